@@ -1,0 +1,69 @@
+"""Entry point of the ``fusion-vo`` command.
+
+Each sub-command lives in its own module of this package and exposes ``register(subparsers)``, which
+adds an ``argparse`` parser and sets ``func`` to a callable ``run(args) -> int``. User mistakes raise
+:class:`fusion_vo.errors.InputError`; they are printed as one line and exit with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from fusion_vo.errors import InputError
+
+#: sub-command modules, in the order ``--help`` lists them
+COMMANDS = [
+    "demo",
+    "run",
+    "simulate",
+    "evaluate",
+    "compare",
+    "show_matches",
+    "import_bag",
+    "calibrate",
+    "bench",
+]
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="fusion-vo",
+        description="Ground-camera visual odometry fused with wheel encoders and an IMU.",
+    )
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv for debug)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"fusion_vo.cli.{name}")
+        except ModuleNotFoundError as exc:  # a command not present in this build
+            if exc.name == f"fusion_vo.cli.{name}":
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING if args.quiet else (logging.DEBUG if args.verbose > 1 else logging.INFO)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except InputError as exc:
+        print(f"fusion-vo: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("fusion-vo: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,244 @@
+"""Camera model: pinhole intrinsics, lens distortion and the camera's pose in the body frame.
+
+A camera point ``X_S = (x, y, z)`` (OpenCV frame: x right, y down, z along the optical axis) projects to
+normalised coordinates ``(x/z, y/z)``, is distorted by the lens model and mapped to pixels by ``K``::
+
+    K = [[fu, 0, cu], [0, fv, cv], [0, 0, 1]]
+
+Distortion models (as in ``cam0/sensor.yaml``):
+
+``radial-tangential``  OpenCV's ``(k1, k2, p1, p2[, k3])``;
+``equidistant``        OpenCV's fisheye model ``(k1, k2, k3, k4)``;
+``none``               no distortion.
+
+``T_BS`` maps camera coordinates to body coordinates: ``X_B = R_BS X_S + t_BS``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from fusion_vo.errors import InputError
+
+DISTORTION_MODELS = ("radial-tangential", "equidistant", "none")
+
+#: camera looking straight down with image-up pointing forward (x_S = -y_B, y_S = -x_B, z_S = -z_B)
+R_BS_DOWN_FORWARD = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+
+
+@dataclass
+class CameraModel:
+    """Intrinsics, distortion and mounting of one camera.
+
+    Attributes
+    ----------
+    width, height : int
+        Image size [px].
+    fu, fv, cu, cv : float
+        Focal lengths and principal point [px].
+    distortion_model : str
+        One of :data:`DISTORTION_MODELS`.
+    distortion : ndarray
+        Distortion coefficients of that model.
+    T_BS : ndarray, shape (4, 4)
+        Camera pose in the body frame.
+    rate_hz : float
+        Nominal frame rate (informative; real timestamps are always used).
+    """
+
+    width: int
+    height: int
+    fu: float
+    fv: float
+    cu: float
+    cv: float
+    distortion_model: str = "none"
+    distortion: np.ndarray = field(default_factory=lambda: np.zeros(4))
+    T_BS: np.ndarray = field(default_factory=lambda: _default_T_BS())
+    rate_hz: float = 20.0
+
+    def __post_init__(self) -> None:
+        self.distortion = np.asarray(self.distortion, dtype=np.float64).ravel()
+        self.T_BS = np.asarray(self.T_BS, dtype=np.float64).reshape(4, 4)
+        if self.distortion_model not in DISTORTION_MODELS:
+            raise ValueError(f"unknown distortion model {self.distortion_model!r}")
+
+    # ------------------------------------------------------------------ matrices
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fu, 0.0, self.cu], [0.0, self.fv, self.cv], [0.0, 0.0, 1.0]])
+
+    @property
+    def R_BS(self) -> np.ndarray:
+        return self.T_BS[:3, :3]
+
+    @property
+    def t_BS(self) -> np.ndarray:
+        return self.T_BS[:3, 3]
+
+    @property
+    def has_distortion(self) -> bool:
+        return self.distortion_model != "none" and bool(np.any(self.distortion != 0))
+
+    # ------------------------------------------------------------------ points
+    def normalize(self, pixels: np.ndarray) -> np.ndarray:
+        """Undistorted normalised coordinates ``(x/z, y/z)`` of raw pixel positions (N x 2)."""
+        pts = np.asarray(pixels, dtype=np.float64).reshape(-1, 1, 2)
+        if not self.has_distortion:
+            out = (pts.reshape(-1, 2) - [self.cu, self.cv]) / [self.fu, self.fv]
+            return out
+        if self.distortion_model == "equidistant":
+            out = cv2.fisheye.undistortPoints(pts, self.K, self.distortion[:4])
+        else:
+            out = cv2.undistortPoints(
+                pts, self.K, self.distortion, None, None, None,
+                (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 1e-10),
+            )
+        return out.reshape(-1, 2)
+
+    def denormalize(self, normalized: np.ndarray) -> np.ndarray:
+        """Raw (distorted) pixel positions of normalised coordinates (N x 2)."""
+        xy = np.asarray(normalized, dtype=np.float64).reshape(-1, 2)
+        if not self.has_distortion:
+            return xy * [self.fu, self.fv] + [self.cu, self.cv]
+        pts3 = np.concatenate([xy, np.ones((len(xy), 1))], axis=1).reshape(-1, 1, 3)
+        if self.distortion_model == "equidistant":
+            out = cv2.fisheye.distortPoints(xy.reshape(-1, 1, 2), self.K, self.distortion[:4])
+        else:
+            out, _ = cv2.projectPoints(pts3, np.zeros(3), np.zeros(3), self.K, self.distortion)
+        return out.reshape(-1, 2)
+
+    def project(self, points_S: np.ndarray) -> np.ndarray:
+        """Pixel positions of camera-frame points (N x 3, z > 0)."""
+        p = np.asarray(points_S, dtype=np.float64).reshape(-1, 3)
+        return self.denormalize(p[:, :2] / p[:, 2:3])
+
+    # ------------------------------------------------------------------ files
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> "CameraModel":
+        """Read a ``cam0/sensor.yaml`` file (see ``datasets/README.md``)."""
+        path = Path(path)
+        data = load_yaml(path)
+        return cls.from_dict(data, path)
+
+    @classmethod
+    def from_dict(cls, data: dict, path: str | Path | None = None) -> "CameraModel":
+        def need(key):
+            if key not in data:
+                raise InputError(f"missing key '{key}'", path)
+            return data[key]
+
+        try:
+            res = [int(v) for v in need("resolution")]
+            intr = [float(v) for v in need("intrinsics")]
+            if len(res) != 2 or len(intr) != 4:
+                raise ValueError
+        except (TypeError, ValueError):
+            raise InputError("'resolution' needs [width, height] and 'intrinsics' [fu, fv, cu, cv]", path) from None
+        model = str(data.get("camera_model", "pinhole"))
+        if model != "pinhole":
+            raise InputError(f"camera_model '{model}' is not supported (only 'pinhole')", path)
+        dmodel = str(data.get("distortion_model", "none"))
+        aliases = {"radtan": "radial-tangential", "plumb_bob": "radial-tangential", "fisheye": "equidistant"}
+        dmodel = aliases.get(dmodel, dmodel)
+        if dmodel not in DISTORTION_MODELS:
+            raise InputError(f"unknown distortion_model '{dmodel}' (use one of {', '.join(DISTORTION_MODELS)})", path)
+        coeffs = np.asarray(data.get("distortion_coefficients", [0.0] * 4), dtype=np.float64)
+        expected = {"radial-tangential": (4, 5), "equidistant": (4,), "none": (0, 4, 5)}[dmodel]
+        if len(coeffs) not in expected:
+            raise InputError(f"distortion_coefficients: {dmodel} needs {' or '.join(map(str, expected))} numbers", path)
+        T = parse_matrix(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
+        values = np.array(intr + list(coeffs) + list(T.ravel()))
+        if not np.all(np.isfinite(values)) or min(res) <= 0 or intr[0] <= 0 or intr[1] <= 0:
+            raise InputError("calibration values must be finite and the focal lengths and resolution positive", path)
+        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-5) or abs(np.linalg.det(T[:3, :3]) - 1) > 1e-5:
+            raise InputError("T_BS rotation part is not a rotation matrix", path)
+        return cls(
+            width=res[0], height=res[1], fu=intr[0], fv=intr[1], cu=intr[2], cv=intr[3],
+            distortion_model=dmodel, distortion=coeffs if len(coeffs) else np.zeros(4), T_BS=T,
+            rate_hz=float(data.get("rate_hz", 20.0)),
+        )
+
+    def to_dict(self) -> dict:
+        return {
+            "sensor_type": "camera",
+            "rate_hz": float(self.rate_hz),
+            "resolution": [int(self.width), int(self.height)],
+            "camera_model": "pinhole",
+            "intrinsics": [float(self.fu), float(self.fv), float(self.cu), float(self.cv)],
+            "distortion_model": self.distortion_model,
+            "distortion_coefficients": [float(v) for v in self.distortion],
+            "T_BS": {"cols": 4, "rows": 4, "data": [float(v) for v in self.T_BS.ravel()]},
+        }
+
+    def write_yaml(self, path: str | Path) -> None:
+        write_yaml_atomic(path, self.to_dict())
+
+
+def _default_T_BS() -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = R_BS_DOWN_FORWARD
+    T[:3, 3] = [0.25, 0.0, 0.1]
+    return T
+
+
+def parse_matrix(entry, name: str, path: str | Path | None) -> np.ndarray:
+    """Read a 4x4 matrix given as ``{cols, rows, data}`` (EuRoC) or a nested list."""
+    try:
+        if isinstance(entry, dict):
+            data = np.asarray(entry["data"], dtype=np.float64)
+            rows, cols = int(entry.get("rows", 4)), int(entry.get("cols", 4))
+            m = data.reshape(rows, cols)
+        else:
+            m = np.asarray(entry, dtype=np.float64)
+        if m.shape != (4, 4):
+            raise ValueError
+    except (KeyError, TypeError, ValueError):
+        raise InputError(f"'{name}' must be a 4x4 matrix (cols: 4, rows: 4, data: [16 numbers])", path) from None
+    return m
+
+
+def load_yaml(path: str | Path) -> dict:
+    """Load a YAML mapping, with :class:`InputError` for a missing, unreadable or malformed file."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            text = f.read()
+        # EuRoC files start with a '%YAML:1.0' directive that PyYAML does not accept
+        if text.startswith("%YAML:"):
+            text = text.split("\n", 1)[1] if "\n" in text else ""
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        line = getattr(getattr(exc, "problem_mark", None), "line", None)
+        raise InputError(f"not valid YAML ({getattr(exc, 'problem', exc)})", path, None if line is None else line + 1) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file ({exc})", path) from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise InputError("expected a YAML mapping of keys to values", path)
+    return data
+
+
+def write_yaml_atomic(path: str | Path, data: dict) -> None:
+    """Write a YAML file under a temporary name, then rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            yaml.safe_dump(data, f, sort_keys=False, default_flow_style=None)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise

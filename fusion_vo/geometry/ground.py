@@ -1,0 +1,216 @@
+"""Ground geometry: from a pixel similarity between two frames to the body's planar motion.
+
+Frames (``datasets/README.md``): body B on the floor under the drive axle (x forward, y left, z up),
+camera S (OpenCV), ``X_B = R_BS X_S + t_BS``; ``h = t_BS[2]`` is the camera's height above the floor.
+
+Rectification
+-------------
+A tilted camera sees the floor through a homography, not a similarity. Every measured point is therefore
+mapped to a *virtual nadir camera* V with the same centre, looking straight down (``z_V = -z_B``), its x
+axis the horizontal direction of the real camera's x axis, focal length ``f = sqrt(fu fv)`` and the
+real principal point ``c``::
+
+    u' = f * r_x / r_z + c_x,    r = R_VS [x_n, y_n, 1]^T,
+
+where ``(x_n, y_n)`` are the undistorted normalised coordinates of the raw pixel. In V the floor moves by
+an exact similarity when the robot moves on a plane, and a rectified pixel ``u'`` is the floor point::
+
+    q = A(u') = t_xy + (h / f) R2 (u' - c),     R2 = R_BV[:2, :2]   (a reflection: det R2 = -1)
+
+Body motion
+-----------
+A floor point fixed in the world has body coordinates ``q_k`` and ``q_{k+1} = T^{-1} q_k``, with
+``T = (dx, dy, dyaw)`` the pose of B(k+1) in B(k). The frontend's similarity ``S`` maps rectified points
+of frame k to frame k+1, so ``T^{-1} = A S A^{-1}``, i.e. the robot's motion is the *conjugate* of the
+image motion by the mounting (``T_B = T_BS T_S T_BS^{-1}``), never the image motion read off directly.
+A robot turning in place with the camera ahead of the axle therefore gives a pure rotation.
+
+The similarity's scale ``s`` is a height change (``h_{k+1} / h_k = 1 / s``), not a motion. The rigid
+motion is taken about the floor point under the camera centre ``q_c = t_xy``: with ``φ = det(R2) θ``,
+``g = A(S c)``::
+
+    dyaw = -φ,    (dx, dy) = q_c - R(-φ) g
+
+and the covariance of ``(dx, dy, dyaw)`` is ``J Σ J^T`` with ``Σ`` the frontend's covariance of
+``(tx, ty, θ, log s)`` and ``J`` the analytic Jacobian of these expressions.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from frontends.base import FrameMotion
+from fusion_vo.geometry import se2
+from fusion_vo.geometry.camera import CameraModel
+from fusion_vo.measurements import VisualIncrement
+
+
+def _rot(a: float) -> np.ndarray:
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s], [s, c]])
+
+
+def nadir_rotation(R_BS: np.ndarray) -> np.ndarray:
+    """``R_BV`` of the virtual nadir camera for a camera with orientation ``R_BS``."""
+    x_s = R_BS[:, 0]
+    x_h = np.array([x_s[0], x_s[1], 0.0])
+    n = np.linalg.norm(x_h)
+    if n < 1e-6:
+        raise ValueError("the camera's x axis is vertical: it does not look at the floor")
+    x_v = x_h / n
+    z_v = np.array([0.0, 0.0, -1.0])
+    y_v = np.cross(z_v, x_v)
+    return np.column_stack([x_v, y_v, z_v])
+
+
+class GroundRectifier:
+    """Maps raw pixels to the virtual nadir camera's pixels and back (a :class:`frontends.PointMap`)."""
+
+    def __init__(self, camera: CameraModel):
+        self.camera = camera
+        R_BS = camera.R_BS
+        if R_BS[2, 2] > -0.5:
+            raise ValueError(
+                f"the camera looks {math.degrees(math.acos(max(-1.0, min(1.0, -R_BS[2, 2])))):.0f} deg away from "
+                "straight down; a ground camera must see the floor (T_BS z axis pointing down)"
+            )
+        self.R_BV = nadir_rotation(R_BS)
+        self.R_VS = self.R_BV.T @ R_BS
+        self.f = math.sqrt(camera.fu * camera.fv)
+        self.c = np.array([camera.cu, camera.cv])
+        self._identity_rotation = np.allclose(self.R_VS, np.eye(3), atol=1e-12)
+
+    @property
+    def trivial(self) -> bool:
+        """True when rectified pixels equal raw pixels (no distortion, no tilt, fu == fv)."""
+        return (not self.camera.has_distortion) and self._identity_rotation and self.camera.fu == self.camera.fv
+
+    def to_rectified(self, pts: np.ndarray) -> np.ndarray:
+        pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+        if self.trivial:
+            return pts.copy()
+        n = self.camera.normalize(pts)
+        if self._identity_rotation:
+            return n * self.f + self.c
+        r = np.column_stack([n, np.ones(len(n))]) @ self.R_VS.T
+        return r[:, :2] / r[:, 2:3] * self.f + self.c
+
+    def to_image(self, pts: np.ndarray) -> np.ndarray:
+        pts = np.asarray(pts, dtype=np.float64).reshape(-1, 2)
+        if self.trivial:
+            return pts.copy()
+        v = (pts - self.c) / self.f
+        if self._identity_rotation:
+            return self.camera.denormalize(v)
+        r = np.column_stack([v, np.ones(len(v))]) @ self.R_VS  # R_SV = R_VS^T
+        return self.camera.denormalize(r[:, :2] / r[:, 2:3])
+
+
+@dataclass
+class GroundGeometry:
+    """Converts frontend similarities (in rectified pixels) into body-frame SE(2) increments.
+
+    Parameters
+    ----------
+    camera : CameraModel
+        Intrinsics, distortion and ``T_BS`` (lever arm, height, tilt).
+    height : float, optional
+        Camera height above the floor [m]; defaults to ``T_BS[2, 3]``.
+    min_sigma_xy : float
+        Floor on the standard deviation of ``dx, dy`` [m] (unmodelled effects: floor relief, rolling).
+    min_sigma_yaw : float
+        Floor on the standard deviation of ``dyaw`` [rad].
+    """
+
+    camera: CameraModel
+    height: float | None = None
+    min_sigma_xy: float = 2e-5
+    min_sigma_yaw: float = 2e-5
+
+    def __post_init__(self) -> None:
+        self.rectifier = GroundRectifier(self.camera)
+        if self.height is None:
+            self.height = float(self.camera.t_BS[2])
+        if not self.height > 0:
+            raise ValueError("camera height must be positive (T_BS z translation, or set 'height')")
+        R2 = self.rectifier.R_BV[:2, :2]
+        self._R2 = R2
+        self._sigma = float(np.sign(np.linalg.det(R2)))
+        self._qc = self.camera.t_BS[:2].copy()
+
+    @property
+    def metres_per_pixel(self) -> float:
+        return self.height / self.rectifier.f
+
+    def floor_point(self, rectified: np.ndarray, height: float | None = None) -> np.ndarray:
+        """Body-frame floor coordinates of rectified pixels (N x 2)."""
+        k = (height or self.height) / self.rectifier.f
+        return self._qc + k * (np.asarray(rectified, dtype=np.float64).reshape(-1, 2) - self.rectifier.c) @ self._R2.T
+
+    def body_increment(self, params: np.ndarray, cov: np.ndarray | None = None, height: float | None = None):
+        """``(dx, dy, dyaw)`` and its covariance from similarity parameters ``(tx, ty, θ, log s)``."""
+        tx, ty, th, lam = (float(v) for v in params)
+        k = (height or self.height) / self.rectifier.f
+        c = self.rectifier.c
+        es = math.exp(lam)
+        Rt = _rot(th)
+        Sc = es * (Rt @ c) + (tx, ty)
+        g = self._qc + k * (self._R2 @ (Sc - c))
+        phi = self._sigma * th
+        Rm = _rot(-phi)
+        d = self._qc - Rm @ g
+        delta = np.array([d[0], d[1], float(se2.wrap_angle(-phi))])
+        if cov is None:
+            return delta, None
+        J = np.zeros((3, 4))
+        dg_dt = k * self._R2
+        dg_dth = k * (self._R2 @ (es * (_rot(th + math.pi / 2) @ c)))
+        dg_dlam = k * (self._R2 @ (es * (Rt @ c)))
+        J[:2, :2] = -Rm @ dg_dt
+        J[:2, 2] = -Rm @ dg_dth + self._sigma * (_rot(-phi + math.pi / 2) @ g)
+        J[:2, 3] = -Rm @ dg_dlam
+        J[2, 2] = -self._sigma
+        P = J @ np.asarray(cov, dtype=np.float64) @ J.T
+        P = 0.5 * (P + P.T)
+        P[0, 0] = max(P[0, 0], self.min_sigma_xy**2)
+        P[1, 1] = max(P[1, 1], self.min_sigma_xy**2)
+        P[2, 2] = max(P[2, 2], self.min_sigma_yaw**2)
+        return delta, P
+
+    def similarity_from_body(self, delta, height_ratio: float = 1.0) -> np.ndarray:
+        """The rectified-pixel similarity that a body increment produces (inverse of :meth:`body_increment`).
+
+        ``height_ratio`` is ``h_{k+1} / h_k``; the image scales by its inverse about the nadir point.
+        """
+        dx, dy, dyaw = (float(v) for v in delta)
+        phi = -dyaw
+        th = self._sigma * phi
+        k = self.height / self.rectifier.f
+        c = self.rectifier.c
+        # g = R(phi) (q_c - d)  is the floor point under the camera at k, seen from k+1
+        g = _rot(phi) @ (self._qc - np.array([dx, dy]))
+        Sc = c + self._R2.T @ (g - self._qc) / k
+        s = 1.0 / height_ratio
+        lin = s * _rot(th)
+        t = Sc - lin @ c
+        return np.column_stack([lin, t])
+
+    def increment(self, motion: FrameMotion, height: float | None = None) -> VisualIncrement:
+        """A :class:`VisualIncrement` from a frontend's :class:`FrameMotion`."""
+        t0 = motion.prev_timestamp if motion.prev_timestamp is not None else motion.timestamp
+        if not motion.ok:
+            return VisualIncrement(t0, motion.timestamp, np.zeros(3), np.diag([np.inf] * 3), 1.0,
+                                   motion.status.value, motion.n_inliers)
+        p = motion.params
+        delta, P = self.body_increment(p, motion.covariance, height)
+        return VisualIncrement(t0, motion.timestamp, delta, P, float(math.exp(-p[3])), "ok", motion.n_inliers)
+
+
+def twist(delta, dt: float) -> np.ndarray:
+    """Body twist ``(vx, vy, yaw rate)`` that produces ``delta`` in ``dt`` seconds (SE(2) logarithm)."""
+    if dt <= 0:
+        raise ValueError("dt must be positive")
+    return se2.log(delta) / dt

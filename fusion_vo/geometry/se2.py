@@ -1,0 +1,85 @@
+"""Planar rigid motions SE(2).
+
+A pose or increment is a vector ``(x, y, yaw)``; its matrix is::
+
+    T = [[cos yaw, -sin yaw, x],
+         [sin yaw,  cos yaw, y],
+         [0,        0,       1]]
+
+``compose(a, b)`` is ``T_a T_b`` (``b`` expressed in the frame of ``a``). ``log``/``exp`` map between an
+increment and the constant body twist ``(vx, vy, w)`` that produces it in unit time.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+
+def wrap_angle(a):
+    """Wrap an angle (or array of angles) to [-pi, pi)."""
+    return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def to_matrix(p) -> np.ndarray:
+    """3x3 homogeneous matrix of ``(x, y, yaw)``."""
+    x, y, th = (float(v) for v in p)
+    c, s = math.cos(th), math.sin(th)
+    return np.array([[c, -s, x], [s, c, y], [0.0, 0.0, 1.0]])
+
+
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """``(x, y, yaw)`` of a 3x3 (or 2x3) rigid matrix."""
+    return np.array([m[0, 2], m[1, 2], math.atan2(m[1, 0], m[0, 0])])
+
+
+def compose(a, b) -> np.ndarray:
+    """``a ⊕ b``: the pose ``b`` (given in frame ``a``) expressed in the frame ``a`` is given in."""
+    ax, ay, at = a
+    bx, by, bt = b
+    c, s = math.cos(at), math.sin(at)
+    return np.array([ax + c * bx - s * by, ay + s * bx + c * by, float(wrap_angle(at + bt))])
+
+
+def inverse(a) -> np.ndarray:
+    """``a⁻¹``."""
+    x, y, th = a
+    c, s = math.cos(th), math.sin(th)
+    return np.array([-c * x - s * y, s * x - c * y, float(wrap_angle(-th))])
+
+
+def between(a, b) -> np.ndarray:
+    """``a⁻¹ ⊕ b``: the pose of ``b`` in the frame of ``a``."""
+    return compose(inverse(a), b)
+
+
+def _v_coefficients(th: float) -> tuple[float, float]:
+    """``sin(th)/th`` and ``(1 - cos th)/th`` with their small-angle series."""
+    if abs(th) < 1e-6:
+        return 1.0 - th * th / 6.0, th / 2.0 - th**3 / 24.0
+    return math.sin(th) / th, (1.0 - math.cos(th)) / th
+
+
+def exp(twist) -> np.ndarray:
+    """Increment produced by the constant body twist ``(vx, vy, w)`` over unit time."""
+    vx, vy, w = (float(v) for v in twist)
+    a, b = _v_coefficients(w)
+    return np.array([a * vx - b * vy, b * vx + a * vy, float(wrap_angle(w))])
+
+
+def log(p) -> np.ndarray:
+    """Constant body twist ``(vx, vy, w)`` that produces increment ``p`` in unit time."""
+    x, y, th = (float(v) for v in p)
+    a, b = _v_coefficients(th)
+    det = a * a + b * b
+    return np.array([(a * x + b * y) / det, (-b * x + a * y) / det, th])
+
+
+def integrate(increments) -> np.ndarray:
+    """Chain increments from the origin: returns ``(N+1) x 3`` poses, the first at the origin."""
+    inc = np.asarray(increments, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros((len(inc) + 1, 3))
+    for i, d in enumerate(inc):
+        out[i + 1] = compose(out[i], d)
+    return out

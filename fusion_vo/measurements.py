@@ -1,0 +1,179 @@
+"""Measurements that flow from the recording and the ground geometry into the backends.
+
+Two shapes of the same data:
+
+* per-sample dataclasses (:class:`VisualIncrement`, :class:`WheelTicks`, :class:`ImuSample`,
+  :class:`TwistSample`, :class:`RangeSample`) for the streaming API, one object per measurement;
+* per-stream arrays (:class:`ImuData`, :class:`WheelData`, :class:`TwistData`, :class:`RangeData`,
+  :class:`PoseData`) as read from a recording, for batch use without millions of small objects.
+
+All times are seconds on the recording's clock (``float``). Poses and increments are ``(x, y, yaw)`` of
+the body frame B (REP-103: x forward, y left, z up; origin on the floor under the drive axle).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+# --------------------------------------------------------------------------- per-sample
+@dataclass(frozen=True)
+class VisualIncrement:
+    """Body motion between two camera frames, from the ground geometry.
+
+    Attributes
+    ----------
+    t0, t1 : float
+        Times of the previous and the current frame [s].
+    delta : ndarray, shape (3,)
+        Pose of B(t1) in B(t0): ``(dx [m], dy [m], dyaw [rad])``.
+    covariance : ndarray, shape (3, 3)
+        Covariance of ``delta`` (from the frontend's inlier residuals).
+    height_ratio : float
+        ``h(t1) / h(t0)`` of the camera height above the floor, from the similarity's scale.
+    status : str
+        The frontend's status (``"ok"`` when usable; anything else contributes nothing).
+    n_inliers : int
+        Inlier correspondences behind the estimate.
+    """
+
+    t0: float
+    t1: float
+    delta: np.ndarray
+    covariance: np.ndarray
+    height_ratio: float = 1.0
+    status: str = "ok"
+    n_inliers: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    @property
+    def dt(self) -> float:
+        return self.t1 - self.t0
+
+
+@dataclass(frozen=True)
+class WheelTicks:
+    """Cumulative encoder counts at time ``t`` (signed 32-bit, may wrap)."""
+
+    t: float
+    left: int
+    right: int
+
+
+@dataclass(frozen=True)
+class TwistSample:
+    """Body-frame twist from a robot's own odometry: ``vx, vy`` [m/s], ``wz`` [rad/s]."""
+
+    t: float
+    vx: float
+    vy: float
+    wz: float
+
+
+@dataclass(frozen=True)
+class ImuSample:
+    """One IMU sample in the IMU frame.
+
+    ``gyro`` [rad/s] and ``accel`` [m/s^2] are 3-vectors; ``orientation`` is an optional AHRS
+    quaternion ``(w, x, y, z)`` of the IMU in the world.
+    """
+
+    t: float
+    gyro: np.ndarray
+    accel: np.ndarray
+    orientation: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class RangeSample:
+    """Downward range finder: distance to the floor [m] (camera height)."""
+
+    t: float
+    distance: float
+
+
+# --------------------------------------------------------------------------- per-stream arrays
+@dataclass
+class WheelConfig:
+    """Differential-drive calibration (``wheel0/sensor.yaml``)."""
+
+    ticks_per_revolution: float
+    wheel_radius_left: float
+    wheel_radius_right: float
+    wheel_base: float
+
+
+@dataclass
+class WheelData:
+    """Encoder stream: times ``t`` (N,), cumulative counts ``left``, ``right`` (N,) int64 as recorded."""
+
+    t: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    config: WheelConfig
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class ImuData:
+    """IMU stream: ``t`` (N,), ``gyro`` (N, 3), ``accel`` (N, 3), optional ``orientation`` (N, 4) w,x,y,z.
+
+    ``T_BS`` is the IMU's pose in the body frame; ``noise`` holds the EuRoC noise keys of
+    ``imu0/sensor.yaml`` (gyroscope_noise_density, gyroscope_random_walk, accelerometer_noise_density,
+    accelerometer_random_walk) when given.
+    """
+
+    t: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    orientation: np.ndarray | None = None
+    T_BS: np.ndarray = field(default_factory=lambda: np.eye(4))
+    rate_hz: float | None = None
+    noise: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class TwistData:
+    """Odometry twist stream: ``t``, ``vx``, ``vy``, ``wz`` (N,)."""
+
+    t: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    wz: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class RangeData:
+    """Range-finder stream: ``t``, ``distance`` (N,)."""
+
+    t: np.ndarray
+    distance: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class PoseData:
+    """Planar poses over time: ``t`` (N,), ``xyyaw`` (N, 3); ``z`` and full quaternions kept when known."""
+
+    t: np.ndarray
+    xyyaw: np.ndarray
+    z: np.ndarray | None = None
+    quat_wxyz: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return len(self.t)

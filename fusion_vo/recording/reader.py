@@ -1,0 +1,335 @@
+"""Open a recording folder and read its streams.
+
+Layout (``datasets/README.md``)::
+
+    SEQ/cam0/data.csv + cam0/data/*.png  (or cam0/video.<ext>), cam0/sensor.yaml
+    SEQ/imu0/data.csv, imu0/sensor.yaml
+    SEQ/wheel0/data.csv, wheel0/sensor.yaml
+    SEQ/odom0/data.csv
+    SEQ/range0/data.csv
+    SEQ/state_groundtruth_estimate0/data.csv
+
+Every stream is optional; asking for one that is absent raises :class:`~fusion_vo.errors.InputError`.
+Camera frames are decoded lazily by :meth:`Recording.frames`. A frame that cannot be read (missing,
+corrupt, wrong size) is yielded with ``image=None`` and an ``error`` text, so that a long run can skip it
+with a warning and count it instead of stopping.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from fusion_vo.errors import InputError
+from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
+from fusion_vo.measurements import ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.recording.csvio import read_frame_list, read_table
+
+log = logging.getLogger(__name__)
+
+VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
+
+
+@dataclass
+class Frame:
+    """One camera frame: its index (row in ``cam0/data.csv``), time [s], grey image or ``None``."""
+
+    index: int
+    t: float
+    image: np.ndarray | None
+    source: str
+    error: str | None = None
+
+
+class Recording:
+    """A recording folder.
+
+    Parameters
+    ----------
+    path : str or Path
+        The sequence folder.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        if not self.path.exists():
+            raise InputError("recording folder not found", self.path)
+        if not self.path.is_dir():
+            raise InputError("not a folder (a recording is a folder with cam0/, imu0/, wheel0/ ...)", self.path)
+        self._camera: CameraModel | None = None
+        self._frame_list: tuple[np.ndarray, list[str], np.ndarray] | None = None
+
+    def __repr__(self) -> str:
+        return f"Recording({str(self.path)!r}, streams={self.streams()})"
+
+    # ------------------------------------------------------------------ presence
+    def has_camera(self) -> bool:
+        return (self.path / "cam0" / "data.csv").is_file()
+
+    def has_imu(self) -> bool:
+        return (self.path / "imu0" / "data.csv").is_file()
+
+    def has_wheel(self) -> bool:
+        return (self.path / "wheel0" / "data.csv").is_file()
+
+    def has_odom(self) -> bool:
+        return (self.path / "odom0" / "data.csv").is_file()
+
+    def has_range(self) -> bool:
+        return (self.path / "range0" / "data.csv").is_file()
+
+    def has_groundtruth(self) -> bool:
+        return (self.path / "state_groundtruth_estimate0" / "data.csv").is_file()
+
+    def streams(self) -> list[str]:
+        """Names of the streams present: camera, imu, wheel, odom, range, groundtruth."""
+        names = ["camera", "imu", "wheel", "odom", "range", "groundtruth"]
+        return [n for n in names if getattr(self, f"has_{n}")()]
+
+    def _need(self, name: str, folder: str) -> Path:
+        p = self.path / folder / "data.csv"
+        if not p.is_file():
+            raise InputError(f"this recording has no {name} stream ({folder}/data.csv is missing)", self.path)
+        return p
+
+    # ------------------------------------------------------------------ camera
+    @property
+    def camera(self) -> CameraModel:
+        """The camera model of ``cam0/sensor.yaml``."""
+        if self._camera is None:
+            self._need("camera", "cam0")
+            self._camera = CameraModel.from_yaml(self.path / "cam0" / "sensor.yaml")
+        return self._camera
+
+    def _frames_index(self) -> tuple[np.ndarray, list[str], np.ndarray]:
+        if self._frame_list is None:
+            self._frame_list = read_frame_list(self._need("camera", "cam0"))
+            if len(self._frame_list[0]) == 0:
+                raise InputError("no frames listed", self.path / "cam0" / "data.csv")
+        return self._frame_list
+
+    @property
+    def frame_times(self) -> np.ndarray:
+        """Frame timestamps [s]."""
+        return self._frames_index()[0].astype(np.float64) * 1e-9
+
+    def __len__(self) -> int:
+        return len(self._frames_index()[0]) if self.has_camera() else 0
+
+    def video_path(self) -> Path | None:
+        cam = self.path / "cam0"
+        for ext in VIDEO_EXTENSIONS:
+            p = cam / f"video{ext}"
+            if p.is_file():
+                return p
+        return None
+
+    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[Frame]:
+        """Decode frames ``start .. stop-1`` one at a time (grey ``uint8`` or ``uint16``)."""
+        t_ns, names, lines = self._frames_index()
+        cam = self.camera
+        stop = len(t_ns) if stop is None else min(stop, len(t_ns))
+        video = self.video_path() if not (self.path / "cam0" / "data").is_dir() else None
+        size = (cam.height, cam.width)
+        if video is not None:
+            yield from self._video_frames(video, t_ns, start, stop, size)
+            return
+        folder = self.path / "cam0" / "data"
+        if not folder.is_dir():
+            raise InputError("no frames: neither cam0/data/ nor cam0/video.<ext> exists", self.path / "cam0")
+        for i in range(start, stop):
+            p = folder / names[i]
+            img, err = _read_image(p, size)
+            if err is not None:
+                err = f"{p}: {err} (cam0/data.csv line {lines[i]})"
+            yield Frame(i, t_ns[i] * 1e-9, img, str(p), err)
+
+    def _video_frames(self, video: Path, t_ns, start, stop, size) -> Iterator[Frame]:
+        cap = cv2.VideoCapture(str(video))
+        if not cap.isOpened():
+            raise InputError("cannot open video file", video)
+        try:
+            if start:
+                cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+            for i in range(start, stop):
+                ok, img = cap.read()
+                if not ok:
+                    raise InputError(f"video ends after {i} frames but cam0/data.csv lists {len(t_ns)}", video)
+                img, err = _to_grey(img, size)
+                yield Frame(i, t_ns[i] * 1e-9, img, f"{video}#{i}", None if err is None else f"{video} frame {i}: {err}")
+        finally:
+            cap.release()
+
+    # ------------------------------------------------------------------ other streams
+    def imu(self) -> ImuData:
+        """``imu0``: gyro, accelerometer and (when the 4 extra columns are present) an AHRS orientation."""
+        path = self._need("IMU", "imu0")
+        tab = read_table(path, (6, 10), "IMU values")
+        if tab.values.shape[1] not in (6, 10):
+            raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
+        orient = None
+        if tab.values.shape[1] == 10:
+            orient = tab.values[:, 6:10]
+            norms = np.linalg.norm(orient, axis=1)
+            bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
+            if len(bad):
+                raise InputError(f"orientation quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
+            orient = orient / norms[:, None]
+        meta = self._yaml("imu0", required=False)
+        T = parse_matrix(meta["T_BS"], "T_BS", self.path / "imu0" / "sensor.yaml") if "T_BS" in meta else np.eye(4)
+        noise = {k: float(meta[k]) for k in (
+            "gyroscope_noise_density", "gyroscope_random_walk",
+            "accelerometer_noise_density", "accelerometer_random_walk") if k in meta}
+        rate = float(meta["rate_hz"]) if "rate_hz" in meta else None
+        return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
+
+    def wheel(self) -> WheelData:
+        """``wheel0``: cumulative encoder counts and the wheel calibration."""
+        path = self._need("wheel encoder", "wheel0")
+        tab = read_table(path, 2, "tick counts")
+        frac = np.abs(tab.values - np.round(tab.values))
+        if np.any(frac > 0):
+            i = int(np.flatnonzero(frac.max(axis=1) > 0)[0])
+            raise InputError("tick counts must be integers", path, int(tab.lines[i]))
+        meta = self._yaml("wheel0", required=True)
+        ypath = self.path / "wheel0" / "sensor.yaml"
+        keys = ("ticks_per_revolution", "wheel_radius_left", "wheel_radius_right", "wheel_base")
+        vals = {}
+        for k in keys:
+            if k not in meta:
+                raise InputError(f"missing key '{k}'", ypath)
+            try:
+                vals[k] = float(meta[k])
+            except (TypeError, ValueError):
+                raise InputError(f"'{k}' must be a number", ypath) from None
+            if not np.isfinite(vals[k]) or vals[k] <= 0:
+                raise InputError(f"'{k}' must be positive", ypath)
+        counts = tab.values.astype(np.int64)
+        return WheelData(tab.t, counts[:, 0], counts[:, 1], WheelConfig(**vals))
+
+    def odom(self) -> TwistData:
+        """``odom0``: body-frame twist."""
+        tab = read_table(self._need("odometry", "odom0"), 3, "twist values")
+        return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
+
+    def range(self) -> RangeData:
+        """``range0``: downward distance to the floor."""
+        path = self._need("range finder", "range0")
+        tab = read_table(path, 1, "distance")
+        bad = np.flatnonzero(tab.values[:, 0] <= 0)
+        if len(bad):
+            raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
+        return RangeData(tab.t, tab.values[:, 0])
+
+    def groundtruth(self) -> PoseData:
+        """``state_groundtruth_estimate0``: pose of B in W (planar part and the full quaternion)."""
+        path = self._need("ground truth", "state_groundtruth_estimate0")
+        tab = read_table(path, (7, 7), "pose values")
+        q = tab.values[:, 3:7]
+        norms = np.linalg.norm(q, axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
+        if len(bad):
+            raise InputError(f"quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
+        q = q / norms[:, None]
+        yaw = quat_wxyz_to_yaw(q)
+        xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
+        return PoseData(tab.t, xyyaw, tab.values[:, 2].copy(), q)
+
+    def _yaml(self, folder: str, required: bool) -> dict:
+        p = self.path / folder / "sensor.yaml"
+        if not p.is_file():
+            if required:
+                raise InputError("file not found", p)
+            return {}
+        return load_yaml(p)
+
+
+# ---------------------------------------------------------------------- images
+def _read_image(path: Path, size: tuple[int, int]) -> tuple[np.ndarray | None, str | None]:
+    if not path.is_file():
+        return None, "image file missing"
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        return None, "unreadable or corrupt image"
+    return _to_grey(img, size)
+
+
+def _to_grey(img: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray | None, str | None]:
+    if img.ndim == 3:
+        if img.shape[2] == 4:
+            img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY)
+        elif img.shape[2] == 3:
+            img = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+        else:
+            img = img[:, :, 0]
+    if img.dtype not in (np.uint8, np.uint16):
+        return None, f"unsupported pixel type {img.dtype}"
+    if img.shape != size:
+        return None, f"frame is {img.shape[1]}x{img.shape[0]} but cam0/sensor.yaml says {size[1]}x{size[0]}"
+    return img, None
+
+
+# ---------------------------------------------------------------------- TUM files
+def quat_wxyz_to_yaw(q: np.ndarray) -> np.ndarray:
+    """Yaw (rotation about world z) of quaternions ``(w, x, y, z)``."""
+    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
+    w, x, y, z = q.T
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
+    """Write a planar trajectory as a TUM file (``timestamp x y z qx qy qz qw``, z = 0), atomically."""
+    path = Path(path)
+    xyyaw = np.asarray(xyyaw, dtype=np.float64).reshape(-1, 3)
+    half = 0.5 * xyyaw[:, 2]
+    data = np.column_stack([
+        np.asarray(t, dtype=np.float64), xyyaw[:, 0], xyyaw[:, 1], np.zeros(len(xyyaw)),
+        np.zeros(len(xyyaw)), np.zeros(len(xyyaw)), np.sin(half), np.cos(half),
+    ])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write("# timestamp x y z qx qy qz qw\n")
+            np.savetxt(f, data, fmt=["%.9f"] + ["%.9f"] * 7)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def read_tum(path: str | Path) -> PoseData:
+    """Read a TUM trajectory file into planar poses (yaw from the quaternion)."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", path)
+    ts, rows = [], []
+    with open(path, encoding="utf-8") as fh:
+        for lineno, raw in enumerate(fh, start=1):
+            s = raw.strip()
+            if not s or s.startswith("#"):
+                continue
+            parts = s.replace(",", " ").split()
+            if len(parts) != 8:
+                raise InputError(f"expected 8 fields 'timestamp x y z qx qy qz qw', found {len(parts)}", path, lineno)
+            try:
+                vals = [float(p) for p in parts]
+            except ValueError:
+                raise InputError("not a number", path, lineno) from None
+            if not np.all(np.isfinite(vals)):
+                raise InputError("NaN or infinite value", path, lineno)
+            if ts and vals[0] <= ts[-1]:
+                raise InputError("timestamps must increase", path, lineno)
+            ts.append(vals[0])
+            rows.append(vals[1:])
+    arr = np.array(rows, dtype=np.float64).reshape(-1, 7)
+    q_wxyz = arr[:, [6, 3, 4, 5]]
+    return PoseData(np.array(ts), np.column_stack([arr[:, 0], arr[:, 1], quat_wxyz_to_yaw(q_wxyz)]), arr[:, 2], q_wxyz)
