@@ -1,0 +1,266 @@
+"""Visual odometry: recording frames -> frontend -> ground geometry -> body increments and a track.
+
+For each frame the frontend measures the similarity to the previous usable frame; the ground geometry
+turns it into ``(dx, dy, dyaw)`` of the body with its covariance (:class:`VisualIncrement`). Chaining
+the increments gives the visual dead-reckoning track::
+
+    x_{k+1} = x_k ⊕ delta_k
+
+When the frontend loses the image (a dark, blurred or featureless stretch) and restarts, the gap between
+the last measured frame and the restart is bridged with the last measured body twist (constant velocity)
+and counted; the fused backends do better by leaning on the wheels and the gyro instead.
+
+The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
+real time between the two frames (not a nominal frame rate).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
+
+from frontends import make_frontend
+from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.errors import InputError
+from fusion_vo.geometry import se2
+from fusion_vo.geometry.ground import GroundGeometry
+from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
+from fusion_vo.recording import Recording
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class OdometryConfig:
+    """Visual odometry settings.
+
+    Attributes
+    ----------
+    frontend : str
+        ``"klt"`` (pyramidal Lucas-Kanade tracking) or ``"features"`` (corners, descriptors, matching).
+    frontend_options : dict
+        Options of the chosen frontend (see ``frontends.klt.KltConfig`` / ``frontends.features.FeatureConfig``).
+    height : float or None
+        Camera height above the floor [m]; ``None`` takes it from ``T_BS`` of ``cam0/sensor.yaml``.
+    use_range : bool
+        Use the downward range finder (``range0``), when the recording has one, as the camera height.
+    min_sigma_xy, min_sigma_yaw : float
+        Floors on the standard deviation of a visual increment [m], [rad].
+    max_bad_start_frames : int
+        If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an
+        error instead of skipping them one by one.
+    """
+
+    frontend: str = "klt"
+    frontend_options: dict = field(default_factory=dict)
+    height: float | None = None
+    use_range: bool = True
+    min_sigma_xy: float = 2e-5
+    min_sigma_yaw: float = 2e-5
+    max_bad_start_frames: int = 5
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "OdometryConfig":
+        known = set(cls.__dataclass_fields__)
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"unknown visual odometry option '{sorted(unknown)[0]}' (known: {', '.join(sorted(known))})")
+        return cls(**d)
+
+
+@dataclass
+class OdometryResult:
+    """Everything visual odometry produced for one recording.
+
+    Attributes
+    ----------
+    increments : list of VisualIncrement
+        One per processed frame after the first (failed ones included, with their status).
+    frame_t : ndarray
+        Time of every processed frame [s].
+    status : list of str
+        Frontend status per processed frame.
+    inliers : ndarray
+        Inlier count per processed frame.
+    velocity : ndarray, shape (N, 3)
+        ``(vx, vy, yaw rate)`` per processed frame (NaN where not measured).
+    track : PoseData
+        Visual dead reckoning, one pose per measured frame.
+    skipped : list of str
+        Frames that could not be loaded (file and reason).
+    bridged_s : float
+        Time spent bridging gaps at constant velocity [s].
+    elapsed_s : float
+        Wall-clock time of the run [s].
+    """
+
+    increments: list[VisualIncrement]
+    frame_t: np.ndarray
+    status: list[str]
+    inliers: np.ndarray
+    velocity: np.ndarray
+    track: PoseData
+    skipped: list[str]
+    bridged_s: float
+    elapsed_s: float
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_t)
+
+    @property
+    def failures(self) -> Counter:
+        return Counter(s for s in self.status if s not in ("ok", "first"))
+
+    @property
+    def fps(self) -> float:
+        return self.n_frames / self.elapsed_s if self.elapsed_s > 0 else float("nan")
+
+    @property
+    def distance(self) -> float:
+        xy = self.track.xyyaw[:, :2]
+        return float(np.sum(np.linalg.norm(np.diff(xy, axis=0), axis=1))) if len(xy) > 1 else 0.0
+
+
+class VisualOdometry:
+    """Streaming visual odometry: feed frames, get body increments and the current pose.
+
+    Parameters
+    ----------
+    frontend : object with ``process(image, t) -> FrameMotion``
+    geometry : GroundGeometry
+    """
+
+    def __init__(self, frontend, geometry: GroundGeometry):
+        self.frontend = frontend
+        self.geometry = geometry
+        self.t: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.bridged_s = 0.0
+        self._last_twist = np.zeros(3)
+
+    @property
+    def pose(self) -> np.ndarray | None:
+        """Latest ``(x, y, yaw)`` of the visual track (``None`` before the first frame)."""
+        return self.poses[-1] if self.poses else None
+
+    def process(self, image: np.ndarray, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
+        """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame)."""
+        motion = self.frontend.process(image, t)
+        if motion.status is MotionStatus.FIRST:
+            if not self.poses:
+                self.t.append(t)
+                self.poses.append(np.zeros(3))
+            return motion, None
+        inc = self.geometry.increment(motion, height)
+        if inc.ok:
+            self._append(inc)
+        return motion, inc
+
+    def _append(self, inc: VisualIncrement) -> None:
+        if not self.poses:
+            self.t.append(inc.t0)
+            self.poses.append(np.zeros(3))
+        gap = inc.t0 - self.t[-1]
+        if gap > 1e-6:  # the frontend restarted: bridge at constant velocity
+            self.poses.append(se2.compose(self.poses[-1], se2.exp(self._last_twist * gap)))
+            self.t.append(inc.t0)
+            self.bridged_s += gap
+        self.poses.append(se2.compose(self.poses[-1], inc.delta))
+        self.t.append(inc.t1)
+        if inc.dt > 0:
+            self._last_twist = se2.log(inc.delta) / inc.dt
+
+    def track(self) -> PoseData:
+        return PoseData(np.asarray(self.t, dtype=np.float64), np.asarray(self.poses, dtype=np.float64).reshape(-1, 3))
+
+
+def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
+    """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
+    if not recording.has_range():
+        return None
+    r: RangeData = recording.range()
+    if len(r) == 0:
+        return None
+    return np.interp(times, r.t, r.distance)
+
+
+def run_visual_odometry(
+    recording: Recording,
+    config: OdometryConfig | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    frames: Iterable | None = None,
+) -> OdometryResult:
+    """Run visual odometry over a whole recording, streaming its frames.
+
+    Parameters
+    ----------
+    recording : Recording
+    config : OdometryConfig
+    progress : callable ``(done, total)``, optional
+        Called after every frame (for a progress bar).
+    frames : iterable of Frame, optional
+        Frames to use instead of ``recording.frames()``.
+    """
+    config = config or OdometryConfig()
+    cam = recording.camera
+    try:
+        geometry = GroundGeometry(cam, height=config.height, min_sigma_xy=config.min_sigma_xy,
+                                  min_sigma_yaw=config.min_sigma_yaw)
+    except ValueError as exc:
+        raise InputError(str(exc), recording.path / "cam0" / "sensor.yaml") from None
+    try:
+        frontend = make_frontend(config.frontend, config.frontend_options, point_map=geometry.rectifier)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"frontend configuration: {exc}") from None
+    heights = heights_for(recording, recording.frame_times) if config.use_range else None
+    vo = VisualOdometry(frontend, geometry)
+    total = len(recording)
+    increments: list[VisualIncrement] = []
+    frame_t, status, inliers, vel = [], [], [], []
+    skipped: list[str] = []
+    bad_run = 0
+    start = time.perf_counter()
+    for k, frame in enumerate(frames if frames is not None else recording.frames()):
+        if frame.image is None:
+            skipped.append(frame.error or frame.source)
+            bad_run += 1
+            if bad_run >= config.max_bad_start_frames and not frame_t:
+                raise InputError(f"the first {bad_run} frames cannot be used; first problem: {skipped[0]}")
+            log.warning("skipping frame %d: %s", frame.index, frame.error)
+            if progress:
+                progress(k + 1, total)
+            continue
+        bad_run = 0
+        h = None if heights is None else float(heights[frame.index])
+        motion, inc = vo.process(frame.image, frame.t, h)
+        frame_t.append(frame.t)
+        status.append(motion.status.value)
+        inliers.append(motion.n_inliers)
+        if inc is not None:
+            increments.append(inc)
+        if inc is not None and inc.ok and inc.dt > 0:
+            vel.append(se2.log(inc.delta) / inc.dt)
+        else:
+            vel.append(np.full(3, np.nan))
+        if progress:
+            progress(k + 1, total)
+    elapsed = time.perf_counter() - start
+    if not frame_t:
+        raise InputError("no usable frame in the recording", recording.path / "cam0")
+    return OdometryResult(
+        increments=increments,
+        frame_t=np.asarray(frame_t),
+        status=status,
+        inliers=np.asarray(inliers, dtype=np.int64),
+        velocity=np.asarray(vel).reshape(-1, 3),
+        track=vo.track(),
+        skipped=skipped,
+        bridged_s=vo.bridged_s,
+        elapsed_s=elapsed,
+    )
