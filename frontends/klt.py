@@ -1,0 +1,472 @@
+"""Pyramidal Lucas-Kanade frontend with track-and-replenish and motion prediction.
+
+Each frame, the points kept from the reference (previous good) frame are tracked into the new frame by
+pyramidal Lucas-Kanade, which minimises for each point the windowed intensity difference
+
+.. math::  \\sum_{x \\in W} \\big(I_1(x + d) - I_0(x)\\big)^2
+
+over the displacement ``d`` by Gauss-Newton, coarse to fine. The tracker starts from a *prediction*:
+the last measured similarity continued over the new time gap (constant velocity,
+:func:`frontends.similarity.scale_motion`), mapped rectified -> image through the point map. So a
+robot moving 120 px per frame is followed as long as its speed changes by less than the pyramid's
+capture range from one frame to the next. If tracking from the prediction fails, it is retried from
+zero motion, and last from a coarse global translation found by phase correlation of the images
+reduced 4 times.
+
+A forward-backward check tracks every point back from where it landed, starting from the same
+prediction, and drops points that do not return within ``fb_threshold``. The similarity is
+estimated on the rectified coordinates of the surviving points (RANSAC or LMedS, then least squares
+on the inliers, :mod:`frontends.similarity`). At zero motion the tracker starts at the true position
+and Lucas-Kanade converges to ``d = 0`` (no drift).
+
+Only the inlier points are carried to the next frame; new Shi-Tomasi corners (minimum eigenvalue of
+the structure tensor, ``cv2.goodFeaturesToTrack`` on the half-resolution image) are added only when
+fewer than ``replenish_below`` remain, away from existing tracks.
+
+Failures: a frame that cannot be measured leaves the reference unchanged, so the next frame is
+measured against the last good frame (the motion then spans the gap). After ``max_failures``
+consecutive failures the tracker restarts: the current frame, if it has texture, becomes the new
+reference and the prediction is dropped.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
+from frontends.config import ConfigMixin
+from frontends.frame_check import check_frame
+from frontends.similarity import (
+    RobustOptions,
+    SimilarityFit,
+    apply_similarity,
+    estimate_similarity,
+    scale_motion,
+)
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class KltConfig(ConfigMixin):
+    """Settings of :class:`KltFrontend` (every field has a working default).
+
+    Attributes
+    ----------
+    max_tracks : int
+        Number of points tracked after a replenish.
+    replenish_below : int
+        New corners are detected only when fewer tracks than this survive.
+    quality_level : float
+        Shi-Tomasi minimum eigenvalue relative to the strongest corner of the image (0-1).
+    min_distance : float
+        Minimum distance between tracked points [px].
+    block_size : int
+        Neighbourhood of the structure tensor used for corner detection [px, at half resolution].
+    window : int
+        Lucas-Kanade window side [px] (odd).
+    pyramid_levels : int
+        Pyramid levels above full resolution used when tracking from a prediction.
+    retry_pyramid_levels : int
+        Pyramid levels used for the zero-motion retry and the global-estimate retry.
+    lk_iterations : int
+        Maximum Gauss-Newton iterations per level.
+    lk_epsilon : float
+        Convergence threshold of the Lucas-Kanade update [px].
+    min_eigen : float
+        Lucas-Kanade's own minimum-eigenvalue threshold (OpenCV units): points below are dropped.
+    fb_threshold : float
+        Maximum forward-backward error [px].
+    warp_tolerance : float
+        When the guessed motion's linear part differs from the identity by more than this (largest
+        element; 1e-3 is about 0.06 deg or 0.1 % scale), the reference is warped by it before tracking.
+    refine_tolerance : float
+        When the fitted motion's linear part differs from the guess by more than this, the points are
+        tracked again through the fitted motion (at full resolution).
+    border : int
+        Points closer than this to the image border are not tracked [px].
+    method : str
+        Robust estimator, ``"ransac"`` or ``"lmeds"``.
+    threshold : float
+        Inlier distance of the robust estimator [rectified px].
+    confidence : float
+        RANSAC confidence.
+    max_iterations : int
+        Maximum number of robust-estimator hypotheses.
+    seed : int
+        Seed of the estimator's random generator (each frontend owns its generator).
+    min_sigma : float
+        Floor of the residual standard deviation used for the covariance [px].
+    min_inliers : int
+        Fewer inliers reject the frame (``TOO_FEW_FEATURES``).
+    min_inlier_ratio : float
+        Fewer inliers than this fraction of the tracked points rejects the estimate.
+    max_abs_log_scale : float
+        Largest plausible ``|log s|`` between consecutive frames; larger is rejected.
+    min_spread : float
+        Smallest standard deviation of the inliers along their weakest axis [px] (``DEGENERATE``).
+    min_texture : float
+        Smallest mean neighbour difference of a usable frame [grey levels]
+        (:func:`frontends.frame_check.texture_measure`).
+    max_prediction_gap : float
+        The prediction is continued over at most this many times the last interval.
+    max_failures : int
+        Consecutive failures after which the tracker restarts from the current frame.
+    global_fallback : bool
+        Whether to try phase correlation when both tracking attempts fail.
+    global_downsample : int
+        Reduction factor of the images for phase correlation.
+    min_global_response : float
+        Smallest phase-correlation peak response accepted.
+    """
+
+    max_tracks: int = 100
+    replenish_below: int = 70
+    quality_level: float = 0.02
+    min_distance: float = 24.0
+    block_size: int = 3
+    window: int = 15
+    pyramid_levels: int = 2
+    retry_pyramid_levels: int = 3
+    lk_iterations: int = 20
+    lk_epsilon: float = 0.01
+    min_eigen: float = 1e-3
+    fb_threshold: float = 0.5
+    warp_tolerance: float = 1e-3
+    refine_tolerance: float = 1e-3
+    border: int = 10
+    method: str = "ransac"
+    threshold: float = 1.0
+    confidence: float = 0.999
+    max_iterations: int = 256
+    seed: int = 0
+    min_sigma: float = 0.02
+    min_inliers: int = 10
+    min_inlier_ratio: float = 0.5
+    max_abs_log_scale: float = 0.1
+    min_spread: float = 20.0
+    min_texture: float = 2.0
+    max_prediction_gap: float = 4.0
+    max_failures: int = 3
+    global_fallback: bool = True
+    global_downsample: int = 4
+    min_global_response: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.window < 5 or self.window % 2 == 0:
+            raise ValueError("window must be an odd number of at least 5")
+        if self.max_tracks < self.min_inliers or self.replenish_below > self.max_tracks:
+            raise ValueError("need min_inliers <= replenish_below <= max_tracks")
+        if self.pyramid_levels < 0 or self.retry_pyramid_levels < 0:
+            raise ValueError("pyramid levels must be non-negative")
+        if not 0.0 <= self.min_inlier_ratio <= 1.0:
+            raise ValueError("min_inlier_ratio must lie in [0, 1]")
+        self.robust_options()  # validates method, threshold, confidence
+
+    def robust_options(self) -> RobustOptions:
+        """The estimator settings derived from this configuration."""
+        return RobustOptions(
+            method=self.method,
+            threshold=self.threshold,
+            confidence=self.confidence,
+            max_iterations=self.max_iterations,
+            max_abs_log_scale=2.0 * self.max_abs_log_scale,
+            min_sigma=self.min_sigma,
+            min_inliers=self.min_inliers,
+            min_spread=self.min_spread,
+        )
+
+
+@dataclass
+class _Attempt:
+    """One tracking attempt from a given initial guess."""
+
+    path: str
+    fit: SimilarityFit | None
+    status: MotionStatus
+    reason: str
+    n_tracked: int = 0
+    next_pts: np.ndarray | None = None  # current-frame positions of the fit's inliers
+
+
+class KltFrontend:
+    """Frame-to-frame similarity from Lucas-Kanade point tracks.
+
+    Parameters
+    ----------
+    config : KltConfig, optional
+    point_map : PointMap, optional
+        Raw pixel <-> rectified coordinates (identity when omitted).
+    """
+
+    def __init__(self, config: KltConfig | None = None, point_map: PointMap | None = None):
+        self.config = config or KltConfig()
+        self.point_map = point_map if point_map is not None else IdentityMap()
+        self._options = self.config.robust_options()
+        self._rng = np.random.default_rng(self.config.seed)
+        w = self.config.window
+        self._win = (w, w)
+        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, self.config.lk_iterations, self.config.lk_epsilon)
+        self._hann: np.ndarray | None = None
+        self._shape: tuple[int, int] | None = None
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self) -> None:
+        """Forget the reference frame and the motion prediction."""
+        self._ref_img: np.ndarray | None = None
+        self._ref_pts = np.zeros((0, 2), np.float32)
+        self._ref_time: float | None = None
+        self._last_motion: np.ndarray | None = None  # similarity of the last good interval
+        self._last_dt: float | None = None
+        self._failures = 0
+
+    # ------------------------------------------------------------ public API
+    def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
+        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
+        t0 = time.perf_counter()
+        try:
+            motion = self._process(image, float(timestamp))
+        except cv2.error as exc:  # defensive: OpenCV refusing an odd input must not stop a run
+            logger.warning("frame at t=%.6f could not be processed: %s", timestamp, exc)
+            motion = self._failed(float(timestamp), MotionStatus.BAD_FRAME, f"OpenCV error: {exc}")
+        motion.info["time_ms"] = (time.perf_counter() - t0) * 1e3
+        return motion
+
+    # -------------------------------------------------------------- pipeline
+    def _process(self, image: np.ndarray, t: float) -> FrameMotion:
+        cfg = self.config
+        check = check_frame(image, self._shape, cfg.min_texture)
+        if check.status is not None:
+            return self._failed(t, check.status, check.reason, texture=check.texture)
+        img = check.image
+        if self._ref_img is None:
+            self._shape = img.shape
+            self._set_reference(img, t, np.zeros((0, 2), np.float32))
+            return FrameMotion(t, None, status=MotionStatus.FIRST, n_features=len(self._ref_pts), info={"path": "first"})
+        dt = t - self._ref_time
+        if not dt > 0.0:
+            return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref_time}")
+        if len(self._ref_pts) < cfg.min_inliers:
+            self._set_reference(img, t, np.zeros((0, 2), np.float32))
+            return self._failed(t, MotionStatus.TOO_FEW_FEATURES, "too few corners in the reference frame")
+
+        ref_rect = self.point_map.to_rectified(self._ref_pts.astype(np.float64))
+        attempts: list[_Attempt] = []
+        prediction = self._predict(dt)
+        if prediction is not None:
+            attempts.append(self._attempt("predicted", img, ref_rect, prediction, cfg.pyramid_levels))
+        if not attempts or attempts[-1].status is not MotionStatus.OK:
+            attempts.append(self._attempt("retry", img, ref_rect, np.eye(2, 3), cfg.retry_pyramid_levels))
+        if attempts[-1].status is not MotionStatus.OK and cfg.global_fallback:
+            shift = self._global_shift(img)
+            if shift is not None:
+                guess = np.array([[1.0, 0.0, shift[0]], [0.0, 1.0, shift[1]]])
+                attempts.append(self._attempt("global", img, ref_rect, guess, cfg.retry_pyramid_levels))
+
+        best = attempts[-1]
+        info = {
+            "path": best.path,
+            "attempts": [a.path for a in attempts],
+            "n_tracked": best.n_tracked,
+            "texture": check.texture,
+        }
+        if best.status is not MotionStatus.OK:
+            reasons = "; ".join(f"{a.path}: {a.reason}" for a in attempts)
+            motion = self._failed(t, best.status, reasons, texture=check.texture, current=img)
+            motion.info.update(info)
+            if best.fit is not None:
+                motion.n_candidates, motion.n_inliers = best.n_tracked, best.fit.n_inliers
+            return motion
+
+        fit = best.fit
+        motion = FrameMotion(
+            timestamp=t,
+            prev_timestamp=self._ref_time,
+            matrix=fit.matrix.copy(),
+            covariance=fit.covariance.copy(),
+            status=MotionStatus.OK,
+            n_candidates=best.n_tracked,
+            n_inliers=fit.n_inliers,
+            residual_rms=fit.residual_rms,
+            n_features=len(best.next_pts),
+            info=info,
+        )
+        self._last_motion, self._last_dt = fit.matrix, dt
+        self._failures = 0
+        self._set_reference(img, t, best.next_pts)
+        return motion
+
+    def _predict(self, dt: float) -> np.ndarray | None:
+        if self._last_motion is None or not self._last_dt:
+            return None
+        k = min(dt / self._last_dt, self.config.max_prediction_gap)
+        return scale_motion(self._last_motion, k)
+
+    def _attempt(self, path: str, img: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray, levels: int) -> _Attempt:
+        """Track the reference points from the rectified similarity ``guess`` and fit a similarity.
+
+        The guess is turned into an image-space affine map ``A`` (least squares through the point
+        map). When ``A`` rotates or scales, the reference image is warped by ``A`` first, so that
+        Lucas-Kanade's translation-only model meets undeformed patches (tracking a rotated patch
+        biases the measured rotation by a fraction of a percent). If the fitted motion then differs
+        from ``A`` by more than ``refine_tolerance``, the points are tracked once more through the
+        fitted motion at full resolution.
+        """
+        cfg = self.config
+        h, w = img.shape
+        b = cfg.border
+        init = self.point_map.to_image(apply_similarity(guess, ref_rect))
+        inside = (init[:, 0] >= b) & (init[:, 0] <= w - 1 - b) & (init[:, 1] >= b) & (init[:, 1] <= h - 1 - b)
+        if np.count_nonzero(inside) < cfg.min_inliers:
+            return _Attempt(path, None, MotionStatus.TOO_FEW_FEATURES, "prediction leaves too few points in view")
+        p0 = self._ref_pts[inside].astype(np.float64)
+        src = ref_rect[inside]
+        affine = _fit_affine(p0, init[inside])
+        outcome = self._track(img, p0, src, affine, levels)
+        if isinstance(outcome, _Attempt):
+            outcome.path = path
+            return outcome
+        fit, p1, n_tracked, keep = outcome
+        refined = _fit_affine(p0[keep][fit.inliers], p1[fit.inliers])
+        if np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
+            outcome2 = self._track(img, p0, src, refined, 0)
+            if not isinstance(outcome2, _Attempt):
+                fit, p1, n_tracked, keep = outcome2
+        return self._judge(path, fit, n_tracked, p1)
+
+    def _track(self, img, p0, src, affine, levels):
+        """Forward-backward Lucas-Kanade from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
+        cfg = self.config
+        h, w = img.shape
+        b = cfg.border
+        moved = np.ascontiguousarray(p0 @ affine[:, :2].T + affine[:, 2], dtype=np.float32)
+        if np.abs(affine[:, :2] - np.eye(2)).max() > cfg.warp_tolerance:
+            # the reference as it would look after the motion: its patches keep their shape
+            ref = cv2.warpAffine(self._ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            q0 = moved
+        else:  # a translation does not deform patches: track from the reference itself
+            ref = self._ref_img
+            q0 = np.ascontiguousarray(p0, dtype=np.float32)
+        start = moved
+        flags = cv2.OPTFLOW_USE_INITIAL_FLOW
+        q1, st1, _ = cv2.calcOpticalFlowPyrLK(
+            ref, img, q0, start.copy(), winSize=self._win, maxLevel=levels,
+            criteria=self._criteria, flags=flags, minEigThreshold=cfg.min_eigen,
+        )
+        ok = st1.ravel().astype(bool)
+        ok &= (q1[:, 0] >= b) & (q1[:, 0] <= w - 1 - b) & (q1[:, 1] >= b) & (q1[:, 1] <= h - 1 - b)
+        if np.count_nonzero(ok) < cfg.min_inliers:
+            return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, "too few points tracked", int(np.count_nonzero(ok)))
+        idx = np.flatnonzero(ok)
+        q0, q1, start = q0[idx], q1[idx], start[idx]
+        # backward from where the points landed, started from the same guess (symmetric check)
+        back_start = np.ascontiguousarray(q1 - (start - q0), dtype=np.float32)
+        q0b, st2, _ = cv2.calcOpticalFlowPyrLK(
+            img, ref, q1, back_start, winSize=self._win, maxLevel=levels,
+            criteria=self._criteria, flags=flags, minEigThreshold=cfg.min_eigen,
+        )
+        fb = np.hypot(*(q0b - q0).T)
+        good = st2.ravel().astype(bool) & (fb < cfg.fb_threshold)
+        n_tracked = int(len(idx))
+        if np.count_nonzero(good) < cfg.min_inliers:
+            return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, "too few points pass the forward-backward check", n_tracked)
+        keep = idx[good]
+        p1 = q1[good].astype(np.float64)
+        fit = estimate_similarity(src[keep], self.point_map.to_rectified(p1), self._options, self._rng)
+        if fit.status != "ok":
+            return self._judge("", fit, n_tracked, p1)
+        return fit, p1, n_tracked, keep
+
+    def _judge(self, path: str, fit: SimilarityFit, n_tracked: int, p1: np.ndarray) -> _Attempt:
+        """Turn a fit into an accepted or failed attempt."""
+        cfg = self.config
+        if fit.status == "too_few":
+            return _Attempt(path, fit, MotionStatus.TOO_FEW_FEATURES, "too few inliers", n_tracked)
+        if fit.status == "degenerate":
+            return _Attempt(path, fit, MotionStatus.DEGENERATE, "inliers clustered or collinear", n_tracked)
+        if fit.n_inliers < cfg.min_inlier_ratio * n_tracked:
+            return _Attempt(path, fit, MotionStatus.REJECTED, f"inlier ratio {fit.n_inliers}/{n_tracked} too low", n_tracked)
+        if abs(fit.params[3]) > cfg.max_abs_log_scale:
+            return _Attempt(path, fit, MotionStatus.REJECTED, f"implausible scale {math.exp(fit.params[3]):.3f}", n_tracked)
+        return _Attempt(path, fit, MotionStatus.OK, "", n_tracked, p1[fit.inliers].astype(np.float32))
+
+    def _global_shift(self, img: np.ndarray) -> tuple[float, float] | None:
+        """Coarse translation (image px) of ``img`` against the reference by phase correlation."""
+        f = self.config.global_downsample
+        size = (img.shape[1] // f, img.shape[0] // f)
+        a = cv2.resize(self._ref_img, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        c = cv2.resize(img, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+        if self._hann is None or self._hann.shape != a.shape:
+            self._hann = cv2.createHanningWindow(size, cv2.CV_32F)
+        (dx, dy), response = cv2.phaseCorrelate(a, c, self._hann)
+        if response < self.config.min_global_response:
+            return None
+        return dx * f, dy * f
+
+    # ------------------------------------------------------------ references
+    def _set_reference(self, img: np.ndarray, t: float, pts: np.ndarray) -> None:
+        self._ref_img, self._ref_time = img, t
+        pts = np.asarray(pts, np.float32).reshape(-1, 2)
+        if len(pts) < self.config.replenish_below:
+            pts = np.vstack([pts, self._detect(img, pts)])
+        self._ref_pts = pts
+
+    def _detect(self, img: np.ndarray, existing: np.ndarray) -> np.ndarray:
+        """New Shi-Tomasi corners on the half-resolution image, away from ``existing`` points."""
+        cfg = self.config
+        half = cv2.pyrDown(img)
+        hh, hw = half.shape
+        margin = (cfg.border + cfg.window // 2) // 2 + 1
+        mask = np.zeros((hh, hw), np.uint8)
+        mask[margin : hh - margin, margin : hw - margin] = 255
+        cell = max(int(cfg.min_distance // 2), 1)
+        if len(existing):
+            # blank the grid cells (and their neighbours) holding an existing track
+            gi = np.clip((existing[:, 1] / 2) // cell, 0, (hh - 1) // cell).astype(int)
+            gj = np.clip((existing[:, 0] / 2) // cell, 0, (hw - 1) // cell).astype(int)
+            occ = np.zeros(((hh - 1) // cell + 3, (hw - 1) // cell + 3), bool)
+            for di in (0, 1, 2):
+                for dj in (0, 1, 2):
+                    occ[gi + di, gj + dj] = True
+            occ = occ[1:-1, 1:-1]
+            big = np.repeat(np.repeat(occ, cell, axis=0), cell, axis=1)[:hh, :hw]
+            mask[big] = 0
+        wanted = cfg.max_tracks - len(existing)
+        if wanted <= 0:
+            return np.zeros((0, 2), np.float32)
+        corners = cv2.goodFeaturesToTrack(
+            half, maxCorners=wanted, qualityLevel=cfg.quality_level, minDistance=cfg.min_distance / 2,
+            mask=mask, blockSize=cfg.block_size,
+        )
+        if corners is None:
+            return np.zeros((0, 2), np.float32)
+        return (corners.reshape(-1, 2) * 2.0).astype(np.float32)
+
+    def _failed(self, t: float, status: MotionStatus, reason: str, texture: float = float("nan"), current=None) -> FrameMotion:
+        """A failed measurement; restarts from ``current`` after too many failures in a row."""
+        self._failures += 1
+        restarted = False
+        if self._failures >= self.config.max_failures and current is not None:
+            self._set_reference(current, t, np.zeros((0, 2), np.float32))
+            self._last_motion, self._last_dt = None, None
+            self._failures = 0
+            restarted = True
+        logger.debug("frame t=%.6f failed (%s): %s", t, status.value, reason)
+        return FrameMotion(
+            t, self._ref_time if not restarted else None, status=status,
+            info={"reason": reason, "texture": texture, "restarted": restarted, "path": "failed"},
+        )
+
+
+def _fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Least-squares 2x3 affine map taking ``src`` onto ``dst`` (``N x 2`` each)."""
+    x = np.hstack([src, np.ones((len(src), 1))])
+    sol, *_ = np.linalg.lstsq(x, dst, rcond=None)
+    return sol.T
