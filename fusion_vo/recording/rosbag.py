@@ -608,7 +608,6 @@ class _Importer:
         self.body_frame: str | None = None
         self.rows = {name: _Rows(StreamSummary(name, t.topic, t.msgtype)) for name, t in chosen.items()}
         self.image_size: tuple[int, int] | None = None
-        self.image_depth: str = ""
         self.written_images: set[int] = set()
         self.imu_missing_orientation = 0
         self.imu_covariance: dict[str, list[float]] = {"gyro": [], "accel": []}
@@ -623,28 +622,32 @@ class _Importer:
         extra = set(self.tf_topics) | ({self.caminfo_topic} if self.caminfo_topic else set())
         conns = [c for c in self.reader.connections if c.topic in wanted or c.topic in extra]
         handlers = {"cam0": self._image, "imu0": self._imu, "odom0": self._odom, "gps0": self._gps}
-        try:
-            for conn, bag_t, raw in self.reader.messages(connections=conns):
-                msg = self.reader.deserialize(raw, conn.msgtype)
-                if conn.topic in wanted:
-                    name = wanted[conn.topic]
-                    self.rows[name].summary.messages += 1
-                    handlers[name](msg, bag_t)
-                elif conn.msgtype == TF_MESSAGE:
-                    self._tf(msg)
-                elif self.camera_info is None and conn.msgtype == CAMERA_INFO and float(msg.k[0]) > 0:
-                    self.camera_info = msg
-        except InputError:
-            raise
-        except Exception as exc:  # a truncated or corrupt bag fails somewhere inside rosbags
-            raise InputError(f"cannot read the bag ({_one_line(exc)})", self.bag) from None
+        for conn, bag_t, msg in self._messages(conns):
+            if conn.topic in wanted:
+                name = wanted[conn.topic]
+                self.rows[name].summary.messages += 1
+                handlers[name](msg, bag_t)
+            elif conn.msgtype == TF_MESSAGE:
+                self._tf(msg)
+            elif self.camera_info is None and conn.msgtype == CAMERA_INFO and float(msg.k[0]) > 0:
+                self.camera_info = msg
         self.body_frame = self.body_frame or "base_link"
         for name in self.chosen:
             getattr(self, f"_finish_{name}")()
             self.summary.streams.append(self.rows[name].summary)
-        if self.tf_topics:
-            self.summary.notes.append(f"{len(self.transforms)} fixed transforms available from "
-                                      f"{', '.join(self.tf_topics)} and --static-tf")
+
+    def _messages(self, conns):
+        """Decoded ``(connection, bag time, message)`` in bag order; a damaged bag is an InputError."""
+        stream = iter(self.reader.messages(connections=conns))
+        while True:
+            try:
+                conn, bag_t, raw = next(stream)
+                msg = self.reader.deserialize(raw, conn.msgtype)
+            except StopIteration:
+                return
+            except Exception as exc:  # damaged chunks fail in rosbags or its decompressors, in many ways
+                raise InputError(f"cannot read the bag ({_one_line(exc)})", self.bag) from None
+            yield conn, bag_t, msg
 
     def _header_time(self, name: str, msg, bag_t: int) -> int:
         t, fallback = _stamp(msg.header, bag_t)
@@ -671,7 +674,7 @@ class _Importer:
             return
         size = (img.shape[1], img.shape[0])
         if self.image_size is None:
-            self.image_size, self.image_depth = size, str(img.dtype)
+            self.image_size = size
         elif size != self.image_size:
             rows.summary.dropped += 1
             log.warning("%s: image at %d ns is %dx%d, not %dx%d like the first; skipped", rows.summary.topic, t,
