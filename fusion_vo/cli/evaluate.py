@@ -1,0 +1,39 @@
+"""``fusion-vo evaluate RUN_DIR [--gt SEQ]``: errors of a run's trajectories against ground truth."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers) -> None:
+    parser = subparsers.add_parser(
+        "evaluate",
+        help="compare a run's trajectories with ground truth (metrics.json, plots, report.html)",
+        description="Compute ATE, RPE, drift, end-point, heading, velocity and per-leg errors for every "
+                    "trajectory (*.tum) in RUN_DIR, write metrics.json, PNG figures and a "
+                    "self-contained report.html into RUN_DIR and print the table.",
+    )
+    parser.add_argument("run_dir", metavar="RUN_DIR", help="folder written by 'fusion-vo run'")
+    parser.add_argument("--gt", metavar="SEQ", default=None,
+                        help="recording with state_groundtruth_estimate0/ (default: run.yaml's sequence)")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from rich.console import Console
+
+    from fusion_vo.evaluation import evaluate_run
+    from fusion_vo.evaluation.table import POSE_COLUMNS, VELOCITY_COLUMNS, legs_table, metrics_table
+
+    metrics = evaluate_run(args.run_dir, args.gt)
+    name = Path(args.run_dir).resolve().name
+    console = Console()
+    console.print(metrics_table(metrics, f"Position errors of {name}", columns=POSE_COLUMNS))
+    console.print(metrics_table(metrics, f"Velocity errors of {name}", columns=VELOCITY_COLUMNS))
+    for name, figures in metrics.items():
+        if figures.get("legs"):
+            console.print(legs_table(name, figures["legs"]))
+    console.print(f"report: {Path(args.run_dir) / 'report.html'}")
+    return 0

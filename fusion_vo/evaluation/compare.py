@@ -1,0 +1,74 @@
+"""Compare several runs: one table (rows run/trajectory) and one overlay figure.
+
+Runs are labelled by their folder names (with the parent folder added where two names clash). Every
+trajectory is evaluated against the ground truth of its own run's recording; the overlay shows the
+estimates anchored at the ground-truth start, and the ground truth itself when all runs share one
+recording.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from evo.core.trajectory import PoseTrajectory3D
+
+from fusion_vo.evaluation.evaluate import evaluate_trajectories, resolve_sequence
+from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, find_trajectories, read_groundtruth, read_run_config,
+                                     write_metrics)
+from fusion_vo.evaluation.metrics import to_planar
+from fusion_vo.evaluation.plots import plot_compare
+
+logger = logging.getLogger(__name__)
+
+
+def run_labels(run_dirs: list[Path]) -> list[str]:
+    """Folder names, or ``parent/name`` for names that occur more than once."""
+    names = [d.resolve().name for d in run_dirs]
+    return [f"{d.resolve().parent.name}/{n}" if names.count(n) > 1 else n for d, n in zip(run_dirs, names)]
+
+
+def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
+                 sequence_dir: str | Path | None = None) -> dict[str, dict[str, dict]]:
+    """Evaluate several runs and write ``compare.json`` and ``compare.png`` into ``out_dir``.
+
+    Parameters
+    ----------
+    run_dirs : list of str or Path
+        Run folders written by ``fusion-vo run``.
+    out_dir : str or Path
+        Folder for the outputs (created if missing).
+    sequence_dir : str or Path, optional
+        Recording with the ground truth for all runs; by default each run's ``run.yaml`` names its own.
+
+    Returns
+    -------
+    dict
+        Run label -> trajectory name -> figures.
+
+    Raises
+    ------
+    InputError
+        As :func:`fusion_vo.evaluation.evaluate.evaluate_run`, for the first run at fault.
+    """
+    run_dirs = [Path(d) for d in run_dirs]
+    out_dir = Path(out_dir)
+    table: dict[str, dict[str, dict]] = {}
+    overlay: dict[str, dict[str, PoseTrajectory3D]] = {}
+    sequences = []
+    reference = None
+    for label, run_dir in zip(run_labels(run_dirs), run_dirs):
+        files = find_trajectories(run_dir)
+        sequence = resolve_sequence(run_dir, read_run_config(run_dir), sequence_dir)
+        gt = read_groundtruth(sequence / GROUNDTRUTH_CSV)
+        results = evaluate_trajectories(gt, files)
+        table[label] = {name: r.figures for name, r in results.items()}
+        overlay[label] = {name: r.anchored for name, r in results.items()}
+        sequences.append(sequence.resolve())
+        reference = reference or to_planar(gt)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_metrics(out_dir / "compare.json", table)
+    shared = len(set(sequences)) == 1
+    plot_compare(reference if shared else None, overlay, out_dir / "compare.png")
+    logger.info("compared %d runs into %s", len(run_dirs), out_dir)
+    return table

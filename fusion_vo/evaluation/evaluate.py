@@ -1,0 +1,158 @@
+"""Evaluate a run folder: metrics.json, figures and report.html next to the trajectories.
+
+A run folder holds TUM trajectories (``vo.tum``, ``wheel.tum``, ``ekf.tum``, ...), optionally
+``velocities.csv`` from the visual frontend and ``run.yaml`` with the configuration, whose ``sequence``
+names the recording. The recording's ground truth is the reference for every figure.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from evo.core.trajectory import PoseTrajectory3D
+
+from fusion_vo.errors import InputError
+from fusion_vo.evaluation import plots
+from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, FrameVelocities, find_trajectories, read_groundtruth,
+                                     read_run_config, read_tum, read_velocities, write_metrics)
+from fusion_vo.evaluation.metrics import (TrajectoryErrors, Velocities, detect_legs, evaluate_trajectory,
+                                          reference_velocities, to_planar)
+from fusion_vo.evaluation.report import write_report
+
+logger = logging.getLogger(__name__)
+
+#: figure files written into the run folder, with their captions in the report
+FIGURES = {
+    "trajectories.png": "Trajectories on the floor, anchored at the ground-truth start (circle: start, "
+                        "triangle: end)",
+    "velocities.png": "Forward, lateral and yaw velocity against ground truth",
+    "heading.png": "Heading over time",
+    "error_distance.png": "Position error against distance travelled",
+    "frontend.png": "Inliers per frame and frames the visual frontend could not use",
+}
+
+
+def has_groundtruth(sequence_dir: str | Path) -> bool:
+    """Whether a recording folder contains ground truth."""
+    return (Path(sequence_dir) / GROUNDTRUTH_CSV).is_file()
+
+
+def resolve_sequence(run_dir: Path, config: dict, sequence_dir: str | Path | None) -> Path:
+    """The recording folder: ``sequence_dir`` if given, else ``run.yaml``'s ``sequence``.
+
+    A relative ``sequence`` in ``run.yaml`` is tried relative to the working directory, then to the run
+    folder.
+
+    Raises
+    ------
+    InputError
+        If no recording is named or the named folder has no ground truth.
+    """
+    if sequence_dir is None:
+        named = config.get("sequence")
+        if not named:
+            raise InputError("no recording to take ground truth from: run.yaml names no 'sequence'; "
+                             "pass --gt SEQ", run_dir / "run.yaml")
+        sequence = Path(str(named)).expanduser()
+        if not sequence.is_absolute() and not sequence.exists() and (run_dir / sequence).exists():
+            sequence = run_dir / sequence
+    else:
+        sequence = Path(sequence_dir)
+    if not sequence.is_dir():
+        raise InputError("recording folder not found", sequence)
+    if not has_groundtruth(sequence):
+        raise InputError("recording has no ground truth", sequence / GROUNDTRUTH_CSV)
+    return sequence
+
+
+def evaluate_trajectories(reference: PoseTrajectory3D,
+                          files: dict[str, Path]) -> dict[str, TrajectoryErrors]:
+    """Read and evaluate TUM files against a reference; errors name the file at fault."""
+    legs = detect_legs(reference)
+    logger.info("ground truth has %d straight legs", len(legs))
+    results = {}
+    for name, path in files.items():
+        estimate = read_tum(path, name)
+        try:
+            results[name] = evaluate_trajectory(reference, estimate, legs)
+        except InputError as exc:
+            raise InputError(exc.message, path) from None
+    return results
+
+
+def frontend_summary(frames: FrameVelocities) -> dict:
+    """Frame counts per status and the mean inlier count of the frames with a motion estimate."""
+    counts = Counter(frames.status)
+    summary = {"frames": len(frames.status)}
+    summary.update({f"frames {status}": n for status, n in sorted(counts.items())})
+    ok = frames.ok
+    if np.any(ok):
+        summary["mean inliers (ok frames)"] = round(float(np.mean(frames.inliers[ok])), 1)
+    return summary
+
+
+def _measured_velocities(frames: FrameVelocities) -> Velocities:
+    ok = frames.ok
+    return Velocities(frames.t[ok], frames.vx[ok], frames.vy[ok], frames.yaw_rate[ok])
+
+
+def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) -> dict:
+    """Evaluate every trajectory of a run folder and write metrics, figures and the report into it.
+
+    Parameters
+    ----------
+    run_dir : str or Path
+        Folder written by ``fusion-vo run``.
+    sequence_dir : str or Path, optional
+        Recording with the ground truth; by default the ``sequence`` named in ``run.yaml``.
+
+    Returns
+    -------
+    dict
+        Trajectory name -> figures, as written to ``metrics.json``.
+
+    Raises
+    ------
+    InputError
+        If the folder or its trajectories are missing or malformed, or there is no ground truth.
+    """
+    run_dir = Path(run_dir)
+    files = find_trajectories(run_dir)
+    config = read_run_config(run_dir)
+    sequence = resolve_sequence(run_dir, config, sequence_dir)
+    reference = read_groundtruth(sequence / GROUNDTRUTH_CSV)
+    results = evaluate_trajectories(reference, files)
+    metrics = {name: result.figures for name, result in results.items()}
+    write_metrics(run_dir / "metrics.json", metrics)
+
+    frames = read_velocities(run_dir / "velocities.csv") if (run_dir / "velocities.csv").is_file() else None
+    ref_planar = to_planar(reference)
+    anchored = {name: r.anchored for name, r in results.items()}
+    images = {}
+    images["trajectories.png"] = plots.plot_trajectories(ref_planar, anchored, run_dir / "trajectories.png",
+                                                         title=f"Trajectories: {run_dir.name}")
+    velocities = {name: r.velocities for name, r in results.items()}
+    if frames is not None and np.any(frames.ok):
+        velocities["vo"] = _measured_velocities(frames)
+        stamps = frames.t
+    else:
+        stamps = next(iter(results.values())).velocities.t
+    t0 = float(reference.timestamps[0])
+    images["velocities.png"] = plots.plot_velocities(reference_velocities(ref_planar, stamps), velocities,
+                                                     run_dir / "velocities.png", t0)
+    images["heading.png"] = plots.plot_heading(ref_planar, anchored, run_dir / "heading.png", t0)
+    images["error_distance.png"] = plots.plot_error_vs_distance(results, run_dir / "error_distance.png")
+    if frames is not None and frames.t.size:
+        images["frontend.png"] = plots.plot_frontend(frames, run_dir / "frontend.png")
+
+    report_config = dict(config)
+    report_config.setdefault("sequence", str(sequence))
+    write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, metrics,
+                 {FIGURES[path.name]: path for path in images.values()},
+                 frontend_summary(frames) if frames is not None else None)
+    logger.info("wrote metrics.json, %d figures and report.html to %s", len(images), run_dir)
+    return metrics
+

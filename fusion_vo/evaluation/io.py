@@ -1,0 +1,334 @@
+"""Files read and written by the evaluation.
+
+Readers
+-------
+* TUM trajectories: one pose per line, ``timestamp x y z qx qy qz qw`` (seconds, pose of the body frame B
+  in the world W). Blank lines and lines starting with ``#`` are skipped.
+* Ground truth in the EuRoC layout: ``#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z[,...]``; columns after
+  the quaternion are ignored. Timestamps are converted to seconds.
+* ``velocities.csv`` of a run: header ``t,vx,vy,yaw_rate,status,inliers``, one row per camera frame.
+
+Every malformed row raises :class:`fusion_vo.errors.InputError` naming the file and the 1-based line.
+Outputs are written to a temporary file in the destination folder and renamed into place, so a reader
+never sees a half-written file.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+from evo.core.trajectory import PoseTrajectory3D
+
+from frontends.base import MotionStatus
+from fusion_vo.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+#: trajectory files a run may contain, in the order they are reported
+TRAJECTORY_NAMES = ("vo", "wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+
+#: relative location of the ground truth inside a recording
+GROUNDTRUTH_CSV = Path("state_groundtruth_estimate0") / "data.csv"
+
+#: statuses a visual frontend may report for a frame (``ok`` first)
+FRAME_STATUSES = tuple(status.value for status in MotionStatus)
+
+
+@dataclass
+class FrameVelocities:
+    """Body-frame velocities measured by the visual frontend, one entry per camera frame.
+
+    Attributes
+    ----------
+    t : ndarray, shape (n,)
+        Frame time [s].
+    vx, vy : ndarray, shape (n,)
+        Forward and leftward velocity of the body [m/s] (NaN where the frame gave none).
+    yaw_rate : ndarray, shape (n,)
+        Yaw rate [rad/s] (NaN where the frame gave none).
+    status : list of str
+        Frontend status of each frame (``ok`` or the reason it failed).
+    inliers : ndarray, shape (n,)
+        Number of inlier matches.
+    """
+
+    t: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    yaw_rate: np.ndarray
+    status: list[str]
+    inliers: np.ndarray
+
+    @property
+    def ok(self) -> np.ndarray:
+        """Boolean mask of frames with a valid motion estimate."""
+        return np.array([s == "ok" for s in self.status], dtype=bool)
+
+
+def _floats(fields: list[str], path: Path, line: int) -> list[float]:
+    try:
+        values = [float(f) for f in fields]
+    except ValueError:
+        raise InputError(f"expected numbers, got {','.join(fields)!r}", path, line) from None
+    if not all(math.isfinite(v) for v in values):
+        raise InputError("non-finite value (NaN or inf)", path, line)
+    return values
+
+
+def _read_lines(path: Path) -> list[str]:
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found", path)
+    try:
+        return path.read_text(encoding="utf-8-sig").splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file: {exc}", path) from None
+
+
+def _check_increasing(t: np.ndarray, lines: list[int], path: Path) -> None:
+    bad = np.nonzero(np.diff(t) <= 0.0)[0]
+    if bad.size:
+        i = int(bad[0]) + 1
+        raise InputError("timestamps must increase strictly", path, lines[i])
+
+
+def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
+    """Read a TUM trajectory file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    name : str, optional
+        Name given to the trajectory (default: the file stem).
+
+    Returns
+    -------
+    PoseTrajectory3D
+        The poses, with timestamps in seconds.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, empty, a row does not hold eight finite numbers, a quaternion has zero
+        length or the timestamps do not increase.
+    """
+    path = Path(path)
+    rows, line_numbers = [], []
+    for number, text in enumerate(_read_lines(path), start=1):
+        text = text.strip()
+        if not text or text.startswith("#"):
+            continue
+        fields = text.replace(",", " ").split()
+        if len(fields) != 8:
+            raise InputError(f"expected 8 columns 'timestamp x y z qx qy qz qw', got {len(fields)}",
+                             path, number)
+        values = _floats(fields, path, number)
+        if math.hypot(*values[4:8]) < 1e-9:
+            raise InputError("quaternion has zero length", path, number)
+        rows.append(values)
+        line_numbers.append(number)
+    if not rows:
+        raise InputError("no poses in trajectory file", path)
+    data = np.array(rows)
+    _check_increasing(data[:, 0], line_numbers, path)
+    quat_wxyz = data[:, [7, 4, 5, 6]]
+    quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
+    return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0], name=name or path.stem)
+
+
+def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
+    """Read ground truth in the EuRoC ``state_groundtruth_estimate0/data.csv`` format.
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file, or a recording folder containing ``state_groundtruth_estimate0/data.csv``.
+
+    Returns
+    -------
+    PoseTrajectory3D
+        Poses of the body in the world, timestamps in seconds, named ``groundtruth``.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, has no rows, a row has fewer than 8 columns or non-numeric values, or the
+        timestamps do not increase.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / GROUNDTRUTH_CSV
+    rows, line_numbers = [], []
+    for number, text in enumerate(_read_lines(path), start=1):
+        text = text.strip()
+        if not text or text.startswith("#"):
+            continue
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) < 8:
+            raise InputError(f"expected at least 8 columns 'timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z', "
+                             f"got {len(fields)}", path, number)
+        values = _floats(fields[:8], path, number)
+        if math.hypot(*values[4:8]) < 1e-9:
+            raise InputError("quaternion has zero length", path, number)
+        rows.append(values)
+        line_numbers.append(number)
+    if not rows:
+        raise InputError("no poses in ground truth file", path)
+    data = np.array(rows)
+    _check_increasing(data[:, 0], line_numbers, path)
+    quat_wxyz = data[:, 4:8] / np.linalg.norm(data[:, 4:8], axis=1, keepdims=True)
+    return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0] * 1e-9, name="groundtruth")
+
+
+def read_velocities(path: str | Path) -> FrameVelocities:
+    """Read the per-frame velocities a run wrote (``velocities.csv``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file with header ``t,vx,vy,yaw_rate,status,inliers``.
+
+    Returns
+    -------
+    FrameVelocities
+
+    Raises
+    ------
+    InputError
+        On a missing header column, a row with the wrong number of fields, a non-numeric time or inlier
+        count, or an unknown status. Empty or ``nan`` velocities are accepted (failed frames).
+    """
+    path = Path(path)
+    lines = _read_lines(path)
+    if not lines:
+        raise InputError("empty file", path)
+    header = [h.strip() for h in lines[0].lstrip("#").split(",")]
+    expected = ["t", "vx", "vy", "yaw_rate", "status", "inliers"]
+    missing = [c for c in expected if c not in header]
+    if missing:
+        raise InputError(f"header lacks column(s) {', '.join(missing)}", path, 1)
+    col = {c: header.index(c) for c in expected}
+    t, vx, vy, wz, status, inliers = [], [], [], [], [], []
+    for number, text in enumerate(lines[1:], start=2):
+        if not text.strip():
+            continue
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) != len(header):
+            raise InputError(f"expected {len(header)} fields, got {len(fields)}", path, number)
+        try:
+            t.append(float(fields[col["t"]]))
+            vx.append(float(fields[col["vx"]] or "nan"))
+            vy.append(float(fields[col["vy"]] or "nan"))
+            wz.append(float(fields[col["yaw_rate"]] or "nan"))
+            inliers.append(int(float(fields[col["inliers"]] or 0)))
+        except ValueError:
+            raise InputError(f"expected numbers in row {text!r}", path, number) from None
+        if not math.isfinite(t[-1]):
+            raise InputError("non-finite time", path, number)
+        if fields[col["status"]] not in FRAME_STATUSES:
+            raise InputError(f"unknown status {fields[col['status']]!r} "
+                             f"(expected one of {', '.join(FRAME_STATUSES)})", path, number)
+        status.append(fields[col["status"]])
+    return FrameVelocities(np.array(t), np.array(vx), np.array(vy), np.array(wz), status,
+                           np.array(inliers, dtype=int))
+
+
+def find_trajectories(run_dir: str | Path) -> dict[str, Path]:
+    """List the TUM trajectories of a run folder.
+
+    The known names (:data:`TRAJECTORY_NAMES`) come first in their fixed order, then any other ``*.tum``
+    file in alphabetical order.
+
+    Raises
+    ------
+    InputError
+        If ``run_dir`` is not a folder or holds no ``.tum`` file.
+    """
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise InputError("run folder not found", run_dir)
+    files = {p.stem: p for p in sorted(run_dir.glob("*.tum"))}
+    if not files:
+        raise InputError("no trajectories (*.tum) in run folder", run_dir)
+    ordered = [n for n in TRAJECTORY_NAMES if n in files] + [n for n in files if n not in TRAJECTORY_NAMES]
+    return {n: files[n] for n in ordered}
+
+
+def read_run_config(run_dir: str | Path) -> dict:
+    """Read ``run.yaml`` of a run folder; an absent file gives an empty configuration.
+
+    Raises
+    ------
+    InputError
+        If the file exists but is not a YAML mapping.
+    """
+    path = Path(run_dir) / "run.yaml"
+    if not path.is_file():
+        return {}
+    try:
+        config = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as exc:
+        line = getattr(getattr(exc, "problem_mark", None), "line", None)
+        raise InputError(f"invalid YAML: {exc}", path, None if line is None else line + 1) from None
+    if config is None:
+        return {}
+    if not isinstance(config, dict):
+        raise InputError("expected a mapping at the top level", path)
+    return config
+
+
+def write_atomic(path: str | Path, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    payload = data.encode("utf-8") if isinstance(data, str) else data
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(payload)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _json_safe(value):
+    """Replace non-finite floats (not valid JSON) by ``None`` and numpy scalars by Python ones."""
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _json_safe(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def write_metrics(path: str | Path, metrics: dict) -> Path:
+    """Write metrics as indented JSON (NaN written as ``null``), atomically."""
+    text = json.dumps(_json_safe(metrics), indent=2, sort_keys=False) + "\n"
+    return write_atomic(path, text)
+
+
+def read_metrics(path: str | Path) -> dict:
+    """Read a ``metrics.json`` written by :func:`write_metrics`."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError("file not found", path) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"invalid JSON: {exc.msg}", path, exc.lineno) from None

@@ -1,0 +1,228 @@
+"""Figures of a run: trajectories, velocities, heading, error growth and frontend health.
+
+Every function draws one PNG with matplotlib's object interface (:class:`matplotlib.figure.Figure` and
+the Agg canvas, no pyplot state) and writes it atomically. Each source has one colour everywhere
+(:data:`COLOURS`); ground truth is black.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import zlib
+from pathlib import Path
+
+import numpy as np
+from evo.core.trajectory import PoseTrajectory3D
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from fusion_vo.evaluation.io import FRAME_STATUSES, FrameVelocities, write_atomic
+from fusion_vo.evaluation.metrics import TrajectoryErrors, Velocities, yaw_of
+
+logger = logging.getLogger(__name__)
+
+#: colour of each source in every figure
+COLOURS = {
+    "groundtruth": "black",
+    "vo": "tab:blue",
+    "wheel": "tab:orange",
+    "ekf": "tab:green",
+    "ekf_smoothed": "tab:olive",
+    "gtsam": "tab:red",
+    "gtsam_online": "tab:purple",
+}
+
+#: legend label of each source
+LABELS = {
+    "groundtruth": "ground truth",
+    "vo": "visual",
+    "wheel": "wheel",
+    "ekf": "EKF",
+    "ekf_smoothed": "EKF smoothed",
+    "gtsam": "GTSAM batch",
+    "gtsam_online": "GTSAM online",
+}
+
+_SPARE_COLOURS = ("tab:brown", "tab:pink", "tab:cyan", "tab:gray", "gold", "navy")
+_RUN_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown",
+                "tab:pink", "tab:cyan", "tab:olive", "tab:gray")
+_STATUS_COLOURS = {"first": "tab:gray", "too_few_features": "tab:orange", "degenerate": "tab:purple",
+                   "rejected": "tab:red", "bad_frame": "tab:brown"}
+
+
+def colour_of(name: str) -> str:
+    """Colour of a source; names outside :data:`COLOURS` get a fixed spare colour."""
+    if name in COLOURS:
+        return COLOURS[name]
+    return _SPARE_COLOURS[zlib.crc32(name.encode()) % len(_SPARE_COLOURS)]
+
+
+def label_of(name: str) -> str:
+    """Legend label of a source."""
+    return LABELS.get(name, name)
+
+
+def _new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: bool = True):
+    fig = Figure(figsize=(width, height * rows), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, sharex=sharex, squeeze=False)[:, 0]
+    return fig, axes
+
+
+def _save(fig: Figure, path: str | Path) -> Path:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    logger.debug("wrote %s", path)
+    return write_atomic(path, buffer.getvalue())
+
+
+def _xy(trajectory: PoseTrajectory3D) -> np.ndarray:
+    return trajectory.positions_xyz[:, :2]
+
+
+def plot_trajectories(reference: PoseTrajectory3D | None, estimates: dict[str, PoseTrajectory3D],
+                      path: str | Path, title: str = "Trajectories") -> Path:
+    """Overlay the paths on the floor with start (circle) and end (triangle) marked.
+
+    Parameters
+    ----------
+    reference : PoseTrajectory3D or None
+        Ground truth, drawn in black.
+    estimates : dict
+        Source name -> trajectory (already in the reference's frame, e.g. anchored at its start).
+    path : str or Path
+        PNG to write.
+    """
+    fig, (ax,) = _new_figure(height=6.5, width=7.5)
+    series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
+    for name, trajectory in series:
+        xy = _xy(trajectory)
+        colour = colour_of(name)
+        width = 2.2 if name == "groundtruth" else 1.4
+        ax.plot(xy[:, 0], xy[:, 1], color=colour, lw=width, label=label_of(name))
+        ax.plot(*xy[0], marker="o", color=colour, ms=8, mfc="white", mew=2)
+        ax.plot(*xy[-1], marker="^", color=colour, ms=9)
+    ax.plot([], [], "o", color="grey", mfc="white", mew=2, label="start")
+    ax.plot([], [], "^", color="grey", label="end")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return _save(fig, path)
+
+
+def _start_time(stamps: list[np.ndarray], t0: float | None) -> float:
+    if t0 is not None:
+        return t0
+    starts = [s[0] for s in stamps if s.size]
+    return float(min(starts)) if starts else 0.0
+
+
+def plot_velocities(reference: Velocities | None, estimates: dict[str, Velocities],
+                    path: str | Path, t0: float | None = None) -> Path:
+    """Forward velocity, lateral velocity and yaw rate over time, each source against ground truth.
+
+    Time is shown from ``t0`` (default: the earliest sample).
+    """
+    fig, axes = _new_figure(rows=3, height=2.6, width=9.0)
+    rows = (("vx", "$v_x$ [m/s]", 1.0), ("vy", "$v_y$ [m/s]", 1.0), ("yaw_rate", "yaw rate [deg/s]",
+                                                                       180.0 / np.pi))
+    series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
+    series = [(name, vel) for name, vel in series if vel is not None and vel.t.size]
+    t0 = _start_time([vel.t for _, vel in series], t0)
+    for ax, (key, ylabel, factor) in zip(axes, rows):
+        for name, vel in series:
+            width = 2.0 if name == "groundtruth" else 1.0
+            ax.plot(vel.t - t0, getattr(vel, key) * factor, color=colour_of(name), lw=width,
+                    label=label_of(name), alpha=1.0 if name == "groundtruth" else 0.85)
+        ax.set_ylabel(ylabel)
+        ax.grid(True, alpha=0.3)
+    axes[0].set_title("Body velocities")
+    if series:
+        fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=len(series),
+                   fontsize="small")
+    axes[-1].set_xlabel("time [s]")
+    return _save(fig, path)
+
+
+def plot_heading(reference: PoseTrajectory3D | None, estimates: dict[str, PoseTrajectory3D],
+                 path: str | Path, t0: float | None = None) -> Path:
+    """Unwrapped heading (yaw) over time from ``t0`` (default: the earliest pose)."""
+    fig, (ax,) = _new_figure(height=4.0, width=9.0)
+    series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
+    t0 = _start_time([trajectory.timestamps for _, trajectory in series], t0)
+    for name, trajectory in series:
+        yaw = np.degrees(np.unwrap(yaw_of(trajectory)))
+        ax.plot(trajectory.timestamps - t0, yaw, color=colour_of(name),
+                lw=2.0 if name == "groundtruth" else 1.2, label=label_of(name))
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("heading [deg]")
+    ax.set_title("Heading")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return _save(fig, path)
+
+
+def plot_error_vs_distance(results: dict[str, TrajectoryErrors], path: str | Path) -> Path:
+    """Position error (estimate anchored at the start) against ground-truth distance travelled."""
+    fig, (ax,) = _new_figure(height=4.0, width=9.0)
+    for name, result in results.items():
+        ax.plot(result.distance, result.error_m, color=colour_of(name), lw=1.4, label=label_of(name))
+    ax.set_xlabel("distance travelled [m]")
+    ax.set_ylabel("position error [m]")
+    ax.set_title("Error growth (anchored at the start)")
+    ax.grid(True, alpha=0.3)
+    if results:
+        ax.legend(loc="upper left", fontsize="small")
+    return _save(fig, path)
+
+
+def plot_frontend(frames: FrameVelocities, path: str | Path) -> Path:
+    """Inlier count per frame with the frames the frontend could not use marked by reason."""
+    fig, (ax,) = _new_figure(height=3.5, width=9.0)
+    t = frames.t - (frames.t[0] if frames.t.size else 0.0)
+    ax.plot(t, frames.inliers, color=COLOURS["vo"], lw=1.0, label="inliers")
+    status = np.array(frames.status)
+    top = max(1, int(frames.inliers.max())) if frames.inliers.size else 1
+    for reason in FRAME_STATUSES[1:]:
+        mask = status == reason
+        if np.any(mask):
+            ax.plot(t[mask], np.full(mask.sum(), -0.04 * top), "|", ms=12, mew=2,
+                    color=_STATUS_COLOURS[reason], label=f"{reason} ({int(mask.sum())})")
+    ok = int(np.sum(status == "ok"))
+    ax.set_title(f"Visual frontend: {ok} of {len(status)} frames ok")
+    ax.set_xlabel("time [s]")
+    ax.set_ylabel("inliers")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="upper right", fontsize="small", ncol=3)
+    return _save(fig, path)
+
+
+def plot_compare(reference: PoseTrajectory3D | None, runs: dict[str, dict[str, PoseTrajectory3D]],
+                 path: str | Path) -> Path:
+    """Overlay the trajectories of several runs: one colour per run, one line style per source."""
+    styles = ("-", "--", "-.", ":")
+    fig, (ax,) = _new_figure(height=6.5, width=8.0)
+    if reference is not None:
+        xy = _xy(reference)
+        ax.plot(xy[:, 0], xy[:, 1], color="black", lw=2.2, label=label_of("groundtruth"))
+        ax.plot(*xy[0], marker="o", color="black", ms=8, mfc="white", mew=2)
+    sources = sorted({s for run in runs.values() for s in run}, key=lambda s: (s not in LABELS, s))
+    for k, (label, trajectories) in enumerate(runs.items()):
+        colour = _RUN_COLOURS[k % len(_RUN_COLOURS)]
+        for name, trajectory in trajectories.items():
+            xy = _xy(trajectory)
+            style = styles[sources.index(name) % len(styles)]
+            ax.plot(xy[:, 0], xy[:, 1], color=colour, ls=style, lw=1.4, label=f"{label}: {label_of(name)}")
+            ax.plot(*xy[-1], marker="^", color=colour, ms=8)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title("Runs compared (anchored at the ground-truth start)" if reference is not None
+                 else "Runs compared")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return _save(fig, path)

@@ -1,0 +1,95 @@
+"""Figures of fusion_vo.evaluation.metrics on trajectories with known errors."""
+
+import math
+
+import numpy as np
+import pytest
+
+from fusion_vo.errors import InputError
+from fusion_vo.evaluation import metrics as m
+
+from synthetic import circle_path, distorted, square_path
+
+
+def trajectory(t, x, y, yaw, name="est"):
+    return m.planar_trajectory(np.asarray(t) + 1.0, x, y, yaw, name=name)
+
+
+@pytest.fixture(scope="module")
+def square():
+    return square_path()
+
+
+def test_rigidly_moved_copy_has_zero_aligned_error_but_anchoring_keeps_nothing_back(square):
+    t, x, y, yaw = square
+    gt = trajectory(t, x, y, yaw, "gt")
+    c, s = math.cos(0.3), math.sin(0.3)
+    est = trajectory(t, c * x - s * y + 2.0, s * x + c * y - 1.0, yaw + 0.3)
+    figures = m.evaluate_trajectory(gt, est).figures
+    assert figures["ate_m"] == pytest.approx(0.0, abs=1e-9)
+    assert figures["ate_anchored_m"] == pytest.approx(0.0, abs=1e-9)
+    assert figures["end_m"] == pytest.approx(0.0, abs=1e-9)
+    assert figures["heading_deg"] == pytest.approx(0.0, abs=1e-6)
+    assert figures["rpe_1m_pct"] == pytest.approx(0.0, abs=1e-6)
+    assert figures["vx_rmse_m_s"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_scale_error_shows_in_legs_rpe_and_velocity(square):
+    t, x, y, yaw = square
+    gt = trajectory(t, x, y, yaw, "gt")
+    result = m.evaluate_trajectory(gt, trajectory(*distorted(t, x, y, yaw, scale=1.05, step=2)),
+                                   m.detect_legs(gt))
+    figures = result.figures
+    assert len(figures["legs"]) == 4
+    for leg in figures["legs"]:
+        assert leg["actual_m"] == pytest.approx(0.9, abs=1e-6)
+        assert leg["estimated_m"] == pytest.approx(0.945, abs=1e-6)
+        assert leg["error_pct"] == pytest.approx(5.0, abs=1e-4)
+    # the square closes, so does the scaled square: the end point is right, the figures in between not
+    assert figures["end_m"] == pytest.approx(0.0, abs=1e-6)
+    assert figures["ate_anchored_m"] > 0.02
+    # over straight 1 m stretches the error is 5 cm; stretches across a corner see less
+    assert 2.5 < figures["rpe_1m_pct"] <= 5.0 + 1e-6
+    assert figures["path_length_m"] == pytest.approx(3.6, abs=0.01)
+    # forward speed 0.2 m/s is 5 % too fast while driving, right while turning in place
+    assert 0.002 < figures["vx_rmse_m_s"] < 0.01
+    assert figures["yaw_rate_rmse_deg_s"] == pytest.approx(0.0, abs=1e-6)
+    assert [d["length_m"] for d in figures["drift"]] == [0.5, 1.0, 2.0]
+    assert figures["revolutions"] == pytest.approx(1.0, abs=1e-6)
+
+
+def test_heading_error_per_revolution_on_a_circle():
+    t, x, y, yaw = circle_path()
+    gt = trajectory(t, x, y, yaw, "gt")
+    bias = math.radians(3.6) / t[-1]  # 3.6 deg after the one revolution
+    figures = m.evaluate_trajectory(gt, trajectory(*distorted(t, x, y, yaw, yaw_rate_bias=bias))).figures
+    assert figures["revolutions"] == pytest.approx(1.0, abs=1e-3)
+    assert figures["heading_deg"] == pytest.approx(3.6, abs=1e-6)
+    assert figures["heading_per_rev_pct"] == pytest.approx(1.0, abs=2e-3)
+    assert figures["yaw_rate_rmse_deg_s"] == pytest.approx(3.6 / t[-1], rel=1e-6)
+    assert figures["legs"] == []
+
+
+def test_legs_follow_the_turns_of_the_square(square):
+    t, x, y, yaw = square
+    legs = m.detect_legs(trajectory(t, x, y, yaw))
+    assert [tuple(np.round(leg.end_xy, 6)) for leg in legs] == [(0.9, 0.0), (0.9, 0.9), (0.0, 0.9), (0.0, 0.0)]
+    assert all(leg.length_m == pytest.approx(0.9) for leg in legs)
+    t_circle, *rest = circle_path()
+    assert m.detect_legs(trajectory(t_circle, *rest)) == []
+
+
+def test_body_velocities_are_in_the_body_frame():
+    t = np.arange(0.0, 1.0, 0.1)
+    traj = m.planar_trajectory(t, 0.5 * t * math.cos(1.0), 0.5 * t * math.sin(1.0), np.full(t.shape, 1.0 + np.pi / 2))
+    vel = m.body_velocities(traj)
+    np.testing.assert_allclose(vel.vx, 0.0, atol=1e-12)
+    np.testing.assert_allclose(vel.vy, -0.5, atol=1e-12)  # moving to the robot's right
+    np.testing.assert_allclose(vel.t, t[1:])
+
+
+def test_estimate_outside_the_ground_truth_time_is_an_input_error(square):
+    t, x, y, yaw = square
+    gt = trajectory(t, x, y, yaw, "gt")
+    with pytest.raises(InputError, match="match the ground truth in time"):
+        m.evaluate_trajectory(gt, trajectory(t + 1000.0, x, y, yaw))
