@@ -42,6 +42,7 @@ import numpy as np
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.frame_check import check_frame
+from frontends.tracking import LkSettings, fit_affine, track_points
 from frontends.similarity import (
     RobustOptions,
     SimilarityFit,
@@ -83,6 +84,8 @@ class KltConfig(ConfigMixin):
         Lucas-Kanade's own minimum-eigenvalue threshold (OpenCV units): points below are dropped.
     fb_threshold : float
         Maximum forward-backward error [px].
+    forward_backward : bool
+        Whether to run the forward-backward check (it doubles the tracking time).
     warp_tolerance : float
         When the guessed motion's linear part differs from the identity by more than this (largest
         element; 1e-3 is about 0.06 deg or 0.1 % scale), the reference is warped by it before tracking.
@@ -138,6 +141,7 @@ class KltConfig(ConfigMixin):
     lk_epsilon: float = 0.01
     min_eigen: float = 1e-3
     fb_threshold: float = 0.5
+    forward_backward: bool = True
     warp_tolerance: float = 1e-3
     refine_tolerance: float = 1e-3
     border: int = 10
@@ -168,6 +172,19 @@ class KltConfig(ConfigMixin):
         if not 0.0 <= self.min_inlier_ratio <= 1.0:
             raise ValueError("min_inlier_ratio must lie in [0, 1]")
         self.robust_options()  # validates method, threshold, confidence
+
+    def lk_settings(self) -> LkSettings:
+        """The Lucas-Kanade settings derived from this configuration."""
+        return LkSettings(
+            window=self.window,
+            iterations=self.lk_iterations,
+            epsilon=self.lk_epsilon,
+            min_eigen=self.min_eigen,
+            fb_threshold=self.fb_threshold,
+            border=self.border,
+            warp_tolerance=self.warp_tolerance,
+            forward_backward=self.forward_backward,
+        )
 
     def robust_options(self) -> RobustOptions:
         """The estimator settings derived from this configuration."""
@@ -210,9 +227,7 @@ class KltFrontend:
         self.point_map = point_map if point_map is not None else IdentityMap()
         self._options = self.config.robust_options()
         self._rng = np.random.default_rng(self.config.seed)
-        w = self.config.window
-        self._win = (w, w)
-        self._criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, self.config.lk_iterations, self.config.lk_epsilon)
+        self._lk = self.config.lk_settings()
         self._hann: np.ndarray | None = None
         self._shape: tuple[int, int] | None = None
         self.reset()
@@ -328,13 +343,13 @@ class KltFrontend:
             return _Attempt(path, None, MotionStatus.TOO_FEW_FEATURES, "prediction leaves too few points in view")
         p0 = self._ref_pts[inside].astype(np.float64)
         src = ref_rect[inside]
-        affine = _fit_affine(p0, init[inside])
+        affine = fit_affine(p0, init[inside])
         outcome = self._track(img, p0, src, affine, levels)
         if isinstance(outcome, _Attempt):
             outcome.path = path
             return outcome
         fit, p1, n_tracked, keep = outcome
-        refined = _fit_affine(p0[keep][fit.inliers], p1[fit.inliers])
+        refined = fit_affine(p0[keep][fit.inliers], p1[fit.inliers])
         if np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
             outcome2 = self._track(img, p0, src, refined, 0)
             if not isinstance(outcome2, _Attempt):
@@ -342,47 +357,16 @@ class KltFrontend:
         return self._judge(path, fit, n_tracked, p1)
 
     def _track(self, img, p0, src, affine, levels):
-        """Forward-backward Lucas-Kanade from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
+        """Tracking from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
         cfg = self.config
-        h, w = img.shape
-        b = cfg.border
-        moved = np.ascontiguousarray(p0 @ affine[:, :2].T + affine[:, 2], dtype=np.float32)
-        if np.abs(affine[:, :2] - np.eye(2)).max() > cfg.warp_tolerance:
-            # the reference as it would look after the motion: its patches keep their shape
-            ref = cv2.warpAffine(self._ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            q0 = moved
-        else:  # a translation does not deform patches: track from the reference itself
-            ref = self._ref_img
-            q0 = np.ascontiguousarray(p0, dtype=np.float32)
-        start = moved
-        flags = cv2.OPTFLOW_USE_INITIAL_FLOW
-        q1, st1, _ = cv2.calcOpticalFlowPyrLK(
-            ref, img, q0, start.copy(), winSize=self._win, maxLevel=levels,
-            criteria=self._criteria, flags=flags, minEigThreshold=cfg.min_eigen,
-        )
-        ok = st1.ravel().astype(bool)
-        ok &= (q1[:, 0] >= b) & (q1[:, 0] <= w - 1 - b) & (q1[:, 1] >= b) & (q1[:, 1] <= h - 1 - b)
-        if np.count_nonzero(ok) < cfg.min_inliers:
-            return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, "too few points tracked", int(np.count_nonzero(ok)))
-        idx = np.flatnonzero(ok)
-        q0, q1, start = q0[idx], q1[idx], start[idx]
-        # backward from where the points landed, started from the same guess (symmetric check)
-        back_start = np.ascontiguousarray(q1 - (start - q0), dtype=np.float32)
-        q0b, st2, _ = cv2.calcOpticalFlowPyrLK(
-            img, ref, q1, back_start, winSize=self._win, maxLevel=levels,
-            criteria=self._criteria, flags=flags, minEigThreshold=cfg.min_eigen,
-        )
-        fb = np.hypot(*(q0b - q0).T)
-        good = st2.ravel().astype(bool) & (fb < cfg.fb_threshold)
-        n_tracked = int(len(idx))
-        if np.count_nonzero(good) < cfg.min_inliers:
-            return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, "too few points pass the forward-backward check", n_tracked)
-        keep = idx[good]
-        p1 = q1[good].astype(np.float64)
-        fit = estimate_similarity(src[keep], self.point_map.to_rectified(p1), self._options, self._rng)
+        tr = track_points(self._ref_img, img, p0, affine, levels, self._lk)
+        if len(tr.index) < cfg.min_inliers:
+            why = "too few points tracked" if tr.n_tracked < cfg.min_inliers else "too few points pass the forward-backward check"
+            return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, why, tr.n_tracked)
+        fit = estimate_similarity(src[tr.index], self.point_map.to_rectified(tr.points), self._options, self._rng)
         if fit.status != "ok":
-            return self._judge("", fit, n_tracked, p1)
-        return fit, p1, n_tracked, keep
+            return self._judge("", fit, tr.n_tracked, tr.points)
+        return fit, tr.points, tr.n_tracked, tr.index
 
     def _judge(self, path: str, fit: SimilarityFit, n_tracked: int, p1: np.ndarray) -> _Attempt:
         """Turn a fit into an accepted or failed attempt."""
@@ -464,9 +448,3 @@ class KltFrontend:
             info={"reason": reason, "texture": texture, "restarted": restarted, "path": "failed"},
         )
 
-
-def _fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
-    """Least-squares 2x3 affine map taking ``src`` onto ``dst`` (``N x 2`` each)."""
-    x = np.hstack([src, np.ones((len(src), 1))])
-    sol, *_ = np.linalg.lstsq(x, dst, rcond=None)
-    return sol.T

@@ -1,0 +1,351 @@
+"""Feature frontend: corners, descriptors, matching and a robust similarity (thesis chapter 4).
+
+Per frame:
+
+1. detect corners (Harris, Shi-Tomasi or FAST; :mod:`frontends.detectors`) and describe them
+   (normalised patches or ORB; :mod:`frontends.descriptors`);
+2. match them to the previous frame's corners (threshold, nearest neighbour or distance ratio, with an
+   optional mutual check; :mod:`frontends.matching`). When a motion prediction exists (the last
+   measured similarity continued over the new time gap) a current corner may only match a previous
+   corner whose predicted position lies within ``gate_radius``; if that fails, matching is retried
+   without the gate;
+3. estimate the similarity on the rectified coordinates of the matches by RANSAC or LMedS followed by
+   least squares on the inliers (:mod:`frontends.similarity`);
+4. refine (``refine="lk"``): corner positions are only repeatable to a few tenths of a pixel, so the
+   inlier corners of the previous frame are located in the current frame by Lucas-Kanade through the
+   fitted motion (:func:`frontends.tracking.track_points`, area-based matching at full resolution)
+   and the similarity is fitted again. ``refine="subpix"`` instead moves both corner sets to their
+   sub-pixel gradient-orthogonality positions; ``"none"`` keeps whole-pixel corners.
+
+Failures leave the reference (last good frame) unchanged; after ``max_failures`` consecutive
+failures the current frame, if textured, becomes the new reference (restart).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
+from frontends.config import ConfigMixin
+from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
+from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
+from frontends.frame_check import check_frame
+from frontends.matching import MATCHERS, gate_distances, match_descriptors
+from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, scale_motion
+from frontends.tracking import LkSettings, fit_affine, track_points
+
+logger = logging.getLogger(__name__)
+
+_DEFAULT_MAX_DISTANCE = {"patch": 0.9, "orb": 80.0}
+
+
+@dataclass
+class FeatureConfig(ConfigMixin):
+    """Settings of :class:`FeatureFrontend` (every field has a working default).
+
+    Attributes
+    ----------
+    detector : str
+        ``"harris"``, ``"shi_tomasi"`` or ``"fast"``.
+    max_corners : int
+        Maximum number of corners kept per frame (thesis: 80).
+    min_quality : float
+        Corner response relative to the strongest one below which corners are dropped (0-1).
+    min_metric : float
+        Absolute minimum corner response (image scaled to [0, 1]; thesis: 0.001; 0 disables).
+    neighbourhood : tuple of int
+        Non-maximum-suppression neighbourhood ``(rows, cols)``, odd [px of the detection image].
+    detect_level : int
+        Corners are detected on the image reduced ``2^detect_level`` times (0: full resolution); the
+        descriptors and the refinement always use the full-resolution image.
+    harris_k : float
+        Harris sensitivity ``k`` in ``det M - k trace(M)^2`` (thesis: 0.001, usual: 0.04).
+    block_size : int
+        Structure tensor neighbourhood [px].
+    fast_threshold : int
+        FAST intensity difference threshold [grey levels].
+    descriptor : str
+        ``"patch"`` (normalised intensity patch) or ``"orb"``.
+    patch_radius : int
+        Half side of the normalised patch [px].
+    matcher : str
+        ``"threshold"``, ``"nearest"`` or ``"ratio"``.
+    max_distance : float or None
+        Largest accepted descriptor distance (``None``: 0.9 for patches, 80 bits for ORB).
+    ratio : float
+        Nearest-neighbour distance ratio limit.
+    mutual : bool
+        Keep only mutually nearest matches.
+    gate_radius : float
+        Matches must lie within this distance of the predicted position [px] (0 disables gating).
+    refine : str
+        ``"lk"``, ``"subpix"`` or ``"none"`` (see the module description).
+    window : int
+        Lucas-Kanade window for ``refine="lk"`` [px].
+    fb_threshold : float
+        Forward-backward limit of the Lucas-Kanade refinement [px].
+    method : str
+        Robust estimator, ``"ransac"`` or ``"lmeds"``.
+    threshold : float
+        Inlier distance for matched corner positions [rectified px].
+    refine_threshold : float
+        Inlier distance after the Lucas-Kanade refinement [rectified px].
+    confidence : float
+        RANSAC confidence.
+    max_iterations : int
+        Maximum number of robust-estimator hypotheses.
+    seed : int
+        Seed of the frontend's own random generator.
+    min_sigma : float
+        Floor of the residual standard deviation used for the covariance [px].
+    min_inliers : int
+        Fewer inliers give ``TOO_FEW_FEATURES``.
+    min_inlier_ratio : float
+        Fewer inliers than this fraction of the matches rejects the estimate.
+    max_abs_log_scale : float
+        Largest plausible ``|log s|`` between consecutive frames.
+    min_spread : float
+        Smallest spread of the inliers along their weakest axis [px] (``DEGENERATE`` below).
+    min_texture : float
+        Smallest mean neighbour difference of a usable frame [grey levels].
+    max_prediction_gap : float
+        The prediction is continued over at most this many times the last interval.
+    max_failures : int
+        Consecutive failures after which the frontend restarts from the current frame.
+    """
+
+    detector: str = "shi_tomasi"
+    max_corners: int = 150
+    min_quality: float = 0.01
+    min_metric: float = 0.0
+    neighbourhood: tuple[int, int] = (9, 9)
+    detect_level: int = 1
+    harris_k: float = 0.04
+    block_size: int = 3
+    fast_threshold: int = 20
+    descriptor: str = "patch"
+    patch_radius: int = 5
+    matcher: str = "ratio"
+    max_distance: float | None = None
+    ratio: float = 0.8
+    mutual: bool = True
+    gate_radius: float = 40.0
+    refine: str = "lk"
+    window: int = 15
+    fb_threshold: float = 0.5
+    method: str = "ransac"
+    threshold: float = 2.0
+    refine_threshold: float = 1.0
+    confidence: float = 0.999
+    max_iterations: int = 256
+    seed: int = 0
+    min_sigma: float = 0.02
+    min_inliers: int = 10
+    min_inlier_ratio: float = 0.3
+    max_abs_log_scale: float = 0.1
+    min_spread: float = 20.0
+    min_texture: float = 2.0
+    max_prediction_gap: float = 4.0
+    max_failures: int = 3
+
+    def __post_init__(self) -> None:
+        self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
+        if any(v < 1 or v % 2 == 0 for v in self.neighbourhood):
+            raise ValueError("neighbourhood must be two positive odd integers")
+        if self.detector not in DETECTORS:
+            raise ValueError(f"detector must be one of {', '.join(DETECTORS)}, not {self.detector!r}")
+        if self.descriptor not in DESCRIPTORS:
+            raise ValueError(f"descriptor must be one of {', '.join(DESCRIPTORS)}, not {self.descriptor!r}")
+        if self.matcher not in MATCHERS:
+            raise ValueError(f"matcher must be one of {', '.join(MATCHERS)}, not {self.matcher!r}")
+        if self.refine not in ("lk", "subpix", "none"):
+            raise ValueError(f"refine must be 'lk', 'subpix' or 'none', not {self.refine!r}")
+        if self.max_corners < self.min_inliers:
+            raise ValueError("max_corners must be at least min_inliers")
+        self.robust_options(self.threshold)  # validates method, threshold, confidence
+
+    @property
+    def distance_limit(self) -> float:
+        """The descriptor distance limit in effect."""
+        return _DEFAULT_MAX_DISTANCE[self.descriptor] if self.max_distance is None else float(self.max_distance)
+
+    def detector_settings(self) -> DetectorSettings:
+        border = max(self.patch_radius, 16 if self.descriptor == "orb" else 0, self.window // 2) + 2
+        return DetectorSettings(
+            method=self.detector, max_corners=self.max_corners, min_quality=self.min_quality,
+            min_metric=self.min_metric, neighbourhood=self.neighbourhood, harris_k=self.harris_k,
+            block_size=self.block_size, fast_threshold=self.fast_threshold, border=border,
+            subpixel=self.refine == "subpix", level=self.detect_level,
+        )
+
+    def robust_options(self, threshold: float) -> RobustOptions:
+        return RobustOptions(
+            method=self.method, threshold=threshold, confidence=self.confidence,
+            max_iterations=self.max_iterations, max_abs_log_scale=2.0 * self.max_abs_log_scale,
+            min_sigma=self.min_sigma, min_inliers=self.min_inliers, min_spread=self.min_spread,
+        )
+
+
+@dataclass
+class _Frame:
+    image: np.ndarray
+    time: float
+    pts: np.ndarray  # corners with a descriptor (raw image coordinates)
+    desc: np.ndarray
+    rect: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+class FeatureFrontend:
+    """Frame-to-frame similarity from matched corners.
+
+    Parameters
+    ----------
+    config : FeatureConfig, optional
+    point_map : PointMap, optional
+        Raw pixel <-> rectified coordinates (identity when omitted).
+    """
+
+    def __init__(self, config: FeatureConfig | None = None, point_map: PointMap | None = None):
+        self.config = config or FeatureConfig()
+        self.point_map = point_map if point_map is not None else IdentityMap()
+        cfg = self.config
+        self._detector = cfg.detector_settings()
+        self._coarse = cfg.robust_options(cfg.threshold)
+        self._fine = cfg.robust_options(cfg.refine_threshold)
+        self._lk = LkSettings(window=cfg.window, fb_threshold=cfg.fb_threshold, border=2)
+        self._rng = np.random.default_rng(cfg.seed)
+        self._orb = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
+        self._shape: tuple[int, int] | None = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the reference frame and the motion prediction."""
+        self._ref: _Frame | None = None
+        self._last_motion: np.ndarray | None = None
+        self._last_dt: float | None = None
+        self._failures = 0
+
+    def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
+        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
+        t0 = time.perf_counter()
+        try:
+            motion = self._process(image, float(timestamp))
+        except cv2.error as exc:  # defensive: OpenCV refusing an odd input must not stop a run
+            logger.warning("frame at t=%.6f could not be processed: %s", timestamp, exc)
+            motion = self._failed(float(timestamp), MotionStatus.BAD_FRAME, f"OpenCV error: {exc}")
+        motion.info["time_ms"] = (time.perf_counter() - t0) * 1e3
+        return motion
+
+    # -------------------------------------------------------------- pipeline
+    def _describe(self, img: np.ndarray, t: float) -> _Frame:
+        pts = detect_corners(img, self._detector)
+        if self.config.descriptor == "orb":
+            desc, idx = orb_descriptors(img, pts, self._orb)
+        else:
+            desc, idx = patch_descriptors(img, pts, self.config.patch_radius)
+        pts = pts[idx]
+        return _Frame(img, t, pts, desc, self.point_map.to_rectified(pts.astype(np.float64)))
+
+    def _process(self, image: np.ndarray, t: float) -> FrameMotion:
+        cfg = self.config
+        check = check_frame(image, self._shape, cfg.min_texture)
+        if check.status is not None:
+            return self._failed(t, check.status, check.reason, texture=check.texture)
+        img = check.image
+        if self._ref is not None and not t > self._ref.time:
+            return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref.time}")
+        cur = self._describe(img, t)
+        if self._ref is None:
+            self._shape = img.shape
+            self._ref = cur
+            return FrameMotion(t, None, status=MotionStatus.FIRST, n_features=len(cur.pts), info={"path": "first"})
+        ref = self._ref
+        if len(ref.pts) < cfg.min_inliers or len(cur.pts) < cfg.min_inliers:
+            return self._failed(t, MotionStatus.TOO_FEW_FEATURES, "too few corners", check.texture, cur)
+
+        dt = t - ref.time
+        dist = distance_matrix(ref.desc, cur.desc, cfg.descriptor)
+        prediction = self._predict(dt)
+        results = []
+        if prediction is not None and cfg.gate_radius > 0:
+            predicted = self.point_map.to_image(apply_similarity(prediction, ref.rect))
+            gated = gate_distances(dist, predicted, cur.pts, cfg.gate_radius)
+            results.append(self._attempt("predicted", gated, ref, cur))
+        if not results or results[-1][1] is not MotionStatus.OK:
+            results.append(self._attempt("retry", dist, ref, cur))
+        path, status, fit, n_matches, reason = results[-1]
+        info = {"path": path, "attempts": [r[0] for r in results], "n_matches": n_matches, "texture": check.texture}
+        if status is not MotionStatus.OK:
+            motion = self._failed(t, status, "; ".join(f"{r[0]}: {r[4]}" for r in results), check.texture, cur)
+            motion.info.update(info)
+            motion.n_candidates = n_matches
+            motion.n_inliers = fit.n_inliers if fit is not None else 0
+            return motion
+        motion = FrameMotion(
+            timestamp=t, prev_timestamp=ref.time, matrix=fit.matrix.copy(), covariance=fit.covariance.copy(),
+            status=MotionStatus.OK, n_candidates=n_matches, n_inliers=fit.n_inliers,
+            residual_rms=fit.residual_rms, n_features=len(cur.pts), info=info,
+        )
+        self._last_motion, self._last_dt = fit.matrix, dt
+        self._failures = 0
+        self._ref = cur
+        return motion
+
+    def _predict(self, dt: float) -> np.ndarray | None:
+        if self._last_motion is None or not self._last_dt:
+            return None
+        return scale_motion(self._last_motion, min(dt / self._last_dt, self.config.max_prediction_gap))
+
+    def _attempt(self, path: str, dist: np.ndarray, ref: _Frame, cur: _Frame):
+        """Match, fit and refine; returns ``(path, status, fit, n_matches, reason)``."""
+        cfg = self.config
+        i0, i1 = match_descriptors(dist, cfg.matcher, cfg.distance_limit, cfg.ratio, cfg.mutual)
+        n = len(i0)
+        if n < cfg.min_inliers:
+            return path, MotionStatus.TOO_FEW_FEATURES, None, n, f"{n} matches"
+        fit = estimate_similarity(ref.rect[i0], cur.rect[i1], self._coarse, self._rng)
+        status, reason = self._judge(fit, n)
+        if status is not MotionStatus.OK or cfg.refine != "lk":
+            return path, status, fit, n, reason
+        p0 = ref.pts[i0[fit.inliers]].astype(np.float64)
+        affine = fit_affine(p0, cur.pts[i1[fit.inliers]].astype(np.float64))
+        tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk)
+        if len(tr.index) < cfg.min_inliers:
+            return path, MotionStatus.TOO_FEW_FEATURES, fit, n, "refinement lost the points"
+        src = ref.rect[i0[fit.inliers]][tr.index]
+        fine = estimate_similarity(src, self.point_map.to_rectified(tr.points), self._fine, self._rng)
+        status, reason = self._judge(fine, n, fit.n_inliers)
+        return path, status, fine, n, reason
+
+    def _judge(self, fit: SimilarityFit, n_matches: int, n_refined: int | None = None) -> tuple[MotionStatus, str]:
+        cfg = self.config
+        if fit.status == "too_few":
+            return MotionStatus.TOO_FEW_FEATURES, "too few inliers"
+        if fit.status == "degenerate":
+            return MotionStatus.DEGENERATE, "inliers clustered or collinear"
+        if fit.n_inliers < cfg.min_inlier_ratio * n_matches:
+            return MotionStatus.REJECTED, f"inlier ratio {fit.n_inliers}/{n_matches} too low"
+        if n_refined is not None and fit.n_inliers < 0.5 * n_refined:
+            return MotionStatus.REJECTED, f"refinement kept {fit.n_inliers}/{n_refined} inliers"
+        if abs(fit.params[3]) > cfg.max_abs_log_scale:
+            return MotionStatus.REJECTED, f"implausible scale {math.exp(fit.params[3]):.3f}"
+        return MotionStatus.OK, ""
+
+    def _failed(self, t: float, status: MotionStatus, reason: str, texture: float = float("nan"), current=None) -> FrameMotion:
+        """A failed measurement; restarts from ``current`` after too many failures in a row."""
+        self._failures += 1
+        restarted = False
+        if self._failures >= self.config.max_failures and current is not None:
+            self._ref = current
+            self._last_motion, self._last_dt = None, None
+            self._failures = 0
+            restarted = True
+        logger.debug("frame t=%.6f failed (%s): %s", t, status.value, reason)
+        prev = None if restarted or self._ref is None else self._ref.time
+        return FrameMotion(t, prev, status=status, info={"reason": reason, "texture": texture, "restarted": restarted, "path": "failed"})
