@@ -345,15 +345,29 @@ def test_camera_yaml_overrides_camera_info(ros2_bag, tmp_path):
     assert not (tmp_path / "seq2").exists() and not list(tmp_path.glob(".seq2*"))
 
 
-def test_ambiguous_topics_need_a_choice(tmp_path):
-    path = tmp_path / "two_imus"
+def test_ambiguous_topics_need_a_choice(tmp_path, capsys):
+    path = tmp_path / "two_cameras"
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 256, (12, 16, 3), dtype=np.uint8) for _ in range(3)]
     with Ros2Bag(path) as b:
-        for topic in ("/imu_a", "/imu_b"):
-            b.write(topic, b.imu(T0, 0.0), T0)
-    with pytest.raises(InputError, match="choose one with --imu-topic"):
+        for i, img in enumerate(frames):
+            t = T0 + i * 50_000_000
+            b.write("/cam/image_raw", b.image(t, img[:, :, 0].copy()), t)
+            png = cv2.imencode(".png", img)[1].reshape(-1)
+            msg = b.t["sensor_msgs/msg/CompressedImage"](header=b.header(t, "cam"), format="png", data=png)
+            b.write("/cam/image_raw/compressed", msg, t)
+    with pytest.raises(InputError, match="choose one with --image-topic"):
         import_bag(path, tmp_path / "seq")
-    summary = import_bag(path, tmp_path / "seq", imu_topic="/imu_b")
-    assert summary.stream("imu0").topic == "/imu_b"
+    summary = import_bag(path, tmp_path / "seq", image_topic="/cam/image_raw/compressed")
+    assert summary.stream("cam0").written == 3
+    assert any("give --camera-yaml" in n for n in summary.notes)  # no CameraInfo in this bag
+    names = sorted((tmp_path / "seq" / "cam0" / "data").iterdir())
+    for img, name in zip(frames, names):
+        grey = cv2.imread(str(name), cv2.IMREAD_UNCHANGED)
+        assert np.array_equal(grey, cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))
+    assert main(["import-bag", str(path), "--list"]) == 0
+    listing = capsys.readouterr().out
+    assert "/cam/image_raw/compressed" in listing and "sensor_msgs/msg/CompressedImage" in listing
 
 
 # ------------------------------------------------------------------------------------ bad input
