@@ -8,7 +8,7 @@ import pytest
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation import metrics as m
 
-from synthetic import circle_path, distorted, square_path
+from eval_synthetic import circle_path, distorted, square_path
 
 
 def trajectory(t, x, y, yaw, name="est"):

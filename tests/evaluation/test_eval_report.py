@@ -9,7 +9,7 @@ import pytest
 
 from fusion_vo.evaluation import compare_runs, evaluate_run
 
-from synthetic import make_run
+from eval_synthetic import make_run
 
 CHROMIUM = Path("/usr/bin/chromium")
 

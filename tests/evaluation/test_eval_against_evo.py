@@ -11,7 +11,7 @@ import pytest
 from fusion_vo.evaluation.io import read_groundtruth, read_tum
 from fusion_vo.evaluation.metrics import evaluate_trajectory
 
-from synthetic import distorted, square_path, write_groundtruth, write_tum
+from eval_synthetic import distorted, square_path, write_groundtruth, write_tum
 
 BIN = Path(sys.executable).parent
 

@@ -4,7 +4,7 @@ import json
 
 from fusion_vo.cli.main import main
 
-from synthetic import make_run
+from eval_synthetic import make_run
 
 
 def test_evaluate_prints_the_table_and_writes_the_report(tmp_path, capsys):
