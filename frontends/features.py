@@ -112,6 +112,9 @@ class FeatureConfig(ConfigMixin):
         Largest plausible ``|log s|`` between consecutive frames.
     min_spread : float
         Smallest spread of the inliers along their weakest axis [px] (``DEGENERATE`` below).
+    min_texture_ratio : float
+        A frame whose texture falls below this fraction of the reference frame's is featureless
+        (sudden blur, exposure loss).
     min_texture : float
         Smallest mean neighbour difference of a usable frame [grey levels].
     max_prediction_gap : float
@@ -151,6 +154,7 @@ class FeatureConfig(ConfigMixin):
     max_abs_log_scale: float = 0.1
     min_spread: float = 20.0
     min_texture: float = 2.0
+    min_texture_ratio: float = 0.35
     max_prediction_gap: float = 4.0
     max_failures: int = 3
 
@@ -199,6 +203,7 @@ class _Frame:
     pts: np.ndarray  # corners with a descriptor (raw image coordinates)
     desc: np.ndarray
     rect: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    texture: float = float("nan")
 
 
 class FeatureFrontend:
@@ -254,13 +259,15 @@ class FeatureFrontend:
 
     def _process(self, image: np.ndarray, t: float) -> FrameMotion:
         cfg = self.config
-        check = check_frame(image, self._shape, cfg.min_texture)
+        ref_texture = None if self._ref is None else self._ref.texture
+        check = check_frame(image, self._shape, cfg.min_texture, ref_texture, cfg.min_texture_ratio)
         if check.status is not None:
             return self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         if self._ref is not None and not t > self._ref.time:
             return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref.time}")
         cur = self._describe(img, t)
+        cur.texture = check.texture
         if self._ref is None:
             self._shape = img.shape
             self._ref = cur

@@ -7,8 +7,11 @@ intensity difference between neighbouring pixels,
 
 .. math::  g = \\tfrac12 \\big( \\overline{|I(x+2, y) - I(x, y)|} + \\overline{|I(x, y+2) - I(x, y)|} \\big),
 
-computed on every other pixel of the 8-bit image (a cheap sharpness and contrast measure). A sharp
-photographed floor gives ``g`` of 10-30 grey levels, a Gaussian blur of sigma 6 px brings it below 1.
+computed on every other pixel of the 8-bit image (a cheap sharpness and contrast measure). The frame
+is featureless when ``g < min_texture`` or when ``g`` dropped below ``min_ratio`` times that of the
+reference frame (a sudden blur or exposure loss on an otherwise usable floor). For scale: the sharp
+scikit-image gravel, grass and brick photographs give ``g`` = 13, 20 and 3.6; a Gaussian blur of sigma
+8 px brings gravel to 2.2 (ratio 0.17), a black or saturated frame gives 0.
 ``uint16`` frames are divided by 257 (full 16-bit range onto 8 bits).
 """
 
@@ -52,7 +55,12 @@ def texture_measure(image: np.ndarray) -> float:
 
 
 def check_frame(
-    image, expected_shape: tuple[int, int] | None, min_texture: float, min_size: int = 32
+    image,
+    expected_shape: tuple[int, int] | None,
+    min_texture: float,
+    reference_texture: float | None = None,
+    min_ratio: float = 0.0,
+    min_size: int = 32,
 ) -> FrameCheck:
     """Validate a frame and measure its texture; never raises.
 
@@ -64,6 +72,10 @@ def check_frame(
         Shape every frame must have (``None``: accept any size of at least ``min_size``).
     min_texture : float
         Smallest acceptable :func:`texture_measure` [grey levels].
+    reference_texture : float, optional
+        Texture of the frame the motion will be measured from.
+    min_ratio : float
+        Smallest acceptable ratio of this frame's texture to ``reference_texture``.
     min_size : int
         Smallest acceptable side length [px].
     """
@@ -85,4 +97,8 @@ def check_frame(
     g = texture_measure(image)
     if g < min_texture:
         return FrameCheck(MotionStatus.TOO_FEW_FEATURES, image, g, f"texture {g:.2f} below {min_texture:g}")
+    if reference_texture is not None and g < min_ratio * reference_texture:
+        return FrameCheck(
+            MotionStatus.TOO_FEW_FEATURES, image, g, f"texture {g:.2f} fell below {min_ratio:g} x {reference_texture:.2f}"
+        )
     return FrameCheck(None, image, g)

@@ -114,6 +114,9 @@ class KltConfig(ConfigMixin):
         Largest plausible ``|log s|`` between consecutive frames; larger is rejected.
     min_spread : float
         Smallest standard deviation of the inliers along their weakest axis [px] (``DEGENERATE``).
+    min_texture_ratio : float
+        A frame whose texture falls below this fraction of the reference frame's is featureless
+        (sudden blur, exposure loss).
     min_texture : float
         Smallest mean neighbour difference of a usable frame [grey levels]
         (:func:`frontends.frame_check.texture_measure`).
@@ -156,6 +159,7 @@ class KltConfig(ConfigMixin):
     max_abs_log_scale: float = 0.1
     min_spread: float = 20.0
     min_texture: float = 2.0
+    min_texture_ratio: float = 0.35
     max_prediction_gap: float = 4.0
     max_failures: int = 3
     global_fallback: bool = True
@@ -241,6 +245,7 @@ class KltFrontend:
         self._last_motion: np.ndarray | None = None  # similarity of the last good interval
         self._last_dt: float | None = None
         self._failures = 0
+        self._ref_texture: float | None = None
 
     # ------------------------------------------------------------ public API
     def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
@@ -257,10 +262,11 @@ class KltFrontend:
     # -------------------------------------------------------------- pipeline
     def _process(self, image: np.ndarray, t: float) -> FrameMotion:
         cfg = self.config
-        check = check_frame(image, self._shape, cfg.min_texture)
+        check = check_frame(image, self._shape, cfg.min_texture, self._ref_texture, cfg.min_texture_ratio)
         if check.status is not None:
             return self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
+        self._cur_texture = check.texture
         if self._ref_img is None:
             self._shape = img.shape
             self._set_reference(img, t, np.zeros((0, 2), np.float32))
@@ -397,6 +403,7 @@ class KltFrontend:
     # ------------------------------------------------------------ references
     def _set_reference(self, img: np.ndarray, t: float, pts: np.ndarray) -> None:
         self._ref_img, self._ref_time = img, t
+        self._ref_texture = self._cur_texture
         pts = np.asarray(pts, np.float32).reshape(-1, 2)
         if len(pts) < self.config.replenish_below:
             pts = np.vstack([pts, self._detect(img, pts)])

@@ -1,0 +1,245 @@
+"""Both frontends on frames with known motion (synthetic warps of photographed floors)."""
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from frontends import make_frontend
+from frontends.base import MotionStatus, similarity_params
+from frontends.features import FeatureConfig
+from frontends.klt import KltConfig
+
+from frontend_frames import HEIGHT, WIDTH, as3, pair, render, sequence, similarity_about, start_map
+
+KINDS = ["klt", "features"]
+CENTRE = np.array([WIDTH / 2, HEIGHT / 2])
+
+WARPS = [  # (texture, tx, ty, angle [deg], scale), rotation and scale about the image centre
+    ("gravel", 0.4, -0.7, 0.0, 1.0),
+    ("gravel", 12.5, 30.25, 2.6, 1.0),
+    ("gravel", -40.0, 25.0, -5.0, 1.0),
+    ("gravel", 3.0, 120.0, 1.5, 1.0),
+    ("gravel", 5.0, -8.0, 0.0, 1.03),
+    ("grass", -20.0, 10.0, 4.0, 0.97),
+    ("grass", 0.0, -110.0, -2.0, 1.01),
+    ("brick", 8.3, -6.1, 3.0, 1.02),
+    ("brick", -60.0, 0.0, -1.0, 1.0),
+]
+
+
+def centre_error(matrix, truth):
+    """Displacement error at the image centre [px]."""
+    return np.hypot(*(matrix[:, :2] @ CENTRE + matrix[:, 2] - truth[:, :2] @ CENTRE - truth[:, 2]))
+
+
+def measure(kind, frames, config=None, dt=0.05):
+    fe = make_frontend(kind, config)
+    return [fe.process(f, i * dt) for i, f in enumerate(frames)]
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("warp", WARPS, ids=lambda w: "_".join(str(v) for v in w))
+def test_recovers_known_warp(kind, warp):
+    name, tx, ty, angle, scale = warp
+    truth = similarity_about(*CENTRE, tx, ty, angle, scale)
+    f0, f1 = pair(truth, name)
+    first, m = measure(kind, [f0, f1])
+    assert first.status is MotionStatus.FIRST
+    assert m.ok, m.info
+    err = m.params - similarity_params(truth)
+    # measured: < 0.03 px, < 0.005 deg, < 7e-5 in log scale on these textures
+    assert centre_error(m.matrix, truth) < 0.1
+    assert abs(math.degrees(err[2])) < 0.01
+    assert abs(err[3]) < 2e-4
+    assert m.n_inliers >= 10 and m.residual_rms < 0.1
+    assert m.prev_timestamp == 0.0 and m.timestamp == 0.05
+    assert m.info["path"] in ("predicted", "retry", "global") and m.info["time_ms"] > 0
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_standstill_with_sensor_noise_does_not_drift(kind):
+    rng = np.random.default_rng(4)
+    base = render(start_map())
+    frames = [np.clip(base + rng.normal(0, 2.0, base.shape), 0, 255).astype(np.uint8) for _ in range(12)]
+    out = measure(kind, frames)
+    steps = [centre_error(m.matrix, np.eye(2, 3)) for m in out[1:]]
+    assert all(m.ok for m in out[1:])
+    assert max(steps) < 0.05
+    total = np.eye(3)
+    for m in out[1:]:
+        total = as3(m.matrix) @ total
+    assert centre_error(total[:2], np.eye(2, 3)) < 0.05
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_follows_acceleration_to_120_px_per_frame(kind):
+    speeds = list(range(0, 121, 15)) + [120, 120, 60, 0]  # px per frame, then a hard stop
+    motions = [similarity_about(*CENTRE, 0.25 * v, -v, 0.02 * v) for v in speeds]
+    frames, truths = zip(*sequence(motions, "gravel", 700.3, 200.6))
+    out = measure(kind, frames)
+    for m, truth in zip(out[1:], truths[1:]):
+        assert m.ok, (m.status, m.info)
+        assert centre_error(m.matrix, truth) < 0.1
+        assert abs(m.params[2] - similarity_params(truth)[2]) < math.radians(0.01)
+    paths = {m.info["path"] for m in out[2:]}
+    assert "predicted" in paths
+
+
+BAD = {
+    "black": lambda f: np.zeros_like(f),
+    "white": lambda f: np.full_like(f, 255),
+    "saturated": lambda f: np.clip(f.astype(int) * 6, 0, 255).astype(np.uint8),
+    "constant": lambda f: np.full_like(f, 128),
+    "blurred": lambda f: cv2.GaussianBlur(f, (0, 0), 8),
+    "dark": lambda f: (f // 12).astype(np.uint8),
+}
+
+BROKEN = {
+    "wrong_size": lambda f: f[:200, :300].copy(),
+    "float": lambda f: f.astype(np.float32),
+    "nan": lambda f: np.full(f.shape, np.nan),
+    "colour": lambda f: np.dstack([f, f, f]),
+    "empty": lambda f: np.zeros((0, 0), np.uint8),
+    "not_an_array": lambda f: "frame.png",
+}
+
+
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("bad", list(BAD) + list(BROKEN))
+def test_bad_frames_fail_cleanly_and_next_frame_uses_last_good(kind, bad):
+    motions = [similarity_about(*CENTRE, 4.0, 9.0, 0.5)] * 3
+    frames, truths = zip(*sequence(motions))
+    spoil = BAD.get(bad) or BROKEN[bad]
+    fe = make_frontend(kind)
+    assert fe.process(frames[0], 0.0).status is MotionStatus.FIRST
+    assert fe.process(frames[1], 0.05).ok
+    m = fe.process(spoil(frames[2]), 0.10)
+    expected = MotionStatus.TOO_FEW_FEATURES if bad in BAD else MotionStatus.BAD_FRAME
+    assert m.status is expected
+    assert not np.isfinite(m.covariance).all()
+    # the next frame is measured against the last good one (frame 1), two intervals away
+    m = fe.process(frames[3], 0.15)
+    assert m.ok and m.prev_timestamp == 0.05
+    two = as3(truths[3]) @ as3(truths[2])
+    assert centre_error(m.matrix, two[:2]) < 0.1
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_restart_after_repeated_failures(kind):
+    frames = [f for f, _ in sequence([similarity_about(*CENTRE, 3.0, 5.0, 0.0)] * 6)]
+    fe = make_frontend(kind, {"max_failures": 2})
+    fe.process(frames[0], 0.0)
+    black = np.zeros_like(frames[0])
+    assert fe.process(black, 0.05).status is MotionStatus.TOO_FEW_FEATURES
+    assert fe.process(black, 0.10).status is MotionStatus.TOO_FEW_FEATURES
+    assert fe.process(frames[3], 0.15).ok  # no usable frame to restart from: still the first frame
+    # repeated non-increasing timestamps are bad frames, never exceptions
+    assert fe.process(frames[4], 0.15).status is MotionStatus.BAD_FRAME
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_uint16_frames(kind):
+    truth = similarity_about(*CENTRE, 7.0, -3.0, 1.0)
+    f0, f1 = pair(truth)
+    out = measure(kind, [f0.astype(np.uint16) * 257, f1.astype(np.uint16) * 257])
+    assert out[1].ok and centre_error(out[1].matrix, truth) < 0.1
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_covariance_is_honest_on_noisy_frames(kind):
+    """Normalised squared parameter error averages near the dimension (4) over noisy trials."""
+    rng = np.random.default_rng(9)
+    truth = similarity_about(*CENTRE, 10.0, 20.0, 1.0)
+    f0, f1 = pair(truth)
+    nees = []
+    for k in range(16):
+        n0 = np.clip(f0 + rng.normal(0, 8.0, f0.shape), 0, 255).astype(np.uint8)
+        n1 = np.clip(f1 + rng.normal(0, 8.0, f1.shape), 0, 255).astype(np.uint8)
+        m = measure(kind, [n0, n1], {"seed": k})[1]
+        assert m.ok
+        e = m.params - similarity_params(truth)
+        nees.append(e @ np.linalg.solve(m.covariance, e))
+    assert 4.0 / 3.0 < np.mean(nees) < 4.0 * 3.0
+
+
+class _Radial:
+    """Division-style radial distortion: rectified = c + (p - c)(1 + k r^2), r the distorted radius."""
+
+    def __init__(self, k=3e-7, c=(WIDTH / 2, HEIGHT / 2)):
+        self.k, self.c = k, np.asarray(c)
+
+    def to_rectified(self, pts):
+        d = np.asarray(pts, float) - self.c
+        return self.c + d * (1.0 + self.k * (d**2).sum(axis=1, keepdims=True))
+
+    def to_image(self, pts):
+        u = np.asarray(pts, float) - self.c
+        d = u.copy()
+        for _ in range(30):
+            d = u / (1.0 + self.k * (d**2).sum(axis=1, keepdims=True))
+        return self.c + d
+
+
+def _render_distorted(a, pm):
+    """Frame of a distorted camera: raw pixel p shows the canvas point under rectified pixel pm(p)."""
+    from frontend_frames import canvas
+
+    ys, xs = np.mgrid[0:HEIGHT, 0:WIDTH].astype(np.float64)
+    rect = pm.to_rectified(np.column_stack([xs.ravel(), ys.ravel()]))
+    inv = np.linalg.inv(as3(a))
+    src = rect @ inv[:2, :2].T + inv[:2, 2]
+    mx = src[:, 0].reshape(HEIGHT, WIDTH).astype(np.float32)
+    my = src[:, 1].reshape(HEIGHT, WIDTH).astype(np.float32)
+    return cv2.remap(canvas("gravel"), mx, my, cv2.INTER_LINEAR)
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_point_map_undistorts_points(kind):
+    pm = _Radial()
+    truth = similarity_about(*CENTRE, 20.0, 35.0, 2.0)
+    a0 = start_map()
+    frames = [_render_distorted(a0, pm), _render_distorted((as3(truth) @ as3(a0))[:2], pm)]
+    fe = make_frontend(kind, point_map=pm)
+    fe.process(frames[0], 0.0)
+    m = fe.process(frames[1], 0.05)
+    assert m.ok
+    assert centre_error(m.matrix, truth) < 0.1
+    assert abs(m.params[3]) < 2e-4 and abs(math.degrees(m.params[2]) - 2.0) < 0.01
+    plain = make_frontend(kind, {"threshold": 3.0, "min_inlier_ratio": 0.0})
+    plain.process(frames[0], 0.0)
+    m_plain = plain.process(frames[1], 0.05)
+    assert not m_plain.ok or centre_error(m_plain.matrix, truth) > 0.2 or abs(m_plain.params[3]) > 5e-4
+
+
+@pytest.mark.parametrize("cls", [KltConfig, FeatureConfig])
+def test_config_from_dict(cls):
+    cfg = cls.from_dict({"seed": 3, "method": "lmeds"})
+    assert cfg.seed == 3 and cls.from_dict(cfg.to_dict()) == cfg
+    with pytest.raises(ValueError, match="no_such_key"):
+        cls.from_dict({"no_such_key": 1})
+    with pytest.raises(ValueError):
+        cls.from_dict({"method": "guess"})
+
+
+@pytest.mark.parametrize(
+    "config",
+    [
+        {"detector": "harris"},
+        {"detector": "fast", "fast_threshold": 10},
+        {"descriptor": "orb"},
+        {"matcher": "nearest", "mutual": False},
+        {"matcher": "threshold", "max_distance": 0.5},
+        {"refine": "subpix"},
+        {"method": "lmeds"},
+    ],
+    ids=lambda c: "-".join(f"{k}={v}" for k, v in c.items()),
+)
+def test_feature_variants(config):
+    truth = similarity_about(*CENTRE, 15.0, -25.0, 2.0, 1.01)
+    f0, f1 = pair(truth)
+    m = measure("features", [f0, f1], config)[1]
+    assert m.ok, m.info
+    limit = 0.5 if config.get("refine") == "subpix" else 0.1
+    assert centre_error(m.matrix, truth) < limit
