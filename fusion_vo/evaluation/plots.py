@@ -226,3 +226,42 @@ def plot_compare(reference: PoseTrajectory3D | None, runs: dict[str, dict[str, P
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
     return _save(fig, path)
+
+
+def plot_matches(image: np.ndarray, matches, path: str | Path, title: str = "") -> Path:
+    """Matched corners drawn on the current frame (thesis figures 4.8 and 5.7).
+
+    Blue stars: corners in the previous frame; red circles: the same corners in the current frame; a line
+    joins each pair, coloured for inliers of the estimated motion and grey for outliers.
+
+    Parameters
+    ----------
+    image : ndarray
+        The current frame (grey).
+    matches : fusion_vo.evaluation.matches.FrameMatches
+    path : str or Path
+        PNG to write.
+    """
+    h, w = image.shape[:2]
+    fig = Figure(figsize=(9.0, 9.0 * h / w + 0.6), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    ax.imshow(image, cmap="gray", interpolation="nearest")
+    for mask, colour, label in ((~matches.inliers, "0.6", "outlier"), (matches.inliers, "yellow", "inlier")):
+        if np.any(mask):
+            p0, p1 = matches.previous[mask], matches.current[mask]
+            xs = np.stack([p0[:, 0], p1[:, 0], np.full(len(p0), np.nan)], axis=1).ravel()
+            ys = np.stack([p0[:, 1], p1[:, 1], np.full(len(p0), np.nan)], axis=1).ravel()
+            ax.plot(xs, ys, color=colour, lw=1.0, label=f"{label} ({int(mask.sum())})")
+    if len(matches.previous):
+        ax.plot(matches.previous[:, 0], matches.previous[:, 1], "*", color="tab:blue", ms=7,
+                label="previous frame")
+        ax.plot(matches.current[:, 0], matches.current[:, 1], "o", mfc="none", mec="red", ms=7, mew=1.2,
+                label="current frame")
+    ax.set_xlim(-0.5, w - 0.5)
+    ax.set_ylim(h - 0.5, -0.5)
+    ax.set_title(title or f"{len(matches.previous)} matches, {matches.n_inliers} inliers")
+    ax.legend(loc="upper right", fontsize="small", framealpha=0.8)
+    ax.set_xlabel("u [px]")
+    ax.set_ylabel("v [px]")
+    return _save(fig, path)
