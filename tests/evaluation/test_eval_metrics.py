@@ -93,3 +93,13 @@ def test_estimate_outside_the_ground_truth_time_is_an_input_error(square):
     gt = trajectory(t, x, y, yaw, "gt")
     with pytest.raises(InputError, match="match the ground truth in time"):
         m.evaluate_trajectory(gt, trajectory(t + 1000.0, x, y, yaw))
+
+
+def test_planar_relative_yaw_equals_evo_rotation_rpe(square):
+    t, x, y, yaw = square
+    gt = trajectory(t[::4], x[::4], y[::4], yaw[::4], "gt")
+    est = trajectory(*distorted(t, x, y, yaw, scale=1.02, yaw_rate_bias=0.02, step=4))
+    fast = m.relative_yaw_errors(gt, est, 1.0)
+    slow = m.rpe_errors(gt, est, 1.0, m.Unit.meters, m.PoseRelation.rotation_angle_deg)
+    assert fast.size > 20
+    np.testing.assert_allclose(fast, slow, atol=1e-6)
