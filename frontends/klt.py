@@ -88,7 +88,8 @@ class KltConfig(ConfigMixin):
         Whether to run the forward-backward check (it doubles the tracking time).
     warp_tolerance : float
         When the guessed motion's linear part differs from the identity by more than this (largest
-        element; 1e-3 is about 0.06 deg or 0.1 % scale), the reference is warped by it before tracking.
+        element; 0.009 is about 0.5 deg or 0.9 % scale), the reference is warped by it before
+        tracking. Below it the rotation bias of unwarped tracking is under 0.05 % of the angle.
     refine_tolerance : float
         When the fitted motion's linear part differs from the guess by more than this, the points are
         tracked again through the fitted motion (at full resolution).
@@ -132,21 +133,21 @@ class KltConfig(ConfigMixin):
         Smallest phase-correlation peak response accepted.
     """
 
-    max_tracks: int = 100
-    replenish_below: int = 70
+    max_tracks: int = 60
+    replenish_below: int = 40
     quality_level: float = 0.02
     min_distance: float = 24.0
     block_size: int = 3
-    window: int = 15
-    pyramid_levels: int = 2
+    window: int = 13
+    pyramid_levels: int = 1
     retry_pyramid_levels: int = 3
     lk_iterations: int = 20
     lk_epsilon: float = 0.01
     min_eigen: float = 1e-3
     fb_threshold: float = 0.5
     forward_backward: bool = True
-    warp_tolerance: float = 1e-3
-    refine_tolerance: float = 1e-3
+    warp_tolerance: float = 0.009
+    refine_tolerance: float = 0.009
     border: int = 10
     method: str = "ransac"
     threshold: float = 1.0

@@ -58,9 +58,11 @@ class TrackResult:
 
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Least-squares 2x3 affine map taking ``src`` onto ``dst`` (``N x 2`` each, ``N >= 3``)."""
-    x = np.hstack([src, np.ones((len(src), 1))])
-    sol, *_ = np.linalg.lstsq(x, dst, rcond=None)
-    return sol.T
+    # normal equations on centred coordinates (well conditioned for pixel coordinates)
+    sm, dm = src.mean(axis=0), dst.mean(axis=0)
+    s, d = src - sm, dst - dm
+    lin = np.linalg.solve(s.T @ s, s.T @ d).T
+    return np.hstack([lin, (dm - lin @ sm)[:, None]])
 
 
 def _inside(p: np.ndarray, w: int, h: int, b: int) -> np.ndarray:
