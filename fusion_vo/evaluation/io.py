@@ -93,11 +93,17 @@ def _read_lines(path: Path) -> list[str]:
         raise InputError(f"cannot read file: {exc}", path) from None
 
 
-def _check_increasing(t: np.ndarray, lines: list[int], path: Path) -> None:
-    bad = np.nonzero(np.diff(t) <= 0.0)[0]
-    if bad.size:
-        i = int(bad[0]) + 1
-        raise InputError("timestamps must increase strictly", path, lines[i])
+def _increasing_rows(t: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
+    """Indices of the rows to keep: a repeated timestamp keeps its last row; going back is an error."""
+    step = np.diff(t)
+    back = np.nonzero(step < 0.0)[0]
+    if back.size:
+        raise InputError(f"timestamp {t[back[0] + 1]!r} is earlier than the one before", path,
+                         lines[int(back[0]) + 1])
+    keep = np.append(step > 0.0, True)
+    if not keep.all():
+        logger.warning("%s: %d repeated timestamps, keeping the last pose of each", path, int((~keep).sum()))
+    return np.nonzero(keep)[0]
 
 
 def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
@@ -119,7 +125,7 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
     ------
     InputError
         If the file is missing, empty, a row does not hold eight finite numbers, a quaternion has zero
-        length or the timestamps do not increase.
+        length or a timestamp is earlier than the one before (a repeated timestamp keeps its last pose).
     """
     path = Path(path)
     rows, line_numbers = [], []
@@ -139,7 +145,7 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
     if not rows:
         raise InputError("no poses in trajectory file", path)
     data = np.array(rows)
-    _check_increasing(data[:, 0], line_numbers, path)
+    data = data[_increasing_rows(data[:, 0], line_numbers, path)]
     quat_wxyz = data[:, [7, 4, 5, 6]]
     quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
     return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0], name=name or path.stem)
@@ -161,8 +167,8 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     Raises
     ------
     InputError
-        If the file is missing, has no rows, a row has fewer than 8 columns or non-numeric values, or the
-        timestamps do not increase.
+        If the file is missing, has no rows, a row has fewer than 8 columns or non-numeric values, or a
+        timestamp is earlier than the one before.
     """
     path = Path(path)
     if path.is_dir():
@@ -184,7 +190,7 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     if not rows:
         raise InputError("no poses in ground truth file", path)
     data = np.array(rows)
-    _check_increasing(data[:, 0], line_numbers, path)
+    data = data[_increasing_rows(data[:, 0], line_numbers, path)]
     quat_wxyz = data[:, 4:8] / np.linalg.norm(data[:, 4:8], axis=1, keepdims=True)
     return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0] * 1e-9, name="groundtruth")
 

@@ -24,7 +24,7 @@ def test_tum_roundtrip_of_values(tmp_path):
     ("1.0 0 0 0 0 0 0 1\n2.0 0 x 0 0 0 0 1\n", 2, "expected numbers"),
     ("1.0 0 0 0 0 0 0 1\n2.0 0 nan 0 0 0 0 1\n", 2, "non-finite"),
     ("1.0 0 0 0 0 0 0 0\n", 1, "zero length"),
-    ("2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n", 2, "increase"),
+    ("2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n", 2, "earlier than the one before"),
 ])
 def test_malformed_tum_rows_are_located(tmp_path, text, line, message):
     path = tmp_path / "ekf.tum"
@@ -32,6 +32,13 @@ def test_malformed_tum_rows_are_located(tmp_path, text, line, message):
     with pytest.raises(InputError, match=message) as info:
         io.read_tum(path)
     assert info.value.path == path and info.value.line == line
+
+
+def test_repeated_timestamp_keeps_the_last_pose(tmp_path):
+    path = tmp_path / "ekf.tum"
+    path.write_text("1.0 0 0 0 0 0 0 1\n1.0 5 0 0 0 0 0 1\n2.0 6 0 0 0 0 0 1\n")
+    traj = io.read_tum(path)
+    np.testing.assert_allclose(traj.positions_xyz[:, 0], [5, 6])
 
 
 def test_missing_and_empty_tum(tmp_path):
