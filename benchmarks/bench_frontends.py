@@ -7,7 +7,8 @@ to 2.6 deg/frame, stops), writes it as PNG files to a temporary folder, then for
 * ``decode included``: ``cv2.imread`` of each PNG followed by ``frontend.process``;
 
 and reports the resident memory at the start and end of the decode-included run (it must not grow
-with the number of frames). Usage::
+with the number of frames). Times are CPU times of this (single-threaded) process, so the figures
+describe one core even on a machine shared with other jobs. Usage::
 
     python benchmarks/bench_frontends.py [--frames 400] [--frontend klt features] [--png-compression 3]
 """
@@ -32,6 +33,11 @@ import skimage.data
 from frontends import make_frontend
 
 WIDTH, HEIGHT = 640, 360
+
+
+def _clock() -> float:
+    """CPU time of this process [s]: single-threaded throughput, unaffected by other jobs' load."""
+    return time.process_time()
 
 
 def _rss_mb() -> float:
@@ -68,26 +74,26 @@ def run(frontend: str, frames_dir: Path, names: list[str], in_memory: list[np.nd
     for i, img in enumerate(in_memory[:5]):  # warm-up
         fe.process(img, i * dt)
     fe.reset()
-    t0 = time.perf_counter()
+    t0 = _clock()
     ok = 0
     for i, img in enumerate(in_memory):
         ok += fe.process(img, i * dt).ok
-    excluded = time.perf_counter() - t0
+    excluded = _clock() - t0
 
     fe = make_frontend(frontend)
     rss = []
-    t0 = time.perf_counter()
+    t0 = _clock()
     for i, name in enumerate(names):
         img = cv2.imread(str(frames_dir / name), cv2.IMREAD_GRAYSCALE)
         fe.process(img, i * dt)
         if i % 100 == 0 or i == len(names) - 1:
             rss.append(_rss_mb())
-    included = time.perf_counter() - t0
+    included = _clock() - t0
 
-    t0 = time.perf_counter()
+    t0 = _clock()
     for name in names:
         cv2.imread(str(frames_dir / name), cv2.IMREAD_GRAYSCALE)
-    decode = time.perf_counter() - t0
+    decode = _clock() - t0
     n = len(names)
     return {
         "fps_excluded": n / excluded,
