@@ -32,8 +32,8 @@ def run(args: argparse.Namespace) -> int:
     console = Console()
     console.print(metrics_table(metrics, f"Position errors of {name}", columns=POSE_COLUMNS))
     console.print(metrics_table(metrics, f"Velocity errors of {name}", columns=VELOCITY_COLUMNS))
-    for name, figures in metrics.items():
-        if figures.get("legs"):
-            console.print(legs_table(name, figures["legs"]))
+    legs = legs_table(metrics)
+    if legs is not None:
+        console.print(legs)
     console.print(f"report: {Path(args.run_dir) / 'report.html'}")
     return 0

@@ -11,10 +11,14 @@ from rich.table import Table
 
 @dataclass(frozen=True)
 class Column:
-    """One figure shown in tables: its key in ``metrics.json``, header and number format."""
+    """One figure shown in tables: its key in ``metrics.json``, headers and number format.
+
+    ``header`` is used in reports, the narrower ``short`` on the terminal.
+    """
 
     key: str
     header: str
+    short: str
     fmt: str = "{:.3f}"
 
     def format(self, figures: dict) -> str:
@@ -27,20 +31,20 @@ class Column:
 
 #: position and heading columns
 POSE_COLUMNS = (
-    Column("ate_m", "ATE [m]"),
-    Column("ate_anchored_m", "ATE anch. [m]"),
-    Column("rpe_1m_pct", "RPE 1 m [%]", "{:.2f}"),
-    Column("drift_pct", "drift [%]", "{:.2f}"),
-    Column("end_m", "end [m]"),
-    Column("end_pct", "end [%]", "{:.2f}"),
-    Column("heading_deg", "heading [deg]", "{:.2f}"),
+    Column("ate_m", "ATE [m]", "ATE m", "{:.4f}"),
+    Column("ate_anchored_m", "ATE anch. [m]", "ATE0 m", "{:.4f}"),
+    Column("rpe_1m_pct", "RPE 1 m [%]", "RPE1m %", "{:.2f}"),
+    Column("drift_pct", "drift [%]", "drift %", "{:.2f}"),
+    Column("end_m", "end [m]", "end m", "{:.4f}"),
+    Column("end_pct", "end [%]", "end %", "{:.2f}"),
+    Column("heading_deg", "heading [deg]", "head. deg", "{:.2f}"),
 )
 
 #: velocity columns
 VELOCITY_COLUMNS = (
-    Column("vx_rmse_m_s", "vx RMSE [m/s]", "{:.4f}"),
-    Column("vy_rmse_m_s", "vy RMSE [m/s]", "{:.4f}"),
-    Column("yaw_rate_rmse_deg_s", "yaw rate RMSE [deg/s]", "{:.2f}"),
+    Column("vx_rmse_m_s", "vx RMSE [m/s]", "vx m/s", "{:.4f}"),
+    Column("vy_rmse_m_s", "vy RMSE [m/s]", "vy m/s", "{:.4f}"),
+    Column("yaw_rate_rmse_deg_s", "yaw rate RMSE [deg/s]", "yaw rate deg/s", "{:.2f}"),
 )
 
 #: columns of every metrics table (report, comparison)
@@ -61,24 +65,38 @@ def metrics_table(metrics: dict[str, dict], title: str = "Trajectory errors",
     metrics : dict
         Row label -> figures (as in ``metrics.json``).
     """
-    table = Table(title=title, box=box.SIMPLE_HEAD)
-    table.add_column(first_header, style="bold")
+    table = Table(title=title, box=box.SIMPLE_HEAD, caption="ATE0: anchored at the start; velocity "
+                  "errors are RMSE" if columns is VELOCITY_COLUMNS else "ATE0: anchored at the start")
+    table.add_column(first_header, style="bold", no_wrap=True)
     for column in columns:
-        table.add_column(column.header, justify="right")
+        table.add_column(column.short, justify="right")
     for row in metrics_rows(metrics, columns):
         table.add_row(*row)
     return table
 
 
-def legs_table(name: str, legs: list[dict]) -> Table:
-    """Per-leg table of one trajectory (thesis table 5.2): positions in metres, errors in %."""
-    table = Table(title=f"Legs of {name}", box=box.SIMPLE_HEAD)
-    for header in ("leg", "start (x, y) [m]", "end (x, y) [m]", "actual [m]", "estimated [m]",
-                   "error [%]", "rel. error [%]"):
-        table.add_column(header, justify="right")
-    for leg in legs:
-        table.add_row(str(leg["leg"]), "({:.3f}, {:.3f})".format(*leg["start"]),
-                      "({:.3f}, {:.3f})".format(*leg["end"]), f"{leg['actual_m']:.3f}",
-                      f"{leg['estimated_m']:.3f}", f"{leg['error_pct']:.2f}",
-                      f"{leg['relative_error_pct']:.2f}")
+def legs_table(metrics: dict[str, dict]) -> Table | None:
+    """The legs between turns (thesis table 5.2): one row per leg, the length error [%] of each trajectory.
+
+    Returns ``None`` when no trajectory has legs.
+    """
+    names = [name for name, figures in metrics.items() if figures.get("legs")]
+    if not names:
+        return None
+    legs: dict[int, dict] = {}
+    for name in names:
+        for leg in metrics[name]["legs"]:
+            legs.setdefault(leg["leg"], {"leg": leg, "errors": {}})["errors"][name] = leg["error_pct"]
+    table = Table(title="Legs between turns: length error [%]", box=box.SIMPLE_HEAD,
+                  caption="start and end of the ground truth [m]")
+    for header in ("leg", "start", "end", "length m"):
+        table.add_column(header, justify="right", no_wrap=True)
+    for name in names:
+        table.add_column(name, justify="right")
+    for number in sorted(legs):
+        leg, errors = legs[number]["leg"], legs[number]["errors"]
+        cells = [str(number), "{:.3f}, {:.3f}".format(*leg["start"]), "{:.3f}, {:.3f}".format(*leg["end"]),
+                 f"{leg['actual_m']:.3f}"]
+        cells += ["\u2013" if errors.get(n) is None else f"{errors[n]:.2f}" for n in names]
+        table.add_row(*cells)
     return table

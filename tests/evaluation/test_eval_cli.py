@@ -12,7 +12,7 @@ def test_evaluate_prints_the_table_and_writes_the_report(tmp_path, capsys):
     (run_dir / "run.yaml").write_text("frontend: features\n")  # no sequence named: --gt gives it
     assert main(["evaluate", str(run_dir), "--gt", str(seq)]) == 0
     out = capsys.readouterr().out
-    assert "Position errors" in out and "wheel" in out and "Legs of vo" in out
+    assert "Position errors" in out and "wheel" in out and "Legs between turns" in out
     assert (run_dir / "report.html").is_file()
     assert not (run_dir / "frontend.png").exists()  # no velocities.csv, no frontend figure
     assert json.loads((run_dir / "metrics.json").read_text())["vo"]["heading_deg"] > 0
