@@ -103,3 +103,30 @@ def test_planar_relative_yaw_equals_evo_rotation_rpe(square):
     slow = m.rpe_errors(gt, est, 1.0, m.Unit.meters, m.PoseRelation.rotation_angle_deg)
     assert fast.size > 20
     np.testing.assert_allclose(fast, slow, atol=1e-6)
+
+
+def test_standing_still_gives_figures_without_distance():
+    t = np.arange(0.0, 5.0, 0.05)
+    gt = trajectory(t, np.zeros_like(t), np.zeros_like(t), np.zeros_like(t), "gt")
+    est = trajectory(t, 0.001 * t, np.zeros_like(t), np.zeros_like(t))
+    figures = m.evaluate_trajectory(gt, est).figures
+    assert figures["path_length_m"] == 0.0
+    assert figures["end_m"] == pytest.approx(0.001 * t[-1])
+    assert math.isnan(figures["end_pct"]) and math.isnan(figures["rpe_1m_pct"])
+    assert figures["drift"] == [] and figures["legs"] == []
+
+
+def test_height_and_tilt_of_the_ground_truth_are_ignored(square):
+    t, x, y, yaw = square
+    flat = trajectory(t, x, y, yaw, "gt")
+    lifted = m.planar_trajectory(t + 1.0, x, y, yaw, name="gt")
+    tilt = np.array([math.cos(0.05), math.sin(0.05), 0.0, 0.0])  # 5.7 deg roll about x, then yaw
+    w, xq, yq, zq = lifted.orientations_quat_wxyz.T
+    rolled = np.column_stack([w * tilt[0] - xq * tilt[1], w * tilt[1] + xq * tilt[0],
+                              yq * tilt[0] + zq * tilt[1], zq * tilt[0] - yq * tilt[1]])
+    lifted = m.PoseTrajectory3D(lifted.positions_xyz + [0, 0, 0.4], rolled, lifted.timestamps)
+    est = trajectory(*distorted(t, x, y, yaw, scale=1.02, step=2))
+    a = m.evaluate_trajectory(flat, est).figures
+    b = m.evaluate_trajectory(lifted, est).figures
+    for key in ("ate_m", "ate_anchored_m", "end_m", "heading_deg", "rpe_1m_m", "vx_rmse_m_s"):
+        assert b[key] == pytest.approx(a[key], abs=1e-9), key
