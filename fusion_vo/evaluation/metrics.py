@@ -245,15 +245,16 @@ def rpe_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, delta: f
     return np.asarray(rpe.error, dtype=float)
 
 
-def relative_yaw_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, delta_m: float) -> np.ndarray:
-    """Absolute heading change errors [deg] over the same pose pairs as :func:`rpe_errors` in metres.
+def relative_yaw_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, delta: float,
+                        unit: Unit) -> np.ndarray:
+    """Absolute errors [deg] of the heading change over the pose pairs :func:`rpe_errors` uses.
 
     On the plane the rotation angle of the RPE is the difference of the yaw increments; computing it from
-    yaw is much faster than evo's SO(3) logarithm per pair.
+    yaw is much faster than evo's SO(3) logarithm per pair, with the same result.
     """
-    all_pairs = reference.num_poses <= ALL_PAIRS_LIMIT
+    all_pairs = unit != Unit.frames and reference.num_poses <= ALL_PAIRS_LIMIT
     try:
-        pairs = np.array(id_pairs_from_delta(reference.poses_se3, delta_m, Unit.meters, REL_DELTA_TOL, all_pairs))
+        pairs = np.array(id_pairs_from_delta(reference.poses_se3, delta, unit, REL_DELTA_TOL, all_pairs))
     except filters.FilterException:
         return np.array([])
     i, j = pairs.T
@@ -436,7 +437,7 @@ def evaluate_trajectory(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
         trans = rpe_errors(ref, est, length, Unit.meters)
         if trans.size == 0:
             continue
-        rot = relative_yaw_errors(ref, est, length)
+        rot = relative_yaw_errors(ref, est, length, Unit.meters)
         drift.append({"length_m": length, "segments": int(trans.size),
                       "trans_pct": 100.0 * float(np.mean(trans)) / length,
                       "rot_deg_per_m": float(np.mean(rot)) / length})
@@ -456,7 +457,7 @@ def evaluate_trajectory(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
         "rpe_1m_m": _rmse(rpe_1m),
         "rpe_1m_pct": 100.0 * _rmse(rpe_1m),
         "rpe_frame_m": _rmse(rpe_errors(ref, est, 1, Unit.frames)),
-        "rpe_frame_deg": _rmse(rpe_errors(ref, est, 1, Unit.frames, PoseRelation.rotation_angle_deg)),
+        "rpe_frame_deg": _rmse(relative_yaw_errors(ref, est, 1, Unit.frames)),
         "drift_pct": float(np.mean([d["trans_pct"] for d in drift])) if drift else math.nan,
         "drift": drift,
         "end_m": end_m,

@@ -99,10 +99,11 @@ def test_planar_relative_yaw_equals_evo_rotation_rpe(square):
     t, x, y, yaw = square
     gt = trajectory(t[::4], x[::4], y[::4], yaw[::4], "gt")
     est = trajectory(*distorted(t, x, y, yaw, scale=1.02, yaw_rate_bias=0.02, step=4))
-    fast = m.relative_yaw_errors(gt, est, 1.0)
-    slow = m.rpe_errors(gt, est, 1.0, m.Unit.meters, m.PoseRelation.rotation_angle_deg)
-    assert fast.size > 20
-    np.testing.assert_allclose(fast, slow, atol=1e-6)
+    for delta, unit in ((1.0, m.Unit.meters), (1, m.Unit.frames)):
+        fast = m.relative_yaw_errors(gt, est, delta, unit)
+        slow = m.rpe_errors(gt, est, delta, unit, m.PoseRelation.rotation_angle_deg)
+        assert fast.size > 20
+        np.testing.assert_allclose(fast, slow, atol=1e-6)
 
 
 def test_standing_still_gives_figures_without_distance():
