@@ -25,8 +25,9 @@ associated by time (the denser trajectory is interpolated at the stamps of the s
 * End point (``end_m``, ``end_pct``): distance between the last positions with the estimate anchored at
   the start, and as a percentage of the reference path length.
 * Heading (``heading_deg``): absolute difference of the unwrapped yaw at the end, anchored at the start;
-  where the reference turns :math:`k \\ge 1` full revolutions, ``heading_per_rev_deg`` is that divided by
-  :math:`k` and ``heading_per_rev_pct`` its percentage of 360 degrees.
+  where the reference turns :math:`k` full revolutions (:math:`k \\ge 0.9`, a circle that ends a little
+  short counts), ``heading_per_rev_deg`` is that divided by :math:`k` and ``heading_per_rev_pct`` its
+  percentage of 360 degrees.
 * Velocities (``vx_rmse_m_s``, ``vy_rmse_m_s``, ``yaw_rate_rmse_deg_s``): both trajectories are
   differentiated over the intervals between consecutive estimated poses,
   :math:`v_k = R(\\psi_{k-1})^\\top (p_k - p_{k-1}) / \\Delta t_k`,
@@ -57,6 +58,9 @@ SEGMENT_LENGTHS = (0.5, 1.0, 2.0, 5.0)
 
 #: largest time difference [s] for associating an estimated pose with a reference pose
 MAX_TIME_DIFF = 0.02
+
+#: a path that turns at least this many full revolutions gets a heading error per revolution
+MIN_REVOLUTIONS = 0.9
 
 #: relative tolerance on the reference path length of an RPE pair (evo's ``rel_delta_tol``)
 REL_DELTA_TOL = 0.1
@@ -453,7 +457,7 @@ def evaluate_trajectory(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
         "path_length_m": path_length,
         "ate_m": ape_rmse(ref, aligned),
         "ate_anchored_m": ape_rmse(ref, anchored),
-        "ate_max_m": float(np.max(error)),
+        "ate_anchored_max_m": float(np.max(error)),
         "rpe_1m_m": _rmse(rpe_1m),
         "rpe_1m_pct": 100.0 * _rmse(rpe_1m),
         "rpe_frame_m": _rmse(rpe_errors(ref, est, 1, Unit.frames)),
@@ -464,8 +468,9 @@ def evaluate_trajectory(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
         "end_pct": 100.0 * end_m / path_length if path_length > 1e-9 else math.nan,
         "heading_deg": heading,
         "revolutions": revolutions,
-        "heading_per_rev_deg": heading / revolutions if revolutions >= 1.0 else math.nan,
-        "heading_per_rev_pct": 100.0 * heading / revolutions / 360.0 if revolutions >= 1.0 else math.nan,
+        "heading_per_rev_deg": heading / revolutions if revolutions >= MIN_REVOLUTIONS else math.nan,
+        "heading_per_rev_pct": (100.0 * heading / revolutions / 360.0 if revolutions >= MIN_REVOLUTIONS
+                                else math.nan),
         "vx_rmse_m_s": _rmse(vel_err["vx"]),
         "vy_rmse_m_s": _rmse(vel_err["vy"]),
         "yaw_rate_rmse_deg_s": math.degrees(_rmse(vel_err["yaw_rate"])),
