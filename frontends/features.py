@@ -38,7 +38,14 @@ from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
 from frontends.frame_check import check_frame
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
 from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, scale_motion
-from frontends.tracking import LkSettings, fit_affine, track_points
+from frontends.tracking import (
+    LkSettings,
+    exposure_change,
+    exposure_differs,
+    fit_affine,
+    reduce_for_exposure,
+    track_points,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -204,6 +211,7 @@ class _Frame:
     desc: np.ndarray
     rect: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     texture: float = float("nan")
+    small: np.ndarray | None = None  # reduced copy for the exposure comparison
 
 
 class FeatureFrontend:
@@ -255,7 +263,8 @@ class FeatureFrontend:
         else:
             desc, idx = patch_descriptors(img, pts, self.config.patch_radius)
         pts = pts[idx]
-        return _Frame(img, t, pts, desc, self.point_map.to_rectified(pts.astype(np.float64)))
+        rect = self.point_map.to_rectified(pts.astype(np.float64))
+        return _Frame(img, t, pts, desc, rect, small=reduce_for_exposure(img))
 
     def _process(self, image: np.ndarray, t: float) -> FrameMotion:
         cfg = self.config
@@ -322,7 +331,10 @@ class FeatureFrontend:
             return path, status, fit, n, reason
         p0 = ref.pts[i0[fit.inliers]].astype(np.float64)
         affine = fit_affine(p0, cur.pts[i1[fit.inliers]].astype(np.float64))
-        tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk)
+        exposure = exposure_change(ref.small, cur.small, affine)
+        if not exposure_differs(exposure, 0.01):
+            exposure = (1.0, 0.0)
+        tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk, exposure=exposure)
         if len(tr.index) < cfg.min_inliers:
             return path, MotionStatus.TOO_FEW_FEATURES, fit, n, "refinement lost the points"
         src = ref.rect[i0[fit.inliers]][tr.index]

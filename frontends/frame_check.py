@@ -105,3 +105,4 @@ def check_frame(
             MotionStatus.TOO_FEW_FEATURES, image, g, f"texture {g:.2f} fell below {min_ratio:g} x {reference_texture:.2f}"
         )
     return FrameCheck(None, image, g)
+

@@ -42,7 +42,14 @@ import numpy as np
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.frame_check import check_frame
-from frontends.tracking import LkSettings, fit_affine, track_points
+from frontends.tracking import (
+    LkSettings,
+    exposure_change,
+    exposure_differs,
+    fit_affine,
+    reduce_for_exposure,
+    track_points,
+)
 from frontends.similarity import (
     RobustOptions,
     SimilarityFit,
@@ -93,6 +100,9 @@ class KltConfig(ConfigMixin):
     refine_tolerance : float
         When the fitted motion's linear part differs from the guess by more than this, the points are
         tracked again through the fitted motion (at full resolution).
+    exposure_tolerance : float
+        When the brightness changed by more than this fraction between the frames (gain, or offset
+        relative to 128 grey levels), the points are tracked again with the reference corrected.
     border : int
         Points closer than this to the image border are not tracked [px].
     method : str
@@ -148,6 +158,7 @@ class KltConfig(ConfigMixin):
     forward_backward: bool = True
     warp_tolerance: float = 0.009
     refine_tolerance: float = 0.009
+    exposure_tolerance: float = 0.01
     border: int = 10
     method: str = "ransac"
     threshold: float = 1.0
@@ -247,6 +258,9 @@ class KltFrontend:
         self._last_dt: float | None = None
         self._failures = 0
         self._ref_texture: float | None = None
+        self._ref_small: np.ndarray | None = None  # reduced reference for the exposure comparison
+        self._cur_texture = float("nan")
+        self._cur_small: np.ndarray | None = None
 
     # ------------------------------------------------------------ public API
     def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
@@ -268,6 +282,7 @@ class KltFrontend:
             return self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         self._cur_texture = check.texture
+        self._cur_small = reduce_for_exposure(img)
         if self._ref_img is None:
             self._shape = img.shape
             self._set_reference(img, t, np.zeros((0, 2), np.float32))
@@ -357,16 +372,18 @@ class KltFrontend:
             return outcome
         fit, p1, n_tracked, keep = outcome
         refined = fit_affine(p0[keep][fit.inliers], p1[fit.inliers])
-        if np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
-            outcome2 = self._track(img, p0, src, refined, 0)
+        exposure = exposure_change(self._ref_small, self._cur_small, refined)
+        relight = exposure_differs(exposure, cfg.exposure_tolerance)
+        if relight or np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
+            outcome2 = self._track(img, p0, src, refined, 0, exposure if relight else (1.0, 0.0))
             if not isinstance(outcome2, _Attempt):
                 fit, p1, n_tracked, keep = outcome2
         return self._judge(path, fit, n_tracked, p1)
 
-    def _track(self, img, p0, src, affine, levels):
+    def _track(self, img, p0, src, affine, levels, exposure=(1.0, 0.0)):
         """Tracking from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
         cfg = self.config
-        tr = track_points(self._ref_img, img, p0, affine, levels, self._lk)
+        tr = track_points(self._ref_img, img, p0, affine, levels, self._lk, exposure=exposure)
         if len(tr.index) < cfg.min_inliers:
             why = "too few points tracked" if tr.n_tracked < cfg.min_inliers else "too few points pass the forward-backward check"
             return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, why, tr.n_tracked)
@@ -405,6 +422,7 @@ class KltFrontend:
     def _set_reference(self, img: np.ndarray, t: float, pts: np.ndarray) -> None:
         self._ref_img, self._ref_time = img, t
         self._ref_texture = self._cur_texture
+        self._ref_small = self._cur_small
         pts = np.asarray(pts, np.float32).reshape(-1, 2)
         if len(pts) < self.config.replenish_below:
             pts = np.vstack([pts, self._detect(img, pts)])
