@@ -6,7 +6,9 @@ Three timings per frontend, per frame:
 ``frontend``   the frontend's ``process`` on the decoded image
 ``geometry``   rectification is inside the frontend; this is the similarity -> body increment step
 
-Frames per second are reported with decode included (the end-to-end figure) and excluded. Memory is
+Times are CPU time of the process (``time.process_time``) with OpenCV limited to one thread, so the
+figures do not depend on what else the machine is doing. Frames per second are reported with decode
+included (the end-to-end figure) and excluded. Memory is
 sampled as the process's resident set size after each quarter of the frames: flat in recording length
 means the last quarter is no larger than the first.
 """
@@ -69,15 +71,15 @@ def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = 
     rss = []
     quarter = max(n // 4, 1)
     for i in range(n):
-        a = time.perf_counter()
+        a = time.process_time()
         img = cv2.imread(str(folder / names[i]), cv2.IMREAD_GRAYSCALE)
-        b = time.perf_counter()
+        b = time.process_time()
         motion = fe.process(img, float(t_ns[i]))
-        c = time.perf_counter()
+        c = time.process_time()
         if motion.ok:
             geometry.increment(motion)
             ok += 1
-        d = time.perf_counter()
+        d = time.process_time()
         dec += b - a
         fro += c - b
         geo += d - c

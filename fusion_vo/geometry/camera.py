@@ -69,6 +69,7 @@ class CameraModel:
         self.T_BS = np.asarray(self.T_BS, dtype=np.float64).reshape(4, 4)
         if self.distortion_model not in DISTORTION_MODELS:
             raise ValueError(f"unknown distortion model {self.distortion_model!r}")
+        self._distorted = self.distortion_model != "none" and bool(np.any(self.distortion != 0))
 
     # ------------------------------------------------------------------ matrices
     @property
@@ -85,7 +86,8 @@ class CameraModel:
 
     @property
     def has_distortion(self) -> bool:
-        return self.distortion_model != "none" and bool(np.any(self.distortion != 0))
+        """Whether the lens model changes any point (fixed when the model is built)."""
+        return self._distorted
 
     # ------------------------------------------------------------------ points
     def normalize(self, pixels: np.ndarray) -> np.ndarray:
