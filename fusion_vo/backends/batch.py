@@ -1,0 +1,156 @@
+"""Batch use: a whole recording's measurements in, trajectories and diagnostics out.
+
+::
+
+    result = run_backends(recording, visual, sensors=["camera", "wheel", "imu"], backend="all")
+    result.trajectories["gtsam"]        # PoseData of B in W
+    result.covariances["ekf"]           # (N, 3, 3)
+    result.summary()                    # counts, calibration, notes, timing
+
+``fuse`` does the same from :class:`~fusion_vo.backends.timeline.SensorStreams` already in memory.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.ekf import run_ekf
+from fusion_vo.backends.result import FusionResult
+from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
+from fusion_vo.errors import InputError
+from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
+
+logger = logging.getLogger(__name__)
+
+BACKENDS = ("ekf", "gtsam")
+CHOICES = ("none", "ekf", "gtsam", "all")
+
+
+def backend_names(backend) -> list[str]:
+    """``"none" | "ekf" | "gtsam" | "all"`` (or a list of names) -> the backends to run."""
+    names = [backend] if isinstance(backend, str) else list(backend)
+    out: list[str] = []
+    for name in names:
+        if name not in CHOICES:
+            raise InputError(f"unknown backend '{name}' (use one of {', '.join(CHOICES)})")
+        for b in (BACKENDS if name == "all" else () if name == "none" else (name,)):
+            if b not in out:
+                out.append(b)
+    return out
+
+
+def as_config(options) -> FusionConfig:
+    """A :class:`FusionConfig` from None, a mapping (``from_dict``) or a config."""
+    if isinstance(options, FusionConfig):
+        return options
+    return FusionConfig.from_dict(options or {})
+
+
+def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | None = None) -> FusionResult:
+    """Run the requested backends on measurements in memory.
+
+    Parameters
+    ----------
+    streams : SensorStreams
+        Only the sensors to use (see :meth:`SensorStreams.select`).
+    backend : str or list of str
+        ``"ekf"``, ``"gtsam"``, ``"all"`` or ``"none"`` (dead reckoning only).
+    config : FusionConfig or dict, optional
+
+    Returns
+    -------
+    FusionResult
+        ``ekf``, ``ekf_smoothed``, ``gtsam``, ``gtsam_online`` (and ``gtsam_fixed_lag``) trajectories,
+        plus ``wheel`` dead reckoning when wheels are used.
+    """
+    config = as_config(config)
+    names = backend_names(backend)
+    result = FusionResult()
+    wheel = wheel_dead_reckoning(streams, config)
+    if wheel is not None:
+        result.trajectories["wheel"] = wheel
+    if not names:
+        return result
+    t0 = time.perf_counter()
+    iv = build_intervals(streams, config)
+    result.timing["timeline"] = time.perf_counter() - t0
+    if "ekf" in names:
+        result.merge(run_ekf(iv, config))
+    if "gtsam" in names:
+        from fusion_vo.backends.graph import run_graph  # GTSAM is imported only when used
+
+        result.merge(run_graph(iv, config))
+    for note in result.notes:
+        logger.info("%s", note)
+    return result
+
+
+def run_backends(recording, visual=None, sensors=None, backend="all", options=None) -> FusionResult:
+    """The whole fusion stage of ``fusion-vo run``.
+
+    Parameters
+    ----------
+    recording : fusion_vo.recording.Recording
+        Provides ``wheel()``, ``odom()``, ``imu()``, ``range()``, ``camera`` and ``has_*()``.
+    visual : OdometryResult or list of VisualIncrement, optional
+        The visual odometry output (its ``increments``); None when the camera is not used.
+    sensors : list of str, optional
+        Of ``camera, wheel, odom, imu, range``; default: all the recording has.
+    backend : str
+        ``none | ekf | gtsam | all``.
+    options : dict or FusionConfig, optional
+        Backend options (``FusionConfig.from_dict`` keys).
+    """
+    config = as_config(options)
+    streams = streams_from_recording(recording, visual, sensors, config)
+    return fuse(streams, backend, config)
+
+
+def streams_from_recording(recording, visual=None, sensors=None, config: FusionConfig | None = None) -> SensorStreams:
+    """Read the streams of ``sensors`` from ``recording`` (only those) into :class:`SensorStreams`."""
+    config = config or FusionConfig()
+    increments = getattr(visual, "increments", visual)
+    present = {
+        "camera": increments is not None and len(increments) > 0,
+        "wheel": recording.has_wheel(),
+        "odom": recording.has_odom(),
+        "imu": recording.has_imu(),
+        "range": recording.has_range(),
+    }
+    if sensors is None:
+        sensors = [s for s in SENSORS if present[s] and not (s == "odom" and present["wheel"])]
+    sensors = list(sensors)
+    for s in sensors:
+        if s not in SENSORS:
+            raise InputError(f"unknown sensor '{s}' (use {', '.join(SENSORS)})")
+    if "camera" in sensors and not present["camera"]:
+        raise InputError("sensor 'camera' was asked for but there are no visual increments (no cam0/ frames?)",
+                         getattr(recording, "path", None))
+    wants_wheel = "wheel" in sensors or "odom" in sensors
+    height = config.camera_height
+    if height is None and recording.has_camera():
+        height = float(recording.camera.T_BS[2, 3])
+    streams = SensorStreams(
+        visual=list(increments) if "camera" in sensors else None,
+        wheel=recording.wheel() if "wheel" in sensors and present["wheel"] else None,
+        odom=recording.odom() if wants_wheel and present["odom"] and not ("wheel" in sensors and present["wheel"]) else None,
+        imu=recording.imu() if "imu" in sensors and present["imu"] else None,
+        range=recording.range() if "range" in sensors and present["range"] else None,
+        camera_height=height,
+    )
+    return streams.select(sensors)
+
+
+def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = None) -> PoseData | None:
+    """Wheel-only trajectory (``wheel.tum``) at the encoder (or twist) rate, or None without wheels."""
+    config = config or FusionConfig()
+    if streams.wheel is not None and len(streams.wheel) > 1:
+        travel = ticks_to_travel(streams.wheel, config.wheel)
+    elif streams.odom is not None and len(streams.odom) > 1:
+        travel = twist_to_travel(streams.odom, max_speed=config.wheel.max_speed)
+    else:
+        return None
+    return wheel_track(travel, config.initial_pose)

@@ -1,0 +1,202 @@
+"""Configuration of the fusion backends (dataclasses with documented defaults).
+
+:meth:`FusionConfig.from_dict` builds a configuration from a (YAML) mapping and raises
+:class:`~fusion_vo.errors.InputError` for unknown keys or values of the wrong type, so that a typo in a
+configuration file is an error rather than a silently ignored setting.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+from fusion_vo.errors import InputError
+from fusion_vo.sensors.imu import ImuNoise
+from fusion_vo.sensors.range import RangeNoise
+from fusion_vo.sensors.wheel import WheelNoise
+
+ROBUST_KERNELS = ("huber", "cauchy", "none")
+
+
+@dataclass
+class EkfConfig:
+    """EKF process noise and options.
+
+    Attributes
+    ----------
+    accel_sigma : float
+        Forward acceleration noise of the constant-twist model [m/s²·√s] (default 0.5).
+    lateral_accel_sigma : float
+        Sideways acceleration noise [m/s²·√s] (default 0.1; a wheeled robot barely slides).
+    yaw_accel_sigma : float
+        Angular acceleration noise [rad/s²·√s] (default 1.0).
+    scale_random_walk : float
+        Random walk of the visual scale and wheel-base factor [1/√s] (default 1e-4).
+    smoother : bool
+        Run the Rauch–Tung–Striebel pass (default True).
+    """
+
+    accel_sigma: float = 0.5
+    lateral_accel_sigma: float = 0.1
+    yaw_accel_sigma: float = 1.0
+    scale_random_walk: float = 1e-4
+    smoother: bool = True
+
+
+@dataclass
+class GraphConfig:
+    """Factor-graph options.
+
+    Attributes
+    ----------
+    robust : str
+        M-estimator on the visual, wheel, gyro and heading factors: ``"huber"``, ``"cauchy"`` or
+        ``"none"`` (default ``"huber"``).
+    robust_k : float
+        Kernel width in standard deviations (default 1.345 for Huber; 2.3849 is Cauchy's classic).
+    keyframe_every : int
+        Keep one pose variable every this many nodes (default 1: every camera frame).
+    batch : bool
+        Batch Levenberg–Marquardt smoothing over the whole recording (``"gtsam"``; default True).
+    online : bool
+        Incremental iSAM2, one update per node (``"gtsam_online"``; default True).
+    fixed_lag : float
+        Lag [s] of an incremental fixed-lag smoother (``"gtsam_fixed_lag"``); 0 disables it (default 0).
+    max_iterations : int
+        Levenberg–Marquardt iterations (default 20).
+    relative_tolerance : float
+        Stop when an iteration decreases the cost by less than this fraction (default 1e-3; later
+        iterations move the poses by far less than their uncertainty).
+    marginals : bool
+        Compute marginal pose covariances of the batch solution (default True).
+    calibration_interval : float
+        Length [s] of the segments that share one gyro-bias and calibration variable (default 1).
+    """
+
+    robust: str = "huber"
+    robust_k: float = 1.345
+    keyframe_every: int = 1
+    batch: bool = True
+    online: bool = True
+    fixed_lag: float = 0.0
+    max_iterations: int = 20
+    relative_tolerance: float = 1e-3
+    marginals: bool = True
+    calibration_interval: float = 1.0
+
+
+@dataclass
+class FusionConfig:
+    """Everything the backends need besides the measurements.
+
+    Attributes
+    ----------
+    step_hz : float
+        Node rate [Hz] where no camera frame provides the nodes (default 20).
+    max_gap : float
+        A gap between two samples of a stream longer than this [s] is not bridged (default 0.25).
+    reorder_window : float
+        Streaming use: samples are held this long [s] to put out-of-order arrivals back in order;
+        anything arriving later is counted as late (default 0.3).
+    gate_probability : float
+        Mahalanobis gate: a measurement whose squared Mahalanobis distance exceeds the chi-square
+        quantile of this probability (degrees of freedom = measurement size) is rejected (default 0.999).
+    self_calibration : bool
+        Estimate the visual scale (camera height) and the wheel base (default True).
+    visual_scale_sigma, wheel_base_sigma : float
+        Prior standard deviations of those two factors around 1 (default 0.05 each).
+    camera_height : float or None
+        Configured camera height [m] the visual increments were computed with; needed by the range
+        finder (default None: taken from the camera's ``T_BS`` by the caller).
+    initial_pose : tuple
+        ``(x, y, yaw)`` of the first node (default the origin).
+    initial_velocity_sigma : float
+        Prior standard deviation of the initial speed [m/s] (default 0.5).
+    wheel, imu, range : WheelNoise, ImuNoise, RangeNoise
+        Sensor noise models.
+    ekf, graph : EkfConfig, GraphConfig
+        Backend options.
+    """
+
+    step_hz: float = 20.0
+    max_gap: float = 0.25
+    reorder_window: float = 0.3
+    gate_probability: float = 0.999
+    self_calibration: bool = True
+    visual_scale_sigma: float = 0.05
+    wheel_base_sigma: float = 0.05
+    camera_height: float | None = None
+    initial_pose: tuple = (0.0, 0.0, 0.0)
+    initial_velocity_sigma: float = 0.5
+    wheel: WheelNoise = field(default_factory=WheelNoise)
+    imu: ImuNoise = field(default_factory=ImuNoise)
+    range: RangeNoise = field(default_factory=RangeNoise)
+    ekf: EkfConfig = field(default_factory=EkfConfig)
+    graph: GraphConfig = field(default_factory=GraphConfig)
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        """Raise :class:`InputError` for values that cannot work."""
+        if self.step_hz <= 0 or self.max_gap <= 0 or self.reorder_window < 0:
+            raise InputError("step_hz and max_gap must be positive, reorder_window non-negative")
+        if not 0.0 < self.gate_probability <= 1.0:
+            raise InputError("gate_probability must be in (0, 1]")
+        if self.graph.robust not in ROBUST_KERNELS:
+            raise InputError(f"graph.robust must be one of {', '.join(ROBUST_KERNELS)}, not {self.graph.robust!r}")
+        if self.graph.calibration_interval <= 0:
+            raise InputError("graph.calibration_interval must be positive")
+        if self.graph.keyframe_every < 1:
+            raise InputError("graph.keyframe_every must be at least 1")
+        if len(tuple(self.initial_pose)) != 3:
+            raise InputError("initial_pose needs three numbers (x, y, yaw)")
+
+    @classmethod
+    def from_dict(cls, data: dict | None, path=None) -> "FusionConfig":
+        """Build from a nested mapping; unknown keys and wrong types raise :class:`InputError`."""
+        return _from_dict(cls, data or {}, "", path)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def _from_dict(cls, data: Any, prefix: str, path):
+    if not isinstance(data, dict):
+        raise InputError(f"'{prefix.rstrip('.') or 'config'}' must be a mapping", path)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - set(fields))
+    if unknown:
+        raise InputError(f"unknown configuration key '{prefix}{unknown[0]}' (known: {', '.join(fields)})", path)
+    kwargs = {}
+    defaults = cls()
+    for name, value in data.items():
+        current = getattr(defaults, name)
+        if dataclasses.is_dataclass(current):
+            kwargs[name] = _from_dict(type(current), value, f"{prefix}{name}.", path)
+        elif isinstance(current, bool):
+            if not isinstance(value, bool):
+                raise InputError(f"'{prefix}{name}' must be true or false", path)
+            kwargs[name] = value
+        elif isinstance(current, (int, float)) and not isinstance(current, bool):
+            try:
+                kwargs[name] = type(current)(value)
+            except (TypeError, ValueError):
+                raise InputError(f"'{prefix}{name}' must be a number", path) from None
+        elif isinstance(current, tuple):
+            try:
+                kwargs[name] = tuple(float(v) for v in value)
+            except (TypeError, ValueError):
+                raise InputError(f"'{prefix}{name}' must be a list of numbers", path) from None
+        elif name == "camera_height":
+            try:
+                kwargs[name] = None if value is None else float(value)
+            except (TypeError, ValueError):
+                raise InputError(f"'{prefix}{name}' must be a number", path) from None
+        else:
+            kwargs[name] = value
+    try:
+        return cls(**kwargs)
+    except InputError as exc:
+        raise InputError(exc.message, path) from None

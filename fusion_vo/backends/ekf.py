@@ -1,0 +1,382 @@
+"""Extended Kalman filter over the node grid, with a Rauch–Tung–Striebel smoother.
+
+State (9)::
+
+    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b]
+
+pose of B in W, the body twist ``u = (v_x, v_y, ω)`` *averaged over the interval that ends at the node*,
+the gyro bias, the visual scale ``k_v = h_configured / h_true`` and the wheel-base factor
+``k_b = b_true / b_configured`` (the last two are frozen when self-calibration is off).
+
+Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
+
+    u_{k+1} = u_k + w_u,                   w_u ~ N(0, diag(σ_a², σ_lat², σ_α²) Δt)
+    pose_{k+1} = pose_k ⊕ exp(u_{k+1} Δt)  (SE(2) exponential: exact circular arc)
+    b_{k+1} = b_k + w_b,                   w_b ~ N(0, σ_bw² Δt)
+    k_{k+1} = k_k + w_k,                   w_k ~ N(0, q_k² Δt)
+
+``F = ∂f/∂x`` and ``Q = G diag(...) Gᵀ`` with ``G = ∂f/∂w`` (the twist noise also moves the pose).
+
+Measurements over an interval (all sensors are integrated onto the same interval by
+:mod:`fusion_vo.backends.timeline`, so each one constrains the twist of *that* interval)::
+
+    visual   z = log(Δ_vis)/Δt          h = (k_v v_x, k_v v_y, ω)       R = Σ_vis / Δt²
+    wheel    z = (d, 0, θ)/Δt (arc)     h = (v_x, v_y, k_b ω)           R = wheel noise model / Δt²
+    gyro     z = Θ/Δt (mean rate)       h = ω + b_g                     R = σ_g² / Δt
+    AHRS     z = ψ_AHRS (at the node)   h = ψ                           R = σ_ψ²
+    range    z = h_range (at the node)  h = h_c / k_v                   R = σ_r²
+
+Because the twist state *is* the interval's mean twist and the pose at the node is a function of the
+previous pose and that twist, an interval measurement is an exact function of the current state — the
+same information a delayed-state (cloned pose) relative update would carry, without augmenting the
+state. High-rate wheel and gyro samples are therefore integrated over each camera interval before the
+update; for a twist that is constant within the interval this is statistically equivalent to applying
+every sample. A visual increment spanning ``n`` intervals (after dropped frames) is applied as its mean
+twist to each of them with covariance ``n R`` (the same total information).
+
+Each sensor's block is gated before the update by its squared Mahalanobis distance
+``yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``; rejections are counted.
+The accepted blocks are stacked into one update with filterpy's
+:class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
+
+The smoother runs backwards over the stored priors and posteriors::
+
+    C_k = P_k Fᵀ_{k+1} (P⁻_{k+1})⁻¹
+    x̂_k = x_k + C_k (x̂_{k+1} - x⁻_{k+1}),   P̂_k = P_k + C_k (P̂_{k+1} - P⁻_{k+1}) C_kᵀ
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+
+import numpy as np
+from filterpy.kalman import ExtendedKalmanFilter
+from scipy.stats import chi2
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.result import FusionResult, SensorCount
+from fusion_vo.backends.timeline import Intervals
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.wheel import arc_twist
+
+logger = logging.getLogger(__name__)
+
+PX, PY, YAW, VX, VY, W, BG, KV, KB = range(9)
+DIM = 9
+_FROZEN_VAR = 1e-12
+
+
+class PlanarEkf:
+    """The filter: :meth:`predict` to the next node, then :meth:`update` with that interval's measurements.
+
+    Parameters
+    ----------
+    config : FusionConfig
+    camera_height : float, optional
+        Height the visual increments assume (for range updates).
+    """
+
+    def __init__(self, config: FusionConfig, camera_height: float | None = None,
+                 estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None):
+        self.config = config
+        calib = config.self_calibration
+        self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
+        self.estimate_kb = calib if estimate_wheel_base is None else calib and estimate_wheel_base
+        self.camera_height = camera_height
+        self.kf = ExtendedKalmanFilter(dim_x=DIM, dim_z=1)
+        x = np.zeros(DIM)
+        x[:3] = config.initial_pose
+        x[KV] = x[KB] = 1.0
+        self.kf.x = x.reshape(DIM, 1)
+        var = np.zeros(DIM)
+        var[:3] = 1e-10
+        var[VX] = var[VY] = config.initial_velocity_sigma**2
+        var[W] = 0.5**2
+        var[BG] = config.imu.gyro_bias_sigma**2
+        var[KV] = config.visual_scale_sigma**2 if self.estimate_kv else _FROZEN_VAR
+        var[KB] = config.wheel_base_sigma**2 if self.estimate_kb else _FROZEN_VAR
+        self.kf.P = np.diag(var)
+        self._thresholds = {m: float(chi2.ppf(config.gate_probability, m)) if config.gate_probability < 1 else np.inf
+                            for m in (1, 2, 3)}
+        self.counts: dict[str, SensorCount] = {}
+
+    # ------------------------------------------------------------------ state access
+    @property
+    def x(self) -> np.ndarray:
+        return self.kf.x.ravel()
+
+    @property
+    def P(self) -> np.ndarray:
+        return self.kf.P
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, dt: float) -> np.ndarray:
+        """Constant-twist prediction over ``dt``; returns the transition Jacobian ``F``."""
+        cfg = self.config
+        x = self.x
+        vx, vy, w = x[VX], x[VY], x[W]
+        th = w * dt
+        a, b, da, db = _sinc(th)
+        ax = dt * (a * vx - b * vy)
+        ay = dt * (b * vx + a * vy)
+        c, s = np.cos(x[YAW]), np.sin(x[YAW])
+        d_a = np.array([[a * dt, -b * dt, dt * dt * (da * vx - db * vy)],
+                        [b * dt, a * dt, dt * dt * (db * vx + da * vy)]])
+        rot = np.array([[c, -s], [s, c]])
+        d_pos_v = rot @ d_a
+        F = np.eye(DIM)
+        F[PX, YAW] = -s * ax - c * ay
+        F[PY, YAW] = c * ax - s * ay
+        F[0:2, VX:W + 1] = d_pos_v
+        F[YAW, W] = dt
+        G = np.zeros((DIM, 3))
+        G[0:2] = d_pos_v
+        G[YAW, 2] = dt
+        G[VX:W + 1] = np.eye(3)
+        qv = np.array([cfg.ekf.accel_sigma, cfg.ekf.lateral_accel_sigma, cfg.ekf.yaw_accel_sigma]) ** 2 * dt
+        Q = (G * qv) @ G.T
+        Q[BG, BG] += cfg.imu.gyro_random_walk**2 * dt
+        if self.estimate_kv:
+            Q[KV, KV] += cfg.ekf.scale_random_walk**2 * dt
+        if self.estimate_kb:
+            Q[KB, KB] += cfg.ekf.scale_random_walk**2 * dt
+        x_new = x.copy()
+        x_new[PX] += c * ax - s * ay
+        x_new[PY] += s * ax + c * ay
+        x_new[YAW] = se2.wrap_angle(x[YAW] + th)
+        self.kf.x = x_new.reshape(DIM, 1)
+        self.kf.P = F @ self.kf.P @ F.T + Q
+        self.kf.x_prior = self.kf.x.copy()
+        self.kf.P_prior = self.kf.P.copy()
+        return F
+
+    # ------------------------------------------------------------------ measurement blocks
+    def visual_block(self, z, R):
+        x = self.x
+        H = np.zeros((3, DIM))
+        H[0, VX] = H[1, VY] = x[KV]
+        H[0, KV], H[1, KV] = x[VX], x[VY]
+        H[2, W] = 1.0
+        return "camera", np.asarray(z, float), np.array([x[KV] * x[VX], x[KV] * x[VY], x[W]]), H, R, None
+
+    def wheel_block(self, z, R):
+        x = self.x
+        H = np.zeros((3, DIM))
+        H[0, VX] = H[1, VY] = 1.0
+        H[2, W], H[2, KB] = x[KB], x[W]
+        return "wheel", np.asarray(z, float), np.array([x[VX], x[VY], x[KB] * x[W]]), H, R, None
+
+    def gyro_block(self, rate: float, var: float):
+        x = self.x
+        H = np.zeros((1, DIM))
+        H[0, W] = H[0, BG] = 1.0
+        return "gyro", np.array([rate]), np.array([x[W] + x[BG]]), H, np.array([[var]]), None
+
+    def heading_block(self, yaw: float, var: float):
+        H = np.zeros((1, DIM))
+        H[0, YAW] = 1.0
+        return "ahrs", np.array([yaw]), np.array([self.x[YAW]]), H, np.array([[var]]), 0
+
+    def range_block(self, height: float, var: float):
+        kv = self.x[KV]
+        H = np.zeros((1, DIM))
+        H[0, KV] = -self.camera_height / kv**2
+        return "range", np.array([height]), np.array([self.camera_height / kv]), H, np.array([[var]]), None
+
+    # ------------------------------------------------------------------ update
+    def update(self, blocks) -> None:
+        """Gate each ``(sensor, z, h, H, R, angle_row)`` block, then apply the accepted ones together."""
+        if not blocks:
+            return
+        P = self.kf.P
+        keep = []
+        for sensor, z, h, H, R, angle in blocks:
+            y = z - h
+            if angle is not None:
+                y[angle] = se2.wrap_angle(y[angle])
+            S = H @ P @ H.T + R
+            d2 = float(y @ np.linalg.solve(S, y))
+            count = self.counts.setdefault(sensor, SensorCount())
+            if not np.isfinite(d2) or d2 > self._thresholds[len(y)]:
+                count.gated += 1
+                logger.debug("ekf: %s gated (d²=%.1f)", sensor, d2)
+                continue
+            count.used += 1
+            keep.append((y, H, R))
+        if not keep:
+            return
+        y = np.concatenate([k[0] for k in keep]).reshape(-1, 1)
+        H = np.vstack([k[1] for k in keep])
+        R = _block_diag([k[2] for k in keep])
+        # z is passed as the innovation with h(x) = 0 so angle rows arrive already wrapped
+        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=R)
+        self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
+
+
+# --------------------------------------------------------------------------- batch run over intervals
+def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
+    """Twist-space measurements per node interval, vectorised (see the module docstring)."""
+    K = iv.n_steps
+    dt = iv.dt
+    out: dict = {}
+    if len(iv.vis_i0):
+        vis_u = np.zeros((K, 3))
+        vis_R = np.zeros((K, 3, 3))
+        vis_ok = np.zeros(K, bool)
+        span = iv.t[iv.vis_i1] - iv.t[iv.vis_i0]
+        n = iv.vis_i1 - iv.vis_i0
+        for m in np.argsort(n, kind="stable"):  # single-interval increments first
+            steps = np.arange(iv.vis_i0[m], iv.vis_i1[m])
+            free = steps[~vis_ok[steps]]
+            if len(free) == 0:
+                continue
+            vis_u[free] = se2.log(iv.vis_delta[m]) / span[m]
+            vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
+            vis_ok[free] = True
+        out["visual"] = (vis_ok, vis_u, vis_R)
+    if iv.uses("wheel"):
+        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel)
+        u[:, 0] *= iv.cx
+        out["wheel"] = (iv.wheel_ok, u, R)
+    if iv.uses("gyro"):
+        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / dt, config.imu.gyro_noise_density**2 / dt)
+    if iv.ahrs_ok.any():
+        out["ahrs"] = (iv.ahrs_ok, iv.ahrs_yaw, config.imu.ahrs_yaw_sigma**2)
+    if iv.range_ok.any():
+        out["range"] = (iv.range_ok, iv.range_height, config.range.sigma**2)
+    return out
+
+
+def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
+    """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
+    start = time.perf_counter()
+    kv_ok, kb_ok = calibration_observable(iv)
+    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok)
+    meas = interval_measurements(iv, config)
+    K = iv.n_steps
+    dt = iv.dt
+    xs = np.zeros((K + 1, DIM))
+    Ps = np.zeros((K + 1, DIM, DIM))
+    x_prior = np.zeros((K + 1, DIM))
+    P_prior = np.zeros((K + 1, DIM, DIM))
+    Fs = np.zeros((K + 1, DIM, DIM))
+    vis = meas.get("visual")
+    whl = meas.get("wheel")
+    gyr = meas.get("gyro")
+    ahr = meas.get("ahrs")
+    rng = meas.get("range")
+    if ahr is not None and ahr[0][0]:
+        ekf.update([ekf.heading_block(ahr[1][0], ahr[2])])
+    xs[0], Ps[0] = ekf.x, ekf.P
+    for k in range(K):
+        Fs[k + 1] = ekf.predict(dt[k])
+        x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
+        blocks = []
+        if vis is not None and vis[0][k]:
+            blocks.append(ekf.visual_block(vis[1][k], vis[2][k]))
+        if whl is not None and whl[0][k]:
+            blocks.append(ekf.wheel_block(whl[1][k], whl[2][k]))
+        if gyr is not None and gyr[0][k]:
+            blocks.append(ekf.gyro_block(gyr[1][k], gyr[2][k]))
+        if ahr is not None and ahr[0][k + 1]:
+            blocks.append(ekf.heading_block(ahr[1][k + 1], ahr[2]))
+        if rng is not None and rng[0][k + 1]:
+            blocks.append(ekf.range_block(rng[1][k + 1], rng[2]))
+        ekf.update(blocks)
+        xs[k + 1], Ps[k + 1] = ekf.x, ekf.P
+    result = FusionResult()
+    result.trajectories["ekf"] = PoseData(iv.t.copy(), xs[:, :3].copy())
+    result.covariances["ekf"] = Ps[:, :3, :3].copy()
+    counts = _merge_counts(iv.counts, ekf.counts)
+    result.counts["ekf"] = counts
+    result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
+    result.timing["ekf"] = time.perf_counter() - start
+    if config.ekf.smoother:
+        t1 = time.perf_counter()
+        xsm, Psm = rts_smooth(xs, Ps, x_prior, P_prior, Fs)
+        result.trajectories["ekf_smoothed"] = PoseData(iv.t.copy(), xsm[:, :3].copy())
+        result.covariances["ekf_smoothed"] = Psm[:, :3, :3].copy()
+        result.counts["ekf_smoothed"] = counts
+        result.calibration["ekf_smoothed"] = _calibration(xsm[-1], Psm[-1], iv, config)
+        result.timing["ekf_smoothed"] = time.perf_counter() - t1
+    result.notes.extend(iv.notes)
+    return result
+
+
+def calibration_observable(iv: Intervals) -> tuple[bool, bool]:
+    """Whether the visual scale and the wheel base can be told apart from the motion.
+
+    The visual scale needs an independent distance (wheels or the range finder) next to the camera;
+    the wheel base needs an independent heading change (camera, gyro or AHRS) next to the wheels.
+    """
+    cam = len(iv.vis_i0) > 0
+    wheel = iv.uses("wheel")
+    kv = cam and (wheel or iv.range_ok.any())
+    kb = wheel and (cam or iv.uses("gyro") or iv.ahrs_ok.any())
+    return bool(kv), bool(kb)
+
+
+def rts_smooth(xs, Ps, x_prior, P_prior, Fs) -> tuple[np.ndarray, np.ndarray]:
+    """Rauch–Tung–Striebel pass over filtered ``xs, Ps`` with the stored priors and Jacobians.
+
+    ``x_prior[k], P_prior[k], Fs[k]`` belong to the prediction *into* step ``k`` (index 0 unused).
+    """
+    n = len(xs)
+    xsm = xs.copy()
+    Psm = Ps.copy()
+    for k in range(n - 2, -1, -1):
+        Pp = P_prior[k + 1]
+        C = np.linalg.solve(Pp.T, (Ps[k] @ Fs[k + 1].T).T).T
+        dx = xsm[k + 1] - x_prior[k + 1]
+        dx[YAW] = se2.wrap_angle(dx[YAW])
+        xsm[k] = xs[k] + C @ dx
+        xsm[k, YAW] = se2.wrap_angle(xsm[k, YAW])
+        Psm[k] = Ps[k] + C @ (Psm[k + 1] - Pp) @ C.T
+    return xsm, Psm
+
+
+def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
+    out = {}
+    if iv.uses("gyro"):
+        out.update(gyro_bias=float(x[BG]), gyro_bias_sigma=float(np.sqrt(P[BG, BG])))
+    kv_ok, kb_ok = calibration_observable(iv)
+    if config.self_calibration and kv_ok:
+        out["visual_scale"] = float(x[KV])
+        out["visual_scale_sigma"] = float(np.sqrt(P[KV, KV]))
+        if iv.camera_height:
+            out["camera_height"] = float(iv.camera_height / x[KV])
+    if config.self_calibration and kb_ok:
+        out["wheel_base_factor"] = float(x[KB])
+        out["wheel_base"] = float(iv.wheel_base * x[KB])
+    return out
+
+
+def _merge_counts(base: dict, extra: dict) -> dict:
+    """Input-stage counts with the filter's gating added (``used`` is what the filter accepted)."""
+    out = {k: SensorCount(**v.as_dict()) for k, v in base.items()}
+    for sensor, c in extra.items():
+        o = out.setdefault(sensor, SensorCount())
+        o.used = c.used
+        o.gated += c.gated
+    return out
+
+
+def _block_diag(mats) -> np.ndarray:
+    n = sum(m.shape[0] for m in mats)
+    out = np.zeros((n, n))
+    i = 0
+    for m in mats:
+        k = m.shape[0]
+        out[i:i + k, i:i + k] = m
+        i += k
+    return out
+
+
+def _sinc(th: float) -> tuple[float, float, float, float]:
+    """``sin θ/θ``, ``(1-cos θ)/θ`` and their derivatives."""
+    if abs(th) < 1e-4:
+        return 1.0 - th * th / 6.0, th / 2.0 - th**3 / 24.0, -th / 3.0, 0.5 - th * th / 8.0
+    s, c = np.sin(th), np.cos(th)
+    return s / th, (1.0 - c) / th, (th * c - s) / th**2, (th * s - (1.0 - c)) / th**2

@@ -1,0 +1,563 @@
+"""Factor-graph backend with GTSAM: batch smoothing, iSAM2 online estimates and a fixed-lag smoother.
+
+Variables
+---------
+``X_k``  Pose2 of B in W at node (keyframe) ``k`` — the camera frames, or every ``keyframe_every``-th;
+``B_c``  gyro bias [rad/s] of segment ``c``;
+``S_c``  visual scale ``k_v = h_configured / h_true`` of segment ``c`` (only with self-calibration);
+``W_c``  wheel-base factor ``k_b = b_true / b_configured`` of segment ``c`` (only with self-calibration).
+
+A segment is ``GraphConfig.calibration_interval`` seconds of nodes (default 1 s); node ``k`` uses the
+variables of its segment ``c(k)``. Slowly varying quantities are thus variables tied by random walks
+between segments rather than single global variables (a variable shared by all factors sits in every
+clique of the Bayes tree and each iSAM2 update would re-solve the whole history) or one per camera
+frame (long chains of nearly equal variables that every update nudges all the way back).
+
+Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)::
+
+    prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²)
+    visual     e = (S_c d_x - m_x, S_c d_y - m_y, d_ψ - m_ψ)   Σ = frontend covariance   (CustomFactor)
+    wheel      BetweenFactorPose2 with the arc increment       Σ = arc model (sensors.wheel)
+               with self-calibration its heading row is split off into
+               e = W_c d_ψ - m_ψ                                σ² = Σ_ψψ         (CustomFactor)
+    gyro       e = d_ψ - (Θ_ij - B_c Δt)                       σ² = σ_g² Δt      (exact linear factor)
+    walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ)   (τ: segment length)
+
+The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
+the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
+attenuates the estimate like a regression on a noisy regressor.
+    heading    PriorFactorPose2 on X_k with the AHRS yaw (x, y left free)
+    range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
+
+Without self-calibration the visual factor is a plain ``BetweenFactorPose2``. Visual, wheel-translation
+and AHRS factors use a robust noise model (Huber or Cauchy, ``GraphConfig.robust``), so a wrong
+visual match costs at most linearly and cannot drag the trajectory; the linear heading factors are not
+robust, their inputs are gated upstream (gyro spikes, encoder jumps).
+
+Solvers
+-------
+``gtsam``             batch Levenberg–Marquardt over the whole graph;
+``gtsam_online``      iSAM2, one update per node; the estimate of ``X_k`` right after its update is the
+                      online (causal) trajectory;
+``gtsam_fixed_lag``   ``IncrementalFixedLagSmoother`` with a lag of ``GraphConfig.fixed_lag`` seconds.
+
+The Levenberg–Marquardt loop is written out here on top of GTSAM's linearisation and sparse
+elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``): the wrapped
+optimizer re-enters Python for every :class:`gtsam.CustomFactor` at a cost that grows with the
+graph, while linearising from Python does not. The algorithm is the standard one: try the
+Gauss–Newton step, and while the cost does not decrease, add ``λ I`` damping (λ × 10) and retry.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.result import FusionResult, SensorCount
+from fusion_vo.backends.timeline import Intervals
+from fusion_vo.backends.ekf import calibration_observable
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment
+
+logger = logging.getLogger(__name__)
+
+def X(k: int) -> int:
+    return gtsam.symbol("x", k)
+
+
+def B(k: int) -> int:
+    return gtsam.symbol("b", k)
+
+
+def S(k: int) -> int:
+    return gtsam.symbol("s", k)
+
+
+def W(k: int) -> int:
+    return gtsam.symbol("w", k)
+
+
+# --------------------------------------------------------------------------- factor error functions
+def _relative(values: gtsam.Values, ki: int, kj: int) -> tuple[float, float, float]:
+    """``(d_x, d_y, d_ψ)`` of ``X_i⁻¹ X_j``."""
+    pi = values.atPose2(ki)
+    pj = values.atPose2(kj)
+    ti = pi.theta()
+    ci, si = math.cos(ti), math.sin(ti)
+    tx, ty = pj.x() - pi.x(), pj.y() - pi.y()
+    return ci * tx + si * ty, -si * tx + ci * ty, _wrap(pj.theta() - ti)
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def scaled_between_error(measured: np.ndarray):
+    """Error function of the visual factor on ``(X_i, X_j, S)``: ``(S d_x - m_x, S d_y - m_y, d_ψ - m_ψ)``."""
+    mx, my, mpsi = (float(v) for v in measured)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
+        ki, kj, ks = this.keys()
+        dx, dy, dpsi = _relative(values, ki, kj)
+        k = values.atDouble(ks)
+        if H is not None:
+            c, s = math.cos(dpsi), math.sin(dpsi)
+            H[0] = np.array([[-k, 0.0, k * dy], [0.0, -k, -k * dx], [0.0, 0.0, -1.0]])
+            H[1] = np.array([[k * c, -k * s, 0.0], [k * s, k * c, 0.0], [0.0, 0.0, 1.0]])
+            H[2] = np.array([[dx], [dy], [0.0]])
+        return np.array([k * dx - mx, k * dy - my, _wrap(dpsi - mpsi)])
+
+    return error
+
+
+def wheel_heading_error(measured: float):
+    """Error function of the wheels' heading factor on ``(X_i, X_j, W)``: ``W d_ψ - m_ψ``."""
+    m = float(measured)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
+        ki, kj, kw = this.keys()
+        d = _wrap(values.atPose2(kj).theta() - values.atPose2(ki).theta())
+        k = values.atDouble(kw)
+        if H is not None:
+            H[0] = np.array([[0.0, 0.0, -k]])
+            H[1] = np.array([[0.0, 0.0, k]])
+            H[2] = np.array([[d]])
+        return np.array([k * d - m])
+
+    return error
+
+
+def heading_change_factor(ki: int, kj: int, kp: int, offset: float, gain: float, sigma: float,
+                          pose_i: gtsam.Pose2, pose_j: gtsam.Pose2, p0: float) -> gtsam.LinearContainerFactor:
+    """Factor ``e = d_ψ - offset - gain · P`` on ``(X_i, X_j, P)`` for a scalar variable ``P``.
+
+    The gyro is ``offset = Θ, gain = -Δt, P = B`` (``d_ψ = Θ - B Δt``). The error is linear in the
+    headings and ``P``, and a Pose2's heading coordinate is additive under GTSAM's retraction, so the
+    factor is exact as a linear factor about any linearisation point (while the heading stays within π
+    of it) and runs entirely in C++.
+    """
+    e0 = _wrap(pose_j.theta() - pose_i.theta() - offset - gain * p0)
+    jf = gtsam.JacobianFactor(ki, _H_HEADING_I, kj, _H_HEADING_J, kp, np.array([[-gain]]), np.array([-e0]),
+                              gtsam.noiseModel.Isotropic.Sigma(1, sigma))
+    lin = gtsam.Values()
+    lin.insert(ki, pose_i)
+    lin.insert(kj, pose_j)
+    lin.insert(kp, float(p0))
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
+_H_HEADING_I = np.array([[0.0, 0.0, -1.0]])
+_H_HEADING_J = np.array([[0.0, 0.0, 1.0]])
+_FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
+
+
+# --------------------------------------------------------------------------- graph construction
+@dataclass
+class NodeFactors:
+    """Factors and initial values that arrive with one node (used by all three solvers)."""
+
+    k: int
+    t: float
+    factors: list = field(default_factory=list)
+    values: dict = field(default_factory=dict)
+    sensors: list = field(default_factory=list)
+    guess: np.ndarray | None = None
+
+
+class GraphBuilder:
+    """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
+
+    def __init__(self, iv: Intervals, config: FusionConfig):
+        self.iv = iv
+        self.config = config
+        self.kv_on, self.kb_on = calibration_observable(iv) if config.self_calibration else (False, False)
+        every = config.graph.keyframe_every
+        nodes = np.arange(0, len(iv.t), every)
+        if nodes[-1] != len(iv.t) - 1:
+            nodes = np.append(nodes, len(iv.t) - 1)
+        self.grid = nodes  # node index -> interval-grid index
+        self.t = iv.t[nodes]
+        # bias and calibration variables: one per segment of `calibration_interval` seconds
+        self.segment = np.floor((self.t - self.t[0]) / config.graph.calibration_interval).astype(int)
+        self._robust = _robust_kernel(config)
+        self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
+        for c in self.counts.values():
+            c.used = 0
+        self._visual_by_end = self._visual_spans()
+        if iv.uses("wheel"):  # per-interval arc increments, vectorised
+            self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
+            self._wheel_inc[:, 0] *= iv.cx
+            self._wheel_inc[:, 1] *= iv.cy
+            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel)
+
+    # ------------------------------------------------------------------ helpers
+    def noise(self, cov: np.ndarray, robust: bool = True):
+        base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
+        if robust and self._robust is not None:
+            return gtsam.noiseModel.Robust.Create(self._robust, base)
+        return base
+
+    def _visual_spans(self) -> dict[int, list]:
+        """Visual increments re-expressed between keyframes, keyed by their end node."""
+        iv = self.iv
+        pos = {int(g): n for n, g in enumerate(self.grid)}
+        out: dict[int, list] = {}
+        chain = None  # (start node, delta, cov, end grid index)
+        for i0, i1, d, c in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov):
+            i0, i1 = int(i0), int(i1)
+            if chain is not None and chain[3] == i0:
+                delta, cov = _compose_with_covariance(chain[1], chain[2], d, c)
+                chain = (chain[0], delta, cov, i1)
+            elif i0 in pos:
+                chain = (pos[i0], d, c, i1)
+            else:
+                chain = None
+                continue
+            if i1 in pos:
+                out.setdefault(pos[i1], []).append((chain[0], chain[1], chain[2]))
+                chain = None
+        return out
+
+    # ------------------------------------------------------------------ per node
+    def first_node(self) -> NodeFactors:
+        cfg = self.config
+        nf = NodeFactors(0, float(self.t[0]))
+        pose = gtsam.Pose2(*cfg.initial_pose)
+        nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
+        nf.values[X(0)] = pose
+        if self.iv.uses("gyro"):
+            nf.factors.append(gtsam.PriorFactorDouble(B(0), 0.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.imu.gyro_bias_sigma)))
+            nf.values[B(0)] = 0.0
+        if self.kv_on:
+            nf.factors.append(gtsam.PriorFactorDouble(S(0), 1.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.visual_scale_sigma)))
+            nf.values[S(0)] = 1.0
+        if self.kb_on:
+            nf.factors.append(gtsam.PriorFactorDouble(W(0), 1.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.wheel_base_sigma)))
+            nf.values[W(0)] = 1.0
+        self._unary(nf, 0)
+        return nf
+
+    def node(self, n: int, previous_pose: gtsam.Pose2, estimate: dict | None = None) -> NodeFactors:
+        """Factors that end at node ``n`` and an initial guess for its variables.
+
+        ``estimate`` holds the running bias and calibration estimates (``gyro_bias``, ``visual_scale``,
+        ``wheel_base_factor``) and the previous increment, used only for initial guesses.
+        """
+        iv, cfg = self.iv, self.config
+        est = estimate or {}
+        g0, g1 = int(self.grid[n - 1]), int(self.grid[n])
+        dt = float(iv.t[g1] - iv.t[g0])
+        c = int(self.segment[n])
+        nf = NodeFactors(n, float(self.t[n]))
+        if c != self.segment[n - 1]:
+            self._new_segment(nf, c, est)
+        translation = heading = None
+        wheel_heading = None
+        # wheel: travel summed over the node interval, arc model
+        if iv.uses("wheel") and iv.wheel_ok[g0:g1].all():
+            m, cov = self._wheel_increment(g0, g1)
+            if self.kb_on:
+                # translation from the arc; the heading change goes through the wheel-base factor
+                cov_xy = cov.copy()
+                cov_xy[2, :] = cov_xy[:, 2] = 0.0
+                cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
+                nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*m), self.noise(cov_xy)))
+                wheel_heading = (float(m[2]), float(np.sqrt(cov[2, 2])))
+            else:
+                nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*m), self.noise(cov)))
+                wheel_heading = None
+            nf.sensors.append("wheel")
+            translation, heading = m[:2], m[2] / est.get("wheel_base_factor", 1.0)
+        # visual increments ending here
+        for start, d, cov in self._visual_by_end.get(n, []):
+            if self.kv_on:
+                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [X(start), X(n), S(c)], scaled_between_error(d)))
+            else:
+                nf.factors.append(gtsam.BetweenFactorPose2(X(start), X(n), gtsam.Pose2(*d), self.noise(cov)))
+            nf.sensors.append("camera")
+            if start == n - 1:
+                translation = d[:2] / est.get("visual_scale", 1.0) if translation is None else translation
+                heading = d[2] if heading is None else heading
+        # gyro: integrated angle, the most reliable heading change
+        angle = None
+        if iv.uses("gyro") and iv.gyro_ok[g0:g1].all():
+            angle = float(iv.gyro_angle[g0:g1].sum())
+            heading = angle - est.get("gyro_bias", 0.0) * dt
+            nf.sensors.append("gyro")
+        last = est.get("last_increment", np.zeros(3))
+        guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
+        if translation is None:
+            # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
+            e = cfg.ekf
+            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
+            nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*guess), gtsam.noiseModel.Diagonal.Sigmas(sig)))
+            nf.sensors.append("motion_model")
+        nf.values[X(n)] = previous_pose.compose(gtsam.Pose2(*guess))
+        nf.guess = guess
+        if angle is not None:
+            sigma = cfg.imu.gyro_noise_density * np.sqrt(dt)
+            nf.factors.append(heading_change_factor(X(n - 1), X(n), B(c), angle, -dt, sigma, previous_pose,
+                                                    nf.values[X(n)], est.get("gyro_bias", 0.0)))
+        if wheel_heading is not None:
+            nm = self.noise(np.array([[wheel_heading[1] ** 2]]))
+            nf.factors.append(gtsam.CustomFactor(nm, [X(n - 1), X(n), W(c)], wheel_heading_error(wheel_heading[0])))
+        self._unary(nf, n)
+        return nf
+
+    def _wheel_increment(self, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Arc-model increment and covariance of the wheel travel between grid indices ``g0`` and ``g1``."""
+        iv = self.iv
+        if g1 == g0 + 1:
+            return self._wheel_inc[g0].copy(), self._wheel_cov[g0]
+        dl, dr = iv.wheel_dl[g0:g1].sum(), iv.wheel_dr[g0:g1].sum()
+        m = arc_increment(dl, dr, iv.wheel_base)[0]
+        m[0] *= iv.cx[g0:g1].mean()
+        m[1] *= iv.cy[g0:g1].mean()
+        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel)[0]
+
+    def _new_segment(self, nf: NodeFactors, c: int, estimate: dict) -> None:
+        """Bias and calibration variables of segment ``c``, tied to segment ``c-1`` by random walks."""
+        cfg = self.config
+        span = float(cfg.graph.calibration_interval)
+        walks = []
+        if self.iv.uses("gyro"):
+            walks.append((B, cfg.imu.gyro_random_walk, estimate.get("gyro_bias", 0.0)))
+        if self.kv_on:
+            walks.append((S, cfg.ekf.scale_random_walk, estimate.get("visual_scale", 1.0)))
+        if self.kb_on:
+            walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
+        for key, q, guess in walks:
+            sigma = max(q * np.sqrt(span), 1e-7)
+            nf.factors.append(gtsam.BetweenFactorDouble(key(c - 1), key(c), 0.0, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
+            nf.values[key(c)] = guess
+
+    def _unary(self, nf: NodeFactors, n: int) -> None:
+        iv, cfg = self.iv, self.config
+        g = int(self.grid[n])
+        if iv.ahrs_ok[g]:
+            sig = np.array([1e3, 1e3, cfg.imu.ahrs_yaw_sigma])
+            nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
+            if self._robust is not None:
+                nm = gtsam.noiseModel.Robust.Create(self._robust, nm)
+            nf.factors.append(gtsam.PriorFactorPose2(X(n), gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g])), nm))
+            nf.sensors.append("ahrs")
+        if self.kv_on and iv.range_ok[g] and iv.camera_height:
+            z = float(iv.range_height[g])
+            h = float(iv.camera_height)
+            sig = h * cfg.range.sigma / z**2
+            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), h / z, gtsam.noiseModel.Isotropic.Sigma(1, sig)))
+            nf.sensors.append("range")
+
+    def count(self, nf: NodeFactors) -> None:
+        for s in nf.sensors:
+            self.counts.setdefault(s, SensorCount()).used += 1
+
+
+def _robust_kernel(config: FusionConfig):
+    name, k = config.graph.robust, config.graph.robust_k
+    if name == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(k)
+    if name == "cauchy":
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(k)
+    return None
+
+
+def _compose_with_covariance(a, cov_a, b, cov_b):
+    """``a ⊕ b`` and its covariance ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ`` (first order, vector form)."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    ja = np.array([[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]])
+    jb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
+
+
+def _insert(values: gtsam.Values, items: dict) -> None:
+    for key, v in items.items():
+        if isinstance(v, gtsam.Pose2):
+            values.insert(key, v)
+        else:
+            values.insert(key, float(v))
+
+
+# --------------------------------------------------------------------------- batch
+def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, dims: dict[int, int],
+                        max_iterations: int = 20, relative_tolerance: float = 1e-3):
+    """Levenberg–Marquardt on GTSAM's linearisation and elimination (see the module docstring).
+
+    Returns ``(solution, iterations, linear_graph)``; the last linearisation serves the marginals.
+    """
+    error = graph.error(values)
+    lam = 0.0
+    it = 0
+    lin = None
+    for it in range(1, max_iterations + 1):
+        lin = graph.linearize(values)
+        while True:
+            system = lin
+            if lam > 0:
+                system = lin.clone()
+                for key, dim in dims.items():
+                    system.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
+                                                    gtsam.noiseModel.Unit.Create(dim)))
+            trial = values.retract(system.optimize())
+            trial_error = graph.error(trial)
+            if trial_error <= error:
+                break
+            lam = 1e-4 if lam == 0 else lam * 10.0
+            if lam > 1e8:
+                return values, it, lin
+        decrease = error - trial_error
+        logger.debug("LM iteration %d: cost %.6g -> %.6g (lambda %.1e)", it, error, trial_error, lam)
+        values, error = trial, trial_error
+        lam = 0.0 if lam <= 1e-3 else lam / 10.0
+        if decrease <= relative_tolerance * max(error, 1e-12):
+            break
+    return values, it, lin
+
+
+def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = None) -> FusionResult:
+    """Batch (``"gtsam"``), iSAM2 (``"gtsam_online"``) and fixed-lag (``"gtsam_fixed_lag"``) solutions."""
+    gcfg = config.graph
+    result = FusionResult()
+    builder = GraphBuilder(iv, config)
+    n_nodes = len(builder.t)
+    online_poses = np.zeros((n_nodes, 3))
+    online_cov = np.zeros((n_nodes, 3, 3))
+    lag_poses = np.zeros((n_nodes, 3))
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    dims: dict[int, int] = {}
+    isam = gtsam.ISAM2(_isam_params()) if gcfg.online else None
+    lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, _isam_params()) if gcfg.fixed_lag > 0 else None
+    t_online = 0.0
+    t_build = time.perf_counter()
+    estimate: dict = {}
+    prev_pose = gtsam.Pose2(*config.initial_pose)
+    for n in range(n_nodes):
+        nf = builder.first_node() if n == 0 else builder.node(n, prev_pose, estimate)
+        builder.count(nf)
+        new_graph = gtsam.NonlinearFactorGraph()
+        for f in nf.factors:
+            new_graph.add(f)
+            graph.add(f)
+        new_values = gtsam.Values()
+        _insert(new_values, nf.values)
+        _insert(values, nf.values)
+        for key, v in nf.values.items():
+            dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
+        if isam is not None:
+            t0 = time.perf_counter()
+            isam.update(new_graph, new_values)
+            pose = isam.calculateEstimatePose2(X(n))
+            online_poses[n] = (pose.x(), pose.y(), pose.theta())
+            online_cov[n] = isam.marginalCovariance(X(n))
+            _track(estimate, isam, builder, n, nf)
+            t_online += time.perf_counter() - t0
+            prev_pose = pose
+        else:
+            prev_pose = new_values.atPose2(X(n))
+            estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
+        if lag is not None:
+            stamps = {key: nf.t for key in nf.values}
+            lag.update(new_graph, new_values, stamps)
+            p = lag.calculateEstimatePose2(X(n))
+            lag_poses[n] = (p.x(), p.y(), p.theta())
+    t_graph = time.perf_counter() - t_build - t_online
+    counts = builder.counts
+    if isam is not None:
+        result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
+        result.covariances["gtsam_online"] = online_cov
+        result.counts["gtsam_online"] = counts
+        result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
+        result.timing["gtsam_online"] = t_online
+        result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
+    if lag is not None:
+        result.trajectories["gtsam_fixed_lag"] = PoseData(builder.t.copy(), lag_poses)
+        result.counts["gtsam_fixed_lag"] = counts
+    if gcfg.batch:
+        t0 = time.perf_counter()
+        start_values = values
+        if isam is not None:
+            start_values = isam.calculateEstimate()
+        elif initial is not None:
+            start_values = _seed_poses(values, initial, builder)
+        solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations, gcfg.relative_tolerance)
+        poses = np.array([[p.x(), p.y(), p.theta()] for p in (solution.atPose2(X(n)) for n in range(n_nodes))])
+        result.trajectories["gtsam"] = PoseData(builder.t.copy(), poses)
+        result.counts["gtsam"] = counts
+        result.calibration["gtsam"] = _calibration(solution, builder)
+        if gcfg.marginals:
+            result.covariances["gtsam"] = pose_marginals(lin, solution, n_nodes)
+        result.timing["gtsam"] = time.perf_counter() - t0 + t_graph
+        logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size(), iters)
+    result.notes.extend(iv.notes)
+    return result
+
+
+def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_nodes: int) -> np.ndarray:
+    """Marginal covariances (N, 3, 3) of all poses (Pose2 tangent space: x, y forward/left, yaw).
+
+    ``linear`` is the graph linearised at (or, after convergence, next to) ``solution``.
+    """
+    marginals = gtsam.Marginals(linear, solution)
+    return np.array([marginals.marginalCovariance(X(n)) for n in range(n_nodes)])
+
+
+def _track(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:
+    """Running estimates of the bias and calibration for initial guesses of the next node."""
+    if builder.iv.uses("gyro"):
+        estimate["gyro_bias"] = isam.calculateEstimateDouble(B(int(builder.segment[n])))
+    if builder.kv_on:
+        estimate["visual_scale"] = isam.calculateEstimateDouble(S(int(builder.segment[n])))
+    if builder.kb_on:
+        estimate["wheel_base_factor"] = isam.calculateEstimateDouble(W(int(builder.segment[n])))
+    estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
+
+
+def _seed_poses(values: gtsam.Values, initial: PoseData, builder: GraphBuilder) -> gtsam.Values:
+    out = gtsam.Values(values)
+    for n, t in enumerate(builder.t):
+        p = [np.interp(t, initial.t, initial.xyyaw[:, i]) for i in range(2)]
+        yaw = np.interp(t, initial.t, np.unwrap(initial.xyyaw[:, 2]))
+        out.update(X(n), gtsam.Pose2(p[0], p[1], float(yaw)))
+    return out
+
+
+def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
+    iv = builder.iv
+    out = {}
+    last = int(builder.segment[-1])
+    if iv.uses("gyro") and values.exists(B(last)):
+        out["gyro_bias"] = float(values.atDouble(B(last)))
+    if builder.kv_on:
+        kv = float(values.atDouble(S(last)))
+        out["visual_scale"] = kv
+        if iv.camera_height:
+            out["camera_height"] = float(iv.camera_height / kv)
+    if builder.kb_on:
+        kb = float(values.atDouble(W(last)))
+        out["wheel_base_factor"] = kb
+        out["wheel_base"] = float(iv.wheel_base * kb)
+    return out
+
+
+def _isam_params() -> gtsam.ISAM2Params:
+    """iSAM2 settings that keep the cost per node constant.
+
+    Slowly varying chains (gyro bias, calibration) change a little at every node all the way back in
+    time; checking and back-substituting the whole tree for such tiny changes would make each update
+    O(N). Relinearisation is therefore checked only along the re-eliminated part of the tree, every
+    10 updates, and back-substitution stops where changes fall under 0.01.
+    """
+    params = gtsam.ISAM2Params()
+    params.setRelinearizeThreshold(0.01)
+    params.relinearizeSkip = 10
+    params.enablePartialRelinearizationCheck = True
+    params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(0.01))
+    return params

@@ -1,0 +1,414 @@
+"""Merging sensor streams of different rates onto one clock of nodes.
+
+Both backends estimate the robot at a sequence of *node times* ``T_0 < T_1 < … < T_K``: every camera
+frame time, plus fill-in nodes at ``step_hz`` wherever the camera leaves a gap longer than
+``1.5 / step_hz`` (no camera at all, dropped frames, the camera stream stopping early). Every
+measurement is applied at its own time:
+
+* visual increments relate the nodes at their own ``t0`` and ``t1`` (which are node times);
+* wheel travel and the gyro's integrated angle are *cumulative* quantities ``L(t), R(t), Θ(t)``; they
+  are interpolated linearly at the node times (exact for constant speed between two samples, whatever
+  the rates and jitter), so each node interval gets ``d_l = L(T_{k+1}) - L(T_k)`` etc.;
+* AHRS headings and range readings are interpolated at the node times.
+
+An interval is only given a wheel or gyro measurement when the stream covers it without a gap longer
+than ``max_gap`` and without a gated sample; otherwise the sensor is counted as missing there and the
+other sensors carry the estimate. Streams whose timestamps are not increasing are put in order (counted
+as ``reordered``); exact duplicates are dropped and counted as gated.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.errors import InputError
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import ImuData, RangeData, TwistData, VisualIncrement, WheelData
+from fusion_vo.sensors.imu import ahrs_heading, cumulative_angle, gyro_yaw
+from fusion_vo.sensors.range import camera_height
+from fusion_vo.sensors.wheel import WheelTravel, ticks_to_travel, twist_to_travel
+
+logger = logging.getLogger(__name__)
+
+SENSORS = ("camera", "wheel", "odom", "imu", "range")
+
+
+@dataclass
+class SensorStreams:
+    """The measurements a fusion run may use (any may be None when not recorded or not wanted).
+
+    ``visual`` is the frontend's time-ordered list of increments; the others are per-stream arrays.
+    ``camera_height`` is the height the visual increments were computed with (for the range finder).
+    """
+
+    visual: list[VisualIncrement] | None = None
+    wheel: WheelData | None = None
+    odom: TwistData | None = None
+    imu: ImuData | None = None
+    range: RangeData | None = None
+    camera_height: float | None = None
+
+    def available(self) -> list[str]:
+        """Sensor names with data."""
+        have = {
+            "camera": self.visual is not None and len(self.visual) > 0,
+            "wheel": self.wheel is not None and len(self.wheel) > 1,
+            "odom": self.odom is not None and len(self.odom) > 1,
+            "imu": self.imu is not None and len(self.imu) > 1,
+            "range": self.range is not None and len(self.range) > 0,
+        }
+        return [s for s in SENSORS if have[s]]
+
+    def select(self, sensors) -> "SensorStreams":
+        """Only the named sensors; a sensor that is asked for but absent is an :class:`InputError`.
+
+        ``wheel`` falls back to the odometry twist when there are no encoder ticks; ``odom`` asks for the
+        twist explicitly (the two are the same sensor to the backends, ticks preferred).
+        """
+        sensors = list(sensors)
+        unknown = [s for s in sensors if s not in SENSORS]
+        if unknown:
+            raise InputError(f"unknown sensor '{unknown[0]}' (use {', '.join(SENSORS)})")
+        available = self.available()
+        if "odom" in available and "wheel" not in available:
+            available.append("wheel")
+        missing = [s for s in sensors if s not in available]
+        if missing:
+            where = {"camera": "cam0/ frames or visual increments", "wheel": "wheel0/ or odom0/", "odom": "odom0/",
+                     "imu": "imu0/", "range": "range0/"}
+            raise InputError(f"sensor '{missing[0]}' was asked for but the recording has no {where[missing[0]]} data")
+        if not sensors:
+            raise InputError("no sensors selected")
+        use_ticks = "wheel" in sensors and self.wheel is not None and len(self.wheel) > 1
+        use_twist = not use_ticks and ("odom" in sensors or "wheel" in sensors)
+        return SensorStreams(
+            visual=self.visual if "camera" in sensors else None,
+            wheel=self.wheel if use_ticks else None,
+            odom=self.odom if use_twist else None,
+            imu=self.imu if "imu" in sensors else None,
+            range=self.range if "range" in sensors else None,
+            camera_height=self.camera_height,
+        )
+
+
+@dataclass
+class Intervals:
+    """All measurements expressed on the node grid.
+
+    Attributes
+    ----------
+    t : ndarray (K+1,)
+        Node times [s].
+    vis_i0, vis_i1 : ndarray (M,) int
+        Node indices spanned by each usable visual increment.
+    vis_delta, vis_cov : ndarray (M, 3), (M, 3, 3)
+        The increments (slope-projected) and their covariances.
+    wheel_ok, wheel_dl, wheel_dr : ndarray (K,)
+        Wheel travel per node interval [m] and where it is usable.
+    wheel_base : float
+        Configured (or nominal, for an odometry twist) wheel base [m].
+    gyro_ok, gyro_angle : ndarray (K,)
+        Integrated body yaw rate per interval [rad] and where it is usable.
+    cx, cy : ndarray (K,)
+        Slope factors projecting body travel to the horizontal (1 on flat ground or without AHRS).
+    ahrs_ok, ahrs_yaw : ndarray (K+1,)
+        AHRS heading at the nodes, aligned so that the first one equals the initial yaw.
+    range_ok, range_height : ndarray (K+1,)
+        Camera height from the range finder at the nodes.
+    camera_height : float or None
+        Height the visual increments assume.
+    counts : dict[str, SensorCount]
+        Bookkeeping of the input stage (gated samples, reordering, missing coverage).
+    notes : list[str]
+        Camera outages and streams that stop.
+    """
+
+    t: np.ndarray
+    vis_i0: np.ndarray
+    vis_i1: np.ndarray
+    vis_delta: np.ndarray
+    vis_cov: np.ndarray
+    wheel_ok: np.ndarray
+    wheel_dl: np.ndarray
+    wheel_dr: np.ndarray
+    wheel_base: float
+    gyro_ok: np.ndarray
+    gyro_angle: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    ahrs_ok: np.ndarray
+    ahrs_yaw: np.ndarray
+    range_ok: np.ndarray
+    range_height: np.ndarray
+    camera_height: float | None = None
+    counts: dict[str, SensorCount] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.t) - 1
+
+    @property
+    def dt(self) -> np.ndarray:
+        return np.diff(self.t)
+
+    def uses(self, sensor: str) -> bool:
+        return sensor in self.counts
+
+
+# --------------------------------------------------------------------------- ordering
+def time_order(t: np.ndarray) -> tuple[np.ndarray, int, int]:
+    """Indices that put samples in time order without exact duplicates.
+
+    Returns ``(index, n_reordered, n_duplicates)``; ``n_reordered`` counts samples whose timestamp is
+    earlier than their predecessor's in the input.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    n_reordered = int(np.count_nonzero(np.diff(t) < 0))
+    order = np.argsort(t, kind="stable")
+    ts = t[order]
+    keep = np.concatenate([[True], np.diff(ts) > 0]) if len(ts) else np.zeros(0, bool)
+    return order[keep], n_reordered, int(np.count_nonzero(~keep))
+
+
+def _ordered_fields(obj, names, count: SensorCount):
+    """Copy of the dataclass ``obj`` with array fields ``names`` in time order (counts updated)."""
+    idx, n_re, n_dup = time_order(obj.t)
+    count.reordered += n_re
+    count.gated += n_dup
+    if n_re == 0 and n_dup == 0:
+        return obj
+    kwargs = dict(obj.__dict__)
+    for name in ("t",) + tuple(names):
+        if kwargs.get(name) is not None:
+            kwargs[name] = np.asarray(kwargs[name])[idx]
+    return type(obj)(**kwargs)
+
+
+# --------------------------------------------------------------------------- grid
+def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
+    """Camera frame times plus fill-in nodes at ``step_hz`` over the span of all streams."""
+    starts, ends = [], []
+    cam = np.zeros(0)
+    if streams.visual:
+        cam = np.array([v for inc in streams.visual for v in (inc.t0, inc.t1)], dtype=np.float64)
+        cam = np.unique(np.round(cam[np.isfinite(cam)], 9))
+        if len(cam):
+            starts.append(cam[0])
+            ends.append(cam[-1])
+    for data in (streams.wheel, streams.odom, streams.imu, streams.range):
+        if data is not None and len(data.t):
+            tt = np.asarray(data.t, dtype=np.float64)
+            tt = tt[np.isfinite(tt)]
+            if len(tt):
+                starts.append(tt.min())
+                ends.append(tt.max())
+    if not starts:
+        raise InputError("no measurements to fuse")
+    start, end = min(starts), max(ends)
+    step = 1.0 / config.step_hz
+    nodes = list(cam)
+    for edge in (start, end):
+        if not len(cam) or np.min(np.abs(cam - edge)) > 0.5 * step:
+            nodes.append(edge)
+    nodes = np.unique(np.asarray(nodes))
+    gaps = np.diff(nodes)
+    fill = [np.linspace(a, b, int(np.ceil((b - a) / step)) + 1)[1:-1] for a, b, g in zip(nodes[:-1], nodes[1:], gaps)
+            if g > 1.5 * step]
+    if fill:
+        nodes = np.unique(np.concatenate([nodes] + fill))
+    if len(nodes) < 2:
+        raise InputError("the measurements span no time (need at least two distinct timestamps)")
+    return nodes
+
+
+# --------------------------------------------------------------------------- builder
+def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None) -> Intervals:
+    """Express every stream of ``streams`` on the node grid (see the module docstring)."""
+    T = node_times(streams, config) if nodes is None else np.asarray(nodes, dtype=np.float64)
+    K = len(T) - 1
+    counts: dict[str, SensorCount] = {}
+    notes: list[str] = []
+    iv = Intervals(
+        t=T, vis_i0=np.zeros(0, int), vis_i1=np.zeros(0, int), vis_delta=np.zeros((0, 3)), vis_cov=np.zeros((0, 3, 3)),
+        wheel_ok=np.zeros(K, bool), wheel_dl=np.zeros(K), wheel_dr=np.zeros(K), wheel_base=1.0,
+        gyro_ok=np.zeros(K, bool), gyro_angle=np.zeros(K), cx=np.ones(K), cy=np.ones(K),
+        ahrs_ok=np.zeros(K + 1, bool), ahrs_yaw=np.zeros(K + 1), range_ok=np.zeros(K + 1, bool),
+        range_height=np.full(K + 1, np.nan), camera_height=streams.camera_height, counts=counts, notes=notes,
+    )
+    if streams.imu is not None:
+        _add_imu(iv, streams.imu, config, counts)
+    if streams.wheel is not None or streams.odom is not None:
+        _add_wheel(iv, streams, config, counts)
+    if streams.visual is not None:
+        _add_visual(iv, streams.visual, counts, notes)
+    if streams.range is not None:
+        _add_range(iv, streams.range, config, counts)
+    for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
+        if name in counts:
+            for a, b in _uncovered_runs(T, ok, 0.5):
+                notes.append(f"{name} unavailable from t={a:.2f} to t={b:.2f} s")
+    return iv
+
+
+def _coverage(ts: np.ndarray, bad_sample_interval: np.ndarray, T: np.ndarray, max_gap: float) -> np.ndarray:
+    """True for node intervals covered by samples ``ts`` without gaps > max_gap or bad sample intervals."""
+    if len(ts) < 2:
+        return np.zeros(len(T) - 1, bool)
+    bad = bad_sample_interval | (np.diff(ts) > max_gap)
+    cum = np.concatenate([[0], np.cumsum(bad)])
+    lo = np.clip(np.searchsorted(ts, T[:-1], side="right") - 1, 0, len(ts) - 2)
+    hi = np.clip(np.searchsorted(ts, T[1:], side="left") - 1, 0, len(ts) - 2)
+    n_bad = cum[hi + 1] - cum[lo]
+    inside = (T[:-1] >= ts[0] - 1e-9) & (T[1:] <= ts[-1] + 1e-9)
+    return inside & (n_bad == 0)
+
+
+def _add_wheel(iv: Intervals, streams: SensorStreams, config: FusionConfig, counts) -> None:
+    count = counts.setdefault("wheel", SensorCount())
+    if streams.wheel is not None:
+        data = _ordered_fields(streams.wheel, ("left", "right"), count)
+        travel: WheelTravel = ticks_to_travel(data, config.wheel)
+    else:
+        data = _ordered_fields(streams.odom, ("vx", "vy", "wz"), count)
+        travel = twist_to_travel(data, max_speed=config.wheel.max_speed)
+    count.gated += travel.n_gated
+    T = iv.t
+    ok = _coverage(travel.t, ~travel.valid, T, config.max_gap)
+    left = np.interp(T, travel.t, travel.left)
+    right = np.interp(T, travel.t, travel.right)
+    iv.wheel_ok, iv.wheel_dl, iv.wheel_dr = ok, np.diff(left), np.diff(right)
+    iv.wheel_base = travel.wheel_base
+    count.used += int(ok.sum())
+    count.missing += int((~ok).sum())
+
+
+def _add_imu(iv: Intervals, imu: ImuData, config: FusionConfig, counts) -> None:
+    count = counts.setdefault("gyro", SensorCount())
+    imu = _ordered_fields(imu, ("gyro", "accel", "orientation"), count)
+    gyro = gyro_yaw(imu, config.imu.with_sensor_keys(imu.noise))
+    count.gated += gyro.n_gated
+    T = iv.t
+    ok = _coverage(gyro.t, np.zeros(max(len(gyro.t) - 1, 0), bool), T, config.max_gap)
+    theta = np.interp(T, gyro.t, cumulative_angle(gyro)) if len(gyro.t) else np.zeros(len(T))
+    iv.gyro_ok, iv.gyro_angle = ok, np.diff(theta)
+    count.used += int(ok.sum())
+    count.missing += int((~ok).sum())
+    heading = ahrs_heading(imu)
+    if heading is None:
+        return
+    acount = counts.setdefault("ahrs", SensorCount())
+    acount.gated += int((~heading.valid).sum())
+    ht = heading.t[heading.valid]
+    if len(ht) < 2:
+        return
+    yaw = np.unwrap(heading.yaw[heading.valid])
+    near = np.abs(ht[np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)] - T) <= config.max_gap
+    ok_n = (T >= ht[0]) & (T <= ht[-1]) & near
+    if not ok_n.any():
+        return
+    yaw_t = np.interp(T, ht, yaw)
+    first = int(np.argmax(ok_n))
+    offset = yaw_t[first] - float(config.initial_pose[2])
+    iv.ahrs_ok = ok_n
+    iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
+    acount.used += int(ok_n.sum())
+    mid = 0.5 * (T[:-1] + T[1:])
+    iv.cx = np.interp(mid, ht, heading.cx[heading.valid])
+    iv.cy = np.interp(mid, ht, heading.cy[heading.valid])
+
+
+def _add_range(iv: Intervals, rng: RangeData, config: FusionConfig, counts) -> None:
+    count = counts.setdefault("range", SensorCount())
+    if iv.camera_height is None:
+        raise InputError("the range finder needs the configured camera height (camera T_BS or camera_height)")
+    rng = _ordered_fields(rng, ("distance",), count)
+    h = camera_height(rng, config.range)
+    count.gated += h.n_gated
+    ht, hv = h.t[h.valid], h.height[h.valid]
+    if len(ht) == 0:
+        return
+    T = iv.t
+    j = np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)
+    jm = np.clip(j - 1, 0, len(ht) - 1)
+    nearest = np.minimum(np.abs(ht[j] - T), np.abs(ht[jm] - T))
+    ok = nearest <= config.max_gap
+    iv.range_ok = ok
+    iv.range_height = np.where(ok, np.interp(T, ht, hv), np.nan)
+    count.used += int(ok.sum())
+
+
+def _add_visual(iv: Intervals, visual: list[VisualIncrement], counts, notes) -> None:
+    count = counts.setdefault("camera", SensorCount())
+    T = iv.t
+    rows = []
+    last_t1 = -np.inf
+    for inc in visual:
+        if inc.t1 < last_t1:
+            count.reordered += 1
+        last_t1 = max(last_t1, inc.t1)
+        if not inc.ok:
+            count.missing += 1
+            continue
+        delta = np.asarray(inc.delta, dtype=np.float64).reshape(3)
+        cov = np.asarray(inc.covariance, dtype=np.float64).reshape(3, 3)
+        if not (np.all(np.isfinite(delta)) and np.all(np.isfinite(cov)) and inc.t1 > inc.t0):
+            count.gated += 1
+            continue
+        if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
+            count.gated += 1
+            continue
+        i0 = _node_index(T, inc.t0)
+        i1 = _node_index(T, inc.t1)
+        if i0 is None or i1 is None or i1 <= i0:
+            count.gated += 1
+            continue
+        rows.append((inc.t1, i0, i1, delta, cov))
+    rows.sort(key=lambda r: r[0])
+    if rows:
+        iv.vis_i0 = np.array([r[1] for r in rows])
+        iv.vis_i1 = np.array([r[2] for r in rows])
+        iv.vis_delta = np.array([r[3] for r in rows])
+        iv.vis_cov = np.array([r[4] for r in rows])
+        # slope: mean projection factors over the spanned intervals
+        cx = np.array([iv.cx[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
+        cy = np.array([iv.cy[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
+        iv.vis_delta[:, 0] *= cx
+        iv.vis_delta[:, 1] *= cy
+    count.used += len(rows)
+    covered = np.zeros(len(T) - 1, bool)
+    for a, b in zip(iv.vis_i0, iv.vis_i1):
+        covered[a:b] = True
+    for a, b in _uncovered_runs(T, covered, 0.2):
+        notes.append(f"camera lost from t={a:.2f} to t={b:.2f} s; wheel and IMU carried the estimate")
+
+
+def _node_index(T: np.ndarray, t: float) -> int | None:
+    i = int(np.clip(np.searchsorted(T, t), 0, len(T) - 1))
+    for j in (i - 1, i):
+        if 0 <= j < len(T) and abs(T[j] - t) < 1e-6:
+            return j
+    return None
+
+
+def _uncovered_runs(T: np.ndarray, covered: np.ndarray, min_length: float) -> list[tuple[float, float]]:
+    """Time spans ``(start, end)`` of consecutive uncovered node intervals at least ``min_length`` long."""
+    runs = []
+    k = 0
+    n = len(covered)
+    while k < n:
+        if covered[k]:
+            k += 1
+            continue
+        j = k
+        while j < n and not covered[j]:
+            j += 1
+        if T[j] - T[k] >= min_length:
+            runs.append((float(T[k]), float(T[j])))
+        k = j
+    return runs

@@ -1,0 +1,14 @@
+"""Sensor models: wheel encoders and odometry twist, IMU (gyro, AHRS), downward range finder.
+
+Each module turns a recorded stream (arrays from :mod:`fusion_vo.measurements`) into gated samples with
+a documented noise model; the backends integrate them between their nodes.
+"""
+
+from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, gyro_yaw
+from fusion_vo.sensors.range import RangeNoise, camera_height
+from fusion_vo.sensors.wheel import WheelNoise, arc_covariance, arc_increment, ticks_to_travel, unwrap_ticks, wheel_track
+
+__all__ = [
+    "ImuNoise", "RangeNoise", "WheelNoise", "ahrs_heading", "arc_covariance", "arc_increment",
+    "camera_height", "gyro_yaw", "ticks_to_travel", "unwrap_ticks", "wheel_track",
+]

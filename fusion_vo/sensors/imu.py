@@ -1,0 +1,203 @@
+"""IMU: gyro yaw rate with bias, AHRS heading and the slope correction of travelled distance.
+
+Gyro
+----
+The body yaw rate is the body-z component of the IMU's rate rotated into the body frame::
+
+    ω_B = R_BS ω_S,      ω_z = (R_BS ω_S)_z = ω + b_g + n
+
+with a bias ``b_g`` that the backends estimate (random walk, ``σ_bw`` = ``gyroscope_random_walk``
+[rad/s²/√Hz]) and white noise of density ``σ_g`` = ``gyroscope_noise_density`` [rad/s/√Hz]. At sample
+rate ``f`` one sample has standard deviation ``σ_g √f``; the mean rate over an interval ``Δt`` has
+variance ``σ_g² / Δt`` and the integrated angle ``σ_g² Δt``.
+
+Spikes (an impossible sample) are found against a running median: a sample further than ``spike_threshold``
+from the median of its ``2w+1`` neighbours, or above ``max_rate``, or not finite, is gated (counted) and
+replaced by the median so integration carries on.
+
+AHRS
+----
+An orientation quaternion ``q_WS`` of the IMU gives the body orientation ``R_WB = R_WS R_BSᵀ``; its
+heading ``atan2(R_WB[1,0], R_WB[0,0])`` is an absolute yaw measurement (relative to the AHRS's own
+north, aligned to the estimate by the first sample). On a slope the body axes leave the horizontal
+plane; body-frame travel ``(d_x, d_y)`` projects to the floor plan by the horizontal lengths of the body
+axes, ``c_x = ‖(R_WB[0,0], R_WB[1,0])‖`` and ``c_y = ‖(R_WB[0,1], R_WB[1,1])‖``.
+
+The accelerometer is not needed by the planar backends; :func:`tilt_from_accel` gives roll and pitch
+from gravity when no AHRS orientation is recorded.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion_vo.measurements import ImuData
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class ImuNoise:
+    """Gyro noise, bias and gating parameters (defaults used when ``imu0/sensor.yaml`` lacks the keys).
+
+    Attributes
+    ----------
+    gyro_noise_density : float
+        ``σ_g`` [rad/s/√Hz] (default 1.7e-3, a MEMS gyro).
+    gyro_random_walk : float
+        ``σ_bw`` [rad/s²/√Hz] (default 2e-5).
+    gyro_bias_sigma : float
+        Prior standard deviation of the initial bias [rad/s] (default 0.02).
+    ahrs_yaw_sigma : float
+        Standard deviation of an AHRS heading [rad] (default 0.02).
+    spike_threshold : float
+        Distance from the running median that marks a spike [rad/s] (default 1.0).
+    spike_window : int
+        Half width ``w`` of the running median (default 2).
+    max_rate : float
+        Largest believable yaw rate [rad/s] (default 10).
+    """
+
+    gyro_noise_density: float = 1.7e-3
+    gyro_random_walk: float = 2e-5
+    gyro_bias_sigma: float = 0.02
+    ahrs_yaw_sigma: float = 0.02
+    spike_threshold: float = 1.0
+    spike_window: int = 2
+    max_rate: float = 10.0
+
+    def with_sensor_keys(self, keys: dict) -> "ImuNoise":
+        """Copy with the EuRoC keys of ``imu0/sensor.yaml`` applied where present and positive."""
+        out = ImuNoise(**self.__dict__)
+        nd = keys.get("gyroscope_noise_density")
+        rw = keys.get("gyroscope_random_walk")
+        if nd is not None and float(nd) > 0:
+            out.gyro_noise_density = float(nd)
+        if rw is not None and float(rw) > 0:
+            out.gyro_random_walk = float(rw)
+        return out
+
+
+def discrete_sigma(noise_density: float, rate_hz: float) -> float:
+    """Standard deviation of one sample of white noise with ``noise_density`` sampled at ``rate_hz``."""
+    return float(noise_density * np.sqrt(rate_hz))
+
+
+@dataclass
+class GyroYaw:
+    """Body yaw rate samples after gating.
+
+    ``t`` (N,), ``rate`` (N,) [rad/s] with spikes replaced, ``gated`` (N,) bool, ``n_gated``.
+    """
+
+    t: np.ndarray
+    rate: np.ndarray
+    gated: np.ndarray
+    n_gated: int
+
+
+def body_yaw_rate(data: ImuData) -> np.ndarray:
+    """Body-z rate ``(R_BS ω_S)_z`` of every sample (N,)."""
+    r_bs = np.asarray(data.T_BS, dtype=np.float64)[:3, :3]
+    return np.asarray(data.gyro, dtype=np.float64) @ r_bs[2]
+
+
+def gyro_yaw(data: ImuData, noise: ImuNoise | None = None) -> GyroYaw:
+    """Yaw rate in the body frame with spikes and non-finite samples gated (see the module docstring)."""
+    noise = noise or ImuNoise()
+    t = np.asarray(data.t, dtype=np.float64)
+    rate = body_yaw_rate(data)
+    finite = np.isfinite(rate)
+    med = running_median(np.where(finite, rate, 0.0), noise.spike_window, finite)
+    gated = ~finite | (np.abs(rate - med) > noise.spike_threshold) | (np.abs(rate) > noise.max_rate)
+    n_gated = int(np.count_nonzero(gated))
+    if n_gated:
+        logger.info("imu: gated %d gyro samples (spikes or non-finite)", n_gated)
+    return GyroYaw(t, np.where(gated, med, rate), gated, n_gated)
+
+
+def running_median(x: np.ndarray, half_width: int, valid: np.ndarray | None = None) -> np.ndarray:
+    """Median of each sample's ``2w+1`` neighbourhood (edges padded by reflection), ignoring invalid ones."""
+    x = np.asarray(x, dtype=np.float64)
+    if len(x) == 0 or half_width <= 0:
+        return x.copy()
+    w = int(half_width)
+    vals = np.where(valid, x, np.nan) if valid is not None else x
+    padded = np.pad(vals, w, mode="reflect") if len(x) > w else np.pad(vals, w, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(padded, 2 * w + 1)
+    with np.errstate(all="ignore"):
+        med = np.nanmedian(windows, axis=1) if valid is not None else np.median(windows, axis=1)
+    return np.where(np.isfinite(med), med, 0.0)
+
+
+def cumulative_angle(gyro: GyroYaw) -> np.ndarray:
+    """Trapezoidal integral of the yaw rate from the first sample [rad] (N,)."""
+    if len(gyro.t) == 0:
+        return np.zeros(0)
+    seg = 0.5 * (gyro.rate[1:] + gyro.rate[:-1]) * np.diff(gyro.t)
+    return np.concatenate([[0.0], np.cumsum(seg)])
+
+
+# --------------------------------------------------------------------------- orientation
+def quat_to_matrix(q_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N x 3 x 3) of unit quaternions ``(w, x, y, z)`` (N x 4); normalises them."""
+    q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
+    q = q / np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=1),
+    ], axis=1)
+
+
+@dataclass
+class AhrsHeading:
+    """Body heading and slope factors from the AHRS orientation.
+
+    ``t`` (N,), ``yaw`` (N,) body heading in the AHRS world [rad], ``cx``, ``cy`` (N,) horizontal
+    lengths of the body x and y axes, ``valid`` (N,) bool (finite, unit-norm quaternion).
+    """
+
+    t: np.ndarray
+    yaw: np.ndarray
+    cx: np.ndarray
+    cy: np.ndarray
+    valid: np.ndarray
+
+
+def ahrs_heading(data: ImuData) -> AhrsHeading | None:
+    """Heading and slope factors of the body from the AHRS columns, or None when not recorded."""
+    if data.orientation is None:
+        return None
+    q = np.asarray(data.orientation, dtype=np.float64)
+    norm = np.linalg.norm(q, axis=1)
+    valid = np.all(np.isfinite(q), axis=1) & (np.abs(norm - 1.0) < 0.1)
+    q = np.where(valid[:, None], q, [1.0, 0.0, 0.0, 0.0])
+    r_wb = quat_to_matrix(q) @ np.asarray(data.T_BS, dtype=np.float64)[:3, :3].T
+    yaw = np.arctan2(r_wb[:, 1, 0], r_wb[:, 0, 0])
+    cx = np.hypot(r_wb[:, 0, 0], r_wb[:, 1, 0])
+    cy = np.hypot(r_wb[:, 0, 1], r_wb[:, 1, 1])
+    return AhrsHeading(np.asarray(data.t, dtype=np.float64), yaw, cx, cy, valid)
+
+
+def tilt_from_accel(accel: np.ndarray, T_BS: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Roll and pitch [rad] of the body from the gravity direction of accelerometer samples (N x 3).
+
+    Valid when the robot does not accelerate much; returns ``(roll, pitch)`` arrays.
+    """
+    a = np.asarray(accel, dtype=np.float64).reshape(-1, 3)
+    if T_BS is not None:
+        a = a @ np.asarray(T_BS, dtype=np.float64)[:3, :3].T
+    roll = np.arctan2(a[:, 1], a[:, 2])
+    pitch = np.arctan2(-a[:, 0], np.hypot(a[:, 1], a[:, 2]))
+    return roll, pitch
+
+
+__all__ = [
+    "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "running_median",
+    "cumulative_angle", "quat_to_matrix", "ahrs_heading", "tilt_from_accel",
+]

@@ -1,0 +1,261 @@
+"""Differential-drive wheel odometry: encoder ticks -> wheel travel -> planar increments.
+
+Ticks
+-----
+Encoder counters are signed 32-bit and may wrap. Between two rows the count change is taken modulo
+``2^32`` into ``[-2^31, 2^31)``, so a wrap is invisible in the result::
+
+    Δn = ((n_k - n_{k-1} + 2^31) mod 2^32) - 2^31
+    d  = Δn / ticks_per_revolution · 2π r                 (wheel travel [m])
+
+A change that would need a speed above ``max_speed`` is a glitch (a counter reset, a bit error); it is
+*gated*: the interval gets no travel, is flagged invalid and is counted.
+
+Arc model
+---------
+With left/right travels ``d_l, d_r`` and wheel base ``b`` the axle centre moves on a circular arc::
+
+    d = (d_r + d_l) / 2,   θ = (d_r - d_l) / b
+    Δ = (d · sin θ / θ,  d · (1 - cos θ) / θ,  θ)      (pose of B(t1) in B(t0))
+
+so the constant body twist over the interval is exactly ``(d, 0, θ) / Δt``.
+
+Noise model
+-----------
+Each wheel's travel has variance growing with the distance it rolled, plus a skid term growing with
+the turn, plus a lateral slip (the arc model assumes none)::
+
+    σ_l² = k² |d_l| + σ_0²,   σ_r² = k² |d_r| + σ_0²
+    Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ|)
+
+where ``J = ∂Δ/∂(d_l, d_r)``. The twist form used by the filter has ``Σ_u = J_u diag(σ_l², σ_r²) J_uᵀ / Δt²``
+with ``J_u = [[½, ½], [-1/b, 1/b]]`` on ``(v_x, ω)`` and the slip term on ``v_y``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
+
+logger = logging.getLogger(__name__)
+
+_WRAP = 2**32
+_HALF = 2**31
+
+
+@dataclass
+class WheelNoise:
+    """Wheel-odometry noise and gating parameters.
+
+    Attributes
+    ----------
+    k : float
+        Per-wheel travel noise [m^½]: variance ``k² |d|`` per metre rolled (default 0.01, i.e. 1 cm
+        standard deviation after 1 m).
+    sigma_floor : float
+        Standard deviation added to every travel [m] (quantisation; default 1e-4).
+    k_lateral : float
+        Lateral slip [m^½]: variance ``k_lateral² |d|`` on the sideways motion (default 0.005).
+    k_yaw : float
+        Skid on turning [rad^½]: variance ``k_yaw² |θ|`` on the heading change (default 0.01).
+    max_speed : float
+        Wheel speeds above this [m/s] are encoder glitches and gated (default 5).
+    """
+
+    k: float = 0.01
+    sigma_floor: float = 1e-4
+    k_lateral: float = 0.005
+    k_yaw: float = 0.01
+    max_speed: float = 5.0
+
+
+@dataclass
+class WheelTravel:
+    """Cumulative wheel travel after unwrapping and gating.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Sample times [s].
+    left, right : ndarray (N,)
+        Cumulative travel of each wheel since the first sample [m] (gated intervals add nothing).
+    valid : ndarray (N-1,) bool
+        False for the intervals that were gated.
+    wheel_base : float
+        Configured wheel base [m].
+    n_gated : int
+        Number of gated intervals.
+    """
+
+    t: np.ndarray
+    left: np.ndarray
+    right: np.ndarray
+    valid: np.ndarray
+    wheel_base: float
+    n_gated: int = 0
+
+
+def unwrap_ticks(ticks) -> np.ndarray:
+    """Unwrap a signed 32-bit cumulative counter into a continuous int64 count (starting at its first value)."""
+    n = np.asarray(ticks, dtype=np.int64)
+    if len(n) == 0:
+        return n.copy()
+    diff = (np.diff(n) + _HALF) % _WRAP - _HALF
+    return n[0] + np.concatenate([[0], np.cumsum(diff)])
+
+
+def ticks_to_travel(data: WheelData, noise: WheelNoise | None = None) -> WheelTravel:
+    """Unwrap the counters of ``data``, convert to metres and gate impossible jumps.
+
+    Parameters
+    ----------
+    data : WheelData
+        Times and cumulative counts as recorded.
+    noise : WheelNoise, optional
+        Provides ``max_speed`` for the gate.
+    """
+    noise = noise or WheelNoise()
+    cfg = data.config
+    t = np.asarray(data.t, dtype=np.float64)
+    per_tick_l = 2.0 * math.pi * cfg.wheel_radius_left / cfg.ticks_per_revolution
+    per_tick_r = 2.0 * math.pi * cfg.wheel_radius_right / cfg.ticks_per_revolution
+    dl = np.diff(unwrap_ticks(data.left)).astype(np.float64) * per_tick_l
+    dr = np.diff(unwrap_ticks(data.right)).astype(np.float64) * per_tick_r
+    dt = np.diff(t)
+    limit = noise.max_speed * np.maximum(dt, 1e-3) + 2.0 * max(per_tick_l, per_tick_r)
+    valid = (np.abs(dl) <= limit) & (np.abs(dr) <= limit) & (dt > 0)
+    n_gated = int(np.count_nonzero(~valid))
+    if n_gated:
+        logger.info("wheel: gated %d encoder jumps above %.1f m/s", n_gated, noise.max_speed)
+    dl = np.where(valid, dl, 0.0)
+    dr = np.where(valid, dr, 0.0)
+    left = np.concatenate([[0.0], np.cumsum(dl)])
+    right = np.concatenate([[0.0], np.cumsum(dr)])
+    return WheelTravel(t, left, right, valid, float(cfg.wheel_base), n_gated)
+
+
+def twist_to_travel(data: TwistData, wheel_base: float = 0.5, max_speed: float = 5.0) -> WheelTravel:
+    """Express an odometry twist stream as equivalent cumulative wheel travel.
+
+    The twist ``(v_x, ω)`` held over each sample interval (zero-order hold of the earlier sample) is
+    turned into ``d_l = (v_x - ω b/2) Δt``, ``d_r = (v_x + ω b/2) Δt`` for a nominal base ``b``, so the
+    same interval integration and noise model serve both ``wheel0`` and ``odom0``. ``v_y`` of a
+    differential drive is zero and is ignored. Samples with NaN or speeds above ``max_speed`` are gated.
+    """
+    t = np.asarray(data.t, dtype=np.float64)
+    vx = np.asarray(data.vx, dtype=np.float64)[:-1]
+    wz = np.asarray(data.wz, dtype=np.float64)[:-1]
+    dt = np.diff(t)
+    valid = np.isfinite(vx) & np.isfinite(wz) & (np.abs(vx) + np.abs(wz) * wheel_base / 2 <= max_speed) & (dt > 0)
+    dl = np.where(valid, (vx - wz * wheel_base / 2) * dt, 0.0)
+    dr = np.where(valid, (vx + wz * wheel_base / 2) * dt, 0.0)
+    return WheelTravel(t, np.concatenate([[0.0], np.cumsum(dl)]), np.concatenate([[0.0], np.cumsum(dr)]),
+                       valid, float(wheel_base), int(np.count_nonzero(~valid)))
+
+
+# --------------------------------------------------------------------------- arc model
+def arc_increment(d_left, d_right, wheel_base: float) -> np.ndarray:
+    """Pose increments ``(dx, dy, dyaw)`` (N x 3) of the arc model for travels ``d_left, d_right`` (N,)."""
+    dl = np.atleast_1d(np.asarray(d_left, dtype=np.float64))
+    dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
+    d = 0.5 * (dr + dl)
+    th = (dr - dl) / wheel_base
+    a, b = _sinc_terms(th)
+    return np.stack([d * a, d * b, th], axis=1)
+
+
+def _sinc_terms(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``sin θ / θ`` and ``(1 - cos θ) / θ`` with small-angle series, vectorised."""
+    small = np.abs(th) < 1e-4
+    safe = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(safe) / safe)
+    b = np.where(small, th / 2.0 - th**3 / 24.0, (1.0 - np.cos(safe)) / safe)
+    return a, b
+
+
+def _sinc_derivatives(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Derivatives of ``sin θ/θ`` and ``(1 - cos θ)/θ`` with respect to θ."""
+    small = np.abs(th) < 1e-4
+    safe = np.where(small, 1.0, th)
+    da = np.where(small, -th / 3.0, (safe * np.cos(safe) - np.sin(safe)) / safe**2)
+    db = np.where(small, 0.5 - th**2 / 8.0, (safe * np.sin(safe) - (1.0 - np.cos(safe))) / safe**2)
+    return da, db
+
+
+def travel_variances(d_left, d_right, noise: WheelNoise) -> tuple[np.ndarray, np.ndarray]:
+    """Per-wheel travel variances ``k² |d| + σ_0²``."""
+    f2 = noise.sigma_floor**2
+    return noise.k**2 * np.abs(d_left) + f2, noise.k**2 * np.abs(d_right) + f2
+
+
+def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise) -> np.ndarray:
+    """Covariances (N x 3 x 3) of :func:`arc_increment`, see the module docstring."""
+    dl = np.atleast_1d(np.asarray(d_left, dtype=np.float64))
+    dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
+    d = 0.5 * (dr + dl)
+    th = (dr - dl) / wheel_base
+    a, b = _sinc_terms(th)
+    da, db = _sinc_derivatives(th)
+    # ∂Δ/∂(d, θ), then ∂(d, θ)/∂(d_l, d_r)
+    j_d = np.stack([a, b, np.zeros_like(a)], axis=1)
+    j_th = np.stack([d * da, d * db, np.ones_like(a)], axis=1)
+    jl = 0.5 * j_d - j_th / wheel_base
+    jr = 0.5 * j_d + j_th / wheel_base
+    vl, vr = travel_variances(dl, dr, noise)
+    cov = vl[:, None, None] * jl[:, :, None] * jl[:, None, :] + vr[:, None, None] * jr[:, :, None] * jr[:, None, :]
+    cov[:, 1, 1] += noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
+    cov[:, 2, 2] += noise.k_yaw**2 * np.abs(th)
+    return cov
+
+
+def arc_twist(d_left, d_right, dt, wheel_base: float, noise: WheelNoise) -> tuple[np.ndarray, np.ndarray]:
+    """Mean body twists ``(v_x, v_y, ω)`` (N x 3) over intervals of length ``dt`` and their covariances.
+
+    The arc model's twist is exact: ``(d, 0, θ) / Δt`` (see the module docstring).
+    """
+    dl = np.atleast_1d(np.asarray(d_left, dtype=np.float64))
+    dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
+    dt = np.atleast_1d(np.asarray(dt, dtype=np.float64))
+    d = 0.5 * (dr + dl)
+    th = (dr - dl) / wheel_base
+    u = np.stack([d, np.zeros_like(d), th], axis=1) / dt[:, None]
+    vl, vr = travel_variances(dl, dr, noise)
+    cov = np.zeros((len(d), 3, 3))
+    cov[:, 0, 0] = 0.25 * (vl + vr)
+    cov[:, 2, 2] = (vl + vr) / wheel_base**2 + noise.k_yaw**2 * np.abs(th)
+    cov[:, 0, 2] = cov[:, 2, 0] = 0.5 * (vr - vl) / wheel_base
+    cov[:, 1, 1] = noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
+    return u, cov / (dt**2)[:, None, None]
+
+
+# --------------------------------------------------------------------------- dead reckoning
+def wheel_track(travel: WheelTravel, initial_pose=(0.0, 0.0, 0.0)) -> PoseData:
+    """Dead-reckoned wheel-only trajectory at the encoder's sample times."""
+    inc = arc_increment(np.diff(travel.left), np.diff(travel.right), travel.wheel_base)
+    poses = np.zeros((len(travel.t), 3))
+    if len(poses):
+        poses[0] = initial_pose
+        poses[1:] = _chain(np.asarray(initial_pose, dtype=np.float64), inc)
+    return PoseData(travel.t.copy(), poses)
+
+
+def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
+    """Compose increments from ``start`` (vectorised through the cumulative heading)."""
+    yaw = start[2] + np.cumsum(inc[:, 2])
+    yaw_before = np.concatenate([[start[2]], yaw[:-1]])
+    c, s = np.cos(yaw_before), np.sin(yaw_before)
+    x = start[0] + np.cumsum(c * inc[:, 0] - s * inc[:, 1])
+    y = start[1] + np.cumsum(s * inc[:, 0] + c * inc[:, 1])
+    return np.stack([x, y, se2.wrap_angle(yaw)], axis=1)
+
+
+__all__ = [
+    "WheelNoise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
+    "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "wheel_track",
+]
