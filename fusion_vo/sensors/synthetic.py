@@ -36,7 +36,7 @@ class SyntheticOptions:
     imu_hz: float = 200.0
     jitter: float = 0.002
     visual_sigma_xy: float = 0.0015
-    visual_sigma_yaw: float = 0.003
+    visual_sigma_yaw: float = 0.001
     visual_scale: float = 1.0
     wheel_base: float = 0.4
     wheel_radius: float = 0.05

@@ -1,0 +1,82 @@
+"""Both backends on generated drives: better than each sensor alone, faults gated, self-calibration."""
+
+import numpy as np
+import pytest
+from backend_synth import position_errors, streams_of, visual_track
+
+from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+
+
+def test_fusion_beats_every_single_sensor(calibrated_error):
+    s, result = calibrated_error
+    wheel_end, wheel_rms = position_errors(result.trajectories["wheel"], s.truth)
+    vis_end, vis_rms = position_errors(visual_track(s.visual), s.truth)
+    best_rms = min(wheel_rms, vis_rms)
+    for name in FUSED:
+        end, rms = position_errors(result.trajectories[name], s.truth)
+        smoothed = name in ("ekf_smoothed", "gtsam")
+        assert rms < (0.7 if smoothed else 1.0) * best_rms, (name, rms, best_rms)
+        assert end < 0.5 * min(wheel_end, vis_end), (name, end)
+
+
+def test_self_calibration_recovers_a_two_percent_height_error(calibrated_error):
+    s, result = calibrated_error
+    for name in ("ekf", "gtsam"):
+        cal = result.calibration[name]
+        assert cal["visual_scale"] == pytest.approx(1.02, abs=0.006), name
+        assert cal["camera_height"] == pytest.approx(s.camera_height / 1.02, rel=0.006), name
+        assert cal["wheel_base"] == pytest.approx(0.4, rel=0.03), name
+        assert cal["gyro_bias"] == pytest.approx(0.01, abs=0.003), name
+
+
+def test_covariances_are_available_and_shrink_when_smoothing(calibrated_error):
+    _, result = calibrated_error
+    for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
+        cov = result.covariances[name]
+        assert cov.shape == (len(result.trajectories[name]), 3, 3)
+        assert np.all(np.linalg.eigvalsh(cov[1:]) > 0), name
+    filt, smooth = result.covariances["ekf"], result.covariances["ekf_smoothed"]
+    assert np.all(np.trace(smooth, axis1=1, axis2=2) <= np.trace(filt, axis1=1, axis2=2) + 1e-12)
+    # position uncertainty of the filter grows along the drive (no absolute position sensor)
+    assert np.trace(filt[-1][:2, :2]) > 10 * np.trace(filt[10][:2, :2])
+
+
+def test_gyro_spike_tick_jump_and_wrong_match_are_gated_and_harmless(faults):
+    clean, clean_result, bad, bad_result = faults
+    for name in ("ekf", "gtsam"):
+        counts = bad_result.counts[name]
+        assert counts["gyro"].gated >= 1 and counts["wheel"].gated >= 1, name
+        assert clean_result.counts[name]["gyro"].gated == 0
+    assert bad_result.counts["ekf"]["camera"].gated >= 1  # the wrong match fails the Mahalanobis gate
+    for name in FUSED:
+        a = clean_result.trajectories[name].xyyaw
+        b = bad_result.trajectories[name].xyyaw
+        assert np.max(np.linalg.norm(a[:, :2] - b[:, :2], axis=1)) < 0.03, name
+
+
+def test_camera_that_stops_leaves_wheels_and_gyro_in_charge():
+    s = synthetic_streams(SyntheticOptions(duration=30.0, camera_stops_at=15.0), seed=5)
+    result = fuse(streams_of(s).select(["camera", "wheel", "imu"]), "all")
+    lost = [n for n in result.notes if n.startswith("camera lost from t=")]
+    assert len(lost) == 1 and 14.8 < float(lost[0].split("t=")[1].split()[0]) <= 15.0
+    wheel_end, _ = position_errors(result.trajectories["wheel"], s.truth)
+    for name in FUSED:
+        t = result.trajectories[name].t
+        assert t[-1] > 29.5 and np.all(np.diff(t) > 0)
+        end, _ = position_errors(result.trajectories[name], s.truth)
+        assert end < wheel_end, name
+
+
+def test_gtsam_options_keyframes_cauchy_and_fixed_lag():
+    s = synthetic_streams(SyntheticOptions(duration=12.0, visual_scale=1.02), seed=7)
+    cfg = FusionConfig.from_dict({"graph": {"keyframe_every": 4, "robust": "cauchy", "fixed_lag": 1.0}})
+    result = fuse(streams_of(s).select(["camera", "wheel", "imu"]), "gtsam", cfg)
+    n = len(result.trajectories["gtsam"])
+    assert n == pytest.approx(12.0 * 20 / 4, abs=3)
+    wheel_end, wheel_rms = position_errors(result.trajectories["wheel"], s.truth)
+    for name in ("gtsam", "gtsam_online", "gtsam_fixed_lag"):
+        end, rms = position_errors(result.trajectories[name], s.truth)
+        assert rms < wheel_rms, name

@@ -1,0 +1,84 @@
+"""Merging streams on the node grid: rates, jitter, order, gaps, missing sensors, configuration."""
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, SensorStreams, build_intervals
+from fusion_vo.backends.timeline import node_times, time_order
+from fusion_vo.errors import InputError
+from fusion_vo.measurements import VisualIncrement, WheelConfig, WheelData
+
+CFG = WheelConfig(4096.0, 0.05, 0.05, 0.4)
+PER_TICK = 2 * np.pi * 0.05 / 4096.0
+
+
+def _wheel(t, speed=0.5):
+    ticks = np.round(speed * t / PER_TICK).astype(np.int64)
+    return WheelData(t, ticks, ticks, CFG)
+
+
+def _visual(times):
+    return [VisualIncrement(a, b, np.array([0.5 * (b - a), 0, 0]), np.eye(3) * 1e-6) for a, b in zip(times[:-1], times[1:])]
+
+
+def test_grid_has_every_frame_and_fills_gaps():
+    cam = np.r_[np.arange(0, 2, 0.05), np.arange(3, 4, 0.05)]  # one second without frames
+    grid = node_times(SensorStreams(visual=_visual(cam)), FusionConfig(step_hz=20.0))
+    assert np.all(np.isin(np.round(cam, 9), np.round(grid, 9)))
+    assert np.max(np.diff(grid)) <= 0.05 + 1e-9
+
+
+def test_grid_without_camera_is_uniform():
+    grid = node_times(SensorStreams(wheel=_wheel(np.linspace(0, 2, 101))), FusionConfig(step_hz=10.0))
+    np.testing.assert_allclose(np.diff(grid), 0.1, atol=1e-9)
+
+
+def test_interval_travel_is_exact_for_jittered_rates():
+    rng = np.random.default_rng(0)
+    tw = np.sort(np.arange(0, 3, 0.02) + rng.uniform(-0.004, 0.004, 150))
+    cam = np.arange(0.05, 2.9, 0.05) + rng.uniform(-0.002, 0.002, 57)
+    iv = build_intervals(SensorStreams(visual=_visual(cam), wheel=_wheel(tw)), FusionConfig())
+    inside = iv.wheel_ok
+    assert inside.sum() > 50
+    np.testing.assert_allclose(iv.wheel_dl[inside], 0.5 * iv.dt[inside], atol=2 * PER_TICK)
+
+
+def test_out_of_order_samples_are_reordered_and_counted():
+    t = np.linspace(0, 2, 101)
+    w = _wheel(t)
+    order = np.arange(101)
+    order[[30, 31]] = order[[31, 30]]
+    order[[70, 71]] = order[[71, 70]]
+    shuffled = WheelData(t[order], w.left[order], w.right[order], CFG)
+    a = build_intervals(SensorStreams(wheel=w), FusionConfig())
+    b = build_intervals(SensorStreams(wheel=shuffled), FusionConfig())
+    assert b.counts["wheel"].reordered == 2 and a.counts["wheel"].reordered == 0
+    np.testing.assert_array_equal(a.wheel_dl, b.wheel_dl)
+    idx, n_re, n_dup = time_order(np.array([0.0, 0.2, 0.1, 0.2, 0.3]))
+    assert (n_re, n_dup) == (1, 1) and list(idx) == [0, 2, 1, 4]
+
+
+def test_a_stream_that_stops_is_reported_missing():
+    iv = build_intervals(SensorStreams(visual=_visual(np.arange(0, 4, 0.05)), wheel=_wheel(np.linspace(0, 2, 101))),
+                         FusionConfig())
+    assert iv.counts["wheel"].missing > 30
+    assert any(n.startswith("wheel unavailable from t=2.00") for n in iv.notes)
+
+
+def test_missing_or_unknown_sensor_is_an_input_error():
+    streams = SensorStreams(wheel=_wheel(np.linspace(0, 2, 101)))
+    with pytest.raises(InputError, match="'imu' was asked for"):
+        streams.select(["wheel", "imu"])
+    with pytest.raises(InputError, match="unknown sensor 'lidar'"):
+        streams.select(["lidar"])
+
+
+def test_config_rejects_unknown_keys_and_bad_values():
+    cfg = FusionConfig.from_dict({"gate_probability": 0.99, "graph": {"robust": "cauchy"}, "wheel": {"k": 0.02}})
+    assert cfg.gate_probability == 0.99 and cfg.graph.robust == "cauchy" and cfg.wheel.k == 0.02
+    with pytest.raises(InputError, match="unknown configuration key 'graph.robustness'"):
+        FusionConfig.from_dict({"graph": {"robustness": "huber"}})
+    with pytest.raises(InputError, match="must be a number"):
+        FusionConfig.from_dict({"step_hz": "fast"})
+    with pytest.raises(InputError, match="robust must be one of"):
+        FusionConfig.from_dict({"graph": {"robust": "tukey"}})
