@@ -249,6 +249,24 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
     return out
 
 
+def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
+    """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`."""
+    blocks = []
+    vis, whl, gyr = meas.get("visual"), meas.get("wheel"), meas.get("gyro")
+    ahr, rng = meas.get("ahrs"), meas.get("range")
+    if vis is not None and vis[0][k]:
+        blocks.append(ekf.visual_block(vis[1][k], vis[2][k]))
+    if whl is not None and whl[0][k]:
+        blocks.append(ekf.wheel_block(whl[1][k], whl[2][k]))
+    if gyr is not None and gyr[0][k]:
+        blocks.append(ekf.gyro_block(gyr[1][k], gyr[2][k]))
+    if ahr is not None and ahr[0][k + 1]:
+        blocks.append(ekf.heading_block(ahr[1][k + 1], ahr[2]))
+    if rng is not None and rng[0][k + 1]:
+        blocks.append(ekf.range_block(rng[1][k + 1], rng[2]))
+    return blocks
+
+
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.perf_counter()
@@ -262,29 +280,14 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     x_prior = np.zeros((K + 1, DIM))
     P_prior = np.zeros((K + 1, DIM, DIM))
     Fs = np.zeros((K + 1, DIM, DIM))
-    vis = meas.get("visual")
-    whl = meas.get("wheel")
-    gyr = meas.get("gyro")
     ahr = meas.get("ahrs")
-    rng = meas.get("range")
     if ahr is not None and ahr[0][0]:
         ekf.update([ekf.heading_block(ahr[1][0], ahr[2])])
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
         Fs[k + 1] = ekf.predict(dt[k])
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
-        blocks = []
-        if vis is not None and vis[0][k]:
-            blocks.append(ekf.visual_block(vis[1][k], vis[2][k]))
-        if whl is not None and whl[0][k]:
-            blocks.append(ekf.wheel_block(whl[1][k], whl[2][k]))
-        if gyr is not None and gyr[0][k]:
-            blocks.append(ekf.gyro_block(gyr[1][k], gyr[2][k]))
-        if ahr is not None and ahr[0][k + 1]:
-            blocks.append(ekf.heading_block(ahr[1][k + 1], ahr[2]))
-        if rng is not None and rng[0][k + 1]:
-            blocks.append(ekf.range_block(rng[1][k + 1], rng[2]))
-        ekf.update(blocks)
+        ekf.update(step_blocks(ekf, meas, k))
         xs[k + 1], Ps[k + 1] = ekf.x, ekf.P
     result = FusionResult()
     result.trajectories["ekf"] = PoseData(iv.t.copy(), xs[:, :3].copy())

@@ -174,10 +174,17 @@ class NodeFactors:
 class GraphBuilder:
     """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
 
-    def __init__(self, iv: Intervals, config: FusionConfig):
+    def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
+                 calibrate: tuple[bool, bool] | None = None):
+        """``offset``, ``t_origin`` and ``calibrate`` let a stream be built one interval at a time: local
+        node ``n`` is variable ``X(offset + n)``, segments count from ``t_origin``, and ``calibrate``
+        says which calibration factors are estimated (default: where observable in ``iv``)."""
         self.iv = iv
         self.config = config
-        self.kv_on, self.kb_on = calibration_observable(iv) if config.self_calibration else (False, False)
+        self.offset = offset
+        if calibrate is None:
+            calibrate = calibration_observable(iv)
+        self.kv_on, self.kb_on = calibrate if config.self_calibration else (False, False)
         every = config.graph.keyframe_every
         nodes = np.arange(0, len(iv.t), every)
         if nodes[-1] != len(iv.t) - 1:
@@ -185,7 +192,8 @@ class GraphBuilder:
         self.grid = nodes  # node index -> interval-grid index
         self.t = iv.t[nodes]
         # bias and calibration variables: one per segment of `calibration_interval` seconds
-        self.segment = np.floor((self.t - self.t[0]) / config.graph.calibration_interval).astype(int)
+        origin = self.t[0] if t_origin is None else t_origin
+        self.segment = np.floor((self.t - origin) / config.graph.calibration_interval + 1e-9).astype(int)
         self._robust = _robust_kernel(config)
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
         for c in self.counts.values():
@@ -255,6 +263,7 @@ class GraphBuilder:
         g0, g1 = int(self.grid[n - 1]), int(self.grid[n])
         dt = float(iv.t[g1] - iv.t[g0])
         c = int(self.segment[n])
+        xi, xj = X(self.offset + n - 1), X(self.offset + n)
         nf = NodeFactors(n, float(self.t[n]))
         if c != self.segment[n - 1]:
             self._new_segment(nf, c, est)
@@ -268,19 +277,19 @@ class GraphBuilder:
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
                 cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-                nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*m), self.noise(cov_xy)))
+                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
                 wheel_heading = (float(m[2]), float(np.sqrt(cov[2, 2])))
             else:
-                nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*m), self.noise(cov)))
+                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov)))
                 wheel_heading = None
             nf.sensors.append("wheel")
             translation, heading = m[:2], m[2] / est.get("wheel_base_factor", 1.0)
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
             if self.kv_on:
-                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [X(start), X(n), S(c)], scaled_between_error(d)))
+                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [X(self.offset + start), xj, S(c)], scaled_between_error(d)))
             else:
-                nf.factors.append(gtsam.BetweenFactorPose2(X(start), X(n), gtsam.Pose2(*d), self.noise(cov)))
+                nf.factors.append(gtsam.BetweenFactorPose2(X(self.offset + start), xj, gtsam.Pose2(*d), self.noise(cov)))
             nf.sensors.append("camera")
             if start == n - 1:
                 translation = d[:2] / est.get("visual_scale", 1.0) if translation is None else translation
@@ -297,17 +306,17 @@ class GraphBuilder:
             # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
             e = cfg.ekf
             sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
-            nf.factors.append(gtsam.BetweenFactorPose2(X(n - 1), X(n), gtsam.Pose2(*guess), gtsam.noiseModel.Diagonal.Sigmas(sig)))
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), gtsam.noiseModel.Diagonal.Sigmas(sig)))
             nf.sensors.append("motion_model")
-        nf.values[X(n)] = previous_pose.compose(gtsam.Pose2(*guess))
+        nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
         nf.guess = guess
         if angle is not None:
             sigma = cfg.imu.gyro_noise_density * np.sqrt(dt)
-            nf.factors.append(heading_change_factor(X(n - 1), X(n), B(c), angle, -dt, sigma, previous_pose,
-                                                    nf.values[X(n)], est.get("gyro_bias", 0.0)))
+            nf.factors.append(heading_change_factor(xi, xj, B(c), angle, -dt, sigma, previous_pose,
+                                                    nf.values[xj], est.get("gyro_bias", 0.0)))
         if wheel_heading is not None:
             nm = self.noise(np.array([[wheel_heading[1] ** 2]]))
-            nf.factors.append(gtsam.CustomFactor(nm, [X(n - 1), X(n), W(c)], wheel_heading_error(wheel_heading[0])))
+            nf.factors.append(gtsam.CustomFactor(nm, [xi, xj, W(c)], wheel_heading_error(wheel_heading[0])))
         self._unary(nf, n)
         return nf
 
@@ -346,7 +355,7 @@ class GraphBuilder:
             nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
             if self._robust is not None:
                 nm = gtsam.noiseModel.Robust.Create(self._robust, nm)
-            nf.factors.append(gtsam.PriorFactorPose2(X(n), gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g])), nm))
+            nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g])), nm))
             nf.sensors.append("ahrs")
         if self.kv_on and iv.range_ok[g] and iv.camera_height:
             z = float(iv.range_height[g])
@@ -377,7 +386,7 @@ def _compose_with_covariance(a, cov_a, b, cov_b):
     return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
 
 
-def _insert(values: gtsam.Values, items: dict) -> None:
+def insert_values(values: gtsam.Values, items: dict) -> None:
     for key, v in items.items():
         if isinstance(v, gtsam.Pose2):
             values.insert(key, v)
@@ -433,8 +442,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     graph = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     dims: dict[int, int] = {}
-    isam = gtsam.ISAM2(_isam_params()) if gcfg.online else None
-    lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, _isam_params()) if gcfg.fixed_lag > 0 else None
+    isam = gtsam.ISAM2(isam_params()) if gcfg.online else None
+    lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, isam_params()) if gcfg.fixed_lag > 0 else None
     t_online = 0.0
     t_build = time.perf_counter()
     estimate: dict = {}
@@ -447,8 +456,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             new_graph.add(f)
             graph.add(f)
         new_values = gtsam.Values()
-        _insert(new_values, nf.values)
-        _insert(values, nf.values)
+        insert_values(new_values, nf.values)
+        insert_values(values, nf.values)
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
         if isam is not None:
@@ -457,7 +466,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             pose = isam.calculateEstimatePose2(X(n))
             online_poses[n] = (pose.x(), pose.y(), pose.theta())
             online_cov[n] = isam.marginalCovariance(X(n))
-            _track(estimate, isam, builder, n, nf)
+            track_estimate(estimate, isam, builder, n, nf)
             t_online += time.perf_counter() - t0
             prev_pose = pose
         else:
@@ -509,7 +518,7 @@ def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_
     return np.array([marginals.marginalCovariance(X(n)) for n in range(n_nodes)])
 
 
-def _track(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:
+def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:
     """Running estimates of the bias and calibration for initial guesses of the next node."""
     if builder.iv.uses("gyro"):
         estimate["gyro_bias"] = isam.calculateEstimateDouble(B(int(builder.segment[n])))
@@ -547,7 +556,7 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     return out
 
 
-def _isam_params() -> gtsam.ISAM2Params:
+def isam_params() -> gtsam.ISAM2Params:
     """iSAM2 settings that keep the cost per node constant.
 
     Slowly varying chains (gyro bias, calibration) change a little at every node all the way back in

@@ -126,6 +126,8 @@ class Intervals:
         Bookkeeping of the input stage (gated samples, reordering, missing coverage).
     notes : list[str]
         Camera outages and streams that stop.
+    heading_offset : float or None
+        AHRS heading minus the estimate's heading (from the first AHRS sample).
     """
 
     t: np.ndarray
@@ -148,6 +150,7 @@ class Intervals:
     camera_height: float | None = None
     counts: dict[str, SensorCount] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    heading_offset: float | None = None
 
     @property
     def n_steps(self) -> int:
@@ -228,8 +231,14 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- builder
-def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None) -> Intervals:
-    """Express every stream of ``streams`` on the node grid (see the module docstring)."""
+def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None,
+                    heading_offset: float | None = None) -> Intervals:
+    """Express every stream of ``streams`` on the node grid (see the module docstring).
+
+    ``nodes`` overrides the grid (streaming use builds one interval at a time); ``heading_offset``
+    keeps the AHRS alignment of earlier calls (by default the first heading is aligned to the
+    initial yaw).
+    """
     T = node_times(streams, config) if nodes is None else np.asarray(nodes, dtype=np.float64)
     K = len(T) - 1
     counts: dict[str, SensorCount] = {}
@@ -241,6 +250,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         ahrs_ok=np.zeros(K + 1, bool), ahrs_yaw=np.zeros(K + 1), range_ok=np.zeros(K + 1, bool),
         range_height=np.full(K + 1, np.nan), camera_height=streams.camera_height, counts=counts, notes=notes,
     )
+    iv.heading_offset = heading_offset
     if streams.imu is not None:
         _add_imu(iv, streams.imu, config, counts)
     if streams.wheel is not None or streams.odom is not None:
@@ -313,8 +323,9 @@ def _add_imu(iv: Intervals, imu: ImuData, config: FusionConfig, counts) -> None:
     if not ok_n.any():
         return
     yaw_t = np.interp(T, ht, yaw)
-    first = int(np.argmax(ok_n))
-    offset = yaw_t[first] - float(config.initial_pose[2])
+    if iv.heading_offset is None:
+        iv.heading_offset = float(yaw_t[int(np.argmax(ok_n))] - float(config.initial_pose[2]))
+    offset = iv.heading_offset
     iv.ahrs_ok = ok_n
     iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
     acount.used += int(ok_n.sum())
