@@ -1,0 +1,325 @@
+"""Generate a complete recording: a robot drives a profile over a photographed floor.
+
+Steps (each a small module of this package):
+
+1. motion      a differential-drive command profile, integrated at 1 kHz (:mod:`.robot`)
+2. frames      every camera frame ray-cast onto the floor (:mod:`.render`), with motion blur over the
+               exposure, height vibration and tilt; then exposure, vignetting, a specular highlight
+               and sensor noise (:mod:`.photometry`)
+3. sensors     wheel encoders with calibration errors and slip, IMU with biases and noise, an optional
+               range finder and robot odometry (:mod:`.sensors`)
+4. files       the folder layout of ``datasets/README.md``, written under a temporary name and renamed
+               when complete, plus ``simulation.yaml`` with the options and the true calibration
+
+The same options and seed always give the same files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cv2
+import numpy as np
+import yaml
+
+from fusion_vo.simulation.camera import CameraModel as RenderCamera
+from fusion_vo.simulation.camera import body_pose, camera_mount
+from fusion_vo.simulation.floor import Floor, Rectangle
+from fusion_vo.simulation.photometry import Photometric, Photometry
+from fusion_vo.simulation.render import Renderer
+from fusion_vo.simulation.robot import PROFILES, Limits, Motion, make_motion
+from fusion_vo.simulation.sensors import ImuNoise, WheelTruth, imu_samples, odometry_twist, sample_times, wheel_ticks
+
+log = logging.getLogger(__name__)
+
+#: default speed limits per profile (max_speed [m/s], max_turn_rate [rad/s])
+PROFILE_SPEEDS = {"random": (0.3, 0.9), "square": (0.2, 1.0), "circle": (0.15, 0.6)}
+
+
+@dataclass
+class SimulationOptions:
+    """Everything a generated recording depends on (with the seed).
+
+    Motion
+        duration [s] (random, standstill), max_speed [m/s], max_turn_rate [rad/s] (None: profile
+        default), side [m] (square, umbmark), radius [m] (circle), length [m] (straight), angle [rad]
+        (turn_in_place).
+    Floor
+        texture (gravel, grass, brick: scikit-image's CC0 photographs), texel_size [m],
+        featureless: rectangles ``[x_min, y_min, x_max, y_max]`` of flat grey floor [m],
+        featureless_time: ``[t0, t1]`` [s]: the floor the camera sees in that time is flat grey.
+    Camera
+        width, height, fu, fv, cu, cv, distortion_model, distortion, camera_rate [Hz], camera_height
+        [m], lever_arm [m], lateral_offset [m], tilt_x_deg, tilt_y_deg, height_error (fraction: the
+        sensor.yaml height is the true one times 1 + height_error), height_vibration [m amplitude],
+        vibration_frequency [Hz], exposure_time [s] (motion blur; 0 = none), blur_samples,
+        supersample, dropped_frames (fraction of frames missing), png_compression (0-9).
+    Photometry
+        gain, exposure_drift, exposure_period [s], vignetting, highlight_radius [px] (0 = none),
+        highlight_center (fractions of width, height), noise [grey levels], shot_noise.
+    Wheels
+        wheel_rate [Hz], ticks_per_revolution, wheel_radius [m], wheel_base [m], radius_error_left,
+        radius_error_right, base_error (fractions: true = nominal · (1 + error)), slip
+        [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
+    IMU
+        imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
+    Other
+        range_finder (write range0), range_noise [m], odometry (write odom0), gt_rate [Hz],
+        jitter [s] (timestamp jitter of wheel and IMU samples), start_time_ns.
+    """
+
+    # motion
+    duration: float | None = None
+    max_speed: float | None = None
+    max_turn_rate: float | None = None
+    side: float | None = None
+    radius: float | None = None
+    length: float | None = None
+    angle: float | None = None
+    # floor
+    texture: str = "gravel"
+    texel_size: float = 0.00025
+    featureless: list = field(default_factory=list)
+    featureless_time: list | None = None
+    # camera
+    width: int = 640
+    height: int = 360
+    fu: float = 420.0
+    fv: float = 420.0
+    cu: float = 319.5
+    cv: float = 179.5
+    distortion_model: str = "radial-tangential"
+    distortion: list = field(default_factory=lambda: [-0.03, 0.01, 0.0005, -0.0003])
+    camera_rate: float = 20.0
+    camera_height: float = 0.10
+    lever_arm: float = 0.25
+    lateral_offset: float = 0.0
+    tilt_x_deg: float = 0.0
+    tilt_y_deg: float = 0.0
+    height_error: float = 0.0
+    height_vibration: float = 0.0
+    vibration_frequency: float = 3.0
+    exposure_time: float = 0.0
+    blur_samples: int = 5
+    supersample: int = 2
+    dropped_frames: float = 0.0
+    png_compression: int = 0
+    # photometry
+    gain: float = 1.0
+    exposure_drift: float = 0.0
+    exposure_period: float = 10.0
+    vignetting: float = 0.0
+    highlight_radius: float = 0.0
+    highlight_center: list = field(default_factory=lambda: [0.55, 0.45])
+    noise: float = 1.0
+    shot_noise: float = 0.0
+    # wheels
+    wheel_rate: float = 50.0
+    ticks_per_revolution: int = 4096
+    wheel_radius: float = 0.05
+    wheel_base: float = 0.30
+    radius_error_left: float = 0.006
+    radius_error_right: float = -0.004
+    base_error: float = 0.015
+    slip: float = 0.0005
+    wheel_start_count: int = 0
+    # imu
+    imu_rate: float = 200.0
+    gyro_bias: list = field(default_factory=lambda: [0.002, -0.001, 0.005])
+    accel_bias: list = field(default_factory=lambda: [0.02, -0.01, 0.03])
+    gyro_noise_density: float = 1.7e-4
+    gyro_random_walk: float = 2.0e-5
+    accel_noise_density: float = 2.0e-3
+    accel_random_walk: float = 3.0e-3
+    # other
+    range_finder: bool = False
+    range_noise: float = 0.0005
+    odometry: bool = False
+    gt_rate: float = 200.0
+    jitter: float = 0.0
+    start_time_ns: int = 1_600_000_000_000_000_000
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "SimulationOptions":
+        known = {f.name for f in dataclasses.fields(cls)}
+        for k in d:
+            if k not in known:
+                raise ValueError(f"unknown simulation option '{k}'")
+        return cls(**d)
+
+
+def _motion_for(profile: str, o: SimulationOptions, rng: np.random.Generator) -> Motion:
+    speed, turn = PROFILE_SPEEDS.get(profile, (0.15, 0.6))
+    limits = Limits(max_speed=o.max_speed or speed, max_turn_rate=o.max_turn_rate or turn)
+    kwargs = {k: getattr(o, k) for k in ("duration", "side", "radius", "length", "angle") if getattr(o, k) is not None}
+    return make_motion(profile, limits, rng, **kwargs)
+
+
+def _featureless_rectangles(o: SimulationOptions, motion: Motion, T_BS: np.ndarray) -> list[Rectangle]:
+    rects = [Rectangle(*map(float, r)) for r in o.featureless]
+    if o.featureless_time:
+        t0, t1 = o.featureless_time
+        m = (motion.t >= t0) & (motion.t <= t1)
+        if np.any(m):
+            p = motion.xyyaw[m]
+            cam = p[:, :2] + np.column_stack([np.cos(p[:, 2]) * T_BS[0, 3] - np.sin(p[:, 2]) * T_BS[1, 3],
+                                              np.sin(p[:, 2]) * T_BS[0, 3] + np.cos(p[:, 2]) * T_BS[1, 3]])
+            margin = 0.12
+            lo, hi = cam.min(axis=0) - margin, cam.max(axis=0) + margin
+            rects.append(Rectangle(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])))
+    return rects
+
+
+def _write_csv(path: Path, header: str, t_ns: np.ndarray, cols: np.ndarray, fmt: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as f:
+        f.write(header + "\n")
+        for t, row in zip(t_ns, cols):
+            f.write(f"{int(t)}," + ",".join(fmt % v for v in row) + "\n")
+
+
+def _yaml(path: Path, data: dict) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as f:
+        yaml.safe_dump(data, f, sort_keys=False, default_flow_style=None)
+
+
+def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
+             options: SimulationOptions | None = None, **overrides) -> Path:
+    """Generate a recording in ``out_dir`` (replaced if it exists); returns its path.
+
+    Parameters
+    ----------
+    out_dir : folder to write.
+    profile : one of :data:`fusion_vo.simulation.robot.PROFILES`.
+    seed : seed of every random choice (motion, noise, dropped frames).
+    options : SimulationOptions, optional
+    **overrides : option fields, applied on top of ``options``.
+    """
+    if profile not in PROFILES:
+        raise ValueError(f"unknown profile '{profile}' (choose one of {', '.join(PROFILES)})")
+    o = dataclasses.replace(options or SimulationOptions(), **overrides) if overrides else (options or SimulationOptions())
+    rng = np.random.default_rng(seed)
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
+    try:
+        info = _generate(tmp, profile, seed, o, rng)
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    log.info("generated %s: %d frames, %.1f s, %.2f m", out_dir, info["frames"], info["duration_s"], info["path_length_m"])
+    return out_dir
+
+
+def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np.random.Generator) -> dict:
+    motion = _motion_for(profile, o, rng)
+    t_end = motion.t[-1]
+    T_BS = camera_mount(o.lever_arm, o.camera_height, o.tilt_x_deg, o.tilt_y_deg, o.lateral_offset)
+    ns = lambda t: np.int64(o.start_time_ns) + np.rint(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
+
+    # ---- camera frames
+    cam = RenderCamera(o.width, o.height, o.fu, o.fv, o.cu, o.cv, o.distortion_model, tuple(o.distortion))
+    floor = Floor.photographed(o.texture, o.texel_size, featureless=_featureless_rectangles(o, motion, T_BS))
+    renderer = Renderer(cam, floor, o.supersample)
+    photo = Photometric(Photometry(o.gain, o.exposure_drift, o.exposure_period, o.vignetting, o.highlight_radius,
+                                   tuple(o.highlight_center), o.noise, o.shot_noise), o.width, o.height)
+    half = o.exposure_time / 2
+    n_frames = int(math.floor((t_end - half) * o.camera_rate)) + 1
+    frame_t = np.arange(n_frames) / o.camera_rate + half
+    frame_t = frame_t[frame_t + half <= t_end]
+    keep = rng.random(len(frame_t)) >= o.dropped_frames
+    keep[0] = True
+    (root / "cam0" / "data").mkdir(parents=True)
+    rows = []
+    png = [cv2.IMWRITE_PNG_COMPRESSION, int(o.png_compression)]
+    heights = o.camera_height + o.height_vibration * np.sin(2 * math.pi * o.vibration_frequency * frame_t)
+    for i, t in enumerate(frame_t):
+        if not keep[i]:
+            continue
+        times = [t] if o.exposure_time <= 0 else list(np.linspace(t - half, t + half, max(o.blur_samples, 2)))
+        poses = []
+        for ts in times:
+            x, y, yaw = motion.pose_at(np.array([ts]))[0]
+            T = T_BS.copy()
+            T[2, 3] = o.camera_height + o.height_vibration * math.sin(2 * math.pi * o.vibration_frequency * ts)
+            poses.append(body_pose(x, y, yaw) @ T)
+        radiance = renderer.radiance_blurred(poses)
+        img = photo.apply(radiance, float(t), rng)
+        name = f"{ns(t)}.png"
+        cv2.imwrite(str(root / "cam0" / "data" / name), img, png)
+        rows.append(f"{ns(t)},{name}")
+        if (i + 1) % 200 == 0:
+            log.info("rendered %d / %d frames", i + 1, len(frame_t))
+    (root / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n" + "\n".join(rows) + "\n")
+    T_written = T_BS.copy()
+    T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
+    cam_yaml = cam.to_yaml_dict(T_written, o.camera_rate)
+    _yaml(root / "cam0" / "sensor.yaml", cam_yaml)
+
+    # ---- wheels
+    truth = WheelTruth(o.wheel_radius * (1 + o.radius_error_left), o.wheel_radius * (1 + o.radius_error_right),
+                       o.wheel_base * (1 + o.base_error), o.wheel_radius, o.wheel_base, o.ticks_per_revolution)
+    wt = sample_times(0.0, t_end, o.wheel_rate, o.jitter, rng)
+    left, right = wheel_ticks(motion, truth, wt, o.slip, o.wheel_start_count, rng)
+    _write_csv(root / "wheel0" / "data.csv", "#timestamp [ns],left_ticks,right_ticks", ns(wt),
+               np.column_stack([left, right]), "%d")
+    _yaml(root / "wheel0" / "sensor.yaml", {"ticks_per_revolution": int(o.ticks_per_revolution),
+                                             "wheel_radius_left": o.wheel_radius, "wheel_radius_right": o.wheel_radius,
+                                             "wheel_base": o.wheel_base})
+    if o.odometry:
+        tw = odometry_twist(wt, left, right, truth)
+        _write_csv(root / "odom0" / "data.csv", "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]",
+                   ns(wt[1:]), tw[1:], "%.9g")
+
+    # ---- IMU
+    it = sample_times(0.0, t_end, o.imu_rate, o.jitter, rng)
+    noise = ImuNoise(o.gyro_noise_density, o.gyro_random_walk, o.accel_noise_density, o.accel_random_walk,
+                     tuple(o.gyro_bias), tuple(o.accel_bias))
+    gyro, accel, bias_g = imu_samples(motion, it, noise, rng)
+    _write_csv(root / "imu0" / "data.csv",
+               "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
+               "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]", ns(it), np.column_stack([gyro, accel]), "%.9g")
+    _yaml(root / "imu0" / "sensor.yaml", {
+        "sensor_type": "imu", "rate_hz": float(o.imu_rate),
+        "T_BS": {"cols": 4, "rows": 4, "data": [float(v) for v in np.eye(4).ravel()]},
+        "gyroscope_noise_density": o.gyro_noise_density, "gyroscope_random_walk": o.gyro_random_walk,
+        "accelerometer_noise_density": o.accel_noise_density, "accelerometer_random_walk": o.accel_random_walk})
+
+    # ---- range finder
+    if o.range_finder:
+        rt = sample_times(0.0, t_end, o.camera_rate * 2, 0.0, rng)
+        h = o.camera_height + o.height_vibration * np.sin(2 * math.pi * o.vibration_frequency * rt)
+        h = h + o.range_noise * rng.standard_normal(len(rt))
+        _write_csv(root / "range0" / "data.csv", "#timestamp [ns],distance [m]", ns(rt), h[:, None], "%.6f")
+
+    # ---- ground truth
+    gt_t = sample_times(0.0, t_end, o.gt_rate, 0.0, rng)
+    p = motion.pose_at(gt_t)
+    half_yaw = p[:, 2] / 2
+    gt = np.column_stack([p[:, 0], p[:, 1], np.zeros(len(p)), np.cos(half_yaw), np.zeros(len(p)), np.zeros(len(p)),
+                          np.sin(half_yaw)])
+    _write_csv(root / "state_groundtruth_estimate0" / "data.csv",
+               "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []",
+               ns(gt_t), gt, "%.9f")
+
+    info = {"frames": int(keep.sum()), "duration_s": float(t_end), "path_length_m": motion.path_length}
+    _yaml(root / "simulation.yaml", {
+        "profile": profile, "seed": int(seed), "options": dataclasses.asdict(o), "summary": info,
+        "truth": {"camera_height": o.camera_height, "lever_arm": o.lever_arm, "lateral_offset": o.lateral_offset,
+                  "tilt_x_deg": o.tilt_x_deg, "tilt_y_deg": o.tilt_y_deg,
+                  "T_BS": [float(v) for v in T_BS.ravel()],
+                  "wheel_radius_left": truth.radius_left, "wheel_radius_right": truth.radius_right,
+                  "wheel_base": truth.wheel_base, "gyro_bias_start": [float(v) for v in bias_g[0]],
+                  "dropped_frames": int((~keep).sum())}})
+    return info

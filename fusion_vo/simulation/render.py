@@ -1,0 +1,189 @@
+"""Exact ray casting of the floor plane into a distorted camera image.
+
+For every (sub-)pixel the normalised ray ``r = (x, y, 1)`` of the *distorted* pixel is computed once
+(:meth:`CameraModel.pixel_rays`, an iterative undistortion). For a camera pose ``T_WS = (R, t)`` the
+ray leaves the camera centre along ``q = R r`` and meets the floor ``z = 0`` at::
+
+    X = t_x - t_z q_x / q_z,    Y = t_y - t_z q_y / q_z
+
+which is a homography of ``r``::
+
+    [X, Y, 1]^T ~ H r,   H = [t_x R_2 - t_z R_0;  t_y R_2 - t_z R_1;  R_2]     (R_i: row i of R)
+
+Composed with the floor-to-texture scaling (:mod:`fusion_vo.simulation.floor`), one
+``cv2.perspectiveTransform`` gives the texture coordinates of every pixel and one ``cv2.remap``
+(bilinear, wrapping around on seamless textures) samples the texture. Supersampling renders
+``s x s`` rays per pixel and averages them (box filter), which removes aliasing and the
+phase-dependent blur of bilinear sampling. Motion blur averages renders at poses spread over the
+exposure time.
+
+The whole texture coordinate computation is float32; the integer number of texture periods under the
+camera is removed in float64 first, so precision does not degrade far from the origin.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from fusion_vo.simulation.camera import CameraModel
+from fusion_vo.simulation.floor import Floor, Rectangle
+
+logger = logging.getLogger(__name__)
+
+
+def floor_homography(T_WS: np.ndarray) -> np.ndarray:
+    """The homography from normalised rays ``(x, y, 1)`` to floor points ``(X, Y, 1)`` for pose ``T_WS``."""
+    R = np.asarray(T_WS, dtype=np.float64)[:3, :3]
+    t = np.asarray(T_WS, dtype=np.float64)[:3, 3]
+    return np.vstack([t[0] * R[2] - t[2] * R[0], t[1] * R[2] - t[2] * R[1], R[2]])
+
+
+class Renderer:
+    """Renders a :class:`Floor` seen by a :class:`CameraModel` from arbitrary camera poses.
+
+    Parameters
+    ----------
+    camera : CameraModel
+    floor : Floor
+    supersample : int
+        Rays per pixel along each axis (1 = one ray through the pixel centre).
+    """
+
+    def __init__(self, camera: CameraModel, floor: Floor, supersample: int = 2):
+        if supersample < 1:
+            raise ValueError("supersample must be >= 1")
+        self.camera = camera
+        self.floor = floor
+        self.supersample = int(supersample)
+        rays = camera.pixel_rays(self.supersample)
+        self._rays = np.ascontiguousarray(rays, dtype=np.float32)
+        h, w = rays.shape[:2]
+        # homogeneous rays of the image border: their sign tells whether all rays meet the floor
+        border = np.concatenate([rays[0, :], rays[-1, :], rays[:, 0], rays[:, -1]])
+        self._border_rays = np.column_stack([border, np.ones(len(border))])
+        logger.debug("renderer ready: %dx%d rays", w, h)
+
+    def _texture_homography(self, H_world: np.ndarray, centre: np.ndarray) -> np.ndarray:
+        """Compose floor metres -> texture coordinates, removing whole periods under ``centre``."""
+        fl = self.floor
+        s = fl.texel_size
+        shift = np.zeros(2)
+        if fl.wrap:
+            th, tw = fl.texture.shape
+            shift[0] = math.floor((centre[0] - fl.origin[0]) / s / tw) * tw
+            shift[1] = math.floor((centre[1] - fl.origin[1]) / s / th) * th
+        A = np.array([[1.0 / s, 0.0, -fl.origin[0] / s - shift[0]],
+                      [0.0, 1.0 / s, -fl.origin[1] / s - shift[1]],
+                      [0.0, 0.0, 1.0]])
+        return A @ H_world
+
+    def radiance(self, T_WS: np.ndarray) -> np.ndarray:
+        """The floor intensity seen through every pixel from pose ``T_WS`` (float32, no photometric effects).
+
+        Parameters
+        ----------
+        T_WS : ndarray, shape (4, 4)
+            Camera pose in the world (camera-to-world).
+
+        Returns
+        -------
+        ndarray, shape (height, width), float32
+            Pixels whose ray misses the floor are ``floor.border_value``.
+        """
+        T_WS = np.asarray(T_WS, dtype=np.float64)
+        H = floor_homography(T_WS)
+        centre = T_WS[:2, 3]
+        maps = cv2.perspectiveTransform(self._rays, self._texture_homography(H, centre))
+        fl = self.floor
+        border = cv2.BORDER_WRAP if fl.wrap else cv2.BORDER_CONSTANT
+        # remap needs coordinates well inside the int16 range of its fixed-point maps
+        np.clip(maps, -30000.0, 30000.0, out=maps)
+        img = cv2.remap(fl.texture, maps, None, cv2.INTER_LINEAR, borderMode=border,
+                        borderValue=float(fl.border_value))
+        q_z = self._border_rays @ T_WS[2, :3]
+        if np.any(q_z > -1e-6):  # some rays miss the floor: mask them
+            miss = (self._rays.reshape(-1, 2) @ T_WS[2, :2].astype(np.float32) + np.float32(T_WS[2, 2])) > -1e-6
+            img.reshape(-1)[miss] = fl.border_value
+        if fl.featureless:
+            self._paint_featureless(img, H, centre, fl.featureless)
+        if self.supersample > 1:
+            img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
+        return img
+
+    def _paint_featureless(self, img: np.ndarray, H: np.ndarray, centre: np.ndarray,
+                           rects: Sequence[Rectangle]) -> None:
+        fl = self.floor
+        rel = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]]) @ H
+        corners = self._border_rays @ rel.T
+        corners = corners[:, :2] / corners[:, 2:3]
+        lo = corners.min(axis=0) + centre - fl.edge
+        hi = corners.max(axis=0) + centre + fl.edge
+        xy = None
+        for rect in rects:
+            if rect.x_min > hi[0] or rect.x_max < lo[0] or rect.y_min > hi[1] or rect.y_max < lo[1]:
+                continue
+            if xy is None:
+                xy = cv2.perspectiveTransform(self._rays, rel)
+            x = xy[..., 0]
+            y = xy[..., 1]
+            inside = np.minimum(np.minimum(x - np.float32(rect.x_min - centre[0]),
+                                           np.float32(rect.x_max - centre[0]) - x),
+                                np.minimum(y - np.float32(rect.y_min - centre[1]),
+                                           np.float32(rect.y_max - centre[1]) - y))
+            alpha = np.clip(inside / np.float32(max(fl.edge, 1e-9)) + np.float32(0.5), 0.0, 1.0)
+            img += alpha * (np.float32(fl.featureless_value) - img)
+
+    def radiance_blurred(self, poses: Sequence[np.ndarray]) -> np.ndarray:
+        """The mean of :meth:`radiance` over several poses (motion blur over an exposure)."""
+        acc = self.radiance(poses[0])
+        for T in poses[1:]:
+            acc += self.radiance(T)
+        if len(poses) > 1:
+            acc *= np.float32(1.0 / len(poses))
+        return acc
+
+
+def render_frame(texture: np.ndarray | Floor, camera: CameraModel, T_WS: np.ndarray, *,
+                 texel_size: float | None = None, origin: tuple[float, float] = (0.0, 0.0),
+                 wrap: bool = False, border_value: float = 0.0, supersample: int = 2) -> np.ndarray:
+    """Render one ``uint8`` image of a textured floor (no noise or other photometric effects).
+
+    Convenient for single images (a chessboard lying on the floor, a test pattern); for many frames
+    build a :class:`Renderer` once, which precomputes the pixel rays.
+
+    Parameters
+    ----------
+    texture : ndarray or Floor
+        A grey image laid on the floor (texel ``(0, 0)`` centred at ``origin``), or a ready Floor.
+    camera : CameraModel
+    T_WS : ndarray, shape (4, 4)
+        Camera pose in the world; the floor is the plane ``z = 0``.
+    texel_size : float
+        Floor size of one texture pixel [m] (required unless ``texture`` is a Floor).
+    origin : tuple of float
+        World position of the centre of texel ``(0, 0)``.
+    wrap : bool
+        Repeat the texture (it should be seamless) or show ``border_value`` around it.
+    border_value : float
+        Intensity where there is no texture.
+    supersample : int
+        Rays per pixel along each axis.
+
+    Returns
+    -------
+    ndarray, shape (camera.height, camera.width), uint8
+    """
+    if isinstance(texture, Floor):
+        floor = texture
+    else:
+        if texel_size is None:
+            raise ValueError("texel_size is required with a texture image")
+        floor = Floor.from_image(texture, texel_size, seamless=False, origin=origin, border_value=border_value)
+        floor.wrap = wrap
+    img = Renderer(camera, floor, supersample).radiance(T_WS)
+    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
