@@ -1,0 +1,117 @@
+"""Shared pieces of the example scripts: command-line options, output folder, plain tables.
+
+Every example takes ``--out DIR`` (where generated recordings and outputs go; a temporary folder that is
+removed at the end if omitted), ``--quick`` (shorter recordings and fewer variants, for a smoke test)
+and ``--seed N`` (the simulator's seed; the same seed gives the same recordings and figures).
+
+Tables are printed as plain text: a title line, a header line, a rule of dashes and one line per row,
+columns separated by at least two spaces, so that they can be pasted into a README or read back by a
+program (:func:`parse_table`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import shutil
+import tempfile
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from fusion_vo.evaluation.metrics import planar_trajectory
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData
+
+FRONTENDS = ("klt", "features")
+
+
+def example_parser(description: str) -> argparse.ArgumentParser:
+    """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``)."""
+    parser = argparse.ArgumentParser(description=description,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", type=Path, default=None,
+                        help="folder for the generated recordings and outputs (default: a temporary folder, "
+                             "removed at the end)")
+    parser.add_argument("--quick", action="store_true",
+                        help="shorter recordings and fewer variants (a fast smoke run)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the generated recordings (default: 0)")
+    return parser
+
+
+@contextlib.contextmanager
+def output_dir(out: Path | None) -> Iterator[Path]:
+    """``out`` (created if needed), or a temporary folder that is removed afterwards."""
+    if out is not None:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        yield out
+        return
+    tmp = Path(tempfile.mkdtemp(prefix="fusion-vo-example-"))
+    try:
+        yield tmp
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+def fmt(value: float | None, digits: int = 2) -> str:
+    """A number with ``digits`` decimals, or ``-`` where it is missing or not finite."""
+    if value is None or not math.isfinite(float(value)):
+        return "-"
+    return f"{float(value):.{digits}f}"
+
+
+def format_table(title: str, headers: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A plain-text table: title, header, rule, rows; cells right-aligned except the first column."""
+    cells = [list(map(str, headers))] + [list(map(str, r)) for r in rows]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(headers))]
+
+    def line(row: Sequence[str]) -> str:
+        parts = [row[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(row[1:], widths[1:])]
+        return "  ".join(parts).rstrip()
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([title, line(cells[0]), rule] + [line(r) for r in cells[1:]])
+
+
+def parse_table(text: str, title: str) -> list[dict[str, str]]:
+    """Read back a table printed by :func:`format_table` from ``text`` (rows as header -> cell).
+
+    Cells are split at runs of two or more spaces, so a cell must not contain two spaces in a row.
+    """
+    import re
+
+    lines = text.splitlines()
+    start = next(i for i, s in enumerate(lines) if s.strip() == title.strip())
+    headers = re.split(r"\s{2,}", lines[start + 1].strip())
+    rows = []
+    for s in lines[start + 3:]:
+        if not s.strip():
+            break
+        cells = re.split(r"\s{2,}", s.strip())
+        if len(cells) != len(headers):
+            raise ValueError(f"row {s!r} has {len(cells)} cells, expected {len(headers)}")
+        rows.append(dict(zip(headers, cells)))
+    return rows
+
+
+def to_trajectory(poses: PoseData, name: str | None = None):
+    """A planar :class:`evo.core.trajectory.PoseTrajectory3D` of a :class:`PoseData` track."""
+    return planar_trajectory(poses.t, poses.xyyaw[:, 0], poses.xyyaw[:, 1], poses.xyyaw[:, 2], name=name)
+
+
+def pose_at(gt: PoseData, t: float) -> np.ndarray:
+    """Ground-truth ``(x, y, yaw)`` at time ``t`` (linear interpolation, unwrapped yaw)."""
+    yaw = np.unwrap(gt.xyyaw[:, 2])
+    return np.array([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]),
+                     float(se2.wrap_angle(np.interp(t, gt.t, yaw)))])
+
+
+def true_twist(gt: PoseData, t0: float, t1: float) -> np.ndarray:
+    """Ground-truth body twist ``(vx, vy, yaw rate)`` over ``[t0, t1]``: ``log(T(t0)^-1 T(t1)) / (t1 - t0)``.
+
+    The same definition as the visual odometry's velocities, so the two compare like for like.
+    """
+    return se2.log(se2.between(pose_at(gt, t0), pose_at(gt, t1))) / (t1 - t0)

@@ -1,0 +1,116 @@
+"""Smoke test of the example scripts: each runs in its ``--quick`` mode and prints tables with sane numbers.
+
+The scripts are run as a user runs them (``python examples/NAME.py --quick --out DIR``); their printed
+tables are read back and checked against loose accuracy bounds, so a script that runs but reports
+nonsense (NaN, a frontend that fails every frame, errors of tens of percent) fails the test.
+"""
+
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+EXAMPLES = REPO / "examples"
+
+
+def run_example(name: str, out: Path, timeout: float = 240.0) -> str:
+    """Run ``examples/NAME.py --quick --out OUT --seed 1`` and return its standard output."""
+    proc = subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), "--quick", "--seed", "1",
+                           "--out", str(out)], capture_output=True, text=True, timeout=timeout, cwd=REPO)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout
+
+
+def table(text: str, title_start: str) -> list[dict[str, str]]:
+    """Rows of the printed table whose title line starts with ``title_start`` (header -> cell)."""
+    lines = text.splitlines()
+    starts = [i for i, s in enumerate(lines) if s.startswith(title_start)]
+    assert starts, f"no table titled {title_start!r} in:\n{text}"
+    i = starts[0]
+    headers = re.split(r"\s{2,}", lines[i + 1].strip())
+    assert set(lines[i + 2].replace(" ", "")) == {"-"}, lines[i + 2]
+    rows = []
+    for line in lines[i + 3:]:
+        if not line.strip():
+            break
+        cells = re.split(r"\s{2,}", line.strip())
+        assert len(cells) == len(headers), (headers, line)
+        rows.append(dict(zip(headers, cells)))
+    assert rows, f"table {title_start!r} has no rows"
+    return rows
+
+
+def number(cell: str) -> float:
+    value = float(cell)
+    assert math.isfinite(value), cell
+    return value
+
+
+@pytest.mark.slow
+def test_table_5_1(tmp_path):
+    rows = table(run_example("thesis_table_5_1", tmp_path), "Table 5.1")
+    assert {r["lighting"] for r in rows} == {"good light", "spotlights", "dark"}
+    assert {r["frontend"] for r in rows} == {"klt", "features"}
+    for r in rows:
+        frames, failed = int(r["frames"]), int(r["failed"])
+        assert frames > 20 and failed <= frames // 4, r
+        assert 0.0 <= number(r["error %"]) < 10.0, r
+        assert number(r["variance %"]) >= 0.0, r
+    good = [number(r["error %"]) for r in rows if r["lighting"] == "good light"]
+    assert max(good) < 3.0
+
+
+@pytest.mark.slow
+def test_square(tmp_path):
+    text = run_example("thesis_square", tmp_path)
+    legs = table(text, "Table 5.2")
+    assert len(legs) == 4
+    for leg in legs:
+        assert number(leg["actual cm"]) > 10.0
+        for frontend in ("klt", "features"):
+            assert number(leg[f"{frontend} err %"]) < 2.0, leg
+        assert number(leg["thesis err %"]) > 1.0
+    whole = table(text, "Whole square")
+    assert [r["frontend"] for r in whole] == ["klt", "features"]
+    assert all(number(r["end %"]) < 1.0 for r in whole), whole
+
+
+@pytest.mark.slow
+def test_heading(tmp_path):
+    rows = table(run_example("thesis_heading", tmp_path), "Heading after one full circle")
+    assert [r["frontend"] for r in rows] == ["klt", "features"]
+    for r in rows:
+        assert number(r["turned deg"]) > 350.0
+        assert number(r["error deg"]) < 1.0, r
+        assert abs(number(r["error %"]) - 100 * number(r["error deg"]) / number(r["turned deg"])) < 1e-3
+
+
+@pytest.mark.slow
+def test_klt_zero_motion(tmp_path):
+    text = run_example("klt_zero_motion", tmp_path)
+    corners = table(text, "Figures 3.3-3.5")[0]
+    assert int(corners["tracked to end"]) >= 10
+    assert number(corners["max step px"]) < 0.5
+    rows = table(text, "Estimated motion per frame")
+    for r in rows:
+        assert number(r["max mm/frame"]) < 0.1, r
+        assert r["< 0.1 mm"] == "yes"
+    png = tmp_path / "klt_zero_motion.png"
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow
+def test_fusion_comparison(tmp_path):
+    rows = table(run_example("fusion_comparison", tmp_path), "Fusion comparison")
+    by_name = {r["trajectory"]: r for r in rows}
+    assert set(by_name) == {"vo", "wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online"}
+    for r in rows:
+        assert number(r["ATE m"]) >= 0.0, r
+        assert number(r["end %"]) >= 0.0, r
+    fused = min(number(by_name[n]["ATE m"]) for n in ("ekf", "ekf_smoothed", "gtsam"))
+    assert fused <= number(by_name["wheel"]["ATE m"])
+    assert (tmp_path / "run-klt" / "metrics.json").is_file()
