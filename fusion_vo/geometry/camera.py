@@ -122,6 +122,29 @@ class CameraModel:
         p = np.asarray(points_S, dtype=np.float64).reshape(-1, 3)
         return self.denormalize(p[:, :2] / p[:, 2:3])
 
+    def pixel_rays(self, supersample: int = 1) -> np.ndarray:
+        """Undistorted normalised coordinates ``(x/z, y/z)`` of the ray through every (sub-)pixel.
+
+        Parameters
+        ----------
+        supersample : int
+            ``s`` samples per pixel along each axis, at offsets ``(k + 0.5) / s - 0.5`` (k = 0..s-1)
+            from the pixel centre; ``s = 1`` is the pixel centre itself.
+
+        Returns
+        -------
+        ndarray, shape (height * s, width * s, 2), float64
+            Computed with :meth:`normalize`, so ``denormalize`` maps them back to the sample positions.
+        """
+        s = int(supersample)
+        if s < 1:
+            raise ValueError("supersample must be >= 1")
+        offsets = (np.arange(s) + 0.5) / s - 0.5
+        us = (np.arange(self.width)[:, None] + offsets[None, :]).ravel()
+        vs = (np.arange(self.height)[:, None] + offsets[None, :]).ravel()
+        uu, vv = np.meshgrid(us, vs)
+        return self.normalize(np.column_stack([uu.ravel(), vv.ravel()])).reshape(len(vs), len(us), 2)
+
     # ------------------------------------------------------------------ files
     @classmethod
     def from_yaml(cls, path: str | Path) -> "CameraModel":

@@ -29,9 +29,9 @@ import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.simulation.camera import CameraModel as RenderCamera
-from fusion_vo.simulation.camera import body_pose, camera_mount
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.simulation.floor import Floor, Rectangle
+from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
 from fusion_vo.simulation.render import Renderer
 from fusion_vo.simulation.robot import PROFILES, Limits, Motion, make_motion
@@ -229,7 +229,8 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     ns = lambda t: np.int64(o.start_time_ns) + np.rint(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
 
     # ---- camera frames
-    cam = RenderCamera(o.width, o.height, o.fu, o.fv, o.cu, o.cv, o.distortion_model, tuple(o.distortion))
+    cam = CameraModel(o.width, o.height, o.fu, o.fv, o.cu, o.cv, o.distortion_model, np.array(o.distortion, float),
+                      T_BS, o.camera_rate)
     floor = Floor.photographed(o.texture, o.texel_size, featureless=_featureless_rectangles(o, motion, T_BS))
     renderer = Renderer(cam, floor, o.supersample)
     photo = Photometric(Photometry(o.gain, o.exposure_drift, o.exposure_period, o.vignetting, o.highlight_radius,
@@ -264,8 +265,7 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     (root / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n" + "\n".join(rows) + "\n")
     T_written = T_BS.copy()
     T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
-    cam_yaml = cam.to_yaml_dict(T_written, o.camera_rate)
-    _yaml(root / "cam0" / "sensor.yaml", cam_yaml)
+    _yaml(root / "cam0" / "sensor.yaml", dataclasses.replace(cam, T_BS=T_written).to_dict())
 
     # ---- wheels
     truth = WheelTruth(o.wheel_radius * (1 + o.radius_error_left), o.wheel_radius * (1 + o.radius_error_right),

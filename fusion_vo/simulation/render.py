@@ -10,15 +10,19 @@ which is a homography of ``r``::
 
     [X, Y, 1]^T ~ H r,   H = [t_x R_2 - t_z R_0;  t_y R_2 - t_z R_1;  R_2]     (R_i: row i of R)
 
-Composed with the floor-to-texture scaling (:mod:`fusion_vo.simulation.floor`), one
-``cv2.perspectiveTransform`` gives the texture coordinates of every pixel and one ``cv2.remap``
-(bilinear, wrapping around on seamless textures) samples the texture. Supersampling renders
-``s x s`` rays per pixel and averages them (box filter), which removes aliasing and the
-phase-dependent blur of bilinear sampling. Motion blur averages renders at poses spread over the
-exposure time.
+Composed with the floor-to-texture scaling (:mod:`fusion_vo.simulation.floor`), one transform of the
+precomputed rays gives the texture coordinates of every pixel (an affine ``cv2.transform`` when the
+camera is level, ``H``'s last row then being ``(0, 0, h22)``; ``cv2.perspectiveTransform`` otherwise)
+and one ``cv2.remap`` (bilinear) samples the texture. Supersampling renders ``s x s`` rays per pixel and
+averages them (box filter), which removes aliasing and the phase-dependent blur of bilinear sampling.
+Motion blur averages renders at poses spread over the exposure time.
 
-The whole texture coordinate computation is float32; the integer number of texture periods under the
-camera is removed in float64 first, so precision does not degrade far from the origin.
+A repeating texture is sampled from a copy padded with its own wrap-around, wide enough to hold the
+whole footprint of the image once whole periods are removed: the same values as ``BORDER_WRAP``, but on
+``remap``'s fast path for every pixel.
+
+The texture coordinates are float32; the integer number of texture periods under the camera is
+removed in float64 first, so precision does not degrade far from the origin.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from fusion_vo.simulation.camera import CameraModel
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.simulation.floor import Floor, Rectangle
 
 logger = logging.getLogger(__name__)
@@ -63,9 +67,12 @@ class Renderer:
         rays = camera.pixel_rays(self.supersample)
         self._rays = np.ascontiguousarray(rays, dtype=np.float32)
         h, w = rays.shape[:2]
-        # homogeneous rays of the image border: their sign tells whether all rays meet the floor
+        # homogeneous rays of the image border: their sign tells whether all rays meet the floor, and
+        # their floor points bound the floor seen by the whole image
         border = np.concatenate([rays[0, :], rays[-1, :], rays[:, 0], rays[:, -1]])
         self._border_rays = np.column_stack([border, np.ones(len(border))])
+        self._padded: np.ndarray | None = None
+        self._pad = 0
         logger.debug("renderer ready: %dx%d rays", w, h)
 
     def _texture_homography(self, H_world: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -81,6 +88,36 @@ class Renderer:
                       [0.0, 1.0 / s, -fl.origin[1] / s - shift[1]],
                       [0.0, 0.0, 1.0]])
         return A @ H_world
+
+    def _padded_texture(self, H_tex: np.ndarray) -> tuple[np.ndarray, int] | None:
+        """The repeating texture extended by whole-texel wrap-around margins that hold every sample.
+
+        ``remap`` with ``BORDER_WRAP`` takes a slow per-pixel path for every sample near or beyond the
+        texture edge, which after removing whole periods is a large part of the image. Sampling a
+        texture padded with its own wrap-around gives the same values on the fast path. Returns
+        ``(texture, pad)`` or None when the margin needed exceeds half the texture size (the caller
+        then wraps).
+        """
+        th, tw = self.floor.texture.shape
+        edge = self._border_rays @ H_tex.T
+        edge = edge[:, :2] / edge[:, 2:3]
+        lo = edge.min(axis=0)
+        hi = edge.max(axis=0)
+        need = max(-lo[0], -lo[1], hi[0] - (tw - 1), hi[1] - (th - 1), 0.0) + 2.0
+        if need > max(tw, th) // 2:
+            return None
+        if need > self._pad:
+            self._pad = min(int(math.ceil(need * 1.25 / 32.0)) * 32, max(tw, th) // 2)
+            self._padded = cv2.copyMakeBorder(self.floor.texture, self._pad, self._pad, self._pad, self._pad,
+                                              cv2.BORDER_WRAP)
+            logger.debug("texture padded by %d texels", self._pad)
+        return self._padded, self._pad
+
+    def _transform_rays(self, H: np.ndarray) -> np.ndarray:
+        """``H`` applied to every ray (float32, shape of the ray grid)."""
+        if H[2, 0] == 0.0 and H[2, 1] == 0.0:  # a level camera: the map is affine, no division needed
+            return cv2.transform(self._rays, H[:2] / H[2, 2])
+        return cv2.perspectiveTransform(self._rays, H)
 
     def radiance(self, T_WS: np.ndarray) -> np.ndarray:
         """The floor intensity seen through every pixel from pose ``T_WS`` (float32, no photometric effects).
@@ -98,15 +135,24 @@ class Renderer:
         T_WS = np.asarray(T_WS, dtype=np.float64)
         H = floor_homography(T_WS)
         centre = T_WS[:2, 3]
-        maps = cv2.perspectiveTransform(self._rays, self._texture_homography(H, centre))
+        H_tex = self._texture_homography(H, centre)
         fl = self.floor
-        border = cv2.BORDER_WRAP if fl.wrap else cv2.BORDER_CONSTANT
-        # remap needs coordinates well inside the int16 range of its fixed-point maps
-        np.clip(maps, -30000.0, 30000.0, out=maps)
-        img = cv2.remap(fl.texture, maps, None, cv2.INTER_LINEAR, borderMode=border,
-                        borderValue=float(fl.border_value))
         q_z = self._border_rays @ T_WS[2, :3]
-        if np.any(q_z > -1e-6):  # some rays miss the floor: mask them
+        sees_horizon = bool(np.any(q_z > -1e-6))
+        padded = self._padded_texture(H_tex) if fl.wrap and not sees_horizon else None
+        if padded is not None:
+            texture, pad = padded
+            H_tex = np.array([[1.0, 0.0, pad], [0.0, 1.0, pad], [0.0, 0.0, 1.0]]) @ H_tex
+            maps = self._transform_rays(H_tex)
+            img = cv2.remap(texture, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        else:
+            maps = self._transform_rays(H_tex)
+            # remap needs coordinates well inside the int16 range of its fixed-point maps
+            np.clip(maps, -30000.0, 30000.0, out=maps)
+            img = cv2.remap(fl.texture, maps, None, cv2.INTER_LINEAR,
+                            borderMode=cv2.BORDER_WRAP if fl.wrap else cv2.BORDER_CONSTANT,
+                            borderValue=float(fl.border_value))
+        if sees_horizon:  # some rays miss the floor: mask them
             miss = (self._rays.reshape(-1, 2) @ T_WS[2, :2].astype(np.float32) + np.float32(T_WS[2, 2])) > -1e-6
             img.reshape(-1)[miss] = fl.border_value
         if fl.featureless:
@@ -128,7 +174,7 @@ class Renderer:
             if rect.x_min > hi[0] or rect.x_max < lo[0] or rect.y_min > hi[1] or rect.y_max < lo[1]:
                 continue
             if xy is None:
-                xy = cv2.perspectiveTransform(self._rays, rel)
+                xy = self._transform_rays(rel)
             x = xy[..., 0]
             y = xy[..., 1]
             inside = np.minimum(np.minimum(x - np.float32(rect.x_min - centre[0]),

@@ -190,6 +190,8 @@ def random_drive(lim: Limits, dt: float, rng: np.random.Generator, duration: flo
     tv = tw = 0.0
     cv = cw = 0.0
     next_change = 0
+    dv = lim.max_accel * dt  # largest speed change per step
+    dw = lim.max_turn_accel * dt
     for k in range(n):
         if k >= next_change:
             if rng.random() < stop_probability or k == 0:
@@ -202,8 +204,8 @@ def random_drive(lim: Limits, dt: float, rng: np.random.Generator, duration: flo
             next_change = k + int(hold / dt)
         if k > n - int(2.0 / dt):  # come to a stop at the end
             tv, tw = 0.0, 0.0
-        cv += float(np.clip(tv - cv, -lim.max_accel * dt, lim.max_accel * dt))
-        cw += float(np.clip(tw - cw, -lim.max_turn_accel * dt, lim.max_turn_accel * dt))
+        cv += min(max(tv - cv, -dv), dv)
+        cw += min(max(tw - cw, -dw), dw)
         v[k], w[k] = cv, cw
     return _motion(v, w, dt)
 
