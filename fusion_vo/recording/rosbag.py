@@ -310,17 +310,23 @@ def _frame(name: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------- images
+class UnsupportedImage(ValueError):
+    """An image format the import cannot convert (as opposed to one damaged message)."""
+
+
 def image_to_grey(msg) -> np.ndarray:
     """Grey ``uint8``/``uint16`` image of a ``sensor_msgs/Image`` message.
 
     Raises
     ------
+    UnsupportedImage
+        For an encoding that is not in :data:`IMAGE_ENCODINGS`.
     ValueError
-        For an unsupported encoding or a data buffer that does not match width, height and step.
+        For a data buffer that does not match width, height and step.
     """
     enc = str(msg.encoding).strip().lower()
     if enc not in IMAGE_ENCODINGS:
-        raise ValueError(f"image encoding '{msg.encoding}' is not supported "
+        raise UnsupportedImage(f"image encoding '{msg.encoding}' is not supported "
                          f"(supported: {', '.join(sorted(IMAGE_ENCODINGS))})")
     kind, channels, code = IMAGE_ENCODINGS[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
@@ -343,12 +349,14 @@ def compressed_to_grey(msg) -> np.ndarray:
 
     Raises
     ------
+    UnsupportedImage
+        For ``compressedDepth`` images.
     ValueError
-        When the data cannot be decoded, or for ``compressedDepth`` images.
+        When the data cannot be decoded.
     """
     fmt = str(msg.format).lower()
     if "compresseddepth" in fmt:
-        raise ValueError(f"compressed depth images ('{msg.format}') are not supported")
+        raise UnsupportedImage(f"compressed depth images ('{msg.format}') are not supported")
     data = np.asarray(msg.data, dtype=np.uint8).reshape(-1)
     img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if img is None:
@@ -356,7 +364,7 @@ def compressed_to_grey(msg) -> np.ndarray:
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY if img.shape[2] == 4 else cv2.COLOR_BGR2GRAY)
     if img.dtype not in (np.uint8, np.uint16):
-        raise ValueError(f"unsupported pixel type {img.dtype}")
+        raise UnsupportedImage(f"pixel type {img.dtype} is not supported")
     return img
 
 
@@ -666,9 +674,9 @@ class _Importer:
             return
         try:
             img = image_to_grey(msg) if rows.summary.msgtype == IMAGE else compressed_to_grey(msg)
+        except UnsupportedImage as exc:
+            raise InputError(f"{rows.summary.topic}: {exc}", self.bag) from None
         except ValueError as exc:
-            if "not supported" in str(exc):
-                raise InputError(f"{rows.summary.topic}: {exc}", self.bag) from None
             rows.summary.dropped += 1
             log.warning("%s: image at %d ns skipped: %s", rows.summary.topic, t, exc)
             return

@@ -19,6 +19,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import (
     StaticTransform,
+    UnsupportedImage,
     chain_transform,
     compressed_to_grey,
     geodetic_to_enu,
@@ -201,7 +202,7 @@ def test_image_encodings_become_grey():
     for big in (False, True):
         out = image_to_grey(_image_msg(deep, "mono16", pad=2, bigendian=big))
         assert out.dtype == np.uint16 and np.array_equal(out, deep)
-    with pytest.raises(ValueError, match="not supported"):
+    with pytest.raises(UnsupportedImage, match="not supported"):
         image_to_grey(_image_msg(deep.astype(np.float32), "32FC1"))
     with pytest.raises(ValueError, match="does not fit"):
         msg = _image_msg(grey, "mono8")
@@ -371,6 +372,17 @@ def test_ambiguous_topics_need_a_choice(tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------------------ bad input
+def test_unsupported_image_encoding_leaves_nothing(tmp_path):
+    path = tmp_path / "depth"
+    with Ros2Bag(path) as b:
+        msg = b.image(T0, np.zeros((4, 4), np.uint8))
+        msg.encoding, msg.step, msg.data = "32FC1", 16, np.zeros(64, np.uint8)
+        b.write("/depth", msg, T0)
+    with pytest.raises(InputError, match="/depth: image encoding '32FC1' is not supported"):
+        import_bag(path, tmp_path / "seq")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["depth"]
+
+
 def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     corrupt = tmp_path / "corrupt.bag"
     corrupt.write_bytes(JACKAL.read_bytes()[:40_000])
