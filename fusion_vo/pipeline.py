@@ -60,7 +60,8 @@ class RunSummary:
             parts.append(f"{self.skipped_frames} skipped (unreadable)")
         parts += [f"{self.distance_m:.3f} m travelled", f"{self.vo_fps:.0f} frames/s"]
         if self.backend_seconds:
-            parts.append(", ".join(f"{k} {v:.2f} s" for k, v in self.backend_seconds.items()))
+            parts.append(", ".join(f"{k[:-3]} {v:.2f} ms" if k.endswith("_ms") else f"{k} {v:.2f} s"
+                                   for k, v in self.backend_seconds.items()))
         return "; ".join(parts) + f" -> {self.out_dir}"
 
 

@@ -17,10 +17,11 @@ STANDARD: dict[str, tuple[str, int, dict, str]] = {
     "random60": ("random", 3, {"duration": 60.0},
                  "60 s random drive with stops, up to 0.3 m/s and 0.9 rad/s, camera 0.1 m high, 0.25 m ahead"),
     "standstill": ("standstill", 4, {"duration": 5.0}, "5 s without motion (thesis figures 3.3-3.5)"),
-    "hard": ("random", 5, {"duration": 60.0, "highlight_radius": 22.0, "dropped_frames": 0.05,
-                           "exposure_time": 0.004, "featureless_time": [20.0, 23.0], "exposure_drift": 0.1,
+    "hard": ("random", 5, {"duration": 40.0, "highlight_radius": 22.0, "dropped_frames": 0.05,
+                           "exposure_time": 0.004, "blur_samples": 3, "featureless_time": [20.0, 23.0],
+                           "exposure_drift": 0.1,
                            "vignetting": 0.3, "wheel_start_count": 2**31 - 20000, "slip": 0.002},
-             "60 s random drive with wheel calibration errors, slip, a fixed specular highlight, 5 % dropped "
+             "40 s random drive with wheel calibration errors, slip, a fixed specular highlight, 5 % dropped "
              "frames, motion blur, exposure drift, vignetting and 3 s of featureless floor"),
     "height_error": ("random", 6, {"duration": 30.0, "height_error": 0.02},
                      "30 s random drive whose cam0/sensor.yaml height is 2 % too large (self-calibration)"),
