@@ -2,7 +2,9 @@
 
 Every example takes ``--out DIR`` (where generated recordings and outputs go; a temporary folder that is
 removed at the end if omitted), ``--quick`` (shorter recordings and fewer variants, for a smoke test)
-and ``--seed N`` (the simulator's seed; the same seed gives the same recordings and figures).
+and ``--seed N`` (the simulator's seed; the same seed gives the same recordings and figures). Examples
+built on a standard generated recording (``datasets/generated.md``) regenerate exactly that recording
+unless ``--seed`` or ``--quick`` changes it.
 
 Tables are printed as plain text: a title line, a header line, a rule of dashes and one line per row,
 columns separated by at least two spaces, so that they can be pasted into a README or read back by a
@@ -24,6 +26,8 @@ import numpy as np
 from fusion_vo.evaluation.metrics import planar_trajectory
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
+from fusion_vo.simulation import simulate
+from fusion_vo.simulation.standard import STANDARD
 
 FRONTENDS = ("klt", "features")
 
@@ -37,8 +41,20 @@ def example_parser(description: str) -> argparse.ArgumentParser:
                              "removed at the end)")
     parser.add_argument("--quick", action="store_true",
                         help="shorter recordings and fewer variants (a fast smoke run)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the generated recordings (default: 0)")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="seed of the generated recordings (default: the standard recording's seed, or 0)")
     return parser
+
+
+def generate(name: str, out_dir: Path, seed: int | None = None, **overrides) -> Path:
+    """Generate the standard recording ``name`` (:mod:`fusion_vo.simulation.standard`) into ``out_dir``.
+
+    ``seed`` replaces the standard seed and ``overrides`` its simulator options (a shorter drive for a
+    quick run); with neither, the recording is exactly the standard one.
+    """
+    profile, standard_seed, options, _ = STANDARD[name]
+    return simulate(out_dir, profile=profile, seed=standard_seed if seed is None else seed,
+                    **{**options, **overrides})
 
 
 @contextlib.contextmanager

@@ -35,10 +35,9 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from common import FRONTENDS, example_parser, fmt, format_table, output_dir  # noqa: E402
+from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir  # noqa: E402
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
-from fusion_vo.simulation import simulate  # noqa: E402
 
 #: features drawn in the plot
 PLOTTED_FEATURES = 12
@@ -114,10 +113,10 @@ def plot_tracks(t: np.ndarray, xy: np.ndarray, alive: np.ndarray, first: np.ndar
 def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
     args = parser.parse_args(argv)
-    options = {"duration": 2.0} if args.quick else {"duration": 10.0}
+    options = {"duration": 2.0} if args.quick else {}
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
-        seq = simulate(out / "standstill", profile="standstill", seed=args.seed, **options)
+        seq = generate("standstill", out / "standstill", args.seed, **options)
         rec = Recording(seq)
         print(f"generated {len(rec)} standstill frames in {time.perf_counter() - t_start:.1f} s")
 

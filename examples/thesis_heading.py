@@ -28,12 +28,11 @@ import time
 
 import numpy as np
 
-from common import FRONTENDS, example_parser, fmt, format_table, output_dir, to_trajectory
+from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
 from fusion_vo.evaluation.metrics import evaluate_trajectory
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.simulation import simulate
 
 #: thesis 5.2.1: heading error after one revolution [% of 360 deg]
 THESIS_HEADING_PCT = 0.5859
@@ -51,7 +50,7 @@ def main(argv=None) -> int:
     options = {"radius": 0.15, "supersample": 1} if args.quick else {}
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
-        seq = simulate(out / "circle", profile="circle", seed=args.seed, **options)
+        seq = generate("circle", out / "circle", args.seed, **options)
         rec = Recording(seq)
         gt = rec.groundtruth()
         turned = turned_between(gt, gt.t[0], gt.t[-1])

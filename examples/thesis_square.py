@@ -30,11 +30,10 @@ from __future__ import annotations
 import math
 import time
 
-from common import FRONTENDS, example_parser, fmt, format_table, output_dir, to_trajectory
+from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
 from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.simulation import simulate
 
 #: thesis table 5.2: error of each 90 cm leg [%]
 THESIS_LEG_ERROR_PCT = (1.51, 2.67, 4.3, 2.9)
@@ -50,7 +49,7 @@ def main(argv=None) -> int:
     options = {"side": 0.3, "supersample": 1} if args.quick else {}
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
-        seq = simulate(out / "square", profile="square", seed=args.seed, **options)
+        seq = generate("square", out / "square", args.seed, **options)
         rec = Recording(seq)
         gt = rec.groundtruth()
         reference = to_trajectory(gt, "groundtruth")

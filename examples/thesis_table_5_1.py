@@ -96,7 +96,8 @@ def main(argv=None) -> int:
         for texture in textures:
             for light, options in LIGHTING.items():
                 name = f"{texture}-{light.replace(' ', '-')}"
-                seq = simulate(out / name, profile="circle", seed=args.seed, texture=texture, **circle, **options)
+                seq = simulate(out / name, profile="circle", seed=args.seed or 0, texture=texture, **circle,
+                               **options)
                 rec = Recording(seq)
                 gt = rec.groundtruth()
                 for frontend in FRONTENDS:
