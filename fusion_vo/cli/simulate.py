@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import yaml
 
@@ -57,13 +56,14 @@ def run(args: argparse.Namespace) -> int:
         options["texture"] = args.texture
     try:
         opts = SimulationOptions.from_dict(options)
-        for f in dataclasses.fields(opts):
-            v = getattr(opts, f.name)
-            if isinstance(v, (int, float)) and not isinstance(v, bool) and v != v:
-                raise ValueError(f"option '{f.name}' is NaN")
-        out = simulate(args.out, profile=profile, seed=seed, options=opts)
     except (ValueError, TypeError) as exc:
-        raise InputError(f"simulate: {exc}", args.config) from None
+        raise InputError(str(exc), args.config) from None
+    try:
+        out = simulate(args.out, profile=profile, seed=seed, options=opts)
+    except ValueError as exc:  # a combination of options the profile cannot drive
+        raise InputError(str(exc), args.config) from None
+    except OSError as exc:
+        raise InputError(f"cannot write the recording ({exc.strerror or exc})", args.out) from None
     info = load_yaml(out / "simulation.yaml")["summary"]
     print(f"{info['frames']} frames, {info['duration_s']:.1f} s, {info['path_length_m']:.2f} m path -> {out}")
     return 0

@@ -29,8 +29,8 @@ import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.geometry.camera import CameraModel
-from fusion_vo.simulation.floor import Floor, Rectangle
+from fusion_vo.geometry.camera import DISTORTION_MODELS, CameraModel
+from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
 from fusion_vo.simulation.render import Renderer
@@ -146,13 +146,86 @@ class SimulationOptions:
     jitter: float = 0.0
     start_time_ns: int = 1_600_000_000_000_000_000
 
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            _check_type(f.name, str(f.type), value)
+            if str(f.type) == "int":  # 640.0 from a YAML file is fine, but stored as an int
+                setattr(self, f.name, int(value))
+        positive = ("duration", "max_speed", "max_turn_rate", "side", "radius", "length", "texel_size", "width",
+                    "height", "fu", "fv", "camera_rate", "camera_height", "blur_samples", "supersample",
+                    "exposure_period", "gain", "wheel_rate", "ticks_per_revolution", "wheel_radius", "wheel_base",
+                    "imu_rate", "gt_rate")
+        for name in positive:
+            value = getattr(self, name)
+            if value is not None and not value > 0:
+                raise ValueError(f"option '{name}' must be positive, not {value}")
+        non_negative = ("exposure_time", "height_vibration", "highlight_radius", "noise", "shot_noise", "slip",
+                        "range_noise", "jitter", "gyro_noise_density", "gyro_random_walk", "accel_noise_density",
+                        "accel_random_walk")
+        for name in non_negative:
+            if getattr(self, name) < 0:
+                raise ValueError(f"option '{name}' must not be negative")
+        if not 0 <= self.dropped_frames < 1:
+            raise ValueError("option 'dropped_frames' is a fraction in [0, 1)")
+        if not 0 <= self.png_compression <= 9:
+            raise ValueError("option 'png_compression' must be 0..9")
+        if self.texture not in TEXTURES:
+            raise ValueError(f"option 'texture' must be one of {', '.join(TEXTURES)}, not {self.texture!r}")
+        if self.distortion_model not in DISTORTION_MODELS:
+            raise ValueError(f"option 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}")
+        n_coeffs = {"radial-tangential": (4, 5), "equidistant": (4,), "none": (0, 4)}[self.distortion_model]
+        if len(self.distortion) not in n_coeffs:
+            raise ValueError(f"option 'distortion': {self.distortion_model} takes "
+                             f"{' or '.join(map(str, n_coeffs))} coefficients")
+        for name, n in (("gyro_bias", 3), ("accel_bias", 3), ("highlight_center", 2), ("featureless_time", 2)):
+            value = getattr(self, name)
+            if value is not None and len(value) != n:
+                raise ValueError(f"option '{name}' needs {n} numbers")
+        for rect in self.featureless:
+            if not isinstance(rect, (list, tuple)) or len(rect) != 4:
+                raise ValueError("option 'featureless' is a list of [x_min, y_min, x_max, y_max] rectangles")
+
     @classmethod
     def from_dict(cls, d: dict) -> "SimulationOptions":
+        """Options from a mapping (a YAML file); unknown keys and bad values raise ``ValueError``."""
         known = {f.name for f in dataclasses.fields(cls)}
         for k in d:
             if k not in known:
                 raise ValueError(f"unknown simulation option '{k}'")
         return cls(**d)
+
+
+def _check_number(name: str, value, integer: bool) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"option '{name}' must be a number, not {value!r}")
+    if not math.isfinite(value):
+        raise ValueError(f"option '{name}' must be finite, not {value}")
+    if integer and value != int(value):
+        raise ValueError(f"option '{name}' must be a whole number, not {value}")
+
+
+def _check_type(name: str, annotation: str, value) -> None:
+    """Check one option against its annotation (``float``, ``int``, ``bool``, ``str``, ``list``, ``| None``)."""
+    if value is None:
+        if "None" not in annotation:
+            raise ValueError(f"option '{name}' needs a value")
+        return
+    kind = annotation.split("|")[0].strip()
+    if kind in ("float", "int"):
+        _check_number(name, value, kind == "int")
+    elif kind == "bool":
+        if not isinstance(value, bool):
+            raise ValueError(f"option '{name}' must be true or false, not {value!r}")
+    elif kind == "str":
+        if not isinstance(value, str):
+            raise ValueError(f"option '{name}' must be a name, not {value!r}")
+    elif kind == "list":
+        if not isinstance(value, (list, tuple)):
+            raise ValueError(f"option '{name}' must be a list, not {value!r}")
+        for item in value:
+            for v in item if isinstance(item, (list, tuple)) else [item]:
+                _check_number(name, v, False)
 
 
 def _motion_for(profile: str, o: SimulationOptions, rng: np.random.Generator) -> Motion:
