@@ -41,9 +41,9 @@ def run(args: argparse.Namespace) -> int:
     for note in summary.notes:
         print(f"note: {note}")
     if summary.metrics:
-        from fusion_vo.cli.tables import print_metrics
+        from fusion_vo.cli.evaluate import show_metrics
 
-        print_metrics(summary.metrics)
+        show_metrics(summary.metrics, "the demo run")
     print(summary.line())
     print(f"recording generated in {t1 - t0:.1f} s, processed in {t2 - t1:.1f} s")
     for name in ("trajectories.png", "report.html"):

@@ -22,18 +22,23 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from rich.console import Console
-
     from fusion_vo.evaluation import evaluate_run
-    from fusion_vo.evaluation.table import POSE_COLUMNS, VELOCITY_COLUMNS, legs_table, metrics_table
 
     metrics = evaluate_run(args.run_dir, args.gt)
-    name = Path(args.run_dir).resolve().name
+    show_metrics(metrics, Path(args.run_dir).resolve().name)
+    print(f"report: {Path(args.run_dir) / 'report.html'}")
+    return 0
+
+
+def show_metrics(metrics: dict, name: str) -> None:
+    """Print the position, velocity and per-leg error tables of one run."""
+    from rich.console import Console
+
+    from fusion_vo.evaluation.table import POSE_COLUMNS, VELOCITY_COLUMNS, legs_table, metrics_table
+
     console = Console()
     console.print(metrics_table(metrics, f"Position errors of {name}", columns=POSE_COLUMNS))
     console.print(metrics_table(metrics, f"Velocity errors of {name}", columns=VELOCITY_COLUMNS))
     legs = legs_table(metrics)
     if legs is not None:
         console.print(legs)
-    console.print(f"report: {Path(args.run_dir) / 'report.html'}")
-    return 0

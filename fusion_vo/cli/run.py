@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config
@@ -52,8 +53,8 @@ def run(args: argparse.Namespace) -> int:
     for note in summary.notes:
         print(f"note: {note}")
     if summary.metrics:
-        from fusion_vo.cli.tables import print_metrics
+        from fusion_vo.cli.evaluate import show_metrics
 
-        print_metrics(summary.metrics)
+        show_metrics(summary.metrics, Path(args.out).resolve().name)
     print(summary.line())
     return 0
