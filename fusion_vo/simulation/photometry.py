@@ -57,5 +57,9 @@ class Photometric:
             sigma = np.float32(s.noise)
             if s.shot_noise > 0:
                 sigma = np.sqrt(sigma**2 + np.float32(s.shot_noise) * np.maximum(img, 0))
-            img = img + sigma * rng.standard_normal(img.shape, dtype=np.float32)
-        return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+            noise = rng.standard_normal(img.shape, dtype=np.float32)
+            noise *= sigma
+            img += noise
+        np.rint(img, out=img)
+        np.clip(img, 0, 255, out=img)
+        return img.astype(np.uint8)
