@@ -7,8 +7,8 @@ built on a standard generated recording (``datasets/generated.md``) regenerate e
 unless ``--seed`` or ``--quick`` changes it.
 
 Tables are printed as plain text: a title line, a header line, a rule of dashes and one line per row,
-columns separated by at least two spaces, so that they can be pasted into a README or read back by a
-program (:func:`parse_table`).
+columns separated by at least two spaces (cells never contain two spaces in a row), so that they can be
+pasted into a README or split back into cells by a program.
 """
 
 from __future__ import annotations
@@ -90,27 +90,6 @@ def format_table(title: str, headers: Sequence[str], rows: Sequence[Sequence[str
 
     rule = "  ".join("-" * w for w in widths)
     return "\n".join([title, line(cells[0]), rule] + [line(r) for r in cells[1:]])
-
-
-def parse_table(text: str, title: str) -> list[dict[str, str]]:
-    """Read back a table printed by :func:`format_table` from ``text`` (rows as header -> cell).
-
-    Cells are split at runs of two or more spaces, so a cell must not contain two spaces in a row.
-    """
-    import re
-
-    lines = text.splitlines()
-    start = next(i for i, s in enumerate(lines) if s.strip() == title.strip())
-    headers = re.split(r"\s{2,}", lines[start + 1].strip())
-    rows = []
-    for s in lines[start + 3:]:
-        if not s.strip():
-            break
-        cells = re.split(r"\s{2,}", s.strip())
-        if len(cells) != len(headers):
-            raise ValueError(f"row {s!r} has {len(cells)} cells, expected {len(headers)}")
-        rows.append(dict(zip(headers, cells)))
-    return rows
 
 
 def to_trajectory(poses: PoseData, name: str | None = None):

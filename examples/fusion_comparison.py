@@ -10,8 +10,8 @@ sensor:
 * a specular highlight fixed in the image, motion blur, 5 % dropped camera frames, exposure drift,
   vignetting, and 3 s of featureless floor where the camera sees nothing to track.
 
-This is the standard generated recording ``hard`` (``datasets/generated.md``): a 60 s random drive at up
-to 0.3 m/s and 0.9 rad/s.
+This is the standard generated recording ``hard`` (``datasets/generated.md``): a random drive with stops
+at up to 0.3 m/s and 0.9 rad/s.
 
 ``fusion_vo.pipeline.run_pipeline`` (what ``fusion-vo run SEQ --out DIR --backend all`` does) produces
 the raw visual track (``vo``), wheel dead reckoning (``wheel``), the EKF and its RTS smoothing
@@ -23,7 +23,11 @@ the raw visual track (``vo``), wheel dead reckoning (``wheel``), the EKF and its
 * heading: heading error at the end [deg];
 * RPE 1 m: RMS relative position error over 1 m of path, as % of 1 m.
 
-The run folders (trajectories, ``metrics.json``, plots, ``report.html``) stay in ``--out``.
+The run folders (trajectories, ``metrics.json``, plots, ``report.html``) stay in ``--out``. The same
+from the command line, for one frontend::
+
+    fusion-vo simulate hard --standard hard
+    fusion-vo run hard --out run-klt --frontend klt --backend all
 
 Run::
 
