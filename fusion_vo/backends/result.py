@@ -56,7 +56,7 @@ class FusionResult:
     notes : list[str]
         Plain-language remarks (camera lost from t=.. to .., streams that stopped, late data).
     timing : dict[str, float]
-        Wall-clock seconds per backend.
+        CPU seconds per backend (``gtsam_online_per_node_ms``: iSAM2 milliseconds per node).
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -68,7 +68,7 @@ class FusionResult:
 
     @property
     def seconds(self) -> dict[str, float]:
-        """Wall-clock seconds per backend (same as ``timing``)."""
+        """CPU seconds per backend (same as ``timing``)."""
         return self.timing
 
     def merge(self, other: "FusionResult") -> "FusionResult":
