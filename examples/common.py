@@ -31,6 +31,15 @@ from fusion_vo.simulation.standard import STANDARD
 
 FRONTENDS = ("klt", "features")
 
+#: simulator options of the lighting variants of thesis table 5.1: even light; a saturated specular
+#: highlight fixed in the image (a lamp's reflection on a glossy floor); a quarter of the exposure with
+#: three times the sensor noise
+LIGHTING = {
+    "good light": {},
+    "spotlights": {"highlight_radius": 40.0},
+    "dark": {"gain": 0.25, "noise": 3.0},
+}
+
 
 def example_parser(description: str) -> argparse.ArgumentParser:
     """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``)."""

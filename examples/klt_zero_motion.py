@@ -4,15 +4,18 @@ In the thesis neither the camera nor the floor moved, yet the tracked features' 
 jumped between frames (feature #90 "moved" from (156.99, 177.08) to (343.98, 123.02) pixels) and the
 algorithm reported large displacements. A correct tracker must see no motion beyond the image noise.
 
-Here the simulator renders a robot standing still over a photographed gravel floor (profile
-``standstill``: sensor noise, no motion). The script
+Here the simulator renders a robot standing still over a photographed gravel floor (the standard
+recording ``standstill``: 5 s, sensor noise, no motion), in the three lighting variants of
+``thesis_table_5_1.py`` (good light; a fixed specular highlight; dark: a quarter of the exposure and three
+times the noise). For each, the script
 
 1. tracks Shi-Tomasi corners of the first frame through every frame with OpenCV's pyramidal
-   Lucas-Kanade (``cv2.calcOpticalFlowPyrLK``, frame to frame, as the thesis did) and plots their x and
-   y positions over time (figures 3.3 and 3.4) into ``klt_zero_motion.png``;
-2. runs the project's visual odometry with both frontends and prints, per frontend, the estimated
-   motion per frame (mean and largest translation [mm], largest rotation [deg]) and the position the
-   visual track has drifted to at the end [mm]. Target: below 0.1 mm per frame.
+   Lucas-Kanade (``cv2.calcOpticalFlowPyrLK``, frame to frame, as the thesis did) and reports how far
+   they wander; for good light it plots their x and y positions over time (figures 3.3 and 3.4) and
+   the corners of the first and last frame (figure 3.5) into ``klt_zero_motion.png``;
+2. runs the project's visual odometry with both frontends and prints the estimated motion per frame
+   (mean and largest translation [mm], largest rotation [deg]) and the position the visual track has
+   drifted to at the end [mm]. Target: below 0.1 mm per frame.
 
 Run::
 
@@ -35,7 +38,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir  # noqa: E402
+from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, generate, output_dir  # noqa: E402
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
 
@@ -110,43 +113,50 @@ def plot_tracks(t: np.ndarray, xy: np.ndarray, alive: np.ndarray, first: np.ndar
     plt.close(fig)
 
 
+def motion_row(vo) -> list[str]:
+    """Frames, failures, motion per frame and end drift of a visual odometry run (table cells)."""
+    ok = [inc for inc in vo.increments if inc.ok]
+    moves = np.array([1e3 * math.hypot(inc.delta[0], inc.delta[1]) for inc in ok] or [np.nan])
+    turns = np.array([math.degrees(abs(inc.delta[2])) for inc in ok] or [np.nan])
+    end = vo.track.xyyaw[-1]
+    return [str(vo.n_frames), str(sum(vo.failures.values())), fmt(np.mean(moves), 5), fmt(np.max(moves), 5),
+            fmt(np.max(turns), 5), fmt(1e3 * math.hypot(end[0], end[1]), 4), fmt(math.degrees(abs(end[2])), 4),
+            "yes" if np.max(moves) < 0.1 else "no"]
+
+
 def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
     args = parser.parse_args(argv)
     options = {"duration": 2.0} if args.quick else {}
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
-        seq = generate("standstill", out / "standstill", args.seed, **options)
-        rec = Recording(seq)
-        print(f"generated {len(rec)} standstill frames in {time.perf_counter() - t_start:.1f} s")
-
-        t, xy, alive, first = track_corners(rec)
+        corner_rows, motion_rows = [], []
         png = out / "klt_zero_motion.png"
-        plot_tracks(t, xy, alive, first, png)
-        excursion = np.abs(xy[:, alive] - xy[:1, alive])
-        step = np.linalg.norm(np.diff(xy[:, alive], axis=0), axis=2)
+        for light, lighting in LIGHTING.items():
+            seq = generate("standstill", out / f"standstill-{light.replace(' ', '-')}", args.seed,
+                           **options, **lighting)
+            rec = Recording(seq)
+            t, xy, alive, first = track_corners(rec)
+            if not corner_rows:
+                plot_tracks(t, xy, alive, first, png)
+            excursion = np.abs(xy[:, alive] - xy[:1, alive])
+            step = np.linalg.norm(np.diff(xy[:, alive], axis=0), axis=2)
+            corner_rows.append([light, str(len(rec)), str(xy.shape[1]), str(int(alive.sum())),
+                                fmt(np.max(excursion[..., 0]), 4), fmt(np.max(excursion[..., 1]), 4),
+                                fmt(np.mean(step), 4), fmt(np.max(step), 4)])
+            for frontend in FRONTENDS:
+                vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend))
+                motion_rows.append([light, frontend] + motion_row(vo))
+            print(f"{light}: {len(rec)} frames done ({time.perf_counter() - t_start:.0f} s)", flush=True)
         print()
         print(format_table("Figures 3.3-3.5: corners tracked by OpenCV pyramidal LK while standing still",
-                           ["corners", "tracked to end", "max |dx| px", "max |dy| px", "mean step px",
-                            "max step px"],
-                           [[str(xy.shape[1]), str(int(alive.sum())), fmt(np.max(excursion[..., 0]), 4),
-                             fmt(np.max(excursion[..., 1]), 4), fmt(np.mean(step), 4), fmt(np.max(step), 4)]]))
-
-        rows = []
-        for frontend in FRONTENDS:
-            vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend))
-            ok = [inc for inc in vo.increments if inc.ok]
-            moves = np.array([1e3 * math.hypot(inc.delta[0], inc.delta[1]) for inc in ok]) if ok else np.array([np.nan])
-            turns = np.array([math.degrees(abs(inc.delta[2])) for inc in ok]) if ok else np.array([np.nan])
-            end = vo.track.xyyaw[-1]
-            rows.append([frontend, str(vo.n_frames), str(sum(vo.failures.values())), fmt(np.mean(moves), 5),
-                         fmt(np.max(moves), 5), fmt(np.max(turns), 5), fmt(1e3 * math.hypot(end[0], end[1]), 4),
-                         fmt(math.degrees(abs(end[2])), 4), "yes" if np.max(moves) < 0.1 else "no"])
+                           ["lighting", "frames", "corners", "tracked to end", "max |dx| px", "max |dy| px",
+                            "mean step px", "max step px"], corner_rows))
         print()
         print(format_table("Estimated motion per frame while standing still",
-                           ["frontend", "frames", "failed", "mean mm/frame", "max mm/frame", "max deg/frame",
-                            "end drift mm", "end yaw deg", "< 0.1 mm"], rows))
-        print(f"\nwrote {png}" if args.out is not None else "\n(pass --out DIR to keep the plot)")
+                           ["lighting", "frontend", "frames", "failed", "mean mm/frame", "max mm/frame",
+                            "max deg/frame", "end drift mm", "end yaw deg", "< 0.1 mm"], motion_rows))
+        print(f"\nwrote {png} (good light)" if args.out is not None else "\n(pass --out DIR to keep the plot)")
         print(f"total time {time.perf_counter() - t_start:.1f} s")
     return 0
 

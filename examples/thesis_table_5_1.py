@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from common import FRONTENDS, example_parser, fmt, format_table, output_dir, true_twist
+from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, output_dir, true_twist
 from fusion_vo.geometry import se2
 from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.measurements import PoseData
@@ -47,13 +47,6 @@ from fusion_vo.recording import Recording
 from fusion_vo.simulation import simulate
 
 TEXTURES = ("gravel", "grass", "brick")
-
-#: simulator options of each lighting variant
-LIGHTING = {
-    "good light": {},
-    "spotlights": {"highlight_radius": 40.0},
-    "dark": {"gain": 0.25, "noise": 3.0},
-}
 
 #: circle options of the full and the quick run (radius [m], turn-rate limit [rad/s])
 CIRCLE = {"radius": 0.4}
