@@ -4,13 +4,13 @@ In the thesis a robot drove one square of 90 cm sides on a corridor floor; the p
 straight legs (A-B, B-C, C-D, D-end) and each leg's estimated length compared with the actual 90 cm:
 1.51 %, 2.67 %, 4.3 % and 2.9 %.
 
-Here the simulator renders the same square (profile ``square``: a camera 0.1 m above a photographed
-gravel floor, 0.25 m ahead of the axle, turning in place at the corners) and visual odometry runs on it
+Here the simulator renders the same square (the standard recording ``square``: a camera 0.1 m above a
+photographed gravel floor, 0.25 m ahead of the axle, legs driven at up to 0.2 m/s, turns in place at
+the corners) and visual odometry runs on it
 with the KLT and the feature frontend. The legs are found in the ground truth at its turns and measured
 with :func:`fusion_vo.evaluation.metrics.detect_legs` and :func:`~fusion_vo.evaluation.metrics.leg_errors`:
 
-* start, end: ground-truth position [cm] at the leg's ends (the visual track is anchored at the
-  ground-truth start pose);
+* start, end: ground-truth position [cm] at the leg's ends;
 * actual: ground-truth straight-line length of the leg [cm];
 * estimated: the visual track's straight-line length between the same instants [cm];
 * error: ``|estimated - actual| / actual`` [%], the thesis' figure.
@@ -31,12 +31,13 @@ import math
 import time
 
 from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
-from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory
+from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory, leg_errors
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 
-#: thesis table 5.2: error of each 90 cm leg [%]
+#: thesis table 5.2: error of each 90 cm leg [%] and the leg's name there
 THESIS_LEG_ERROR_PCT = (1.51, 2.67, 4.3, 2.9)
+THESIS_LEG_NAMES = ("A-B", "B-C", "C-D", "D-end")
 
 
 def cm(xy) -> str:
@@ -60,9 +61,9 @@ def main(argv=None) -> int:
         leg_rows, run_rows = {}, []
         for frontend in FRONTENDS:
             vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend))
-            result = evaluate_trajectory(reference, to_trajectory(vo.track, frontend), legs)
-            fig = result.figures
-            for leg in fig["legs"]:
+            track = to_trajectory(vo.track, frontend)
+            fig = evaluate_trajectory(reference, track).figures
+            for leg in leg_errors(reference, track, legs):
                 leg_rows.setdefault(leg["leg"], {"leg": leg})[frontend] = leg
             run_rows.append([frontend, str(vo.n_frames), str(sum(vo.failures.values())),
                              fmt(fig["path_length_m"], 3), fmt(100 * fig["end_m"], 2), fmt(fig["end_pct"], 3),
@@ -72,7 +73,8 @@ def main(argv=None) -> int:
         for number in sorted(leg_rows):
             leg = leg_rows[number]["leg"]
             thesis = THESIS_LEG_ERROR_PCT[number - 1] if number <= len(THESIS_LEG_ERROR_PCT) else math.nan
-            row = [str(number), cm(leg["start"]), cm(leg["end"]), fmt(100 * leg["actual_m"], 1)]
+            label = f"{number} ({THESIS_LEG_NAMES[number - 1]})" if number <= len(THESIS_LEG_NAMES) else str(number)
+            row = [label, cm(leg["start"]), cm(leg["end"]), fmt(100 * leg["actual_m"], 1)]
             for frontend in FRONTENDS:
                 this = leg_rows[number].get(frontend)
                 row += [fmt(100 * this["estimated_m"], 2) if this else "-",

@@ -11,9 +11,9 @@ circle of 0.4 m radius at 0.15 m/s (profile ``circle``: the image moves along a 
 turns with it), in three lighting variants:
 
 * ``good light``: even illumination, normal exposure and sensor noise;
-* ``spotlights``: a bright specular highlight fixed in the image (the lamp's reflection on a glossy floor,
-  thesis 5.3.1) that does not move with the floor;
-* ``dark``: low exposure gain (a quarter of the light) with more sensor noise.
+* ``spotlights``: a saturated specular highlight of 40 px radius fixed in the image (a lamp's reflection
+  on a glossy floor, thesis 5.3.1) that does not move with the floor;
+* ``dark``: a quarter of the exposure gain with three times the sensor noise (3 grey levels).
 
 Both visual frontends (KLT tracking and feature matching) run on every recording. Per frame ``k`` with a
 motion estimate, the body velocity ``v_k = (vx, vy)`` [m/s] is the SE(2) logarithm of the frame's
@@ -41,8 +41,8 @@ import numpy as np
 
 from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, output_dir, true_twist
 from fusion_vo.geometry import se2
-from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.measurements import PoseData
+from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation import simulate
 
