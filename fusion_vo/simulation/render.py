@@ -75,8 +75,8 @@ class Renderer:
         self._pad = 0
         logger.debug("renderer ready: %dx%d rays", w, h)
 
-    def _texture_homography(self, H_world: np.ndarray, centre: np.ndarray) -> np.ndarray:
-        """Compose floor metres -> texture coordinates, removing whole periods under ``centre``."""
+    def _world_to_texture(self, centre: np.ndarray) -> np.ndarray:
+        """The affine map floor metres -> texture coordinates, removing whole periods under ``centre``."""
         fl = self.floor
         s = fl.texel_size
         shift = np.zeros(2)
@@ -84,10 +84,9 @@ class Renderer:
             th, tw = fl.texture.shape
             shift[0] = math.floor((centre[0] - fl.origin[0]) / s / tw) * tw
             shift[1] = math.floor((centre[1] - fl.origin[1]) / s / th) * th
-        A = np.array([[1.0 / s, 0.0, -fl.origin[0] / s - shift[0]],
-                      [0.0, 1.0 / s, -fl.origin[1] / s - shift[1]],
-                      [0.0, 0.0, 1.0]])
-        return A @ H_world
+        return np.array([[1.0 / s, 0.0, -fl.origin[0] / s - shift[0]],
+                         [0.0, 1.0 / s, -fl.origin[1] / s - shift[1]],
+                         [0.0, 0.0, 1.0]])
 
     def _padded_texture(self, H_tex: np.ndarray) -> tuple[np.ndarray, int] | None:
         """The repeating texture extended by whole-texel wrap-around margins that hold every sample.
@@ -133,56 +132,75 @@ class Renderer:
             Pixels whose ray misses the floor are ``floor.border_value``.
         """
         T_WS = np.asarray(T_WS, dtype=np.float64)
-        H = floor_homography(T_WS)
-        centre = T_WS[:2, 3]
-        H_tex = self._texture_homography(H, centre)
         fl = self.floor
-        q_z = self._border_rays @ T_WS[2, :3]
-        sees_horizon = bool(np.any(q_z > -1e-6))
-        padded = self._padded_texture(H_tex) if fl.wrap and not sees_horizon else None
+        H = floor_homography(T_WS)
+        sees_horizon = bool(np.any(self._border_rays @ T_WS[2, :3] > -1e-6))
+        rects = fl.featureless if sees_horizon else self._featureless_in_view(H) if fl.featureless else []
+        if rects == "covered":  # the whole view is flat grey floor
+            return np.full((self.camera.height, self.camera.width), fl.featureless_value, dtype=np.float32)
+        to_tex = self._world_to_texture(T_WS[:2, 3])
+        padded = self._padded_texture(to_tex @ H) if fl.wrap and not sees_horizon else None
         if padded is not None:
             texture, pad = padded
-            H_tex = np.array([[1.0, 0.0, pad], [0.0, 1.0, pad], [0.0, 0.0, 1.0]]) @ H_tex
-            maps = self._transform_rays(H_tex)
+            to_tex[:2, 2] += pad
+            maps = self._transform_rays(to_tex @ H)
             img = cv2.remap(texture, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         else:
-            maps = self._transform_rays(H_tex)
+            maps = self._transform_rays(to_tex @ H)
             # remap needs coordinates well inside the int16 range of its fixed-point maps
-            np.clip(maps, -30000.0, 30000.0, out=maps)
-            img = cv2.remap(fl.texture, maps, None, cv2.INTER_LINEAR,
+            img = cv2.remap(fl.texture, np.clip(maps, -30000.0, 30000.0), None, cv2.INTER_LINEAR,
                             borderMode=cv2.BORDER_WRAP if fl.wrap else cv2.BORDER_CONSTANT,
                             borderValue=float(fl.border_value))
+        for rect in rects:
+            self._paint_featureless(img, maps, to_tex, rect)
         if sees_horizon:  # some rays miss the floor: mask them
             miss = (self._rays.reshape(-1, 2) @ T_WS[2, :2].astype(np.float32) + np.float32(T_WS[2, 2])) > -1e-6
             img.reshape(-1)[miss] = fl.border_value
-        if fl.featureless:
-            self._paint_featureless(img, H, centre, fl.featureless)
         if self.supersample > 1:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
         return img
 
-    def _paint_featureless(self, img: np.ndarray, H: np.ndarray, centre: np.ndarray,
-                           rects: Sequence[Rectangle]) -> None:
+    def _featureless_in_view(self, H: np.ndarray) -> list[Rectangle] | str:
+        """The featureless rectangles that reach into the view, or ``"covered"`` if one fills all of it.
+
+        The floor points of the border rays bound the floor seen by the whole image: the view is the
+        image of the (sub-)pixel grid's outline, so its bounding box is that of its border.
+        """
         fl = self.floor
-        rel = np.array([[1.0, 0.0, -centre[0]], [0.0, 1.0, -centre[1]], [0.0, 0.0, 1.0]]) @ H
-        corners = self._border_rays @ rel.T
+        corners = self._border_rays @ H.T
         corners = corners[:, :2] / corners[:, 2:3]
-        lo = corners.min(axis=0) + centre - fl.edge
-        hi = corners.max(axis=0) + centre + fl.edge
-        xy = None
-        for rect in rects:
-            if rect.x_min > hi[0] or rect.x_max < lo[0] or rect.y_min > hi[1] or rect.y_max < lo[1]:
-                continue
-            if xy is None:
-                xy = self._transform_rays(rel)
-            x = xy[..., 0]
-            y = xy[..., 1]
-            inside = np.minimum(np.minimum(x - np.float32(rect.x_min - centre[0]),
-                                           np.float32(rect.x_max - centre[0]) - x),
-                                np.minimum(y - np.float32(rect.y_min - centre[1]),
-                                           np.float32(rect.y_max - centre[1]) - y))
-            alpha = np.clip(inside / np.float32(max(fl.edge, 1e-9)) + np.float32(0.5), 0.0, 1.0)
-            img += alpha * (np.float32(fl.featureless_value) - img)
+        lo = corners.min(axis=0)
+        hi = corners.max(axis=0)
+        near = []
+        for rect in fl.featureless:
+            if (rect.x_min + fl.edge / 2 <= lo[0] and hi[0] <= rect.x_max - fl.edge / 2
+                    and rect.y_min + fl.edge / 2 <= lo[1] and hi[1] <= rect.y_max - fl.edge / 2):
+                return "covered"  # every ray is at least edge / 2 inside: fully flat
+            if not (rect.x_min > hi[0] + fl.edge or rect.x_max < lo[0] - fl.edge
+                    or rect.y_min > hi[1] + fl.edge or rect.y_max < lo[1] - fl.edge):
+                near.append(rect)
+        return near
+
+    def _paint_featureless(self, img: np.ndarray, maps: np.ndarray, to_tex: np.ndarray, rect: Rectangle) -> None:
+        """Blend the flat grey of ``rect`` into ``img`` (at full ray resolution).
+
+        ``alpha = clip(d / edge + 1/2, 0, 1)`` with ``d`` the signed distance inside the rectangle
+        (its smallest distance to a side), computed from the texture coordinates ``maps`` of the rays,
+        which ``to_tex`` (a scaling and shift) relates to the floor.
+        """
+        fl = self.floor
+        k = to_tex[0, 0]  # texels per metre
+        u, v = cv2.split(maps)
+        inside = u - np.float32(k * rect.x_min + to_tex[0, 2])
+        np.minimum(inside, np.float32(k * rect.x_max + to_tex[0, 2]) - u, out=inside)
+        np.minimum(inside, v - np.float32(k * rect.y_min + to_tex[1, 2]), out=inside)
+        np.minimum(inside, np.float32(k * rect.y_max + to_tex[1, 2]) - v, out=inside)
+        inside *= np.float32(1.0 / (k * max(fl.edge, 1e-9)))
+        inside += np.float32(0.5)
+        np.clip(inside, 0.0, 1.0, out=inside)
+        flat = np.float32(fl.featureless_value) - img
+        flat *= inside
+        img += flat
 
     def radiance_blurred(self, poses: Sequence[np.ndarray]) -> np.ndarray:
         """The mean of :meth:`radiance` over several poses (motion blur over an exposure)."""
