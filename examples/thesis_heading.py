@@ -14,6 +14,8 @@ ground-truth start pose:
 * heading error: ``|estimated - turned|`` [deg], and as % of the turned angle (the thesis' figure);
 * end: end-point position error [cm] and as % of the path length.
 
+``heading.png`` shows the heading over time against ground truth (figure 5.13).
+
 Run::
 
     python examples/thesis_heading.py [--out DIR] [--seed N] [--quick]
@@ -29,7 +31,8 @@ import time
 import numpy as np
 
 from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
-from fusion_vo.evaluation.metrics import evaluate_trajectory
+from fusion_vo.evaluation.metrics import evaluate_trajectory, to_planar
+from fusion_vo.evaluation.plots import plot_heading
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
@@ -57,10 +60,12 @@ def main(argv=None) -> int:
         print(f"generated {len(rec)} frames of the circle in {time.perf_counter() - t_start:.1f} s: "
               f"the robot turns {turned:.2f} deg")
         reference = to_trajectory(gt, "groundtruth")
-        rows = []
+        rows, anchored = [], {}
         for frontend in FRONTENDS:
             vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend))
-            fig = evaluate_trajectory(reference, to_trajectory(vo.track, frontend)).figures
+            result = evaluate_trajectory(reference, to_trajectory(vo.track, frontend))
+            anchored[frontend] = result.anchored
+            fig = result.figures
             ref_turn = turned_between(gt, vo.track.t[0], vo.track.t[-1])
             est_yaw = np.unwrap(vo.track.xyyaw[:, 2])
             est_turn = math.degrees(abs(est_yaw[-1] - est_yaw[0]))
@@ -72,7 +77,9 @@ def main(argv=None) -> int:
         print(format_table("Heading after one full circle (thesis 5.2.1)",
                            ["frontend", "frames", "failed", "turned deg", "estimated deg", "error deg",
                             "error %", "end cm", "end %", "thesis %"], rows))
-        print(f"\ntotal time {time.perf_counter() - t_start:.1f} s")
+        png = plot_heading(to_planar(reference), anchored, out / "heading.png")
+        print(f"\nwrote {png}" if args.out is not None else "\n(pass --out DIR to keep the plot)")
+        print(f"total time {time.perf_counter() - t_start:.1f} s")
     return 0
 
 

@@ -16,7 +16,7 @@ with :func:`fusion_vo.evaluation.metrics.detect_legs` and :func:`~fusion_vo.eval
 * error: ``|estimated - actual| / actual`` [%], the thesis' figure.
 
 A second table gives the whole run: end-point error (anchored at the start) as % of the path length and
-the heading error at the end.
+the heading error at the end. ``square.png`` overlays the tracks on the ground truth (figures 5.8-5.9).
 
 Run::
 
@@ -31,7 +31,8 @@ import math
 import time
 
 from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
-from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory, leg_errors
+from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory, leg_errors, to_planar
+from fusion_vo.evaluation.plots import plot_trajectories
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 
@@ -58,11 +59,13 @@ def main(argv=None) -> int:
         t_sim = time.perf_counter() - t_start
         print(f"generated {len(rec)} frames of the square in {t_sim:.1f} s: {len(legs)} legs in the ground truth")
 
-        leg_rows, run_rows = {}, []
+        leg_rows, run_rows, anchored = {}, [], {}
         for frontend in FRONTENDS:
             vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend))
             track = to_trajectory(vo.track, frontend)
-            fig = evaluate_trajectory(reference, track).figures
+            result = evaluate_trajectory(reference, track)
+            anchored[frontend] = result.anchored
+            fig = result.figures
             for leg in leg_errors(reference, track, legs):
                 leg_rows.setdefault(leg["leg"], {"leg": leg})[frontend] = leg
             run_rows.append([frontend, str(vo.n_frames), str(sum(vo.failures.values())),
@@ -91,7 +94,10 @@ def main(argv=None) -> int:
         print(format_table("Whole square: end point and heading",
                            ["frontend", "frames", "failed", "path m", "end cm", "end %", "heading deg", "fps"],
                            run_rows))
-        print(f"\ntotal time {time.perf_counter() - t_start:.1f} s")
+        png = plot_trajectories(to_planar(reference), anchored, out / "square.png",
+                                title="The square of table 5.2 (thesis figures 5.8-5.9)")
+        print(f"\nwrote {png}" if args.out is not None else "\n(pass --out DIR to keep the plot)")
+        print(f"total time {time.perf_counter() - t_start:.1f} s")
     return 0
 
 

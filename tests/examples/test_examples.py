@@ -44,6 +44,11 @@ def table(text: str, title_start: str) -> list[dict[str, str]]:
     return rows
 
 
+def is_png(path: Path) -> bool:
+    """Whether ``path`` is a PNG file of a real figure (not an empty canvas)."""
+    return path.is_file() and path.stat().st_size > 10_000 and path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def number(cell: str) -> float:
     value = float(cell)
     assert math.isfinite(value), cell
@@ -77,6 +82,7 @@ def test_square(tmp_path):
     whole = table(text, "Whole square")
     assert [r["frontend"] for r in whole] == ["klt", "features"]
     assert all(number(r["end %"]) < 1.0 for r in whole), whole
+    assert is_png(tmp_path / "square.png")
 
 
 @pytest.mark.slow
@@ -87,6 +93,7 @@ def test_heading(tmp_path):
         assert number(r["turned deg"]) > 350.0
         assert number(r["error deg"]) < 1.0, r
         assert abs(number(r["error %"]) - 100 * number(r["error deg"]) / number(r["turned deg"])) < 1e-3
+    assert is_png(tmp_path / "heading.png")
 
 
 @pytest.mark.slow
@@ -104,8 +111,7 @@ def test_klt_zero_motion(tmp_path):
         assert int(r["failed"]) == 0, r
         assert number(r["max mm/frame"]) < 0.1, r
         assert r["< 0.1 mm"] == "yes"
-    png = tmp_path / "klt_zero_motion.png"
-    assert png.stat().st_size > 10_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert is_png(tmp_path / "klt_zero_motion.png")
 
 
 @pytest.mark.slow
