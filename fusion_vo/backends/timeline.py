@@ -262,7 +262,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
             for a, b in _uncovered_runs(T, ok, 0.5):
-                notes.append(f"{name} unavailable from t={a:.2f} to t={b:.2f} s")
+                notes.append(f"{name} unavailable from {_when(a, T)} to {_when(b, T)}")
     return iv
 
 
@@ -396,7 +396,12 @@ def _add_visual(iv: Intervals, visual: list[VisualIncrement], counts, notes) -> 
     for a, b in zip(iv.vis_i0, iv.vis_i1):
         covered[a:b] = True
     for a, b in _uncovered_runs(T, covered, 0.2):
-        notes.append(f"camera lost from t={a:.2f} to t={b:.2f} s; wheel and IMU carried the estimate")
+        notes.append(f"camera lost from {_when(a, T)} to {_when(b, T)}; the other sensors carried the estimate")
+
+
+def _when(t: float, T: np.ndarray) -> str:
+    """``t=...`` on the recording clock with the time since the first node."""
+    return f"t={t:.2f} ({t - T[0]:.2f} s in)"
 
 
 def _node_index(T: np.ndarray, t: float) -> int | None:

@@ -62,6 +62,7 @@ def test_camera_that_stops_leaves_wheels_and_gyro_in_charge():
     result = fuse(streams_of(s).select(["camera", "wheel", "imu"]), "all")
     lost = [n for n in result.notes if n.startswith("camera lost from t=")]
     assert len(lost) == 1 and 14.8 < float(lost[0].split("t=")[1].split()[0]) <= 15.0
+    assert "the other sensors carried the estimate" in lost[0]
     wheel_end, _ = position_errors(result.trajectories["wheel"], s.truth)
     for name in FUSED:
         t = result.trajectories[name].t

@@ -62,7 +62,7 @@ def test_a_stream_that_stops_is_reported_missing():
     iv = build_intervals(SensorStreams(visual=_visual(np.arange(0, 4, 0.05)), wheel=_wheel(np.linspace(0, 2, 101))),
                          FusionConfig())
     assert iv.counts["wheel"].missing > 30
-    assert any(n.startswith("wheel unavailable from t=2.00") for n in iv.notes)
+    assert any(n.startswith("wheel unavailable from t=2.00 (2.00 s in)") for n in iv.notes)
 
 
 def test_missing_or_unknown_sensor_is_an_input_error():
