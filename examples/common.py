@@ -45,12 +45,12 @@ def example_parser(description: str) -> argparse.ArgumentParser:
     """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``)."""
     parser = argparse.ArgumentParser(description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", type=Path, default=None,
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="folder for the generated recordings and outputs (default: a temporary folder, "
                              "removed at the end)")
     parser.add_argument("--quick", action="store_true",
                         help="shorter recordings and fewer variants (a fast smoke run)")
-    parser.add_argument("--seed", type=int, default=None,
+    parser.add_argument("--seed", type=int, default=None, metavar="N",
                         help="seed of the generated recordings (default: the standard recording's seed, or 0)")
     return parser
 

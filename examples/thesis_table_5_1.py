@@ -7,8 +7,8 @@ middle of the image, one dark. The spots (and, to a lesser degree, the dark imag
 
 Here the simulator renders the same experiment properly: a camera 0.1 m above a photographed floor
 (scikit-image's gravel, grass and brick, CC0), 0.25 m ahead of the axle of a robot that drives one
-circle of 0.4 m radius at 0.15 m/s (profile ``circle``: the image moves along a circular pattern and
-turns with it), in three lighting variants:
+circle of 0.4 m radius at 0.15 m/s (the standard recording ``circle``: the image moves along a circular
+pattern and turns with it), in three lighting variants:
 
 * ``good light``: even illumination, normal exposure and sensor noise;
 * ``spotlights``: a saturated specular highlight of 40 px radius fixed in the image (a lamp's reflection
@@ -39,17 +39,15 @@ import time
 
 import numpy as np
 
-from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, output_dir, true_twist
+from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, generate, output_dir, true_twist
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.simulation import simulate
 
 TEXTURES = ("gravel", "grass", "brick")
 
-#: circle options of the full and the quick run (radius [m], turn-rate limit [rad/s])
-CIRCLE = {"radius": 0.4}
+#: changes to the standard circle recording for the quick run: a small, fast circle rendered with fewer rays
 QUICK_CIRCLE = {"radius": 0.1, "max_turn_rate": 1.5, "supersample": 1}
 
 
@@ -82,15 +80,14 @@ def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
     args = parser.parse_args(argv)
     textures = TEXTURES[:1] if args.quick else TEXTURES
-    circle = QUICK_CIRCLE if args.quick else CIRCLE
+    circle = QUICK_CIRCLE if args.quick else {}
     rows = []
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
         for texture in textures:
             for light, options in LIGHTING.items():
                 name = f"{texture}-{light.replace(' ', '-')}"
-                seq = simulate(out / name, profile="circle", seed=args.seed or 0, texture=texture, **circle,
-                               **options)
+                seq = generate("circle", out / name, args.seed, texture=texture, **circle, **options)
                 rec = Recording(seq)
                 gt = rec.groundtruth()
                 for frontend in FRONTENDS:
