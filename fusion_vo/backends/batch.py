@@ -129,14 +129,15 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
     if "camera" in sensors and not present["camera"]:
         raise InputError("sensor 'camera' was asked for but there are no visual increments (no cam0/ frames?)",
                          getattr(recording, "path", None))
-    wants_wheel = "wheel" in sensors or "odom" in sensors
+    ticks = "wheel" in sensors and present["wheel"]
+    twist = ("wheel" in sensors or "odom" in sensors) and present["odom"] and not ticks
     height = config.camera_height
     if height is None and recording.has_camera():
         height = float(recording.camera.T_BS[2, 3])
     streams = SensorStreams(
         visual=list(increments) if "camera" in sensors else None,
-        wheel=recording.wheel() if "wheel" in sensors and present["wheel"] else None,
-        odom=recording.odom() if wants_wheel and present["odom"] and not ("wheel" in sensors and present["wheel"]) else None,
+        wheel=recording.wheel() if ticks else None,
+        odom=recording.odom() if twist else None,
         imu=recording.imu() if "imu" in sensors and present["imu"] else None,
         range=recording.range() if "range" in sensors and present["range"] else None,
         camera_height=height,

@@ -59,14 +59,15 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
-from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.wheel import arc_covariance, arc_increment
 
 logger = logging.getLogger(__name__)
+
 
 def X(k: int) -> int:
     return gtsam.symbol("x", k)
@@ -236,21 +237,23 @@ class GraphBuilder:
 
     # ------------------------------------------------------------------ per node
     def first_node(self, estimate: dict | None = None) -> NodeFactors:
+        """Priors on the first pose, bias and calibration (``estimate`` gives initial values)."""
         cfg = self.config
         est = estimate or {}
         nf = NodeFactors(0, float(self.t[0]))
         pose = gtsam.Pose2(*cfg.initial_pose)
         nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
         nf.values[X(0)] = pose
+        priors = []  # (key, prior mean, prior sigma, initial value)
         if self.iv.uses("gyro"):
-            nf.factors.append(gtsam.PriorFactorDouble(B(0), 0.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.imu.gyro_bias_sigma)))
-            nf.values[B(0)] = est.get("gyro_bias", 0.0)
+            priors.append((B(0), 0.0, cfg.imu.gyro_bias_sigma, est.get("gyro_bias", 0.0)))
         if self.kv_on:
-            nf.factors.append(gtsam.PriorFactorDouble(S(0), 1.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.visual_scale_sigma)))
-            nf.values[S(0)] = est.get("visual_scale", 1.0)
+            priors.append((S(0), 1.0, cfg.visual_scale_sigma, est.get("visual_scale", 1.0)))
         if self.kb_on:
-            nf.factors.append(gtsam.PriorFactorDouble(W(0), 1.0, gtsam.noiseModel.Isotropic.Sigma(1, cfg.wheel_base_sigma)))
-            nf.values[W(0)] = est.get("wheel_base_factor", 1.0)
+            priors.append((W(0), 1.0, cfg.wheel_base_sigma, est.get("wheel_base_factor", 1.0)))
+        for key, mean, sigma, guess in priors:
+            nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
+            nf.values[key] = guess
         self._unary(nf, 0)
         return nf
 
@@ -288,10 +291,11 @@ class GraphBuilder:
             translation, heading = m[:2], m[2] / est.get("wheel_base_factor", 1.0)
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
+            xs = X(self.offset + start)
             if self.kv_on:
-                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [X(self.offset + start), xj, S(c)], scaled_between_error(d)))
+                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [xs, xj, S(c)], scaled_between_error(d)))
             else:
-                nf.factors.append(gtsam.BetweenFactorPose2(X(self.offset + start), xj, gtsam.Pose2(*d), self.noise(cov)))
+                nf.factors.append(gtsam.BetweenFactorPose2(xs, xj, gtsam.Pose2(*d), self.noise(cov)))
             nf.sensors.append("camera")
             if start == n - 1:
                 translation = d[:2] / est.get("visual_scale", 1.0) if translation is None else translation
@@ -308,7 +312,8 @@ class GraphBuilder:
             # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
             e = cfg.ekf
             sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
-            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), gtsam.noiseModel.Diagonal.Sigmas(sig)))
+            nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), nm))
             nf.sensors.append("motion_model")
         nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
         nf.guess = guess
@@ -346,8 +351,15 @@ class GraphBuilder:
             walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
         for key, q, guess in walks:
             sigma = max(q * np.sqrt(span), 1e-7)
-            nf.factors.append(gtsam.BetweenFactorDouble(key(c - 1), key(c), 0.0, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
+            nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
+            nf.factors.append(gtsam.BetweenFactorDouble(key(c - 1), key(c), 0.0, nm))
             nf.values[key(c)] = guess
+
+    def segment_keys(self, n: int) -> list[int]:
+        """Bias and calibration variables of node ``n``'s segment."""
+        c = int(self.segment[n])
+        keys = [B(c)] if self.iv.uses("gyro") else []
+        return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else [])
 
     def _unary(self, nf: NodeFactors, n: int) -> None:
         iv, cfg = self.iv, self.config
@@ -357,13 +369,15 @@ class GraphBuilder:
             nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
             if self._robust is not None:
                 nm = gtsam.noiseModel.Robust.Create(self._robust, nm)
-            nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g])), nm))
+            heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
+            nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), heading, nm))
             nf.sensors.append("ahrs")
         if self.kv_on and iv.range_ok[g] and iv.camera_height:
             z = float(iv.range_height[g])
             h = float(iv.camera_height)
             sig = h * cfg.range.sigma / z**2
-            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), h / z, gtsam.noiseModel.Isotropic.Sigma(1, sig)))
+            nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
+            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), h / z, nm))
             nf.sensors.append("range")
 
     def count(self, nf: NodeFactors) -> None:
@@ -518,7 +532,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             prev_pose = new_values.atPose2(X(n))
             estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
         if lag is not None:
-            stamps = {key: nf.t for key in nf.values}
+            # the current segment's bias and calibration stay in the window while factors still use them
+            stamps = {key: nf.t for key in list(nf.values) + builder.segment_keys(n)}
             lag.update(new_graph, new_values, stamps)
             p = lag.calculateEstimatePose2(X(n))
             lag_poses[n] = (p.x(), p.y(), p.theta())

@@ -6,7 +6,9 @@ a documented noise model; the backends integrate them between their nodes.
 
 from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, gyro_yaw
 from fusion_vo.sensors.range import RangeNoise, camera_height
-from fusion_vo.sensors.wheel import WheelNoise, arc_covariance, arc_increment, ticks_to_travel, unwrap_ticks, wheel_track
+from fusion_vo.sensors.wheel import (
+    WheelNoise, arc_covariance, arc_increment, ticks_to_travel, unwrap_ticks, wheel_track,
+)
 
 __all__ = [
     "ImuNoise", "RangeNoise", "WheelNoise", "ahrs_heading", "arc_covariance", "arc_increment",

@@ -116,7 +116,10 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
     ang = np.interp(tw, tf, yaw)
     left = dist - ang * b_true / 2
     right = dist + ang * b_true / 2
-    slip = lambda d: np.concatenate([[0.0], np.cumsum(o.wheel_slip * np.sqrt(np.abs(np.diff(d))) * rng.standard_normal(len(d) - 1))])
+    def slip(d):
+        steps = o.wheel_slip * np.sqrt(np.abs(np.diff(d))) * rng.standard_normal(len(d) - 1)
+        return np.concatenate([[0.0], np.cumsum(steps)])
+
     left, right = left + slip(left), right + slip(right)
     per_tick = 2 * np.pi * o.wheel_radius / o.ticks_per_revolution
     start = 2**31 - 20000
@@ -125,8 +128,11 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
     if o.tick_jump_at is not None:
         j = int(np.searchsorted(tw, o.tick_jump_at))
         tl[j] += 500000  # a one-sample glitch
-    wrap = lambda n: ((n + 2**31) % 2**32) - 2**31
-    wheel = WheelData(tw, wrap(tl), wrap(tr), WheelConfig(o.ticks_per_revolution, o.wheel_radius, o.wheel_radius, o.wheel_base))
+    def wrap(n):
+        return ((n + 2**31) % 2**32) - 2**31
+
+    config = WheelConfig(o.ticks_per_revolution, o.wheel_radius, o.wheel_radius, o.wheel_base)
+    wheel = WheelData(tw, wrap(tl), wrap(tr), config)
 
     # gyro
     ti = np.arange(0.0, o.duration, 1.0 / o.imu_hz)

@@ -28,8 +28,9 @@ the turn, plus a lateral slip (the arc model assumes none)::
     σ_l² = k² |d_l| + σ_0²,   σ_r² = k² |d_r| + σ_0²
     Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ|)
 
-where ``J = ∂Δ/∂(d_l, d_r)``. The twist form used by the filter has ``Σ_u = J_u diag(σ_l², σ_r²) J_uᵀ / Δt²``
-with ``J_u = [[½, ½], [-1/b, 1/b]]`` on ``(v_x, ω)`` and the slip term on ``v_y``.
+where ``J = ∂Δ/∂(d_l, d_r)``. The twist form used by the filter has
+``Σ_u = J_u diag(σ_l², σ_r²) J_uᵀ / Δt²`` with ``J_u = [[½, ½], [-1/b, 1/b]]`` on ``(v_x, ω)`` and the slip
+term on ``v_y``.
 """
 
 from __future__ import annotations
