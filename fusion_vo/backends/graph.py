@@ -443,6 +443,27 @@ def _compose_with_covariance(a, cov_a, b, cov_b):
     return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
 
 
+def freeze_custom_factors(factors: list, lookup) -> list:
+    """Replace each :class:`gtsam.CustomFactor` by its linearisation at ``lookup(key)`` values.
+
+    Used for the incremental solvers: iSAM2 re-enters Python for a CustomFactor at a cost that grows
+    with the size of the whole problem, so the online estimators receive the (robustly weighted)
+    linearisation as a ``LinearContainerFactor`` instead. The factors are relative constraints between
+    close nodes, linearised at the prediction of the newest pose, where they are nearly linear; the
+    robust weight is fixed at that prediction, so a visual increment that disagrees with the wheels
+    and the gyro enters with a small weight. The batch solution keeps the nonlinear factors.
+    """
+    out = []
+    for f in factors:
+        if isinstance(f, gtsam.CustomFactor):
+            lin = gtsam.Values()
+            insert_values(lin, {key: lookup(key) for key in f.keys()})
+            out.append(gtsam.LinearContainerFactor(f.linearize(lin), lin))
+        else:
+            out.append(f)
+    return out
+
+
 def insert_values(values: gtsam.Values, items: dict) -> None:
     """Insert ``key -> Pose2 or float`` items into ``values``."""
     for key, v in items.items():
@@ -509,18 +530,21 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
         builder.count(nf)
-        new_graph = gtsam.NonlinearFactorGraph()
-        for f in nf.factors:
-            new_graph.add(f)
         new_values = gtsam.Values()
         insert_values(new_values, nf.values)
         if gcfg.batch:
-            graph.push_back(new_graph)
+            for f in nf.factors:
+                graph.add(f)
             values.insert(new_values)
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
+        t0 = time.process_time()
+        new_graph = gtsam.NonlinearFactorGraph()
+        if isam is not None or lag is not None:
+            lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
+            for f in freeze_custom_factors(nf.factors, lookup):
+                new_graph.add(f)
         if isam is not None:
-            t0 = time.process_time()
             isam.update(new_graph, new_values)
             pose = isam.calculateEstimatePose2(X(n))
             online_poses[n] = (pose.x(), pose.y(), pose.theta())
@@ -571,6 +595,21 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size(), iters)
     result.notes.extend(iv.notes)
     return result
+
+
+def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
+    """Current value of a key: new variables from ``new``, others from the incremental ``solver``."""
+
+    def value(key: int):
+        if key in new:
+            return new[key]
+        if key == X(prev):
+            return prev_pose
+        if chr(gtsam.Symbol(key).chr()) == "x":
+            return solver.calculateEstimatePose2(key)
+        return solver.calculateEstimateDouble(key)
+
+    return value
 
 
 def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_nodes: int) -> np.ndarray:

@@ -340,7 +340,8 @@ class _OnlineGraph:
 
     def _update(self, nf):
         g = self.gtsam.NonlinearFactorGraph()
-        for f in nf.factors:
+        lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, self.n - 1)
+        for f in self.graph.freeze_custom_factors(nf.factors, lookup):
             g.add(f)
         values = self.gtsam.Values()
         self.graph.insert_values(values, nf.values)
