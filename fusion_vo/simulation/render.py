@@ -11,9 +11,11 @@ which is a homography of ``r``::
     [X, Y, 1]^T ~ H r,   H = [t_x R_2 - t_z R_0;  t_y R_2 - t_z R_1;  R_2]     (R_i: row i of R)
 
 Composed with the floor-to-texture scaling (:mod:`fusion_vo.simulation.floor`), one transform of the
-precomputed rays gives the texture coordinates of every pixel (an affine ``cv2.transform`` when the
-camera is level, ``H``'s last row then being ``(0, 0, h22)``; ``cv2.perspectiveTransform`` otherwise)
-and one ``cv2.remap`` (bilinear) samples the texture. Supersampling renders ``s x s`` rays per pixel and
+precomputed rays gives the texture coordinates of every pixel and one ``cv2.remap`` (bilinear) samples
+the texture. The transform is affine in every frame: for a level camera ``H``'s last row is
+``(0, 0, h22)``; a tilted camera only turns about the vertical as the robot drives, so its rays are
+turned by the tilt and divided by their z once, after which the map is affine again
+(:meth:`Renderer._texture_maps`). Supersampling renders ``s x s`` rays per pixel and
 averages them (box filter), which removes aliasing and the phase-dependent blur of bilinear sampling.
 Motion blur averages renders at poses spread over the exposure time.
 
@@ -73,6 +75,7 @@ class Renderer:
         self._border_rays = np.column_stack([border, np.ones(len(border))])
         self._padded: np.ndarray | None = None
         self._pad = 0
+        self._turned_rays: tuple[np.ndarray, np.ndarray] | None = None  # (M, p) of a tilted camera
         logger.debug("renderer ready: %dx%d rays", w, h)
 
     def _world_to_texture(self, centre: np.ndarray) -> np.ndarray:
@@ -118,6 +121,34 @@ class Renderer:
             return cv2.transform(self._rays, H[:2] / H[2, 2])
         return cv2.perspectiveTransform(self._rays, H)
 
+    def _texture_maps(self, T_WS: np.ndarray, to_tex: np.ndarray) -> np.ndarray:
+        """Texture coordinates of every ray for camera pose ``T_WS`` (float32, shape of the ray grid).
+
+        A robot turns its camera about the vertical only: ``R_WS = R_z(psi) M`` with ``M`` the camera
+        rotation of the first pose rendered, whenever the last rows of ``R_WS`` and ``M`` agree. With
+        the rays turned by ``M`` and divided by their z once, ``p = (M r)_xy / (M r)_z``, the floor
+        point of every ray is affine in ``p``::
+
+            X_xy = t_xy - t_z R_z(psi)_2x2 p
+
+        so one affine ``cv2.transform`` replaces the perspective division in every frame.
+        """
+        R = T_WS[:3, :3]
+        t = T_WS[:3, 3]
+        if R[2, 0] == 0.0 and R[2, 1] == 0.0:  # a level camera: the map is affine in the rays themselves
+            return self._transform_rays(to_tex @ floor_homography(T_WS))
+        if self._turned_rays is None:
+            rays = np.concatenate([self._rays.astype(np.float64), np.ones(self._rays.shape[:2] + (1,))], axis=2)
+            m = rays @ R.T
+            self._turned_rays = (R.copy(), np.ascontiguousarray(m[..., :2] / m[..., 2:3], dtype=np.float32))
+        M, p = self._turned_rays
+        if not np.array_equal(R[2], M[2]):  # another tilt than the one prepared
+            return self._transform_rays(to_tex @ floor_homography(T_WS))
+        turn = (R @ M.T)[:2, :2]
+        A = to_tex[:2, :2] @ (-t[2] * turn)
+        b = to_tex[:2, :2] @ t[:2] + to_tex[:2, 2]
+        return cv2.transform(p, np.column_stack([A, b]))
+
     def radiance(self, T_WS: np.ndarray) -> np.ndarray:
         """The floor intensity seen through every pixel from pose ``T_WS`` (float32, no photometric effects).
 
@@ -143,10 +174,10 @@ class Renderer:
         if padded is not None:
             texture, pad = padded
             to_tex[:2, 2] += pad
-            maps = self._transform_rays(to_tex @ H)
+            maps = self._texture_maps(T_WS, to_tex)
             img = cv2.remap(texture, maps, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         else:
-            maps = self._transform_rays(to_tex @ H)
+            maps = self._texture_maps(T_WS, to_tex) if not sees_horizon else self._transform_rays(to_tex @ H)
             # remap needs coordinates well inside the int16 range of its fixed-point maps
             img = cv2.remap(fl.texture, np.clip(maps, -30000.0, 30000.0), None, cv2.INTER_LINEAR,
                             borderMode=cv2.BORDER_WRAP if fl.wrap else cv2.BORDER_CONSTANT,

@@ -43,8 +43,11 @@ def pose_showing_dot_at(camera: CameraModel, pixel: np.ndarray, yaw: float) -> n
 
 
 @pytest.mark.parametrize("supersample", [1, 2])
-def test_dot_appears_where_the_camera_model_projects_it(supersample):
-    camera = CameraModel(160, 120, 110.0, 112.0, 80.3, 58.7, "radial-tangential", [-0.12, 0.03, 0.001, -0.0008],
+@pytest.mark.parametrize("lens, coefficients", [("radial-tangential", [-0.12, 0.03, 0.001, -0.0008]),
+                                                ("equidistant", [0.05, -0.01, 0.002, 0.0])])
+def test_dot_appears_where_the_camera_model_projects_it(supersample, lens, coefficients):
+    # rendered without the lens distortion, the radial-tangential dot lands 1-3.5 px away
+    camera = CameraModel(160, 120, 110.0, 112.0, 80.3, 58.7, lens, coefficients,
                          camera_mount(0.25, 0.1, tilt_x_deg=4.0, tilt_y_deg=-3.0))
     texture = dot_texture()
     origin = (DOT[0] - 200 * TEXEL, DOT[1] - 200 * TEXEL)
