@@ -60,6 +60,8 @@ def main() -> None:
     poses = [[body_pose(0.015 * (i + k / 5), 0.002 * (i + k / 5), 0.02 * (i + k / 5)) @ T_BS
               for k in range(args.blur)] for i in range(args.frames)]
     png = [cv2.IMWRITE_PNG_COMPRESSION, args.png_compression]
+    if args.png_compression == 0:  # as the simulator: no row filters for stored (uncompressed) data
+        png += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
     render = photometry = write = 0.0
     with tempfile.TemporaryDirectory() as tmp:
         for i, frame_poses in enumerate(poses):
