@@ -9,7 +9,8 @@ measurement is applied at its own time:
 * wheel travel and the gyro's integrated angle are *cumulative* quantities ``L(t), R(t), Θ(t)``; they
   are interpolated linearly at the node times (exact for constant speed between two samples, whatever
   the rates and jitter), so each node interval gets ``d_l = L(T_{k+1}) - L(T_k)`` etc.;
-* AHRS headings and range readings are interpolated at the node times.
+* AHRS headings and range readings are interpolated at the node times; the AHRS's north is aligned
+  to the initial heading over its first quarter second (the gyro carries the heading within it).
 
 An interval is only given a wheel or gyro measurement when the stream covers it without a gap longer
 than ``max_gap`` and without a gated sample; otherwise the sensor is counted as missing there and the
@@ -324,7 +325,17 @@ def _add_imu(iv: Intervals, imu: ImuData, config: FusionConfig, counts) -> None:
         return
     yaw_t = np.interp(T, ht, yaw)
     if iv.heading_offset is None:
-        iv.heading_offset = float(yaw_t[int(np.argmax(ok_n))] - float(config.initial_pose[2]))
+        # AHRS north vs. the estimate's initial heading, averaged over the samples of the first
+        # quarter second with the gyro carrying the heading (one noisy sample would bias all headings)
+        first = int(np.argmax(ok_n))
+        window = (ht >= T[first] - 1e-9) & (ht <= T[first] + 0.25)
+        gyro_heading = np.zeros(int(window.sum()))
+        if len(gyro.t):
+            angle = cumulative_angle(gyro)
+            gyro_heading = np.interp(ht[window], gyro.t, angle) - np.interp(T[first], gyro.t, angle)
+        diffs = se2.wrap_angle(yaw[window] - yaw_t[first] - gyro_heading)
+        mean = float(np.mean(diffs)) if len(diffs) else 0.0
+        iv.heading_offset = float(yaw_t[first] + mean - float(config.initial_pose[2]))
     offset = iv.heading_offset
     iv.ahrs_ok = ok_n
     iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)

@@ -8,7 +8,8 @@ The robot drives a smooth path with twist ``v(t) = v₀ (1 + 0.3 sin(0.3 t))``,
 * cumulative signed-32-bit encoder counts at ``wheel_hz`` starting near the wrap point, from the true
   wheel travel of a robot whose real wheel base is ``wheel_base * wheel_base_factor``;
 * gyro samples at ``imu_hz`` with a constant bias and white noise;
-* optional range readings of the true camera height.
+* optional range readings of the true camera height;
+* optional AHRS orientations (true heading plus noise of ``ahrs_sigma``, an unknown heading offset).
 
 Faults can be injected: frames whose increment fails (status ``"lost"``), wrong visual matches, a gyro
 spike and an encoder jump.
@@ -47,6 +48,7 @@ class SyntheticOptions:
     gyro_noise_density: float = 2e-3
     camera_height: float = 0.1
     range_hz: float = 0.0
+    ahrs_sigma: float | None = None
     lost_frames: list = field(default_factory=list)
     wrong_matches: list = field(default_factory=list)
     gyro_spike_at: float | None = None
@@ -143,7 +145,11 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
     gyro = np.zeros((len(ti), 3))
     gyro[:, 2] = wz
     accel = np.tile([0.0, 0.0, 9.81], (len(ti), 1))
-    imu = ImuData(ti, gyro, accel, None, np.eye(4), o.imu_hz,
+    orientation = None
+    if o.ahrs_sigma is not None:
+        psi = np.interp(ti, tf, yaw) + 1.3 + o.ahrs_sigma * rng.standard_normal(len(ti))
+        orientation = np.stack([np.cos(psi / 2), np.zeros_like(psi), np.zeros_like(psi), np.sin(psi / 2)], axis=1)
+    imu = ImuData(ti, gyro, accel, orientation, np.eye(4), o.imu_hz,
                   {"gyroscope_noise_density": o.gyro_noise_density, "gyroscope_random_walk": 1e-5})
 
     rng_data = None

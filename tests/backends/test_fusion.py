@@ -81,3 +81,29 @@ def test_gtsam_options_keyframes_cauchy_and_fixed_lag():
     for name in ("gtsam", "gtsam_online", "gtsam_fixed_lag"):
         end, rms = position_errors(result.trajectories[name], s.truth)
         assert rms < wheel_rms, name
+
+
+def test_range_finder_fixes_the_visual_scale_without_wheels():
+    s = synthetic_streams(SyntheticOptions(duration=15.0, visual_scale=1.02, range_hz=10.0), seed=13)
+    result = fuse(streams_of(s).select(["camera", "imu", "range"]), "all")
+    for name in ("ekf", "gtsam"):
+        assert result.calibration[name]["camera_height"] == pytest.approx(s.camera_height / 1.02, rel=0.005), name
+        assert result.counts[name]["range"].used > 100
+    vis_end, _ = position_errors(visual_track(s.visual), s.truth)
+    assert position_errors(result.trajectories["gtsam"], s.truth)[0] < 0.5 * vis_end
+
+
+def test_ahrs_heading_bounds_the_heading_drift():
+    opts = dict(duration=30.0, gyro_bias=0.03, ahrs_sigma=0.01)
+    s = synthetic_streams(SyntheticOptions(**opts), seed=17)
+    cfg = FusionConfig.from_dict({"imu": {"gyro_bias_sigma": 0.001}})  # a prior that is wrong on purpose
+    with_ahrs = fuse(streams_of(s).select(["wheel", "imu"]), "all", cfg)
+    s.imu.orientation = None
+    without = fuse(streams_of(s).select(["wheel", "imu"]), "all", cfg)
+    truth_yaw = np.interp(with_ahrs.trajectories["ekf"].t, s.truth.t, s.truth.xyyaw[:, 2])
+    for name in ("ekf", "gtsam"):
+        err = np.abs(np.angle(np.exp(1j * (with_ahrs.trajectories[name].xyyaw[:, 2] - truth_yaw))))
+        err_without = np.abs(np.angle(np.exp(1j * (without.trajectories[name].xyyaw[:, 2] - truth_yaw))))
+        late = slice(len(err) // 2, None)  # once the bias has been learnt
+        assert err[late].max() < 0.025 and err_without[late].max() > 2 * err[late].max(), name
+        assert with_ahrs.counts[name]["ahrs"].used > 500
