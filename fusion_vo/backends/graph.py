@@ -41,6 +41,10 @@ Solvers
                       online (causal) trajectory;
 ``gtsam_fixed_lag``   ``IncrementalFixedLagSmoother`` with a lag of ``GraphConfig.fixed_lag`` seconds.
 
+The incremental solvers receive the two Python factors (visual with scale, wheel heading) linearised
+at the prediction of the newest pose (:func:`freeze_custom_factors`); the batch solution relinearises
+everything.
+
 The Levenberg–Marquardt loop is written out here on top of GTSAM's linearisation and sparse
 elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``): the wrapped
 optimizer re-enters Python for every :class:`gtsam.CustomFactor` at a cost that grows with the

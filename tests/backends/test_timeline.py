@@ -82,3 +82,36 @@ def test_config_rejects_unknown_keys_and_bad_values():
         FusionConfig.from_dict({"step_hz": "fast"})
     with pytest.raises(InputError, match="robust must be one of"):
         FusionConfig.from_dict({"graph": {"robust": "tukey"}})
+
+
+def test_a_pitched_body_projects_wheel_travel_onto_the_floor_plan():
+    from fusion_vo.backends import fuse
+    from fusion_vo.measurements import ImuData
+
+    t = np.linspace(0, 4, 201)
+    pitch = 0.3
+    q = np.tile([np.cos(pitch / 2), 0.0, np.sin(pitch / 2), 0.0], (len(t), 1))  # nose down/up by 0.3 rad
+    imu = ImuData(t, np.zeros((len(t), 3)), np.tile([0, 0, 9.81], (len(t), 1)), q)
+    streams = SensorStreams(wheel=_wheel(t), imu=imu)
+    iv = build_intervals(streams, FusionConfig())
+    np.testing.assert_allclose(iv.cx, np.cos(pitch), atol=1e-9)
+    result = fuse(streams, "all")
+    for name in ("ekf", "gtsam"):
+        end = result.trajectories[name].xyyaw[-1]
+        np.testing.assert_allclose(end[:2], [0.5 * 4 * np.cos(pitch), 0.0], atol=5e-3)
+    # the wheel dead reckoning knows nothing of the slope
+    assert abs(result.trajectories["wheel"].xyyaw[-1, 0] - 2.0) < 2 * PER_TICK
+
+
+def test_odometry_twist_stands_in_for_encoder_ticks():
+    from fusion_vo.backends import fuse
+    from fusion_vo.measurements import TwistData
+
+    t = np.linspace(0, 3, 151)
+    odom = TwistData(t, np.full(151, 0.4), np.zeros(151), np.full(151, 0.2))
+    streams = SensorStreams(odom=odom).select(["odom"])
+    result = fuse(streams, "ekf")
+    end = result.trajectories["ekf"].xyyaw[-1]
+    R = 0.4 / 0.2
+    np.testing.assert_allclose(end, [R * np.sin(0.6), R * (1 - np.cos(0.6)), 0.6], atol=5e-3)
+    assert set(fuse(streams, "none").trajectories) == {"wheel"}
