@@ -22,12 +22,13 @@ Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)
                e = W_c d_ψ - m_ψ                                σ² = Σ_ψψ         (CustomFactor)
     gyro       e = d_ψ - (Θ_ij - B_c Δt)                       σ² = σ_g² Δt      (exact linear factor)
     walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ)   (τ: segment length)
+    heading    PriorFactorPose2 on X_k with the AHRS yaw (x, y left free)
+    range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
+    motion     weak constant-twist BetweenFactorPose2 where no sensor measures an interval's translation
 
 The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
 the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
 attenuates the estimate like a regression on a noisy regressor.
-    heading    PriorFactorPose2 on X_k with the AHRS yaw (x, y left free)
-    range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
 
 Without self-calibration the visual factor is a plain ``BetweenFactorPose2``. Visual, wheel-translation
 and AHRS factors use a robust noise model (Huber or Cauchy, ``GraphConfig.robust``), so a wrong
