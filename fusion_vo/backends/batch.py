@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 
@@ -66,7 +67,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         ``ekf``, ``ekf_smoothed``, ``gtsam``, ``gtsam_online`` (and ``gtsam_fixed_lag``) trajectories,
         plus ``wheel`` dead reckoning when wheels are used.
     """
-    config = as_config(config)
+    config = with_recorded_noise(as_config(config), streams)
     names = backend_names(backend)
     result = FusionResult()
     wheel = wheel_dead_reckoning(streams, config)
@@ -86,6 +87,13 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     for note in result.notes:
         logger.info("%s", note)
     return result
+
+
+def with_recorded_noise(config: FusionConfig, streams: SensorStreams) -> FusionConfig:
+    """``config`` with the gyro noise keys of the recording's ``imu0/sensor.yaml`` where given."""
+    if streams.imu is None or not streams.imu.noise:
+        return config
+    return dataclasses.replace(config, imu=config.imu.with_sensor_keys(streams.imu.noise))
 
 
 def run_backends(recording, visual=None, sensors=None, backend="all", options=None) -> FusionResult:

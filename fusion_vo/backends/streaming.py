@@ -25,6 +25,7 @@ causally and is counted as late.
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -82,6 +83,8 @@ class StreamingFusion:
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         self.config = as_config(config)
+        if imu_noise:
+            self.config = dataclasses.replace(self.config, imu=self.config.imu.with_sensor_keys(imu_noise))
         self.backend = backend
         self.sensors = list(sensors)
         bad = [s for s in self.sensors if s not in SENSORS]

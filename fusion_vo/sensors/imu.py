@@ -41,7 +41,10 @@ logger = logging.getLogger(__name__)
 
 @dataclass
 class ImuNoise:
-    """Gyro noise, bias and gating parameters (defaults used when ``imu0/sensor.yaml`` lacks the keys).
+    """Gyro noise, bias and gating parameters.
+
+    ``gyroscope_noise_density`` and ``gyroscope_random_walk`` of the recording's ``imu0/sensor.yaml``
+    replace the two noise defaults below when present (:meth:`with_sensor_keys`).
 
     Attributes
     ----------
