@@ -51,6 +51,7 @@ class RunSummary:
     backend_seconds: dict = field(default_factory=dict)
     trajectories: list = field(default_factory=list)
     notes: list = field(default_factory=list)
+    fusion: dict = field(default_factory=dict)
     metrics: dict | None = None
 
     def line(self) -> str:
@@ -151,17 +152,20 @@ def run_pipeline(
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
                   summary: RunSummary) -> dict[str, PoseData]:
     """Wheel dead reckoning and the fused backends; returns name -> trajectory."""
-    try:
-        from fusion_vo import backends
-    except ImportError:  # pragma: no cover - backends are part of the package
-        log.warning("fusion backends are not available in this installation")
-        return {}
-    if not hasattr(backends, "run_backends"):
-        return {}
+    from fusion_vo import backends
+
     t0 = time.perf_counter()
     result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
-    summary.backend_seconds.update(getattr(result, "seconds", {}) or {})
-    summary.notes.extend(getattr(result, "notes", []) or [])
+    summary.backend_seconds.update(result.seconds or {})
+    summary.notes.extend(result.notes or [])
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration")}
+    shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
+             "gyro_bias": "gyro bias {:.5f} rad/s"}
+    for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates
+        estimates = (result.calibration or {}).get(backend_name) or {}
+        text = ", ".join(fmt.format(estimates[k]) for k, fmt in shown.items() if isinstance(estimates.get(k), float))
+        if text:
+            summary.notes.append(f"{backend_name} self-calibration: {text} (all estimates in summary.json)")
     log.debug("backends took %.2f s", time.perf_counter() - t0)
     return dict(result.trajectories)
 
