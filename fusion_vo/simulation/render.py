@@ -101,10 +101,10 @@ class Renderer:
         then wraps).
         """
         th, tw = self.floor.texture.shape
-        edge = self._border_rays @ H_tex.T
-        edge = edge[:, :2] / edge[:, 2:3]
-        lo = edge.min(axis=0)
-        hi = edge.max(axis=0)
+        outline = self._border_rays @ H_tex.T
+        outline = outline[:, :2] / outline[:, 2:3]
+        lo = outline.min(axis=0)
+        hi = outline.max(axis=0)
         need = max(-lo[0], -lo[1], hi[0] - (tw - 1), hi[1] - (th - 1), 0.0) + 2.0
         if need > max(tw, th) // 2:
             return None
@@ -166,8 +166,8 @@ class Renderer:
         fl = self.floor
         H = floor_homography(T_WS)
         sees_horizon = bool(np.any(self._border_rays @ T_WS[2, :3] > -1e-6))
-        rects = fl.featureless if sees_horizon else self._featureless_in_view(H) if fl.featureless else []
-        if rects == "covered":  # the whole view is flat grey floor
+        covered, rects = self._featureless_in_view(H, sees_horizon)
+        if covered:  # the whole view is flat grey floor
             return np.full((self.camera.height, self.camera.width), fl.featureless_value, dtype=np.float32)
         to_tex = self._world_to_texture(T_WS[:2, 3])
         padded = self._padded_texture(to_tex @ H) if fl.wrap and not sees_horizon else None
@@ -191,13 +191,15 @@ class Renderer:
             img = cv2.resize(img, (self.camera.width, self.camera.height), interpolation=cv2.INTER_AREA)
         return img
 
-    def _featureless_in_view(self, H: np.ndarray) -> list[Rectangle] | str:
-        """The featureless rectangles that reach into the view, or ``"covered"`` if one fills all of it.
+    def _featureless_in_view(self, H: np.ndarray, sees_horizon: bool) -> tuple[bool, list[Rectangle]]:
+        """Whether one featureless rectangle fills the whole view, and those that reach into it.
 
         The floor points of the border rays bound the floor seen by the whole image: the view is the
         image of the (sub-)pixel grid's outline, so its bounding box is that of its border.
         """
         fl = self.floor
+        if not fl.featureless or sees_horizon:  # no bound on a view that reaches the horizon
+            return False, list(fl.featureless)
         corners = self._border_rays @ H.T
         corners = corners[:, :2] / corners[:, 2:3]
         lo = corners.min(axis=0)
@@ -206,11 +208,11 @@ class Renderer:
         for rect in fl.featureless:
             if (rect.x_min + fl.edge / 2 <= lo[0] and hi[0] <= rect.x_max - fl.edge / 2
                     and rect.y_min + fl.edge / 2 <= lo[1] and hi[1] <= rect.y_max - fl.edge / 2):
-                return "covered"  # every ray is at least edge / 2 inside: fully flat
+                return True, [rect]  # every ray is at least edge / 2 inside: fully flat
             if not (rect.x_min > hi[0] + fl.edge or rect.x_max < lo[0] - fl.edge
                     or rect.y_min > hi[1] + fl.edge or rect.y_max < lo[1] - fl.edge):
                 near.append(rect)
-        return near
+        return False, near
 
     def _paint_featureless(self, img: np.ndarray, maps: np.ndarray, to_tex: np.ndarray, rect: Rectangle) -> None:
         """Blend the flat grey of ``rect`` into ``img`` (at full ray resolution).
