@@ -39,6 +39,29 @@ def register(sub) -> None:
     q.add_argument("--out", required=True, metavar="FILE", help="cam0/sensor.yaml to write with the measured T_BS")
     q.set_defaults(func=run_floor)
 
+    q = kinds.add_parser("height", help="camera height from a straight drive of known length (thesis method)")
+    q.add_argument("seq", metavar="SEQ", help="recording of a straight drive")
+    q.add_argument("--distance", required=True, type=float, metavar="M", help="driven distance [m]")
+    q.add_argument("--distance-std", type=float, default=0.001, metavar="M",
+                   help="standard deviation of the measured distance [m] (default 0.001)")
+    q.add_argument("--allow-failed", action="store_true", help="accept frames the frontend failed on")
+    q.add_argument("--out", metavar="FILE", help="cam0/sensor.yaml to write with the measured height")
+    q.set_defaults(func=run_height)
+
+    q = kinds.add_parser("lever-arm", help="camera offset from the rotation centre from a turn in place")
+    q.add_argument("seq", metavar="SEQ", help="recording of a turn in place about the axle")
+    q.add_argument("--height-std", type=float, default=0.0, metavar="M",
+                   help="standard deviation of the camera height [m], propagated into the result")
+    q.add_argument("--out", metavar="FILE", help="cam0/sensor.yaml to write with the measured lever arm")
+    q.set_defaults(func=run_lever_arm)
+
+    q = kinds.add_parser("wheels", help="wheel radii and wheel base (ground truth or UMBmark)")
+    q.add_argument("seq", metavar="SEQ", help="recording with wheel0 and ground truth (the clockwise square for UMBmark)")
+    q.add_argument("--method", choices=["groundtruth", "umbmark"], default="groundtruth")
+    q.add_argument("--ccw", metavar="SEQ2", help="the counter-clockwise square (UMBmark)")
+    q.add_argument("--out", metavar="FILE", help="wheel0/sensor.yaml to write")
+    q.set_defaults(func=run_wheels)
+
     p.set_defaults(func=lambda args: p.print_help() or 2)
 
 
@@ -91,4 +114,68 @@ def run_floor(args: argparse.Namespace) -> int:
     camera.T_BS = result.T_BS
     camera.write_yaml(args.out)
     print(f"-> {args.out}")
+    return 0
+
+
+def _camera_out(recording, out: str | None, change) -> None:
+    if not out:
+        return
+    camera = recording.camera
+    change(camera)
+    camera.write_yaml(out)
+    print(f"-> {out}")
+
+
+def run_height(args: argparse.Namespace) -> int:
+    from fusion_vo.calibration.height import height_from_drive
+    from fusion_vo.calibration.motion import frame_motions
+    from fusion_vo.recording import Recording
+
+    rec = Recording(args.seq)
+    motions, geometry = frame_motions(rec)
+    r = height_from_drive(motions, geometry.rectifier.f, geometry.rectifier.c, args.distance, args.distance_std,
+                          args.allow_failed)
+    print(r.summary())
+
+    def set_height(cam):
+        cam.T_BS[2, 3] = r.height
+
+    _camera_out(rec, args.out, set_height)
+    return 0
+
+
+def run_lever_arm(args: argparse.Namespace) -> int:
+    from fusion_vo.calibration.lever_arm import lever_arm_from_turn
+    from fusion_vo.calibration.motion import frame_motions
+    from fusion_vo.recording import Recording
+
+    rec = Recording(args.seq)
+    motions, geometry = frame_motions(rec)
+    r = lever_arm_from_turn([m.matrix for m in motions if m.ok], geometry, args.height_std)
+    print(r.summary())
+
+    def set_lever(cam):
+        cam.T_BS[:2, 3] = r.lever_arm
+
+    _camera_out(rec, args.out, set_lever)
+    return 0
+
+
+def run_wheels(args: argparse.Namespace) -> int:
+    from fusion_vo.calibration.wheels import umbmark, wheels_from_groundtruth
+    from fusion_vo.geometry.camera import write_yaml_atomic
+    from fusion_vo.recording import Recording
+
+    rec = Recording(args.seq)
+    if args.method == "umbmark":
+        if not args.ccw:
+            raise InputError("UMBmark needs the counter-clockwise square too (--ccw SEQ2)")
+        other = Recording(args.ccw)
+        r = umbmark((rec.wheel(), rec.groundtruth()), (other.wheel(), other.groundtruth()))
+    else:
+        r = wheels_from_groundtruth(rec.wheel(), rec.groundtruth())
+    print(r.summary())
+    if args.out:
+        write_yaml_atomic(args.out, r.to_dict())
+        print(f"-> {args.out}")
     return 0
