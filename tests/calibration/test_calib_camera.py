@@ -113,3 +113,22 @@ def test_floor_board_height_and_tilt(tilt, origin, yaw):
     assert abs(r.values["tilt_x_deg"] - tilt[0]) < 0.2 and abs(r.values["tilt_y_deg"] - tilt[1]) < 0.2
     assert abs(r.values["lever_x"] - 0.25) < 0.002 and abs(r.values["lever_y"] - 0.004) < 0.002
     assert 0 < r.std["height"] < 0.001 and 0 < r.std["tilt_deg"] < 0.5
+
+
+def test_cli_floor_writes_mount(tmp_path, capsys):
+    T_BS = camera_mount(0.25, 0.1, 2.0, 1.0)
+    cam = CameraModel(640, 360, 420.0, 420.0, 319.5, 179.5, "radial-tangential", np.array([-0.03, 0.01, 0.0005, -0.0003]), T_BS)
+    board = Board(9, 6, 0.008)
+    image = tmp_path / "floor.png"
+    cv2.imwrite(str(image), render_views(cam, board, [floor_view_pose(T_BS, (0.23, 0.032), math.radians(-90))],
+                                         np.random.default_rng(3))[0])
+    intrinsics = tmp_path / "intrinsics.yaml"
+    CameraModel(640, 360, 420.0, 420.0, 319.5, 179.5, "radial-tangential", cam.distortion).write_yaml(intrinsics)
+    out = tmp_path / "sensor.yaml"
+    args = ["calibrate", "floor", str(image), "--intrinsics", str(intrinsics), "--board", "9x6", "--square", "0.008",
+            "--board-origin", "0.23,0.032", "--board-yaw", "-90", "--out", str(out)]
+    assert main(args) == 0
+    assert "Height" in capsys.readouterr().out
+    assert np.allclose(CameraModel.from_yaml(out).T_BS, T_BS, atol=2e-3)
+    assert main(args[:-4] + ["--board-origin", "0.23", "--out", str(out)]) == 2
+    assert "--board-origin" in capsys.readouterr().err
