@@ -159,7 +159,7 @@ def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = N
     if streams.wheel is not None and len(streams.wheel) > 1:
         travel = ticks_to_travel(streams.wheel, config.wheel)
     elif streams.odom is not None and len(streams.odom) > 1:
-        travel = twist_to_travel(streams.odom, max_speed=config.wheel.max_speed)
+        travel = twist_to_travel(streams.odom, max_speed=config.odom.max_speed)
     else:
         return None
     return wheel_track(travel, config.initial_pose)

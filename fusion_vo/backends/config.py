@@ -14,7 +14,7 @@ from typing import Any
 from fusion_vo.errors import InputError
 from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
-from fusion_vo.sensors.wheel import WheelNoise
+from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
 
 ROBUST_KERNELS = ("huber", "cauchy", "none")
 
@@ -106,6 +106,9 @@ class FusionConfig:
         Estimate the visual scale (camera height) and the wheel base (default True).
     visual_scale_sigma, wheel_base_sigma : float
         Prior standard deviations of those two factors around 1 (default 0.05 each).
+    odom_base_sigma : float
+        Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
+        (default 0.3: the effective track width of a skid-steered base is known only roughly).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller).
@@ -113,8 +116,9 @@ class FusionConfig:
         ``(x, y, yaw)`` of the first node (default the origin).
     initial_velocity_sigma : float
         Prior standard deviation of the initial speed [m/s] (default 0.5).
-    wheel, imu, range : WheelNoise, ImuNoise, RangeNoise
-        Sensor noise models.
+    wheel, odom, imu, range : WheelNoise, WheelNoise, ImuNoise, RangeNoise
+        Sensor noise models (``wheel`` for encoder ticks, ``odom`` for an odometry twist, see
+        :func:`~fusion_vo.sensors.wheel.odom_twist_noise`).
     ekf, graph : EkfConfig, GraphConfig
         Backend options.
     """
@@ -126,10 +130,12 @@ class FusionConfig:
     self_calibration: bool = True
     visual_scale_sigma: float = 0.05
     wheel_base_sigma: float = 0.05
+    odom_base_sigma: float = 0.3
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
     wheel: WheelNoise = field(default_factory=WheelNoise)
+    odom: WheelNoise = field(default_factory=odom_twist_noise)
     imu: ImuNoise = field(default_factory=ImuNoise)
     range: RangeNoise = field(default_factory=RangeNoise)
     ekf: EkfConfig = field(default_factory=EkfConfig)
@@ -152,6 +158,10 @@ class FusionConfig:
             raise InputError("graph.keyframe_every must be at least 1")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
+
+    def wheel_model(self, twist: bool) -> tuple[WheelNoise, float]:
+        """Noise model and wheel-base prior sigma of encoder ticks (``twist=False``) or an odometry twist."""
+        return (self.odom, self.odom_base_sigma) if twist else (self.wheel, self.wheel_base_sigma)
 
     @classmethod
     def from_dict(cls, data: dict | None, path=None) -> "FusionConfig":

@@ -76,10 +76,15 @@ class PlanarEkf:
     config : FusionConfig
     camera_height : float, optional
         Height the visual increments assume (for range updates).
+    estimate_visual_scale, estimate_wheel_base : bool, optional
+        Whether the two calibration factors are observable (default: as ``config.self_calibration``).
+    twist : bool
+        The wheels are an odometry twist (``config.odom`` noise and ``odom_base_sigma`` prior).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
-                 estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None):
+                 estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
+                 twist: bool = False):
         self.config = config
         calib = config.self_calibration
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
@@ -96,7 +101,7 @@ class PlanarEkf:
         var[W] = 0.5**2
         var[BG] = config.imu.gyro_bias_sigma**2
         var[KV] = config.visual_scale_sigma**2 if self.estimate_kv else _FROZEN_VAR
-        var[KB] = config.wheel_base_sigma**2 if self.estimate_kb else _FROZEN_VAR
+        var[KB] = config.wheel_model(twist)[1] ** 2 if self.estimate_kb else _FROZEN_VAR
         self.kf.P = np.diag(var)
         self._thresholds = {m: float(chi2.ppf(config.gate_probability, m)) if config.gate_probability < 1 else np.inf
                             for m in (1, 2, 3)}
@@ -237,7 +242,7 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
             vis_ok[free] = True
         out["visual"] = (vis_ok, vis_u, vis_R)
     if iv.uses("wheel"):
-        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel)
+        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0])
         u[:, 0] *= iv.cx
         out["wheel"] = (iv.wheel_ok, u, R)
     if iv.uses("gyro"):
@@ -271,7 +276,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
-    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok)
+    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt

@@ -209,7 +209,7 @@ class GraphBuilder:
             self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
             self._wheel_inc[:, 0] *= iv.cx
             self._wheel_inc[:, 1] *= iv.cy
-            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel)
+            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0])
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -255,7 +255,7 @@ class GraphBuilder:
         if self.kv_on:
             priors.append((S(0), 1.0, cfg.visual_scale_sigma, est.get("visual_scale", 1.0)))
         if self.kb_on:
-            priors.append((W(0), 1.0, cfg.wheel_base_sigma, est.get("wheel_base_factor", 1.0)))
+            priors.append((W(0), 1.0, cfg.wheel_model(self.iv.twist)[1], est.get("wheel_base_factor", 1.0)))
         for key, mean, sigma, guess in priors:
             nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
             nf.values[key] = guess
@@ -341,7 +341,7 @@ class GraphBuilder:
         m = arc_increment(dl, dr, iv.wheel_base)[0]
         m[0] *= iv.cx[g0:g1].mean()
         m[1] *= iv.cy[g0:g1].mean()
-        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel)[0]
+        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0])[0]
 
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict) -> None:
         """Bias and calibration variables of segment ``c``, tied to segment ``c-1`` by random walks."""
@@ -425,7 +425,7 @@ def initial_calibration(iv: Intervals) -> dict:
             ok = np.isfinite(heading) & np.isfinite(wheel_yaw)
             if ok.sum() > 10 and np.sum(heading[ok] ** 2) > 1e-6:
                 out["wheel_base_factor"] = float(np.sum(wheel_yaw[ok] * heading[ok]) / np.sum(heading[ok] ** 2))
-    for key, lo, hi in (("visual_scale", 0.8, 1.25), ("wheel_base_factor", 0.8, 1.25)):
+    for key, lo, hi in (("visual_scale", 0.8, 1.25), ("wheel_base_factor", 0.5, 2.0)):
         if key in out and not lo < out[key] < hi:
             del out[key]
     return out

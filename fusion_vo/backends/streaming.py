@@ -293,7 +293,8 @@ class StreamingFusion:
         self._t_nodes.append(t)
         kv, kb = self._calibration_flags()
         if self.backend == "ekf":
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb)
+            twist = "odom" in self.sensors and "wheel" not in self.sensors
+            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._graph = _OnlineGraph(cfg, t, (kv, kb))

@@ -129,6 +129,8 @@ class Intervals:
         Camera outages and streams that stop.
     heading_offset : float or None
         AHRS heading minus the estimate's heading (from the first AHRS sample).
+    twist : bool
+        The wheel travel comes from an odometry twist (``odom0``) rather than encoder ticks.
     """
 
     t: np.ndarray
@@ -152,6 +154,7 @@ class Intervals:
     counts: dict[str, SensorCount] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     heading_offset: float | None = None
+    twist: bool = False
 
     @property
     def n_steps(self) -> int:
@@ -287,7 +290,8 @@ def _add_wheel(iv: Intervals, streams: SensorStreams, config: FusionConfig, coun
         travel: WheelTravel = ticks_to_travel(data, config.wheel)
     else:
         data = _ordered_fields(streams.odom, ("vx", "vy", "wz"), count)
-        travel = twist_to_travel(data, max_speed=config.wheel.max_speed)
+        travel = twist_to_travel(data, max_speed=config.odom.max_speed)
+        iv.twist = True
     count.gated += travel.n_gated
     T = iv.t
     ok = _coverage(travel.t, ~travel.valid, T, config.max_gap)

@@ -26,11 +26,23 @@ Each wheel's travel has variance growing with the distance it rolled, plus a ski
 the turn, plus a lateral slip (the arc model assumes none)::
 
     σ_l² = k² |d_l| + σ_0²,   σ_r² = k² |d_r| + σ_0²
-    Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ|)
+    Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ| + (s_ψ θ)²)
 
-where ``J = ∂Δ/∂(d_l, d_r)``. The twist form used by the filter has
+where ``J = ∂Δ/∂(d_l, d_r)``. The last term is the skid of a skid-steered (or tracked) robot: its
+wheels slide sideways whenever it turns, the instantaneous centres of rotation of the tracks move
+with the ground and the load, and the heading change the wheels report is off by a fraction
+``s_ψ`` of itself (tens of percent, varying from turn to turn). Its systematic part is the
+wheel-base factor that the backends can estimate; ``s_ψ`` is the part that varies. The twist form used by the filter has
 ``Σ_u = J_u diag(σ_l², σ_r²) J_uᵀ / Δt²`` with ``J_u = [[½, ½], [-1/b, 1/b]]`` on ``(v_x, ω)`` and the slip
 term on ``v_y``.
+
+Odometry twist
+--------------
+A robot's own odometry (``odom0``, e.g. ``nav_msgs/Odometry`` of a skid-steer controller) is a twist
+``(v_x, ω)`` sampled at a few Hz and held between samples. It has no tick quantisation but a
+velocity error: ``σ_v`` [m/s] held over a sample period ``τ`` gives a travel floor ``σ_v τ``; its
+heading comes from wheel speeds through a nominal track width, so on a skid-steered base it is
+only known to a scale (:func:`odom_twist_noise` documents the defaults).
 """
 
 from __future__ import annotations
@@ -65,6 +77,9 @@ class WheelNoise:
         Lateral slip [m^½]: variance ``k_lateral² |d|`` on the sideways motion (default 0.005).
     k_yaw : float
         Skid on turning [rad^½]: variance ``k_yaw² |θ|`` on the heading change (default 0.01).
+    yaw_scale : float
+        ``s_ψ``: relative standard deviation of the reported heading change (skid steering;
+        default 0, an ideal differential drive).
     max_speed : float
         Wheel speeds above this [m/s] are encoder glitches and gated (default 5).
     """
@@ -73,7 +88,24 @@ class WheelNoise:
     sigma_floor: float = 1e-4
     k_lateral: float = 0.005
     k_yaw: float = 0.01
+    yaw_scale: float = 0.0
     max_speed: float = 5.0
+
+
+def odom_twist_noise() -> WheelNoise:
+    """Noise of an odometry twist stream (``odom0``) of a wheeled base that may be skid-steered.
+
+    * ``k = 0.02`` m^½: 2 % of the distance after one metre — a rolling radius that changes with tyre
+      pressure and load, which a twist from someone else's controller does not calibrate;
+    * ``sigma_floor = 1e-3`` m: a velocity error of about 0.01 m/s held over a 0.1 s sample (the
+      twist is a rate, not a count; an exactly zero twist does not pin the robot to 0.1 mm);
+    * ``k_lateral = 0.02`` m^½: sideways sliding of skid-steered wheels;
+    * ``k_yaw = 0.02`` rad^½ and ``yaw_scale = 0.3``: the heading change computed from the wheel
+      speeds with a nominal track width is off by tens of percent on a skid-steered base (the
+      effective track width of skid steering is typically 1.2 to 2 times the geometric one and
+      changes with the ground), so a gyro, when present, must dominate the heading.
+    """
+    return WheelNoise(k=0.02, sigma_floor=1e-3, k_lateral=0.02, k_yaw=0.02, yaw_scale=0.3)
 
 
 @dataclass
@@ -211,7 +243,7 @@ def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise) -> np.
     vl, vr = travel_variances(dl, dr, noise)
     cov = vl[:, None, None] * jl[:, :, None] * jl[:, None, :] + vr[:, None, None] * jr[:, :, None] * jr[:, None, :]
     cov[:, 1, 1] += noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
-    cov[:, 2, 2] += noise.k_yaw**2 * np.abs(th)
+    cov[:, 2, 2] += noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2
     return cov
 
 
@@ -229,7 +261,7 @@ def arc_twist(d_left, d_right, dt, wheel_base: float, noise: WheelNoise) -> tupl
     vl, vr = travel_variances(dl, dr, noise)
     cov = np.zeros((len(d), 3, 3))
     cov[:, 0, 0] = 0.25 * (vl + vr)
-    cov[:, 2, 2] = (vl + vr) / wheel_base**2 + noise.k_yaw**2 * np.abs(th)
+    cov[:, 2, 2] = (vl + vr) / wheel_base**2 + noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2
     cov[:, 0, 2] = cov[:, 2, 0] = 0.5 * (vr - vl) / wheel_base
     cov[:, 1, 1] = noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
     return u, cov / (dt**2)[:, None, None]
@@ -257,6 +289,6 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
 
 
 __all__ = [
-    "WheelNoise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
+    "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "wheel_track",
 ]

@@ -1,0 +1,39 @@
+"""Streams of a skid-steered robot reporting an odometry twist, with a gyro and an optional AHRS.
+
+The robot drives, stops for a long while, and drives again. Its own odometry reports the yaw rate
+``yaw_scale`` times the true one (skid steering), the gyro has a constant bias, and the AHRS heading
+(when asked for) drifts away from the truth by ``ahrs_drift`` [rad] over the recording.
+"""
+
+import numpy as np
+
+from fusion_vo.measurements import ImuData, PoseData, TwistData
+
+
+def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004, ahrs_drift=None, seed=0):
+    """``(odom, imu, truth)``: twist at 10 Hz, IMU at 30 Hz, truth at 100 Hz."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, duration, 0.01)
+    moving = (t < stop[0]) | (t >= stop[1])
+    v = np.where(moving, 0.8, 0.0)
+    w = np.where(moving, 0.25 * np.sin(0.15 * t) + 0.1, 0.0)
+    yaw = np.concatenate([[0.0], np.cumsum(0.5 * (w[1:] + w[:-1]) * 0.01)])
+    x = np.concatenate([[0.0], np.cumsum(v[:-1] * np.cos(yaw[:-1] + 0.5 * w[:-1] * 0.01) * 0.01)])
+    y = np.concatenate([[0.0], np.cumsum(v[:-1] * np.sin(yaw[:-1] + 0.5 * w[:-1] * 0.01) * 0.01)])
+    truth = PoseData(t, np.stack([x, y, yaw], axis=1))
+    to = t[::10]
+    moving_o = (to < stop[0]) | (to >= stop[1])
+    noise_v = np.where(moving_o, 0.01 * rng.standard_normal(len(to)), 0.0)
+    noise_w = np.where(moving_o, 0.02 * rng.standard_normal(len(to)), 0.0)
+    odom = TwistData(to, v[::10] + noise_v, np.zeros(len(to)), yaw_scale * w[::10] + noise_w)
+    ti = np.arange(0.0, duration, 1.0 / 30.0)
+    gz = np.interp(ti, t, w) + gyro_bias + 0.003 * np.sqrt(30.0) * rng.standard_normal(len(ti))
+    gyro = np.zeros((len(ti), 3))
+    gyro[:, 2] = gz
+    accel = np.tile([0.0, 0.0, 9.81], (len(ti), 1))
+    orientation = None
+    if ahrs_drift is not None:
+        heading = np.interp(ti, t, yaw) + ahrs_drift * ti / duration + 0.01 * rng.standard_normal(len(ti))
+        orientation = np.stack([np.cos(heading / 2), 0 * ti, 0 * ti, np.sin(heading / 2)], axis=1)
+    imu = ImuData(ti, gyro, accel, orientation, noise={"gyroscope_noise_density": 0.003})
+    return odom, imu, truth

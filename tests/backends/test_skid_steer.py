@@ -1,0 +1,52 @@
+"""A skid-steered robot's odometry twist fused with a gyro: standstill, yaw-rate scale, drifting AHRS."""
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.backends.timeline import build_intervals
+from fusion_vo.sensors.wheel import WheelNoise, arc_covariance, odom_twist_noise
+
+from backend_synth import position_errors
+from husky_like import husky_like
+
+
+def test_zero_twist_does_not_pin_the_pose():
+    """A twist of exactly zero is a velocity reading: its travel keeps the velocity-noise floor."""
+    cov = arc_covariance(np.zeros(1), np.zeros(1), 0.5, odom_twist_noise())[0]
+    assert np.all(np.sqrt(np.diag(cov))[:2] >= 7e-4)
+    assert np.sqrt(cov[2, 2]) >= 2e-3
+    turning = arc_covariance(np.array([0.0]), np.array([0.05]), 0.5, odom_twist_noise())[0]
+    assert np.sqrt(turning[2, 2]) >= 0.3 * 0.1  # yaw_scale of the 0.1 rad turn
+
+
+def test_twist_streams_use_the_odometry_noise_model():
+    odom, imu, _ = husky_like(duration=10.0, stop=(3.0, 6.0))
+    iv = build_intervals(SensorStreams(odom=odom, imu=imu), FusionConfig())
+    assert iv.twist
+    assert FusionConfig().wheel_model(True)[0] == odom_twist_noise()
+    assert FusionConfig().wheel_model(False)[0] == WheelNoise()
+
+
+@pytest.mark.parametrize("self_calibration", [False, True])
+def test_long_standstill_with_gyro_only(self_calibration):
+    """Every node of a long stop is solvable by iSAM2 and the batch smoother (no AHRS)."""
+    odom, imu, truth = husky_like(duration=120.0, stop=(20.0, 100.0), yaw_scale=1.0)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "gtsam", FusionConfig(self_calibration=self_calibration))
+    for name in ("gtsam", "gtsam_online"):
+        end, rms = position_errors(result.trajectories[name], truth)
+        assert end < 0.5 and rms < 0.3, (name, end, rms)
+    assert abs(result.calibration["gtsam"]["gyro_bias"] - 0.004) < 5e-4
+
+
+def test_yaw_rate_scale_of_the_twist_is_calibrated():
+    """Odometry reporting 75 % of the true turn rate: the wheel-base factor absorbs it, the gyro keeps the heading."""
+    odom, imu, truth = husky_like(yaw_scale=0.75)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    wheel_end, _ = position_errors(result.trajectories["wheel"], truth)
+    assert wheel_end > 10.0
+    for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
+        end, rms = position_errors(result.trajectories[name], truth)
+        assert end < 0.5 and rms < 0.3, (name, end, rms)
+    for name in ("ekf", "gtsam"):
+        assert abs(result.calibration[name]["wheel_base_factor"] - 0.75) < 0.05
