@@ -82,6 +82,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
                         t = int(tf)
                     except ValueError:
                         raise InputError(f"timestamp '{parts[0].strip()}' is not an integer number of nanoseconds", path, lineno) from None
+                _check_range(t, path, lineno)
                 try:
                     vals = [float(p) for p in parts[1 : n + 1]]
                 except ValueError:
@@ -123,6 +124,7 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
                     t = int(parts[0])
                 except ValueError:
                     raise InputError(f"timestamp '{parts[0]}' is not an integer number of nanoseconds", path, lineno) from None
+                _check_range(t, path, lineno)
                 if ts and t <= ts[-1]:
                     kind = "duplicate" if t == ts[-1] else "decreasing"
                     raise InputError(f"{kind} timestamp {t} (previous row has {ts[-1]}); timestamps must increase", path, lineno)
@@ -134,6 +136,12 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", path) from None
     return np.array(ts, dtype=np.int64), names, np.array(lines, dtype=np.int64)
+
+
+def _check_range(t: int, path: Path, lineno: int) -> int:
+    if not 0 <= t < 2**63:
+        raise InputError(f"timestamp {t} is outside the range of nanosecond timestamps (0 to 2^63)", path, lineno)
+    return t
 
 
 def _is_float(s: str) -> bool:

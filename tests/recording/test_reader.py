@@ -106,6 +106,8 @@ def test_bad_frames_are_reported_not_raised(tmp_path):
         ("imu0/data.csv", "#h\n5,0,0,0,0,0,9.8\n3,0,0,0,0,0,9.8\n", "decreasing timestamp", 3),
         ("imu0/data.csv", "#h\n1,0,0,0,0,0,9.8\n2,0,0,0,0,0\n", "found 6 fields", 3),
         ("imu0/data.csv", "#h\n1,0,0,abc,0,0,9.8\n", "'abc' is not a number", 2),
+        ("imu0/data.csv", "#h\n99999999999999999999,0,0,0,0,0,9.8\n", "outside the range", 2),
+        ("cam0/data.csv", "#h\n-5,a.png\n", "outside the range", 2),
         ("wheel0/data.csv", "#h\n1,10,12\n2,1.5,12\n", "integers", 3),
         ("cam0/data.csv", "#h\n1,a.png\n1,b.png\n", "duplicate timestamp", 3),
         ("state_groundtruth_estimate0/data.csv", "#h\n1,0,0,0,2,0,0,0\n", "norm", 2),
@@ -162,3 +164,25 @@ def test_cli_errors_are_one_line_with_status_2(tmp_path, capsys):
     assert "c.yaml" in capsys.readouterr().err
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--sensors", "camera,lidar"]) == 2
     assert "unknown sensor 'lidar'" in capsys.readouterr().err
+
+
+def test_video_instead_of_png_frames(tmp_path):
+    root = make_recording(tmp_path / "seq", n_frames=5)
+    pngs = sorted((root / "cam0" / "data").iterdir())
+    images = [cv2.imread(str(p), cv2.IMREAD_GRAYSCALE) for p in pngs]
+    writer = cv2.VideoWriter(str(root / "cam0" / "video.avi"), cv2.VideoWriter_fourcc(*"FFV1"), 20, (64, 48), False)
+    if not writer.isOpened():
+        pytest.skip("this OpenCV build has no lossless video encoder")
+    for img in images:
+        writer.write(img)
+    writer.release()
+    for p in pngs:
+        p.unlink()
+    (root / "cam0" / "data").rmdir()
+    frames = list(Recording(root).frames())
+    assert len(frames) == 5 and all(f.error is None for f in frames)
+    assert all(np.array_equal(f.image, img) for f, img in zip(frames, images))
+    lines = (root / "cam0" / "data.csv").read_text().splitlines()
+    (root / "cam0" / "data.csv").write_text("\n".join(lines + [f"{T0 + 10**9},extra.png"]) + "\n")
+    with pytest.raises(InputError, match="video ends after 5 frames"):
+        list(Recording(root).frames())
