@@ -109,6 +109,8 @@ def run_pipeline(
     rec = Recording(sequence)
     sensors = resolve_sensors(rec, config)
     out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise InputError("the output must be a folder, but a file of that name exists", out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     summary = RunSummary(sequence=str(rec.path), out_dir=str(out_dir))
     staging = Path(tempfile.mkdtemp(prefix=".fusion-vo-partial-", dir=out_dir))

@@ -67,6 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"fusion-vo: error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # permissions, a full disk, a path that cannot be created
+        where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
+        print(f"fusion-vo: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("fusion-vo: interrupted", file=sys.stderr)
         return 130

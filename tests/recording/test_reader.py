@@ -164,6 +164,9 @@ def test_cli_errors_are_one_line_with_status_2(tmp_path, capsys):
     assert "c.yaml" in capsys.readouterr().err
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--sensors", "camera,lidar"]) == 2
     assert "unknown sensor 'lidar'" in capsys.readouterr().err
+    (tmp_path / "afile").write_text("")
+    assert main(["run", str(root), "--out", str(tmp_path / "afile")]) == 2
+    assert "must be a folder" in capsys.readouterr().err
 
 
 def test_video_instead_of_png_frames(tmp_path):
