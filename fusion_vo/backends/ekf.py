@@ -1,12 +1,13 @@
 """Extended Kalman filter over the node grid, with a Rauch–Tung–Striebel smoother.
 
-State (9)::
+State (10)::
 
-    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b]
+    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b,  o_ψ]
 
 pose of B in W, the body twist ``u = (v_x, v_y, ω)`` *averaged over the interval that ends at the node*,
 the gyro bias, the visual scale ``k_v = h_configured / h_true`` and the wheel-base factor
-``k_b = b_true / b_configured`` (the last two are frozen when self-calibration is off).
+``k_b = b_true / b_configured`` (these two are frozen when self-calibration is off), and the offset
+``o_ψ`` of the AHRS heading from the true heading.
 
 Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
 
@@ -14,6 +15,7 @@ Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
     pose_{k+1} = pose_k ⊕ exp(u_{k+1} Δt)  (SE(2) exponential: exact circular arc)
     b_{k+1} = b_k + w_b,                   w_b ~ N(0, σ_bw² Δt)
     k_{k+1} = k_k + w_k,                   w_k ~ N(0, q_k² Δt)
+    o_{k+1} = o_k + w_o,                   w_o ~ N(0, σ_ow² Δt)
 
 ``F = ∂f/∂x`` and ``Q = G diag(...) Gᵀ`` with ``G = ∂f/∂w`` (the twist noise also moves the pose).
 
@@ -23,7 +25,7 @@ Measurements over an interval (all sensors are integrated onto the same interval
     visual   z = log(Δ_vis)/Δt          h = (k_v v_x, k_v v_y, ω)       R = Σ_vis / Δt²
     wheel    z = (d, 0, θ)/Δt (arc)     h = (v_x, v_y, k_b ω)           R = wheel noise model / Δt²
     gyro     z = Θ/Δt (mean rate)       h = ω + b_g                     R = σ_g² / Δt
-    AHRS     z = ψ_AHRS (at the node)   h = ψ                           R = σ_ψ²
+    AHRS     z = ψ_AHRS (at the node)   h = ψ + o_ψ                     R = σ_ψ²
     range    z = h_range (at the node)  h = h_c / k_v                   R = σ_r²
 
 Because the twist state *is* the interval's mean twist and the pose at the node is a function of the
@@ -33,6 +35,14 @@ state. High-rate wheel and gyro samples are therefore integrated over each camer
 update; for a twist that is constant within the interval this is statistically equivalent to applying
 every sample. A visual increment spanning ``n`` intervals (after dropped frames) is applied as its mean
 twist to each of them with covariance ``n R`` (the same total information).
+
+The AHRS heading is not trusted as an absolute truth: an AHRS's heading comes from its
+magnetometer, which the robot's own motors, steel in the floor and nearby vehicles bend by degrees
+to tens of degrees, slowly, as the robot moves. Its offset ``o_ψ`` (zero at the start, where the
+AHRS north is aligned) is therefore a random walk of ``ImuNoise.ahrs_offset_walk`` [rad/√s]: the
+AHRS corrects the heading's slow drift on time scales where the gyro's bias walk exceeds the
+offset's walk, while a heading that strays from the gyro's integral moves ``o_ψ`` instead of the
+pose. A sudden jump (a magnetic disturbance) fails the gate and is counted.
 
 Each sensor's block is gated before the update by its squared Mahalanobis distance
 ``yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``; rejections are counted.
@@ -63,8 +73,8 @@ from fusion_vo.sensors.wheel import arc_twist
 
 logger = logging.getLogger(__name__)
 
-PX, PY, YAW, VX, VY, W, BG, KV, KB = range(9)
-DIM = 9
+PX, PY, YAW, VX, VY, W, BG, KV, KB, AO = range(10)
+DIM = 10
 _FROZEN_VAR = 1e-12
 
 
@@ -102,6 +112,8 @@ class PlanarEkf:
         var[BG] = config.imu.gyro_bias_sigma**2
         var[KV] = config.visual_scale_sigma**2 if self.estimate_kv else _FROZEN_VAR
         var[KB] = config.wheel_model(twist)[1] ** 2 if self.estimate_kb else _FROZEN_VAR
+        # the AHRS north is aligned to the initial heading; no offset walk: an AHRS trusted as absolute
+        var[AO] = config.imu.ahrs_yaw_sigma**2 if config.imu.ahrs_offset_walk > 0 else _FROZEN_VAR
         self.kf.P = np.diag(var)
         self._thresholds = {m: float(chi2.ppf(config.gate_probability, m)) if config.gate_probability < 1 else np.inf
                             for m in (1, 2, 3)}
@@ -143,6 +155,7 @@ class PlanarEkf:
         qv = np.array([cfg.ekf.accel_sigma, cfg.ekf.lateral_accel_sigma, cfg.ekf.yaw_accel_sigma]) ** 2 * dt
         Q = (G * qv) @ G.T
         Q[BG, BG] += cfg.imu.gyro_random_walk**2 * dt
+        Q[AO, AO] += cfg.imu.ahrs_offset_walk**2 * dt
         if self.estimate_kv:
             Q[KV, KV] += cfg.ekf.scale_random_walk**2 * dt
         if self.estimate_kb:
@@ -181,8 +194,8 @@ class PlanarEkf:
 
     def heading_block(self, yaw: float, var: float):
         H = np.zeros((1, DIM))
-        H[0, YAW] = 1.0
-        return "ahrs", np.array([yaw]), np.array([self.x[YAW]]), H, np.array([[var]]), 0
+        H[0, YAW] = H[0, AO] = 1.0
+        return "ahrs", np.array([yaw]), np.array([self.x[YAW] + self.x[AO]]), H, np.array([[var]]), 0
 
     def range_block(self, height: float, var: float):
         kv = self.x[KV]

@@ -5,7 +5,8 @@ Variables
 ``X_k``  Pose2 of B in W at node (keyframe) ``k`` — the camera frames, or every ``keyframe_every``-th;
 ``B_c``  gyro bias [rad/s] of segment ``c``;
 ``S_c``  visual scale ``k_v = h_configured / h_true`` of segment ``c`` (only with self-calibration);
-``W_c``  wheel-base factor ``k_b = b_true / b_configured`` of segment ``c`` (only with self-calibration).
+``W_c``  wheel-base factor ``k_b = b_true / b_configured`` of segment ``c`` (only with self-calibration);
+``O_c``  offset [rad] of the AHRS heading from the true heading in segment ``c`` (whenever the IMU is used).
 
 A segment is ``GraphConfig.calibration_interval`` seconds of nodes (default 1 s); node ``k`` uses the
 variables of its segment ``c(k)``. Slowly varying quantities are thus variables tied by random walks
@@ -15,20 +16,25 @@ frame (long chains of nearly equal variables that every update nudges all the wa
 
 Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)::
 
-    prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²)
+    prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²),  O_0 ~ N(0, σ_ψ²)
     visual     e = (S_c d_x - m_x, S_c d_y - m_y, d_ψ - m_ψ)   Σ = frontend covariance   (CustomFactor)
     wheel      BetweenFactorPose2 with the arc increment       Σ = arc model (sensors.wheel)
                with self-calibration its heading row is split off into
                e = W_c d_ψ - m_ψ                                σ² = Σ_ψψ         (CustomFactor)
     gyro       e = d_ψ - (Θ_ij - B_c Δt)                       σ² = σ_g² Δt      (exact linear factor)
-    walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ)   (τ: segment length)
-    heading    PriorFactorPose2 on X_k with the AHRS yaw (x, y left free)
+    walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ),
+               O_c - O_{c-1} ~ N(0, σ_ow² τ)                                           (τ: segment length)
+    heading    e = ψ_k + O_c - ψ_AHRS                            σ² = σ_ψ²         (CustomFactor)
     range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
     motion     weak constant-twist BetweenFactorPose2 where no sensor measures an interval's translation
 
 The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
 the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
 attenuates the estimate like a regression on a noisy regressor.
+
+The AHRS heading has its own slowly wandering offset (the magnetometer's disturbances, see
+:mod:`fusion_vo.backends.ekf`): a heading that strays from the gyro's integral moves ``O_c``, not
+the poses, and still bounds the heading drift over the long run.
 
 Without self-calibration the visual factor is a plain ``BetweenFactorPose2``. Visual, wheel-translation
 and AHRS factors use a robust noise model (Huber or Cauchy, ``GraphConfig.robust``), so a wrong
@@ -80,6 +86,10 @@ def X(k: int) -> int:
 
 def B(k: int) -> int:
     return gtsam.symbol("b", k)
+
+
+def O(k: int) -> int:  # noqa: E743 (the symbol's letter)
+    return gtsam.symbol("o", k)
 
 
 def S(k: int) -> int:
@@ -136,6 +146,20 @@ def wheel_heading_error(measured: float):
             H[1] = np.array([[0.0, 0.0, k]])
             H[2] = np.array([[d]])
         return np.array([k * d - m])
+
+    return error
+
+
+def ahrs_heading_error(measured: float):
+    """Error function of the AHRS factor on ``(X_k, O)``: ``ψ_k + O - ψ_AHRS`` (wrapped)."""
+    m = float(measured)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
+        kx, ko = this.keys()
+        if H is not None:
+            H[0] = np.array([[0.0, 0.0, 1.0]])
+            H[1] = np.array([[1.0]])
+        return np.array([_wrap(values.atPose2(kx).theta() + values.atDouble(ko) - m)])
 
     return error
 
@@ -201,6 +225,8 @@ class GraphBuilder:
         origin = self.t[0] if t_origin is None else t_origin
         self.segment = np.floor((self.t - origin) / config.graph.calibration_interval + 1e-9).astype(int)
         self._robust = _robust_kernel(config)
+        # the AHRS offset variables exist with the IMU (an AHRS may report in any interval of a stream)
+        self.ahrs_offset_on = iv.uses("gyro") and config.imu.ahrs_offset_walk > 0
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
         for c in self.counts.values():
             c.used = 0
@@ -252,6 +278,8 @@ class GraphBuilder:
         priors = []  # (key, prior mean, prior sigma, initial value)
         if self.iv.uses("gyro"):
             priors.append((B(0), 0.0, cfg.imu.gyro_bias_sigma, est.get("gyro_bias", 0.0)))
+        if self.ahrs_offset_on:
+            priors.append((O(0), 0.0, cfg.imu.ahrs_yaw_sigma, est.get("ahrs_offset", 0.0)))
         if self.kv_on:
             priors.append((S(0), 1.0, cfg.visual_scale_sigma, est.get("visual_scale", 1.0)))
         if self.kb_on:
@@ -350,6 +378,8 @@ class GraphBuilder:
         walks = []
         if self.iv.uses("gyro"):
             walks.append((B, cfg.imu.gyro_random_walk, estimate.get("gyro_bias", 0.0)))
+        if self.ahrs_offset_on:
+            walks.append((O, cfg.imu.ahrs_offset_walk, estimate.get("ahrs_offset", 0.0)))
         if self.kv_on:
             walks.append((S, cfg.ekf.scale_random_walk, estimate.get("visual_scale", 1.0)))
         if self.kb_on:
@@ -364,16 +394,19 @@ class GraphBuilder:
         """Bias and calibration variables of node ``n``'s segment."""
         c = int(self.segment[n])
         keys = [B(c)] if self.iv.uses("gyro") else []
+        keys += [O(c)] if self.ahrs_offset_on else []
         return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else [])
 
     def _unary(self, nf: NodeFactors, n: int) -> None:
         iv, cfg = self.iv, self.config
         g = int(self.grid[n])
-        if iv.ahrs_ok[g]:
-            sig = np.array([1e3, 1e3, cfg.imu.ahrs_yaw_sigma])
-            nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
-            if self._robust is not None:
-                nm = gtsam.noiseModel.Robust.Create(self._robust, nm)
+        if iv.ahrs_ok[g] and self.ahrs_offset_on:
+            nm = self.noise(np.array([[cfg.imu.ahrs_yaw_sigma**2]]))
+            keys = [X(self.offset + n), O(int(self.segment[n]))]
+            nf.factors.append(gtsam.CustomFactor(nm, keys, ahrs_heading_error(float(iv.ahrs_yaw[g]))))
+            nf.sensors.append("ahrs")
+        elif iv.ahrs_ok[g]:  # an AHRS trusted as absolute (no offset walk)
+            nm = self.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]))
             heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
             nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), heading, nm))
             nf.sensors.append("ahrs")
@@ -630,6 +663,8 @@ def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: Node
     """Running estimates of the bias and calibration for initial guesses of the next node."""
     if builder.iv.uses("gyro"):
         estimate["gyro_bias"] = isam.calculateEstimateDouble(B(int(builder.segment[n])))
+    if builder.ahrs_offset_on:
+        estimate["ahrs_offset"] = isam.calculateEstimateDouble(O(int(builder.segment[n])))
     if builder.kv_on:
         estimate["visual_scale"] = isam.calculateEstimateDouble(S(int(builder.segment[n])))
     if builder.kb_on:

@@ -19,7 +19,8 @@ AHRS
 ----
 An orientation quaternion ``q_WS`` of the IMU gives the body orientation ``R_WB = R_WS R_BSᵀ``; its
 heading ``atan2(R_WB[1,0], R_WB[0,0])`` is an absolute yaw measurement (relative to the AHRS's own
-north, aligned to the estimate by the first sample). On a slope the body axes leave the horizontal
+north, aligned to the estimate by the first sample) up to an offset that wanders slowly
+(``ahrs_offset_walk``; the backends estimate it). On a slope the body axes leave the horizontal
 plane; body-frame travel ``(d_x, d_y)`` projects to the floor plan by the horizontal lengths of the body
 axes, ``c_x = ‖(R_WB[0,0], R_WB[1,0])‖`` and ``c_y = ‖(R_WB[0,1], R_WB[1,1])‖``.
 
@@ -55,7 +56,12 @@ class ImuNoise:
     gyro_bias_sigma : float
         Prior standard deviation of the initial bias [rad/s] (default 0.02).
     ahrs_yaw_sigma : float
-        Standard deviation of an AHRS heading [rad] (default 0.02).
+        Standard deviation of an AHRS heading's white noise [rad] (default 0.02).
+    ahrs_offset_walk : float
+        Random walk ``σ_ow`` [rad/√s] of the AHRS heading's offset from the true heading (default
+        0.02: a magnetometer heading that may stray by about 10° in a minute or two, the order of the
+        disturbances a robot's motors and the steel around it cause, while it still bounds a gyro's
+        drift over longer runs; 0 trusts the AHRS heading as absolute).
     spike_threshold : float
         Distance from the running median that marks a spike [rad/s] (default 1.0).
     spike_window : int
@@ -68,6 +74,7 @@ class ImuNoise:
     gyro_random_walk: float = 2e-5
     gyro_bias_sigma: float = 0.02
     ahrs_yaw_sigma: float = 0.02
+    ahrs_offset_walk: float = 0.02
     spike_threshold: float = 1.0
     spike_window: int = 2
     max_rate: float = 10.0

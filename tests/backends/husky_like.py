@@ -2,7 +2,7 @@
 
 The robot drives, stops for a long while, and drives again. Its own odometry reports the yaw rate
 ``yaw_scale`` times the true one (skid steering), the gyro has a constant bias, and the AHRS heading
-(when asked for) drifts away from the truth by ``ahrs_drift`` [rad] over the recording.
+(when asked for) strays from the truth by up to ``ahrs_drift`` [rad] in the middle of the recording.
 """
 
 import numpy as np
@@ -33,7 +33,7 @@ def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004
     accel = np.tile([0.0, 0.0, 9.81], (len(ti), 1))
     orientation = None
     if ahrs_drift is not None:
-        heading = np.interp(ti, t, yaw) + ahrs_drift * ti / duration + 0.01 * rng.standard_normal(len(ti))
+        heading = np.interp(ti, t, yaw) + ahrs_drift * np.sin(np.pi * ti / duration) ** 2 + 0.01 * rng.standard_normal(len(ti))
         orientation = np.stack([np.cos(heading / 2), 0 * ti, 0 * ti, np.sin(heading / 2)], axis=1)
     imu = ImuData(ti, gyro, accel, orientation, noise={"gyroscope_noise_density": 0.003})
     return odom, imu, truth

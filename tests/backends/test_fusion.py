@@ -96,7 +96,8 @@ def test_range_finder_fixes_the_visual_scale_without_wheels():
 def test_ahrs_heading_bounds_the_heading_drift():
     opts = dict(duration=30.0, gyro_bias=0.03, ahrs_sigma=0.01)
     s = synthetic_streams(SyntheticOptions(**opts), seed=17)
-    cfg = FusionConfig.from_dict({"imu": {"gyro_bias_sigma": 0.001}})  # a prior that is wrong on purpose
+    # a bias prior that is wrong on purpose, and an AHRS trusted as an absolute heading (no offset walk)
+    cfg = FusionConfig.from_dict({"imu": {"gyro_bias_sigma": 0.001, "ahrs_offset_walk": 0.0}})
     with_ahrs = fuse(streams_of(s).select(["wheel", "imu"]), "all", cfg)
     s.imu.orientation = None
     without = fuse(streams_of(s).select(["wheel", "imu"]), "all", cfg)

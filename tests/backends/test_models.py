@@ -16,7 +16,7 @@ def _predict(x, dt):
 
 
 def test_ekf_transition_jacobian():
-    x = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99])
+    x = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05])
     _, F = _predict(x, 0.05)
     eps = 1e-7
     num = np.zeros((DIM, DIM))

@@ -50,3 +50,18 @@ def test_yaw_rate_scale_of_the_twist_is_calibrated():
         assert end < 0.5 and rms < 0.3, (name, end, rms)
     for name in ("ekf", "gtsam"):
         assert abs(result.calibration[name]["wheel_base_factor"] - 0.75) < 0.05
+
+
+def test_drifting_ahrs_heading_does_not_drag_the_track():
+    """An AHRS heading that strays up to 0.6 rad (34°) from the truth moves its offset, not the poses."""
+    odom, imu, truth = husky_like(yaw_scale=1.0, ahrs_drift=0.6)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    trusted = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig.from_dict({"imu": {"ahrs_offset_walk": 0.0}}))
+    _, rms_trusted = position_errors(trusted.trajectories["ekf"], truth)
+    assert rms_trusted > 3.0
+    for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
+        end, rms = position_errors(result.trajectories[name], truth)
+        assert end < 1.0 and rms < 0.5 * rms_trusted, (name, end, rms, rms_trusted)
+        if name in ("ekf_smoothed", "gtsam"):
+            assert rms < 0.6, (name, rms)
+        assert result.counts[name]["ahrs"].used > 1000
