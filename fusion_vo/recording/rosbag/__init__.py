@@ -1,14 +1,32 @@
-"""ROS bags (ROS 1 ``.bag``, ROS 2 folder, ``.mcap`` or ``.db3``) to the recording layout."""
+"""ROS bags (ROS 1 ``.bag``, ROS 2 folder, ``.mcap`` or ``.db3``) to the recording layout.
 
-from fusion_vo.recording.rosbag.importer import _camera_info_yaml as camera_info_yaml, _pick_camera_info as pick_camera_info
-from fusion_vo.recording.rosbag.importer import (
+Modules
+-------
+reader
+    Opening a bag, listing and selecting its topics, message stamps.
+images
+    ``sensor_msgs/Image`` and ``CompressedImage`` to grey images.
+transforms
+    Fixed transforms (``/tf_static``, ``static_transform_publisher`` lines) and GPS fixes in local ENU.
+camera_info
+    ``sensor_msgs/CameraInfo`` to ``cam0/sensor.yaml`` entries.
+streams
+    Sorting, de-duplicating and writing the rows of one stream.
+summary
+    What an import wrote.
+importer
+    :func:`import_bag`, one pass over the bag writing every stream.
+"""
+
+from fusion_vo.recording.rosbag.camera_info import camera_info_yaml, pick_camera_info
+from fusion_vo.recording.rosbag.images import (
     IMAGE_ENCODINGS,
     UnsupportedImage,
     compressed_to_grey,
     image_to_grey,
 )
 from fusion_vo.recording.rosbag.importer import import_bag
-from fusion_vo.recording.rosbag.importer import (
+from fusion_vo.recording.rosbag.reader import (
     CAMERA_INFO,
     COMPRESSED_IMAGE,
     IMAGE,
@@ -22,8 +40,8 @@ from fusion_vo.recording.rosbag.importer import (
     open_reader,
     select_topics,
 )
-from fusion_vo.recording.rosbag.importer import ImportSummary, StreamSummary
-from fusion_vo.recording.rosbag.importer import (
+from fusion_vo.recording.rosbag.summary import ImportSummary, StreamSummary
+from fusion_vo.recording.rosbag.transforms import (
     WGS84_A,
     WGS84_E2,
     WGS84_F,

@@ -1,0 +1,168 @@
+"""Fixed transforms between sensor frames, and GPS fixes in a local East-North-Up frame.
+
+Local ENU of GPS fixes
+----------------------
+Geodetic latitude ``φ``, longitude ``λ`` and ellipsoidal height ``h`` go to Earth-centred coordinates on
+the WGS-84 ellipsoid (``a = 6378137 m``, ``f = 1/298.257223563``, ``e² = f (2 - f)``)::
+
+    N(φ) = a / sqrt(1 - e² sin² φ)
+    X = (N + h) cos φ cos λ,   Y = (N + h) cos φ sin λ,   Z = (N (1 - e²) + h) sin φ
+
+and are rotated into East-North-Up at the first fix ``(φ0, λ0, h0)``::
+
+    [e]   [ -sin λ0          cos λ0          0      ]
+    [n] = [ -sin φ0 cos λ0  -sin φ0 sin λ0   cos φ0 ] (X - X0)
+    [u]   [  cos φ0 cos λ0   cos φ0 sin λ0   sin φ0 ]
+
+Extrinsics
+----------
+``/tf_static`` transforms (and any given with ``static_tfs``, in ``static_transform_publisher`` order
+``x y z yaw pitch roll parent child``) form a tree; ``T_BS`` of a sensor is the chain of transforms from
+the body frame (the odometry's ``child_frame_id``, else ``base_link``) to the sensor message's
+``frame_id``. Rotations from yaw, pitch, roll are ``R = Rz(yaw) Ry(pitch) Rx(roll)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+from fusion_vo.errors import InputError
+
+
+WGS84_A = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+
+
+@dataclass(frozen=True)
+class StaticTransform:
+    """A fixed transform: pose of frame ``child`` in frame ``parent`` as a 4x4 matrix ``T``."""
+
+    parent: str
+    child: str
+    T: np.ndarray
+
+
+def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0_m: float) -> np.ndarray:
+    """East, north, up [m] of WGS-84 positions relative to a reference position (module docstring).
+
+    Parameters
+    ----------
+    lat_deg, lon_deg, alt_m : array_like, shape (N,)
+        Latitude and longitude [deg], ellipsoidal altitude [m].
+    lat0_deg, lon0_deg, alt0_m : float
+        The reference (origin of the local frame).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        ``(e, n, u)`` per position.
+    """
+    xyz = _geodetic_to_ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float))
+    xyz0 = _geodetic_to_ecef(np.array([lat0_deg]), np.array([lon0_deg]), np.array([alt0_m]))
+    phi, lam = math.radians(lat0_deg), math.radians(lon0_deg)
+    sp, cp, sl, cl = math.sin(phi), math.cos(phi), math.sin(lam), math.cos(lam)
+    R = np.array([[-sl, cl, 0.0], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]])
+    return (xyz - xyz0) @ R.T
+
+
+def _geodetic_to_ecef(lat_deg: np.ndarray, lon_deg: np.ndarray, alt_m: np.ndarray) -> np.ndarray:
+    phi, lam = np.radians(lat_deg), np.radians(lon_deg)
+    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
+    return np.column_stack([
+        (n + alt_m) * np.cos(phi) * np.cos(lam),
+        (n + alt_m) * np.cos(phi) * np.sin(lam),
+        (n * (1.0 - WGS84_E2) + alt_m) * np.sin(phi),
+    ])
+
+
+def quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
+    """Rotation matrix of a (normalised) quaternion ``w + xi + yj + zk``."""
+    q = np.array([w, x, y, z], dtype=float)
+    n = np.linalg.norm(q)
+    if not np.isfinite(n) or n < 1e-9:
+        raise ValueError("zero or non-finite quaternion")
+    w, x, y, z = q / n
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def ypr_to_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
+    """``Rz(yaw) Ry(pitch) Rx(roll)``, the rotation of ``static_transform_publisher x y z yaw pitch roll``."""
+    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch),
+                              math.cos(roll), math.sin(roll))
+    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
+    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
+    return Rz @ Ry @ Rx
+
+
+def parse_static_tf(text: str) -> StaticTransform:
+    """Parse ``"x y z yaw pitch roll parent child"`` (or ``"x y z qx qy qz qw parent child"``).
+
+    The order is that of ROS's ``static_transform_publisher``, so a line of a launch file can be pasted.
+    """
+    parts = text.replace(",", " ").split()
+    if len(parts) not in (8, 9):
+        raise InputError(f"--static-tf '{text}': expected 'x y z yaw pitch roll parent child' "
+                         "or 'x y z qx qy qz qw parent child'")
+    try:
+        nums = [float(p) for p in parts[:-2]]
+    except ValueError:
+        raise InputError(f"--static-tf '{text}': the first {len(parts) - 2} fields must be numbers") from None
+    if not all(math.isfinite(v) for v in nums):
+        raise InputError(f"--static-tf '{text}': values must be finite")
+    T = np.eye(4)
+    T[:3, 3] = nums[:3]
+    if len(nums) == 6:
+        T[:3, :3] = ypr_to_matrix(*nums[3:6])
+    else:
+        try:
+            T[:3, :3] = quat_to_matrix(nums[6], nums[3], nums[4], nums[5])
+        except ValueError:
+            raise InputError(f"--static-tf '{text}': zero quaternion") from None
+    return StaticTransform(frame_name(parts[-2]), frame_name(parts[-1]), T)
+
+
+def chain_transform(transforms: Iterable[StaticTransform], target: str, source: str) -> np.ndarray | None:
+    """Pose of frame ``source`` in frame ``target`` from a set of fixed transforms, or ``None``.
+
+    The transforms are edges of an undirected graph (walked backwards through their inverse); the
+    first path found breadth-first is used.
+    """
+    target, source = frame_name(target), frame_name(source)
+    if target == source:
+        return np.eye(4)
+    edges: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for tf in transforms:
+        edges.setdefault(tf.parent, []).append((tf.child, tf.T))
+        edges.setdefault(tf.child, []).append((tf.parent, _inverse(tf.T)))
+    best = {target: np.eye(4)}
+    queue = [target]
+    while queue:
+        frame = queue.pop(0)
+        for nxt, T in edges.get(frame, []):
+            if nxt not in best:
+                best[nxt] = best[frame] @ T
+                if nxt == source:
+                    return best[nxt]
+                queue.append(nxt)
+    return None
+
+
+def _inverse(T: np.ndarray) -> np.ndarray:
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def frame_name(name: str) -> str:
+    return name.strip().lstrip("/")
