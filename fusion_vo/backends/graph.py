@@ -56,7 +56,8 @@ The Levenberg–Marquardt loop is written out here on top of GTSAM's linearisati
 elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``): the wrapped
 optimizer re-enters Python for every :class:`gtsam.CustomFactor` at a cost that grows with the
 graph, while linearising from Python does not. The algorithm is the standard one: try the
-Gauss–Newton step, and while the cost does not decrease, add ``λ I`` damping (λ × 10) and retry.
+Gauss–Newton step, and while the cost does not decrease (or the undamped system is too poorly
+conditioned to factorise), add ``λ I`` damping (λ × 10) and retry.
 """
 
 from __future__ import annotations
@@ -531,8 +532,14 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                 for key, dim in dims.items():
                     system.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
                                                     gtsam.noiseModel.Unit.Create(dim)))
-            trial = values.retract(system.optimize())
-            trial_error = graph.error(trial)
+            try:
+                trial = values.retract(system.optimize())
+                trial_error = graph.error(trial)
+            except RuntimeError as exc:  # a (nearly) singular Gauss-Newton system: damp it, as GTSAM's LM does
+                if "Indeterminate" not in str(exc):
+                    raise
+                logger.debug("LM iteration %d: indeterminate system at lambda %.1e", it, lam)
+                trial_error = math.inf
             if trial_error <= error:
                 break
             lam = 1e-4 if lam == 0 else lam * 10.0
@@ -653,9 +660,26 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
 def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_nodes: int) -> np.ndarray:
     """Marginal covariances (N, 3, 3) of all poses (Pose2 tangent space: x, y forward/left, yaw).
 
-    ``linear`` is the graph linearised at (or, after convergence, next to) ``solution``.
+    ``linear`` is the graph linearised at (or, after convergence, next to) ``solution``. When
+    the factorisation finds the system too poorly conditioned, every variable gets a vague prior
+    (``σ = 100`` in its tangent space, far wider than anything is estimated to) and the
+    factorisation is repeated; if that fails too the covariances are NaN (logged).
     """
-    marginals = gtsam.Marginals(linear, solution)
+    try:
+        marginals = gtsam.Marginals(linear, solution)
+    except RuntimeError as exc:
+        if "Indeterminate" not in str(exc):
+            raise
+        logger.warning("gtsam: marginals of a poorly conditioned system; adding vague priors")
+        linear = linear.clone()
+        for key in solution.keys():
+            dim = 3 if chr(gtsam.Symbol(key).chr()) == "x" else 1
+            linear.add(gtsam.JacobianFactor(key, np.eye(dim) * 0.01, np.zeros(dim), gtsam.noiseModel.Unit.Create(dim)))
+        try:
+            marginals = gtsam.Marginals(linear, solution)
+        except RuntimeError:
+            logger.warning("gtsam: no marginal covariances (the linearised system is indeterminate)")
+            return np.full((n_nodes, 3, 3), np.nan)
     return np.array([marginals.marginalCovariance(X(n)) for n in range(n_nodes)])
 
 
