@@ -23,9 +23,6 @@ failures the current frame, if textured, becomes the new reference (restart).
 
 from __future__ import annotations
 
-import logging
-import math
-import time
 from dataclasses import dataclass, field
 
 import cv2
@@ -37,17 +34,9 @@ from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors,
 from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
 from frontends.frame_check import check_frame
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
-from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, scale_motion
-from frontends.tracking import (
-    LkSettings,
-    exposure_change,
-    exposure_differs,
-    fit_affine,
-    reduce_for_exposure,
-    track_points,
-)
-
-logger = logging.getLogger(__name__)
+from frontends.prediction import MotionHistory, failed_motion, timed_measurement
+from frontends.similarity import RobustOptions, apply_similarity, estimate_similarity, judge_fit
+from frontends.tracking import LkSettings, exposure_correction, fit_affine, reduce_for_exposure, track_points
 
 _DEFAULT_MAX_DISTANCE = {"patch": 0.9, "orb": 80.0}
 
@@ -240,20 +229,11 @@ class FeatureFrontend:
     def reset(self) -> None:
         """Forget the reference frame and the motion prediction."""
         self._ref: _Frame | None = None
-        self._last_motion: np.ndarray | None = None
-        self._last_dt: float | None = None
-        self._failures = 0
+        self._history = MotionHistory(self.config.max_prediction_gap, self.config.max_failures)
 
     def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
         """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
-        t0 = time.perf_counter()
-        try:
-            motion = self._process(image, float(timestamp))
-        except cv2.error as exc:  # defensive: OpenCV refusing an odd input must not stop a run
-            logger.warning("frame at t=%.6f could not be processed: %s", timestamp, exc)
-            motion = self._failed(float(timestamp), MotionStatus.BAD_FRAME, f"OpenCV error: {exc}")
-        motion.info["time_ms"] = (time.perf_counter() - t0) * 1e3
-        return motion
+        return timed_measurement(self._process, self._failed, image, timestamp)
 
     # -------------------------------------------------------------- pipeline
     def _describe(self, img: np.ndarray, t: float) -> _Frame:
@@ -287,7 +267,7 @@ class FeatureFrontend:
 
         dt = t - ref.time
         dist = distance_matrix(ref.desc, cur.desc, cfg.descriptor)
-        prediction = self._predict(dt)
+        prediction = self._history.predict(dt)
         results = []
         if prediction is not None and cfg.gate_radius > 0:
             predicted = self.point_map.to_image(apply_similarity(prediction, ref.rect))
@@ -308,15 +288,9 @@ class FeatureFrontend:
             status=MotionStatus.OK, n_candidates=n_matches, n_inliers=fit.n_inliers,
             residual_rms=fit.residual_rms, n_features=len(cur.pts), info=info,
         )
-        self._last_motion, self._last_dt = fit.matrix, dt
-        self._failures = 0
+        self._history.succeeded(fit.matrix, dt)
         self._ref = cur
         return motion
-
-    def _predict(self, dt: float) -> np.ndarray | None:
-        if self._last_motion is None or not self._last_dt:
-            return None
-        return scale_motion(self._last_motion, min(dt / self._last_dt, self.config.max_prediction_gap))
 
     def _attempt(self, path: str, dist: np.ndarray, ref: _Frame, cur: _Frame):
         """Match, fit and refine; returns ``(path, status, fit, n_matches, reason)``."""
@@ -326,45 +300,24 @@ class FeatureFrontend:
         if n < cfg.min_inliers:
             return path, MotionStatus.TOO_FEW_FEATURES, None, n, f"{n} matches"
         fit = estimate_similarity(ref.rect[i0], cur.rect[i1], self._coarse, self._rng)
-        status, reason = self._judge(fit, n)
+        status, reason = judge_fit(fit, n, cfg.min_inlier_ratio, cfg.max_abs_log_scale)
         if status is not MotionStatus.OK or cfg.refine != "lk":
             return path, status, fit, n, reason
         p0 = ref.pts[i0[fit.inliers]].astype(np.float64)
         affine = fit_affine(p0, cur.pts[i1[fit.inliers]].astype(np.float64))
-        exposure = exposure_change(ref.small, cur.small, affine)
-        if not exposure_differs(exposure, 0.01):
-            exposure = (1.0, 0.0)
+        exposure = exposure_correction(ref.small, cur.small, affine, 0.01)
         tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk, exposure=exposure)
         if len(tr.index) < cfg.min_inliers:
             return path, MotionStatus.TOO_FEW_FEATURES, fit, n, "refinement lost the points"
         src = ref.rect[i0[fit.inliers]][tr.index]
         fine = estimate_similarity(src, self.point_map.to_rectified(tr.points), self._fine, self._rng)
-        status, reason = self._judge(fine, n, fit.n_inliers)
+        status, reason = judge_fit(fine, n, cfg.min_inlier_ratio, cfg.max_abs_log_scale, fit.n_inliers)
         return path, status, fine, n, reason
-
-    def _judge(self, fit: SimilarityFit, n_matches: int, n_refined: int | None = None) -> tuple[MotionStatus, str]:
-        cfg = self.config
-        if fit.status == "too_few":
-            return MotionStatus.TOO_FEW_FEATURES, "too few inliers"
-        if fit.status == "degenerate":
-            return MotionStatus.DEGENERATE, "inliers clustered or collinear"
-        if fit.n_inliers < cfg.min_inlier_ratio * n_matches:
-            return MotionStatus.REJECTED, f"inlier ratio {fit.n_inliers}/{n_matches} too low"
-        if n_refined is not None and fit.n_inliers < 0.5 * n_refined:
-            return MotionStatus.REJECTED, f"refinement kept {fit.n_inliers}/{n_refined} inliers"
-        if abs(fit.params[3]) > cfg.max_abs_log_scale:
-            return MotionStatus.REJECTED, f"implausible scale {math.exp(fit.params[3]):.3f}"
-        return MotionStatus.OK, ""
 
     def _failed(self, t: float, status: MotionStatus, reason: str, texture: float = float("nan"), current=None) -> FrameMotion:
         """A failed measurement; restarts from ``current`` after too many failures in a row."""
-        self._failures += 1
-        restarted = False
-        if self._failures >= self.config.max_failures and current is not None:
+        restarted = self._history.failed(can_restart=current is not None)
+        if restarted:
             self._ref = current
-            self._last_motion, self._last_dt = None, None
-            self._failures = 0
-            restarted = True
-        logger.debug("frame t=%.6f failed (%s): %s", t, status.value, reason)
         prev = None if restarted or self._ref is None else self._ref.time
-        return FrameMotion(t, prev, status=status, info={"reason": reason, "texture": texture, "restarted": restarted, "path": "failed"})
+        return failed_motion(t, prev, status, reason, texture, restarted)

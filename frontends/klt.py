@@ -31,9 +31,6 @@ reference and the prediction is dropped.
 
 from __future__ import annotations
 
-import logging
-import math
-import time
 from dataclasses import dataclass
 
 import cv2
@@ -42,23 +39,9 @@ import numpy as np
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.frame_check import check_frame
-from frontends.tracking import (
-    LkSettings,
-    exposure_change,
-    exposure_differs,
-    fit_affine,
-    reduce_for_exposure,
-    track_points,
-)
-from frontends.similarity import (
-    RobustOptions,
-    SimilarityFit,
-    apply_similarity,
-    estimate_similarity,
-    scale_motion,
-)
-
-logger = logging.getLogger(__name__)
+from frontends.prediction import MotionHistory, failed_motion, timed_measurement
+from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, judge_fit
+from frontends.tracking import LkSettings, exposure_correction, fit_affine, reduce_for_exposure, track_points
 
 
 @dataclass
@@ -255,9 +238,7 @@ class KltFrontend:
         self._ref_img: np.ndarray | None = None
         self._ref_pts = np.zeros((0, 2), np.float32)
         self._ref_time: float | None = None
-        self._last_motion: np.ndarray | None = None  # similarity of the last good interval
-        self._last_dt: float | None = None
-        self._failures = 0
+        self._history = MotionHistory(self.config.max_prediction_gap, self.config.max_failures)
         self._ref_texture: float | None = None
         self._ref_small: np.ndarray | None = None  # reduced reference for the exposure comparison
         self._cur_texture = float("nan")
@@ -266,14 +247,7 @@ class KltFrontend:
     # ------------------------------------------------------------ public API
     def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
         """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
-        t0 = time.perf_counter()
-        try:
-            motion = self._process(image, float(timestamp))
-        except cv2.error as exc:  # defensive: OpenCV refusing an odd input must not stop a run
-            logger.warning("frame at t=%.6f could not be processed: %s", timestamp, exc)
-            motion = self._failed(float(timestamp), MotionStatus.BAD_FRAME, f"OpenCV error: {exc}")
-        motion.info["time_ms"] = (time.perf_counter() - t0) * 1e3
-        return motion
+        return timed_measurement(self._process, self._failed, image, timestamp)
 
     # -------------------------------------------------------------- pipeline
     def _process(self, image: np.ndarray, t: float) -> FrameMotion:
@@ -297,7 +271,7 @@ class KltFrontend:
 
         ref_rect = self.point_map.to_rectified(self._ref_pts.astype(np.float64))
         attempts: list[_Attempt] = []
-        prediction = self._predict(dt)
+        prediction = self._history.predict(dt)
         if prediction is not None:
             attempts.append(self._attempt("predicted", img, ref_rect, prediction, cfg.pyramid_levels))
         if not attempts or attempts[-1].status is not MotionStatus.OK:
@@ -336,16 +310,9 @@ class KltFrontend:
             n_features=len(best.next_pts),
             info=info,
         )
-        self._last_motion, self._last_dt = fit.matrix, dt
-        self._failures = 0
+        self._history.succeeded(fit.matrix, dt)
         self._set_reference(img, t, best.next_pts)
         return motion
-
-    def _predict(self, dt: float) -> np.ndarray | None:
-        if self._last_motion is None or not self._last_dt:
-            return None
-        k = min(dt / self._last_dt, self.config.max_prediction_gap)
-        return scale_motion(self._last_motion, k)
 
     def _attempt(self, path: str, img: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray, levels: int) -> _Attempt:
         """Track the reference points from the rectified similarity ``guess`` and fit a similarity.
@@ -373,10 +340,9 @@ class KltFrontend:
             return outcome
         fit, p1, n_tracked, keep = outcome
         refined = fit_affine(p0[keep][fit.inliers], p1[fit.inliers])
-        exposure = exposure_change(self._ref_small, self._cur_small, refined)
-        relight = exposure_differs(exposure, cfg.exposure_tolerance)
-        if relight or np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
-            outcome2 = self._track(img, p0, src, refined, 0, exposure if relight else (1.0, 0.0))
+        exposure = exposure_correction(self._ref_small, self._cur_small, refined, cfg.exposure_tolerance)
+        if exposure != (1.0, 0.0) or np.abs(refined[:, :2] - affine[:, :2]).max() > cfg.refine_tolerance:
+            outcome2 = self._track(img, p0, src, refined, 0, exposure)
             if not isinstance(outcome2, _Attempt):
                 fit, p1, n_tracked, keep = outcome2
         return self._judge(path, fit, n_tracked, p1)
@@ -395,15 +361,9 @@ class KltFrontend:
 
     def _judge(self, path: str, fit: SimilarityFit, n_tracked: int, p1: np.ndarray) -> _Attempt:
         """Turn a fit into an accepted or failed attempt."""
-        cfg = self.config
-        if fit.status == "too_few":
-            return _Attempt(path, fit, MotionStatus.TOO_FEW_FEATURES, "too few inliers", n_tracked)
-        if fit.status == "degenerate":
-            return _Attempt(path, fit, MotionStatus.DEGENERATE, "inliers clustered or collinear", n_tracked)
-        if fit.n_inliers < cfg.min_inlier_ratio * n_tracked:
-            return _Attempt(path, fit, MotionStatus.REJECTED, f"inlier ratio {fit.n_inliers}/{n_tracked} too low", n_tracked)
-        if abs(fit.params[3]) > cfg.max_abs_log_scale:
-            return _Attempt(path, fit, MotionStatus.REJECTED, f"implausible scale {math.exp(fit.params[3]):.3f}", n_tracked)
+        status, reason = judge_fit(fit, n_tracked, self.config.min_inlier_ratio, self.config.max_abs_log_scale)
+        if status is not MotionStatus.OK:
+            return _Attempt(path, fit, status, reason, n_tracked)
         return _Attempt(path, fit, MotionStatus.OK, "", n_tracked, p1[fit.inliers].astype(np.float32))
 
     def _global_shift(self, img: np.ndarray) -> tuple[float, float] | None:
@@ -462,16 +422,8 @@ class KltFrontend:
 
     def _failed(self, t: float, status: MotionStatus, reason: str, texture: float = float("nan"), current=None) -> FrameMotion:
         """A failed measurement; restarts from ``current`` after too many failures in a row."""
-        self._failures += 1
-        restarted = False
-        if self._failures >= self.config.max_failures and current is not None:
+        restarted = self._history.failed(can_restart=current is not None)
+        if restarted:
             self._set_reference(current, t, np.zeros((0, 2), np.float32))
-            self._last_motion, self._last_dt = None, None
-            self._failures = 0
-            restarted = True
-        logger.debug("frame t=%.6f failed (%s): %s", t, status.value, reason)
-        return FrameMotion(
-            t, self._ref_time if not restarted else None, status=status,
-            info={"reason": reason, "texture": texture, "restarted": restarted, "path": "failed"},
-        )
+        return failed_motion(t, None if restarted else self._ref_time, status, reason, texture, restarted)
 

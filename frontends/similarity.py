@@ -40,6 +40,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from frontends.base import MotionStatus
+
 logger = logging.getLogger(__name__)
 
 _BATCH = 32  # hypotheses scored per vectorised batch
@@ -337,6 +339,27 @@ def estimate_similarity(
         pa, pb = complex(pm[0, 0], pm[1, 0]), complex(pm[0, 2], pm[1, 2])
         fit.prior_deviation = float(np.max(np.abs((a - pa) * zi + (b - pb))))
     return fit
+
+
+def judge_fit(fit: SimilarityFit, n_candidates: int, min_inlier_ratio: float, max_abs_log_scale: float,
+              n_refined: int | None = None) -> tuple[MotionStatus, str]:
+    """Whether a frontend accepts ``fit``: its status and, when rejected, the reason.
+
+    A fit is rejected when the estimator found too few inliers or a degenerate set, when fewer than
+    ``min_inlier_ratio * n_candidates`` correspondences are inliers, when a refinement kept fewer than
+    half of the ``n_refined`` inliers it started from, or when ``|log s| > max_abs_log_scale``.
+    """
+    if fit.status == "too_few":
+        return MotionStatus.TOO_FEW_FEATURES, "too few inliers"
+    if fit.status == "degenerate":
+        return MotionStatus.DEGENERATE, "inliers clustered or collinear"
+    if fit.n_inliers < min_inlier_ratio * n_candidates:
+        return MotionStatus.REJECTED, f"inlier ratio {fit.n_inliers}/{n_candidates} too low"
+    if n_refined is not None and fit.n_inliers < 0.5 * n_refined:
+        return MotionStatus.REJECTED, f"refinement kept {fit.n_inliers}/{n_refined} inliers"
+    if abs(fit.params[3]) > max_abs_log_scale:
+        return MotionStatus.REJECTED, f"implausible scale {math.exp(fit.params[3]):.3f}"
+    return MotionStatus.OK, ""
 
 
 def scale_motion(matrix: np.ndarray, k: float) -> np.ndarray:

@@ -180,3 +180,10 @@ def exposure_change(ref_small: np.ndarray, cur_small: np.ndarray, affine: np.nda
     if np.count_nonzero(keep) < 20:
         return 1.0, 0.0
     return float(cur_small[keep].sum() / mapped[keep].sum()), 0.0
+
+
+def exposure_correction(ref_small: np.ndarray, cur_small: np.ndarray, affine: np.ndarray,
+                        tolerance: float) -> tuple[float, float]:
+    """The :func:`exposure_change` to correct the reference by, or ``(1, 0)`` when within ``tolerance``."""
+    exposure = exposure_change(ref_small, cur_small, affine)
+    return exposure if exposure_differs(exposure, tolerance) else (1.0, 0.0)
