@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import base64
 import html
+import math
 import logging
 from datetime import datetime, timezone
 from pathlib import Path
@@ -39,7 +40,10 @@ def _table(headers: list[str], rows: list[list[str]]) -> str:
 
 
 def _number(value, fmt: str = "{:.3f}") -> str:
-    return "\u2013" if value is None else fmt.format(value)
+    """The formatted value, or an en dash where the figure is missing or not a number."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "\u2013"
+    return fmt.format(value)
 
 
 def _image(title: str, png: bytes) -> str:
