@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import base64
 import html
-import math
 import logging
+import math
 from datetime import datetime, timezone
 from pathlib import Path
 
