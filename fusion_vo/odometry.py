@@ -89,6 +89,9 @@ class OdometryResult:
         Inlier count per processed frame.
     velocity : ndarray, shape (N, 3)
         ``(vx, vy, yaw rate)`` per processed frame (NaN where not measured).
+    height_ratio : ndarray
+        ``h(t1) / h(t0)`` of the camera height per processed frame, from the similarity's scale (NaN
+        where not measured).
     track : PoseData
         Visual dead reckoning, one pose per measured frame.
     skipped : list of str
@@ -104,6 +107,7 @@ class OdometryResult:
     status: list[str]
     inliers: np.ndarray
     velocity: np.ndarray
+    height_ratio: np.ndarray
     track: PoseData
     skipped: list[str]
     bridged_s: float
@@ -222,7 +226,7 @@ def run_visual_odometry(
     vo = VisualOdometry(frontend, geometry)
     total = len(recording)
     increments: list[VisualIncrement] = []
-    frame_t, status, inliers, vel = [], [], [], []
+    frame_t, status, inliers, vel, ratio = [], [], [], [], []
     skipped: list[str] = []
     bad_run = 0
     start = time.perf_counter()
@@ -246,8 +250,10 @@ def run_visual_odometry(
             increments.append(inc)
         if inc is not None and inc.ok and inc.dt > 0:
             vel.append(se2.log(inc.delta) / inc.dt)
+            ratio.append(inc.height_ratio)
         else:
             vel.append(np.full(3, np.nan))
+            ratio.append(np.nan)
         if progress:
             progress(k + 1, total)
     elapsed = time.perf_counter() - start
@@ -259,6 +265,7 @@ def run_visual_odometry(
         status=status,
         inliers=np.asarray(inliers, dtype=np.int64),
         velocity=np.asarray(vel).reshape(-1, 3),
+        height_ratio=np.asarray(ratio, dtype=np.float64),
         track=vo.track(),
         skipped=skipped,
         bridged_s=vo.bridged_s,

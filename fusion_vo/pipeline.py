@@ -5,7 +5,9 @@
 Outputs (in ``out_dir``; written under a temporary folder and moved into place only when complete):
 
 ``vo.tum``            visual dead reckoning (TUM: ``t x y z qx qy qz qw``, pose of B in W)
-``velocities.csv``    ``t,vx,vy,yaw_rate,status,inliers`` per camera frame
+``velocities.csv``    ``t,vx,vy,yaw_rate,status,inliers,height_ratio`` per camera frame (``height_ratio``
+                      is the camera height at the frame over the height at the previous one, from the
+                      similarity's scale)
 ``wheel.tum``         wheel dead reckoning (when the recording has wheel encoders)
 ``ekf.tum``, ``ekf_smoothed.tum``, ``gtsam.tum``, ``gtsam_online.tum``   fused trajectories
 ``run.yaml``          the configuration used and the recording's path
@@ -86,9 +88,9 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
 
 def write_velocities(path: Path, vo: OdometryResult) -> None:
     with open(path, "w") as f:
-        f.write("t,vx,vy,yaw_rate,status,inliers\n")
-        for t, v, s, n in zip(vo.frame_t, vo.velocity, vo.status, vo.inliers):
-            f.write(f"{t:.9f},{v[0]:.9g},{v[1]:.9g},{v[2]:.9g},{s},{int(n)}\n")
+        f.write("t,vx,vy,yaw_rate,status,inliers,height_ratio\n")
+        for t, v, s, n, r in zip(vo.frame_t, vo.velocity, vo.status, vo.inliers, vo.height_ratio):
+            f.write(f"{t:.9f},{v[0]:.9g},{v[1]:.9g},{v[2]:.9g},{s},{int(n)},{r:.7f}\n")
 
 
 def run_pipeline(

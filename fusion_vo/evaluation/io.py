@@ -6,7 +6,8 @@ Readers
   in the world W). Blank lines and lines starting with ``#`` are skipped.
 * Ground truth in the EuRoC layout: ``#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z[,...]``; columns after
   the quaternion are ignored. Timestamps are converted to seconds.
-* ``velocities.csv`` of a run: header ``t,vx,vy,yaw_rate,status,inliers``, one row per camera frame.
+* ``velocities.csv`` of a run: header ``t,vx,vy,yaw_rate,status,inliers`` (further columns such as
+  ``height_ratio`` are ignored), one row per camera frame.
 
 Every malformed row raises :class:`fusion_vo.errors.InputError` naming the file and the 1-based line.
 Outputs are written to a temporary file in the destination folder and renamed into place, so a reader

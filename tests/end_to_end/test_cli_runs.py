@@ -36,7 +36,9 @@ def test_corrupt_frame_is_skipped_and_counted(standard_recording, tmp_path, caps
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["skipped_frames"] == 1 and summary["frames"] == len(frames) - 1
     vel = (tmp_path / "out" / "velocities.csv").read_text().splitlines()
-    assert vel[0] == "t,vx,vy,yaw_rate,status,inliers" and len(vel) == len(frames)
+    assert vel[0] == "t,vx,vy,yaw_rate,status,inliers,height_ratio" and len(vel) == len(frames)
+    ratios = np.array([float(row.split(",")[-1]) for row in vel[2:]])
+    assert np.nanmax(np.abs(ratios - 1.0)) < 2e-3  # the simulated camera height does not change
 
 
 @pytest.mark.slow
