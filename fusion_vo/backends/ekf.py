@@ -27,6 +27,13 @@ Measurements over an interval (all sensors are integrated onto the same interval
     gyro     z = Θ/Δt (mean rate)       h = ω + b_g                     R = σ_g² / Δt
     AHRS     z = ψ_AHRS (at the node)   h = ψ + o_ψ                     R = σ_ψ²
     range    z = h_range (at the node)  h = h_c / k_v                   R = σ_r²
+    still    z = 0 (wheels at rest)     h = ω                           R = σ_still²
+
+The wheels' heading error on a skid-steered base is correlated over a turn; its variance per
+interval is inflated by its correlation time (``WheelNoise.yaw_scale_time``, see
+:mod:`fusion_vo.sensors.wheel`) and taken proportional to the gyro's turn rather than the
+wheels' own reading (which would bias ``k_b`` low), so a long turn does not outweigh the gyro and drag its bias. An interval in which the wheels report rest is a zero-velocity update of the yaw
+rate (``still``); with the gyro's ``ω + b_g`` it measures the bias directly.
 
 Because the twist state *is* the interval's mean twist and the pose at the node is a function of the
 previous pose and that twist, an interval measurement is an exact function of the current state — the
@@ -69,7 +76,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.sensors.wheel import arc_twist
+from fusion_vo.sensors.wheel import arc_twist, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -197,6 +204,11 @@ class PlanarEkf:
         H[0, YAW] = H[0, AO] = 1.0
         return "ahrs", np.array([yaw]), np.array([self.x[YAW] + self.x[AO]]), H, np.array([[var]]), 0
 
+    def standstill_block(self, var: float):
+        H = np.zeros((1, DIM))
+        H[0, W] = 1.0
+        return "standstill", np.zeros(1), np.array([self.x[W]]), H, np.array([[var]]), None
+
     def range_block(self, height: float, var: float):
         kv = self.x[KV]
         H = np.zeros((1, DIM))
@@ -255,9 +267,14 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
             vis_ok[free] = True
         out["visual"] = (vis_ok, vis_u, vis_R)
     if iv.uses("wheel"):
-        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0])
+        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0],
+                         gyro_turn(iv))
         u[:, 0] *= iv.cx
         out["wheel"] = (iv.wheel_ok, u, R)
+        noise = config.wheel_model(iv.twist)[0]
+        still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+        if still.any():
+            out["standstill"] = (still, noise.standstill_yaw_rate**2)
     if iv.uses("gyro"):
         out["gyro"] = (iv.gyro_ok, iv.gyro_angle / dt, config.imu.gyro_noise_density**2 / dt)
     if iv.ahrs_ok.any():
@@ -265,6 +282,14 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
     if iv.range_ok.any():
         out["range"] = (iv.range_ok, iv.range_height, config.range.sigma**2)
     return out
+
+
+def gyro_turn(iv: Intervals) -> np.ndarray | None:
+    """The gyro's heading change per interval (NaN where it has none), or None without a gyro: the
+    independent measure of the turn that scales the wheels' skid variance (:func:`~fusion_vo.sensors.wheel.skid_variance`)."""
+    if not iv.uses("gyro"):
+        return None
+    return np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
 
 
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
@@ -278,6 +303,9 @@ def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
         blocks.append(ekf.wheel_block(whl[1][k], whl[2][k]))
     if gyr is not None and gyr[0][k]:
         blocks.append(ekf.gyro_block(gyr[1][k], gyr[2][k]))
+    still = meas.get("standstill")
+    if still is not None and still[0][k]:
+        blocks.append(ekf.standstill_block(still[1]))
     if ahr is not None and ahr[0][k + 1]:
         blocks.append(ekf.heading_block(ahr[1][k + 1], ahr[2]))
     if rng is not None and rng[0][k + 1]:

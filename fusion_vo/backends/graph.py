@@ -22,6 +22,7 @@ Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)
                with self-calibration its heading row is split off into
                e = W_c d_ψ - m_ψ                                σ² = Σ_ψψ         (CustomFactor)
     gyro       e = d_ψ - (Θ_ij - B_c Δt)                       σ² = σ_g² Δt      (exact linear factor)
+    standstill e = d_ψ   (wheels at rest over the interval)      σ = σ_still Δt   (exact linear factor)
     walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ),
                O_c - O_{c-1} ~ N(0, σ_ow² τ)                                           (τ: segment length)
     heading    e = ψ_k + O_c - ψ_AHRS                            σ² = σ_ψ²         (CustomFactor)
@@ -31,6 +32,11 @@ Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)
 The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
 the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
 attenuates the estimate like a regression on a noisy regressor.
+
+The wheels' heading error on a skid-steered base is correlated over a turn: its variance per
+interval is inflated by its correlation time (``WheelNoise.yaw_scale_time``, see
+:mod:`fusion_vo.sensors.wheel`) and scaled by the gyro's turn, so the wheels' turn rate does not outweigh the gyro and drag its bias. A standstill (both wheels at rest) fixes the
+heading change to zero, which ties the bias to the gyro's reading at rest.
 
 The AHRS heading has its own slowly wandering offset (the magnetometer's disturbances, see
 :mod:`fusion_vo.backends.ekf`): a heading that strays from the gyro's integral moves ``O_c``, not
@@ -71,12 +77,12 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import calibration_observable
+from fusion_vo.backends.ekf import calibration_observable, gyro_turn
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -184,6 +190,18 @@ def heading_change_factor(ki: int, kj: int, kp: int, offset: float, gain: float,
     return gtsam.LinearContainerFactor(jf, lin)
 
 
+def standstill_factor(ki: int, kj: int, sigma: float, pose_i: gtsam.Pose2,
+                      pose_j: gtsam.Pose2) -> gtsam.LinearContainerFactor:
+    """Zero heading change ``e = d_ψ`` on ``(X_i, X_j)`` (wheels at rest), exact as a linear factor."""
+    e0 = _wrap(pose_j.theta() - pose_i.theta())
+    jf = gtsam.JacobianFactor(ki, _H_HEADING_I, kj, _H_HEADING_J, np.array([-e0]),
+                              gtsam.noiseModel.Isotropic.Sigma(1, sigma))
+    lin = gtsam.Values()
+    lin.insert(ki, pose_i)
+    lin.insert(kj, pose_j)
+    return gtsam.LinearContainerFactor(jf, lin)
+
+
 _H_HEADING_I = np.array([[0.0, 0.0, -1.0]])
 _H_HEADING_J = np.array([[0.0, 0.0, 1.0]])
 _FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
@@ -236,7 +254,9 @@ class GraphBuilder:
             self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
             self._wheel_inc[:, 0] *= iv.cx
             self._wheel_inc[:, 1] *= iv.cy
-            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0])
+            self._turn = gyro_turn(iv)
+            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
+                                             np.diff(iv.t), self._turn)
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -308,8 +328,11 @@ class GraphBuilder:
             self._new_segment(nf, c, est)
         translation = heading = None
         wheel_heading = None
+        still = False
+        wheel_noise = cfg.wheel_model(iv.twist)[0]
         # wheel: travel summed over the node interval, arc model
         if iv.uses("wheel") and iv.wheel_ok[g0:g1].all():
+            still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
             if self.kb_on:
                 # translation from the arc; the heading change goes through the wheel-base factor
@@ -355,6 +378,10 @@ class GraphBuilder:
             sigma = cfg.imu.gyro_noise_density * np.sqrt(dt)
             nf.factors.append(heading_change_factor(xi, xj, B(c), angle, -dt, sigma, previous_pose,
                                                     nf.values[xj], est.get("gyro_bias", 0.0)))
+        if still:
+            sigma = wheel_noise.standstill_yaw_rate * max(dt, 1e-3)
+            nf.factors.append(standstill_factor(xi, xj, sigma, previous_pose, nf.values[xj]))
+            nf.sensors.append("standstill")
         if wheel_heading is not None:
             nm = self.noise(np.array([[wheel_heading[1] ** 2]]))
             nf.factors.append(gtsam.CustomFactor(nm, [xi, xj, W(c)], wheel_heading_error(wheel_heading[0])))
@@ -370,7 +397,9 @@ class GraphBuilder:
         m = arc_increment(dl, dr, iv.wheel_base)[0]
         m[0] *= iv.cx[g0:g1].mean()
         m[1] *= iv.cy[g0:g1].mean()
-        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0])[0]
+        turn = None if self._turn is None else self._turn[g0:g1].sum()
+        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
+                                 turn)[0]
 
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict) -> None:
         """Bias and calibration variables of segment ``c``, tied to segment ``c-1`` by random walks."""

@@ -26,7 +26,7 @@ Each wheel's travel has variance growing with the distance it rolled, plus a ski
 the turn, plus a lateral slip (the arc model assumes none)::
 
     σ_l² = k² |d_l| + σ_0²,   σ_r² = k² |d_r| + σ_0²
-    Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ| + (s_ψ θ)²)
+    Σ_Δ  = J diag(σ_l², σ_r²) Jᵀ + diag(0, k_lat² |d|, k_yaw² |θ| + (s_ψ θ)² max(1, τ_ψ/Δt))
 
 where ``J = ∂Δ/∂(d_l, d_r)``. The last term is the skid of a skid-steered (or tracked) robot: its
 wheels slide sideways whenever it turns, the instantaneous centres of rotation of the tracks move
@@ -43,6 +43,33 @@ A robot's own odometry (``odom0``, e.g. ``nav_msgs/Odometry`` of a skid-steer co
 velocity error: ``σ_v`` [m/s] held over a sample period ``τ`` gives a travel floor ``σ_v τ``; its
 heading comes from wheel speeds through a nominal track width, so on a skid-steered base it is
 only known to a scale (:func:`odom_twist_noise` documents the defaults).
+
+Correlated heading error of skid steering
+-----------------------------------------
+The skid error of the reported heading change is not white: the effective track width is set by
+the ground and the load and stays much the same for a whole turn, so consecutive samples share
+the same relative error (a Gauss–Markov error of correlation time ``τ_ψ``). Treated as independent
+per interval, a turn of ``N`` intervals would pin the heading change to ``s_ψ / √N`` and the wheels
+would outweigh a gyro and drag its bias. A correlated error sampled every ``Δt < τ_ψ`` carries about
+one independent sample per ``τ_ψ``, so each interval's skid variance is inflated by ``τ_ψ / Δt``::
+
+    σ_ψ,skid² = (s_ψ θ)² · max(1, τ_ψ / Δt) = s_ψ² ω² τ_ψ Δt      (Δt < τ_ψ)
+
+i.e. white yaw-rate noise of density ``s_ψ |ω| √τ_ψ``: over a turn lasting ``τ_ψ`` the summed
+variance is ``(s_ψ θ_turn)²``, the stated relative error of one turn, whatever the sample rate.
+The ``θ`` in that variance should not be the wheels' own reading: a variance proportional to the
+measurement weights the samples that happen to read low more and biases every estimate that
+uses them (the yaw-rate scale, and through it the gyro bias) towards small turns. The backends pass
+the gyro's heading change of the interval when there is one (its noise is independent of the wheels').
+The inflation matters only where the wheels are fused with such an independent measure of the
+turn; where they are the only one (no gyro, or a gap in it), nothing can tell their correlated
+error apart and the inflation would only make the estimate lag behind the wheels, so it is left out.
+
+Standstill
+----------
+An interval in which both wheels move slower than ``standstill_speed`` is a standstill: the robot
+does not rotate, so its yaw rate is measured as ``0`` with standard deviation ``standstill_yaw_rate``
+(zero-velocity update). With a gyro, this is what fixes its bias: at rest the gyro reads ``b_g``.
 """
 
 from __future__ import annotations
@@ -82,6 +109,14 @@ class WheelNoise:
         default 0, an ideal differential drive).
     max_speed : float
         Wheel speeds above this [m/s] are encoder glitches and gated (default 5).
+    yaw_scale_time : float
+        ``τ_ψ``: correlation time [s] of the ``s_ψ`` heading error (default 0: white).
+    standstill_speed : float
+        Both wheels slower than this [m/s] over an interval is a standstill (default 1e-3; 0 disables
+        the zero-velocity update).
+    standstill_yaw_rate : float
+        Standard deviation [rad/s] of the zero yaw rate at a standstill (default 3e-3: vibration of
+        a robot at rest).
     """
 
     k: float = 0.01
@@ -90,6 +125,9 @@ class WheelNoise:
     k_yaw: float = 0.01
     yaw_scale: float = 0.0
     max_speed: float = 5.0
+    yaw_scale_time: float = 0.0
+    standstill_speed: float = 1e-3
+    standstill_yaw_rate: float = 1e-2
 
 
 def odom_twist_noise() -> WheelNoise:
@@ -103,9 +141,11 @@ def odom_twist_noise() -> WheelNoise:
     * ``k_yaw = 0.02`` rad^½ and ``yaw_scale = 0.3``: the heading change computed from the wheel
       speeds with a nominal track width is off by tens of percent on a skid-steered base (the
       effective track width of skid steering is typically 1.2 to 2 times the geometric one and
-      changes with the ground), so a gyro, when present, must dominate the heading.
+      changes with the ground), so a gyro, when present, must dominate the heading;
+    * ``yaw_scale_time = 5`` s: that error persists for a turn (the time a slow base takes for a
+      quarter turn) and changes from turn to turn; it is not white at the sample rate.
     """
-    return WheelNoise(k=0.02, sigma_floor=1e-3, k_lateral=0.02, k_yaw=0.02, yaw_scale=0.3)
+    return WheelNoise(k=0.02, sigma_floor=1e-3, k_lateral=0.02, k_yaw=0.02, yaw_scale=0.3, yaw_scale_time=5.0)
 
 
 @dataclass
@@ -227,8 +267,28 @@ def travel_variances(d_left, d_right, noise: WheelNoise) -> tuple[np.ndarray, np
     return noise.k**2 * np.abs(d_left) + f2, noise.k**2 * np.abs(d_right) + f2
 
 
-def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise) -> np.ndarray:
-    """Covariances (N x 3 x 3) of :func:`arc_increment`, see the module docstring."""
+def skid_variance(theta, dt, noise: WheelNoise, theta_ref=None) -> np.ndarray:
+    """Variance of the reported heading change ``θ`` over intervals ``dt`` from skid: ``k_yaw² |θ|`` plus
+    the scale error ``(s_ψ θ)²``; where ``theta_ref`` (an independent measure of the same turn, e.g. the
+    gyro's) is finite, ``θ`` is replaced by it and the scale error, correlated over ``τ_ψ``, is
+    inflated by ``max(1, τ_ψ / Δt)`` (see the module docstring)."""
+    th = np.asarray(theta, dtype=np.float64)
+    if theta_ref is None:
+        return noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2
+    ref = np.broadcast_to(np.asarray(theta_ref, dtype=np.float64), th.shape)
+    fused = np.isfinite(ref)
+    th = np.where(fused, ref, th)
+    inflation = np.ones_like(th)
+    if noise.yaw_scale_time > 0 and dt is not None:
+        ratio = noise.yaw_scale_time / np.maximum(np.asarray(dt, dtype=np.float64), 1e-6)
+        inflation = np.where(fused, np.maximum(1.0, ratio), 1.0)
+    return noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2 * inflation
+
+
+def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise, dt=None, theta_ref=None) -> np.ndarray:
+    """Covariances (N x 3 x 3) of :func:`arc_increment` over intervals of length ``dt`` [s] (needed by a
+    correlated skid error, ``noise.yaw_scale_time > 0``), see the module docstring and
+    :func:`skid_variance` for ``theta_ref``."""
     dl = np.atleast_1d(np.asarray(d_left, dtype=np.float64))
     dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
     d = 0.5 * (dr + dl)
@@ -243,12 +303,14 @@ def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise) -> np.
     vl, vr = travel_variances(dl, dr, noise)
     cov = vl[:, None, None] * jl[:, :, None] * jl[:, None, :] + vr[:, None, None] * jr[:, :, None] * jr[:, None, :]
     cov[:, 1, 1] += noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
-    cov[:, 2, 2] += noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2
+    cov[:, 2, 2] += skid_variance(th, dt, noise, theta_ref)
     return cov
 
 
-def arc_twist(d_left, d_right, dt, wheel_base: float, noise: WheelNoise) -> tuple[np.ndarray, np.ndarray]:
-    """Mean body twists ``(v_x, v_y, ω)`` (N x 3) over intervals of length ``dt`` and their covariances.
+def arc_twist(d_left, d_right, dt, wheel_base: float, noise: WheelNoise,
+              theta_ref=None) -> tuple[np.ndarray, np.ndarray]:
+    """Mean body twists ``(v_x, v_y, ω)`` (N x 3) over intervals of length ``dt`` and their covariances
+    (``theta_ref``: see :func:`skid_variance`).
 
     The arc model's twist is exact: ``(d, 0, θ) / Δt`` (see the module docstring).
     """
@@ -261,10 +323,21 @@ def arc_twist(d_left, d_right, dt, wheel_base: float, noise: WheelNoise) -> tupl
     vl, vr = travel_variances(dl, dr, noise)
     cov = np.zeros((len(d), 3, 3))
     cov[:, 0, 0] = 0.25 * (vl + vr)
-    cov[:, 2, 2] = (vl + vr) / wheel_base**2 + noise.k_yaw**2 * np.abs(th) + (noise.yaw_scale * th) ** 2
+    cov[:, 2, 2] = (vl + vr) / wheel_base**2 + skid_variance(th, dt, noise, theta_ref)
     cov[:, 0, 2] = cov[:, 2, 0] = 0.5 * (vr - vl) / wheel_base
     cov[:, 1, 1] = noise.k_lateral**2 * np.abs(d) + noise.sigma_floor**2
     return u, cov / (dt**2)[:, None, None]
+
+
+def standstill(d_left, d_right, dt, noise: WheelNoise) -> np.ndarray:
+    """True for the intervals in which both wheels moved slower than ``noise.standstill_speed``."""
+    dl = np.abs(np.atleast_1d(np.asarray(d_left, dtype=np.float64)))
+    dr = np.abs(np.atleast_1d(np.asarray(d_right, dtype=np.float64)))
+    dt = np.atleast_1d(np.asarray(dt, dtype=np.float64))
+    if noise.standstill_speed <= 0:
+        return np.zeros(np.broadcast(dl, dr, dt).shape, bool)
+    limit = noise.standstill_speed * dt
+    return (dl < limit) & (dr < limit)
 
 
 # --------------------------------------------------------------------------- dead reckoning
@@ -290,5 +363,5 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
 
 __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
-    "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "wheel_track",
+    "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
 ]

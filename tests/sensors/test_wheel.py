@@ -84,3 +84,28 @@ def test_constant_twist_drives_a_circle():
     xy = track.xyyaw[:, :2]
     np.testing.assert_allclose(np.hypot(xy[:, 0], xy[:, 1] - 1.0), 1.0, atol=1e-3)  # radius v/ω = 1 m
     np.testing.assert_allclose(xy[-1], [0.0, 0.0], atol=1e-2)
+
+
+def test_correlated_skid_variance_is_inflated_against_an_independent_turn():
+    """``(s_ψ θ)² τ/Δt`` where a gyro measures the turn; the plain ``(s_ψ θ)²`` for wheels alone."""
+    from fusion_vo.sensors.wheel import skid_variance
+
+    noise = WheelNoise(k_yaw=0.0, yaw_scale=0.3, yaw_scale_time=5.0)
+    alone = skid_variance(np.array([0.02]), np.array([0.05]), noise)
+    np.testing.assert_allclose(alone, (0.3 * 0.02) ** 2)
+    fused = skid_variance(np.array([0.02, 0.02]), np.array([0.05, 0.05]), noise, np.array([0.03, np.nan]))
+    np.testing.assert_allclose(fused, [(0.3 * 0.03) ** 2 * 100.0, (0.3 * 0.02) ** 2])
+    # a turn lasting τ sums to the variance of one sample of the relative error, whatever the rate
+    for dt in (0.01, 0.1):
+        n = int(round(5.0 / dt))
+        total = skid_variance(np.full(n, 0.2 * dt), np.full(n, dt), noise, np.full(n, 0.2 * dt)).sum()
+        np.testing.assert_allclose(total, (0.3 * 0.2 * 5.0) ** 2, rtol=1e-9)
+
+
+def test_standstill_needs_both_wheels_at_rest():
+    from fusion_vo.sensors.wheel import standstill
+
+    noise = WheelNoise(standstill_speed=1e-3)
+    still = standstill([0.0, 0.0, 1e-5, 0.0], [0.0, 2e-4, 1e-5, 0.0], [0.1, 0.1, 0.1, 0.1], noise)
+    assert still.tolist() == [True, False, True, True]
+    assert not standstill([0.0], [0.0], [0.1], WheelNoise(standstill_speed=0.0)).any()
