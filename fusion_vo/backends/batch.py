@@ -8,6 +8,13 @@
     result.summary()                    # counts, calibration, notes, timing
 
 ``fuse`` does the same from :class:`~fusion_vo.backends.timeline.SensorStreams` already in memory.
+
+Before the streams are merged, an odometry twist is put on the gyro's clock: its delay behind the
+gyro is estimated from the two yaw rates over the whole recording
+(:func:`~fusion_vo.sensors.sync.rate_delay`) and, when it exceeds the twist's sample period (the
+resolution of a twist held between samples), its timestamps are moved back by it
+(``FusionConfig.sync_odometry``). Streaming use has no whole recording to align and takes the
+timestamps as they come.
 """
 
 from __future__ import annotations
@@ -16,12 +23,16 @@ import dataclasses
 import logging
 import time
 
+import numpy as np
+
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import run_ekf
 from fusion_vo.backends.result import FusionResult
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.imu import gyro_yaw
+from fusion_vo.sensors.sync import rate_delay
 from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
 
 logger = logging.getLogger(__name__)
@@ -76,7 +87,10 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     if not names:
         return result
     t0 = time.process_time()
+    streams, delay = synchronise_odometry(streams, config)
     iv = build_intervals(streams, config)
+    if delay is not None:
+        iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
     if "ekf" in names:
         result.merge(run_ekf(iv, config))
@@ -87,6 +101,26 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     for note in result.notes:
         logger.info("%s", note)
     return result
+
+
+def synchronise_odometry(streams: SensorStreams, config: FusionConfig) -> tuple[SensorStreams, float | None]:
+    """``streams`` with the odometry twist's timestamps moved back by its estimated delay behind the gyro.
+
+    Returns the streams and the delay [s] (None when not corrected: no twist, no gyro, no turns, a
+    delay shorter than the twist's sample period, or ``config.sync_odometry`` off). See
+    :mod:`fusion_vo.sensors.sync`.
+    """
+    odom, imu = streams.odom, streams.imu
+    if not config.sync_odometry or odom is None or imu is None or len(odom) < 3 or len(imu) < 3:
+        return streams, None
+    gyro = gyro_yaw(imu, config.imu)
+    delay = rate_delay(odom.t, odom.wz, gyro.t, gyro.rate, max_delay=config.max_odom_delay)
+    period = float(np.median(np.diff(odom.t)))
+    if delay is None or abs(delay) < period:
+        # below the resolution of a twist held over its sample period
+        return streams, None
+    logger.info("odometry twist delayed by %.3f s behind the gyro; corrected", delay)
+    return dataclasses.replace(streams, odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
 
 
 def with_recorded_noise(config: FusionConfig, streams: SensorStreams) -> FusionConfig:

@@ -109,6 +109,12 @@ class FusionConfig:
     odom_base_sigma : float
         Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
         (default 0.3: the effective track width of a skid-steered base is known only roughly).
+    sync_odometry : bool
+        Batch use: estimate the delay of an odometry twist behind the gyro from their yaw rates
+        (:func:`~fusion_vo.sensors.sync.rate_delay`) and move the twist's timestamps back by it
+        (default True; a controller's odometry is often stamped when published, late).
+    max_odom_delay : float
+        Largest delay [s] searched (default 1).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller).
@@ -131,6 +137,8 @@ class FusionConfig:
     visual_scale_sigma: float = 0.05
     wheel_base_sigma: float = 0.05
     odom_base_sigma: float = 0.3
+    sync_odometry: bool = True
+    max_odom_delay: float = 1.0
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
