@@ -32,8 +32,9 @@ Measurements over an interval (all sensors are integrated onto the same interval
 The wheels' heading error on a skid-steered base is correlated over a turn; its variance per
 interval is inflated by its correlation time (``WheelNoise.yaw_scale_time``, see
 :mod:`fusion_vo.sensors.wheel`) and taken proportional to the gyro's turn rather than the
-wheels' own reading (which would bias ``k_b`` low), so a long turn does not outweigh the gyro and drag its bias. An interval in which the wheels report rest is a zero-velocity update of the yaw
-rate (``still``); with the gyro's ``ω + b_g`` it measures the bias directly.
+wheels' own reading (which would bias ``k_b`` low), so a long turn does not outweigh the gyro and
+drag its bias. An interval in which the wheels report rest is a zero-velocity update of the yaw rate
+(``still``); with the gyro's ``ω + b_g`` it measures the bias directly.
 
 Because the twist state *is* the interval's mean twist and the pose at the node is a function of the
 previous pose and that twist, an interval measurement is an exact function of the current state — the
