@@ -319,7 +319,6 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     png = [cv2.IMWRITE_PNG_COMPRESSION, int(o.png_compression)]
     if o.png_compression == 0:  # stored, not compressed: row filters would only cost time
         png += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
-    heights = o.camera_height + o.height_vibration * np.sin(2 * math.pi * o.vibration_frequency * frame_t)
     for i, t in enumerate(frame_t):
         if not keep[i]:
             continue
