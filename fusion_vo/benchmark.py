@@ -62,19 +62,17 @@ def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = 
     rec = Recording(sequence)
     geometry = GroundGeometry(rec.camera)
     fe = make_frontend(frontend, options or {}, point_map=geometry.rectifier)
-    t_ns = rec.frame_times
-    folder = Path(rec.path) / "cam0" / "data"
-    _, names, _ = rec._frames_index()
-    n = len(names) if max_frames is None else min(max_frames, len(names))
+    n = len(rec) if max_frames is None else min(max_frames, len(rec))
     dec = fro = geo = 0.0
     ok = 0
     rss = []
     quarter = max(n // 4, 1)
+    frames = rec.frames(stop=n)  # decoding happens in next(): timed as decode
     for i in range(n):
         a = time.process_time()
-        img = cv2.imread(str(folder / names[i]), cv2.IMREAD_GRAYSCALE)
+        frame = next(frames)
         b = time.process_time()
-        motion = fe.process(img, float(t_ns[i]))
+        motion = fe.process(frame.image, frame.t)
         c = time.process_time()
         if motion.ok:
             geometry.increment(motion)
