@@ -50,6 +50,7 @@ from evo.core.sync_method import SyncMethod
 from evo.core.trajectory import PoseTrajectory3D
 
 from fusion_vo.errors import InputError
+from fusion_vo.geometry import se2
 
 logger = logging.getLogger(__name__)
 
@@ -146,8 +147,7 @@ class TrajectoryErrors:
 
 def yaw_of(trajectory: PoseTrajectory3D) -> np.ndarray:
     """Yaw [rad] of each pose (rotation about the world z axis, ZYX convention), in (-pi, pi]."""
-    w, x, y, z = trajectory.orientations_quat_wxyz.T
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return se2.yaw_of_quaternion(trajectory.orientations_quat_wxyz)
 
 
 def wrap_angle(angle):

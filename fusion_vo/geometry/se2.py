@@ -22,6 +22,12 @@ def wrap_angle(a):
     return (np.asarray(a) + np.pi) % (2.0 * np.pi) - np.pi
 
 
+def yaw_of_quaternion(q_wxyz) -> np.ndarray:
+    """Yaw (rotation about the world z axis, ZYX convention) of quaternions ``(w, x, y, z)`` (N x 4)."""
+    w, x, y, z = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4).T
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
 def to_matrix(p) -> np.ndarray:
     """3x3 homogeneous matrix of ``(x, y, yaw)``."""
     x, y, th = (float(v) for v in p)

@@ -5,6 +5,6 @@ demand; camera frames are decoded one at a time while iterating, so a long recor
 memory.
 """
 
-from fusion_vo.recording.reader import Frame, Recording, read_tum, write_tum
+from fusion_vo.recording.reader import Frame, Recording, write_tum
 
-__all__ = ["Frame", "Recording", "read_tum", "write_tum"]
+__all__ = ["Frame", "Recording", "write_tum"]

@@ -28,6 +28,7 @@ import cv2
 import numpy as np
 
 from fusion_vo.errors import InputError
+from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
 from fusion_vo.measurements import ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
 from fusion_vo.recording.csvio import read_frame_list, read_table
@@ -238,7 +239,7 @@ class Recording:
         if len(bad):
             raise InputError(f"quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
         q = q / norms[:, None]
-        yaw = quat_wxyz_to_yaw(q)
+        yaw = se2.yaw_of_quaternion(q)
         xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
         return PoseData(tab.t, xyyaw, tab.values[:, 2].copy(), q)
 
@@ -277,13 +278,6 @@ def _to_grey(img: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray | None,
 
 
 # ---------------------------------------------------------------------- TUM files
-def quat_wxyz_to_yaw(q: np.ndarray) -> np.ndarray:
-    """Yaw (rotation about world z) of quaternions ``(w, x, y, z)``."""
-    q = np.asarray(q, dtype=np.float64).reshape(-1, 4)
-    w, x, y, z = q.T
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
 def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
     """Write a planar trajectory as a TUM file (``timestamp x y z qx qy qz qw``, z = 0), atomically."""
     path = Path(path)
@@ -304,32 +298,3 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
-
-
-def read_tum(path: str | Path) -> PoseData:
-    """Read a TUM trajectory file into planar poses (yaw from the quaternion)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
-    ts, rows = [], []
-    with open(path, encoding="utf-8") as fh:
-        for lineno, raw in enumerate(fh, start=1):
-            s = raw.strip()
-            if not s or s.startswith("#"):
-                continue
-            parts = s.replace(",", " ").split()
-            if len(parts) != 8:
-                raise InputError(f"expected 8 fields 'timestamp x y z qx qy qz qw', found {len(parts)}", path, lineno)
-            try:
-                vals = [float(p) for p in parts]
-            except ValueError:
-                raise InputError("not a number", path, lineno) from None
-            if not np.all(np.isfinite(vals)):
-                raise InputError("NaN or infinite value", path, lineno)
-            if ts and vals[0] <= ts[-1]:
-                raise InputError("timestamps must increase", path, lineno)
-            ts.append(vals[0])
-            rows.append(vals[1:])
-    arr = np.array(rows, dtype=np.float64).reshape(-1, 7)
-    q_wxyz = arr[:, [6, 3, 4, 5]]
-    return PoseData(np.array(ts), np.column_stack([arr[:, 0], arr[:, 1], quat_wxyz_to_yaw(q_wxyz)]), arr[:, 2], q_wxyz)
