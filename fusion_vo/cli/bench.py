@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import os
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
+
+#: numerical libraries that start worker threads unless told otherwise (read when numpy loads)
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 def register(sub) -> None:
@@ -19,6 +25,17 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if any(os.environ.get(v) != "1" for v in THREAD_VARIABLES):
+        # numpy is already loaded with multi-threaded BLAS, whose idle workers would be counted as CPU
+        # time: measure in a fresh interpreter limited to one thread.
+        env = {**os.environ, **{v: "1" for v in THREAD_VARIABLES}}
+        argv = [sys.executable, "-m", "fusion_vo.cli.main", "bench", "--frontend", args.frontend, "--seed", str(args.seed)]
+        if args.frames is not None:
+            argv += ["--frames", str(args.frames)]
+        if args.sequence is not None:
+            argv.append(args.sequence)
+        return subprocess.run(argv, env=env, check=False).returncode
+
     from fusion_vo.benchmark import format_timing, time_frontend
 
     with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
