@@ -38,6 +38,7 @@ import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
+from frontends.direct import DenseFallback
 from frontends.frame_check import check_frame
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, judge_fit
@@ -125,6 +126,15 @@ class KltConfig(ConfigMixin):
         Reduction factor of the images for phase correlation.
     min_global_response : float
         Smallest phase-correlation peak response accepted.
+    dense_fallback : bool
+        When the points cannot measure a frame that still has texture (too few corners, too few
+        inliers, points out of view, sudden blur), align the whole frames photometrically instead
+        (:class:`frontends.direct.DenseFallback`); the frame is then weighted by the photometric
+        covariance rather than dropped.
+    adaptive_corners : bool
+        Scale ``min_distance`` and ``border`` with the image size (their values are for a 360-pixel
+        high image) and, when the detector finds too few corners, retry with a lower quality level
+        and half the spacing (coarse or low-contrast floors).
     """
 
     max_tracks: int = 60
@@ -161,6 +171,8 @@ class KltConfig(ConfigMixin):
     global_fallback: bool = True
     global_downsample: int = 4
     min_global_response: float = 0.05
+    dense_fallback: bool = True
+    adaptive_corners: bool = True
 
     def __post_init__(self) -> None:
         if self.window < 5 or self.window % 2 == 0:
@@ -230,6 +242,7 @@ class KltFrontend:
         self._lk = self.config.lk_settings()
         self._hann: np.ndarray | None = None
         self._shape: tuple[int, int] | None = None
+        self._dense = DenseFallback(self.point_map) if self.config.dense_fallback else None
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -254,7 +267,8 @@ class KltFrontend:
         cfg = self.config
         check = check_frame(image, self._shape, cfg.min_texture, self._ref_texture, cfg.min_texture_ratio)
         if check.status is not None:
-            return self._failed(t, check.status, check.reason, texture=check.texture)
+            dense = self._dense_motion(check.image, t, check.texture, check.reason) if check.image is not None else None
+            return dense or self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         self._cur_texture = check.texture
         self._cur_small = reduce_for_exposure(img)
@@ -266,6 +280,9 @@ class KltFrontend:
         if not dt > 0.0:
             return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref_time}")
         if len(self._ref_pts) < cfg.min_inliers:
+            dense = self._dense_motion(img, t, check.texture, "too few corners in the reference frame")
+            if dense is not None:
+                return dense
             self._set_reference(img, t, np.zeros((0, 2), np.float32))
             return self._failed(t, MotionStatus.TOO_FEW_FEATURES, "too few corners in the reference frame")
 
@@ -291,6 +308,9 @@ class KltFrontend:
         }
         if best.status is not MotionStatus.OK:
             reasons = "; ".join(f"{a.path}: {a.reason}" for a in attempts)
+            dense = self._dense_motion(img, t, check.texture, reasons)
+            if dense is not None:
+                return dense
             motion = self._failed(t, best.status, reasons, texture=check.texture, current=img)
             motion.info.update(info)
             if best.fit is not None:
@@ -312,6 +332,23 @@ class KltFrontend:
         )
         self._history.succeeded(fit.matrix, dt)
         self._set_reference(img, t, best.next_pts)
+        return motion
+
+    def _dense_motion(self, img: np.ndarray, t: float, texture: float, why: str) -> FrameMotion | None:
+        """The per-frame dense fallback (``None`` when disabled or when it fails too)."""
+        if self._dense is None or self._ref_img is None or self._ref_img.shape != img.shape:
+            return None
+        dt = t - self._ref_time
+        if not dt > 0.0:
+            return None
+        motion = self._dense.motion(self._ref_img, img, t, self._ref_time, self._history.predict(dt), texture, why)
+        if motion is None:
+            return None
+        self._cur_texture = texture
+        self._cur_small = reduce_for_exposure(img)
+        self._history.succeeded(motion.matrix, dt)
+        self._set_reference(img, t, np.zeros((0, 2), np.float32))
+        motion.n_features = len(self._ref_pts)
         return motion
 
     def _attempt(self, path: str, img: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray, levels: int) -> _Attempt:
@@ -389,15 +426,28 @@ class KltFrontend:
             pts = np.vstack([pts, self._detect(img, pts)])
         self._ref_pts = pts
 
-    def _detect(self, img: np.ndarray, existing: np.ndarray) -> np.ndarray:
-        """New Shi-Tomasi corners on the half-resolution image, away from ``existing`` points."""
+    def _spacing(self, shape: tuple[int, int]) -> tuple[float, int]:
+        """``(min_distance, border)`` in effect for frames of ``shape`` [px]."""
         cfg = self.config
+        if not cfg.adaptive_corners:
+            return cfg.min_distance, cfg.border
+        f = min(1.0, min(shape) / 360.0)
+        return max(cfg.min_distance * f, 6.0), max(int(round(cfg.border * f)), 4)
+
+    def _detect(self, img: np.ndarray, existing: np.ndarray) -> np.ndarray:
+        """New Shi-Tomasi corners on the half-resolution image, away from ``existing`` points.
+
+        With ``adaptive_corners``, a frame that yields fewer than ``replenish_below`` corners is
+        searched again with a tenth of the quality level and half the spacing.
+        """
+        cfg = self.config
+        min_distance, border = self._spacing(img.shape)
         half = cv2.pyrDown(img)
         hh, hw = half.shape
-        margin = (cfg.border + cfg.window // 2) // 2 + 1
+        margin = (border + cfg.window // 2) // 2 + 1
         mask = np.zeros((hh, hw), np.uint8)
         mask[margin : hh - margin, margin : hw - margin] = 255
-        cell = max(int(cfg.min_distance // 2), 1)
+        cell = max(int(min_distance // 2), 1)
         if len(existing):
             # blank the grid cells (and their neighbours) holding an existing track
             gi = np.clip((existing[:, 1] / 2) // cell, 0, (hh - 1) // cell).astype(int)
@@ -413,9 +463,17 @@ class KltFrontend:
         if wanted <= 0:
             return np.zeros((0, 2), np.float32)
         corners = cv2.goodFeaturesToTrack(
-            half, maxCorners=wanted, qualityLevel=cfg.quality_level, minDistance=cfg.min_distance / 2,
+            half, maxCorners=wanted, qualityLevel=cfg.quality_level, minDistance=min_distance / 2,
             mask=mask, blockSize=cfg.block_size,
         )
+        found = 0 if corners is None else len(corners)
+        if cfg.adaptive_corners and len(existing) + found < cfg.replenish_below:
+            retry = cv2.goodFeaturesToTrack(
+                half, maxCorners=wanted, qualityLevel=cfg.quality_level / 10, minDistance=min_distance / 4,
+                mask=mask, blockSize=cfg.block_size,
+            )
+            if retry is not None and len(retry) > found:
+                corners = retry
         if corners is None:
             return np.zeros((0, 2), np.float32)
         return (corners.reshape(-1, 2) * 2.0).astype(np.float32)

@@ -17,7 +17,7 @@ def register(sub) -> None:
                                    "and evaluate against ground truth when the recording has it.")
     p.add_argument("sequence", nargs="?", help="recording folder (EuRoC layout plus wheel0/, see datasets/README.md)")
     p.add_argument("--out", "-o", help="output folder (created if needed)")
-    p.add_argument("--frontend", choices=["klt", "features"], help="visual frontend (default: klt)")
+    p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: what the recording has)")
