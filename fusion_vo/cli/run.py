@@ -22,6 +22,9 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: what the recording has)")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
+    p.add_argument("--uncalibrated", action="store_true",
+                   help="the camera has no calibration: ignore missing intrinsics (pinhole, no distortion)")
+    p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
     p.add_argument("--print-config", action="store_true", help="print the default configuration and exit")
     p.set_defaults(func=run)
 
@@ -35,6 +38,10 @@ def apply_overrides(cfg, args):
         cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
     if getattr(args, "no_evaluate", False):
         cfg.evaluate = False
+    if getattr(args, "uncalibrated", False):
+        cfg.odometry = {**cfg.odometry, "uncalibrated": True}
+    if getattr(args, "focal_length", None) is not None:
+        cfg.odometry = {**cfg.odometry, "focal_length": args.focal_length}
     cfg.validate()
     return cfg
 
