@@ -589,6 +589,31 @@ class DenseFallback:
         return FrameMotion(t, ref_time, matrix=result.matrix, covariance=result.covariance, status=MotionStatus.OK,
                            info=info)
 
+    def verify(self, ref: np.ndarray, cur: np.ndarray, motion: FrameMotion, tolerance: float) -> FrameMotion | None:
+        """Check a point-based ``motion`` against a dense alignment started from it.
+
+        Few points on a coarse pattern can all slide along the same edges (the aperture problem) and
+        agree on a wrong motion. The dense alignment, started from that motion, is decisive: when it
+        moves any image corner by more than ``tolerance`` px from where the points put it, its result
+        replaces the points' (``info["path"] = "dense"``); otherwise ``None`` (the points stand).
+        """
+        result = self.measure(ref, cur, motion.matrix)
+        if result.status is not MotionStatus.OK:
+            return None
+        h, w = cur.shape
+        corners = np.array([[0.0, 0.0], [w - 1.0, 0.0], [0.0, h - 1.0], [w - 1.0, h - 1.0]])
+        a = corners @ motion.matrix[:, :2].T + motion.matrix[:, 2]
+        b = corners @ result.matrix[:, :2].T + result.matrix[:, 2]
+        moved = float(np.max(np.linalg.norm(a - b, axis=1)))
+        if moved <= tolerance:
+            return None
+        logger.debug("t=%.6f: dense alignment moves the points' estimate by %.2f px; using it", motion.timestamp, moved)
+        info = {"path": "dense", "point_failure": f"points disagree with the dense alignment by {moved:.1f} px",
+                "start": result.start, "correlation": result.correlation}
+        return FrameMotion(motion.timestamp, motion.prev_timestamp, matrix=result.matrix,
+                           covariance=result.covariance, status=MotionStatus.OK, n_features=motion.n_features,
+                           info=info)
+
     def measure(self, ref: np.ndarray, cur: np.ndarray, prediction: np.ndarray | None) -> Alignment:
         """The similarity from ``ref`` to ``cur`` (raw ``uint8`` frames of the same size)."""
         guesses = [("predicted", prediction)] if prediction is not None else []

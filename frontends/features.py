@@ -23,7 +23,6 @@ failures the current frame, if textured, becomes the new reference (restart).
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 
 import cv2
@@ -122,9 +121,11 @@ class FeatureConfig(ConfigMixin):
     dense_fallback : bool
         When the corners cannot measure a frame that still has texture, align the whole frames
         photometrically instead (:class:`frontends.direct.DenseFallback`).
-    adaptive_corners : bool
-        When a frame yields fewer than ``4 * min_inliers`` corners, detect again on the full-resolution
-        image with a tenth of the quality level (coarse or low-contrast floors, small images).
+    verify_below : int
+        A corner estimate with fewer inliers than this is checked against a dense alignment started
+        from it, which replaces it when they disagree by more than ``verify_tolerance`` px (0: never).
+    verify_tolerance : float
+        See ``verify_below`` [px].
     """
 
     detector: str = "shi_tomasi"
@@ -162,7 +163,8 @@ class FeatureConfig(ConfigMixin):
     max_prediction_gap: float = 4.0
     max_failures: int = 3
     dense_fallback: bool = True
-    adaptive_corners: bool = True
+    verify_below: int = 30
+    verify_tolerance: float = 1.0
 
     def __post_init__(self) -> None:
         self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
@@ -249,11 +251,6 @@ class FeatureFrontend:
     # -------------------------------------------------------------- pipeline
     def _describe(self, img: np.ndarray, t: float) -> _Frame:
         pts = detect_corners(img, self._detector)
-        if self.config.adaptive_corners and len(pts) < 4 * self.config.min_inliers:
-            relaxed = dataclasses.replace(self._detector, min_quality=self._detector.min_quality / 10, level=0)
-            more = detect_corners(img, relaxed)
-            if len(more) > len(pts):
-                pts = more
         if self.config.descriptor == "orb":
             desc, idx = orb_descriptors(img, pts, self._orb)
         else:
@@ -312,7 +309,12 @@ class FeatureFrontend:
             status=MotionStatus.OK, n_candidates=n_matches, n_inliers=fit.n_inliers,
             residual_rms=fit.residual_rms, n_features=len(cur.pts), info=info,
         )
-        self._history.succeeded(fit.matrix, dt)
+        if self._dense is not None and fit.n_inliers < cfg.verify_below:
+            checked = self._dense.verify(ref.image, img, motion, cfg.verify_tolerance)
+            if checked is not None:
+                checked.info["texture"] = check.texture
+                motion = checked
+        self._history.succeeded(motion.matrix, dt)
         self._ref = cur
         return motion
 

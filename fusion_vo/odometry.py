@@ -235,6 +235,7 @@ def run_visual_odometry(
     config = config or OdometryConfig()
     if config.uncalibrated:
         cam = uncalibrated_camera(recording.path / "cam0" / "sensor.yaml", config.focal_length)
+        recording.camera = cam  # every later reader of this recording sees the same model
     else:
         cam = recording.camera
     try:

@@ -67,7 +67,7 @@ class GyroDerotation:
         self.R_BV = rect.R_BV
         cam = geometry.camera
         w, h = cam.width, cam.height
-        gx, gy = np.meshgrid(np.linspace(0, w - 1, 7), np.linspace(0, h - 1, 5))
+        gx, gy = np.meshgrid(np.linspace(0, w - 1, 16), np.linspace(0, h - 1, 10))
         self._grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
@@ -77,24 +77,35 @@ class GyroDerotation:
         a = np.array([np.interp(t1, self.t, self._cum[:, k]) - np.interp(t0, self.t, self._cum[:, k]) for k in range(3)])
         return Rotation.from_rotvec(a).as_matrix()
 
-    def correction(self, t0: float, t1: float) -> np.ndarray:
-        """The 3x3 similarity ``H^{-1}`` (best fit) that removes the rotation's image motion."""
+    def correction(self, t0: float, t1: float, matrix: np.ndarray | None = None) -> np.ndarray:
+        """The 3x3 similarity ``H^{-1}`` (best fit) that removes the rotation's image motion.
+
+        ``H^{-1}`` is a homography; its best similarity depends on where the points are, so it is
+        fitted on the rectified grid moved by the measured similarity ``matrix`` (the points of the
+        second frame), keeping those still in view.
+        """
         dR = self.rotation(t0, t1)
         if np.allclose(dR, np.eye(3), atol=1e-12):
             return np.eye(3)
+        pts = self._grid
+        if matrix is not None:
+            m = np.asarray(matrix, dtype=np.float64)
+            moved = pts @ m[:, :2].T + m[:, 2]
+            lo, hi = self._grid.min(axis=0), self._grid.max(axis=0)
+            inside = np.all((moved >= lo) & (moved <= hi), axis=1)
+            if np.count_nonzero(inside) >= 6:
+                pts = moved[inside]
         # H^{-1} = K R_VB dR R_BV K^{-1}: a pixel seen at the second frame back to where it was
         M = self.R_BV.T @ dR @ self.R_BV
-        d = np.column_stack([(self._grid - self.c) / self.f, np.ones(len(self._grid))]) @ M.T
+        d = np.column_stack([(pts - self.c) / self.f, np.ones(len(pts))]) @ M.T
         back = d[:, :2] / d[:, 2:3] * self.f + self.c
-        z = self._grid[:, 0] + 1j * self._grid[:, 1]
-        wz = back[:, 0] + 1j * back[:, 1]
-        a, b = fit_least_squares(z, wz)
+        a, b = fit_least_squares(pts[:, 0] + 1j * pts[:, 1], back[:, 0] + 1j * back[:, 1])
         return np.array([[a.real, -a.imag, b.real], [a.imag, a.real, b.imag], [0.0, 0.0, 1.0]])
 
     def apply(self, matrix: np.ndarray, t0: float, t1: float) -> np.ndarray:
         """The rotation-free similarity ``H^{-1} ∘ S`` of a measured 2x3 similarity over ``[t0, t1]``."""
         S = np.vstack([np.asarray(matrix, dtype=np.float64), [0.0, 0.0, 1.0]])
-        return (self.correction(t0, t1) @ S)[:2]
+        return (self.correction(t0, t1, matrix) @ S)[:2]
 
     def flow_px(self, t0: float, t1: float) -> float:
         """Size of the rotation's image motion at the principal point [rectified px] (diagnostics)."""

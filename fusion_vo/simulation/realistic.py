@@ -58,6 +58,10 @@ class RealisticCamera:
         Principal point offset from the image centre [px].
     coefficients : list of float
         ``k1..k4`` of the polynomial lens (ignored by the equisolid lens).
+    tangential : list of float
+        Decentering ``(p1, p2)`` of a lens element slightly off axis, applied (Brown's form) to the
+        *distorted* normalised coordinates of either lens: the estimator's models apply it before the
+        radial term (radial-tangential) or not at all (equidistant).
     calibration : str
         What ``cam0/sensor.yaml`` states: ``"fitted"`` (the estimator's closest model, fitted),
         ``"focal"`` (the focal length only, no distortion), ``"none"`` (no intrinsics).
@@ -105,6 +109,7 @@ class RealisticCamera:
     focal: float = 420.0
     centre_offset: list = field(default_factory=lambda: [1.5, -2.0])
     coefficients: list = field(default_factory=lambda: [-0.28, 0.09, -0.02, 0.004])
+    tangential: list = field(default_factory=lambda: [4e-4, -3e-4])
     calibration: str = "fitted"
     defocus: float = 0.8
     defocus_per_metre: float = 10.0
@@ -131,8 +136,8 @@ class RealisticCamera:
             raise ValueError(f"realistic option 'lens' must be one of {', '.join(LENSES)}, not {self.lens!r}")
         if self.calibration not in CALIBRATIONS:
             raise ValueError(f"realistic option 'calibration' must be one of {', '.join(CALIBRATIONS)}")
-        if len(self.coefficients) != 4 or len(self.centre_offset) != 2:
-            raise ValueError("realistic option 'coefficients' needs 4 numbers and 'centre_offset' 2")
+        if len(self.coefficients) != 4 or len(self.centre_offset) != 2 or len(self.tangential) != 2:
+            raise ValueError("realistic options 'coefficients', 'centre_offset' and 'tangential' need 4, 2 and 2 numbers")
         for name in ("focal", "supersample", "bands", "focus_height", "texel_size", "rocking_period"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"realistic option '{name}' must be positive")
@@ -172,6 +177,13 @@ class _Lens:
         self.f = float(cam.focal)
         self.c = np.array([(width - 1) / 2.0 + cam.centre_offset[0], (height - 1) / 2.0 + cam.centre_offset[1]])
         self.k = np.asarray(cam.coefficients, dtype=np.float64)
+        self.p = np.asarray(cam.tangential, dtype=np.float64)
+
+    def _tangential(self, xy: np.ndarray) -> np.ndarray:
+        x, y = xy[:, 0], xy[:, 1]
+        r2 = x * x + y * y
+        p1, p2 = self.p
+        return np.column_stack([2 * p1 * x * y + p2 * (r2 + 2 * x * x), p1 * (r2 + 2 * y * y) + 2 * p2 * x * y])
 
     def _distort_radius(self, r: np.ndarray) -> np.ndarray:
         r2 = r * r
@@ -180,7 +192,10 @@ class _Lens:
 
     def rays(self, pixels: np.ndarray) -> np.ndarray:
         """Unit camera-frame rays (N x 3) through raw pixel positions (N x 2)."""
-        d = (np.asarray(pixels, dtype=np.float64) - self.c) / self.f
+        observed = (np.asarray(pixels, dtype=np.float64) - self.c) / self.f
+        d = observed.copy()
+        for _ in range(20):  # remove the decentering: observed = d + tangential(d)
+            d = observed - self._tangential(d)
         rd = np.hypot(d[:, 0], d[:, 1])
         direction = d / np.maximum(rd, 1e-12)[:, None]
         if self.cam.lens == "equisolid":
@@ -221,8 +236,9 @@ class _Lens:
         target = self._distort_radius(r) / r - 1.0
         A = np.column_stack([r**2, r**4, r**6])
         k = np.linalg.lstsq(A, target, rcond=None)[0]
+        p1, p2 = (float(v) for v in self.p)
         return {"intrinsics": intr, "distortion_model": "radial-tangential",
-                "distortion_coefficients": [float(k[0]), float(k[1]), 0.0, 0.0, float(k[2])]}
+                "distortion_coefficients": [float(k[0]), float(k[1]), p1, p2, float(k[2])]}
 
 
 class RealisticRenderer:

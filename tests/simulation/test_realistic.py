@@ -1,0 +1,118 @@
+"""The independent renderer: its own lens, a calibration the estimator can only approximate, and
+frontends that measure every frame the plain OpenCV script measures on its coarse checkerboards."""
+
+from __future__ import annotations
+
+import ast
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import fusion_vo.simulation.realistic as realistic
+from fusion_vo.errors import InputError
+from fusion_vo.geometry.camera import CameraModel
+from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+from fusion_vo.recording import Recording
+from fusion_vo.simulation import simulate
+from fusion_vo.simulation.realistic import RealisticCamera, RealisticRenderer
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import baseline_opencv  # noqa: E402
+
+
+def test_renderer_shares_nothing_with_the_estimators_geometry():
+    tree = ast.parse(Path(realistic.__file__).read_text())
+    imported = [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+    imported += [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+    assert not [m for m in imported if m and (m.startswith("fusion_vo.geometry") or m.startswith("frontends"))]
+
+
+@pytest.mark.parametrize("lens, size, focal, worst_px", [
+    ("polynomial", (640, 360), 420.0, 0.5),
+    ("equisolid", (320, 240), 170.0, 0.5),
+])
+def test_fitted_calibration_approximates_the_true_lens(lens, size, focal, worst_px):
+    """The estimator's model (OpenCV radial-tangential, or the equidistant fisheye) with the fitted
+    coefficients reprojects the true lens's rays to within ``worst_px``, but not exactly."""
+    cam = RealisticCamera(lens=lens, focal=focal)
+    r = RealisticRenderer(cam, *size)
+    calib = r.sensor_calibration()
+    model = CameraModel.from_dict({"resolution": list(size), **calib})
+    gu, gv = np.meshgrid(np.linspace(0, size[0] - 1, 17), np.linspace(0, size[1] - 1, 13))
+    pix = np.column_stack([gu.ravel(), gv.ravel()])
+    rays = r.lens.rays(pix)
+    err = np.linalg.norm(model.project(rays) - pix, axis=1)
+    assert err.max() < worst_px
+    assert err.max() > 1e-3  # an independent lens: the estimator's model does not reproduce it exactly
+    # without the distortion (focal length only) the error at the corners is tens of pixels
+    plain = CameraModel(size[0], size[1], *calib["intrinsics"])
+    assert np.linalg.norm(plain.project(rays) - pix, axis=1).max() > 10.0
+
+
+def _short(tmp_path, name, **realistic_options):
+    options = {"width": 640, "height": 360, "exposure_time": 0.004, "blur_samples": 2}
+    return simulate(tmp_path / name, profile="straight", seed=5, length=0.25, realistic=realistic_options,
+                    **options)
+
+
+@pytest.fixture(scope="module")
+def coarse(tmp_path_factory):
+    """A 0.25 m straight drive over checkerboard squares a quarter of the image wide (barrel lens)."""
+    return _short(tmp_path_factory.mktemp("real"), "coarse", lens="polynomial", checker_size=0.04, defocus=1.2,
+                  supersample=1)
+
+
+def test_every_frontend_measures_what_the_plain_script_measures(coarse):
+    rec = Recording(coarse)
+    results, _ = baseline_opencv.run(coarse)
+    plain = sum(m is not None for _, _, m in results)
+    assert plain >= len(results) - 2
+    gt = rec.groundtruth()
+    truth = float(np.linalg.norm(gt.xyyaw[-1, :2] - gt.xyyaw[0, :2]))
+    for fe in ("klt", "features", "direct"):
+        vo = run_visual_odometry(rec, OdometryConfig(frontend=fe))
+        measured = sum(s == "ok" for s in vo.status)
+        assert measured >= plain, (fe, vo.failures)
+        travelled = float(np.linalg.norm(vo.track.xyyaw[-1, :2] - vo.track.xyyaw[0, :2]))
+        assert abs(travelled - truth) < 0.01 * truth, fe
+
+
+def test_frame_rendering_is_deterministic_and_exposure_adapts():
+    cam = RealisticCamera(checker_size=0.04, auto_exposure=0.5, brightness=240.0, supersample=1)
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[2, 3] = 0.1
+    frames = []
+    for _ in range(2):
+        r = RealisticRenderer(cam, 320, 240)
+        rng = np.random.default_rng(0)
+        frames.append([r.frame(lambda t: T, 0.05 * k, rng) for k in range(8)])
+    assert all(np.array_equal(a, b) for a, b in zip(*frames))
+    means = [float(f.mean()) for f in frames[0]]
+    assert abs(means[-1] - cam.target_grey) < 0.3 * abs(means[0] - cam.target_grey)
+
+
+def test_missing_intrinsics_is_an_error_unless_uncalibrated(tmp_path):
+    seq = simulate(tmp_path / "uncal", profile="straight", seed=3, length=0.05, width=320, height=240,
+                   realistic={"lens": "polynomial", "focal": 220.0, "calibration": "none", "supersample": 1})
+    assert "intrinsics" not in (seq / "cam0" / "sensor.yaml").read_text()
+    with pytest.raises(InputError, match="uncalibrated"):
+        run_visual_odometry(Recording(seq), OdometryConfig(frontend="klt"))
+    vo = run_visual_odometry(Recording(seq), OdometryConfig(frontend="klt", uncalibrated=True, focal_length=220.0))
+    assert sum(s == "ok" for s in vo.status) == len(vo.status) - 1
+    gt = Recording(seq).groundtruth()
+    truth = float(np.linalg.norm(gt.xyyaw[-1, :2] - gt.xyyaw[0, :2]))
+    travelled = float(np.linalg.norm(vo.track.xyyaw[-1, :2] - vo.track.xyyaw[0, :2]))
+    # the barrel lens is ignored: distances come out a few percent off, not more
+    assert abs(travelled - truth) < 0.1 * truth
+
+
+def test_bad_realistic_options_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="lens"):
+        simulate(tmp_path / "x", profile="straight", realistic={"lens": "spherical"})
+    with pytest.raises(ValueError, match="unknown realistic option"):
+        simulate(tmp_path / "y", profile="straight", realistic={"colour": 1})
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
