@@ -157,7 +157,8 @@ class CameraModel:
     def from_dict(cls, data: dict, path: str | Path | None = None) -> "CameraModel":
         def need(key):
             if key not in data:
-                hint = " (a camera without calibration: run with the option 'uncalibrated: true')" if key == "intrinsics" else ""
+                hint = (" (a camera without calibration: run with --uncalibrated [--focal-length PX], or 'uncalibrated: true'"
+                        " under 'odometry' in the configuration)") if key == "intrinsics" else ""
                 raise InputError(f"missing key '{key}'{hint}", path)
             return data[key]
 
