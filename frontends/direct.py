@@ -75,7 +75,8 @@ class DirectConfig(ConfigMixin):
     max_abs_log_scale : float
         Largest plausible ``|log s|`` between consecutive frames (``REJECTED`` above).
     min_texture : float
-        Smallest mean neighbour difference of a usable frame [grey levels].
+        Smallest mean neighbour difference of a usable frame [grey levels] (sensor noise of 1 grey level
+        alone gives 1.1: a flat floor must not be aligned on its noise or a fixed highlight).
     min_texture_ratio : float
         A frame whose texture falls below this fraction of the reference frame's is featureless.
     max_prediction_gap : float
@@ -101,7 +102,7 @@ class DirectConfig(ConfigMixin):
     min_correlation_fallback: float = 0.3
     min_overlap: float = 0.3
     max_abs_log_scale: float = 0.15
-    min_texture: float = 0.3
+    min_texture: float = 1.5
     min_texture_ratio: float = 0.05
     max_prediction_gap: float = 4.0
     max_failures: int = 3
@@ -572,13 +573,16 @@ class DenseFallback:
         return levels
 
     def motion(self, ref: np.ndarray, cur: np.ndarray, t: float, ref_time: float, prediction: np.ndarray | None,
-               texture: float, why: str) -> FrameMotion | None:
+               texture: float, why: str, min_texture: float = 0.0) -> FrameMotion | None:
         """An accepted :class:`FrameMotion` from ``ref`` (at ``ref_time``) to ``cur`` (at ``t``), or ``None``.
 
-        ``why`` (the point-based failure) is kept in ``info["point_failure"]``.
+        ``why`` (the point-based failure) is kept in ``info["point_failure"]``. A frame whose texture
+        is below ``min_texture`` (the calling frontend's own limit) or this fallback's is not tried: on
+        a flat floor the only structure left is fixed in the image (noise pattern, highlight), and an
+        alignment would lock onto it and report a standstill.
         """
         cfg = self.aligner.config
-        if not texture >= cfg.min_texture or clipped_fraction(cur) > cfg.max_clipped:
+        if not texture >= max(cfg.min_texture, min_texture) or clipped_fraction(cur) > cfg.max_clipped:
             return None
         result = self.measure(ref, cur, prediction)
         if result.status is not MotionStatus.OK:

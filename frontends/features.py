@@ -325,7 +325,8 @@ class FeatureFrontend:
         if self._dense is None or ref is None or ref.image.shape != img.shape or not t > ref.time:
             return None
         dt = t - ref.time
-        motion = self._dense.motion(ref.image, img, t, ref.time, self._history.predict(dt), texture, why)
+        motion = self._dense.motion(ref.image, img, t, ref.time, self._history.predict(dt), texture, why,
+                                   self.config.min_texture)
         if motion is None:
             return None
         if cur is None:

@@ -358,7 +358,8 @@ class KltFrontend:
         dt = t - self._ref_time
         if not dt > 0.0:
             return None
-        motion = self._dense.motion(self._ref_img, img, t, self._ref_time, self._history.predict(dt), texture, why)
+        motion = self._dense.motion(self._ref_img, img, t, self._ref_time, self._history.predict(dt), texture, why,
+                                   self.config.min_texture)
         if motion is None:
             return None
         self._cur_texture = texture
