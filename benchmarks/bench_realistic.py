@@ -13,6 +13,7 @@ focal length (the script does not undistort), the same heights (range finder) an
 constant-velocity bridging of failed frames.
 
     python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
+                                         [--uncalibrated] [--no-derotation]
 
 Recordings are generated into ``--data`` (default ``./realistic-data``) unless already there.
 """
@@ -137,7 +138,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", default="realistic-data", help="folder of the recordings (generated when missing)")
     ap.add_argument("--recordings", default=",".join(REALISTIC), help="comma-separated standard names")
     ap.add_argument("--frontends", default=",".join(FRONTENDS))
+    ap.add_argument("--uncalibrated", action="store_true",
+                    help="run the frontends without the lens distortion of sensor.yaml (its focal length only)")
+    ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
     args = ap.parse_args(argv)
+    odometry = {"uncalibrated": args.uncalibrated, "gyro_derotation": not args.no_derotation}
     root = Path(args.data)
     for name in args.recordings.split(","):
         seq = root / name
@@ -147,7 +152,7 @@ def main(argv: list[str] | None = None) -> int:
         rec = Recording(seq)
         rows = [run_baseline(rec)]
         for fe in args.frontends.split(","):
-            rows.append(run_frontend(rec, fe, {}))
+            rows.append(run_frontend(rec, fe, odometry))
         print_table(name, rows)
     return 0
 
