@@ -93,6 +93,9 @@ class RealisticCamera:
         Difference between white and black squares (fraction of white).
     grain : float
         Contrast of the gravel photograph under the checkerboard (0: clean print).
+    checker_squares : list of int
+        ``[columns, rows]`` of a finite calibration board from the floor origin along x and y, white
+        around it; empty (the default): the checkerboard covers the whole floor.
     texture : str
         Photograph used as the floor or grain (scikit-image's ``gravel``, ``grass`` or ``brick``).
     texel_size : float
@@ -125,6 +128,7 @@ class RealisticCamera:
     checker_size: float = 0.0
     checker_contrast: float = 0.7
     grain: float = 0.06
+    checker_squares: list = field(default_factory=list)
     texture: str = "gravel"
     texel_size: float = 0.00025
     rocking_deg: float = 0.0
@@ -310,8 +314,15 @@ class RealisticRenderer:
         k = np.float32(1.0 / cam.checker_size)
         cx = np.float32((px - period * math.floor(px / period)) / cam.checker_size)
         cy = np.float32((py - period * math.floor(py / period)) / cam.checker_size)
-        parity = (np.floor(dx * k + cx) + np.floor(dy * k + cy)).astype(np.int32) & 1
+        ix, iy = np.floor(dx * k + cx), np.floor(dy * k + cy)
+        parity = (ix + iy).astype(np.int32) & 1
         board = np.where(parity > 0, np.float32(1.0), np.float32(1.0 - cam.checker_contrast))
+        if cam.checker_squares:  # a finite board: square indices counted from the floor origin
+            cols, rows = cam.checker_squares
+            gx = ix + np.float32(round((px - (px - period * math.floor(px / period))) / cam.checker_size))
+            gy = iy + np.float32(round((py - (py - period * math.floor(py / period))) / cam.checker_size))
+            outside = (gx < 0) | (gx >= cols) | (gy < 0) | (gy >= rows)
+            board = np.where(outside, np.float32(1.0), board)
         return board if out is None else out * board
 
     def _radiance(self, pose_at: Callable[[float], np.ndarray], t: float) -> tuple[np.ndarray, float]:
