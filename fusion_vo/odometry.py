@@ -12,16 +12,28 @@ and counted; the fused backends do better by leaning on the wheels and the gyro 
 
 The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
 real time between the two frames (not a nominal frame rate).
+
+Frames are decoded ahead of the tracker: with ``threads >= 2`` a reader thread decodes the recording's
+frames in order into a bounded queue (:func:`read_ahead`) while the calling thread tracks, and OpenCV's
+own kernels may use ``threads`` threads. Decoding does not depend on the previous frame, and OpenCV
+releases the GIL while it decodes, so the two overlap on two cores. At most ``2 * threads + 2`` decoded
+frames wait in the queue, so memory stays flat in recording length. The results are identical frame for
+frame to ``threads=1`` (everything in the calling thread, OpenCV single-threaded).
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import queue
+import threading
 import time
 from collections import Counter
+from contextlib import closing, contextmanager, nullcontext
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator, TypeVar
 
+import cv2
 import numpy as np
 
 from frontends import make_frontend
@@ -54,6 +66,11 @@ class OdometryConfig:
     max_bad_start_frames : int
         If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an
         error instead of skipping them one by one.
+    threads : int or None
+        Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
+        single-threaded; ``N >= 2`` decodes frames in a reader thread ahead of the tracker and lets
+        OpenCV use ``N`` threads. ``None`` (the default) uses the cores available to the process. The
+        results do not depend on it.
     """
 
     frontend: str = "klt"
@@ -63,6 +80,16 @@ class OdometryConfig:
     min_sigma_xy: float = 2e-5
     min_sigma_yaw: float = 2e-5
     max_bad_start_frames: int = 5
+    threads: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.threads is not None and (isinstance(self.threads, bool) or not isinstance(self.threads, int)
+                                         or self.threads < 1):
+            raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
+
+    def thread_count(self) -> int:
+        """The number of threads to use (``threads``, or the cores available when it is ``None``)."""
+        return self.threads if self.threads is not None else available_cores()
 
     @classmethod
     def from_dict(cls, d: dict) -> "OdometryConfig":
@@ -184,6 +211,85 @@ class VisualOdometry:
         return PoseData(np.asarray(self.t, dtype=np.float64), np.asarray(self.poses, dtype=np.float64).reshape(-1, 3))
 
 
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the system reports it)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # not Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+T = TypeVar("T")
+
+
+def read_ahead(items: Iterable[T], depth: int) -> Iterator[T]:
+    """Iterate ``items`` in a background thread, at most ``depth`` items ahead of the consumer.
+
+    The items come out in their order; an exception raised by ``items`` is raised here at the same
+    position. When the consumer stops early (an error, ``close()``), the background thread stops after
+    the item it is producing and closes ``items``.
+
+    Parameters
+    ----------
+    items : iterable
+        Typically a generator that decodes frames; it is only ever advanced by the background thread.
+    depth : int
+        Largest number of produced items waiting for the consumer (memory bound).
+    """
+    buffer: queue.Queue = queue.Queue(maxsize=max(int(depth), 1))
+    stop = threading.Event()
+    end = object()
+
+    def put(entry) -> bool:
+        while not stop.is_set():
+            try:
+                buffer.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        iterator = iter(items)
+        try:
+            for item in iterator:
+                if not put((item, None)):
+                    break
+            else:
+                put((end, None))
+        except BaseException as exc:  # handed to the consumer, raised there
+            put((end, exc))
+        finally:
+            close = getattr(iterator, "close", None)
+            if close is not None:
+                close()
+
+    worker = threading.Thread(target=produce, name="fusion-vo-read-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = buffer.get()
+            if exc is not None:
+                raise exc
+            if item is end:
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
+
+
+@contextmanager
+def opencv_threads(n: int):
+    """Let OpenCV's kernels use ``n`` threads inside the block, then restore the previous setting."""
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(int(n))
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
     if not recording.has_range():
@@ -210,6 +316,9 @@ def run_visual_odometry(
         Called after every frame (for a progress bar).
     frames : iterable of Frame, optional
         Frames to use instead of ``recording.frames()``.
+
+    With ``config.threads`` other than 1 the frames are decoded in a background thread ahead of the
+    tracker (:func:`read_ahead`); the results are the same as with one thread.
     """
     config = config or OdometryConfig()
     cam = recording.camera
@@ -229,33 +338,37 @@ def run_visual_odometry(
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
     skipped: list[str] = []
     bad_run = 0
+    threads = config.thread_count()
     start = time.perf_counter()
-    for k, frame in enumerate(frames if frames is not None else recording.frames()):
-        if frame.image is None:
-            skipped.append(frame.error or frame.source)
-            bad_run += 1
-            if bad_run >= config.max_bad_start_frames and not frame_t:
-                raise InputError(f"the first {bad_run} frames cannot be used; first problem: {skipped[0]}")
-            log.warning("skipping frame %d: %s", frame.index, frame.error)
+    source = frames if frames is not None else recording.frames()
+    ahead = read_ahead(source, depth=2 * threads + 2) if threads > 1 else None
+    with opencv_threads(threads), (closing(ahead) if ahead is not None else nullcontext()):
+        for k, frame in enumerate(ahead if ahead is not None else source):
+            if frame.image is None:
+                skipped.append(frame.error or frame.source)
+                bad_run += 1
+                if bad_run >= config.max_bad_start_frames and not frame_t:
+                    raise InputError(f"the first {bad_run} frames cannot be used; first problem: {skipped[0]}")
+                log.warning("skipping frame %d: %s", frame.index, frame.error)
+                if progress:
+                    progress(k + 1, total)
+                continue
+            bad_run = 0
+            h = None if heights is None else float(heights[frame.index])
+            motion, inc = vo.process(frame.image, frame.t, h)
+            frame_t.append(frame.t)
+            status.append(motion.status.value)
+            inliers.append(motion.n_inliers)
+            if inc is not None:
+                increments.append(inc)
+            if inc is not None and inc.ok and inc.dt > 0:
+                vel.append(se2.log(inc.delta) / inc.dt)
+                ratio.append(inc.height_ratio)
+            else:
+                vel.append(np.full(3, np.nan))
+                ratio.append(np.nan)
             if progress:
                 progress(k + 1, total)
-            continue
-        bad_run = 0
-        h = None if heights is None else float(heights[frame.index])
-        motion, inc = vo.process(frame.image, frame.t, h)
-        frame_t.append(frame.t)
-        status.append(motion.status.value)
-        inliers.append(motion.n_inliers)
-        if inc is not None:
-            increments.append(inc)
-        if inc is not None and inc.ok and inc.dt > 0:
-            vel.append(se2.log(inc.delta) / inc.dt)
-            ratio.append(inc.height_ratio)
-        else:
-            vel.append(np.full(3, np.nan))
-            ratio.append(np.nan)
-        if progress:
-            progress(k + 1, total)
     elapsed = time.perf_counter() - start
     if not frame_t:
         raise InputError("no usable frame in the recording", recording.path / "cam0")
