@@ -1,6 +1,13 @@
-"""Speed of the visual odometry chain on a recording, single-threaded.
+"""Speed of the visual odometry chain on a recording, beside the plain OpenCV script.
 
-Three timings per frontend, per frame:
+End to end (:func:`compare_end_to_end`): the wall time of :func:`fusion_vo.odometry.run_visual_odometry`
+over the whole recording, decoding included, with one thread and with all threads, and the wall time of
+the plain OpenCV script (``benchmarks/baseline_opencv.py``: Shi-Tomasi corners, pyramidal LK, RANSAC
+similarity, one frame at a time) over the same frames. The runs are interleaved and repeated, and each
+ratio is taken between runs made next to each other, so that a shared machine's changing speed
+affects both sides alike.
+
+Where the time goes (:func:`time_frontend`), three timings per frontend, per frame:
 
 ``decode``     reading and decoding the PNG (``cv2.imread``)
 ``frontend``   the frontend's ``process`` on the decoded image
@@ -16,16 +23,22 @@ means the last quarter is no larger than the first.
 from __future__ import annotations
 
 import logging
+import os
 import resource
+import statistics
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
-import cv2
+import importlib.util
+import tempfile
 
 from frontends import make_frontend
 from fusion_vo.geometry.ground import GroundGeometry
+from fusion_vo.odometry import OdometryConfig, available_cores, opencv_threads, run_visual_odometry
 from fusion_vo.recording import Recording
+from fusion_vo.recording.csvio import read_frame_list
 
 log = logging.getLogger(__name__)
 
@@ -58,16 +71,22 @@ def _rss_mb() -> float:
 def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = None,
                   options: dict | None = None) -> FrontendTiming:
     """Time decode + frontend + geometry over the frames of a recording (one thread)."""
-    cv2.setNumThreads(1)
     rec = Recording(sequence)
     geometry = GroundGeometry(rec.camera)
     fe = make_frontend(frontend, options or {}, point_map=geometry.rectifier)
     n = len(rec) if max_frames is None else min(max_frames, len(rec))
+    frames = rec.frames(stop=n)  # decoding happens in next(): timed as decode
+    with opencv_threads(1):
+        dec, fro, geo, ok, rss = _time_stages(frames, n, fe, geometry)
+    return FrontendTiming(frontend, n, 1000 * dec / n, 1000 * fro / n, 1000 * geo / n,
+                          ok / max(n - 1, 1), rss)
+
+
+def _time_stages(frames, n, fe, geometry) -> tuple[float, float, float, int, list]:
     dec = fro = geo = 0.0
     ok = 0
     rss = []
     quarter = max(n // 4, 1)
-    frames = rec.frames(stop=n)  # decoding happens in next(): timed as decode
     for i in range(n):
         a = time.process_time()
         frame = next(frames)
@@ -83,8 +102,7 @@ def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = 
         geo += d - c
         if (i + 1) % quarter == 0:
             rss.append(round(_rss_mb(), 1))
-    return FrontendTiming(frontend, n, 1000 * dec / n, 1000 * fro / n, 1000 * geo / n,
-                          ok / max(n - 1, 1), rss)
+    return dec, fro, geo, ok, rss
 
 
 def format_timing(t: FrontendTiming) -> str:
@@ -97,3 +115,180 @@ def format_timing(t: FrontendTiming) -> str:
 def summary_table(timings: list[FrontendTiming]) -> str:
     return "\n".join(format_timing(t) for t in timings)
 
+
+
+# ---------------------------------------------------------------------- end to end, beside the baseline
+#: ``run(seq) -> (results, wall seconds)`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``)
+BaselineRun = Callable[[str | Path], tuple[list, float]]
+
+
+@dataclass
+class EndToEnd:
+    """Frames per second over repeated, interleaved runs on one recording.
+
+    Attributes
+    ----------
+    name : str
+        ``"plain OpenCV script"`` or the frontend's name.
+    threads : int or None
+        Threads given to fusion-vo (``None`` for the plain script, which uses OpenCV's default).
+    frames : int
+        Frames in the recording.
+    fps : list of float
+        Frames per second of each repeat, decoding included.
+    ratio : list of float
+        Each repeat's frames per second over the plain script's in the same repeat (empty for the script).
+    failed : int
+        Frames the run could not measure (last repeat).
+    """
+
+    name: str
+    threads: int | None
+    frames: int
+    fps: list = field(default_factory=list)
+    ratio: list = field(default_factory=list)
+    failed: int = 0
+
+    @property
+    def label(self) -> str:
+        if self.threads is None:
+            return self.name
+        return f"{self.name}, {self.threads} thread{'s' if self.threads > 1 else ''}"
+
+
+def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int]:
+    """Frames per second of visual odometry over a recording (wall clock, decoding included) and failures."""
+    rec = Recording(sequence)
+    n = len(rec)
+    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads))
+    return n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped)
+
+
+def time_baseline(sequence: str | Path, baseline: BaselineRun) -> tuple[float, int]:
+    """Frames per second of the plain OpenCV script over a recording and the frame pairs it failed on."""
+    results, seconds = baseline(sequence)
+    return (len(results) + 1) / seconds, sum(m is None for *_, m in results)
+
+
+def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: BaselineRun,
+                       thread_counts: list[int] | None = None, repeats: int = 3,
+                       report: Callable[[str], None] | None = None) -> list[EndToEnd]:
+    """fusion-vo beside the plain OpenCV script, frames per second end to end.
+
+    Each repeat runs the plain script, then every frontend with every thread count, on the same
+    recording; ratios are taken within a repeat.
+
+    Parameters
+    ----------
+    sequence : path
+    frontends : list of str
+    baseline : callable
+        ``run`` of ``benchmarks/baseline_opencv.py``.
+    thread_counts : list of int, optional
+        Default ``[1, cores available]`` (just ``[1]`` on one core).
+    repeats : int
+    report : callable, optional
+        Called with a line after each run (progress).
+    """
+    if thread_counts is None:
+        thread_counts = sorted({1, available_cores()})
+    n = len(Recording(sequence))
+    base = EndToEnd("plain OpenCV script", None, n)
+    rows = [EndToEnd(fe, th, n) for fe in frontends for th in thread_counts]
+    for r in range(repeats):
+        fps, base.failed = time_baseline(sequence, baseline)
+        base.fps.append(fps)
+        if report:
+            report(f"repeat {r + 1}/{repeats}: {base.label} {fps:.1f} frames/s")
+        for row in rows:
+            fps, row.failed = time_run(sequence, row.name, row.threads)
+            row.fps.append(fps)
+            row.ratio.append(fps / base.fps[-1])
+            if report:
+                report(f"repeat {r + 1}/{repeats}: {row.label} {fps:.1f} frames/s ({row.ratio[-1]:.2f}x)")
+    return [base, *rows]
+
+
+def _span(values: list[float], fmt: str) -> str:
+    med = statistics.median(values)
+    if len(values) == 1:
+        return format(med, fmt)
+    return f"{format(med, fmt)} ({format(min(values), fmt)}-{format(max(values), fmt)})"
+
+
+def end_to_end_table(rows: list[EndToEnd]) -> str:
+    """A Markdown table: frames/s and the ratio to the plain script (median, and range over repeats)."""
+    lines = ["| run | frames/s end to end | x plain script | failed frames |", "|---|---|---|---|"]
+    for row in rows:
+        ratio = _span(row.ratio, ".2f") if row.ratio else "1"
+        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {row.failed} |")
+    return "\n".join(lines)
+
+
+def first_frames(sequence: str | Path, n: int, out: str | Path) -> Path:
+    """A recording of the first ``n`` frames of ``sequence`` (its camera only; frame files linked, not copied)."""
+    sequence, out = Path(sequence), Path(out)
+    t_ns, names, _ = read_frame_list(sequence / "cam0" / "data.csv")
+    (out / "cam0" / "data").mkdir(parents=True)
+    (out / "cam0" / "sensor.yaml").write_bytes((sequence / "cam0" / "sensor.yaml").read_bytes())
+    with open(out / "cam0" / "data.csv", "w", newline="") as fh:
+        fh.write("#timestamp [ns],filename\n")
+        for stamp, name in zip(t_ns[:n], names[:n]):
+            os.symlink((sequence / "cam0" / "data" / name).resolve(), out / "cam0" / "data" / Path(name).name)
+            fh.write(f"{int(stamp)},{Path(name).name}\n")
+    return out
+
+
+#: where the plain OpenCV script lives in a source checkout
+BASELINE_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "baseline_opencv.py"
+
+
+def load_baseline(path: str | Path = BASELINE_SCRIPT) -> BaselineRun | None:
+    """``run`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``), or ``None`` when absent.
+
+    The script belongs to the source tree, not to the installed package.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return None
+    spec = importlib.util.spec_from_file_location("baseline_opencv", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.run
+
+
+def run_benchmark(sequence: str | Path, frontends: list[str], baseline: BaselineRun | None,
+                  thread_counts: list[int] | None = None, repeats: int = 3, max_frames: int | None = None,
+                  stages: bool = True, out: Callable[[str], None] = print) -> list[EndToEnd]:
+    """The whole benchmark of ``fusion-vo bench`` and ``benchmarks/bench_frontends.py``; prints as it goes.
+
+    With ``max_frames`` both fusion-vo and the plain script run on the first ``max_frames`` frames.
+    Without a ``baseline``, the fusion-vo figures are printed without ratios.
+    """
+    with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
+        seq = Path(sequence)
+        if max_frames is not None and max_frames < len(Recording(seq)):
+            seq = first_frames(seq, max_frames, Path(tmp) / "first")
+        n = len(Recording(seq))
+        out(f"{n} frames of {Recording(seq).camera.width}x{Recording(seq).camera.height} from {sequence}; "
+            f"{available_cores()} cores available; {repeats} interleaved repeats")
+        if baseline is None:
+            out(f"note: {BASELINE_SCRIPT} not found (it is part of the source tree): no plain-script baseline")
+            rows = [EndToEnd(fe, th, n) for fe in frontends for th in (thread_counts or sorted({1, available_cores()}))]
+            for _ in range(repeats):
+                for row in rows:
+                    fps, row.failed = time_run(seq, row.name, row.threads)
+                    row.fps.append(fps)
+        else:
+            rows = compare_end_to_end(seq, frontends, baseline, thread_counts, repeats, report=out)
+        out("")
+        out("frames per second end to end (decoding included, wall clock); median (range) over the repeats,")
+        out("ratios taken between runs made next to each other:")
+        out("")
+        out(end_to_end_table(rows))
+        if stages:
+            out("")
+            out("where the time goes, one thread, CPU time per frame:")
+            for fe in frontends:
+                out(format_timing(time_frontend(seq, fe)))
+    return rows
