@@ -14,9 +14,10 @@ The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its i
 real time between the two frames (not a nominal frame rate).
 
 Frames are decoded ahead of the tracker: with ``threads >= 2`` a reader thread decodes the recording's
-frames in order into a bounded queue (:func:`read_ahead`) while the calling thread tracks, and OpenCV's
-own kernels may use ``threads`` threads. Decoding does not depend on the previous frame, and OpenCV
-releases the GIL while it decodes, so the two overlap on two cores. At most ``2 * threads + 2`` decoded
+frames in order into a bounded queue (:func:`read_ahead`), together with the frontend's per-frame work
+that does not depend on earlier frames (its ``prepare``, when it has one), while the calling thread
+tracks, and OpenCV's own kernels may use ``threads`` threads. OpenCV releases the GIL while it decodes
+and filters, so the two overlap on two cores. At most ``2 * threads + 2`` decoded
 frames wait in the queue, so memory stays flat in recording length. The results are identical frame for
 frame to ``threads=1`` (everything in the calling thread, OpenCV single-threaded).
 """
@@ -42,7 +43,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
-from fusion_vo.recording import Recording
+from fusion_vo.recording import Frame, Recording
 
 log = logging.getLogger(__name__)
 
@@ -180,8 +181,11 @@ class VisualOdometry:
         """Latest ``(x, y, yaw)`` of the visual track (``None`` before the first frame)."""
         return self.poses[-1] if self.poses else None
 
-    def process(self, image: np.ndarray, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
-        """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame)."""
+    def process(self, image, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
+        """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame).
+
+        ``image`` is the frame, or what the frontend's ``prepare`` made of it.
+        """
         motion = self.frontend.process(image, t)
         if motion.status is MotionStatus.FIRST:
             if not self.poses:
@@ -340,10 +344,15 @@ def run_visual_odometry(
     bad_run = 0
     threads = config.thread_count()
     start = time.perf_counter()
-    source = frames if frames is not None else recording.frames()
+    prepare = getattr(frontend, "prepare", None)
+
+    def prepared(frame: Frame) -> tuple[Frame, object]:
+        return frame, (prepare(frame.image) if prepare is not None and frame.image is not None else frame.image)
+
+    source = map(prepared, frames if frames is not None else recording.frames())
     ahead = read_ahead(source, depth=2 * threads + 2) if threads > 1 else None
     with opencv_threads(threads), (closing(ahead) if ahead is not None else nullcontext()):
-        for k, frame in enumerate(ahead if ahead is not None else source):
+        for k, (frame, image) in enumerate(ahead if ahead is not None else source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
                 bad_run += 1
@@ -355,7 +364,7 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
-            motion, inc = vo.process(frame.image, frame.t, h)
+            motion, inc = vo.process(image, frame.t, h)
             frame_t.append(frame.t)
             status.append(motion.status.value)
             inliers.append(motion.n_inliers)

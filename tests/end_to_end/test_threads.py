@@ -120,3 +120,24 @@ def test_threads_must_be_a_positive_whole_number(value, tmp_path, capsys):
 def test_threads_in_the_configuration_is_checked(value):
     with pytest.raises(ValueError, match="threads"):
         OdometryConfig.from_dict({"threads": value})
+
+
+@pytest.mark.parametrize("sixteen_bit", [False, True])
+def test_klt_prepared_frames_give_the_same_motions(standard_recording, sixteen_bit):
+    from frontends.klt import KltFrontend, PreparedFrame
+
+    rec = Recording(standard_recording("short"))
+    frames = [(f.image.astype(np.uint16) * 257 if sixteen_bit else f.image, f.t) for f in rec.frames(stop=40)]
+    frames[20] = (np.zeros((5, 5), np.uint8), frames[20][1])  # a bad frame passes through prepare unchanged
+    plain, ahead = KltFrontend(), KltFrontend()
+    ok = 0
+    for image, t in frames:
+        prepared = KltFrontend.prepare(image)
+        assert isinstance(prepared, PreparedFrame) == (image.shape != (5, 5))
+        a, b = plain.process(image, t), ahead.process(prepared, t)
+        assert a.status == b.status and a.n_inliers == b.n_inliers
+        if a.ok:
+            ok += 1
+            np.testing.assert_array_equal(a.matrix, b.matrix)
+            np.testing.assert_array_equal(a.covariance, b.covariance)
+    assert ok >= 35
