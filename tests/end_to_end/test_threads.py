@@ -123,17 +123,20 @@ def test_threads_in_the_configuration_is_checked(value):
 
 
 @pytest.mark.parametrize("sixteen_bit", [False, True])
-def test_klt_prepared_frames_give_the_same_motions(standard_recording, sixteen_bit):
-    from frontends.klt import KltFrontend, PreparedFrame
+@pytest.mark.parametrize("frontend", ["klt", "features", "features_orb"])
+def test_prepared_frames_give_the_same_motions(standard_recording, frontend, sixteen_bit):
+    from frontends import make_frontend
 
+    options = {"descriptor": "orb"} if frontend == "features_orb" else {}
+    name = frontend.split("_")[0]
     rec = Recording(standard_recording("short"))
     frames = [(f.image.astype(np.uint16) * 257 if sixteen_bit else f.image, f.t) for f in rec.frames(stop=40)]
     frames[20] = (np.zeros((5, 5), np.uint8), frames[20][1])  # a bad frame passes through prepare unchanged
-    plain, ahead = KltFrontend(), KltFrontend()
+    plain, ahead = make_frontend(name, options), make_frontend(name, options)
     ok = 0
     for image, t in frames:
-        prepared = KltFrontend.prepare(image)
-        assert isinstance(prepared, PreparedFrame) == (image.shape != (5, 5))
+        prepared = ahead.prepare(image)
+        assert (prepared is image) == (image.shape == (5, 5))
         a, b = plain.process(image, t), ahead.process(prepared, t)
         assert a.status == b.status and a.n_inliers == b.n_inliers
         if a.ok:
