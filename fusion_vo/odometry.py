@@ -30,7 +30,8 @@ import queue
 import threading
 import time
 from collections import Counter
-from contextlib import closing, contextmanager, nullcontext
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
 from typing import Callable, Iterable, Iterator, TypeVar
 
@@ -283,6 +284,34 @@ def read_ahead(items: Iterable[T], depth: int) -> Iterator[T]:
         worker.join()
 
 
+def prepared_frames(frames: Iterable[Frame], prepare: Callable | None, threads: int) -> Iterator[tuple[Frame, object]]:
+    """``(frame, prepare(frame.image))`` in order, decoded and prepared ahead of the caller with ``threads > 1``.
+
+    With one thread everything happens in the calling thread. Otherwise one reader thread advances
+    ``frames`` (decoding them: a recording's frame reader keeps state from frame to frame) and hands
+    each frame to a pool of ``threads`` workers for ``prepare``; at most ``2 * threads + 2`` frames are
+    decoded ahead of the caller (:func:`read_ahead`). A frame that failed to load (``image is None``)
+    is passed through unprepared, as is every frame when ``prepare`` is ``None``.
+    """
+
+    def work(frame: Frame) -> tuple[Frame, object]:
+        if prepare is None or frame.image is None:
+            return frame, frame.image
+        return frame, prepare(frame.image)
+
+    if threads <= 1:
+        yield from map(work, frames)
+        return
+    pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="fusion-vo-prepare")
+    ahead = read_ahead((pool.submit(work, frame) for frame in frames), depth=2 * threads + 2)
+    try:
+        for future in ahead:
+            yield future.result()
+    finally:
+        ahead.close()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 @contextmanager
 def opencv_threads(n: int):
     """Let OpenCV's kernels use ``n`` threads inside the block, then restore the previous setting."""
@@ -344,15 +373,10 @@ def run_visual_odometry(
     bad_run = 0
     threads = config.thread_count()
     start = time.perf_counter()
-    prepare = getattr(frontend, "prepare", None)
-
-    def prepared(frame: Frame) -> tuple[Frame, object]:
-        return frame, (prepare(frame.image) if prepare is not None and frame.image is not None else frame.image)
-
-    source = map(prepared, frames if frames is not None else recording.frames())
-    ahead = read_ahead(source, depth=2 * threads + 2) if threads > 1 else None
-    with opencv_threads(threads), (closing(ahead) if ahead is not None else nullcontext()):
-        for k, (frame, image) in enumerate(ahead if ahead is not None else source):
+    source = prepared_frames(frames if frames is not None else recording.frames(),
+                             getattr(frontend, "prepare", None), threads)
+    with opencv_threads(threads), closing(source):
+        for k, (frame, image) in enumerate(source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
                 bad_run += 1
