@@ -55,10 +55,13 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     lines = []
     rows = run_benchmark(short, ["klt"], load_baseline(), [1, 2], repeats=1, max_frames=40, stages=False,
                          out=lines.append)
-    base, one, two = rows
-    assert base.label == "plain OpenCV script" and base.frames == 40 and base.failed == 0
+    default, single, one, two = rows
+    assert default.baseline and single.baseline and (default.threads, single.threads) == (None, 1)
+    assert default.frames == single.frames == 40 and default.failed == single.failed == 0
     assert (one.threads, two.threads) == (1, 2) and one.failed == two.failed == 0
     for row in (one, two):
-        assert row.ratio == [pytest.approx(row.fps[0] / base.fps[0])]
+        assert row.ratio == [pytest.approx(row.fps[0] / max(default.fps[0], single.fps[0]))]
     table = "\n".join(lines)
-    assert "| plain OpenCV script |" in table and "| klt, 1 thread |" in table and "| klt, 2 threads |" in table
+    for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
+                  "klt, 1 thread |", "klt, 2 threads |"):
+        assert f"| {label}" in table
