@@ -15,22 +15,17 @@ frontend and ground geometry, and the peak resident memory after each quarter of
 
 from __future__ import annotations
 
-import os
+import argparse
+import sys
+import tempfile
+from pathlib import Path
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")  # single-threaded numerical libraries (before numpy loads)
+from baseline_opencv import run as baseline_run  # this folder
 
-import argparse  # noqa: E402
-import sys  # noqa: E402
-import tempfile  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-from baseline_opencv import run as baseline_run  # noqa: E402  (this folder)
-
-from fusion_vo.benchmark import run_benchmark  # noqa: E402
-from fusion_vo.cli.bench import frame_count, frontend_list, thread_list  # noqa: E402
-from fusion_vo.cli.run import positive_int  # noqa: E402
-from fusion_vo.simulation.standard import make_standard  # noqa: E402
+from fusion_vo.benchmark import run_benchmark
+from fusion_vo.cli.bench import frame_count, frontend_list, thread_list
+from fusion_vo.cli.run import positive_int
+from fusion_vo.simulation.standard import make_standard
 
 
 def main() -> int:

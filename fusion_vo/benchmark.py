@@ -13,8 +13,8 @@ Where the time goes (:func:`time_frontend`), three timings per frontend, per fra
 ``frontend``   the frontend's ``process`` on the decoded image
 ``geometry``   rectification is inside the frontend; this is the similarity -> body increment step
 
-Times are CPU time of the process (``time.process_time``) with OpenCV limited to one thread, so the
-figures do not depend on what else the machine is doing. Frames per second are reported with decode
+Times are CPU time of the process (``time.process_time``) with OpenCV and the BLAS libraries limited
+to one thread, so the figures depend less on what else the machine is doing. Frames per second are reported with decode
 included (the end-to-end figure) and excluded. Memory is
 sampled as the process's resident set size after each quarter of the frames: flat in recording length
 means the last quarter is no larger than the first.

@@ -16,7 +16,8 @@ real time between the two frames (not a nominal frame rate).
 Frames are decoded ahead of the tracker: with ``threads >= 2`` a reader thread decodes the recording's
 frames in order into a bounded queue (:func:`read_ahead`), together with the frontend's per-frame work
 that does not depend on earlier frames (its ``prepare``, when it has one), while the calling thread
-tracks, and OpenCV's own kernels may use ``threads`` threads. OpenCV releases the GIL while it decodes
+tracks, and OpenCV's own kernels may use ``threads`` threads (the BLAS libraries one: the matrices are
+small). OpenCV releases the GIL while it decodes
 and filters, so the two overlap on two cores. At most ``2 * threads + 2`` decoded
 frames wait in the queue, so memory stays flat in recording length. The results are identical frame for
 frame to ``threads=1`` (everything in the calling thread, OpenCV single-threaded).
@@ -37,6 +38,7 @@ from typing import Callable, Iterable, Iterator, TypeVar
 
 import cv2
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
@@ -314,11 +316,17 @@ def prepared_frames(frames: Iterable[Frame], prepare: Callable | None, threads: 
 
 @contextmanager
 def opencv_threads(n: int):
-    """Let OpenCV's kernels use ``n`` threads inside the block, then restore the previous setting."""
+    """Let OpenCV's kernels use ``n`` threads inside the block, the BLAS libraries one; then restore both.
+
+    The matrices of a frame (descriptor distances: 150 x 121) are far too small for a multi-threaded
+    BLAS, whose waiting workers cost more than they compute (OpenCV's ``gemm`` goes to the OpenBLAS
+    that opencv-python bundles); parallelism comes from the frame pipeline instead.
+    """
     before = cv2.getNumThreads()
     cv2.setNumThreads(int(n))
     try:
-        yield
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
     finally:
         cv2.setNumThreads(before)
 

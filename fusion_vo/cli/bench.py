@@ -3,17 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 from fusion_vo.cli.run import positive_int
 from fusion_vo.errors import InputError
-
-#: numerical libraries that start worker threads unless told otherwise (read when numpy loads)
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 #: the frontends that can be measured
 FRONTENDS = ("klt", "features")
@@ -71,20 +65,6 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    if any(os.environ.get(v) != "1" for v in THREAD_VARIABLES):
-        # numpy is already loaded with multi-threaded BLAS, whose idle workers would compete with the
-        # measured threads: measure in a fresh interpreter with single-threaded BLAS.
-        env = {**os.environ, **{v: "1" for v in THREAD_VARIABLES}}
-        argv = [sys.executable, "-m", "fusion_vo.cli.main", "bench", "--frontend", ",".join(args.frontend),
-                "--repeats", str(args.repeats)]
-        if args.frames is not None:
-            argv += ["--frames", str(args.frames)]
-        if args.threads is not None:
-            argv += ["--threads", ",".join(map(str, args.threads))]
-        if args.sequence is not None:
-            argv.append(args.sequence)
-        return subprocess.run(argv, env=env, check=False).returncode
-
     from fusion_vo.benchmark import load_baseline, run_benchmark
     from fusion_vo.recording import Recording
 

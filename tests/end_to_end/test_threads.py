@@ -144,3 +144,17 @@ def test_prepared_frames_give_the_same_motions(standard_recording, frontend, six
             np.testing.assert_array_equal(a.matrix, b.matrix)
             np.testing.assert_array_equal(a.covariance, b.covariance)
     assert ok >= 35
+
+
+def test_compute_threads_are_set_inside_and_restored_after():
+    import cv2
+    from threadpoolctl import threadpool_info
+
+    from fusion_vo.odometry import opencv_threads
+
+    before_cv, before_blas = cv2.getNumThreads(), [i["num_threads"] for i in threadpool_info()]
+    with opencv_threads(3):
+        assert cv2.getNumThreads() == 3
+        assert all(i["num_threads"] == 1 for i in threadpool_info() if i["user_api"] == "blas")
+    assert cv2.getNumThreads() == before_cv
+    assert [i["num_threads"] for i in threadpool_info()] == before_blas
