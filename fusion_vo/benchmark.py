@@ -145,6 +145,8 @@ class EndToEnd:
         Frames the run could not measure (last repeat).
     baseline : bool
         Whether this is the plain script.
+    rss_mb : list of float
+        Resident memory of the process after each quarter of the frames (last repeat; fusion-vo only).
     """
 
     name: str
@@ -154,6 +156,7 @@ class EndToEnd:
     ratio: list = field(default_factory=list)
     failed: int = 0
     baseline: bool = False
+    rss_mb: list = field(default_factory=list)
 
     @property
     def label(self) -> str:
@@ -164,12 +167,29 @@ class EndToEnd:
         return f"{self.name}, {self.threads} thread{'s' if self.threads > 1 else ''}"
 
 
-def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int]:
-    """Frames per second of visual odometry over a recording (wall clock, decoding included) and failures."""
+def current_rss_mb() -> float:
+    """Resident memory of this process now [MB] (Linux ``/proc``; the peak elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return _rss_mb()
+
+
+def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int, list]:
+    """Frames per second of visual odometry over a recording (wall clock, decoding included), failures,
+    and the resident memory after each quarter of the frames [MB]."""
     rec = Recording(sequence)
     n = len(rec)
-    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads))
-    return n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped)
+    quarter = max(n // 4, 1)
+    rss: list = []
+
+    def progress(done: int, total: int) -> None:
+        if done % quarter == 0 and len(rss) < 4:
+            rss.append(round(current_rss_mb(), 1))
+
+    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads), progress=progress)
+    return n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped), rss
 
 
 def time_baseline(sequence: str | Path, baseline: BaselineRun, threads: int | None = None) -> tuple[float, int]:
@@ -217,7 +237,7 @@ def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: Bas
                 report(f"repeat {r + 1}/{repeats}: {base.label} {fps:.1f} frames/s")
         best = max(base.fps[-1] for base in bases)
         for row in rows:
-            fps, row.failed = time_run(sequence, row.name, row.threads)
+            fps, row.failed, row.rss_mb = time_run(sequence, row.name, row.threads)
             row.fps.append(fps)
             row.ratio.append(fps / best)
             if report:
@@ -234,10 +254,12 @@ def _span(values: list[float], fmt: str) -> str:
 
 def end_to_end_table(rows: list[EndToEnd]) -> str:
     """A Markdown table: frames/s and the ratio to the plain script (median, and range over repeats)."""
-    lines = ["| run | frames/s end to end | x plain script (the faster run) | failed frames |", "|---|---|---|---|"]
+    lines = ["| run | frames/s end to end | x plain script (the faster run) | failed frames | memory after each quarter |",
+             "|---|---|---|---|---|"]
     for row in rows:
         ratio = _span(row.ratio, ".2f") if row.ratio else "–"
-        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {row.failed} |")
+        memory = " / ".join(f"{m:.0f}" for m in row.rss_mb) + " MB" if row.rss_mb else "–"
+        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {row.failed} | {memory} |")
     return "\n".join(lines)
 
 
@@ -294,7 +316,7 @@ def run_benchmark(sequence: str | Path, frontends: list[str], baseline: Baseline
             rows = [EndToEnd(fe, th, n) for fe in frontends for th in (thread_counts or sorted({1, available_cores()}))]
             for _ in range(repeats):
                 for row in rows:
-                    fps, row.failed = time_run(seq, row.name, row.threads)
+                    fps, row.failed, row.rss_mb = time_run(seq, row.name, row.threads)
                     row.fps.append(fps)
         else:
             rows = compare_end_to_end(seq, frontends, baseline, thread_counts, repeats, report=out)

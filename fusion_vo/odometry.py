@@ -13,14 +13,14 @@ and counted; the fused backends do better by leaning on the wheels and the gyro 
 The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
 real time between the two frames (not a nominal frame rate).
 
-Frames are decoded ahead of the tracker: with ``threads >= 2`` a reader thread decodes the recording's
-frames in order into a bounded queue (:func:`read_ahead`), together with the frontend's per-frame work
-that does not depend on earlier frames (its ``prepare``, when it has one), while the calling thread
-tracks, and OpenCV's own kernels may use ``threads`` threads (the BLAS libraries one: the matrices are
-small). OpenCV releases the GIL while it decodes
-and filters, so the two overlap on two cores. At most ``2 * threads + 2`` decoded
-frames wait in the queue, so memory stays flat in recording length. The results are identical frame for
-frame to ``threads=1`` (everything in the calling thread, OpenCV single-threaded).
+Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``threads >= 2`` a reader
+thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
+per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
+calling thread tracks. OpenCV releases the GIL while it decodes and filters, so they overlap on the
+cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
+small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
+flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
+the calling thread, OpenCV single-threaded).
 """
 
 from __future__ import annotations
@@ -72,9 +72,9 @@ class OdometryConfig:
         error instead of skipping them one by one.
     threads : int or None
         Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
-        single-threaded; ``N >= 2`` decodes frames in a reader thread ahead of the tracker and lets
-        OpenCV use ``N`` threads. ``None`` (the default) uses the cores available to the process. The
-        results do not depend on it.
+        single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
+        (:func:`prepared_frames`) and lets OpenCV use ``N`` threads. ``None`` (the default) uses the
+        cores available to the process. The results do not depend on it.
     """
 
     frontend: str = "klt"
@@ -358,8 +358,8 @@ def run_visual_odometry(
     frames : iterable of Frame, optional
         Frames to use instead of ``recording.frames()``.
 
-    With ``config.threads`` other than 1 the frames are decoded in a background thread ahead of the
-    tracker (:func:`read_ahead`); the results are the same as with one thread.
+    With ``config.threads`` other than 1 the frames are decoded and prepared in other threads ahead of
+    the tracker (:func:`prepared_frames`); the results are the same as with one thread.
     """
     config = config or OdometryConfig()
     cam = recording.camera

@@ -59,6 +59,7 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     assert (one.threads, two.threads) == (1, 2) and one.failed == two.failed == 0
     for row in (one, two):
         assert row.ratio == [pytest.approx(row.fps[0] / max(default.fps[0], single.fps[0]))]
+        assert len(row.rss_mb) == 4 and all(m > 10 for m in row.rss_mb)
     table = "\n".join(lines)
     for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
                   "klt, 1 thread |", "klt, 2 threads |"):
