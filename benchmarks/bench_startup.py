@@ -8,7 +8,9 @@ Prints the wall time (median of the repeats) of:
   even with ``--backend none``);
 * the whole ``fusion-vo run SEQ --backend none --no-evaluate`` command, and the part of it spent outside
   visual odometry (start-up, imports, wheel dead reckoning, output writing);
-* writing the visual odometry outputs (``vo.tum`` and ``velocities.csv``) of that run, in this process.
+* writing the visual odometry outputs (``vo.tum`` and ``velocities.csv``) of that run, in this process;
+* the whole plain OpenCV script, ``python benchmarks/baseline_opencv.py SEQ``, as a command, interleaved
+  with the ``fusion-vo run`` command above: the whole-command frame rates of both, side by side.
 
 Usage::
 
@@ -60,15 +62,19 @@ def main() -> int:
         ]
         out = Path(tmp) / "out"
         run = [*cli, "-q", "run", str(seq), "--out", str(out), "--backend", "none", "--no-evaluate"]
-        total, inside = [], []
+        plain = [py, str(Path(__file__).with_name("baseline_opencv.py")), str(seq)]
+        total, inside, script = [], [], []
         for _ in range(args.repeats):
             start = time.perf_counter()
             subprocess.run(run, check=True, stdout=subprocess.DEVNULL)
             total.append(time.perf_counter() - start)
             inside.append(json.loads((out / "summary.json").read_text())["vo_seconds"])
+            script.append(wall(plain, 1))
         frames = json.loads((out / "summary.json").read_text())["frames"]
         rows.append((f"fusion-vo run --backend none ({frames} frames)", statistics.median(total)))
         rows.append(("  of which outside visual odometry", statistics.median(t - v for t, v in zip(total, inside))))
+        rows.append((f"python benchmarks/baseline_opencv.py ({frames} frames)", statistics.median(script)))
+        ratios = [s_ / t for s_, t in zip(script, total)]
 
         from fusion_vo.odometry import OdometryConfig, run_visual_odometry
         from fusion_vo.pipeline import write_velocities
@@ -86,6 +92,9 @@ def main() -> int:
     print("|---|---|")
     for name, seconds in rows:
         print(f"| {name} | {1000 * seconds:.0f} ms |")
+    print(f"whole commands: fusion-vo run {frames / statistics.median(total):.0f} frames/s, plain script "
+          f"{frames / statistics.median(script):.0f} frames/s; ratio {statistics.median(ratios):.2f} "
+          f"({min(ratios):.2f}-{max(ratios):.2f}) between commands run next to each other")
     return 0
 
 
