@@ -306,13 +306,15 @@ class Alignment:
     """Planar rigid transform from a track's frame to ENU, fitted to fixes.
 
     ``yaw`` [rad] and ``offset`` (2,) [m] map a position ``p`` of the track to ``R(yaw) p + offset``;
-    ``rms`` [m] is the residual of the fitted fixes, ``n`` their number.
+    ``rms`` [m] is the residual of the fitted fixes, ``n`` their number, ``yaw_sigma`` [rad] the
+    standard deviation of ``yaw`` from the fixes' noise: ``1 / sqrt(Σ |a_i - ā|² / σ_i²)``.
     """
 
     yaw: float
     offset: np.ndarray
     rms: float
     n: int
+    yaw_sigma: float = float("nan")
 
     def apply(self, xyyaw: np.ndarray) -> np.ndarray:
         """Poses of the track expressed in ENU."""
@@ -355,10 +357,11 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
     w = 1.0 / np.maximum(var, 1e-12)
     yaw, offset = se2.fit_rigid_2d(a, z, w)
     sigma = math.sqrt(float(np.median(var)))
-    spread = math.sqrt(float(np.average(np.sum((a - np.average(a, axis=0, weights=w)) ** 2, axis=1), weights=w)))
+    moment = np.sum((a - np.average(a, axis=0, weights=w)) ** 2, axis=1)
+    spread = math.sqrt(float(np.average(moment, weights=w)))
     if spread < min_spread * sigma:
         return None
     c, s = math.cos(yaw), math.sin(yaw)
     fitted = a @ np.array([[c, s], [-s, c]]) + offset
     rms = math.sqrt(float(np.mean(np.sum((fitted - z) ** 2, axis=1))))
-    return Alignment(float(yaw), offset, rms, len(idx))
+    return Alignment(float(yaw), offset, rms, len(idx), 1.0 / math.sqrt(float(np.sum(w * moment))))
