@@ -42,12 +42,13 @@ def show_metrics(metrics: dict, name: str) -> None:
         from rich import box
         from rich.table import Table
 
-        from fusion_vo.evaluation.gps import gps_table
+        from fusion_vo.evaluation.gps import gps_frame, gps_table
 
         headers, rows = gps_table(metrics)
-        table = Table(title=f"Errors of {name} against GPS fixes (no ground truth)", box=box.SIMPLE_HEAD)
+        table = Table(title=f"Errors of {name} against GPS fixes (no ground truth)", box=box.SIMPLE_HEAD,
+                      caption=f"trajectories {gps_frame(metrics)}; outliers: fixes > 5 robust sigma off")
         for h in headers:
-            table.add_column(h, justify="left" if h in ("trajectory", "frame") else "right")
+            table.add_column(h, justify="left" if h == "trajectory" else "right")
         for row in rows:
             table.add_row(*row)
         console.print(table)

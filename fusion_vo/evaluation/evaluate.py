@@ -165,7 +165,7 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
 
 def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Path], config: dict) -> dict:
     """Score a run's trajectories against the recording's GPS fixes (:mod:`.gps`); metrics, gps.png, report."""
-    from fusion_vo.evaluation.gps import evaluate_against_gps, gps_table
+    from fusion_vo.evaluation.gps import evaluate_against_gps, gps_frame, gps_table
     from fusion_vo.recording import Recording
 
     gps = Recording(sequence).gps()
@@ -176,7 +176,8 @@ def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Pat
     headers, rows = gps_table(metrics)
     notes = [f"{n} GPS fixes skipped ({reason})" for reason, n in gps.skipped.items()]
     write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, {}, images,
-                 sections=[("Errors against GPS fixes (no ground truth)", headers, rows, notes)])
+                 sections=[(f"Errors against GPS fixes (no ground truth; {gps_frame(metrics)})",
+                                headers, rows, notes)])
     logger.info("scored %d trajectories against %d GPS fixes; wrote metrics.json, gps.png and report.html to %s",
                 len(metrics), len(gps), run_dir)
     return metrics

@@ -6,11 +6,15 @@ the fixes ``z_i`` in East-North-Up at the datum:
 
 * when the run did not fuse GPS (``gps`` not among ``run.yaml``'s ``sensors``) the trajectory lives in a
   frame of its own: the antenna positions are first carried onto the fixes by the weighted
-  least-squares rigid transform (SE(2): heading and offset, no scale; :func:`fusion_vo.geometry.se2.fit_rigid_2d`);
+  least-squares rigid transform (SE(2): heading and offset, no scale), reweighted so that multipath
+  jumps in the fixes do not bend it (:func:`fusion_vo.sensors.gps.robust_fit_rigid_2d`);
 * when it did, the trajectory is already in ENU and is scored as it is.
 
-The figures are the RMS, median and largest horizontal distance ``|h(x(t_i)) - z_i|``; they include the
-fixes' own noise (and any multipath jump in them), so they are an upper bound of the track's error.
+The figures are the RMS, median and largest horizontal distance ``|h(x(t_i)) - z_i|`` over every fix in
+the trajectory's span. They include the fixes' own noise and any multipath jump in them: a jump shows in
+the RMS and the maximum, while the median stays a measure of the track. Fixes further from the track
+than 5 robust standard deviations (``5 · 1.4826 · median``) are counted as outliers, and the RMS is also
+given without them.
 """
 
 from __future__ import annotations
@@ -25,17 +29,18 @@ import numpy as np
 from fusion_vo.evaluation.io import read_tum
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
-from fusion_vo.sensors.gps import interpolate_poses, predict
+from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
 
 logger = logging.getLogger(__name__)
 
 #: (key in metrics.json, header, format) of the GPS figures
 GPS_COLUMNS = (
-    ("gps_rms_m", "RMS to fixes [m]", "{:.3f}"),
+    ("gps_rms_m", "RMS [m]", "{:.3f}"),
+    ("gps_rms_inliers_m", "RMS inliers [m]", "{:.3f}"),
     ("gps_median_m", "median [m]", "{:.3f}"),
     ("gps_max_m", "max [m]", "{:.3f}"),
     ("gps_fixes", "fixes", "{:d}"),
-    ("gps_frame", "frame", "{}"),
+    ("gps_outliers", "outliers", "{:d}"),
 )
 
 
@@ -54,9 +59,17 @@ class GpsScore:
         return np.linalg.norm(self.antenna - self.fixes, axis=1)
 
     @property
+    def outliers(self) -> np.ndarray:
+        """Fixes further than 5 robust standard deviations (``1.4826 · median``) from the track."""
+        e = self.errors
+        return e > 5.0 * 1.4826 * float(np.median(e))
+
+    @property
     def figures(self) -> dict:
         e = self.errors
-        return {"gps_rms_m": float(np.sqrt(np.mean(e**2))), "gps_median_m": float(np.median(e)),
+        inl = ~self.outliers
+        return {"gps_rms_m": float(np.sqrt(np.mean(e**2))), "gps_rms_inliers_m": float(np.sqrt(np.mean(e[inl]**2))),
+                "gps_outliers": int(np.count_nonzero(~inl)), "gps_median_m": float(np.median(e)),
                 "gps_max_m": float(np.max(e)), "gps_fixes": int(len(e)),
                 "gps_frame": "SE(2)-aligned" if self.aligned else "ENU (GPS fused)",
                 "gps_alignment_yaw_deg": self.yaw_deg}
@@ -80,7 +93,7 @@ def score_track(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, fused: bool) -> 
     yaw = 0.0
     if not fused:
         w = 2.0 / np.trace(gps.covariance[inside], axis1=1, axis2=2)
-        yaw, offset = se2.fit_rigid_2d(antenna, fixes, w)
+        yaw, offset, _ = robust_fit_rigid_2d(antenna, fixes, w)
         c, s = math.cos(yaw), math.sin(yaw)
         antenna = antenna @ np.array([[c, s], [-s, c]]) + offset
     return GpsScore(gps.t[inside], antenna, fixes, not fused, math.degrees(yaw))
@@ -139,6 +152,11 @@ def plot_fixes(gps: GpsData, scores: dict[str, GpsScore], path: Path) -> Path:
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png")
     return write_atomic(path, buffer.getvalue())
+
+
+def gps_frame(metrics: dict[str, dict]) -> str:
+    """How the trajectories were compared with the fixes: ``SE(2)-aligned`` or ``ENU (GPS fused)``."""
+    return next((f["gps_frame"] for f in metrics.values() if "gps_frame" in f), "")
 
 
 def gps_table(metrics: dict[str, dict]) -> tuple[list[str], list[list[str]]]:

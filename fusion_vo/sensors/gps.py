@@ -301,6 +301,32 @@ def interpolate_poses(t: np.ndarray, xyyaw: np.ndarray, t_query: np.ndarray) -> 
                             se2.wrap_angle(np.interp(t_query, t, yaw))])
 
 
+def robust_fit_rigid_2d(source: np.ndarray, target: np.ndarray, weights: np.ndarray, width: float = 3.0,
+                        iterations: int = 10) -> tuple[float, np.ndarray, np.ndarray]:
+    """Rigid planar fit ``target ≈ R(yaw) source + t`` that ignores outliers such as multipath jumps.
+
+    Iteratively reweighted least squares (:func:`fusion_vo.geometry.se2.fit_rigid_2d` each step) with a
+    Cauchy weight ``1 / (1 + (r / (width · s))²)`` of each residual distance ``r``, where ``s`` is the
+    robust scale ``1.4826 · median(r)`` of the current residuals.
+
+    Returns
+    -------
+    yaw, translation, final robust weights (N,)
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    rw = np.ones(len(w))
+    yaw, offset = se2.fit_rigid_2d(source, target, w)
+    for _ in range(iterations):
+        c, s = math.cos(yaw), math.sin(yaw)
+        r = np.linalg.norm(source @ np.array([[c, s], [-s, c]]) + offset - target, axis=1)
+        scale = 1.4826 * float(np.median(r))
+        if scale <= 1e-12:
+            break
+        rw = 1.0 / (1.0 + (r / (width * scale)) ** 2)
+        yaw, offset = se2.fit_rigid_2d(source, target, w * rw)
+    return yaw, offset, rw
+
+
 @dataclass
 class Alignment:
     """Planar rigid transform from a track's frame to ENU, fitted to fixes.
@@ -331,7 +357,7 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
 
     The antenna positions of the track at the fix times, ``a_i = h(x(t_i))``, are fitted to the fixes
     ``z_i`` by the weighted least-squares rigid transform ``z ≈ R(yaw) a + o`` (weights: inverse trace of
-    each fix's covariance). The heading is only observable once the antenna has moved: ``None`` is
+    each fix's covariance), robust to multipath jumps (:func:`robust_fit_rigid_2d`). The heading is only observable once the antenna has moved: ``None`` is
     returned while the fitted positions spread less than ``min_spread`` standard deviations of the
     fixes' noise (a robot standing still, or too few fixes).
 
@@ -355,7 +381,7 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
     z = gps.enu[idx, :2]
     var = np.trace(gps.covariance[idx], axis1=1, axis2=2) / 2.0
     w = 1.0 / np.maximum(var, 1e-12)
-    yaw, offset = se2.fit_rigid_2d(a, z, w)
+    yaw, offset, _ = robust_fit_rigid_2d(a, z, w)
     sigma = math.sqrt(float(np.median(var)))
     moment = np.sum((a - np.average(a, axis=0, weights=w)) ** 2, axis=1)
     spread = math.sqrt(float(np.average(moment, weights=w)))

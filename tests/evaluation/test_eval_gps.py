@@ -104,6 +104,16 @@ def test_a_jump_in_the_fixes_shows_in_the_max_not_the_median(tmp_path):
     figures = json.loads((run / "metrics.json").read_text())["gtsam"]
     assert figures["gps_max_m"] == pytest.approx(20.0, abs=0.3)
     assert figures["gps_median_m"] < 3 * SIGMA
+    assert figures["gps_outliers"] == 1
+    assert figures["gps_rms_inliers_m"] == pytest.approx(SIGMA * math.sqrt(2), rel=0.15)
+    # the alignment of an unfused track is not bent by the jump
+    run2 = tmp_path / "unfused"
+    run.rename(run2)
+    (run2 / "run.yaml").write_text(yaml.safe_dump({"sequence": str(seq), "sensors": ["wheel"]}))
+    assert main(["evaluate", str(run2)]) == 0
+    figures = json.loads((run2 / "metrics.json").read_text())["wheel"]
+    assert figures["gps_alignment_yaw_deg"] == pytest.approx(30.0, abs=0.2)
+    assert figures["gps_outliers"] == 1 and figures["gps_median_m"] < 3 * SIGMA
 
 
 def test_recording_with_neither_ground_truth_nor_gps_is_an_error(tmp_path, capsys):
