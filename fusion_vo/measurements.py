@@ -229,3 +229,7 @@ class GpsData:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def samples(self) -> list[GpsFix]:
+        """The fixes one at a time (east, north and covariance), for the streaming API."""
+        return [GpsFix(float(t), self.enu[i, :2].copy(), self.covariance[i].copy()) for i, t in enumerate(self.t)]

@@ -169,7 +169,7 @@ def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Pat
     from fusion_vo.recording import Recording
 
     gps = Recording(sequence).gps()
-    metrics, images = evaluate_against_gps(run_dir, files, gps, config)
+    metrics, images = evaluate_against_gps(run_dir, files, gps, config, sequence / "gps0" / "data.csv")
     write_metrics(run_dir / "metrics.json", metrics)
     report_config = dict(config)
     report_config.setdefault("sequence", str(sequence))

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo.errors import InputError
 from fusion_vo.evaluation.io import read_tum
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
@@ -99,9 +100,12 @@ def score_track(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, fused: bool) -> 
     return GpsScore(gps.t[inside], antenna, fixes, not fused, math.degrees(yaw))
 
 
-def evaluate_against_gps(run_dir: Path, files: dict[str, Path], gps: GpsData, config: dict
-                         ) -> tuple[dict[str, dict], dict[str, Path]]:
+def evaluate_against_gps(run_dir: Path, files: dict[str, Path], gps: GpsData, config: dict,
+                         source: Path | None = None) -> tuple[dict[str, dict], dict[str, Path]]:
     """Score every trajectory file of a run against the fixes and draw ``gps.png``.
+
+    ``source`` (the fixes' file) is named in the error raised when no trajectory overlaps the fixes in
+    time, as when the fixes are stamped on another clock.
 
     Returns
     -------
@@ -120,6 +124,11 @@ def evaluate_against_gps(run_dir: Path, files: dict[str, Path], gps: GpsData, co
             logger.warning("%s: fewer than 3 GPS fixes within its time span, not scored", path)
             continue
         scores[name] = score
+    if not scores:
+        spans = [read_tum(p).timestamps for p in files.values()]
+        lo, hi = min(float(t[0]) for t in spans), max(float(t[-1]) for t in spans)
+        raise InputError(f"no trajectory has 3 GPS fixes within its time span (fixes {gps.t[0]:.3f} to {gps.t[-1]:.3f} s, "
+                         f"trajectories {lo:.3f} to {hi:.3f} s): are the fixes on another clock?", source)
     metrics = {name: s.figures for name, s in scores.items()}
     caption = ("Trajectories (antenna positions, each SE(2)-aligned to the fixes) and the GPS fixes in ENU"
                if not fused else "Trajectories (antenna positions, GPS fused: not aligned) and the GPS fixes in ENU")

@@ -123,3 +123,25 @@ def test_recording_with_neither_ground_truth_nor_gps_is_an_error(tmp_path, capsy
     assert main(["evaluate", str(run)]) == 2
     assert "no ground truth (and no GPS fixes" in capsys.readouterr().err
     assert not (run / "metrics.json").exists()
+
+
+def test_fixes_on_another_clock_are_a_one_line_error(tmp_path, capsys):
+    seq = make_sequence(tmp_path)
+    run = make_run(tmp_path, seq, ["wheel"])
+    for name in ("wheel", "vo", "gtsam"):  # trajectories stamped 10^6 s later than the fixes
+        p = run / f"{name}.tum"
+        rows = [line.split() for line in p.read_text().splitlines() if not line.startswith("#")]
+        p.write_text("".join(f"{float(r[0]) + 1e6:.9f} {' '.join(r[1:])}\n" for r in rows))
+    assert main(["evaluate", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "gps0/data.csv: no trajectory has 3 GPS fixes within its time span" in err
+    assert "another clock" in err and len(err.strip().splitlines()) == 1
+    assert not (run / "metrics.json").exists()
+
+
+def test_bad_gps_sensor_yaml_stops_the_evaluation_with_the_key(tmp_path, capsys):
+    seq = make_sequence(tmp_path)
+    run = make_run(tmp_path, seq, ["wheel"])
+    (seq / "gps0" / "sensor.yaml").write_text("horizontal_sigma_m: -1\n")
+    assert main(["evaluate", str(run)]) == 2
+    assert "gps0/sensor.yaml: 'horizontal_sigma_m' must be positive" in capsys.readouterr().err

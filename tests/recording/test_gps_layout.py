@@ -44,6 +44,9 @@ def test_fixes_are_read_in_enu_with_their_covariance_and_lever_arm(tmp_path):
     np.testing.assert_array_equal(gps.status, [0, 2, 1])
     np.testing.assert_allclose(gps.t, [1.0, 1.2, 1.4])
     assert gps.skipped == {} and gps.notes == []
+    fix = gps.samples()[1]
+    assert fix.t == pytest.approx(1.2) and fix.enu == pytest.approx([8.0, 10.0], abs=1e-3)
+    np.testing.assert_allclose(fix.covariance, np.eye(2) * 0.25)
 
 
 def test_no_fix_nan_and_zero_covariance_are_skipped_and_counted(tmp_path):
