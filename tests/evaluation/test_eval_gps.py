@@ -145,3 +145,20 @@ def test_bad_gps_sensor_yaml_stops_the_evaluation_with_the_key(tmp_path, capsys)
     (seq / "gps0" / "sensor.yaml").write_text("horizontal_sigma_m: -1\n")
     assert main(["evaluate", str(run)]) == 2
     assert "gps0/sensor.yaml: 'horizontal_sigma_m' must be positive" in capsys.readouterr().err
+
+
+def test_run_on_a_recording_without_ground_truth_scores_against_gps(tmp_path, capsys):
+    import shutil
+
+    from fusion_vo.simulation import simulate
+
+    seq = simulate(tmp_path / "seq", profile="random", seed=4, duration=20.0, camera_rate=2.0, width=80, height=48,
+                   fu=60.0, fv=60.0, cu=39.5, cv=23.5, supersample=1, gps=True, gps_jumps=[[12.0, 12.0, 0.0, 20.0]])
+    shutil.rmtree(seq / "state_groundtruth_estimate0")
+    assert main(["run", str(seq), "--out", str(tmp_path / "run"), "--sensors", "wheel,imu", "--backend", "ekf"]) == 0
+    assert "against GPS fixes" in capsys.readouterr().out
+    metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
+    assert set(metrics) == {"wheel", "ekf", "ekf_smoothed"}
+    assert metrics["ekf_smoothed"]["gps_outliers"] == 1
+    assert metrics["ekf_smoothed"]["gps_median_m"] < 0.1  # 5 cm noise per axis plus the fused track's drift
+    assert (tmp_path / "run" / "gps.png").is_file()
