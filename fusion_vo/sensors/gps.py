@@ -332,8 +332,9 @@ class Alignment:
     """Planar rigid transform from a track's frame to ENU, fitted to fixes.
 
     ``yaw`` [rad] and ``offset`` (2,) [m] map a position ``p`` of the track to ``R(yaw) p + offset``;
-    ``rms`` [m] is the residual of the fitted fixes, ``n`` their number, ``yaw_sigma`` [rad] the
-    standard deviation of ``yaw`` from the fixes' noise: ``1 / sqrt(Σ |a_i - ā|² / σ_i²)``.
+    ``rms`` [m] is the residual of the fitted fixes that the robust fit kept (weight ≥ 0.5), ``n`` the
+    number of fixes, ``n_outliers`` those it discarded, ``yaw_sigma`` [rad] the standard deviation of
+    ``yaw`` from the fixes' noise alone: ``1 / sqrt(Σ |a_i - ā|² / σ_i²)``.
     """
 
     yaw: float
@@ -341,6 +342,7 @@ class Alignment:
     rms: float
     n: int
     yaw_sigma: float = float("nan")
+    n_outliers: int = 0
 
     def apply(self, xyyaw: np.ndarray) -> np.ndarray:
         """Poses of the track expressed in ENU."""
@@ -381,7 +383,7 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
     z = gps.enu[idx, :2]
     var = np.trace(gps.covariance[idx], axis1=1, axis2=2) / 2.0
     w = 1.0 / np.maximum(var, 1e-12)
-    yaw, offset, _ = robust_fit_rigid_2d(a, z, w)
+    yaw, offset, kept = robust_fit_rigid_2d(a, z, w)
     sigma = math.sqrt(float(np.median(var)))
     moment = np.sum((a - np.average(a, axis=0, weights=w)) ** 2, axis=1)
     spread = math.sqrt(float(np.average(moment, weights=w)))
@@ -389,5 +391,7 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
         return None
     c, s = math.cos(yaw), math.sin(yaw)
     fitted = a @ np.array([[c, s], [-s, c]]) + offset
-    rms = math.sqrt(float(np.mean(np.sum((fitted - z) ** 2, axis=1))))
-    return Alignment(float(yaw), offset, rms, len(idx), 1.0 / math.sqrt(float(np.sum(w * moment))))
+    inlier = kept >= 0.5
+    rms = math.sqrt(float(np.mean(np.sum((fitted[inlier] - z[inlier]) ** 2, axis=1))))
+    return Alignment(float(yaw), offset, rms, len(idx), 1.0 / math.sqrt(float(np.sum(w * moment))),
+                     int(np.count_nonzero(~inlier)))

@@ -56,6 +56,11 @@ def test_alignment_helper_recovers_the_world_heading_from_the_fixes(rec):
     assert math.degrees(fit.yaw_sigma) < 1.0
     assert abs(fit.yaw - math.radians(40.0)) < 3 * fit.yaw_sigma
     np.testing.assert_allclose(fit.offset, [5.0, -3.0], atol=0.1)
+    assert fit.n_outliers == 0 and fit.rms == pytest.approx(0.05 * math.sqrt(2), rel=0.25)
+    # over the whole drive the 5 jumped fixes are discarded and the heading still holds
+    full = gps_model.align_to_fixes(gt.t, gt.xyyaw, gps)
+    assert full.n_outliers == 5 and abs(full.yaw - math.radians(40.0)) < 3 * full.yaw_sigma
+    assert full.rms == pytest.approx(0.05 * math.sqrt(2), rel=0.25)
 
 
 def test_truth_and_sensor_yaml(rec):
