@@ -162,7 +162,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
     result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
     summary.backend_seconds.update(result.seconds or {})
     summary.notes.extend(result.notes or [])
-    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration")}
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates

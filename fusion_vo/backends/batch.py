@@ -92,6 +92,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
+    result.inconsistent = [ep.as_dict() for ep in iv.episodes]
     if "ekf" in names:
         result.merge(run_ekf(iv, config))
     if "gtsam" in names:

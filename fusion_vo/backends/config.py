@@ -115,6 +115,21 @@ class FusionConfig:
         (default True; a controller's odometry is often stamped when published, late).
     max_odom_delay : float
         Largest delay [s] searched (default 1).
+    monitor : bool
+        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) against each other over windows
+        and drop the component that contradicts the others there (:mod:`fusion_vo.backends.monitor`;
+        default True).
+    monitor_window : float
+        Window length [s] of that check (default 2).
+    monitor_probability : float
+        A window whose NIS exceeds the chi-square quantile of this probability (1 degree of freedom)
+        is inconsistent (default 0.9999: NIS 15.1).
+    monitor_whole_fraction : float
+        A component inconsistent over more than this fraction of the time it was checked is dropped
+        for the whole recording (default 0.5).
+    monitor_bias_sigma : float
+        Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
+        (default 0.005).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller).
@@ -139,6 +154,11 @@ class FusionConfig:
     odom_base_sigma: float = 0.3
     sync_odometry: bool = True
     max_odom_delay: float = 1.0
+    monitor: bool = True
+    monitor_window: float = 2.0
+    monitor_probability: float = 0.9999
+    monitor_bias_sigma: float = 0.005
+    monitor_whole_fraction: float = 0.5
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
@@ -164,6 +184,8 @@ class FusionConfig:
             raise InputError("graph.calibration_interval must be positive")
         if self.graph.keyframe_every < 1:
             raise InputError("graph.keyframe_every must be at least 1")
+        if not self.monitor_window > 0 or not 0.0 < self.monitor_probability < 1.0 or not self.monitor_bias_sigma > 0:
+            raise InputError("monitor_window and monitor_bias_sigma must be positive, monitor_probability in (0, 1)")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
 

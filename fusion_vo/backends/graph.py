@@ -334,7 +334,14 @@ class GraphBuilder:
         if iv.uses("wheel") and iv.wheel_ok[g0:g1].all():
             still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
-            if self.kb_on:
+            yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
+            if not yaw_ok:  # yaw component dropped by the consistency monitor: translation only
+                m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
+                cov_xy = cov.copy()
+                cov_xy[2, :] = cov_xy[:, 2] = 0.0
+                cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
+                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
+            elif self.kb_on:
                 # translation from the arc; the heading change goes through the wheel-base factor
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
@@ -470,7 +477,8 @@ def initial_calibration(iv: Intervals) -> dict:
     wheel_yaw = wheel_xy = None
     if iv.uses("wheel"):
         inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
-        wheel_yaw = np.where(iv.wheel_ok, inc[:, 2], np.nan)
+        yaw_ok = iv.wheel_ok if iv.wheel_yaw_ok is None else iv.wheel_ok & iv.wheel_yaw_ok
+        wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
         wheel_xy = np.where(iv.wheel_ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
     ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw
     if iv.uses("gyro") and ref is not None:

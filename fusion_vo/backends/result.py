@@ -57,6 +57,10 @@ class FusionResult:
         Plain-language remarks (camera lost from t=.. to .., streams that stopped, late data).
     timing : dict[str, float]
         CPU seconds per backend (``gtsam_online_per_node_ms``: iSAM2 milliseconds per node).
+    inconsistent : list[dict]
+        Spans in which a stream's component contradicted the others and was dropped (sensor,
+        component, start, end [s on the recording clock], max_nis, against); see
+        :mod:`fusion_vo.backends.monitor`.
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -65,6 +69,7 @@ class FusionResult:
     calibration: dict[str, dict[str, float]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     timing: dict[str, float] = field(default_factory=dict)
+    inconsistent: list[dict] = field(default_factory=list)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -89,4 +94,5 @@ class FusionResult:
             "calibration": self.calibration,
             "notes": list(self.notes),
             "timing_s": self.timing,
+            "inconsistent": list(self.inconsistent),
         }
