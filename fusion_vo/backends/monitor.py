@@ -81,15 +81,28 @@ def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
 
 
 def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None) -> float:
+    """The gyro's bias for the check: median rate at rest, else median rate minus the AHRS's, the
+    camera's or the wheels' heading rate (a constant bias is the backends' to estimate, not a lie)."""
     dt = iv.dt
     rate = np.where(iv.gyro_ok, iv.gyro_angle / np.maximum(dt, 1e-9), np.nan)
     if still is not None and np.count_nonzero(still & iv.gyro_ok) >= 10:
         return float(np.median(rate[still & iv.gyro_ok]))
+    refs = []
     if iv.ahrs_ok.any():
-        ok = iv.gyro_ok & iv.ahrs_ok[:-1] & iv.ahrs_ok[1:]
+        refs.append((iv.ahrs_ok[:-1] & iv.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
+    if len(iv.vis_i0):
+        ok = np.zeros(len(dt), bool)
+        ang = np.zeros(len(dt))
+        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
+            ok[a:b] = True
+            ang[a:b] = delta[2] / (b - a)
+        refs.append((ok, ang))
+    if wheel_yaw is not None:
+        refs.append((iv.wheel_ok.copy(), wheel_yaw))
+    for ok, ang in refs:
+        ok = ok & iv.gyro_ok
         if np.count_nonzero(ok) >= 10:
-            d = np.angle(np.exp(1j * (iv.ahrs_yaw[1:] - iv.ahrs_yaw[:-1])))
-            return float(np.median(rate[ok] - d[ok] / dt[ok]))
+            return float(np.median(rate[ok] - ang[ok] / dt[ok]))
     return 0.0
 
 
@@ -105,6 +118,7 @@ def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
     release = float(chi2.ppf(0.9, 1))
     sources: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # name -> (ok, angle, var) per interval
     wheel_yaw = still = None
+    wheel_rel = 0.0
     if iv.uses("wheel"):
         noise, base_sigma = cfg.wheel_model(iv.twist)
         inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
@@ -141,73 +155,50 @@ def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
         return []
     names = list(sources)
     bad = {s: np.zeros(len(dt), bool) for s in names}
-    episodes: list[Episode] = []
-    open_ep: dict[str, Episode] = {}
-    for a, b in _windows(T, cfg.monitor_window):
-        span = float(T[b] - T[a])
-        theta, var = {}, {}
-        for s in names:
-            ok, ang, v = sources[s]
-            if not ok[a:b].all():
-                continue
-            theta[s] = float(ang[a:b].sum())
-            var[s] = float(v[a:b].sum())
-        if "gyro" in theta:
-            var["gyro"] += (cfg.monitor_bias_sigma * span) ** 2
-        if "ahrs" in theta:
-            var["ahrs"] += 2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * span
-        if "wheel" in theta:
-            ref = theta.get("gyro", theta["wheel"])
-            var["wheel"] += wheel_rel * ref**2
-        present = list(theta)
-        flagged: dict[str, tuple[float, list[str]]] = {}
-        if len(present) == 2 and "wheel" in present:
-            other = [s for s in present if s != "wheel"][0]
-            nis = (theta["wheel"] - theta[other]) ** 2 / (var["wheel"] + var[other])
-            if nis > threshold:
-                flagged["wheel"] = (nis, [other])
-        elif len(present) >= 3:
-            for s in present:
-                others = [o for o in present if o != s]
-                w = np.array([1.0 / max(var[o], 1e-12) for o in others])
-                mean = float(np.sum(w * [theta[o] for o in others]) / w.sum())
-                var_mean = float(1.0 / w.sum())
-                nis = (theta[s] - mean) ** 2 / (var[s] + var_mean)
-                if nis <= threshold:
-                    continue
-                # the others must agree among themselves
-                agree = all((theta[o] - mean) ** 2 / (var[o] + var_mean) <= threshold for o in others)
-                if agree:
-                    flagged[s] = (nis, others)
-        for s in names:
-            if s in flagged:
-                nis, others = flagged[s]
-                bad[s][a:b] = True
-                ep = open_ep.get(s)
-                if ep is None:
-                    ep = Episode(s if s != "gyro" else "imu", _COMPONENT[s], float(T[a]), float(T[b]), nis,
-                                 ", ".join(others))
-                    open_ep[s] = ep
-                    episodes.append(ep)
-                ep.end = float(T[b])
-                ep.max_nis = max(ep.max_nis, float(nis))
-            elif s in open_ep:
-                # hysteresis: a dropped component comes back only once it agrees well again
-                nis = _window_nis(s, theta, var)
-                if nis is not None and nis > release:
-                    bad[s][a:b] = True
-                    open_ep[s].end = float(T[b])
+    peak = {s: np.zeros(len(dt)) for s in names}
+    against = {s: np.full(len(dt), "", dtype=object) for s in names}
+    for scale in _SCALES:
+        dropped: set[str] = set()  # hysteresis state at this scale
+        for a, b in _windows(T, cfg.monitor_window * scale):
+            theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
+            liar, nis, others = _find_liar(theta, var, threshold, cfg.monitor_probability)
+            for s in names:
+                if s == liar:
+                    dropped.add(s)
+                elif s in dropped:
+                    # hysteresis: a dropped component comes back only once it agrees well again
+                    n = _window_nis(s, theta, var)
+                    if n is None or n <= release:
+                        dropped.discard(s)
+                        continue
+                    nis, others = n, [o for o in theta if o != s]
                 else:
-                    del open_ep[s]
+                    continue
+                bad[s][a:b] = True
+                peak[s][a:b] = np.maximum(peak[s][a:b], nis)
+                against[s][a:b] = ", ".join(others)
+    episodes: list[Episode] = []
     for s in names:
         checked = np.count_nonzero(sources[s][0])
-        if checked and np.count_nonzero(bad[s]) > cfg.monitor_whole_fraction * checked:
+        fraction = 0.0 if s == "ahrs" else cfg.monitor_whole_fraction
+        if checked and np.count_nonzero(bad[s]) > fraction * checked:
             # a stream that contradicts the others most of the time is not trusted in its quiet windows either
-            t_bad = [ep for ep in episodes if ep.sensor == (s if s != "gyro" else "imu")]
+            who = next(x for x in against[s] if x)
             bad[s][:] = True
-            merged = Episode(t_bad[0].sensor, t_bad[0].component, float(T[0]), float(T[-1]),
-                             max(ep.max_nis for ep in t_bad), t_bad[0].against)
-            episodes = [ep for ep in episodes if ep not in t_bad] + [merged]
+            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[0]), float(T[-1]), float(peak[s].max()), who))
+            continue
+        k = 0
+        while k < len(dt):
+            if not bad[s][k]:
+                k += 1
+                continue
+            j = k
+            while j < len(dt) and bad[s][j]:
+                j += 1
+            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[k]), float(T[j]), float(peak[s][k:j].max()),
+                                    str(against[s][k])))
+            k = j
+    episodes.sort(key=lambda e: e.start)
     if "wheel" in bad:
         iv.wheel_yaw_ok = iv.wheel_yaw_ok & ~bad["wheel"]
     if "gyro" in bad:
@@ -221,6 +212,54 @@ def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
     return episodes
 
 
+def _window_sums(sources: dict, a: int, b: int, span: float, cfg: FusionConfig, wheel_rel: float):
+    """Each source's heading change over intervals ``[a, b)`` and its variance (sources that cover it)."""
+    theta, var = {}, {}
+    for s, (ok, ang, v) in sources.items():
+        if ok[a:b].all():
+            theta[s] = float(ang[a:b].sum())
+            var[s] = float(v[a:b].sum())
+    if "gyro" in theta:
+        var["gyro"] += (cfg.monitor_bias_sigma * span) ** 2
+    if "ahrs" in theta:
+        var["ahrs"] += 2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * span
+    if "wheel" in theta:
+        ref = theta.get("gyro", theta["wheel"])
+        var["wheel"] += wheel_rel * ref**2
+    return theta, var
+
+
+def _find_liar(theta: dict, var: dict, threshold: float, probability: float):
+    """The one source to drop in a window, its NIS and the sources it contradicts, or ``(None, 0, [])``.
+
+    With two sources, only the wheels' yaw is ever dropped. With more, each source whose NIS against
+    the others' mean exceeds ``threshold`` is a candidate; the one whose removal leaves the others most
+    consistent (smallest chi-square about their mean, which must itself pass) is dropped.
+    """
+    present = list(theta)
+    if len(present) == 2:
+        if "wheel" not in present:
+            return None, 0.0, []
+        other = [s for s in present if s != "wheel"][0]
+        nis = (theta["wheel"] - theta[other]) ** 2 / (var["wheel"] + var[other])
+        return ("wheel", nis, [other]) if nis > threshold else (None, 0.0, [])
+    if len(present) < 2:
+        return None, 0.0, []
+    best = (None, 0.0, [], np.inf)
+    for s in present:
+        nis = _window_nis(s, theta, var)
+        if nis is None or nis <= threshold:
+            continue
+        others = [o for o in present if o != s]
+        w = np.array([1.0 / max(var[o], 1e-12) for o in others])
+        vals = np.array([theta[o] for o in others])
+        mean = float(np.sum(w * vals) / w.sum())
+        rest = float(np.sum(w * (vals - mean) ** 2))
+        if rest <= chi2.ppf(probability, len(others) - 1) and rest < best[3]:
+            best = (s, nis, others, rest)
+    return best[:3]
+
+
 def _window_nis(s: str, theta: dict, var: dict) -> float | None:
     """NIS of source ``s`` against the inverse-variance mean of the others in one window (None: absent)."""
     if s not in theta or len(theta) < 2:
@@ -231,6 +270,8 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
     return (theta[s] - mean) ** 2 / (var[s] + 1.0 / w.sum())
 
 
+_SCALES = (1, 5, 15)  # window lengths in units of monitor_window: fast lies and slow drifts
+_SENSOR = {"wheel": "wheel", "gyro": "imu", "ahrs": "imu", "camera": "camera"}
 _COMPONENT = {"wheel": "yaw rate", "gyro": "gyro yaw rate", "ahrs": "AHRS heading", "camera": "visual heading"}
 
 __all__ = ["Episode", "check_heading_sources"]
