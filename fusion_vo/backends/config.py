@@ -8,6 +8,7 @@ configuration file is an error rather than a silently ignored setting.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -186,6 +187,14 @@ class FusionConfig:
             raise InputError("graph.keyframe_every must be at least 1")
         if not self.monitor_window > 0 or not 0.0 < self.monitor_probability < 1.0 or not self.monitor_bias_sigma > 0:
             raise InputError("monitor_window and monitor_bias_sigma must be positive, monitor_probability in (0, 1)")
+        for key, value in _numbers(self):
+            if not math.isfinite(value):
+                raise InputError(f"'{key}' must be a finite number, not {value}")
+            leaf = key.rsplit(".", 1)[-1]
+            if ("sigma" in leaf or leaf in _POSITIVE) and value <= 0:
+                raise InputError(f"'{key}' must be positive, not {value}")
+            if value < 0:
+                raise InputError(f"'{key}' must not be negative, not {value}")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
 
@@ -200,6 +209,20 @@ class FusionConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+#: noise parameters that must be strictly positive besides every ``*sigma*`` (a zero would claim a perfect sensor)
+_POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
+
+
+def _numbers(obj, prefix: str = ""):
+    """``(dotted key, value)`` of every float field of a (nested) config dataclass, except the pose."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _numbers(value, f"{prefix}{f.name}.")
+        elif isinstance(value, float) and f.name not in ("initial_pose", "camera_height"):
+            yield f"{prefix}{f.name}", value
 
 
 def _from_dict(cls, data: Any, prefix: str, path):

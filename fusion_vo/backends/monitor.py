@@ -12,14 +12,21 @@ Four streams may measure how much the robot turned over a window of ``W`` second
 Each has a variance over the window from its noise model (the wheels' includes the relative error of
 the track width, ``sqrt(yaw_scale² + base_sigma²)`` of the turn, so a skid-steered base that turns
 1.5 times what its twist says is *not* a liar; the gyro's includes the bias' uncertainty
-``monitor_bias_sigma · W``). A source is compared with the inverse-variance mean of the others; its
-normalised innovation squared ``NIS = (θ_s - θ̄)² / (σ_s² + σ̄²)`` is tested against the chi-square
-quantile of ``monitor_probability`` (1 degree of freedom), and it is declared inconsistent in that
-window only when the other sources agree among themselves (so one liar cannot condemn two honest
-streams). With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
-yaw rate from a nominal track width is the usual liar; a gyro is not). The AHRS heading is also
-compared over long spans: its offset from the gyro-integrated heading must stay within what the
-configured offset walk and the bias uncertainty allow since the last window where it agreed.
+``monitor_bias_sigma · W``; the AHRS's its white noise and its offset walk). Windows of ``W``, ``5 W`` and
+``15 W`` are checked, so a fast lie (a wrong yaw rate) and a slow drift (an AHRS heading straying by a
+degree a second, a gyro bias step) are both seen. In each window a source's normalised innovation
+squared against the inverse-variance mean of the others, ``NIS = (θ_s - θ̄)² / (σ_s² + σ̄²)``, is
+tested against the chi-square quantile of ``monitor_probability`` (1 degree of freedom); of the
+sources above it, the one whose removal leaves the others most consistent (their chi-square about
+their own mean within its quantile) is dropped in that window, so one liar cannot condemn two honest
+streams. With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
+yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
+judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for the whole recording:
+its offset is no longer known.
+
+The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
+(:class:`~fusion_vo.backends.streaming.StreamingFusion`) does not run it yet, and speeds (the wheels'
+against the camera's) are not checked yet: only heading sources are.
 
 Only the inconsistent *component* is dropped, for as long as it disagrees (it comes back after a
 window whose NIS is below the 90 % quantile, 2.7, so a liar is not trusted again because one window
