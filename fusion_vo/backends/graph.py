@@ -647,7 +647,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     counts = builder.counts
     if isam is not None:
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
-        result.covariances["gtsam_online"] = online_cov
+        result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
         result.counts["gtsam_online"] = counts
         result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
         result.timing["gtsam_online"] = t_online
@@ -670,7 +670,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.calibration["gtsam"] = _calibration(solution, builder)
         t_solve = time.process_time() - t0
         if gcfg.marginals:
-            result.covariances["gtsam"] = pose_marginals(lin, solution, n_nodes)
+            result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
         result.timing["gtsam_solve"] = t_solve
@@ -692,6 +692,17 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
         return solver.calculateEstimateDouble(key)
 
     return value
+
+
+def world_covariances(yaw: np.ndarray, cov_local: np.ndarray) -> np.ndarray:
+    """Pose covariances (N, 3, 3) from GTSAM's Pose2 tangent space (x, y along the body's own axes)
+    to the world frame's (x, y, yaw), as the EKF reports them and ``NAME.cov.csv`` holds them:
+    ``P_W = J P Jᵀ`` with ``J = diag(R(ψ), 1)`` (first order of ``p ⊕ δ``)."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    J = np.zeros((len(yaw), 3, 3))
+    c, s = np.cos(yaw), np.sin(yaw)
+    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
+    return J @ np.asarray(cov_local) @ np.transpose(J, (0, 2, 1))
 
 
 def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_nodes: int) -> np.ndarray:
