@@ -107,20 +107,24 @@ def apply_values(base: RunConfig, values: dict, path: Path | None = None) -> Run
     data = base.to_dict()
     for key, value in values.items():
         _set_dotted(data, key, value)
+    keys = describe(values)
     try:
         config = RunConfig(**data)
         config.validate(path)
     except InputError as exc:
-        keys = ", ".join(f"{k}={v!r}" for k, v in values.items())
         raise InputError(f"{exc.message} (parameter set {keys})", path) from None
     except (TypeError, ValueError) as exc:
-        keys = ", ".join(f"{k}={v!r}" for k, v in values.items())
         raise InputError(f"{str(exc).splitlines()[0]} (parameter set {keys})", path) from None
-    _check_sections(config, values, path)
+    _check_sections(config, keys, path)
     return config
 
 
-def _check_sections(config: RunConfig, values: dict, path: Path | None) -> None:
+def describe(values: dict) -> str:
+    """``key=value, ...`` of a parameter set."""
+    return ", ".join(f"{k}={v}" for k, v in values.items())
+
+
+def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
     """Build the options of both frontends and of the backends, so that a misspelt option of a section the
     run would not otherwise check (the frontend that is not selected, ``fusion``) is an error here."""
     from frontends.features import FeatureConfig
@@ -133,9 +137,9 @@ def _check_sections(config: RunConfig, values: dict, path: Path | None) -> None:
         try:
             check()
         except InputError as exc:
-            raise InputError(f"{section}: {exc.message} (parameter set {values})", path) from None
+            raise InputError(f"{section}: {exc.message} (parameter set {keys})", path) from None
         except (TypeError, ValueError) as exc:
-            raise InputError(f"{section}: {str(exc).splitlines()[0]} (parameter set {values})", path) from None
+            raise InputError(f"{section}: {str(exc).splitlines()[0]} (parameter set {keys})", path) from None
 
 
 def _as_list(key: str, values, path: Path | None) -> list:

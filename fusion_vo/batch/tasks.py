@@ -19,6 +19,7 @@ import math
 import os
 import shutil
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -90,9 +91,9 @@ def recording_labels(recordings: list[str | Path]) -> list[tuple[Path, str]]:
             raise InputError(f"recording listed twice (also as {seen[real]})", given)
         seen[real] = str(given)
         paths.append(path)
-    names = [p.name for p in paths]
-    labels = [f"{p.parent.name}_{p.name}" if names.count(p.name) > 1 else p.name for p in paths]
-    clash = sorted({x for x in labels if labels.count(x) > 1})
+    names = Counter(p.name for p in paths)
+    labels = [f"{p.parent.name}_{p.name}" if names[p.name] > 1 else p.name for p in paths]
+    clash = sorted(label for label, n in Counter(labels).items() if n > 1)
     if clash:
         raise InputError(f"two recordings would share the run folder '{clash[0]}'; rename one of them", paths[labels.index(clash[0])])
     return list(zip(paths, labels))
