@@ -60,6 +60,11 @@ def _metric_per_recording(frame, metric: str) -> bytes | None:
             values = ok[ok["trajectory"] == name].set_index("recording")[metric].reindex(recordings)
             ax.bar(x + (k - (len(trajectories) - 1) / 2) * width, values.to_numpy(dtype=float), width,
                    color=colour_of(name), label=label_of(name))
+        failed = set(frame[frame["status"] != "ok"]["recording"])
+        for i, name in enumerate(recordings):
+            if name in failed:
+                ax.text(i, 0.02, "failed", transform=ax.get_xaxis_transform(), ha="center", color="tab:red")
+        ax.set_xlim(-0.5, len(recordings) - 0.5)
         ax.set_xticks(x, recordings, rotation=30 if len(recordings) > 6 else 0, ha="right" if len(recordings) > 6 else "center")
         ax.legend(fontsize="small", ncols=min(len(trajectories), 4))
     else:
@@ -67,8 +72,16 @@ def _metric_per_recording(frame, metric: str) -> bytes | None:
         ax.boxplot(data, tick_labels=[label_of(n) for n in trajectories])
         ax.set_xlabel(f"trajectory ({len(recordings)} recordings)")
     ax.set_ylabel(METRIC_LABELS[metric])
+    _scale(ax, ok[metric])
     ax.grid(True, axis="y", alpha=0.3)
     return _png(fig)
+
+
+def _scale(ax, values) -> None:
+    """A logarithmic axis when the figures span more than a factor of 30 (visual against wheel errors)."""
+    positive = values[values > 0]
+    if len(positive) == len(values) and len(values) and positive.max() > 30 * positive.min():
+        ax.set_yscale("log")
 
 
 def _metric_against_keys(frame, metric: str, keys: list[str]) -> bytes | None:
@@ -95,6 +108,7 @@ def _metric_against_keys(frame, metric: str, keys: list[str]) -> bytes | None:
             ax.set_xticks(range(len(order)), [str(v) for v in order])
         ax.set_xlabel(key)
         ax.set_ylabel(METRIC_LABELS[metric])
+        _scale(ax, ok[metric])
         ax.grid(True, alpha=0.3)
     axes[0].set_title(f"{METRIC_LABELS[metric]}: mean over the recordings, per value of each swept key")
     axes[0].legend(fontsize="small", ncols=min(len(trajectories), 4))

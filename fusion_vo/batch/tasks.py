@@ -198,8 +198,8 @@ def run_task(task: Task) -> list[dict]:
     record = _read_record(record_path)
     if record and record.get("key") == key and record.get("status") == "ok" and run_dir.is_dir():
         rows = record.get("rows") or []
-        for row in rows:
-            row["cached"] = True
+        for row in rows:  # the batch folder may have moved since
+            row.update(cached=True, run_dir=task.run_dir)
         log.info("%s: unchanged, reusing %s", task.key, record_path)
         return rows
     if record and run_dir.is_dir():  # a folder this batch wrote before, for other inputs
