@@ -86,6 +86,18 @@ def check_key(key: str, path: Path | None, schema: dict | None = None) -> None:
         walked.append(part)
 
 
+def config_data(config: RunConfig) -> dict:
+    """The full configuration as plain data (what a task carries and the cache key hashes)."""
+    return config.to_dict()
+
+
+def build_config(data: dict, path: Path | None = None) -> RunConfig:
+    """A validated :class:`RunConfig` from plain data (the inverse of :func:`config_data`)."""
+    config = RunConfig(**data)
+    config.validate(path)
+    return config
+
+
 def _set_dotted(config: dict, key: str, value) -> None:
     node = config
     parts = key.split(".")
@@ -104,13 +116,12 @@ def apply_values(base: RunConfig, values: dict, path: Path | None = None) -> Run
     InputError
         Naming ``path`` and the key, for an unknown key or a value the configuration rejects.
     """
-    data = base.to_dict()
+    data = config_data(base)
     for key, value in values.items():
         _set_dotted(data, key, value)
     keys = describe(values)
     try:
-        config = RunConfig(**data)
-        config.validate(path)
+        config = build_config(data, path)
     except InputError as exc:
         raise InputError(f"{exc.message} (parameter set {keys})", path) from None
     except (TypeError, ValueError) as exc:

@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fusion_vo.batch.grid import GRID_SECTIONS, Grid, ParameterSet, _schema, apply_values, check_key
+from fusion_vo.batch.grid import GRID_SECTIONS, Grid, ParameterSet, _schema, apply_values, check_key, config_data
 from fusion_vo.batch.runner import Progress, _check_out, _frame, _labels, write_results
 from fusion_vo.batch.tasks import METRICS, RECORDS, Task, failed_rows, run_task
 from fusion_vo.config import RunConfig
@@ -139,7 +139,7 @@ def optimize(recordings, space: SearchSpace, config: RunConfig, client, *, out: 
                       record=str(out / RECORDS / label / f"{name}.json"), config={}, params=values, set_name=name)
                  for path, label in labelled]
         try:
-            cfg = apply_values(config, {**space.fixed, **values}, space.path).to_dict()
+            cfg = config_data(apply_values(config, {**space.fixed, **values}, space.path))
         except InputError as exc:  # a combination the configuration rejects: a failed trial, nothing run
             rows = [failed_rows(t, exc.message) for t in tasks]
             all_rows.extend(rows)

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Callable
 
 from fusion_vo.batch.cluster import open_client, require_dask
-from fusion_vo.batch.grid import Grid, load_grid, parse_grid
+from fusion_vo.batch.grid import Grid, build_config, config_data, load_grid, parse_grid
 from fusion_vo.batch.tasks import COLUMNS, RECORDS, Task, failed_rows, recording_labels, run_task
 from fusion_vo.config import RunConfig, load_config
 from fusion_vo.errors import InputError
@@ -26,8 +26,7 @@ Progress = Callable[[int, int, int], None]
 def _as_config(config: RunConfig | str | Path | None) -> RunConfig:
     if config is None or isinstance(config, (str, Path)):
         return load_config(config)
-    config.validate()
-    return config
+    return build_config(config_data(config))
 
 
 def _check_out(out: str | Path) -> Path:
@@ -41,7 +40,7 @@ def plan_batch(recordings: list[str | Path], config: RunConfig, out: str | Path)
     """One task per recording; checks the recordings (folders, none twice) without reading them."""
     out = _check_out(out).absolute()
     labelled = _labels(recordings)
-    settings = config.to_dict()
+    settings = config_data(config)
     return [Task(recording=str(path), label=label, run_dir=str(out / label),
                  record=str(out / RECORDS / f"{label}.json"), config=settings)
             for path, label in labelled]
@@ -51,7 +50,7 @@ def plan_sweep(recordings: list[str | Path], grid: Grid, out: str | Path) -> lis
     """One task per (recording, parameter set), recording-major."""
     out = _check_out(out).absolute()
     labelled = _labels(recordings)
-    settings = [c.to_dict() for c in grid.configs]
+    settings = [config_data(c) for c in grid.configs]
     return [Task(recording=str(path), label=label, run_dir=str(out / label / ps.name),
                  record=str(out / RECORDS / label / f"{ps.name}.json"), config=cfg, params=dict(ps.values),
                  set_name=ps.name)

@@ -186,7 +186,7 @@ def run_task(task: Task) -> list[dict]:
     running. Otherwise the run folder is written by :func:`fusion_vo.pipeline.run_pipeline`, the
     call ``fusion-vo run`` makes, and the record is written last.
     """
-    from fusion_vo.config import RunConfig
+    from fusion_vo.batch.grid import build_config
     from fusion_vo.pipeline import run_pipeline
 
     start = time.perf_counter()
@@ -207,7 +207,7 @@ def run_task(task: Task) -> list[dict]:
     record_path.unlink(missing_ok=True)
     _limit_threads()
     try:
-        summary = run_pipeline(task.recording, run_dir, RunConfig(**task.config))
+        summary = run_pipeline(task.recording, run_dir, build_config(task.config))
     except InputError as exc:
         rows = failed_rows(task, str(exc), time.perf_counter() - start)
     except Exception as exc:  # noqa: BLE001 - one broken recording must not stop the others
