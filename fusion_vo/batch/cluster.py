@@ -5,6 +5,8 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import signal
+import threading
 from typing import Callable, Iterator
 
 from fusion_vo.errors import InputError
@@ -24,6 +26,20 @@ def require_dask() -> None:
         import pandas  # noqa: F401
     except ImportError as exc:
         raise InputError(f"batches and sweeps need {exc.name}; {EXTRA_HINT}") from None
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start worker processes with SIGINT ignored (kept across their start-up), so that Ctrl-C on a
+    terminal, which reaches the whole process group, stops the command, and the command stops them."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager
@@ -77,8 +93,9 @@ def open_client(workers: int | None = None, scheduler: str | None = None, dashbo
                 import bokeh  # noqa: F401
             except ImportError:
                 address = None
-        cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                                   dashboard_address=address, silence_logs=logging.ERROR))
+        with _workers_ignore_ctrl_c():
+            cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                       dashboard_address=address, silence_logs=logging.ERROR))
         client = stack.enter_context(Client(cluster))
         if announce:
             link = client.dashboard_link if address else "off (the dashboard needs bokeh)"

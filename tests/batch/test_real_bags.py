@@ -2,6 +2,8 @@
 
 from pathlib import Path
 
+import numpy as np
+
 from fusion_vo.batch import run_batch
 from fusion_vo.config import RunConfig
 from fusion_vo.pipeline import run_pipeline
@@ -24,6 +26,8 @@ def test_batch_of_real_bags_equals_single_runs(client, tmp_path):
         single = run_pipeline(rec, tmp_path / "single" / rec.name, config)
         assert list(frame[frame["recording"] == rec.name]["trajectory"]) == single.trajectories
         for name in single.trajectories:
-            batch_tum = (tmp_path / "batch" / rec.name / f"{name}.tum").read_bytes()
-            assert batch_tum == (tmp_path / "single" / rec.name / f"{name}.tum").read_bytes(), (rec.name, name)
-            assert len(batch_tum.splitlines()) > 100
+            batch_tum = np.loadtxt(tmp_path / "batch" / rec.name / f"{name}.tum")
+            single_tum = np.loadtxt(tmp_path / "single" / rec.name / f"{name}.tum")
+            # the same numbers up to rounding: a worker's BLAS has one thread, this process's may have more
+            assert batch_tum.shape == single_tum.shape and len(batch_tum) > 100, (rec.name, name)
+            np.testing.assert_allclose(batch_tum, single_tum, rtol=0, atol=1e-9, err_msg=f"{rec.name} {name}")
