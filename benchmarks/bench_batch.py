@@ -107,17 +107,16 @@ def main() -> int:
         for r in recordings:
             _fusion_vo("run", str(r), "--out", f"{base}/{r.name}")
 
-    inside: list[float] = []  # seconds spent inside the tasks of each 1-worker batch
+    inside: dict[str, list[float]] = {"1 worker": [], "2 workers": []}  # seconds inside the tasks of each batch
 
     def batch(workers: int):
         def go() -> None:
+            import pandas as pd
+
             folder = out()
             _fusion_vo("batch", *names, "--out", folder, "--workers", str(workers), "--no-dashboard")
-            if workers == 1:
-                import pandas as pd
-
-                table = pd.read_csv(Path(folder) / "results.csv").drop_duplicates("recording")
-                inside.append(float(table["seconds"].sum()))
+            table = pd.read_csv(Path(folder) / "results.csv").drop_duplicates("recording")
+            inside["1 worker" if workers == 1 else "2 workers"].append(float(table["seconds"].sum()))
         return go
 
     order = [("loop", loop), ("1 worker", batch(1)), ("2 workers", batch(2))]
@@ -136,7 +135,12 @@ def main() -> int:
     print(f"overhead per task, batch with 1 worker against the loop: {(best['1 worker'] - best['loop']) / n:+.2f} s")
     k = times["1 worker"].index(best["1 worker"])
     print(f"batch machinery per task (1 worker: wall clock - time inside the tasks, cluster start-up and "
-          f"report included): {(best['1 worker'] - inside[k]) / n:.2f} s")
+          f"report included): {(best['1 worker'] - inside['1 worker'][k]) / n:.2f} s")
+    for name in ("1 worker", "2 workers"):
+        k = times[name].index(best[name])
+        print(f"  {name:>9}: {inside[name][k] / n:.2f} s inside each task on average, "
+              f"{inside[name][k] / best[name]:.2f} tasks running at once on average")
+    print("(with 2 workers each task takes about twice as long as with 1 when the machine has no second core free)")
     planned, submitted = graph_seconds(work)
     print(f"task graph of 10,000 recordings: planned in {planned:.2f} s, on the scheduler after {submitted:.2f} s "
           "(target < 10 s)")
