@@ -165,18 +165,31 @@ def _write_record(path: Path, record: dict) -> None:
     write_atomic(path, json.dumps(record, indent=1, default=str))
 
 
-def _limit_threads() -> None:
-    """One thread per task inside a Dask worker: the cluster runs one task per core."""
+def _in_worker() -> bool:
+    """Whether this code runs as a task of a Dask worker."""
     try:
         from distributed import get_worker
 
-        if get_worker().state.nthreads != 1:
-            return
-    except (ImportError, ValueError, AttributeError):
-        return
+        get_worker()
+    except (ImportError, ValueError):
+        return False
+    return True
+
+
+def _one_thread(config: dict) -> dict:
+    """The configuration with visual odometry on one thread, unless it names a number of threads.
+
+    Inside a Dask worker the cluster's parallelism is one task per core, so a task must not take every
+    core as ``fusion-vo run`` does by default; the results are the same for any number of threads.
+    """
     import cv2
 
     cv2.setNumThreads(1)
+    odometry = dict(config.get("odometry") or {})
+    if odometry.get("threads") is not None:
+        return config
+    odometry["threads"] = 1
+    return {**config, "odometry": odometry}
 
 
 def run_task(task: Task) -> list[dict]:
@@ -205,9 +218,9 @@ def run_task(task: Task) -> list[dict]:
     if record and run_dir.is_dir():  # a folder this batch wrote before, for other inputs
         shutil.rmtree(run_dir)
     record_path.unlink(missing_ok=True)
-    _limit_threads()
     try:
-        summary = run_pipeline(task.recording, run_dir, build_config(task.config))
+        config = build_config(_one_thread(task.config) if _in_worker() else task.config)
+        summary = run_pipeline(task.recording, run_dir, config)
     except InputError as exc:
         rows = failed_rows(task, str(exc), time.perf_counter() - start)
     except Exception as exc:  # noqa: BLE001 - one broken recording must not stop the others
