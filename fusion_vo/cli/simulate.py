@@ -31,6 +31,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion_vo import schema
     from fusion_vo.geometry.camera import load_yaml
     from fusion_vo.simulation import SimulationOptions, simulate
     from fusion_vo.simulation.standard import STANDARD
@@ -54,10 +55,7 @@ def run(args: argparse.Namespace) -> int:
         options["duration"] = args.duration
     if args.texture:
         options["texture"] = args.texture
-    try:
-        opts = SimulationOptions.from_dict(options)
-    except (ValueError, TypeError) as exc:
-        raise InputError(str(exc), args.config) from None
+    opts = schema.build(SimulationOptions, options, args.config)
     try:
         out = simulate(args.out, profile=profile, seed=seed, options=opts)
     except ValueError as exc:  # a combination of options the profile cannot drive

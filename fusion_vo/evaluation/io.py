@@ -22,14 +22,17 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
 import yaml
-from evo.core.trajectory import PoseTrajectory3D
 
 from frontends.base import MotionStatus
 from fusion_vo.errors import InputError
+
+if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
+    from evo.core.trajectory import PoseTrajectory3D
 
 logger = logging.getLogger(__name__)
 
@@ -149,6 +152,8 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
     data = data[_increasing_rows(data[:, 0], line_numbers, path)]
     quat_wxyz = data[:, [7, 4, 5, 6]]
     quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
+    from evo.core.trajectory import PoseTrajectory3D
+
     return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0], name=name or path.stem)
 
 
@@ -193,6 +198,8 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     data = np.array(rows)
     data = data[_increasing_rows(data[:, 0], line_numbers, path)]
     quat_wxyz = data[:, 4:8] / np.linalg.norm(data[:, 4:8], axis=1, keepdims=True)
+    from evo.core.trajectory import PoseTrajectory3D
+
     return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0] * 1e-9, name="groundtruth")
 
 
