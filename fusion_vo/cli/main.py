@@ -21,6 +21,7 @@ COMMANDS = [
     "simulate",
     "evaluate",
     "compare",
+    "export",
     "show_matches",
     "import_bag",
     "calibrate",

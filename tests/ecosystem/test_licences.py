@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 #: packages whose every module must import without evo
 CORE_PACKAGES = ["frontends", "fusion_vo.geometry", "fusion_vo.sensors", "fusion_vo.backends", "fusion_vo.recording",
-                 "fusion_vo.calibration", "fusion_vo.simulation"]
+                 "fusion_vo.calibration", "fusion_vo.simulation", "fusion_vo.export"]
 #: single modules of the core (and the command line, which must start without evo)
 CORE_MODULES = ["fusion_vo", "fusion_vo.config", "fusion_vo.odometry", "fusion_vo.measurements",
                 "fusion_vo.pipeline", "fusion_vo.cli.main", "fusion_vo.evaluation", "fusion_vo.evaluation.plots",
