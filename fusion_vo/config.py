@@ -103,6 +103,10 @@ class RunConfig:
         """Check every section against the schema; raise :class:`InputError` naming the key path."""
         validate_config(self.to_dict(), path)
 
+    def resolved(self, path: Path | None = None) -> "RunConfig":
+        """This configuration with every option of every section filled in (for ``run.yaml``)."""
+        return validate_config(self.to_dict(), path)
+
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 

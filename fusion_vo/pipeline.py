@@ -140,7 +140,7 @@ def run_pipeline(
             if len(traj):
                 write_tum(staging / f"{name}.tum", traj.t, traj.xyyaw)
                 summary.trajectories.append(name)
-        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}
+        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
         with open(staging / "run.yaml", "w") as f:
             yaml.safe_dump(run_info, f, sort_keys=False)
         with open(staging / "summary.json", "w") as f:
