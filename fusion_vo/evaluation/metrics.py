@@ -155,8 +155,7 @@ def planar_trajectory(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarr
     """Build a trajectory with ``z = 0`` and rotations about z only."""
     t = np.asarray(t, dtype=float)
     xyz = np.column_stack([x, y, np.zeros_like(t)])
-    half = 0.5 * np.asarray(yaw, dtype=float)
-    quat = np.column_stack([np.cos(half), np.zeros_like(t), np.zeros_like(t), np.sin(half)])
+    quat = se2.quaternion_of_yaw(yaw)
     return PoseTrajectory3D(xyz, quat, t, name=name)
 
 

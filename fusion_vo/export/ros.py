@@ -175,9 +175,7 @@ def groundtruth_of_run(run_dir: str | Path) -> ExportTrajectory | None:
     if not rec.has_groundtruth():
         return None
     gt = rec.groundtruth()
-    half = 0.5 * gt.xyyaw[:, 2]
-    quat = gt.quat_wxyz if gt.quat_wxyz is not None else np.column_stack(
-        [np.cos(half), np.zeros_like(half), np.zeros_like(half), np.sin(half)])
+    quat = gt.quat_wxyz if gt.quat_wxyz is not None else se2.quaternion_of_yaw(gt.xyyaw[:, 2])
     z = gt.z if gt.z is not None else np.zeros(len(gt))
     stamp_ns = np.round(np.asarray(gt.t, dtype=np.float64) * 1e9).astype(np.int64)
     return ExportTrajectory("groundtruth", stamp_ns, np.column_stack([gt.xyyaw[:, :2], z]), quat, None)

@@ -2,17 +2,9 @@
 
 Local ENU of GPS fixes
 ----------------------
-Geodetic latitude ``φ``, longitude ``λ`` and ellipsoidal height ``h`` go to Earth-centred coordinates on
-the WGS-84 ellipsoid (``a = 6378137 m``, ``f = 1/298.257223563``, ``e² = f (2 - f)``)::
-
-    N(φ) = a / sqrt(1 - e² sin² φ)
-    X = (N + h) cos φ cos λ,   Y = (N + h) cos φ sin λ,   Z = (N (1 - e²) + h) sin φ
-
-and are rotated into East-North-Up at the first fix ``(φ0, λ0, h0)``::
-
-    [e]   [ -sin λ0          cos λ0          0      ]
-    [n] = [ -sin φ0 cos λ0  -sin φ0 sin λ0   cos φ0 ] (X - X0)
-    [u]   [  cos φ0 cos λ0   cos φ0 sin λ0   sin φ0 ]
+Geodetic latitude, longitude and ellipsoidal height on the WGS-84 ellipsoid go to East-North-Up
+coordinates at a reference position (the first fix) with pymap3d's ``geodetic2enu`` (through
+Earth-centred coordinates, exact on the ellipsoid).
 
 Extrinsics
 ----------
@@ -29,6 +21,8 @@ from dataclasses import dataclass
 from typing import Iterable
 
 import numpy as np
+import pymap3d
+from scipy.spatial.transform import Rotation
 
 from fusion_vo.errors import InputError
 
@@ -36,6 +30,7 @@ from fusion_vo.errors import InputError
 WGS84_A = 6378137.0
 WGS84_F = 1.0 / 298.257223563
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+_WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
 
 
 @dataclass(frozen=True)
@@ -48,7 +43,7 @@ class StaticTransform:
 
 
 def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0_m: float) -> np.ndarray:
-    """East, north, up [m] of WGS-84 positions relative to a reference position (module docstring).
+    """East, north, up [m] of WGS-84 positions relative to a reference position (pymap3d).
 
     Parameters
     ----------
@@ -62,46 +57,29 @@ def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, a
     ndarray, shape (N, 3)
         ``(e, n, u)`` per position.
     """
-    xyz = _geodetic_to_ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float))
-    xyz0 = _geodetic_to_ecef(np.array([lat0_deg]), np.array([lon0_deg]), np.array([alt0_m]))
-    phi, lam = math.radians(lat0_deg), math.radians(lon0_deg)
-    sp, cp, sl, cl = math.sin(phi), math.cos(phi), math.sin(lam), math.cos(lam)
-    R = np.array([[-sl, cl, 0.0], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]])
-    return (xyz - xyz0) @ R.T
-
-
-def _geodetic_to_ecef(lat_deg: np.ndarray, lon_deg: np.ndarray, alt_m: np.ndarray) -> np.ndarray:
-    phi, lam = np.radians(lat_deg), np.radians(lon_deg)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-    return np.column_stack([
-        (n + alt_m) * np.cos(phi) * np.cos(lam),
-        (n + alt_m) * np.cos(phi) * np.sin(lam),
-        (n * (1.0 - WGS84_E2) + alt_m) * np.sin(phi),
-    ])
+    e, n, u = pymap3d.geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float),
+                                   float(lat0_deg), float(lon0_deg), float(alt0_m), ell=_WGS84)
+    return np.column_stack([np.atleast_1d(e), np.atleast_1d(n), np.atleast_1d(u)])
 
 
 def quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    """Rotation matrix of a (normalised) quaternion ``w + xi + yj + zk``."""
-    q = np.array([w, x, y, z], dtype=float)
+    """Rotation matrix of a quaternion ``w + xi + yj + zk`` (normalised first; scipy's ``Rotation``).
+
+    Raises
+    ------
+    ValueError
+        For a zero or non-finite quaternion.
+    """
+    q = np.array([x, y, z, w], dtype=float)
     n = np.linalg.norm(q)
     if not np.isfinite(n) or n < 1e-9:
         raise ValueError("zero or non-finite quaternion")
-    w, x, y, z = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return Rotation.from_quat(q / n).as_matrix()
 
 
 def ypr_to_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
     """``Rz(yaw) Ry(pitch) Rx(roll)``, the rotation of ``static_transform_publisher x y z yaw pitch roll``."""
-    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch),
-                              math.cos(roll), math.sin(roll))
-    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    return Rz @ Ry @ Rx
+    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
 
 
 def parse_static_tf(text: str) -> StaticTransform:
