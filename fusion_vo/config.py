@@ -177,4 +177,4 @@ def default_config_text(config: RunConfig | None = None) -> str:
 
 def schema_text() -> str:
     """The JSON schema of the run configuration (for ``--print-schema``)."""
-    return json.dumps(run_model().model_json_schema(), indent=2) + "\n"
+    return json.dumps(schema.json_schema(run_model()), indent=2) + "\n"

@@ -28,6 +28,7 @@ from typing import Any
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+from pydantic.json_schema import GenerateJsonSchema
 
 from fusion_vo.errors import InputError
 
@@ -87,6 +88,22 @@ def _unit(description: str) -> str | None:
     return match.group(1) if match else None
 
 
+class _JsonSchema(GenerateJsonSchema):
+    """JSON schema generation that describes a field of a type JSON schema cannot express (an array, a
+    callable) as "any value" instead of failing."""
+
+    def handle_invalid_for_json_schema(self, schema, error_info):
+        return {}
+
+    def encode_default(self, dft):
+        return super().encode_default(plain(dft))
+
+
+def json_schema(model: type[BaseModel]) -> dict:
+    """The JSON schema of a model (for editors)."""
+    return model.model_json_schema(schema_generator=_JsonSchema)
+
+
 def _first_sentence(text: str, limit: int = 110) -> str:
     text = text.replace("``", "").replace("i.e.", "i\u2024e\u2024").replace("e.g.", "e\u2024g\u2024")
     sentence = re.split(r"(?<=[a-z0-9\)\]])\. ", text, maxsplit=1)[0].rstrip(".")
@@ -123,7 +140,10 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     key = (cls, exclude, None if defaults is None else _defaults_key(defaults))
     if key in _MODELS:
         return _MODELS[key]
-    hints = typing.get_type_hints(cls)
+    try:
+        hints = typing.get_type_hints(cls)
+    except (NameError, TypeError):  # an annotation that cannot be resolved: such fields accept any value
+        hints = {f.name: f.type for f in dataclasses.fields(cls) if not isinstance(f.type, str)}
     docs = field_docs(cls)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
@@ -254,8 +274,8 @@ def plain(value):
         return [plain(v) for v in value]
     if isinstance(value, dict):
         return {k: plain(v) for k, v in value.items()}
-    if hasattr(value, "item") and callable(value.item):  # numpy scalars
-        return value.item()
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy arrays and scalars
+        return value.tolist()
     return value
 
 

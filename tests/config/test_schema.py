@@ -147,3 +147,24 @@ def test_run_config_validate_checks_programmatic_values():
     with pytest.raises(InputError, match=r"fusion\.ekf\.accel_sigma: expected a number"):
         RunConfig(fusion={"ekf": {"accel_sigma": "fast"}}).validate()
     assert set(run_model().model_fields) == {f.name for f in dataclasses.fields(RunConfig)}
+
+
+def test_fields_of_any_type_still_print():
+    import numpy as np
+
+    @dataclass
+    class Odd:
+        """Options.
+
+        Attributes
+        ----------
+        gains : ndarray
+            Per-axis gains.
+        """
+
+        gains: np.ndarray = dataclasses.field(default_factory=lambda: np.array([1.0, 2.0]))
+
+    model = schema.model_of(Odd)
+    assert "gains: [1.0, 2.0]  # Per-axis gains" in schema.commented_yaml(model)
+    gains = schema.json_schema(model)["properties"]["gains"]
+    assert gains["description"] == "Per-axis gains." and gains["default"] == [1.0, 2.0]

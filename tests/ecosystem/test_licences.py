@@ -65,3 +65,42 @@ def test_evo_is_only_an_extra():
     extras = text.split("[project.optional-dependencies]", 1)[1].split("\n[", 1)[0]
     assert 'eval = ["evo' in extras
     assert (ROOT / "LICENSE").read_text().startswith("BSD 3-Clause License")
+
+
+def _licence_texts(dist) -> str:
+    meta = dist.metadata
+    parts = [meta.get("License-Expression") or "", (meta.get("License") or "")[:200]]
+    parts += [c for c in meta.get_all("Classifier") or [] if c.startswith("License")]
+    return " ".join(parts)
+
+
+def test_installed_core_dependencies_are_not_gpl():
+    """Walk the installed dependency closure of the core (no extras): nothing in it is GPL."""
+    from importlib.metadata import PackageNotFoundError, distribution
+
+    from packaging.requirements import Requirement
+    from packaging.utils import canonicalize_name
+
+    seen: dict[str, str] = {}
+    todo = ["fusion-vo"]
+    while todo:
+        name = canonicalize_name(todo.pop())
+        if name in seen:
+            continue
+        try:
+            dist = distribution(name)
+        except PackageNotFoundError:  # an optional platform dependency that is not installed here
+            seen[name] = ""
+            continue
+        seen[name] = _licence_texts(dist)
+        for text in dist.requires or []:
+            req = Requirement(text)
+            if req.marker is None or req.marker.evaluate({"extra": ""}):
+                todo.append(req.name)
+    assert {"numpy", "gtsam", "rosbags", "pydantic", "jinja2", "mcap", "pymap3d"} <= set(seen)
+    assert "evo" not in seen
+    gpl = {name: text for name, text in seen.items()
+           if "GPL" in text.replace("LGPL", "") or "General Public License" in text.replace("Lesser General", "")}
+    assert not gpl, gpl
+    # the walk does see a GPL licence where there is one
+    assert "GPL" in _licence_texts(distribution("evo"))
