@@ -27,7 +27,10 @@ EVO_MISSING = ("evaluation against ground truth needs evo (GPL-3.0), which is no
 
 def evo_available() -> bool:
     """Whether evo can be imported."""
-    return importlib.util.find_spec("evo") is not None
+    try:
+        return importlib.util.find_spec("evo") is not None
+    except (ImportError, ValueError):
+        return False
 
 
 def require_evo() -> None:
