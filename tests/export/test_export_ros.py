@@ -152,3 +152,29 @@ def test_covariance_file_missing_a_pose(run_dir, tmp_path, capsys):
     assert main(["export", str(run), str(tmp_path / "bag"), "--to", "rosbag2"]) == 2
     assert "gtsam.cov.csv: no covariance row for the pose at" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_groundtruth_of_the_recording_is_exported_on_its_clock(run_dir, tmp_path):
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    run, _ = run_dir
+    rec = tmp_path / "rec"
+    (rec / "state_groundtruth_estimate0").mkdir(parents=True)
+    t_ns = T0_NS + np.arange(7, dtype=np.int64) * 5_000_000 + 123
+    yaw = np.linspace(0.0, 0.6, 7)
+    rows = [f"{t},{0.1 * i},{-0.05 * i},0.0,{float(np.cos(a / 2))!r},0.0,0.0,{float(np.sin(a / 2))!r}"
+            for i, (t, a) in enumerate(zip(t_ns, yaw))]
+    (rec / "state_groundtruth_estimate0" / "data.csv").write_text(
+        "#timestamp [ns],p_x,p_y,p_z,q_w,q_x,q_y,q_z\n" + "\n".join(rows) + "\n")
+    (run / "run.yaml").write_text(yaml.safe_dump({"sequence": str(rec)}))
+    out = tmp_path / "gt.mcap"
+    assert main(["export", str(run), str(out), "--to", "mcap", "--trajectories", "groundtruth"]) == 0
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with open(out, "rb") as f:
+        got = [(message.log_time, store.deserialize_cdr(message.data, schema.name))
+               for schema, channel, message in make_reader(f).iter_messages(topics=["/fusion_vo/groundtruth/odometry"])]
+    # the recording's nanosecond stamps (to the float precision of seconds, as the trajectories)
+    assert np.max(np.abs(np.array([lt for lt, _ in got]) - t_ns)) <= 500
+    assert [m.pose.pose.position.x for _, m in got] == pytest.approx([0.1 * i for i in range(7)], abs=1e-12)
+    assert [_yaw(m.pose.pose.orientation) for _, m in got] == pytest.approx(yaw, abs=1e-9)
