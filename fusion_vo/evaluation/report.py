@@ -54,7 +54,7 @@ def count_rows(counts: dict | None) -> tuple[list[str], list[list]]:
 
 def render_report(title: str, config: dict, metrics: dict[str, dict], images: dict[str, bytes],
                   frontend: dict | None = None, notes: list[str] | None = None,
-                  counts: dict | None = None) -> str:
+                  counts: dict | None = None, sections: list | None = None) -> str:
     """Build the HTML text of a report from the template ``templates/report.html.j2``.
 
     Parameters
@@ -73,6 +73,9 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
         The run's notes (``summary.json``): camera loss, skipped frames, self-calibration, ...
     counts : dict, optional
         Measurements per backend and sensor (``summary.json``'s ``fusion.counts``).
+    sections : list, optional
+        Further tables ``(heading, headers, rows, notes)``, shown before the figures (e.g. errors against
+        another reference); the table of errors against ground truth is then shown only with ``metrics``.
 
     Returns
     -------
@@ -85,6 +88,8 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
         "generated": f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}",
         "sequence": (config or {}).get("sequence"),
         "notes": list(notes or []),
+        "show_metrics": bool(metrics) or not sections,
+        "sections": [{"heading": h, "headers": hs, "rows": rows, "notes": list(ns)} for h, hs, rows, ns in sections or []],
         "metric_headers": ["trajectory"] + [c.header for c in KEY_COLUMNS],
         "metric_rows": [[name] + [c.format(figures) for c in KEY_COLUMNS] for name, figures in metrics.items()],
         "drift_rows": [[name, _number(d["length_m"], "{:g}"), str(d["segments"]), _number(d["trans_pct"], "{:.2f}"),
@@ -109,9 +114,9 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
 
 def write_report(path: str | Path, title: str, config: dict, metrics: dict[str, dict],
                  images: dict[str, str | Path], frontend: dict | None = None, notes: list[str] | None = None,
-                 counts: dict | None = None) -> Path:
+                 counts: dict | None = None, sections: list | None = None) -> Path:
     """Render a report with the given PNG files embedded and write it atomically to ``path``."""
     pngs = {caption: Path(p).read_bytes() for caption, p in images.items()}
-    text = render_report(title, config, metrics, pngs, frontend, notes, counts)
+    text = render_report(title, config, metrics, pngs, frontend, notes, counts, sections)
     logger.debug("wrote %s", path)
     return write_atomic(path, text)

@@ -43,3 +43,11 @@ def test_report_without_notes_or_counts_leaves_those_sections_out():
     assert "<h2>Notes</h2>" not in text and "Measurements per sensor" not in text and "<h2>Figures</h2>" not in text
     assert "<pre>(none)</pre>" in text
     assert count_rows(None) == (["backend", "sensor"], [])
+
+
+def test_further_sections_replace_the_ground_truth_table():
+    text = render_report("r", {}, {}, {}, sections=[("Errors against GPS fixes", ["trajectory", "RMS [m]"],
+                                                      [["ekf", "0.42"]], ["3 fixes skipped (no fix)"])])
+    assert "Errors against ground truth" not in text
+    assert _cells(text, "Errors against GPS fixes") == [["ekf", "0.42"]]
+    assert "<p>3 fixes skipped (no fix)</p>" in text
