@@ -32,7 +32,7 @@ from pydantic.json_schema import GenerateJsonSchema
 
 from fusion_vo.errors import InputError
 
-_UNIT = re.compile(r"\[([^\[\]]{1,24})\]")
+_UNIT = re.compile(r"\[([^\[\]]{1,32})\]")
 
 #: pydantic error types -> the expected kind of value, in words
 _EXPECTED = {

@@ -168,3 +168,18 @@ def test_fields_of_any_type_still_print():
     assert "gains: [1.0, 2.0]  # Per-axis gains" in schema.commented_yaml(model)
     gains = schema.json_schema(model)["properties"]["gains"]
     assert gains["description"] == "Per-axis gains." and gains["default"] == [1.0, 2.0]
+
+
+def test_simulate_prints_its_options_and_reads_them_back(tmp_path, capsys):
+    assert main(["simulate", "--standard", "hard", "--print-config", "-O", "noise=2.5"]) == 0
+    printed = capsys.readouterr().out
+    data = yaml.safe_load(printed)
+    assert data["noise"] == 2.5 and data["duration"] == 40.0 and data["width"] == 640
+    path = tmp_path / "sim.yaml"
+    path.write_text(printed)
+    assert main(["simulate", "--config", str(path), "--print-config"]) == 0
+    assert yaml.safe_load(capsys.readouterr().out) == data
+    assert main(["simulate", "--print-config", "-O", "width=wide"]) == 2
+    assert capsys.readouterr().err.strip() == "fusion-vo: error: width: expected an integer, got 'wide'"
+    assert main(["simulate"]) == 2
+    assert "needs an output folder" in capsys.readouterr().err
