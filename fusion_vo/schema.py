@@ -228,9 +228,25 @@ def validate(model: type[BaseModel], data: Any, path=None, prefix: tuple = ()) -
         where = _location(prefix) or "the file"
         raise InputError(f"{where}: expected a mapping of key: value, got {_shown(data)}", path)
     try:
-        return model.model_validate(data)
+        return model.model_validate(_drop_empty_sections(model, data))
     except ValidationError as exc:
         raise config_error(exc, model, path, prefix) from None
+
+
+def _drop_empty_sections(model: type[BaseModel], data: dict) -> dict:
+    """A section left empty in YAML (``fusion:`` with every line below commented out) reads as null: it
+    keeps its defaults, like a section left out."""
+    out = {}
+    for key, value in data.items():
+        field = model.model_fields.get(key) if isinstance(key, str) else None
+        sub = getattr(field, "annotation", None)
+        if inspect.isclass(sub) and issubclass(sub, BaseModel):
+            if value is None:
+                continue
+            if isinstance(value, dict):
+                value = _drop_empty_sections(sub, value)
+        out[key] = value
+    return out
 
 
 def to_dataclass(cls: type, values: BaseModel, path=None, prefix: tuple = ()):
