@@ -145,6 +145,8 @@ def validate_config(data: dict, path: Path | None = None) -> RunConfig:
         For an unknown key, a value of the wrong type or a combination of options a stage rejects; the
         message names ``path`` and the key path.
     """
+    if isinstance(data, dict):  # a top-level key left empty keeps its default
+        data = {k: v for k, v in data.items() if v is not None}
     values = schema.validate(run_model(), data, path)
     sections = {}
     for name, (cls, exclude) in _sections().items():

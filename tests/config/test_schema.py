@@ -186,6 +186,6 @@ def test_simulate_prints_its_options_and_reads_them_back(tmp_path, capsys):
 
 
 def test_empty_sections_keep_their_defaults(tmp_path):
-    _, cfg = _load(tmp_path, "fusion:\n  ekf:\n  graph: {batch: false}\nklt:\nodometry: {height: null}\n")
+    _, cfg = _load(tmp_path, "frontend:\nfusion:\n  ekf:\n  graph: {batch: false}\nklt:\nodometry: {height: null}\n")
     assert cfg == _load(tmp_path, "fusion: {graph: {batch: false}}\n")[1]
     assert cfg.fusion_config().graph.batch is False and cfg.odometry["height"] is None
