@@ -39,11 +39,12 @@ SENSORS = ("camera", "wheel", "imu", "odom", "range")
 BACKENDS = ("none", "ekf", "gtsam", "all")
 FRONTENDS = ("klt", "features")
 
-#: the sections that are configuration dataclasses: name -> (dataclass, fields not set from the file)
+#: fields of OdometryConfig that the run sets itself (from ``frontend`` and the frontend's section)
 _ODOMETRY_EXCLUDE = ("frontend", "frontend_options")
 
 
 def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
+    """The sections that are a stage's configuration dataclass: name -> (dataclass, fields not in the file)."""
     from frontends.features import FeatureConfig
     from frontends.klt import KltConfig
     from fusion_vo.backends.config import FusionConfig
