@@ -31,7 +31,6 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
 
 from fusion_vo import schema
-from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.odometry import OdometryConfig
 
