@@ -90,7 +90,7 @@ class RunConfig:
         """The visual odometry configuration, with the chosen frontend's options."""
         opts = dict(self.odometry)
         opts["frontend"] = self.frontend
-        opts["frontend_options"] = dict(self.klt if self.frontend == "klt" else self.features)
+        opts["frontend_options"] = dict(getattr(self, self.frontend, None) or {})  # the section named by frontend
         return OdometryConfig.from_dict(opts)
 
     def fusion_config(self, path: Path | None = None):
