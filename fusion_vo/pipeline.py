@@ -149,7 +149,7 @@ def run_pipeline(
             os.replace(p, out_dir / p.name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
-    if config.evaluate and rec.has_groundtruth():
+    if config.evaluate and (rec.has_groundtruth() or rec.has_gps()):
         summary.metrics = _evaluate(out_dir, rec.path)
         if summary.metrics is None:
             summary.notes.append(EVO_MISSING.replace("evaluation against ground truth needs",

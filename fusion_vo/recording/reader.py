@@ -7,6 +7,7 @@ Layout (``datasets/README.md``)::
     SEQ/wheel0/data.csv, wheel0/sensor.yaml
     SEQ/odom0/data.csv
     SEQ/range0/data.csv
+    SEQ/gps0/data.csv, gps0/sensor.yaml
     SEQ/state_groundtruth_estimate0/data.csv
 
 Every stream is optional; asking for one that is absent raises :class:`~fusion_vo.errors.InputError`.
@@ -30,7 +31,7 @@ import numpy as np
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
-from fusion_vo.measurements import ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
 from fusion_vo.recording.csvio import read_frame_list, read_table
 
 log = logging.getLogger(__name__)
@@ -86,12 +87,15 @@ class Recording:
     def has_range(self) -> bool:
         return (self.path / "range0" / "data.csv").is_file()
 
+    def has_gps(self) -> bool:
+        return (self.path / "gps0" / "data.csv").is_file()
+
     def has_groundtruth(self) -> bool:
         return (self.path / "state_groundtruth_estimate0" / "data.csv").is_file()
 
     def streams(self) -> list[str]:
-        """Names of the streams present: camera, imu, wheel, odom, range, groundtruth."""
-        names = ["camera", "imu", "wheel", "odom", "range", "groundtruth"]
+        """Names of the streams present: camera, imu, wheel, odom, range, gps, groundtruth."""
+        names = ["camera", "imu", "wheel", "odom", "range", "gps", "groundtruth"]
         return [n for n in names if getattr(self, f"has_{n}")()]
 
     def _need(self, name: str, folder: str) -> Path:
@@ -228,6 +232,13 @@ class Recording:
         if len(bad):
             raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
         return RangeData(tab.t, tab.values[:, 0])
+
+    def gps(self) -> GpsData:
+        """``gps0``: fixes in local ENU at the datum, unusable fixes skipped and counted (:mod:`.gps`)."""
+        from fusion_vo.recording.gps import read_gps
+
+        self._need("GPS", "gps0")
+        return read_gps(self.path / "gps0")
 
     def groundtruth(self) -> PoseData:
         """``state_groundtruth_estimate0``: pose of B in W (planar part and the full quaternion)."""

@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusion_vo.geometry import se2
-from fusion_vo.recording.rosbag.transforms import geodetic_to_enu, quat_to_matrix, ypr_to_matrix
+from fusion_vo.recording.rosbag.transforms import quat_to_matrix, ypr_to_matrix
 from fusion_vo.simulation.robot import integrate
 
 angles = st.floats(-3.14, 3.14, allow_nan=False)
@@ -61,11 +61,3 @@ def test_arc_integration_is_a_circle():
     straight = integrate(np.full(11, 0.3), np.zeros(11), 0.1, start=(1.0, 2.0, 0.5))
     assert straight[-1, :2] == pytest.approx([1.0 + 0.3 * math.cos(0.5), 2.0 + 0.3 * math.sin(0.5)], abs=1e-12)
 
-
-def test_geodetic_to_enu_round_trips_through_ecef():
-    import pymap3d
-
-    lat0, lon0, h0 = 47.3, 8.5, 400.0
-    e, n, u = np.array([12.0, -300.0, 1500.0]), np.array([40.0, 250.0, -900.0]), np.array([1.0, -2.0, 30.0])
-    lat, lon, h = pymap3d.enu2geodetic(e, n, u, lat0, lon0, h0)
-    assert geodetic_to_enu(lat, lon, h, lat0, lon0, h0) == pytest.approx(np.column_stack([e, n, u]), abs=1e-6)

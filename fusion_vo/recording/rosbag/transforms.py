@@ -1,10 +1,4 @@
-"""Fixed transforms between sensor frames, and GPS fixes in a local East-North-Up frame.
-
-Local ENU of GPS fixes
-----------------------
-Geodetic latitude, longitude and ellipsoidal height on the WGS-84 ellipsoid go to East-North-Up
-coordinates at a reference position (the first fix) with pymap3d's ``geodetic2enu`` (through
-Earth-centred coordinates, exact on the ellipsoid).
+"""Fixed transforms between sensor frames.
 
 Extrinsics
 ----------
@@ -21,16 +15,9 @@ from dataclasses import dataclass
 from typing import Iterable
 
 import numpy as np
-import pymap3d
 from scipy.spatial.transform import Rotation
 
 from fusion_vo.errors import InputError
-
-
-WGS84_A = 6378137.0
-WGS84_F = 1.0 / 298.257223563
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
-_WGS84 = pymap3d.Ellipsoid.from_name("wgs84")
 
 
 @dataclass(frozen=True)
@@ -40,26 +27,6 @@ class StaticTransform:
     parent: str
     child: str
     T: np.ndarray
-
-
-def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0_m: float) -> np.ndarray:
-    """East, north, up [m] of WGS-84 positions relative to a reference position (pymap3d).
-
-    Parameters
-    ----------
-    lat_deg, lon_deg, alt_m : array_like, shape (N,)
-        Latitude and longitude [deg], ellipsoidal altitude [m].
-    lat0_deg, lon0_deg, alt0_m : float
-        The reference (origin of the local frame).
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        ``(e, n, u)`` per position.
-    """
-    e, n, u = pymap3d.geodetic2enu(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float),
-                                   float(lat0_deg), float(lon0_deg), float(alt0_m), ell=_WGS84)
-    return np.column_stack([np.atleast_1d(e), np.atleast_1d(n), np.atleast_1d(u)])
 
 
 def quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
