@@ -20,6 +20,9 @@ angles = st.floats(-3.14, 3.14, allow_nan=False)
 @given(th=st.one_of(angles, st.floats(-1e-3, 1e-3), st.just(1e-3), st.just(0.0)))
 def test_sinc_terms_match_their_definition(th):
     a, b = se2.sinc_terms(th)
+    # the array path (numpy's sinc) and the scalar path (math) agree
+    arr_a, arr_b = se2.sinc_terms(np.array([th, th]))
+    assert arr_a[1] == pytest.approx(a, rel=1e-14, abs=1e-300) and arr_b[1] == pytest.approx(b, rel=1e-14, abs=1e-300)
     if abs(th) > 1e-3:
         assert a == pytest.approx(math.sin(th) / th, rel=1e-12)
         assert b == pytest.approx((1.0 - math.cos(th)) / th, rel=1e-9)
