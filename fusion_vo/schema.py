@@ -23,11 +23,12 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import re
+import types
 import typing
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, create_model
 from pydantic.json_schema import GenerateJsonSchema
 
 from fusion_vo.errors import InputError
@@ -163,13 +164,34 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
             nested = model_of(type(default), defaults=default)
             fields[f.name] = (nested, Field(default_factory=nested, description=description))
         else:
-            annotation = hints.get(f.name, Any)
+            annotation = _no_bool_for_numbers(hints.get(f.name, Any))
             fields[f.name] = (annotation, Field(default=default, description=description, json_schema_extra=extra))
     summary = inspect.cleandoc(cls.__doc__ or "").split("\n\n", 1)[0].replace("\n", " ")
     model = create_model(cls.__name__, __config__=ConfigDict(extra="forbid", arbitrary_types_allowed=True,
                                                              title=cls.__name__), __doc__=summary, **fields)
     _MODELS[key] = model
     return model
+
+
+def _reject_bool(expected: str):
+    def check(value):
+        if isinstance(value, bool):
+            raise ValueError(f"expected {expected}, got {value!r}")
+        return value
+    return check
+
+
+def _no_bool_for_numbers(annotation):
+    """A number field (``int``, ``float``, optionally ``None``) that rejects ``true``/``false`` (pydantic's
+    lax mode would read them as 1 and 0)."""
+    args = set(typing.get_args(annotation)) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
+        else {annotation}
+    numbers = args - {type(None)}
+    if numbers == {int}:
+        return Annotated[annotation, BeforeValidator(_reject_bool("an integer"))]
+    if numbers and numbers <= {int, float}:
+        return Annotated[annotation, BeforeValidator(_reject_bool("a number"))]
+    return annotation
 
 
 def _location(loc: tuple) -> str:

@@ -26,6 +26,8 @@ def _load(tmp_path, text):
 @pytest.mark.parametrize("text, message", [
     ("fusion:\n  ekf:\n    accel_sigma: abc\n", "run.yaml: fusion.ekf.accel_sigma: expected a number, got 'abc'"),
     ("klt:\n  max_tracks: 2.5\n", "run.yaml: klt.max_tracks: expected an integer, got 2.5"),
+    ("klt:\n  max_tracks: true\n", "run.yaml: klt.max_tracks: expected an integer, got True"),
+    ("fusion:\n  camera_height: false\n", "run.yaml: fusion.camera_height: expected a number, got False"),
     ("fusion:\n  graph:\n    batch: maybe\n", "run.yaml: fusion.graph.batch: expected true or false, got 'maybe'"),
     ("fusion:\n  ekf:\n    gate: 3\n", "run.yaml: fusion.ekf.gate: unknown key (known: accel_sigma, "),
     ("frontned: klt\n", "run.yaml: frontned: unknown key (known: frontend, sensors, backend, "),
