@@ -10,6 +10,8 @@ Outputs (in ``out_dir``; written under a temporary folder and moved into place o
                       similarity's scale)
 ``wheel.tum``         wheel dead reckoning (when the recording has wheel encoders)
 ``ekf.tum``, ``ekf_smoothed.tum``, ``gtsam.tum``, ``gtsam_online.tum``   fused trajectories
+``NAME.cov.csv``      per pose of ``NAME.tum`` (same timestamps): ``# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw``,
+                      the upper triangle of the (x, y, yaw) covariance in m², m·rad, rad²
 ``run.yaml``          the configuration used and the recording's path
 ``summary.json``      counts, timings and notes of the run
 """
@@ -29,6 +31,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation import EVO_MISSING
@@ -134,12 +137,15 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
-        fused = _run_backends(rec, vo, sensors, config, summary)
+        fused, covariances = _run_backends(rec, vo, sensors, config, summary)
         trajectories.update(fused)
         for name, traj in trajectories.items():
             if len(traj):
                 write_tum(staging / f"{name}.tum", traj.t, traj.xyyaw)
                 summary.trajectories.append(name)
+                cov = covariances.get(name)
+                if cov is not None and len(cov) == len(traj):
+                    write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
         run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
         with open(staging / "run.yaml", "w") as f:
             yaml.safe_dump(run_info, f, sort_keys=False)
@@ -158,8 +164,9 @@ def run_pipeline(
 
 
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
-                  summary: RunSummary) -> dict[str, PoseData]:
-    """Wheel dead reckoning and the fused backends; returns name -> trajectory."""
+                  summary: RunSummary) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
+    """Wheel dead reckoning and the fused backends; returns name -> trajectory and name -> (N, 3, 3)
+    pose covariances."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
@@ -167,7 +174,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
                                    options=config.fusion_config())
     summary.backend_seconds.update(result.seconds or {})
     summary.notes.extend(result.notes or [])
-    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration")}
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates
@@ -176,7 +183,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
         if text:
             summary.notes.append(f"{backend_name} self-calibration: {text} (all estimates in summary.json)")
     log.debug("backends took %.2f s", time.perf_counter() - t0)
-    return dict(result.trajectories)
+    return dict(result.trajectories), dict(result.covariances)
 
 
 def _evaluate(out_dir: Path, seq: Path) -> dict | None:

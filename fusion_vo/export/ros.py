@@ -35,13 +35,13 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo.backends.result import COV_HEADER  # noqa: F401  (the format read here, written by the backends)
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 
 log = logging.getLogger(__name__)
 
 FORMATS = ("rosbag2", "mcap")
-COV_HEADER = "# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw"
 #: indices of (x, y, yaw) in ROS's 6 x 6 pose covariance (x, y, z, rot x, rot y, rot z)
 _ROS_INDEX = (0, 1, 5)
 _ODOMETRY = "nav_msgs/msg/Odometry"
