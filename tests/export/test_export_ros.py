@@ -178,3 +178,15 @@ def test_groundtruth_of_the_recording_is_exported_on_its_clock(run_dir, tmp_path
     assert np.max(np.abs(np.array([lt for lt, _ in got]) - t_ns)) <= 500
     assert [m.pose.pose.position.x for _, m in got] == pytest.approx([0.1 * i for i in range(7)], abs=1e-12)
     assert [_yaw(m.pose.pose.orientation) for _, m in got] == pytest.approx(yaw, abs=1e-9)
+
+
+def test_reads_the_covariance_files_the_backends_write(tmp_path):
+    from fusion_vo.backends.result import write_pose_covariances
+    from fusion_vo.export.ros import load_run_trajectories
+
+    t_ns, xyyaw = _poses(30, 7)
+    cov = _covariances(30, 8)
+    write_tum(tmp_path / "ekf.tum", t_ns * 1e-9, xyyaw)
+    write_pose_covariances(tmp_path / "ekf.cov.csv", t_ns * 1e-9, cov)
+    (traj,) = load_run_trajectories(tmp_path)
+    np.testing.assert_allclose(traj.covariance, cov, rtol=1e-9)  # the writer keeps 10 significant digits
