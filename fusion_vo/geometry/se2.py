@@ -80,7 +80,7 @@ def sinc_terms(th):
         if t == 0.0:
             return 1.0, 0.0
         half = 0.5 * t
-        s = math.sin(half) / half
+        s = math.sin(half) / half if half != 0.0 else 1.0  # half underflows for the smallest subnormal t
         return math.sin(t) / t, half * s * s
     th = np.asarray(th, dtype=np.float64)
     return np.sinc(th / np.pi), 0.5 * th * np.sinc(th / (2.0 * np.pi)) ** 2
