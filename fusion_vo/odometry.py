@@ -111,11 +111,14 @@ class OdometryConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "OdometryConfig":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown visual odometry option '{sorted(unknown)[0]}' (known: {', '.join(sorted(known))})")
-        return cls(**d)
+        """Build from a mapping through the configuration schema (:func:`fusion_vo.schema.build`);
+        unknown keys and values of the wrong type raise ``ValueError`` naming the key."""
+        from fusion_vo import schema
+
+        try:
+            return schema.build(cls, d)
+        except InputError as exc:
+            raise ValueError(exc.message) from None
 
 
 @dataclass

@@ -34,6 +34,7 @@ import yaml
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
+from fusion_vo.evaluation import EVO_MISSING
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
 from fusion_vo.recording import Recording, write_tum
@@ -145,7 +146,7 @@ def run_pipeline(
                 cov = covariances.get(name)
                 if cov is not None and len(cov) == len(traj):
                     write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
-        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}
+        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
         with open(staging / "run.yaml", "w") as f:
             yaml.safe_dump(run_info, f, sort_keys=False)
         with open(staging / "summary.json", "w") as f:
@@ -156,6 +157,9 @@ def run_pipeline(
         shutil.rmtree(staging, ignore_errors=True)
     if config.evaluate and (rec.has_groundtruth() or rec.has_gps()):
         summary.metrics = _evaluate(out_dir, rec.path)
+        if summary.metrics is None:
+            summary.notes.append(EVO_MISSING.replace("evaluation against ground truth needs",
+                                                     "no evaluation against ground truth: it needs"))
     return summary
 
 
@@ -166,7 +170,8 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
     from fusion_vo import backends
 
     t0 = time.perf_counter()
-    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
+    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend,
+                                   options=config.fusion_config())
     summary.backend_seconds.update(result.seconds or {})
     summary.notes.extend(result.notes or [])
     summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
@@ -182,11 +187,12 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
 
 
 def _evaluate(out_dir: Path, seq: Path) -> dict | None:
-    try:
-        from fusion_vo.evaluation import evaluate_run
-    except ImportError:
+    """The run's metrics against ground truth, or ``None`` when evo (the ``eval`` extra) is not installed."""
+    from fusion_vo import evaluation
+
+    if not evaluation.evo_available():
         return None
-    return evaluate_run(out_dir, seq)
+    return evaluation.evaluate_run(out_dir, seq)
 
 
 def _json_default(o):

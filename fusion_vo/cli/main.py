@@ -23,6 +23,7 @@ COMMANDS = [
     "compare",
     "batch",
     "sweep",
+    "export",
     "show_matches",
     "import_bag",
     "calibrate",

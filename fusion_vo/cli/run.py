@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
-from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config
+from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
 
 
@@ -39,7 +39,11 @@ def register(sub) -> None:
     p.add_argument("--uncalibrated", action="store_true",
                    help="the camera has no calibration: ignore missing intrinsics (pinhole, no distortion)")
     p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
-    p.add_argument("--print-config", action="store_true", help="print the default configuration and exit")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the configuration (every option, its default and description; with --config, the "
+                        "file's values) as YAML and exit")
+    p.add_argument("--print-schema", action="store_true",
+                   help="print the JSON schema of the configuration file (for editors) and exit")
     p.set_defaults(func=run)
 
 
@@ -63,8 +67,11 @@ def apply_overrides(cfg, args):
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.print_schema:
+        sys.stdout.write(schema_text())
+        return 0
     if args.print_config:
-        sys.stdout.write(default_config_text())
+        sys.stdout.write(default_config_text(load_config(args.config) if args.config else None))
         return 0
     if not args.sequence or not args.out:
         raise InputError("run needs a recording folder and --out DIR (see fusion-vo run --help)")

@@ -22,14 +22,18 @@ import math
 import os
 import tempfile
 from dataclasses import dataclass
+from decimal import Decimal
+from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
 import yaml
-from evo.core.trajectory import PoseTrajectory3D
 
 from frontends.base import MotionStatus
 from fusion_vo.errors import InputError
+
+if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
+    from evo.core.trajectory import PoseTrajectory3D
 
 logger = logging.getLogger(__name__)
 
@@ -107,20 +111,30 @@ def _increasing_rows(t: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
     return np.nonzero(keep)[0]
 
 
-def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
-    """Read a TUM trajectory file.
+@dataclass
+class TumPoses:
+    """The poses of a TUM file, as arrays.
 
-    Parameters
+    Attributes
     ----------
-    path : str or Path
-        The file.
-    name : str, optional
-        Name given to the trajectory (default: the file stem).
+    t : ndarray, shape (n,)
+        Timestamps [s].
+    stamp_ns : ndarray of int64, shape (n,)
+        The same timestamps in integer nanoseconds, converted exactly from the file's decimal text.
+    xyz : ndarray, shape (n, 3)
+        Positions [m].
+    quat_wxyz : ndarray, shape (n, 4)
+        Unit quaternions ``(w, x, y, z)``.
+    """
 
-    Returns
-    -------
-    PoseTrajectory3D
-        The poses, with timestamps in seconds.
+    t: np.ndarray
+    stamp_ns: np.ndarray
+    xyz: np.ndarray
+    quat_wxyz: np.ndarray
+
+
+def read_tum_poses(path: str | Path) -> TumPoses:
+    """Read a TUM trajectory file (``timestamp x y z qx qy qz qw``) into arrays.
 
     Raises
     ------
@@ -129,7 +143,7 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
         length or a timestamp is earlier than the one before (a repeated timestamp keeps its last pose).
     """
     path = Path(path)
-    rows, line_numbers = [], []
+    rows, line_numbers, stamps = [], [], []
     for number, text in enumerate(_read_lines(path), start=1):
         text = text.strip()
         if not text or text.startswith("#"):
@@ -143,13 +157,36 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
             raise InputError("quaternion has zero length", path, number)
         rows.append(values)
         line_numbers.append(number)
+        stamps.append(int((Decimal(fields[0]) * 1_000_000_000).to_integral_value()))
     if not rows:
         raise InputError("no poses in trajectory file", path)
     data = np.array(rows)
-    data = data[_increasing_rows(data[:, 0], line_numbers, path)]
+    keep = _increasing_rows(data[:, 0], line_numbers, path)
+    data = data[keep]
     quat_wxyz = data[:, [7, 4, 5, 6]]
     quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
-    return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0], name=name or path.stem)
+    return TumPoses(data[:, 0], np.asarray(stamps, dtype=np.int64)[keep], data[:, 1:4], quat_wxyz)
+
+
+def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
+    """Read a TUM trajectory file as an evo trajectory (see :func:`read_tum_poses` for the rules).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    name : str, optional
+        Name given to the trajectory (default: the file stem).
+
+    Returns
+    -------
+    PoseTrajectory3D
+        The poses, with timestamps in seconds.
+    """
+    from evo.core.trajectory import PoseTrajectory3D
+
+    poses = read_tum_poses(path)
+    return PoseTrajectory3D(poses.xyz, poses.quat_wxyz, poses.t, name=name or Path(path).stem)
 
 
 def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
@@ -193,6 +230,8 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     data = np.array(rows)
     data = data[_increasing_rows(data[:, 0], line_numbers, path)]
     quat_wxyz = data[:, 4:8] / np.linalg.norm(data[:, 4:8], axis=1, keepdims=True)
+    from evo.core.trajectory import PoseTrajectory3D
+
     return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0] * 1e-9, name="groundtruth")
 
 

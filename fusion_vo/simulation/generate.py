@@ -222,12 +222,15 @@ class SimulationOptions:
 
     @classmethod
     def from_dict(cls, d: dict) -> "SimulationOptions":
-        """Options from a mapping (a YAML file); unknown keys and bad values raise ``ValueError``."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        for k in d:
-            if k not in known:
-                raise ValueError(f"unknown simulation option '{k}'")
-        return cls(**d)
+        """Options from a mapping (a YAML file) through the configuration schema
+        (:func:`fusion_vo.schema.build`); unknown keys and bad values raise ``ValueError``."""
+        from fusion_vo import schema
+        from fusion_vo.errors import InputError
+
+        try:
+            return schema.build(cls, d)
+        except InputError as exc:
+            raise ValueError(exc.message) from None
 
 
 def _check_number(name: str, value, integer: bool) -> None:
