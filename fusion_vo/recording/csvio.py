@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 
 
 @dataclass
@@ -45,9 +45,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
     what : name of the values, for error messages.
     require_increasing : raise on duplicate or decreasing timestamps.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     lo, hi = (columns, columns) if isinstance(columns, int) else columns
     ts: list[int] = []
     rows: list[list[float]] = []
@@ -105,9 +103,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
 
 def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Read ``cam0/data.csv``: ``timestamp [ns], filename`` rows; returns (t_ns, names, lines)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     ts: list[int] = []
     names: list[str] = []
     lines: list[int] = []
