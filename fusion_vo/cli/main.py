@@ -13,6 +13,7 @@ import logging
 import sys
 
 from fusion_vo.errors import InputError
+from fusion_vo.outputs import Terminated, handle_signals
 
 #: sub-command modules, in the order ``--help`` lists them
 COMMANDS = [
@@ -63,7 +64,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with handle_signals():
+            return int(args.func(args) or 0)
     except InputError as exc:
         print(f"fusion-vo: error: {exc}", file=sys.stderr)
         return 2
@@ -72,8 +74,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fusion-vo: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("fusion-vo: interrupted", file=sys.stderr)
+        print("fusion-vo: interrupted; nothing was left half-written", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"fusion-vo: {exc}; nothing was left half-written", file=sys.stderr)
+        return 128 + exc.signum
+    except MemoryError:
+        print("fusion-vo: error: out of memory", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: one line, the traceback only with -vv
+        logging.getLogger("fusion_vo").debug("traceback of the internal error", exc_info=True)
+        print(f"fusion-vo: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(please report it; -vv shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text[:300] + ("..." if len(text) > 300 else "")
 
 
 if __name__ == "__main__":
