@@ -302,7 +302,7 @@ def run_pipeline(
         fused = _run_backends(rec, vo, sensors, config, summary)
         trajectories.update(fused)
         for name, traj in trajectories.items():
-            if len(traj):
+            if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
                 write_tum(staging / f"{name}.tum", traj.t, traj.xyyaw)
                 summary.trajectories.append(name)
         run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}

@@ -25,10 +25,18 @@ import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.outputs import OutputFolder, make_folder, write_atomic
+from fusion_vo.outputs import OutputFolder, check_replaceable, make_folder, write_atomic
 
 #: marker file of a recording written by fusion-vo (its presence allows replacing the folder)
 MARKER = ".fusion-vo-recording"
+
+
+def check_target(out: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()) -> None:
+    """Raise :class:`~fusion_vo.errors.InputError` unless :class:`RecordingWriter` may write ``out``.
+
+    A command calls it before its work, so that a bad target is reported at once.
+    """
+    check_replaceable(out, MARKER, force, inputs, "recording folder")
 
 
 class RecordingWriter:

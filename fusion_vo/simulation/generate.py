@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from fusion_vo.geometry.camera import DISTORTION_MODELS, CameraModel
-from fusion_vo.recording.writer import RecordingWriter
+from fusion_vo.recording.writer import RecordingWriter, check_target
 from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
@@ -275,6 +275,7 @@ def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
     o = dataclasses.replace(options or SimulationOptions(), **overrides) if overrides else (options or SimulationOptions())
     rng = np.random.default_rng(seed)
     out_dir = Path(out_dir)
+    check_target(out_dir, force)
     with RecordingWriter(out_dir, force=force, source=f"simulate --profile {profile} --seed {seed}") as writer:
         info = _generate(writer, profile, seed, o, rng)
         writer.commit()
