@@ -142,6 +142,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     from fusion_vo.backends.batch import as_config
 
     config_path = None if config_path is None else Path(config_path)
+    _check_number_types(config, config_path)
     try:
         config.validate(config_path)
     except InputError as exc:
@@ -179,12 +180,13 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             if odometry.height is not None:
                 raise _config_error(exc, config_path, "odometry.height") from None
             raise InputError(str(exc), rec.path / "cam0" / "sensor.yaml") from None
-        try:
-            from frontends import make_frontend
+        from frontends import make_frontend
 
-            make_frontend(config.frontend, odometry.frontend_options, point_map=geometry.rectifier)
-        except (InputError, TypeError, ValueError) as exc:
-            raise _config_error(exc, config_path, config.frontend) from None
+        for name in ("klt", "features"):  # both sections, not only the frontend in use
+            try:
+                make_frontend(name, getattr(config, name), point_map=geometry.rectifier)
+            except (InputError, TypeError, ValueError) as exc:
+                raise _config_error(exc, config_path, name) from None
         note("camera", t_ns * 1e-9, "cam0")
     if "wheel" in sensors and rec.has_wheel():
         note("wheel", rec.wheel().t, "wheel0")
@@ -222,6 +224,31 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
                 raise InputError(f"ground truth {_span((g0, g1))} does not overlap the sensors' "
                                  f"{_span((lo, hi))}: it must be stamped on the recording's clock", gt_path)
     return RunInputs(rec, sensors, spans, groundtruth)
+
+
+def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
+    """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
+    import dataclasses
+
+    from frontends.features import FeatureConfig
+    from frontends.klt import KltConfig
+    from fusion_vo.odometry import OdometryConfig
+
+    for section, cls in (("odometry", OdometryConfig), ("klt", KltConfig), ("features", FeatureConfig)):
+        values = getattr(config, section) or {}
+        if not isinstance(values, dict):
+            raise InputError(f"'{section}' must be a mapping of option: value", config_path)
+        defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+        for key, value in values.items():
+            default = defaults.get(key, dataclasses.MISSING)
+            number = isinstance(default, (int, float)) and not isinstance(default, bool)
+            if key == "height" and section == "odometry":
+                number = True
+            if number and value is not None and (isinstance(value, (bool, str)) or
+                                                 not isinstance(value, (int, float))):
+                raise InputError(f"{section}.{key} must be a number, not {value!r}", config_path)
+            if number and isinstance(value, float) and not math.isfinite(value):
+                raise InputError(f"{section}.{key} must be finite, not {value}", config_path)
 
 
 def _line_of(rec: Recording, name: str, row: int) -> int | None:
