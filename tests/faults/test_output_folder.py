@@ -148,3 +148,18 @@ def test_every_output_follows_the_umask(umask, recording, tmp_path, capsys):
         for p in paths:
             want = (0o777 if p.is_dir() else 0o666) & ~umask
             assert p.stat().st_mode & 0o777 == want, f"{p}: {oct(p.stat().st_mode & 0o777)} != {oct(want)}"
+
+
+def test_calibrate_out_follows_the_umask(pristine, tmp_path, capsys):
+    target = tmp_path / "wheel0" / "sensor.yaml"
+    target.parent.mkdir()
+    target.write_text("old: 1\n")
+    os.chmod(target, 0o644)
+    old = os.umask(0o022)
+    try:
+        status, out, err = cli(capsys, "calibrate", "wheels", pristine, "--out", target)
+    finally:
+        os.umask(old)
+    assert status == 0, err
+    assert target.stat().st_mode & 0o777 == 0o644 and "wheel_base" in target.read_text()
+    assert sorted(p.name for p in target.parent.iterdir()) == ["sensor.yaml"]  # no temporary file left
