@@ -151,15 +151,16 @@ def test_every_output_follows_the_umask(umask, recording, tmp_path, capsys):
 
 
 def test_calibrate_out_follows_the_umask(pristine, tmp_path, capsys):
-    target = tmp_path / "wheel0" / "sensor.yaml"
+    target = tmp_path / "cam0" / "sensor.yaml"
     target.parent.mkdir()
     target.write_text("old: 1\n")
     os.chmod(target, 0o644)
     old = os.umask(0o022)
     try:
-        status, out, err = cli(capsys, "calibrate", "wheels", pristine, "--out", target)
+        status, out, err = cli(capsys, "calibrate", "height", pristine, "--distance", "0.05", "--allow-failed",
+                               "--out", target)
     finally:
         os.umask(old)
     assert status == 0, err
-    assert target.stat().st_mode & 0o777 == 0o644 and "wheel_base" in target.read_text()
+    assert target.stat().st_mode & 0o777 == 0o644 and "intrinsics" in target.read_text()
     assert sorted(p.name for p in target.parent.iterdir()) == ["sensor.yaml"]  # no temporary file left
