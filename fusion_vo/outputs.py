@@ -60,8 +60,10 @@ def handle_signals() -> Iterator[None]:
 
     previous = {}
     try:
-        for sig in (signal.SIGTERM, signal.SIGHUP):
-            previous[sig] = signal.signal(sig, raise_terminated)
+        for name in ("SIGTERM", "SIGHUP"):
+            sig = getattr(signal, name, None)
+            if sig is not None:
+                previous[sig] = signal.signal(sig, raise_terminated)
     except ValueError:  # not the main thread
         pass
     try:
@@ -203,6 +205,7 @@ class OutputFolder:
         self._lock()
         try:
             check_replaceable(self.target, self.marker, self.force, self.inputs, self.what)  # again, under the lock
+            self._remove_stale_staging()
             self._holder = parent / _random_name(STAGING_PREFIX)
             os.mkdir(self._holder, 0o777)
             self.path = self._holder / self.target.name
@@ -214,10 +217,11 @@ class OutputFolder:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self._cleanup()
-        if isinstance(exc, InputError) and exc.path is not None and self.path is not None:
-            fixed = self.public(exc.path)
-            if fixed != exc.path:
-                raise InputError(exc.message.replace(str(self.path), str(self.target)), fixed, exc.line) from None
+        if isinstance(exc, InputError) and self.path is not None:
+            fixed = None if exc.path is None else self.public(exc.path)
+            message = exc.message.replace(str(self.path), str(self.target))
+            if fixed != exc.path or message != exc.message:
+                raise InputError(message, fixed, exc.line) from None
         if isinstance(exc, OSError) and exc.filename and self.path is not None:
             exc.filename = str(self.public(exc.filename))
         return None
@@ -267,6 +271,28 @@ class OutputFolder:
                 self._lock_fd, self._lock_path = fd, lock_path
                 return
             os.close(fd)
+
+    def _remove_stale_staging(self) -> None:
+        """Remove staging folders of this target left by a process that was killed (SIGKILL, power loss).
+
+        Only folders that look exactly like ours are removed: named ``STAGING_PREFIX...`` beside the target and
+        holding nothing but a folder of the target's name or a previous version. Any writer of this target
+        would hold the lock we now hold, so such a folder belongs to no running command.
+        """
+        parent = self.target.parent
+        try:
+            candidates = [p for p in parent.iterdir() if p.name.startswith(STAGING_PREFIX) and p.is_dir()
+                          and not p.is_symlink()]
+        except OSError:
+            return
+        for holder in candidates:
+            try:
+                names = [c.name for c in holder.iterdir()]
+            except OSError:
+                continue
+            if names and all(n == self.target.name or n.startswith(".previous-") for n in names):
+                log.info("removing %s, left by an interrupted command", holder)
+                shutil.rmtree(holder, ignore_errors=True)
 
     def _cleanup(self) -> None:
         if self._holder is not None:

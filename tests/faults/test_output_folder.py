@@ -164,3 +164,14 @@ def test_calibrate_out_follows_the_umask(pristine, tmp_path, capsys):
     assert status == 0, err
     assert target.stat().st_mode & 0o777 == 0o644 and "intrinsics" in target.read_text()
     assert sorted(p.name for p in target.parent.iterdir()) == ["sensor.yaml"]  # no temporary file left
+
+
+def test_a_staging_folder_left_by_a_killed_run_is_removed_by_the_next(recording, tmp_path, capsys):
+    stale = tmp_path / f"{STAGING_PREFIX}dead" / "out"
+    stale.mkdir(parents=True)
+    (stale / "vo.tum").write_text("half")
+    other = tmp_path / f"{STAGING_PREFIX}other" / "another_name"  # not this target's: left alone
+    other.mkdir(parents=True)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert status == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([f"{STAGING_PREFIX}other", "out", "rec"])
