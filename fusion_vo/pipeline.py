@@ -168,6 +168,9 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     if "camera" in sensors:
         cam = rec.camera  # cam0/sensor.yaml
         t_ns, _, _ = rec._frames_index()  # cam0/data.csv, frame names inside cam0/data/
+        if len(t_ns) < 2:
+            raise InputError(f"{len(t_ns)} frame listed: visual odometry needs at least two",
+                             rec.path / "cam0" / "data.csv")
         if not (rec.path / "cam0" / "data").is_dir() and rec.video_path() is None:
             raise InputError("no frames: neither cam0/data/ nor cam0/video.<ext> exists", rec.path / "cam0")
         rec.pixel_shift()  # a bad bit_depth in cam0/sensor.yaml

@@ -96,3 +96,11 @@ def test_some_unreadable_frames_are_skipped_and_counted(recording, tmp_path, cap
     assert "2 frames could not be read and were skipped" in out
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert summary["skipped_frames"] == 2
+
+
+def test_frames_of_the_wrong_size_stop_the_run_naming_the_frame(recording, tmp_path, capsys):
+    for png in (recording / "cam0" / "data").iterdir():
+        cv2.imwrite(str(png), np.full((60, 80), 90, np.uint8))
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf")
+    assert_error(status, err, "cam0/data/", "80x60", "160x120")
+    assert not (tmp_path / "out").exists()

@@ -157,6 +157,12 @@ def empty_frame_list(rec):
     return "cam0/data.csv: no frames listed", None
 
 
+def one_frame(rec):
+    p = rec / "cam0" / "data.csv"
+    p.write_text("\n".join(_rows(p)[:2]) + "\n")
+    return "cam0/data.csv: 1 frame listed", None
+
+
 def no_frame_folder(rec):
     import shutil
 
@@ -191,7 +197,7 @@ FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time
           negative_timestamp, absolute_frame_path, frame_path_leaving_the_recording, timestamp_near_2_63,
           ground_truth_with_one_row, ground_truth_repeated_time, ground_truth_bad_quaternion,
           imu_on_another_clock, ground_truth_on_another_clock, missing_frame_list, imu_symlink_loop,
-          wheel_broken_link, frame_list_is_a_folder, binary_imu_file, empty_frame_list, no_frame_folder,
+          wheel_broken_link, frame_list_is_a_folder, binary_imu_file, empty_frame_list, one_frame, no_frame_folder,
           camera_yaml_missing_key, camera_yaml_not_yaml, wheel_yaml_negative_radius, bad_bit_depth]
 
 
