@@ -100,17 +100,21 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
             break
         except FileExistsError:
             continue
+        except OSError as exc:  # name the file being written, not the temporary name
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
     else:  # pragma: no cover - 100 collisions of 32 random bits
         raise FileExistsError(errno.EEXIST, "cannot create a temporary file", str(parent))
     try:
         with os.fdopen(fd, "wb") as handle:
             handle.write(payload)
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if isinstance(exc, OSError):  # a full disk, a quota: name the file being written
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
     return path
 

@@ -175,3 +175,28 @@ def test_a_staging_folder_left_by_a_killed_run_is_removed_by_the_next(recording,
     status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
     assert status == 0, err
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([f"{STAGING_PREFIX}other", "out", "rec"])
+
+
+def test_a_full_disk_names_the_file_not_a_temporary_name(recording, tmp_path, capsys, monkeypatch):
+    import fusion_vo.outputs as outputs
+
+    real = os.fdopen
+
+    class Full:
+        def __init__(self, fd, mode):
+            self.handle = real(fd, mode)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.handle.close()
+
+        def write(self, data):
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(outputs.os, "fdopen", Full)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert_error(status, err, "No space left on device", str(tmp_path / "out") + "/")
+    assert ".tmp-" not in err and STAGING_PREFIX not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
