@@ -119,6 +119,7 @@ class RunInputs:
     sensors: list[str]
     spans: dict[str, tuple[float, float]]
     groundtruth: PoseData | None
+    times: dict[str, np.ndarray] = field(default_factory=dict)
 
 
 def _config_error(exc: Exception, config_path: Path | None, key: str) -> InputError:
@@ -226,7 +227,18 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             if g1 < lo or hi < g0:
                 raise InputError(f"ground truth {_span((g0, g1))} does not overlap the sensors' "
                                  f"{_span((lo, hi))}: it must be stamped on the recording's clock", gt_path)
-    return RunInputs(rec, sensors, spans, groundtruth)
+    return RunInputs(rec, sensors, spans, groundtruth, times)
+
+
+def _longest_common_pause(times: dict[str, np.ndarray] | None) -> tuple[float, float] | None:
+    """The longest interval [s] in which no stream has a sample, or ``None``."""
+    if not times:
+        return None
+    t = np.unique(np.concatenate([np.asarray(v, dtype=np.float64) for v in times.values()]))
+    if len(t) < 2:
+        return None
+    i = int(np.argmax(np.diff(t)))
+    return float(t[i]), float(t[i + 1])
 
 
 def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
@@ -329,7 +341,7 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
-        fused = _run_backends(rec, vo, sensors, config, summary)
+        fused = _run_backends(rec, vo, sensors, config, summary, inputs.times)
         trajectories.update(fused)
         for name, traj in trajectories.items():
             if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
@@ -362,12 +374,21 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
 
 
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
-                  summary: RunSummary) -> dict[str, PoseData]:
+                  summary: RunSummary, spans_times: dict[str, np.ndarray] | None = None) -> dict[str, PoseData]:
     """Wheel dead reckoning and the fused backends; returns name -> trajectory."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
-    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
+    try:
+        result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
+    except RuntimeError as exc:
+        if "Indeterminate" not in str(exc):
+            raise
+        pause = _longest_common_pause(spans_times)
+        where = (f"every stream pauses for {pause[1] - pause[0]:.1f} s from {pause[0]:.3f} s: " if pause else "")
+        raise InputError(f"{where}the factor graph has nothing to tie the poses across it (gtsam: "
+                         "indeterminate linear system); use --backend ekf, or split the recording there",
+                         rec.path) from None
     summary.backend_seconds.update(result.seconds or {})
     alone = not any(s in sensors for s in ("wheel", "odom", "imu"))
     for note in result.notes or []:

@@ -49,3 +49,12 @@ def test_a_pause_is_not_bridged_at_constant_velocity(recording, tmp_path, capsys
     vo = np.loadtxt(tmp_path / "out" / "vo.tum")
     travelled = np.sum(np.hypot(*np.diff(vo[:, 1:3], axis=0).T))
     assert travelled < 0.1  # the robot drove 0.05 m
+
+
+def test_a_pause_the_factor_graph_cannot_bridge_is_a_clear_error_at_worst(recording, tmp_path, capsys):
+    pause(recording, 0.8, 20.0)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "gtsam",
+                         "--no-evaluate")
+    assert status == 0 or ("every stream pauses for 20.0 s" in err and status == 2), err
+    if status == 2:
+        assert not (tmp_path / "out").exists()
