@@ -16,8 +16,9 @@ Every file and folder fusion-vo writes goes through this module, so every output
 
 The folder rules (the reason of this module): an existing target is replaced only if it is empty or holds
 the marker file that fusion-vo writes into every output folder of that kind (``marker``); any other folder
-needs ``force=True``. Even with ``force``, the current folder, a folder above it, and a folder that holds
-one of the command's inputs are never replaced.
+needs ``force=True``. Even with ``force``, the current folder, a folder above it, a folder that holds one
+of the command's inputs, and an existing folder inside an input that fusion-vo did not write are never
+replaced.
 """
 
 from __future__ import annotations
@@ -152,6 +153,11 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
             raise InputError(f"the {what} holds an input of this command ({p}); give another {what}", target)
     if os.path.lexists(target) and not target.is_dir():
         raise InputError(f"the {what} must be a folder, but a file of that name exists", target)
+    if target.is_dir() and not (target / marker).is_file():
+        for p in inputs:
+            if _inside(resolved, Path(p).resolve()) and any(target.iterdir()):
+                raise InputError(f"the {what} is part of an input of this command ({p}); give another "
+                                 f"{what}", target)
     if target.is_dir() and not (target / marker).is_file() and not force:
         try:
             empty = not any(target.iterdir())

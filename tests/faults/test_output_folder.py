@@ -47,17 +47,19 @@ def test_a_folder_fusion_vo_did_not_write_is_refused_unless_forced(recording, tm
     assert not (out / "thesis.tex").exists() and (out / "ekf.tum").is_file()
 
 
-@pytest.mark.parametrize("where", ["cwd", "parent_of_cwd", "holds_the_recording", "is_the_recording"])
+@pytest.mark.parametrize("where", ["cwd", "parent_of_cwd", "holds_the_recording", "is_the_recording",
+                                   "inside_the_recording"])
 def test_never_the_current_folder_its_parents_or_the_input(where, recording, tmp_path, capsys, monkeypatch):
     work = tmp_path / "work" / "sub"
     work.mkdir(parents=True)
     if where in ("cwd", "parent_of_cwd"):
         monkeypatch.chdir(work)
     out = {"cwd": ".", "parent_of_cwd": "..", "holds_the_recording": str(tmp_path),
-           "is_the_recording": str(recording)}[where]
+           "is_the_recording": str(recording), "inside_the_recording": str(recording / "cam0")}[where]
     before = snapshot(tmp_path)
     status, _, err = cli(capsys, "run", recording, "--out", out, "--force", *QUICK)
-    assert_error(status, err, "refusing" if where in ("cwd", "parent_of_cwd") else "holds an input")
+    expected = {"cwd": "refusing", "parent_of_cwd": "refusing", "inside_the_recording": "part of an input"}
+    assert_error(status, err, expected.get(where, "holds an input"))
     assert snapshot(tmp_path) == before
 
 
