@@ -8,8 +8,8 @@
   (Ctrl-C, SIGTERM) removes the staging folder and leaves the target as it was.
 * It never deletes what fusion-vo did not write: an existing target is replaced only when it is empty or
   holds the marker file ``.fusion-vo-recording`` that the writer leaves in every recording it makes;
-  anything else needs ``force``. The current folder, a folder above it and a folder holding an input of
-  the command are never replaced, even with ``force``.
+  anything else needs ``force``. The current folder, a folder above it, a folder holding an input of
+  the command and a folder inside an input are never replaced, even with ``force``.
 * Every stream it writes reads back with :class:`~fusion_vo.recording.Recording`: integer nanosecond
   timestamps that increase strictly, finite numbers, frame names relative to ``cam0/data/``.
 * Files and folders follow the umask, like any file the user creates.
