@@ -58,9 +58,9 @@ HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 
 def read_gps(seq: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Times [s] and local ``(e, n)`` [m] of ``gps0/data.csv``."""
-    data = np.loadtxt(seq / "gps0" / "data.csv", delimiter=",", comments="#", ndmin=2)
-    return data[:, 0] * 1e-9, data[:, 4:6]
+    """Times [s] and local ``(e, n)`` [m] of the usable fixes of ``gps0/``."""
+    gps = Recording(seq).gps()
+    return gps.t, gps.enu[:, :2]
 
 
 def distance_travelled(rec: Recording) -> float:

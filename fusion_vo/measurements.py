@@ -3,9 +3,9 @@
 Two shapes of the same data:
 
 * per-sample dataclasses (:class:`VisualIncrement`, :class:`WheelTicks`, :class:`ImuSample`,
-  :class:`TwistSample`, :class:`RangeSample`) for the streaming API, one object per measurement;
+  :class:`TwistSample`, :class:`RangeSample`, :class:`GpsFix`) for the streaming API, one object per measurement;
 * per-stream arrays (:class:`ImuData`, :class:`WheelData`, :class:`TwistData`, :class:`RangeData`,
-  :class:`PoseData`) as read from a recording, for batch use without millions of small objects.
+  :class:`PoseData`, :class:`GpsData`) as read from a recording, for batch use without millions of small objects.
 
 All times are seconds on the recording's clock (``float``). Poses and increments are ``(x, y, yaw)`` of
 the body frame B (REP-103: x forward, y left, z up; origin on the floor under the drive axle).
@@ -97,6 +97,15 @@ class RangeSample:
     distance: float
 
 
+@dataclass(frozen=True)
+class GpsFix:
+    """One GNSS fix: antenna ``east, north`` [m] in ENU at the datum and its 2x2 covariance [m²]."""
+
+    t: float
+    enu: np.ndarray
+    covariance: np.ndarray
+
+
 # --------------------------------------------------------------------------- per-stream arrays
 @dataclass
 class WheelConfig:
@@ -177,3 +186,50 @@ class PoseData:
 
     def __len__(self) -> int:
         return len(self.t)
+
+
+@dataclass
+class GpsData:
+    """GNSS fixes in local East-North-Up at the datum (``gps0``), after skipping unusable fixes.
+
+    Attributes
+    ----------
+    t : ndarray (N,)
+        Times [s].
+    enu : ndarray (N, 3)
+        East, north, up of the antenna [m] relative to ``datum``.
+    covariance : ndarray (N, 2, 2)
+        Horizontal (east, north) covariance of each fix [m²]; the default sigma where a fix had none.
+    geodetic : ndarray (N, 3)
+        Latitude, longitude [deg] and ellipsoidal altitude [m] as recorded.
+    status : ndarray (N,) int
+        NavSatFix status (0 fix, 1 SBAS, 2 GBAS); 0 when the file has no status column.
+    datum : tuple of float
+        Latitude, longitude [deg], altitude [m] of the ENU origin.
+    lever_arm : ndarray (3,)
+        Antenna position in the body frame [m] (translation of ``T_BS``).
+    horizontal_sigma : float
+        Default standard deviation [m] used for fixes without a covariance.
+    skipped : dict
+        Reason -> number of fixes skipped (``no fix``, ``NaN``, ``zero covariance``).
+    notes : list of str
+        What was assumed or skipped, for the run's notes.
+    """
+
+    t: np.ndarray
+    enu: np.ndarray
+    covariance: np.ndarray
+    geodetic: np.ndarray
+    status: np.ndarray
+    datum: tuple
+    lever_arm: np.ndarray
+    horizontal_sigma: float
+    skipped: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def samples(self) -> list[GpsFix]:
+        """The fixes one at a time (east, north and covariance), for the streaming API."""
+        return [GpsFix(float(t), self.enu[i, :2].copy(), self.covariance[i].copy()) for i, t in enumerate(self.t)]

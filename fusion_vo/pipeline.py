@@ -227,6 +227,8 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             if g1 < lo or hi < g0:
                 raise InputError(f"ground truth {_span((g0, g1))} does not overlap the sensors' "
                                  f"{_span((lo, hi))}: it must be stamped on the recording's clock", gt_path)
+    if config.evaluate and groundtruth is None and rec.has_gps():
+        rec.gps()  # the fixes the evaluation scores against: a malformed file stops the run before any work
     return RunInputs(rec, sensors, spans, groundtruth, times)
 
 
@@ -351,7 +353,7 @@ def run_pipeline(
         write_atomic(staging / "run.yaml", yaml.safe_dump(run_info, sort_keys=False))
         fields = {k: v for k, v in summary.__dict__.items() if k != "metrics"}
         write_atomic(staging / "summary.json", json.dumps(_finite(fields), indent=2, default=_json_default) + "\n")
-        if config.evaluate and inputs.groundtruth is not None:
+        if config.evaluate and (inputs.groundtruth is not None or rec.has_gps()):
             summary.metrics = _evaluate(staging, rec.path)
         folder.commit()
     return summary

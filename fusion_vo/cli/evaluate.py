@@ -15,7 +15,8 @@ def register(subparsers) -> None:
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="folder written by 'fusion-vo run'")
     parser.add_argument("--gt", metavar="SEQ", default=None,
-                        help="recording with state_groundtruth_estimate0/ (default: run.yaml's sequence)")
+                        help="recording with state_groundtruth_estimate0/, or without it but with gps0/ "
+                             "to score against the GPS fixes (default: run.yaml's sequence)")
     parser.set_defaults(func=run)
 
 
@@ -44,6 +45,21 @@ def show_metrics(metrics: dict, name: str) -> None:
     from fusion_vo.evaluation.table import POSE_COLUMNS, VELOCITY_COLUMNS, legs_table, metrics_table
 
     console = globals()["console"]()
+    if any("gps_rms_m" in figures for figures in metrics.values()):
+        from rich import box
+        from rich.table import Table
+
+        from fusion_vo.evaluation.gps import gps_frame, gps_table
+
+        headers, rows = gps_table(metrics)
+        table = Table(title=f"Errors of {name} against GPS fixes (no ground truth)", box=box.SIMPLE_HEAD,
+                      caption=f"trajectories {gps_frame(metrics)}; outliers: fixes > 5 robust sigma off")
+        for h in headers:
+            table.add_column(h, justify="left" if h == "trajectory" else "right")
+        for row in rows:
+            table.add_row(*row)
+        console.print(table)
+        return
     console.print(metrics_table(metrics, f"Position errors of {name}", columns=POSE_COLUMNS))
     console.print(metrics_table(metrics, f"Velocity errors of {name}", columns=VELOCITY_COLUMNS))
     legs = legs_table(metrics)

@@ -2,7 +2,8 @@
 
 A run folder holds TUM trajectories (``vo.tum``, ``wheel.tum``, ``ekf.tum``, ...), optionally
 ``velocities.csv`` from the visual frontend and ``run.yaml`` with the configuration, whose ``sequence``
-names the recording. The recording's ground truth is the reference for every figure.
+names the recording. The recording's ground truth is the reference for every figure; a recording
+without ground truth but with GPS fixes is scored against the fixes instead (:mod:`.gps`).
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ def resolve_sequence(run_dir: Path, config: dict, sequence_dir: str | Path | Non
     Raises
     ------
     InputError
-        If no recording is named or the named folder has no ground truth.
+        If no recording is named or the named folder has neither ground truth nor GPS fixes.
     """
     if sequence_dir is None:
         named = config.get("sequence")
@@ -63,8 +64,9 @@ def resolve_sequence(run_dir: Path, config: dict, sequence_dir: str | Path | Non
         sequence = Path(sequence_dir)
     if not sequence.is_dir():
         raise InputError("recording folder not found", sequence)
-    if not has_groundtruth(sequence):
-        raise InputError("recording has no ground truth", sequence / GROUNDTRUTH_CSV)
+    if not has_groundtruth(sequence) and not (sequence / "gps0" / "data.csv").is_file():
+        raise InputError("recording has no ground truth (and no GPS fixes to score against)",
+                         sequence / GROUNDTRUTH_CSV)
     return sequence
 
 
@@ -117,12 +119,15 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
     Raises
     ------
     InputError
-        If the folder or its trajectories are missing or malformed, or there is no ground truth.
+        If the folder or its trajectories are missing or malformed, or there is neither ground truth nor
+        GPS.
     """
     run_dir = Path(run_dir)
     files = find_trajectories(run_dir)
     config = read_run_config(run_dir)
     sequence = resolve_sequence(run_dir, config, sequence_dir)
+    if not has_groundtruth(sequence):
+        return evaluate_run_against_gps(run_dir, sequence, files, config)
     reference = read_groundtruth(sequence / GROUNDTRUTH_CSV)
     results = evaluate_trajectories(reference, files)
     metrics = {name: result.figures for name, result in results.items()}
@@ -156,3 +161,23 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
     logger.info("wrote metrics.json, %d figures and report.html to %s", len(images), run_dir)
     return metrics
 
+
+
+def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Path], config: dict) -> dict:
+    """Score a run's trajectories against the recording's GPS fixes (:mod:`.gps`); metrics, gps.png, report."""
+    from fusion_vo.evaluation.gps import evaluate_against_gps, gps_frame, gps_table
+    from fusion_vo.recording import Recording
+
+    gps = Recording(sequence).gps()
+    metrics, images = evaluate_against_gps(run_dir, files, gps, config, sequence / "gps0" / "data.csv")
+    write_metrics(run_dir / "metrics.json", metrics)
+    report_config = dict(config)
+    report_config.setdefault("sequence", str(sequence))
+    headers, rows = gps_table(metrics)
+    notes = [f"{n} GPS fixes skipped ({reason})" for reason, n in gps.skipped.items()]
+    write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, {}, images,
+                 sections=[(f"Errors against GPS fixes (no ground truth; {gps_frame(metrics)})",
+                                headers, rows, notes)])
+    logger.info("scored %d trajectories against %d GPS fixes; wrote metrics.json, gps.png and report.html to %s",
+                len(metrics), len(gps), run_dir)
+    return metrics

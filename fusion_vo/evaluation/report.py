@@ -53,7 +53,7 @@ def _image(title: str, png: bytes) -> str:
 
 
 def render_report(title: str, config: dict, metrics: dict[str, dict], images: dict[str, bytes],
-                  frontend: dict | None = None) -> str:
+                  frontend: dict | None = None, sections: list | None = None) -> str:
     """Build the HTML text of a report.
 
     Parameters
@@ -68,6 +68,9 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
         Caption -> PNG bytes, shown in this order.
     frontend : dict, optional
         Summary of the visual frontend (frame counts per status, mean inliers).
+    sections : list, optional
+        Further tables ``(heading, headers, rows, notes)``, shown before the figures (the errors against
+        GPS fixes of a recording without ground truth).
 
     Returns
     -------
@@ -75,10 +78,11 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
         A complete HTML document.
     """
     parts = [f"<h1>{html.escape(title)}</h1>",
-             f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.</p>",
-             "<h2>Errors against ground truth</h2>"]
-    rows = [[name] + [c.format(figures) for c in KEY_COLUMNS] for name, figures in metrics.items()]
-    parts.append(_table(["trajectory"] + [c.header for c in KEY_COLUMNS], rows))
+             f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.</p>"]
+    if metrics or not sections:
+        parts.append("<h2>Errors against ground truth</h2>")
+        rows = [[name] + [c.format(figures) for c in KEY_COLUMNS] for name, figures in metrics.items()]
+        parts.append(_table(["trajectory"] + [c.header for c in KEY_COLUMNS], rows))
 
     drift_rows = [[name, _number(d["length_m"], "{:g}"), str(d["segments"]), _number(d["trans_pct"], "{:.2f}"),
                    _number(d["rot_deg_per_m"], "{:.2f}")]
@@ -109,6 +113,11 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
         parts.append("<h2>Visual frontend</h2>")
         parts.append(_table(["figure", "value"], [[k, str(v)] for k, v in frontend.items()]))
 
+    for heading, headers, rows, notes in sections or []:
+        parts.append(f"<h2>{html.escape(heading)}</h2>")
+        parts.append(_table(headers, rows))
+        parts.extend(f"<p>{html.escape(note)}</p>" for note in notes)
+
     if images:
         parts.append("<h2>Figures</h2>")
         parts.extend(_image(caption, png) for caption, png in images.items())
@@ -122,9 +131,9 @@ def render_report(title: str, config: dict, metrics: dict[str, dict], images: di
 
 
 def write_report(path: str | Path, title: str, config: dict, metrics: dict[str, dict],
-                 images: dict[str, str | Path], frontend: dict | None = None) -> Path:
+                 images: dict[str, str | Path], frontend: dict | None = None, sections: list | None = None) -> Path:
     """Render a report with the given PNG files embedded and write it atomically to ``path``."""
     pngs = {caption: Path(p).read_bytes() for caption, p in images.items()}
-    text = render_report(title, config, metrics, pngs, frontend)
+    text = render_report(title, config, metrics, pngs, frontend, sections)
     logger.debug("wrote %s", path)
     return write_atomic(path, text)

@@ -89,3 +89,30 @@ def integrate(increments) -> np.ndarray:
     for i, d in enumerate(inc):
         out[i + 1] = compose(out[i], d)
     return out
+
+
+def fit_rigid_2d(source, target, weights=None) -> tuple[float, np.ndarray]:
+    """Weighted least-squares rotation and translation with ``target ≈ R(yaw) source + t``.
+
+    The closed form of Umeyama (1991) without scale: with centroids ``s̄, t̄`` and the cross-covariance
+    ``C = Σ w_i (t_i - t̄)(s_i - s̄)ᵀ``, ``yaw = atan2(C₁₀ - C₀₁, C₀₀ + C₁₁)`` and ``t = t̄ - R s̄``.
+
+    Parameters
+    ----------
+    source, target : array_like, shape (N, 2)
+        Corresponding points.
+    weights : array_like, shape (N,), optional
+
+    Returns
+    -------
+    yaw : float
+    translation : ndarray, shape (2,)
+    """
+    src = np.asarray(source, dtype=np.float64).reshape(-1, 2)
+    dst = np.asarray(target, dtype=np.float64).reshape(-1, 2)
+    w = np.ones(len(src)) if weights is None else np.asarray(weights, dtype=np.float64)
+    ms, md = np.average(src, axis=0, weights=w), np.average(dst, axis=0, weights=w)
+    C = ((dst - md) * w[:, None]).T @ (src - ms)
+    yaw = math.atan2(C[1, 0] - C[0, 1], C[0, 0] + C[1, 1])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return yaw, md - np.array([[c, -s], [s, c]]) @ ms

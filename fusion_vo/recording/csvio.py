@@ -34,7 +34,7 @@ class Table:
 
 
 def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "values",
-               require_increasing: bool = True) -> Table:
+               require_increasing: bool = True, allow_nan: bool = False) -> Table:
     """Read ``timestamp [ns], v1, v2, ...`` rows.
 
     Parameters
@@ -44,6 +44,8 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
         ``max`` are ignored.
     what : name of the values, for error messages.
     require_increasing : raise on duplicate or decreasing timestamps.
+    allow_nan : keep ``nan`` values (for streams whose reader skips and counts such rows) instead of
+        raising; infinite values still raise.
     """
     path = check_file(path)
     lo, hi = (columns, columns) if isinstance(columns, int) else columns
@@ -86,7 +88,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
                 except ValueError:
                     bad = next(p for p in parts[1 : n + 1] if not _is_float(p))
                     raise InputError(f"'{bad.strip()}' is not a number", path, lineno) from None
-                if not all(math.isfinite(v) for v in vals):
+                if not all(math.isfinite(v) or (allow_nan and math.isnan(v)) for v in vals):
                     raise InputError("NaN or infinite value", path, lineno)
                 if require_increasing and ts and t <= ts[-1]:
                     kind = "duplicate" if t == ts[-1] else "decreasing"

@@ -7,6 +7,7 @@ Layout (``datasets/README.md``)::
     SEQ/wheel0/data.csv, wheel0/sensor.yaml
     SEQ/odom0/data.csv
     SEQ/range0/data.csv
+    SEQ/gps0/data.csv, gps0/sensor.yaml
     SEQ/state_groundtruth_estimate0/data.csv
 
 Every stream is optional. A stream is *present* when its folder (``imu0/``) or its ``data.csv`` exists; a
@@ -39,7 +40,7 @@ import numpy as np
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
-from fusion_vo.measurements import ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
 from fusion_vo.outputs import make_folder, write_atomic
 from fusion_vo.recording.csvio import read_frame_list, read_table
 
@@ -49,7 +50,7 @@ VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
 
 #: stream folders of the layout, by the name :meth:`Recording.streams` uses
 STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "odom0", "range": "range0",
-                  "groundtruth": "state_groundtruth_estimate0"}
+                  "gps": "gps0", "groundtruth": "state_groundtruth_estimate0"}
 
 #: bit depths a 16-bit frame may hold
 BIT_DEPTHS = (10, 12, 14, 16)
@@ -107,11 +108,14 @@ class Recording:
     def has_range(self) -> bool:
         return self._present("range0")
 
+    def has_gps(self) -> bool:
+        return self._present("gps0")
+
     def has_groundtruth(self) -> bool:
         return self._present("state_groundtruth_estimate0")
 
     def streams(self) -> list[str]:
-        """Names of the streams present: camera, imu, wheel, odom, range, groundtruth."""
+        """Names of the streams present: camera, imu, wheel, odom, range, gps, groundtruth."""
         return [n for n, folder in STREAM_FOLDERS.items() if self._present(folder)]
 
     def _need(self, name: str, folder: str) -> Path:
@@ -287,6 +291,13 @@ class Recording:
         if len(bad):
             raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
         return RangeData(tab.t, tab.values[:, 0])
+
+    def gps(self) -> GpsData:
+        """``gps0``: fixes in local ENU at the datum, unusable fixes skipped and counted (:mod:`.gps`)."""
+        from fusion_vo.recording.gps import read_gps
+
+        self._need("GPS", "gps0")
+        return read_gps(self.path / "gps0")
 
     def groundtruth(self) -> PoseData:
         """``state_groundtruth_estimate0``: pose of B in W; see :func:`read_groundtruth_csv` for the rules."""

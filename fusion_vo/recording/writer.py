@@ -81,6 +81,10 @@ class RecordingWriter:
         """Write a stream ``relpath`` (e.g. ``imu0/data.csv``); see :func:`write_csv`."""
         return write_csv(self.root / relpath, header, t_ns, rows, fmt)
 
+    def lines(self, relpath: str, header: str, rows: Sequence[str]) -> Path:
+        """Write a stream of rows already formatted (``timestamp,...``); see :func:`write_lines`."""
+        return write_lines(self.root / relpath, header, rows)
+
     def yaml(self, relpath: str, data: dict, comments: Sequence[str] = ()) -> Path:
         """Write a ``sensor.yaml`` (or any YAML file) ``relpath``; see :func:`write_yaml`."""
         return write_yaml(self.root / relpath, data, comments)
@@ -125,6 +129,27 @@ def write_csv(path: Path, header: str, t_ns, rows, fmt: str | Sequence[str]) -> 
         lines.append(f"{int(ti)}," + ",".join(f % v for f, v in zip(fmts, row)))
     make_folder(path.parent)
     return write_atomic(path, "\n".join(lines) + "\n")
+
+
+def write_lines(path: Path, header: str, rows: Sequence[str]) -> Path:
+    """Write rows formatted by the stream's own module (``timestamp,...`` each), under ``header``.
+
+    Raises
+    ------
+    ValueError
+        If a row's timestamp is not an integer or the timestamps do not increase strictly.
+    """
+    previous = None
+    for row in rows:
+        try:
+            t = int(row.split(",", 1)[0])
+        except ValueError:
+            raise ValueError(f"{path.name}: row {row!r} does not start with an integer timestamp") from None
+        if previous is not None and t <= previous:
+            raise ValueError(f"{path.name}: timestamp {t} does not follow {previous}; timestamps must increase")
+        previous = t
+    make_folder(path.parent)
+    return write_atomic(path, "\n".join([header, *rows]) + "\n")
 
 
 def write_yaml(path: Path, data: dict, comments: Sequence[str] = ()) -> Path:

@@ -1,9 +1,10 @@
-"""Sensor models: wheel encoders and odometry twist, IMU (gyro, AHRS), downward range finder.
+"""Sensor models: wheel encoders and odometry twist, IMU (gyro, AHRS), downward range finder, GPS.
 
 Each module turns a recorded stream (arrays from :mod:`fusion_vo.measurements`) into gated samples with
 a documented noise model; the backends integrate them between their nodes.
 """
 
+from fusion_vo.sensors.gps import GpsModel, GpsNoise, align_to_fixes
 from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, gyro_yaw
 from fusion_vo.sensors.range import RangeNoise, camera_height
 from fusion_vo.sensors.wheel import (
@@ -11,6 +12,6 @@ from fusion_vo.sensors.wheel import (
 )
 
 __all__ = [
-    "ImuNoise", "RangeNoise", "WheelNoise", "ahrs_heading", "arc_covariance", "arc_increment",
+    "GpsModel", "GpsNoise", "ImuNoise", "align_to_fixes", "RangeNoise", "WheelNoise", "ahrs_heading", "arc_covariance", "arc_increment",
     "camera_height", "gyro_yaw", "ticks_to_travel", "unwrap_ticks", "wheel_track",
 ]

@@ -33,7 +33,8 @@ from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
 from fusion_vo.simulation.render import Renderer
 from fusion_vo.simulation.robot import PROFILES, Limits, Motion, make_motion
-from fusion_vo.simulation.sensors import ImuNoise, WheelTruth, imu_samples, odometry_twist, sample_times, wheel_ticks
+from fusion_vo.simulation.sensors import (GpsSimulation, ImuNoise, WheelTruth, gps_fixes, imu_samples,
+                                         odometry_twist, sample_times, wheel_ticks)
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +69,11 @@ class SimulationOptions:
         [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
     IMU
         imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
+    GPS
+        gps (write gps0), gps_rate [Hz], gps_noise [m per horizontal axis], gps_lever_arm [m, body x y z],
+        gps_outages ``[[t0, t1], ...]`` [s], gps_jumps ``[[t0, t1, de, dn], ...]`` [s, m],
+        gps_heading_deg (heading of the world x axis in ENU, counter-clockwise from east), gps_origin [m,
+        ENU position of the world origin], gps_datum [latitude deg, longitude deg, altitude m].
     Other
         range_finder (write range0), range_noise [m], odometry (write odom0), gt_rate [Hz],
         jitter [s] (timestamp jitter of wheel and IMU samples), start_time_ns.
@@ -136,6 +142,16 @@ class SimulationOptions:
     gyro_random_walk: float = 2.0e-5
     accel_noise_density: float = 2.0e-3
     accel_random_walk: float = 3.0e-3
+    # gps
+    gps: bool = False
+    gps_rate: float = 5.0
+    gps_noise: float = 0.05
+    gps_lever_arm: list = field(default_factory=lambda: [-0.10, 0.0, 0.40])
+    gps_outages: list = field(default_factory=list)
+    gps_jumps: list = field(default_factory=list)
+    gps_heading_deg: float = 30.0
+    gps_origin: list = field(default_factory=lambda: [0.0, 0.0])
+    gps_datum: list = field(default_factory=lambda: [47.3977, 8.5456, 488.0])
     # other
     range_finder: bool = False
     range_noise: float = 0.0005
@@ -153,7 +169,7 @@ class SimulationOptions:
         positive = ("duration", "max_speed", "max_turn_rate", "side", "radius", "length", "texel_size", "width",
                     "height", "fu", "fv", "camera_rate", "camera_height", "blur_samples", "supersample",
                     "exposure_period", "gain", "wheel_rate", "ticks_per_revolution", "wheel_radius", "wheel_base",
-                    "imu_rate", "gt_rate")
+                    "imu_rate", "gt_rate", "gps_rate", "gps_noise")
         for name in positive:
             value = getattr(self, name)
             if value is not None and not value > 0:
@@ -176,10 +192,17 @@ class SimulationOptions:
         if len(self.distortion) not in n_coeffs:
             raise ValueError(f"option 'distortion': {self.distortion_model} takes "
                              f"{' or '.join(map(str, n_coeffs))} coefficients")
-        for name, n in (("gyro_bias", 3), ("accel_bias", 3), ("highlight_center", 2), ("featureless_time", 2)):
+        for name, n in (("gyro_bias", 3), ("accel_bias", 3), ("highlight_center", 2), ("featureless_time", 2),
+                        ("gps_lever_arm", 3), ("gps_origin", 2), ("gps_datum", 3)):
             value = getattr(self, name)
             if value is not None and len(value) != n:
                 raise ValueError(f"option '{name}' needs {n} numbers")
+        for name, n, what in (("gps_outages", 2, "[t0, t1]"), ("gps_jumps", 4, "[t0, t1, de, dn]")):
+            for item in getattr(self, name):
+                if not isinstance(item, (list, tuple)) or len(item) != n or item[1] < item[0]:
+                    raise ValueError(f"option '{name}' is a list of {what} with t0 <= t1")
+        if abs(self.gps_datum[0]) > 90 or abs(self.gps_datum[1]) > 180:
+            raise ValueError("option 'gps_datum' is [latitude, longitude, altitude] in degrees and metres")
         for rect in self.featureless:
             if not isinstance(rect, (list, tuple)) or len(rect) != 4:
                 raise ValueError("option 'featureless' is a list of [x_min, y_min, x_max, y_max] rectangles")
@@ -373,6 +396,11 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
                "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []",
                ns(gt_t), gt, "%.9f")
 
+    # ---- GPS (last, so that recordings without it keep their random streams)
+    gps_truth = {}
+    if o.gps:
+        gps_truth = _write_gps(writer, motion, o, t_end, ns, rng)
+
     info = {"frames": int(keep.sum()), "duration_s": float(t_end), "path_length_m": motion.path_length}
     writer.yaml("simulation.yaml", {
         "profile": profile, "seed": int(seed), "options": dataclasses.asdict(o), "summary": info,
@@ -381,5 +409,29 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
                   "T_BS": [float(v) for v in T_BS.ravel()],
                   "wheel_radius_left": truth.radius_left, "wheel_radius_right": truth.radius_right,
                   "wheel_base": truth.wheel_base, "gyro_bias_start": [float(v) for v in bias_g[0]],
-                  "dropped_frames": int((~keep).sum())}})
+                  "dropped_frames": int((~keep).sum()), **gps_truth}})
     return info
+
+
+def _write_gps(writer: RecordingWriter, motion: Motion, o: SimulationOptions, t_end: float, ns, rng) -> dict:
+    """``gps0/data.csv`` and ``sensor.yaml`` of simulated fixes; returns the truth for simulation.yaml."""
+    from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
+
+    sim = GpsSimulation(o.gps_rate, o.gps_noise, tuple(o.gps_lever_arm), o.gps_outages, o.gps_jumps,
+                        math.radians(o.gps_heading_deg), tuple(o.gps_origin))
+    t, enu, jumped = gps_fixes(motion, sim, t_end, rng)
+    n = len(t)
+    geo = enu_to_geodetic(enu, o.gps_datum)
+    var = o.gps_noise ** 2
+    rows = format_rows(ns(t), geo, enu, np.zeros(n), np.full(n, 2), np.tile([var, 0.0, var], (n, 1)))
+    writer.lines("gps0/data.csv", HEADER, rows)
+    T = np.eye(4)
+    T[:3, 3] = o.gps_lever_arm
+    writer.yaml("gps0/sensor.yaml", {
+        "sensor_type": "gnss", "rate_hz": float(o.gps_rate),
+        "T_BS": {"cols": 4, "rows": 4, "data": [float(v) for v in T.ravel()]},
+        "horizontal_sigma_m": float(o.gps_noise),
+        "datum": {"latitude": float(o.gps_datum[0]), "longitude": float(o.gps_datum[1]),
+                  "altitude": float(o.gps_datum[2])}})
+    return {"gps_world_heading_deg": float(o.gps_heading_deg), "gps_world_origin_enu": [float(v) for v in o.gps_origin],
+            "gps_fixes": int(n), "gps_jumped_fixes": int(jumped.sum())}

@@ -1,4 +1,4 @@
-"""Simulated proprioceptive sensors: wheel encoders, IMU, range finder, robot odometry.
+"""Simulated sensors: wheel encoders, IMU, range finder, robot odometry, GPS.
 
 Wheel encoders
 --------------
@@ -15,6 +15,11 @@ IMU (at the body origin, axes of the body)
 -----------------------------------------
 ``gyro = (0, 0, w) + b_g + n_g``, with ``b_g`` a constant bias plus a random walk and ``n_g`` white noise
 of density ``σ_g`` (discrete ``σ_g · sqrt(rate)``). Specific force ``accel = (dv/dt, v w, g) + b_a + n_a``.
+
+GPS
+---
+The antenna's position in East-North-Up with white noise, outages and multipath jumps
+(:func:`gps_fixes`).
 """
 
 from __future__ import annotations
@@ -124,3 +129,47 @@ def odometry_twist(times: np.ndarray, left: np.ndarray, right: np.ndarray, truth
     out[1:, 0] = v
     out[1:, 2] = w
     return out
+
+
+@dataclass
+class GpsSimulation:
+    """A GNSS receiver: rate [Hz], horizontal noise [m], antenna lever arm in the body (x, y, z) [m],
+    outages ``[[t0, t1], ...]`` [s] without fixes, multipath jumps ``[[t0, t1, de, dn], ...]`` (fixes in
+    ``[t0, t1]`` offset by ``(de, dn)`` metres), and the world frame's place in ENU: heading [rad] of the
+    world x axis counter-clockwise from east, and the ENU position [m] of the world origin."""
+
+    rate: float = 5.0
+    noise: float = 0.05
+    lever_arm: tuple = (-0.10, 0.0, 0.40)
+    outages: list = None
+    jumps: list = None
+    heading: float = 0.0
+    origin: tuple = (0.0, 0.0)
+
+
+def gps_fixes(motion: Motion, gps: GpsSimulation, t_end: float, rng: np.random.Generator
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Times (N,), measured ENU antenna positions (N, 3) and the jump flag (N,) of simulated fixes.
+
+    The true antenna position is ``p + R(yaw) l`` in the world, carried to ENU by the rotation
+    ``heading`` and the offset ``origin``; the fixes add white noise of ``noise`` per horizontal axis
+    (twice that vertically), drop out during the outages and jump during the jumps.
+    """
+    t = sample_times(0.0, t_end, gps.rate, 0.0, rng)
+    for t0, t1 in gps.outages or []:
+        t = t[(t < t0) | (t > t1)]
+    p = motion.pose_at(t)
+    lx, ly, lz = (float(v) for v in gps.lever_arm)
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    world = np.column_stack([p[:, 0] + c * lx - s * ly, p[:, 1] + s * lx + c * ly])
+    ch, sh = math.cos(gps.heading), math.sin(gps.heading)
+    enu = np.column_stack([ch * world[:, 0] - sh * world[:, 1] + gps.origin[0],
+                           sh * world[:, 0] + ch * world[:, 1] + gps.origin[1], np.full(len(t), lz)])
+    enu += rng.standard_normal((len(t), 3)) * (gps.noise * np.array([1.0, 1.0, 2.0]))
+    jumped = np.zeros(len(t), dtype=bool)
+    for t0, t1, de, dn in gps.jumps or []:
+        m = (t >= t0) & (t <= t1)
+        enu[m, 0] += de
+        enu[m, 1] += dn
+        jumped |= m
+    return t, enu, jumped

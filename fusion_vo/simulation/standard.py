@@ -33,6 +33,10 @@ STANDARD: dict[str, tuple[str, int, dict, str]] = {
     "umbmark_cw": ("umbmark_cw", 10, {"side": 2.0}, "UMBmark 2 m square, clockwise (wheel calibration)"),
     "umbmark_ccw": ("umbmark_ccw", 11, {"side": 2.0}, "UMBmark 2 m square, counter-clockwise"),
     "short": ("random", 12, {"duration": 5.0}, "5 s random drive for quick checks"),
+    "gps_outage": ("random", 13, {"duration": 60.0, "gps": True, "gps_outages": [[20.0, 30.0]],
+                                  "gps_jumps": [[40.0, 41.0, 12.0, 16.0]]},
+                   "60 s random drive with GPS at 5 Hz (5 cm noise, antenna 0.1 m behind the axle, 0.4 m up), "
+                   "a 10 s outage from 20 s and a 20 m multipath jump from 40 to 41 s"),
 }
 
 

@@ -127,10 +127,22 @@ def test_husky_gps_local_enu_and_imu_mounting(husky):
     assert gps.written == 30 and gps.rate_hz == pytest.approx(2.5, abs=0.05)
     fixes = read_csv(out / "gps0" / "data.csv")
     assert np.allclose(fixes[0, 4:7], 0.0)
-    enu = geodetic_to_enu(fixes[:, 1], fixes[:, 2], fixes[:, 3], *fixes[0, 1:4])
+    enu = geodetic_to_enu(fixes[:, 1], fixes[:, 2], fixes[:, 3], fixes[0, 1:4])
     assert np.allclose(enu, fixes[:, 4:7], atol=1e-3)
     meta = yaml.safe_load((out / "gps0" / "sensor.yaml").read_text())
-    assert meta["enu_origin"]["latitude"] == pytest.approx(fixes[0, 1], abs=1e-9)
+    assert meta["datum"]["latitude"] == pytest.approx(fixes[0, 1], abs=1e-9)
+    # the fix's status and east-north covariance are kept, and the reader uses them
+    with AnyReader([HUSKY]) as reader:
+        conns = [c for c in reader.connections if c.msgtype == "sensor_msgs/msg/NavSatFix"]
+        msgs = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(connections=conns)]
+    cov = np.array([[m.position_covariance[0], m.position_covariance[1], m.position_covariance[4]] for m in msgs])
+    assert fixes.shape[1] == 12
+    np.testing.assert_allclose(fixes[:, 9:12], cov[: len(fixes)], rtol=1e-5)
+    np.testing.assert_array_equal(fixes[:, 7], [m.status.status for m in msgs][: len(fixes)])
+    data = Recording(out).gps()
+    assert len(data) == 30 and data.skipped == {}
+    np.testing.assert_allclose(data.covariance[:, 0, 0], cov[:30, 0], rtol=1e-5)
+    np.testing.assert_allclose(data.enu, fixes[:, 4:7], atol=1e-3)
     # the GPS track and the wheel odometry agree on the distance travelled (about 1 m/s for 12 s)
     odom = Recording(out).odom()
     wheel_dist = float(np.sum(odom.vx[:-1] * np.diff(odom.t)))
@@ -160,7 +172,7 @@ def test_geodetic_to_enu_matches_the_ellipsoid_radii():
     s = math.sin(math.radians(lat0))
     meridian = a * (1 - e2) / (1 - e2 * s * s) ** 1.5
     normal = a / math.sqrt(1 - e2 * s * s)
-    enu = geodetic_to_enu([lat0 + 1e-4, lat0, lat0], [lon0, lon0 + 1e-4, lon0], [0.0, 0.0, 10.0], lat0, lon0, 0.0)
+    enu = geodetic_to_enu([lat0 + 1e-4, lat0, lat0], [lon0, lon0 + 1e-4, lon0], [0.0, 0.0, 10.0], (lat0, lon0, 0.0))
     assert enu[0] == pytest.approx([0.0, meridian * math.radians(1e-4), 0.0], abs=2e-3)
     assert enu[1] == pytest.approx([normal * math.cos(math.radians(lat0)) * math.radians(1e-4), 0.0, 0.0], abs=2e-3)
     assert enu[2] == pytest.approx([0.0, 0.0, 10.0], abs=1e-6)

@@ -40,14 +40,11 @@ from fusion_vo.recording.rosbag.reader import (
     open_reader,
     select_topics,
 )
+from fusion_vo.recording.gps import geodetic_to_enu
 from fusion_vo.recording.rosbag.summary import ImportSummary, StreamSummary
 from fusion_vo.recording.rosbag.transforms import (
-    WGS84_A,
-    WGS84_E2,
-    WGS84_F,
     StaticTransform,
     chain_transform,
-    geodetic_to_enu,
     parse_static_tf,
     quat_to_matrix,
     ypr_to_matrix,
@@ -55,7 +52,7 @@ from fusion_vo.recording.rosbag.transforms import (
 
 __all__ = [
     "CAMERA_INFO", "COMPRESSED_IMAGE", "IMAGE", "IMAGE_ENCODINGS", "IMU", "NAV_SAT_FIX", "ODOMETRY",
-    "STREAM_TYPES", "TF_MESSAGE", "WGS84_A", "WGS84_E2", "WGS84_F",
+    "STREAM_TYPES", "TF_MESSAGE",
     "BagTopic", "ImportSummary", "StaticTransform", "StreamSummary", "UnsupportedImage",
     "camera_info_yaml", "chain_transform", "compressed_to_grey", "geodetic_to_enu", "image_to_grey",
     "import_bag", "list_topics", "open_reader", "parse_static_tf", "pick_camera_info", "quat_to_matrix",

@@ -6,7 +6,8 @@ Each supported topic becomes one stream of the recording folder::
     sensor_msgs/CameraInfo              ->  cam0/sensor.yaml (unless --camera-yaml is given)
     sensor_msgs/Imu                     ->  imu0/data.csv (+ q_RS_w,x,y,z when the IMU gives an orientation)
     nav_msgs/Odometry                   ->  odom0/data.csv (body twist) and odom0/pose.csv (its pose)
-    sensor_msgs/NavSatFix               ->  gps0/data.csv (latitude, longitude, altitude, local ENU)
+    sensor_msgs/NavSatFix               ->  gps0/data.csv (latitude, longitude, altitude, local ENU, status,
+                                            covariance type and the east-north covariance)
     tf2_msgs/TFMessage on /tf_static    ->  T_BS of imu0, cam0 and gps0
 
 IMU noise densities, when the messages carry covariances, are ``sqrt(median(covariance) / rate_hz)``;
@@ -42,15 +43,17 @@ from fusion_vo.recording.rosbag.reader import (
     select_topics,
 )
 from fusion_vo.recording.rosbag.streams import Rows, finite, matrix_entry
-from fusion_vo.recording.writer import RecordingWriter, check_target, write_csv, write_image, write_yaml
+from fusion_vo.recording.writer import RecordingWriter, check_target, write_csv, write_image, write_lines, write_yaml
 from fusion_vo.recording.rosbag.summary import ImportSummary, StreamSummary
 from fusion_vo.recording.rosbag.transforms import (
     StaticTransform,
     chain_transform,
     frame_name,
-    geodetic_to_enu,
     quat_to_matrix,
 )
+from fusion_vo.recording.gps import HEADER as GPS_HEADER
+from fusion_vo.recording.gps import format_rows as gps_rows
+from fusion_vo.recording.gps import geodetic_to_enu
 
 log = logging.getLogger(__name__)
 
@@ -244,10 +247,12 @@ class _Importer:
         if int(msg.status.status) < 0 or not finite(fix) or abs(fix[0]) > 90 or abs(fix[1]) > 180:
             rows.summary.dropped += 1
             return
-        rows.add(t, fix)
-        if int(msg.position_covariance_type) > 0:
-            cov = msg.position_covariance
-            self.gps_sigma.append(math.sqrt(max(0.0, 0.5 * (float(cov[0]) + float(cov[4])))))
+        cov_type = int(msg.position_covariance_type)
+        cov = msg.position_covariance
+        cov_en = (float(cov[0]), float(cov[1]), float(cov[4])) if cov_type > 0 else (0.0, 0.0, 0.0)
+        rows.add(t, (*fix, int(msg.status.status), cov_type, *cov_en))
+        if cov_type > 0 and finite(cov_en) and cov_en[0] > 0 and cov_en[2] > 0:
+            self.gps_sigma.append(math.sqrt(0.5 * (cov_en[0] + cov_en[2])))
 
     def _tf(self, msg) -> None:
         for ts in msg.transforms:
@@ -354,21 +359,20 @@ class _Importer:
     def _finish_gps0(self) -> None:
         rows = self.rows["gps0"]
         t, values = rows.finish()
-        fixes = np.array(values, dtype=float).reshape(-1, 3)
-        enu = geodetic_to_enu(fixes[:, 0], fixes[:, 1], fixes[:, 2], *fixes[0]) if len(fixes) else fixes
-        table = [(*f, *e) for f, e in zip(fixes, enu)]
-        path = self.root / "gps0" / "data.csv"
-        write_csv(path, "#timestamp [ns],latitude [deg],longitude [deg],altitude [m],e [m],n [m],u [m]",
-                   t, table, ("%.10f", "%.10f", "%.4f", "%.4f", "%.4f", "%.4f"))
+        table = np.array(values, dtype=float).reshape(-1, 8)
+        fixes = table[:, :3]
+        enu = geodetic_to_enu(fixes[:, 0], fixes[:, 1], fixes[:, 2], fixes[0]) if len(fixes) else fixes
+        lines = gps_rows(t, fixes, enu, table[:, 3], table[:, 4], table[:, 5:8])
+        write_lines(self.root / "gps0" / "data.csv", GPS_HEADER, lines)
         T, how = self._extrinsics("gps0")
         data = {"sensor_type": "gnss", "rate_hz": rows.summary.rate_hz}
         if len(fixes):
-            data["enu_origin"] = {"latitude": float(fixes[0, 0]), "longitude": float(fixes[0, 1]),
-                                  "altitude": float(fixes[0, 2])}
+            data["datum"] = {"latitude": float(fixes[0, 0]), "longitude": float(fixes[0, 1]),
+                             "altitude": float(fixes[0, 2])}
         if self.gps_sigma:
             data["horizontal_sigma_m"] = float(f"{np.median(self.gps_sigma):.4g}")
         comments = [f"GNSS receiver of {rows.summary.topic}, frame '{self.frames.get('gps0', '')}'",
-                    "e, n, u of data.csv: local East-North-Up [m] relative to enu_origin (WGS-84)"]
+                    "e, n, u of data.csv: local East-North-Up [m] relative to datum (WGS-84)"]
         if T is not None:
             data["T_BS"] = matrix_entry(T)
             comments.append(f"T_BS (antenna in the body frame) {how}")

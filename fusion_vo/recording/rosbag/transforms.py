@@ -1,18 +1,4 @@
-"""Fixed transforms between sensor frames, and GPS fixes in a local East-North-Up frame.
-
-Local ENU of GPS fixes
-----------------------
-Geodetic latitude ``φ``, longitude ``λ`` and ellipsoidal height ``h`` go to Earth-centred coordinates on
-the WGS-84 ellipsoid (``a = 6378137 m``, ``f = 1/298.257223563``, ``e² = f (2 - f)``)::
-
-    N(φ) = a / sqrt(1 - e² sin² φ)
-    X = (N + h) cos φ cos λ,   Y = (N + h) cos φ sin λ,   Z = (N (1 - e²) + h) sin φ
-
-and are rotated into East-North-Up at the first fix ``(φ0, λ0, h0)``::
-
-    [e]   [ -sin λ0          cos λ0          0      ]
-    [n] = [ -sin φ0 cos λ0  -sin φ0 sin λ0   cos φ0 ] (X - X0)
-    [u]   [  cos φ0 cos λ0   cos φ0 sin λ0   sin φ0 ]
+"""Fixed transforms between sensor frames.
 
 Extrinsics
 ----------
@@ -33,11 +19,6 @@ import numpy as np
 from fusion_vo.errors import InputError
 
 
-WGS84_A = 6378137.0
-WGS84_F = 1.0 / 298.257223563
-WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
-
-
 @dataclass(frozen=True)
 class StaticTransform:
     """A fixed transform: pose of frame ``child`` in frame ``parent`` as a 4x4 matrix ``T``."""
@@ -45,39 +26,6 @@ class StaticTransform:
     parent: str
     child: str
     T: np.ndarray
-
-
-def geodetic_to_enu(lat_deg, lon_deg, alt_m, lat0_deg: float, lon0_deg: float, alt0_m: float) -> np.ndarray:
-    """East, north, up [m] of WGS-84 positions relative to a reference position (module docstring).
-
-    Parameters
-    ----------
-    lat_deg, lon_deg, alt_m : array_like, shape (N,)
-        Latitude and longitude [deg], ellipsoidal altitude [m].
-    lat0_deg, lon0_deg, alt0_m : float
-        The reference (origin of the local frame).
-
-    Returns
-    -------
-    ndarray, shape (N, 3)
-        ``(e, n, u)`` per position.
-    """
-    xyz = _geodetic_to_ecef(np.asarray(lat_deg, float), np.asarray(lon_deg, float), np.asarray(alt_m, float))
-    xyz0 = _geodetic_to_ecef(np.array([lat0_deg]), np.array([lon0_deg]), np.array([alt0_m]))
-    phi, lam = math.radians(lat0_deg), math.radians(lon0_deg)
-    sp, cp, sl, cl = math.sin(phi), math.cos(phi), math.sin(lam), math.cos(lam)
-    R = np.array([[-sl, cl, 0.0], [-sp * cl, -sp * sl, cp], [cp * cl, cp * sl, sp]])
-    return (xyz - xyz0) @ R.T
-
-
-def _geodetic_to_ecef(lat_deg: np.ndarray, lon_deg: np.ndarray, alt_m: np.ndarray) -> np.ndarray:
-    phi, lam = np.radians(lat_deg), np.radians(lon_deg)
-    n = WGS84_A / np.sqrt(1.0 - WGS84_E2 * np.sin(phi) ** 2)
-    return np.column_stack([
-        (n + alt_m) * np.cos(phi) * np.cos(lam),
-        (n + alt_m) * np.cos(phi) * np.sin(lam),
-        (n * (1.0 - WGS84_E2) + alt_m) * np.sin(phi),
-    ])
 
 
 def quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:

@@ -1,0 +1,397 @@
+"""GPS (GNSS) fix as a measurement of the antenna's position in a local East-North-Up frame.
+
+Model
+-----
+The state is the planar pose ``x = (x, y, ψ)`` of the body B in the world W. When GPS is fused, W is
+East-North-Up at the datum of ``gps0/sensor.yaml`` (x east, y north). The antenna sits at the lever arm
+``l = (l_x, l_y)`` in the body frame (the translation of ``T_BS``; its height plays no part in a
+planar model). A fix measures the antenna's horizontal position::
+
+    z = h(x) + n,      h(x) = [x, y]ᵀ + R(ψ) l,      n ~ N(0, Σ)
+
+    R(ψ) = [[cos ψ, -sin ψ],
+            [sin ψ,  cos ψ]]
+
+``Σ`` is the fix's own 2x2 horizontal covariance (NavSatFix ``position_covariance``, east-north block),
+or ``σ² I`` with the default ``horizontal_sigma_m`` when the fix carries none.
+
+Jacobian with respect to ``(x, y, ψ)`` (world-frame perturbations, as the EKF uses)::
+
+    H = ∂h/∂x = [[1, 0, -sin ψ · l_x - cos ψ · l_y],
+                 [0, 1,  cos ψ · l_x - sin ψ · l_y]]
+
+GTSAM perturbs a ``Pose2`` on the right, ``x ⊕ δ = x · Exp(δ)`` with ``δ`` in the body frame; the
+Jacobian with respect to ``δ = (δx, δy, δψ)`` is ``[R(ψ) | R(ψ) [-l_y, l_x]ᵀ]`` (:func:`gps_factor`).
+
+Outliers
+--------
+With the innovation ``r = z - h(x)`` and its covariance ``S`` (``S = H P Hᵀ + Σ`` in a filter with state
+covariance ``P``; ``S = Σ`` against a fixed estimate), the squared Mahalanobis distance is
+``d² = rᵀ S⁻¹ r``. A fix with ``d² > gate_chi2`` (default 13.82, the 99.9 % point of χ² with 2 degrees
+of freedom) is rejected and counted. Accepted fixes are further down-weighted by a robust kernel of
+``d`` with width ``k`` (the weight multiplies the information ``Σ⁻¹``; a filter divides ``Σ`` by it):
+
+* Huber:  ``w(d) = 1`` for ``d ≤ k``, else ``k / d``
+* Cauchy: ``w(d) = 1 / (1 + (d / k)²)``
+
+In the factor graph the same kernel is GTSAM's ``mEstimator`` wrapped round the fix's Gaussian noise, so
+a 20 m multipath jump against decimetre noise pulls on the solution with a force that vanishes (Cauchy)
+or stays bounded (Huber); :meth:`GpsModel.check` gates it out before it is added at all.
+
+World alignment
+---------------
+Before GPS is fused the estimate lives in a frame anchored at the first pose. :func:`align_to_fixes`
+estimates the rigid planar transform (heading and offset) that carries a dead-reckoned track onto the
+first fixes, so that a backend can start in ENU with an estimated, not assumed, initial heading.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import GpsData
+
+log = logging.getLogger(__name__)
+
+#: 99.9 % point of the chi-square distribution with 2 degrees of freedom
+CHI2_2DOF_999 = 13.815510557964274
+ROBUST_KERNELS = ("huber", "cauchy", "none")
+
+
+# ---------------------------------------------------------------------- configuration
+@dataclass
+class GpsNoise:
+    """Gating and robust weighting of GPS fixes.
+
+    Attributes
+    ----------
+    gate_chi2 : float
+        Squared Mahalanobis distance above which a fix is rejected (default: 99.9 % of χ²(2)).
+    kernel : str
+        ``"huber"``, ``"cauchy"`` or ``"none"``.
+    kernel_width : float
+        ``k`` of the kernel, in units of the Mahalanobis distance (default 2.0).
+    min_sigma : float
+        Floor on the horizontal standard deviation [m] so that an optimistic receiver cannot pin the
+        estimate (default 0.01).
+    """
+
+    gate_chi2: float = CHI2_2DOF_999
+    kernel: str = "cauchy"
+    kernel_width: float = 2.0
+    min_sigma: float = 0.01
+
+    def __post_init__(self) -> None:
+        if self.kernel not in ROBUST_KERNELS:
+            raise ValueError(f"GPS kernel must be one of {', '.join(ROBUST_KERNELS)}, not {self.kernel!r}")
+        if not self.gate_chi2 > 0 or not self.kernel_width > 0 or not self.min_sigma >= 0:
+            raise ValueError("GPS gate_chi2 and kernel_width must be positive, min_sigma not negative")
+
+
+# ---------------------------------------------------------------------- model
+def predict(pose, lever_arm) -> np.ndarray:
+    """Predicted antenna position ``h(x) = [x, y] + R(ψ) l`` (module docstring).
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,) or (N, 3)
+        ``(x, y, ψ)`` of B in W.
+    lever_arm : array_like, shape (2,) or (3,)
+        Antenna position in the body frame [m]; only ``x, y`` are used.
+    """
+    p = np.asarray(pose, dtype=np.float64)
+    lx, ly = float(lever_arm[0]), float(lever_arm[1])
+    c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+    return np.stack([p[..., 0] + c * lx - s * ly, p[..., 1] + s * lx + c * ly], axis=-1)
+
+
+def jacobian(pose, lever_arm) -> np.ndarray:
+    """``∂h/∂(x, y, ψ)``, shape (2, 3), for world-frame perturbations (module docstring)."""
+    th = float(pose[2])
+    lx, ly = float(lever_arm[0]), float(lever_arm[1])
+    c, s = math.cos(th), math.sin(th)
+    return np.array([[1.0, 0.0, -s * lx - c * ly], [0.0, 1.0, c * lx - s * ly]])
+
+
+def body_jacobian(pose, lever_arm) -> np.ndarray:
+    """``∂h/∂δ`` for GTSAM's right perturbation ``x · Exp(δ)``, shape (2, 3)."""
+    th = float(pose[2])
+    lx, ly = float(lever_arm[0]), float(lever_arm[1])
+    c, s = math.cos(th), math.sin(th)
+    R = np.array([[c, -s], [s, c]])
+    return np.column_stack([R, R @ np.array([-ly, lx])])
+
+
+def mahalanobis2(residual, covariance) -> float:
+    """``rᵀ S⁻¹ r`` of a 2-vector residual and its 2x2 covariance."""
+    r = np.asarray(residual, dtype=np.float64)
+    return float(r @ np.linalg.solve(np.asarray(covariance, dtype=np.float64), r))
+
+
+def robust_weight(distance: float, kernel: str = "cauchy", width: float = 2.0) -> float:
+    """Weight in ``(0, 1]`` of the information of a fix at Mahalanobis distance ``distance``."""
+    d = abs(float(distance))
+    if kernel == "huber":
+        return 1.0 if d <= width else width / d
+    if kernel == "cauchy":
+        return 1.0 / (1.0 + (d / width) ** 2)
+    if kernel == "none":
+        return 1.0
+    raise ValueError(f"unknown robust kernel {kernel!r}")
+
+
+@dataclass
+class GpsCheck:
+    """One fix checked against a predicted pose.
+
+    Attributes
+    ----------
+    residual : ndarray (2,)
+        ``z - h(x)`` [m].
+    H : ndarray (2, 3)
+        ``∂h/∂(x, y, ψ)``.
+    R : ndarray (2, 2)
+        Noise covariance to use: the fix's covariance divided by the robust weight.
+    d2 : float
+        Squared Mahalanobis distance of the innovation.
+    weight : float
+        Robust weight (0 when rejected).
+    accepted : bool
+        Whether the fix passed the gate.
+    """
+
+    residual: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+    d2: float
+    weight: float
+    accepted: bool
+
+
+@dataclass
+class GpsModel:
+    """The GPS measurement model with its lever arm, noise settings and counters.
+
+    Parameters
+    ----------
+    lever_arm : array_like
+        Antenna in the body frame [m] (``x, y`` used).
+    noise : GpsNoise, optional
+
+    Attributes
+    ----------
+    n_used, n_rejected : int
+        Fixes accepted and rejected by the gate so far (:meth:`check` counts them).
+    rejected_t : list of float
+        Times of the rejected fixes, when :meth:`check` was given them.
+    """
+
+    lever_arm: np.ndarray
+    noise: GpsNoise = field(default_factory=GpsNoise)
+    n_used: int = 0
+    n_rejected: int = 0
+    rejected_t: list = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.lever_arm = np.asarray(self.lever_arm, dtype=np.float64).ravel()[:2]
+
+    def covariance(self, fix_covariance) -> np.ndarray:
+        """The fix's 2x2 covariance with the ``min_sigma`` floor applied."""
+        cov = 0.5 * (np.asarray(fix_covariance, dtype=np.float64) + np.asarray(fix_covariance).T)
+        return cov + np.eye(2) * max(0.0, self.noise.min_sigma ** 2 - float(np.min(np.linalg.eigvalsh(cov))))
+
+    def check(self, pose, fix_enu, fix_covariance, pose_covariance=None, t: float | None = None) -> GpsCheck:
+        """Residual, Jacobian, gate and robust weight of one fix (module docstring).
+
+        Parameters
+        ----------
+        pose : array_like (3,)
+            Predicted ``(x, y, ψ)`` in ENU.
+        fix_enu : array_like (2,) or (3,)
+            The fix's east, north [m].
+        fix_covariance : array_like (2, 2)
+            Its horizontal covariance [m²].
+        pose_covariance : array_like (3, 3), optional
+            Covariance of ``pose``; the gate then uses ``S = H P Hᵀ + Σ``.
+        t : float, optional
+            Time of the fix, kept in :attr:`rejected_t` when it is rejected.
+        """
+        z = np.asarray(fix_enu, dtype=np.float64).ravel()[:2]
+        r = z - predict(pose, self.lever_arm)
+        H = jacobian(pose, self.lever_arm)
+        R = self.covariance(fix_covariance)
+        S = R if pose_covariance is None else H @ np.asarray(pose_covariance, dtype=np.float64) @ H.T + R
+        d2 = mahalanobis2(r, S)
+        if not d2 <= self.noise.gate_chi2:
+            self.n_rejected += 1
+            if t is not None:
+                self.rejected_t.append(float(t))
+            log.debug("GPS fix%s rejected: Mahalanobis distance %.1f", "" if t is None else f" at {t:.2f} s",
+                      math.sqrt(d2) if math.isfinite(d2) else d2)
+            return GpsCheck(r, H, R, d2, 0.0, False)
+        self.n_used += 1
+        w = robust_weight(math.sqrt(d2), self.noise.kernel, self.noise.kernel_width)
+        return GpsCheck(r, H, R / w, d2, w, True)
+
+    def noise_model(self, fix_covariance):
+        """GTSAM noise model of one fix: the Gaussian covariance inside the robust kernel."""
+        import gtsam
+
+        base = gtsam.noiseModel.Gaussian.Covariance(self.covariance(fix_covariance))
+        k = self.noise.kernel_width
+        if self.noise.kernel == "huber":
+            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), base)
+        if self.noise.kernel == "cauchy":
+            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), base)
+        return base
+
+    def factor(self, key: int, fix_enu, fix_covariance):
+        """A GTSAM unary factor of one fix on the ``Pose2`` at ``key`` (:func:`gps_factor`)."""
+        return gps_factor(key, fix_enu, self.lever_arm, self.noise_model(fix_covariance))
+
+
+# ---------------------------------------------------------------------- GTSAM
+def gps_factor(key: int, fix_enu, lever_arm, noise_model):
+    """A ``gtsam.CustomFactor`` on one ``Pose2``: error ``h(x) - z`` with the body-frame Jacobian.
+
+    GTSAM's own ``GPSFactor`` constrains a ``Pose3`` (and ``PoseTranslationPrior2D`` a ``Pose2``
+    without lever arm), so the planar antenna model with a lever arm is written here once.
+
+    Parameters
+    ----------
+    key : int
+        Key of the ``Pose2`` variable.
+    fix_enu : array_like (2,)
+        The fix's east, north [m].
+    lever_arm : array_like (2,)
+        Antenna in the body frame [m].
+    noise_model : gtsam.noiseModel.Base
+        For example :meth:`GpsModel.noise_model`.
+    """
+    import gtsam
+
+    z = np.asarray(fix_enu, dtype=np.float64).ravel()[:2].copy()
+    lever = np.asarray(lever_arm, dtype=np.float64).ravel()[:2].copy()
+
+    def error(this, values, jacobians):
+        pose = values.atPose2(this.keys()[0])
+        p = np.array([pose.x(), pose.y(), pose.theta()])
+        if jacobians is not None:
+            jacobians[0] = body_jacobian(p, lever)
+        return predict(p, lever) - z
+
+    return gtsam.CustomFactor(noise_model, [key], error)
+
+
+# ---------------------------------------------------------------------- fixes in time
+def fixes_in(gps: GpsData, t0: float, t1: float) -> np.ndarray:
+    """Indices of the fixes with ``t0 <= t <= t1``."""
+    return np.flatnonzero((gps.t >= t0) & (gps.t <= t1))
+
+
+def interpolate_poses(t: np.ndarray, xyyaw: np.ndarray, t_query: np.ndarray) -> np.ndarray:
+    """Poses at ``t_query`` by linear interpolation (yaw unwrapped); ``t_query`` must lie in ``t``'s span."""
+    yaw = np.unwrap(xyyaw[:, 2])
+    return np.column_stack([np.interp(t_query, t, xyyaw[:, 0]), np.interp(t_query, t, xyyaw[:, 1]),
+                            se2.wrap_angle(np.interp(t_query, t, yaw))])
+
+
+def robust_fit_rigid_2d(source: np.ndarray, target: np.ndarray, weights: np.ndarray, width: float = 3.0,
+                        iterations: int = 10) -> tuple[float, np.ndarray, np.ndarray]:
+    """Rigid planar fit ``target ≈ R(yaw) source + t`` that ignores outliers such as multipath jumps.
+
+    Iteratively reweighted least squares (:func:`fusion_vo.geometry.se2.fit_rigid_2d` each step) with a
+    Cauchy weight ``1 / (1 + (r / (width · s))²)`` of each residual distance ``r``, where ``s`` is the
+    robust scale ``1.4826 · median(r)`` of the current residuals.
+
+    Returns
+    -------
+    yaw, translation, final robust weights (N,)
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    rw = np.ones(len(w))
+    yaw, offset = se2.fit_rigid_2d(source, target, w)
+    for _ in range(iterations):
+        c, s = math.cos(yaw), math.sin(yaw)
+        r = np.linalg.norm(source @ np.array([[c, s], [-s, c]]) + offset - target, axis=1)
+        scale = 1.4826 * float(np.median(r))
+        if scale <= 1e-12:
+            break
+        rw = 1.0 / (1.0 + (r / (width * scale)) ** 2)
+        yaw, offset = se2.fit_rigid_2d(source, target, w * rw)
+    return yaw, offset, rw
+
+
+@dataclass
+class Alignment:
+    """Planar rigid transform from a track's frame to ENU, fitted to fixes.
+
+    ``yaw`` [rad] and ``offset`` (2,) [m] map a position ``p`` of the track to ``R(yaw) p + offset``;
+    ``rms`` [m] is the residual of the fitted fixes that the robust fit kept (weight ≥ 0.5), ``n`` the
+    number of fixes, ``n_outliers`` those it discarded, ``yaw_sigma`` [rad] the standard deviation of
+    ``yaw`` from the fixes' noise alone: ``1 / sqrt(Σ |a_i - ā|² / σ_i²)``.
+    """
+
+    yaw: float
+    offset: np.ndarray
+    rms: float
+    n: int
+    yaw_sigma: float = float("nan")
+    n_outliers: int = 0
+
+    def apply(self, xyyaw: np.ndarray) -> np.ndarray:
+        """Poses of the track expressed in ENU."""
+        p = np.asarray(xyyaw, dtype=np.float64).reshape(-1, 3)
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return np.column_stack([c * p[:, 0] - s * p[:, 1] + self.offset[0],
+                                s * p[:, 0] + c * p[:, 1] + self.offset[1],
+                                se2.wrap_angle(p[:, 2] + self.yaw)])
+
+
+def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float | None = None,
+                   min_spread: float = 3.0) -> Alignment | None:
+    """Heading and offset of ENU relative to a dead-reckoned track, from the fixes up to ``t_end``.
+
+    The antenna positions of the track at the fix times, ``a_i = h(x(t_i))``, are fitted to the fixes
+    ``z_i`` by the weighted least-squares rigid transform ``z ≈ R(yaw) a + o`` (weights: inverse trace of
+    each fix's covariance), robust to multipath jumps (:func:`robust_fit_rigid_2d`). The heading is only observable once the antenna has moved: ``None`` is
+    returned while the fitted positions spread less than ``min_spread`` standard deviations of the
+    fixes' noise (a robot standing still, or too few fixes).
+
+    Parameters
+    ----------
+    t, xyyaw : ndarray
+        The track's times (N,) and poses (N, 3) in its own frame.
+    gps : GpsData
+        Fixes (ENU at the datum) and the lever arm.
+    t_end : float, optional
+        Use only fixes up to this time (default: every fix within the track).
+    min_spread : float
+        Required RMS spread of the antenna positions, in units of the fixes' standard deviation.
+    """
+    t = np.asarray(t, dtype=np.float64)
+    hi = t[-1] if t_end is None else min(float(t_end), t[-1])
+    idx = fixes_in(gps, t[0], hi)
+    if len(idx) < 3:
+        return None
+    a = predict(interpolate_poses(t, np.asarray(xyyaw, dtype=np.float64), gps.t[idx]), gps.lever_arm)
+    z = gps.enu[idx, :2]
+    var = np.trace(gps.covariance[idx], axis1=1, axis2=2) / 2.0
+    w = 1.0 / np.maximum(var, 1e-12)
+    yaw, offset, kept = robust_fit_rigid_2d(a, z, w)
+    sigma = math.sqrt(float(np.median(var)))
+    moment = np.sum((a - np.average(a, axis=0, weights=w)) ** 2, axis=1)
+    spread = math.sqrt(float(np.average(moment, weights=w)))
+    if spread < min_spread * sigma:
+        return None
+    c, s = math.cos(yaw), math.sin(yaw)
+    fitted = a @ np.array([[c, s], [-s, c]]) + offset
+    inlier = kept >= 0.5
+    rms = math.sqrt(float(np.mean(np.sum((fitted[inlier] - z[inlier]) ** 2, axis=1))))
+    return Alignment(float(yaw), offset, rms, len(idx), 1.0 / math.sqrt(float(np.sum(w * moment))),
+                     int(np.count_nonzero(~inlier)))
