@@ -17,8 +17,9 @@ parking lot: IMU at 30 Hz, wheel odometry at 10 Hz, GPS at 2.5 Hz). The script
 The GPS fixes themselves have about 0.9 m standard deviation (the bag's covariance), so errors of a
 metre or two are at the level of the reference. The AHRS heading of this IMU (a Microstrain 3DM-GX2
 that robot_localization calls "slightly broken") strays from the gyro's by up to about 35 degrees in
-the second half of the drive; the backends model it with a slowly wandering offset, but it still
-costs the variant that uses it a few metres. The Husky is skid-steered: its odometry reports about
+the second half of the drive (a heading-dependent, hard-iron-like error); the backends' consistency
+monitor finds it contradicting the gyro and the wheels and drops it for the whole log (it prints a
+note), so both variants fuse the wheels with the gyro. The Husky is skid-steered: its odometry reports about
 four fifths of the turn rate the gyro measures, with an error that persists over a turn (the
 backends model it as correlated, not white), and it is stamped about 0.39 s after the gyro, which
 batch fusion estimates from the two yaw rates and corrects (it prints a note).
@@ -27,7 +28,8 @@ Usage::
 
     python examples/husky_gps.py [BAG] [--backend ekf|gtsam|all] [--keep DIR]
 
-``BAG`` defaults to ``../shared/data/robot_localization/test1.bag`` relative to the repository.
+``BAG`` defaults to ``tests/data/robot_localization/test1.bag`` of the repository (BSD, see the
+``LICENSE`` there).
 """
 
 from __future__ import annotations
@@ -52,7 +54,7 @@ from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw
 from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_BAG = REPO.parent / "shared" / "data" / "robot_localization" / "test1.bag"
+DEFAULT_BAG = REPO / "tests" / "data" / "robot_localization" / "test1.bag"
 #: base_link -> imu_link of robot_localization's test_ekf_localization_node_bag1.test
 HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 

@@ -22,6 +22,8 @@ Outputs (in ``out_dir``):
                       similarity's scale)
 ``wheel.tum``         wheel dead reckoning (when the recording has wheel encoders)
 ``ekf.tum``, ``ekf_smoothed.tum``, ``gtsam.tum``, ``gtsam_online.tum``   fused trajectories
+``NAME.cov.csv``      per pose of ``NAME.tum`` (same timestamps): ``# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw``,
+                      the upper triangle of the (x, y, yaw) covariance in m², m·rad, rad²
 ``run.yaml``          the configuration used and the recording's path
 ``summary.json``      counts, timings and notes of the run
 ``metrics.json``, figures, ``report.html``   the evaluation, when the recording has ground truth
@@ -41,6 +43,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
@@ -343,12 +346,15 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
-        fused = _run_backends(rec, vo, sensors, config, summary, inputs.times)
+        fused, covariances = _run_backends(rec, vo, sensors, config, summary, inputs.times)
         trajectories.update(fused)
         for name, traj in trajectories.items():
             if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
                 write_tum(staging / f"{name}.tum", traj.t, traj.xyyaw)
                 summary.trajectories.append(name)
+                cov = covariances.get(name)
+                if cov is not None and len(cov) == len(traj):
+                    write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
         run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}
         write_atomic(staging / "run.yaml", yaml.safe_dump(run_info, sort_keys=False))
         fields = {k: v for k, v in summary.__dict__.items() if k != "metrics"}
@@ -376,8 +382,10 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
 
 
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
-                  summary: RunSummary, spans_times: dict[str, np.ndarray] | None = None) -> dict[str, PoseData]:
-    """Wheel dead reckoning and the fused backends; returns name -> trajectory."""
+                  summary: RunSummary, spans_times: dict[str, np.ndarray] | None = None
+                  ) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
+    """Wheel dead reckoning and the fused backends; returns name -> trajectory and name -> (N, 3, 3)
+    pose covariances."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
@@ -398,7 +406,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
             note = note.replace("the other sensors carried the estimate",
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
-    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration")}
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates
@@ -407,7 +415,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
         if text:
             summary.notes.append(f"{backend_name} self-calibration: {text} (all estimates in summary.json)")
     log.debug("backends took %.2f s", time.perf_counter() - t0)
-    return dict(result.trajectories)
+    return dict(result.trajectories), dict(result.covariances)
 
 
 def _evaluate(out_dir: Path, seq: Path) -> dict | None:

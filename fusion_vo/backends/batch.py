@@ -92,12 +92,20 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
+    result.inconsistent = [ep.as_dict() for ep in iv.episodes]
     if "ekf" in names:
         result.merge(run_ekf(iv, config))
     if "gtsam" in names:
         from fusion_vo.backends.graph import run_graph  # GTSAM is imported only when used
 
-        result.merge(run_graph(iv, config))
+        try:
+            result.merge(run_graph(iv, config))
+        except RuntimeError as exc:
+            # GTSAM's IndeterminateSystemException: a variable the configuration leaves unconstrained
+            where = " ".join(str(exc).split())
+            where = where[where.find("near variable"):].split(".")[0] if "near variable" in where else where[:80]
+            raise InputError(f"gtsam: the factor graph cannot be solved ({where}); a configured noise makes a "
+                             "variable unobservable -- check the fusion sigmas, or use --backend ekf") from None
     for note in result.notes:
         logger.info("%s", note)
     return result

@@ -8,6 +8,7 @@ configuration file is an error rather than a silently ignored setting.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -115,6 +116,21 @@ class FusionConfig:
         (default True; a controller's odometry is often stamped when published, late).
     max_odom_delay : float
         Largest delay [s] searched (default 1).
+    monitor : bool
+        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) against each other over windows
+        and drop the component that contradicts the others there (:mod:`fusion_vo.backends.monitor`;
+        default True).
+    monitor_window : float
+        Window length [s] of that check (default 2).
+    monitor_probability : float
+        A window whose NIS exceeds the chi-square quantile of this probability (1 degree of freedom)
+        is inconsistent (default 0.9999: NIS 15.1).
+    monitor_whole_fraction : float
+        A component inconsistent over more than this fraction of the time it was checked is dropped
+        for the whole recording (default 0.5).
+    monitor_bias_sigma : float
+        Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
+        (default 0.001; a median over many samples at rest).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller).
@@ -139,6 +155,11 @@ class FusionConfig:
     odom_base_sigma: float = 0.3
     sync_odometry: bool = True
     max_odom_delay: float = 1.0
+    monitor: bool = True
+    monitor_window: float = 2.0
+    monitor_probability: float = 0.9999
+    monitor_bias_sigma: float = 0.001
+    monitor_whole_fraction: float = 0.5
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
@@ -164,6 +185,16 @@ class FusionConfig:
             raise InputError("graph.calibration_interval must be positive")
         if self.graph.keyframe_every < 1:
             raise InputError("graph.keyframe_every must be at least 1")
+        if not self.monitor_window > 0 or not 0.0 < self.monitor_probability < 1.0 or not self.monitor_bias_sigma > 0:
+            raise InputError("monitor_window and monitor_bias_sigma must be positive, monitor_probability in (0, 1)")
+        for key, value in _numbers(self):
+            if not math.isfinite(value):
+                raise InputError(f"'{key}' must be a finite number, not {value}")
+            leaf = key.rsplit(".", 1)[-1]
+            if ("sigma" in leaf or leaf in _POSITIVE) and value <= 0:
+                raise InputError(f"'{key}' must be positive, not {value}")
+            if value < 0:
+                raise InputError(f"'{key}' must not be negative, not {value}")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
 
@@ -178,6 +209,20 @@ class FusionConfig:
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
+
+
+#: noise parameters that must be strictly positive besides every ``*sigma*`` (a zero would claim a perfect sensor)
+_POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
+
+
+def _numbers(obj, prefix: str = ""):
+    """``(dotted key, value)`` of every float field of a (nested) config dataclass, except the pose."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _numbers(value, f"{prefix}{f.name}.")
+        elif isinstance(value, float) and f.name not in ("initial_pose", "camera_height"):
+            yield f"{prefix}{f.name}", value
 
 
 def _from_dict(cls, data: Any, prefix: str, path):

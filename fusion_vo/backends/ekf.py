@@ -84,6 +84,9 @@ logger = logging.getLogger(__name__)
 PX, PY, YAW, VX, VY, W, BG, KV, KB, AO = range(10)
 DIM = 10
 _FROZEN_VAR = 1e-12
+_DROPPED_VAR = 1e8
+_REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
+  # variance of a measurement row the consistency monitor dropped
 
 
 class PlanarEkf:
@@ -230,11 +233,18 @@ class PlanarEkf:
             S = H @ P @ H.T + R
             d2 = float(y @ np.linalg.solve(S, y))
             count = self.counts.setdefault(sensor, SensorCount())
-            if not np.isfinite(d2) or d2 > self._thresholds[len(y)]:
+            threshold = self._thresholds[len(y)]
+            if not np.isfinite(d2) or d2 > _REJECT_FACTOR * threshold:
                 count.gated += 1
                 logger.debug("ekf: %s gated (d²=%.1f)", sensor, d2)
                 continue
             count.used += 1
+            if d2 > threshold:
+                # outside the gate but not absurd: down-weighted so that it sits on the gate (the
+                # bounded influence of the graph's robust kernel) rather than dropped -- a robot that
+                # brakes harder than the constant-twist model expects must not coast on
+                count.gated += 1
+                R = R * (d2 / threshold) + H @ P @ H.T * (d2 / threshold - 1.0)
             keep.append((y, H, R))
         if not keep:
             return
@@ -271,6 +281,12 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
         u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0],
                          gyro_turn(iv))
         u[:, 0] *= iv.cx
+        if iv.wheel_yaw_ok is not None and not iv.wheel_yaw_ok.all():
+            # yaw component dropped by the consistency monitor: the speed rows stay
+            drop = ~iv.wheel_yaw_ok
+            R = R.copy()
+            R[drop, 2, :] = R[drop, :, 2] = 0.0
+            R[drop, 2, 2] = _DROPPED_VAR
         out["wheel"] = (iv.wheel_ok, u, R)
         noise = config.wheel_model(iv.twist)[0]
         still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)

@@ -334,7 +334,14 @@ class GraphBuilder:
         if iv.uses("wheel") and iv.wheel_ok[g0:g1].all():
             still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
-            if self.kb_on:
+            yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
+            if not yaw_ok:  # yaw component dropped by the consistency monitor: translation only
+                m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
+                cov_xy = cov.copy()
+                cov_xy[2, :] = cov_xy[:, 2] = 0.0
+                cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
+                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
+            elif self.kb_on:
                 # translation from the arc; the heading change goes through the wheel-base factor
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
@@ -470,7 +477,8 @@ def initial_calibration(iv: Intervals) -> dict:
     wheel_yaw = wheel_xy = None
     if iv.uses("wheel"):
         inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
-        wheel_yaw = np.where(iv.wheel_ok, inc[:, 2], np.nan)
+        yaw_ok = iv.wheel_ok if iv.wheel_yaw_ok is None else iv.wheel_ok & iv.wheel_yaw_ok
+        wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
         wheel_xy = np.where(iv.wheel_ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
     ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw
     if iv.uses("gyro") and ref is not None:
@@ -639,7 +647,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     counts = builder.counts
     if isam is not None:
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
-        result.covariances["gtsam_online"] = online_cov
+        result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
         result.counts["gtsam_online"] = counts
         result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
         result.timing["gtsam_online"] = t_online
@@ -662,7 +670,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.calibration["gtsam"] = _calibration(solution, builder)
         t_solve = time.process_time() - t0
         if gcfg.marginals:
-            result.covariances["gtsam"] = pose_marginals(lin, solution, n_nodes)
+            result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
         result.timing["gtsam_solve"] = t_solve
@@ -684,6 +692,17 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
         return solver.calculateEstimateDouble(key)
 
     return value
+
+
+def world_covariances(yaw: np.ndarray, cov_local: np.ndarray) -> np.ndarray:
+    """Pose covariances (N, 3, 3) from GTSAM's Pose2 tangent space (x, y along the body's own axes)
+    to the world frame's (x, y, yaw), as the EKF reports them and ``NAME.cov.csv`` holds them:
+    ``P_W = J P Jᵀ`` with ``J = diag(R(ψ), 1)`` (first order of ``p ⊕ δ``)."""
+    yaw = np.asarray(yaw, dtype=np.float64)
+    J = np.zeros((len(yaw), 3, 3))
+    c, s = np.cos(yaw), np.sin(yaw)
+    J[:, 0, 0], J[:, 0, 1], J[:, 1, 0], J[:, 1, 1], J[:, 2, 2] = c, -s, s, c, 1.0
+    return J @ np.asarray(cov_local) @ np.transpose(J, (0, 2, 1))
 
 
 def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_nodes: int) -> np.ndarray:

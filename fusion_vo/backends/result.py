@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -57,6 +59,10 @@ class FusionResult:
         Plain-language remarks (camera lost from t=.. to .., streams that stopped, late data).
     timing : dict[str, float]
         CPU seconds per backend (``gtsam_online_per_node_ms``: iSAM2 milliseconds per node).
+    inconsistent : list[dict]
+        Spans in which a stream's component contradicted the others and was dropped (sensor,
+        component, start, end [s on the recording clock], max_nis, against); see
+        :mod:`fusion_vo.backends.monitor`.
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -65,6 +71,7 @@ class FusionResult:
     calibration: dict[str, dict[str, float]] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     timing: dict[str, float] = field(default_factory=dict)
+    inconsistent: list[dict] = field(default_factory=list)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -89,4 +96,43 @@ class FusionResult:
             "calibration": self.calibration,
             "notes": list(self.notes),
             "timing_s": self.timing,
+            "inconsistent": list(self.inconsistent),
         }
+
+
+COV_HEADER = "# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw"
+
+
+def write_pose_covariances(path: str | Path, t: np.ndarray, cov: np.ndarray) -> None:
+    """Write ``NAME.cov.csv``: per pose, the upper triangle of the ``(x, y, yaw)`` covariance.
+
+    One comma-separated row per pose of ``NAME.tum`` (same timestamps) after the header
+    ``# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw``; units m², m², m·rad, m², m·rad, rad². Written
+    atomically (a temporary file renamed into place).
+    """
+    path = Path(path)
+    t = np.asarray(t, dtype=np.float64).reshape(-1)
+    cov = np.asarray(cov, dtype=np.float64).reshape(-1, 3, 3)
+    if len(t) != len(cov):
+        raise ValueError(f"{len(t)} timestamps but {len(cov)} covariances")
+    iu = np.triu_indices(3)
+    data = np.column_stack([t, cov[:, iu[0], iu[1]]])
+    import io
+
+    from fusion_vo.outputs import write_atomic
+
+    buf = io.StringIO()
+    buf.write(COV_HEADER + "\n")
+    np.savetxt(buf, data, fmt=["%.9f"] + ["%.9e"] * 6, delimiter=",")
+    write_atomic(path, buf.getvalue())  # renamed into place; the mode follows the umask
+
+
+def read_pose_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read ``NAME.cov.csv`` back: timestamps (N,) and covariances (N, 3, 3)."""
+    data = np.loadtxt(path, delimiter=",", comments="#", ndmin=2)
+    t = data[:, 0]
+    cov = np.zeros((len(data), 3, 3))
+    iu = np.triu_indices(3)
+    cov[:, iu[0], iu[1]] = data[:, 1:7]
+    cov[:, iu[1], iu[0]] = data[:, 1:7]
+    return t, cov

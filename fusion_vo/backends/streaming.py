@@ -353,7 +353,8 @@ class _OnlineGraph:
         key = self.graph.X(self.n)
         pose = self.isam.calculateEstimatePose2(key)
         self.prev_pose = pose
-        return np.array([pose.x(), pose.y(), pose.theta()]), self.isam.marginalCovariance(key)
+        cov = self.graph.world_covariances(np.array([pose.theta()]), self.isam.marginalCovariance(key)[None])[0]
+        return np.array([pose.x(), pose.y(), pose.theta()]), cov
 
     def start(self):
         cfg = self.config

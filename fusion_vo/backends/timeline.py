@@ -131,6 +131,11 @@ class Intervals:
         AHRS heading minus the estimate's heading (from the first AHRS sample).
     twist : bool
         The wheel travel comes from an odometry twist (``odom0``) rather than encoder ticks.
+    wheel_yaw_ok : ndarray (K,) or None
+        Where the wheels' yaw component may be used (False where the consistency monitor dropped it;
+        None: everywhere the wheels are).
+    episodes : list
+        The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
     """
 
     t: np.ndarray
@@ -155,6 +160,8 @@ class Intervals:
     notes: list[str] = field(default_factory=list)
     heading_offset: float | None = None
     twist: bool = False
+    wheel_yaw_ok: np.ndarray | None = None
+    episodes: list = field(default_factory=list)
 
     @property
     def n_steps(self) -> int:
@@ -263,6 +270,12 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         _add_visual(iv, streams.visual, counts, notes)
     if streams.range is not None:
         _add_range(iv, streams.range, config, counts)
+    iv.wheel_yaw_ok = np.ones(K, bool)
+    if nodes is None:  # whole-recording use: check the heading sources against each other
+        from fusion_vo.backends.monitor import check_heading_sources
+
+        iv.episodes = check_heading_sources(iv, config)
+        notes.extend(ep.note(T[0]) for ep in iv.episodes)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
             for a, b in _uncovered_runs(T, ok, 0.5):

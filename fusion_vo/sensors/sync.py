@@ -11,8 +11,10 @@ with an unknown scale ``k`` (a skid-steered base reports a fraction of its turn)
 (``a`` lags ``b`` by ``d`` seconds). Both rates are resampled on a common grid of step ``h`` and ``d``
 is the shift in ``[-d_max, d_max]`` that maximises their normalised cross-correlation (which does not
 depend on ``k``), refined to below the grid step by a parabola through the peak and its neighbours.
-The estimate is only returned when the peak correlation exceeds ``min_correlation``: a recording
-without turns has nothing to align.
+The estimate is only returned when the peak correlation exceeds ``min_correlation`` (0.8): a
+recording without turns has nothing to align, and a twist whose yaw rate has little to do with the
+gyro's (a skid-steered base's reported turn rate can be off by a large factor and shape) would
+give a delay that is only noise; moving its timestamps by it would shift every speed sample.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ logger = logging.getLogger(__name__)
 
 
 def rate_delay(t_a, rate_a, t_b, rate_b, max_delay: float = 1.0, step: float = 0.01,
-               min_correlation: float = 0.5) -> float | None:
+               min_correlation: float = 0.8) -> float | None:
     """Delay ``d`` [s] of stream ``a`` behind stream ``b`` (see the module docstring), or None.
 
     Parameters

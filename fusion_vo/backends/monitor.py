@@ -1,0 +1,284 @@
+"""Per-component consistency of the heading sources: a stream that lies is caught before fusion.
+
+Four streams may measure how much the robot turned over a window of ``W`` seconds
+(``FusionConfig.monitor_window``):
+
+* the wheels' yaw component ``θ_w = (d_r - d_l) / b`` (a twist's ``ω`` integrated);
+* the gyro's integrated angle ``Θ`` minus its bias ``b̂ W`` (``b̂`` the median of the gyro's rate where
+  the wheels stand still, else of its rate minus the AHRS heading's rate, else 0);
+* the AHRS heading's change ``ψ(t_1) - ψ(t_0)``;
+* the camera's summed heading increments.
+
+Each has a variance over the window from its noise model (the wheels' includes the relative error of
+the track width, ``sqrt(yaw_scale² + base_sigma²)`` of the turn, so a skid-steered base that turns
+1.5 times what its twist says is *not* a liar; the gyro's includes the bias' uncertainty
+``monitor_bias_sigma · W``; the AHRS's its white noise and its offset walk). Windows of ``W``, ``5 W`` and
+``15 W`` are checked, so a fast lie (a wrong yaw rate) and a slow drift (an AHRS heading straying by a
+degree a second, a gyro bias step) are both seen. In each window a source's normalised innovation
+squared against the inverse-variance mean of the others, ``NIS = (θ_s - θ̄)² / (σ_s² + σ̄²)``, is
+tested against the chi-square quantile of ``monitor_probability`` (1 degree of freedom); of the
+sources above it, the one whose removal leaves the others most consistent (their chi-square about
+their own mean within its quantile) is dropped in that window, so one liar cannot condemn two honest
+streams. With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
+yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
+judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for the whole recording:
+its offset is no longer known.
+
+The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
+(:class:`~fusion_vo.backends.streaming.StreamingFusion`) does not run it yet, and speeds (the wheels'
+against the camera's) are not checked yet: only heading sources are.
+
+Only the inconsistent *component* is dropped, for as long as it disagrees (it comes back after a
+window whose NIS is below the 90 % quantile, 2.7, so a liar is not trusted again because one window
+happened to be quiet; a component found inconsistent over more than ``monitor_whole_fraction`` of
+the time it was checked is dropped for the whole recording, since its quiet windows are no evidence
+that it is right there): the wheels' speed
+stays in use while their yaw rate is dropped (``Intervals.wheel_yaw_ok``), a dropped gyro or AHRS
+span clears ``gyro_ok`` / ``ahrs_ok`` there. Each drop becomes an :class:`Episode` (sensor, component,
+start, end, largest NIS), a plain note and an entry of ``summary.json``; it never makes the run fail.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import chi2
+
+from fusion_vo.backends.config import FusionConfig
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class Episode:
+    """A span in which one component of one stream contradicted the others and was dropped."""
+
+    sensor: str
+    component: str
+    start: float
+    end: float
+    max_nis: float
+    against: str
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+    def note(self, t0: float) -> str:
+        return (f"{self.sensor} {self.component} inconsistent with {self.against} from t={self.start:.2f} "
+                f"({self.start - t0:.1f} s in) to t={self.end:.2f} ({self.end - t0:.1f} s in), "
+                f"NIS up to {self.max_nis:.0f}: dropped there")
+
+
+def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
+    """Consecutive runs of node intervals ``[a, b)`` about ``length`` seconds long."""
+    K = len(T) - 1
+    out = []
+    a = 0
+    while a < K:
+        b = int(np.searchsorted(T, T[a] + length - 1e-9))
+        b = min(max(b, a + 1), K)
+        out.append((a, b))
+        a = b
+    if len(out) > 1 and T[out[-1][1]] - T[out[-1][0]] < 0.5 * length:
+        out[-2] = (out[-2][0], out[-1][1])
+        out.pop()
+    return out
+
+
+def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None) -> float:
+    """The gyro's bias for the check: median rate at rest, else median rate minus the AHRS's, the
+    camera's or the wheels' heading rate (a constant bias is the backends' to estimate, not a lie)."""
+    dt = iv.dt
+    rate = np.where(iv.gyro_ok, iv.gyro_angle / np.maximum(dt, 1e-9), np.nan)
+    if still is not None and np.count_nonzero(still & iv.gyro_ok) >= 10:
+        return float(np.median(rate[still & iv.gyro_ok]))
+    refs = []
+    if iv.ahrs_ok.any():
+        refs.append((iv.ahrs_ok[:-1] & iv.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
+    if len(iv.vis_i0):
+        ok = np.zeros(len(dt), bool)
+        ang = np.zeros(len(dt))
+        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
+            ok[a:b] = True
+            ang[a:b] = delta[2] / (b - a)
+        refs.append((ok, ang))
+    if wheel_yaw is not None:
+        refs.append((iv.wheel_ok.copy(), wheel_yaw))
+    for ok, ang in refs:
+        ok = ok & iv.gyro_ok
+        if np.count_nonzero(ok) >= 10:
+            return float(np.median(rate[ok] - ang[ok] / dt[ok]))
+    return 0.0
+
+
+def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
+    """Find and drop the inconsistent heading components of ``iv`` (in place); returns the episodes."""
+    from fusion_vo.sensors.wheel import arc_increment, standstill
+
+    cfg = config
+    if not cfg.monitor or iv.n_steps < 2:
+        return []
+    T, dt = iv.t, iv.dt
+    threshold = float(chi2.ppf(cfg.monitor_probability, 1))
+    release = float(chi2.ppf(0.9, 1))
+    sources: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # name -> (ok, angle, var) per interval
+    wheel_yaw = still = None
+    wheel_rel = 0.0
+    if iv.uses("wheel"):
+        noise, base_sigma = cfg.wheel_model(iv.twist)
+        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
+        wheel_yaw = inc[:, 2]
+        still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+    bias = _gyro_bias(iv, wheel_yaw, still) if iv.uses("gyro") else 0.0
+    gyro = None
+    if iv.uses("gyro"):
+        gyro = iv.gyro_angle - bias * dt
+        sources["gyro"] = (iv.gyro_ok.copy(), gyro, cfg.imu.gyro_noise_density**2 * dt)
+    if wheel_yaw is not None:
+        d = np.abs(0.5 * (iv.wheel_dl + iv.wheel_dr))
+        rel = noise.yaw_scale**2 + base_sigma**2
+        turn = np.abs(np.where(iv.gyro_ok, gyro, wheel_yaw)) if gyro is not None else np.abs(wheel_yaw)
+        var = noise.k_yaw**2 * turn + 2.0 * (noise.k**2 * d + noise.sigma_floor**2) / iv.wheel_base**2
+        # the relative error is shared over a window (a track width), added per window below
+        sources["wheel"] = (iv.wheel_ok.copy(), wheel_yaw, var)
+        wheel_rel = rel
+    if iv.ahrs_ok.any():
+        ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:]
+        d = np.angle(np.exp(1j * (iv.ahrs_yaw[1:] - iv.ahrs_yaw[:-1])))
+        sources["ahrs"] = (ok, d, np.zeros(len(dt)))
+    if len(iv.vis_i0):
+        ok = np.zeros(len(dt), bool)
+        ang = np.zeros(len(dt))
+        var = np.zeros(len(dt))
+        for a, b, delta, cov in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov):
+            n = b - a
+            ok[a:b] = True
+            ang[a:b] = delta[2] / n
+            var[a:b] = cov[2, 2] / n
+        sources["camera"] = (ok, ang, var)
+    if len(sources) < 2:
+        return []
+    names = list(sources)
+    bad = {s: np.zeros(len(dt), bool) for s in names}
+    peak = {s: np.zeros(len(dt)) for s in names}
+    against = {s: np.full(len(dt), "", dtype=object) for s in names}
+    for scale in _SCALES:
+        dropped: set[str] = set()  # hysteresis state at this scale
+        for a, b in _windows(T, cfg.monitor_window * scale):
+            theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
+            liar, nis, others = _find_liar(theta, var, threshold, cfg.monitor_probability)
+            for s in names:
+                if s == liar:
+                    dropped.add(s)
+                elif s in dropped:
+                    # hysteresis: a dropped component comes back only once it agrees well again
+                    n = _window_nis(s, theta, var)
+                    if n is None or n <= release:
+                        dropped.discard(s)
+                        continue
+                    nis, others = n, [o for o in theta if o != s]
+                else:
+                    continue
+                bad[s][a:b] = True
+                peak[s][a:b] = np.maximum(peak[s][a:b], nis)
+                against[s][a:b] = ", ".join(others)
+    episodes: list[Episode] = []
+    for s in names:
+        checked = np.count_nonzero(sources[s][0])
+        fraction = 0.0 if s == "ahrs" else cfg.monitor_whole_fraction
+        if checked and np.count_nonzero(bad[s]) > fraction * checked:
+            # a stream that contradicts the others most of the time is not trusted in its quiet windows either
+            who = next(x for x in against[s] if x)
+            bad[s][:] = True
+            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[0]), float(T[-1]), float(peak[s].max()), who))
+            continue
+        k = 0
+        while k < len(dt):
+            if not bad[s][k]:
+                k += 1
+                continue
+            j = k
+            while j < len(dt) and bad[s][j]:
+                j += 1
+            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[k]), float(T[j]), float(peak[s][k:j].max()),
+                                    str(against[s][k])))
+            k = j
+    episodes.sort(key=lambda e: e.start)
+    if "wheel" in bad:
+        iv.wheel_yaw_ok = iv.wheel_yaw_ok & ~bad["wheel"]
+    if "gyro" in bad:
+        iv.gyro_ok = iv.gyro_ok & ~bad["gyro"]
+    if "ahrs" in bad:
+        drop = np.zeros(len(T), bool)
+        drop[1:] |= bad["ahrs"]
+        iv.ahrs_ok = iv.ahrs_ok & ~drop
+    for ep in episodes:
+        logger.info("monitor: %s", ep.note(T[0]))
+    return episodes
+
+
+def _window_sums(sources: dict, a: int, b: int, span: float, cfg: FusionConfig, wheel_rel: float):
+    """Each source's heading change over intervals ``[a, b)`` and its variance (sources that cover it)."""
+    theta, var = {}, {}
+    for s, (ok, ang, v) in sources.items():
+        if ok[a:b].all():
+            theta[s] = float(ang[a:b].sum())
+            var[s] = float(v[a:b].sum())
+    if "gyro" in theta:
+        var["gyro"] += (cfg.monitor_bias_sigma * span) ** 2
+    if "ahrs" in theta:
+        var["ahrs"] += 2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * span
+    if "wheel" in theta:
+        ref = theta.get("gyro", theta["wheel"])
+        var["wheel"] += wheel_rel * ref**2
+    return theta, var
+
+
+def _find_liar(theta: dict, var: dict, threshold: float, probability: float):
+    """The one source to drop in a window, its NIS and the sources it contradicts, or ``(None, 0, [])``.
+
+    With two sources, only the wheels' yaw is ever dropped. With more, each source whose NIS against
+    the others' mean exceeds ``threshold`` is a candidate; the one whose removal leaves the others most
+    consistent (smallest chi-square about their mean, which must itself pass) is dropped.
+    """
+    present = list(theta)
+    if len(present) == 2:
+        if "wheel" not in present:
+            return None, 0.0, []
+        other = [s for s in present if s != "wheel"][0]
+        nis = (theta["wheel"] - theta[other]) ** 2 / (var["wheel"] + var[other])
+        return ("wheel", nis, [other]) if nis > threshold else (None, 0.0, [])
+    if len(present) < 2:
+        return None, 0.0, []
+    best = (None, 0.0, [], np.inf)
+    for s in present:
+        nis = _window_nis(s, theta, var)
+        if nis is None or nis <= threshold:
+            continue
+        others = [o for o in present if o != s]
+        w = np.array([1.0 / max(var[o], 1e-12) for o in others])
+        vals = np.array([theta[o] for o in others])
+        mean = float(np.sum(w * vals) / w.sum())
+        rest = float(np.sum(w * (vals - mean) ** 2))
+        if rest <= chi2.ppf(probability, len(others) - 1) and rest < best[3]:
+            best = (s, nis, others, rest)
+    return best[:3]
+
+
+def _window_nis(s: str, theta: dict, var: dict) -> float | None:
+    """NIS of source ``s`` against the inverse-variance mean of the others in one window (None: absent)."""
+    if s not in theta or len(theta) < 2:
+        return None
+    others = [o for o in theta if o != s]
+    w = np.array([1.0 / max(var[o], 1e-12) for o in others])
+    mean = float(np.sum(w * [theta[o] for o in others]) / w.sum())
+    return (theta[s] - mean) ** 2 / (var[s] + 1.0 / w.sum())
+
+
+_SCALES = (1, 5, 15)  # window lengths in units of monitor_window: fast lies and slow drifts
+_SENSOR = {"wheel": "wheel", "gyro": "imu", "ahrs": "imu", "camera": "camera"}
+_COMPONENT = {"wheel": "yaw rate", "gyro": "gyro yaw rate", "ahrs": "AHRS heading", "camera": "visual heading"}
+
+__all__ = ["Episode", "check_heading_sources"]

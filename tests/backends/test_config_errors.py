@@ -1,0 +1,42 @@
+"""A configured sigma that is zero, negative or NaN is a one-line error naming the key."""
+
+from pathlib import Path
+
+import pytest
+
+from fusion_vo.backends import FusionConfig
+from fusion_vo.cli.main import main
+from fusion_vo.errors import InputError
+
+
+@pytest.mark.parametrize("options, key", [
+    ({"imu": {"gyro_noise_density": 0.0}}, "imu.gyro_noise_density"),
+    ({"odom": {"k": float("nan")}}, "odom.k"),
+    ({"visual_scale_sigma": -0.01}, "visual_scale_sigma"),
+    ({"range": {"sigma": 0.0}}, "range.sigma"),
+    ({"imu": {"ahrs_offset_walk": -0.1}}, "imu.ahrs_offset_walk"),
+])
+def test_bad_sigma_names_the_key(options, key):
+    with pytest.raises(InputError) as exc:
+        FusionConfig.from_dict(options)
+    assert f"'{key}'" in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_zero_offset_walk_and_yaw_scale_are_allowed():
+    cfg = FusionConfig.from_dict({"imu": {"ahrs_offset_walk": 0.0}, "wheel": {"yaw_scale": 0.0}})
+    assert cfg.imu.ahrs_offset_walk == 0.0
+
+
+def test_cli_exits_2_on_a_bad_sigma(tmp_path, capsys):
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text("fusion:\n  imu:\n    gyro_noise_density: .nan\n")
+    seq = tmp_path / "seq"
+    bag = Path(__file__).resolve().parents[1] / "data" / "robot_localization" / "test2.bag"
+    assert main(["import-bag", str(bag), str(seq), "--imu-topic", "/imu/data",
+                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
+    capsys.readouterr()
+    code = main(["run", str(seq), "--out", str(tmp_path / "out"), "--config", str(cfg)])
+    err = capsys.readouterr().err
+    assert code == 2 and "imu.gyro_noise_density" in err, err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out" / "ekf.tum").exists()

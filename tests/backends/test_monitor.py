@@ -1,0 +1,75 @@
+"""The consistency monitor: a heading source that contradicts the others is dropped there, and said so."""
+
+import dataclasses
+
+import numpy as np
+
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.errors import InputError
+
+from backend_synth import position_errors
+from husky_like import husky_like
+
+FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+
+
+def _episodes(result, component):
+    return [e for e in result.inconsistent if e["component"] == component]
+
+
+def test_wheel_yaw_rate_seven_times_too_large_is_dropped_but_its_speed_kept():
+    """Odometry whose yaw rate is 7 × the truth (the Jackal log's twist) next to a gyro and an AHRS."""
+    odom, imu, truth = husky_like(yaw_scale=7.0, ahrs_drift=0.0, gyro_bias=0.002)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    wheel = _episodes(result, "yaw rate")
+    assert len(wheel) == 1 and wheel[0]["sensor"] == "wheel", result.inconsistent
+    assert wheel[0]["start"] <= truth.t[1] and wheel[0]["end"] >= truth.t[-1] - 0.1  # the whole recording
+    assert len(result.inconsistent) == 1, result.inconsistent
+    assert any("wheel yaw rate inconsistent with gyro, ahrs" in n for n in result.notes)
+    _, wheel_rms = position_errors(result.trajectories["wheel"], truth)
+    for name in FUSED:
+        end, rms = position_errors(result.trajectories[name], truth)
+        # the speed is still used (without it nothing measures the translation)
+        assert end < 0.5 and rms < 0.3, (name, end, rms)
+        assert rms < 0.2 * wheel_rms
+
+
+def test_a_skid_steer_scale_within_the_track_width_prior_is_not_a_lie():
+    odom, imu, _ = husky_like(yaw_scale=0.75, ahrs_drift=0.0)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
+    assert result.inconsistent == []
+
+
+def test_gyro_bias_step_is_dropped_from_the_step_on():
+    """A gyro whose bias jumps by 0.05 rad/s at 70 s, next to an honest AHRS and wheels."""
+    odom, imu, truth = husky_like(yaw_scale=1.0, ahrs_drift=0.0, gyro_bias=0.002)
+    gyro = imu.gyro.copy()
+    gyro[imu.t >= 70.0, 2] += 0.05
+    imu = dataclasses.replace(imu, gyro=gyro)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    gyro_eps = _episodes(result, "gyro yaw rate")
+    assert gyro_eps, result.inconsistent
+    assert all(e["sensor"] == "imu" for e in gyro_eps)
+    assert 66.0 <= gyro_eps[0]["start"] <= 72.0, gyro_eps
+    assert gyro_eps[-1]["end"] >= truth.t[-1] - 2.0, gyro_eps
+    assert not _episodes(result, "AHRS heading"), result.inconsistent
+    for name in FUSED:
+        end, rms = position_errors(result.trajectories[name], truth)
+        assert end < 0.5 and rms < 0.3, (name, end, rms)
+
+
+def test_monitor_options_are_checked():
+    for bad in ({"monitor_window": 0.0}, {"monitor_probability": 1.0}, {"monitor_bias_sigma": -1.0}):
+        try:
+            FusionConfig.from_dict(bad)
+        except InputError as exc:
+            assert "monitor" in str(exc)
+        else:
+            raise AssertionError(bad)
+
+
+def test_the_streams_are_consistent_on_a_clean_drive():
+    odom, imu, _ = husky_like(yaw_scale=1.0, ahrs_drift=0.0)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
+    assert result.inconsistent == [] and not any("inconsistent" in n for n in result.notes)
+    assert np.isfinite(result.trajectories["ekf"].xyyaw).all()
