@@ -27,7 +27,9 @@ def register(sub) -> None:
                        description="Run visual odometry on a recording folder, fuse it with the wheels and the IMU, "
                                    "and evaluate against ground truth when the recording has it.")
     p.add_argument("sequence", nargs="?", help="recording folder (EuRoC layout plus wheel0/, see datasets/README.md)")
-    p.add_argument("--out", "-o", help="output folder (created if needed)")
+    p.add_argument("--out", "-o", help="output folder: new, empty, or an earlier run's (replaced as a whole)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an output folder that is not empty and was not written by fusion-vo run")
     p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
@@ -79,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = apply_overrides(load_config(args.config), args)
     with progress_bar("visual odometry") as update:
-        summary = run_pipeline(args.sequence, args.out, cfg, progress=update)
+        summary = run_pipeline(args.sequence, args.out, cfg, progress=update, force=args.force,
+                               config_path=args.config)
     for note in summary.notes:
         print(f"note: {note}")
     if summary.metrics:

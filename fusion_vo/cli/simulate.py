@@ -18,7 +18,9 @@ def register(sub) -> None:
                                    "robot drives a profile over a floor made from a photographed texture. "
                                    "Options are the fields of fusion_vo.simulation.SimulationOptions "
                                    "(see datasets/generated.md).")
-    p.add_argument("out", nargs="?", help="output folder (replaced if it exists)")
+    p.add_argument("out", nargs="?", help="output folder: new, empty, or a recording fusion-vo wrote (then replaced)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a non-empty folder that is not a recording fusion-vo wrote")
     p.add_argument("--profile", choices=sorted(PROFILES), default="square")
     p.add_argument("--standard", choices=sorted(STANDARD), help="one of the standard recordings (fixes profile, options, seed)")
     p.add_argument("--seed", type=int, default=0)
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.out:
         raise InputError("simulate needs an output folder (see fusion-vo simulate --help)")
     try:
-        out = simulate(args.out, profile=profile, seed=seed, options=opts)
+        out = simulate(args.out, profile=profile, seed=seed, options=opts, force=args.force)
     except ValueError as exc:  # a combination of options the profile cannot drive
         raise InputError(str(exc), args.config) from None
     except OSError as exc:
