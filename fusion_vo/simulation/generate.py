@@ -59,7 +59,8 @@ class SimulationOptions:
     Camera
         width, height, fu, fv, cu, cv, distortion_model, distortion, camera_rate [Hz], camera_height
         [m], lever_arm [m], lateral_offset [m], tilt_x_deg, tilt_y_deg, height_error (fraction: the
-        sensor.yaml height is the true one times 1 + height_error), height_vibration [m amplitude],
+        sensor.yaml height is the true one times 1 + height_error; ``height_sigma`` states that error,
+        at least 0.1 mm), height_vibration [m amplitude],
         vibration_frequency [Hz], exposure_time [s] (motion blur; 0 = none), blur_samples,
         supersample, dropped_frames (fraction of frames missing), png_compression (0-9).
     Photometry
@@ -67,7 +68,8 @@ class SimulationOptions:
         highlight_center (fractions of width, height), noise [grey levels], shot_noise.
     Wheels
         wheel_rate [Hz], ticks_per_revolution, wheel_radius [m], wheel_base [m], radius_error_left,
-        radius_error_right, base_error (fractions: true = nominal · (1 + error)), slip
+        radius_error_right, base_error (fractions: true = nominal · (1 + error); ``radius_sigma`` of
+        wheel0/sensor.yaml states the larger radius error), slip
         [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
     IMU
         imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
@@ -362,7 +364,10 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     (root / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n" + "\n".join(rows) + "\n")
     T_written = T_BS.copy()
     T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
-    _yaml(root / "cam0" / "sensor.yaml", dataclasses.replace(cam, T_BS=T_written).to_dict())
+    # the calibration's stated uncertainty: the size of the error written into it (at least 0.1 mm)
+    cam_yaml = dataclasses.replace(cam, T_BS=T_written).to_dict()
+    cam_yaml["height_sigma"] = float(max(abs(o.height_error) * o.camera_height, 1e-4))
+    _yaml(root / "cam0" / "sensor.yaml", cam_yaml)
 
     # ---- wheels
     truth = WheelTruth(o.wheel_radius * (1 + o.radius_error_left), o.wheel_radius * (1 + o.radius_error_right),
@@ -373,7 +378,9 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
                np.column_stack([left, right]), "%d")
     _yaml(root / "wheel0" / "sensor.yaml", {"ticks_per_revolution": int(o.ticks_per_revolution),
                                              "wheel_radius_left": o.wheel_radius, "wheel_radius_right": o.wheel_radius,
-                                             "wheel_base": o.wheel_base})
+                                             "wheel_base": o.wheel_base,
+                                             "radius_sigma": float(max(abs(o.radius_error_left), abs(o.radius_error_right))
+                                                                   * o.wheel_radius) or 1e-4})
     if o.odometry:
         tw = odometry_twist(wt, left, right, truth)
         _write_csv(root / "odom0" / "data.csv", "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]",
