@@ -148,6 +148,9 @@ class OdometryResult:
         Time spent bridging gaps at constant velocity [s].
     elapsed_s : float
         Wall-clock time of the run [s].
+    range_scaled : bool
+        The increments were scaled frame by frame with the range finder's height (``use_range``), so the
+        range finder is already in them and the backends must not use it again.
     """
 
     increments: list[VisualIncrement]
@@ -160,6 +163,7 @@ class OdometryResult:
     skipped: list[str]
     bridged_s: float
     elapsed_s: float
+    range_scaled: bool = False
 
     @property
     def n_frames(self) -> int:
@@ -455,4 +459,5 @@ def run_visual_odometry(
         skipped=skipped,
         bridged_s=vo.bridged_s,
         elapsed_s=elapsed,
+        range_scaled=heights is not None,
     )

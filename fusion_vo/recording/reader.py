@@ -280,8 +280,14 @@ class Recording:
                 raise InputError(f"'{k}' must be a number", ypath) from None
             if not np.isfinite(vals[k]) or vals[k] <= 0:
                 raise InputError(f"'{k}' must be positive", ypath)
+        vals["radius_sigma"] = _optional_sigma(meta, "radius_sigma", ypath)
         counts = tab.values.astype(np.int64)
         return WheelData(tab.t, counts[:, 0], counts[:, 1], WheelConfig(**vals))
+
+    def camera_height_sigma(self) -> float | None:
+        """``height_sigma`` of ``cam0/sensor.yaml``: standard deviation [m] of the camera height its
+        ``T_BS`` states, or None when the file does not state it."""
+        return _optional_sigma(self._yaml("cam0", required=False), "height_sigma", self.path / "cam0" / "sensor.yaml")
 
     def odom(self) -> TwistData:
         """``odom0``: body-frame twist."""
@@ -404,3 +410,16 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
     np.savetxt(buf, data, fmt=["%.9f"] + ["%.9f"] * 7)
     make_folder(path.parent)
     write_atomic(path, buf.getvalue())
+
+
+def _optional_sigma(meta: dict, key: str, path: Path) -> float | None:
+    """An optional positive standard deviation of a ``sensor.yaml``; a bad value is an InputError naming the key."""
+    if meta.get(key) is None:
+        return None
+    try:
+        value = float(meta[key])
+    except (TypeError, ValueError):
+        raise InputError(f"'{key}' must be a number", path) from None
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"'{key}' must be positive", path)
+    return value

@@ -58,7 +58,8 @@ class SimulationOptions:
     Camera
         width, height, fu, fv, cu, cv, distortion_model, distortion, camera_rate [Hz], camera_height
         [m], lever_arm [m], lateral_offset [m], tilt_x_deg, tilt_y_deg, height_error (fraction: the
-        sensor.yaml height is the true one times 1 + height_error), height_vibration [m amplitude],
+        sensor.yaml height is the true one times 1 + height_error; ``height_sigma`` states that error,
+        at least 0.1 mm), height_vibration [m amplitude],
         vibration_frequency [Hz], exposure_time [s] (motion blur; 0 = none), blur_samples,
         supersample, dropped_frames (fraction of frames missing), png_compression (0-9).
     Photometry
@@ -66,7 +67,8 @@ class SimulationOptions:
         highlight_center (fractions of width, height), noise [grey levels], shot_noise.
     Wheels
         wheel_rate [Hz], ticks_per_revolution, wheel_radius [m], wheel_base [m], radius_error_left,
-        radius_error_right, base_error (fractions: true = nominal · (1 + error)), slip
+        radius_error_right, base_error (fractions: true = nominal · (1 + error); ``radius_sigma`` of
+        wheel0/sensor.yaml states the larger radius error), slip
         [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
     IMU
         imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
@@ -381,7 +383,9 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
     writer.frame_list(np.array(stamps, dtype=np.int64), names)
     T_written = T_BS.copy()
     T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
+    # the calibration's stated uncertainty: the size of the error written into it (at least 0.1 mm)
     cam_yaml = dataclasses.replace(cam, T_BS=T_written).to_dict()
+    cam_yaml["height_sigma"] = float(max(abs(o.height_error) * o.camera_height, 1e-4))
     if real_cam is not None:
         for key in ("intrinsics", "distortion_model", "distortion_coefficients"):
             cam_yaml.pop(key)
@@ -397,7 +401,9 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
                np.column_stack([left, right]), "%d")
     writer.yaml("wheel0/sensor.yaml", {"ticks_per_revolution": int(o.ticks_per_revolution),
                                              "wheel_radius_left": o.wheel_radius, "wheel_radius_right": o.wheel_radius,
-                                             "wheel_base": o.wheel_base})
+                                             "wheel_base": o.wheel_base,
+                                             "radius_sigma": float(max(abs(o.radius_error_left), abs(o.radius_error_right))
+                                                                   * o.wheel_radius) or 1e-4})
     if o.odometry:
         tw = odometry_twist(wt, left, right, truth)
         writer.csv("odom0/data.csv", "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]",
