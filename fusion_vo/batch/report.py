@@ -7,7 +7,7 @@ recordings, per trajectory) and names the best parameter set.
 
 from __future__ import annotations
 
-import html
+import base64
 import io
 import logging
 from datetime import datetime, timezone
@@ -21,7 +21,7 @@ from fusion_vo.batch.grid import Grid
 from fusion_vo.batch.tasks import METRICS
 from fusion_vo.evaluation.io import write_atomic
 from fusion_vo.evaluation.plots import colour_of, label_of
-from fusion_vo.evaluation.report import _STYLE, _image, _number, _table
+from fusion_vo.evaluation.report import _environment, _number
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ def _metric_against_keys(frame, metric: str, keys: list[str]) -> bytes | None:
     return _png(fig)
 
 
-def _rows_table(frame, keys: list[str]) -> str:
+def _rows_table(frame, keys: list[str]) -> tuple[list[str], list[list]]:
     headers = ["recording", *(["set", *keys] if keys else []), "trajectory", "status", *METRIC_LABELS.values(),
                "frames", "failed frames", "seconds", "error"]
     rows = []
@@ -125,67 +125,57 @@ def _rows_table(frame, keys: list[str]) -> str:
                      _number(r["ate_m"], "{:.4f}"), _number(r["end_pct"], "{:.3f}"),
                      _number(r["heading_deg"], "{:.3f}"), _number(r["rpe_1m_pct"], "{:.3f}"),
                      str(r["frames"]), str(r["failed_frames"]), _number(r["seconds"], "{:.1f}"), r["error"]])
-    return _table(headers, rows)
+    return headers, rows
 
 
-def _summary_table(frame) -> str:
+def _summary_table(frame) -> tuple[list[str], list[list]]:
     ok = frame[frame["status"] == "ok"]
     rows = []
     for name, part in ok.groupby("trajectory", sort=False):
         rows.append([name, str(len(part))] + [f"{_number(part[m].median(), '{:.4f}')} / {_number(part[m].max(), '{:.4f}')}"
                                               for m in METRICS])
-    return _table(["trajectory", "recordings", *(f"{METRIC_LABELS[m]} median / max" for m in METRICS)], rows)
+    return ["trajectory", "recordings", *(f"{METRIC_LABELS[m]} median / max" for m in METRICS)], rows
 
 
 def render(frame, title: str, grid: Grid | None = None, rank: tuple[str, str | None] = ("ate_m", None)) -> str:
-    """The HTML text of the report."""
+    """The HTML text of the report, from the template ``fusion_vo/evaluation/templates/batch.html.j2``."""
     from fusion_vo.batch.runner import best_sets, describe_set
 
     keys = grid.keys if grid else []
     tasks = frame.drop_duplicates(["recording", "parameter_set"] if keys else ["recording"])
-    n_failed = int((tasks["status"] != "ok").sum())
-    parts = [f"<h1>{html.escape(title)}</h1>",
-             f"<p>Generated {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC: {len(tasks)} tasks, "
-             f"{n_failed} failed, {int(tasks['cached'].sum())} reused from an earlier run. "
-             "Every figure is computed against each recording's ground truth (results.csv has them all).</p>"]
+    context: dict = {"title": title, "generated": f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}",
+                     "n_tasks": len(tasks), "n_failed": int((tasks["status"] != "ok").sum()),
+                     "n_cached": int(tasks["cached"].sum()), "sweep": bool(keys), "best": None}
     if keys:
         ranked, trajectory = best_sets(frame, *rank)
         if len(ranked) and ranked["recordings"].iloc[0] > 0 and not np.isnan(ranked["mean"].iloc[0]):
             best = ranked["parameter_set"].iloc[0]
-            parts.append(f"<p><b>Best parameter set: {html.escape(best)}</b> ({html.escape(describe_set(frame, best))}): "
-                         f"mean {html.escape(METRIC_LABELS[rank[0]])} of the {html.escape(label_of(trajectory))} "
-                         f"trajectory {_number(ranked['mean'].iloc[0], '{:.5g}')} over {ranked['recordings'].iloc[0]} "
-                         "recordings.</p>")
-        else:
-            parts.append("<p><b>No parameter set completed on every recording.</b></p>")
-        parts.append(f"<h2>Parameter sets ranked by the mean {html.escape(METRIC_LABELS[rank[0]])} "
-                     f"({html.escape(label_of(trajectory))})</h2>")
-        parts.append(_table(["set", *keys, "mean", "recordings", "failed"],
-                            [[r["parameter_set"], *[str(r[k]) for k in keys], _number(r["mean"], "{:.5g}"),
-                              str(r["recordings"]), str(r["failed"])] for r in ranked.to_dict("records")]))
+            context["best"] = {"set": best, "description": describe_set(frame, best),
+                               "metric": METRIC_LABELS[rank[0]], "trajectory": label_of(trajectory),
+                               "mean": _number(ranked["mean"].iloc[0], "{:.5g}"),
+                               "recordings": ranked["recordings"].iloc[0]}
+        context["ranked_metric"] = METRIC_LABELS[rank[0]]
+        context["ranked_trajectory"] = label_of(trajectory)
+        context["ranked_headers"] = ["set", *keys, "mean", "recordings", "failed"]
+        context["ranked_rows"] = [[r["parameter_set"], *[str(r[k]) for k in keys], _number(r["mean"], "{:.5g}"),
+                                   str(r["recordings"]), str(r["failed"])] for r in ranked.to_dict("records")]
     failures = tasks[tasks["status"] != "ok"]
-    if len(failures):
-        parts.append("<h2>Failed tasks</h2>")
-        parts.append(_table(["recording", *(["set"] if keys else []), "error"],
-                            [[r["recording"], *([r["parameter_set"]] if keys else []), r["error"]]
-                             for r in failures.to_dict("records")]))
-    parts.append("<h2>Results</h2>")
+    context["failure_headers"] = ["recording", *(["set"] if keys else []), "error"]
+    context["failure_rows"] = [[r["recording"], *([r["parameter_set"]] if keys else []), r["error"]]
+                               for r in failures.to_dict("records")]
     if len(frame) <= MAX_ROWS:
-        parts.append(_rows_table(frame, keys))
+        context["summary_note"] = None
+        context["result_headers"], context["result_rows"] = _rows_table(frame, keys)
     else:
-        parts.append(f"<p>{len(frame)} rows: the table below summarises them per trajectory.</p>")
-        parts.append(_summary_table(frame))
-    parts.append("<h2>Figures</h2>")
+        context["summary_note"] = f"{len(frame)} rows: the table below summarises them per trajectory."
+        context["result_headers"], context["result_rows"] = _summary_table(frame)
+    figures = []
     for metric in METRICS:
         png = _metric_against_keys(frame, metric, keys) if keys else _metric_per_recording(frame, metric)
-        if png:
-            parts.append(_image(METRIC_LABELS[metric], png))
-        else:
-            parts.append(f"<p>{html.escape(METRIC_LABELS[metric])}: no finite value in any row (no plot).</p>")
-    body = "\n".join(parts)
-    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-            f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n{body}\n"
-            f"</body>\n</html>\n")
+        figures.append({"caption": METRIC_LABELS[metric],
+                        "data": base64.b64encode(png).decode("ascii") if png else None})
+    context["figures"] = figures
+    return _environment().get_template("batch.html.j2").render(**context)
 
 
 def write_report(frame, path: str | Path, title: str, grid: Grid | None = None,

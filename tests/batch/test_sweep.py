@@ -20,7 +20,7 @@ def test_two_by_two_sweep(recordings, client, tmp_path):
     assert (csv["status"] == "ok").all() and csv["ate_m"].notna().all()
     for row in sets.to_dict("records"):  # each run used its own parameters
         used = yaml.safe_load((out / good[0].name / row["parameter_set"] / "run.yaml").read_text())
-        assert used["klt"] == {"max_tracks": row["klt.max_tracks"], "threshold": row["klt.threshold"]}
+        assert (used["klt"]["max_tracks"], used["klt"]["threshold"]) == (row["klt.max_tracks"], row["klt.threshold"])
     assert csv.groupby("parameter_set")["trajectory"].apply(tuple).nunique() == 1
     ranked, trajectory = best_sets(frame, "ate_m")
     vo = csv[csv["trajectory"] == "vo"].set_index("parameter_set")["ate_m"]
