@@ -24,7 +24,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.odometry import OdometryConfig
 
-SENSORS = ("camera", "wheel", "imu", "odom", "range")
+SENSORS = ("camera", "wheel", "imu", "odom", "range", "gps")
 BACKENDS = ("none", "ekf", "gtsam", "all")
 
 
@@ -38,7 +38,8 @@ class RunConfig:
         Visual frontend: ``klt`` or ``features``.
     sensors : list of str or None
         Sensors the backends may use (of :data:`SENSORS`); the recording must have them. ``None``
-        (the default) uses the camera, wheels and IMU the recording has.
+        (the default) uses the camera, wheels and IMU the recording has; GPS (``gps0/``) is fused only
+        when listed, and the world frame is then East-North-Up at its datum.
     backend : str
         ``none`` (visual and wheel dead reckoning only), ``ekf``, ``gtsam`` or ``all``.
     odometry : dict

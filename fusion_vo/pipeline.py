@@ -74,7 +74,7 @@ class RunSummary:
 def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     """The sensors to use: as configured (each must be in the recording) or all that are present."""
     present = {"camera": rec.has_camera(), "wheel": rec.has_wheel(), "imu": rec.has_imu(),
-               "odom": rec.has_odom(), "range": rec.has_range()}
+               "odom": rec.has_odom(), "range": rec.has_range(), "gps": rec.has_gps()}
     if config.sensors is None:
         chosen = [s for s in ("camera", "wheel", "imu") if present[s]]
         if not present["wheel"] and present["odom"]:
@@ -84,7 +84,8 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
         return chosen
     for s in config.sensors:
         if not present[s]:
-            folder = {"camera": "cam0", "wheel": "wheel0", "imu": "imu0", "odom": "odom0", "range": "range0"}[s]
+            folder = {"camera": "cam0", "wheel": "wheel0", "imu": "imu0", "odom": "odom0", "range": "range0",
+                      "gps": "gps0"}[s]
             raise InputError(f"sensor '{s}' was asked for but the recording has no {folder}/data.csv", rec.path)
     return list(config.sensors)
 
