@@ -407,6 +407,8 @@ class StreamingFusion:
             self._poses = [p for p in fit.apply(np.array(self._poses))]
             self._covs = [rot @ cv @ rot.T for cv in self._covs]
             self._frame = "enu"
+            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
+                self._heading_offset -= fit.yaw
             self._gps_reacquire = GpsReacquire(self.config.gps_reacquire)
             self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")

@@ -9,7 +9,8 @@ the datum of ``gps0/sensor.yaml``, and nothing tells the backends which way the 
    that carries that track's antenna positions onto the first fixes (robust to multipath jumps); the
    window grows from 2 s of fixes, doubling, until the fitted heading's standard deviation
    (from the fixes' noise) is below :data:`TARGET_YAW_SIGMA`, or the whole recording is used;
-3. both backends then start at the aligned first pose, with a prior of three times the fit's
+3. the AHRS headings, aligned to the configured initial heading, are turned by the same rotation;
+4. both backends then start at the aligned first pose, with a prior of three times the fit's
    standard deviations (heading at least :data:`MIN_YAW_SIGMA`), and the fixes themselves refine it.
 
 While the robot has not moved a few fix sigmas the heading is unobservable; the configured initial
@@ -53,6 +54,17 @@ def fallback_prior(iv: Intervals, config: FusionConfig, fix_sigma: float) -> tup
     return pose, np.array([3.0 * fix_sigma, 3.0 * fix_sigma, 1e-3])
 
 
+def rotate_ahrs(iv: Intervals, yaw: float) -> None:
+    """AHRS headings re-expressed in the rotated world frame: they were aligned to the configured
+    initial heading, which the world alignment turned by ``yaw``."""
+    from fusion_vo.geometry import se2
+
+    if iv.ahrs_ok.any():
+        iv.ahrs_yaw = se2.wrap_angle(iv.ahrs_yaw + yaw)
+    if iv.heading_offset is not None:
+        iv.heading_offset = float(iv.heading_offset - yaw)
+
+
 def align_world(iv: Intervals, config: FusionConfig) -> None:
     """Set ``iv.initial_pose`` / ``iv.initial_sigma`` in ENU from the fixes (module docstring); adds a note."""
     if iv.gps_ok is None or not iv.gps_ok.any():
@@ -83,6 +95,7 @@ def align_world(iv: Intervals, config: FusionConfig) -> None:
                         f"configured initial heading {math.degrees(config.initial_pose[2]):.1f} deg is assumed")
         return
     iv.initial_pose, iv.initial_sigma = prior_from_alignment(fit, traj.xyyaw[0], fix_sigma)
+    rotate_ahrs(iv, fit.yaw)
     iv.notes.append(f"gps: world frame is ENU at the datum {tuple(round(v, 7) for v in gps.datum)}; first heading "
                     f"{math.degrees(iv.initial_pose[2]):.2f} deg (east = 0, counter-clockwise) estimated from the "
                     f"fixes of the first {min(window, traj.t[-1] - t_first):.0f} s (± {math.degrees(fit.yaw_sigma):.2f} deg, "
