@@ -95,6 +95,7 @@ PX, PY, YAW, VX, VY, W, BG, KV, KB, AO = range(10)
 DIM = 10
 _FROZEN_VAR = 1e-12
 _DROPPED_VAR = 1e8
+OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
   # variance of a measurement row the consistency monitor dropped
 
@@ -381,14 +382,24 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     if ahr is not None and ahr[0][0]:
         ekf.update([ekf.heading_block(ahr[1][0], ahr[2])])
     reacquire = GpsReacquire(config.gps_reacquire)
+    result_notes: list[str] = []
+    last_fix = None
     if gps is not None and iv.gps_ok[0]:
         reacquire(ekf, gps, iv, 0)
+        last_fix = float(iv.t[0])
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
         Fs[k + 1] = ekf.predict(dt[k])
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
         ekf.update(step_blocks(ekf, meas, k))
         if gps is not None and iv.gps_ok[k + 1]:
+            if last_fix is not None and iv.t[k + 1] - last_fix >= OUTAGE_NOTE_S:
+                # the first fix after an outage measures how far the estimate drifted without GPS
+                drift = float(np.linalg.norm(iv.gps_enu[k + 1] - gps_predict(ekf.x[:3], gps.lever_arm)))
+                sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
+                result_notes.append(f"ekf: gps outage from {last_fix - iv.t[0]:.2f} to {iv.t[k + 1] - iv.t[0]:.2f} s in: "
+                                    f"drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
+            last_fix = float(iv.t[k + 1])
             reacquire(ekf, gps, iv, k + 1)
         xs[k + 1], Ps[k + 1] = ekf.x, ekf.P
     if gps is not None:
@@ -400,6 +411,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     result.counts["ekf"] = counts
     if gps is not None:
         result.notes.append(gps_note("ekf", gps, iv, reacquire.times))
+        result.notes.extend(result_notes)
     result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:

@@ -99,6 +99,10 @@ def test_drift_during_the_outage_is_larger_than_with_gps_and_bounded(fused, trut
     assert e[last_second].max() > 1.3 * e[start]
     after = (t > OUTAGE[1] + 2.0) & (t < JUMP[0])
     assert np.sqrt(np.mean(e[after] ** 2)) <= 0.5 * NOISE
+    # and the run reports it: the first fix after the outage measures the drift
+    note = next(n for n in fused.notes if n.startswith("ekf: gps outage"))
+    drift = float(note.split("drift ")[1].split(" m")[0])
+    assert drift < 0.2 and drift > 0.5 * e[last_second].max()
 
 
 def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
