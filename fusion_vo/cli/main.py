@@ -21,6 +21,8 @@ COMMANDS = [
     "simulate",
     "evaluate",
     "compare",
+    "batch",
+    "sweep",
     "show_matches",
     "import_bag",
     "calibrate",
