@@ -35,7 +35,7 @@ from fusion_vo import schema
 from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.odometry import OdometryConfig
 
-SENSORS = ("camera", "wheel", "imu", "odom", "range")
+SENSORS = ("camera", "wheel", "imu", "odom", "range", "gps")
 BACKENDS = ("none", "ekf", "gtsam", "all")
 FRONTENDS = ("klt", "features", "direct")
 
@@ -63,8 +63,9 @@ class RunConfig:
     frontend : str
         Visual frontend: ``klt``, ``features`` or ``direct``.
     sensors : list of str or None
-        Sensors the backends may use (of camera, wheel, imu, odom, range); the recording must have them.
-        ``None`` (the default) uses the camera, wheels and IMU the recording has.
+        Sensors the backends may use (of camera, wheel, imu, odom, range, gps); the recording must have them. ``None``
+        (the default) uses the camera, wheels and IMU the recording has; GPS (``gps0/``) is fused only
+        when listed, and the world frame is then East-North-Up at its datum.
     backend : str
         ``none`` (visual and wheel dead reckoning only), ``ekf``, ``gtsam`` or ``all``.
     odometry : dict

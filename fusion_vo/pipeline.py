@@ -100,7 +100,7 @@ MAX_JUMP_S = 86400.0
 def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     """The sensors to use: as configured (each must be in the recording) or all that are present."""
     present = {"camera": rec.has_camera(), "wheel": rec.has_wheel(), "imu": rec.has_imu(),
-               "odom": rec.has_odom(), "range": rec.has_range()}
+               "odom": rec.has_odom(), "range": rec.has_range(), "gps": rec.has_gps()}
     if config.sensors is None:
         chosen = [s for s in ("camera", "wheel", "imu") if present[s]]
         if not present["wheel"] and present["odom"]:

@@ -89,6 +89,10 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     t0 = time.process_time()
     streams, delay = synchronise_odometry(streams, config)
     iv = build_intervals(streams, config)
+    if iv.gps_ok is not None:
+        from fusion_vo.backends.world import align_world
+
+        align_world(iv, config)
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
@@ -148,7 +152,8 @@ def run_backends(recording, visual=None, sensors=None, backend="all", options=No
     visual : OdometryResult or list of VisualIncrement, optional
         The visual odometry output (its ``increments``); None when the camera is not used.
     sensors : list of str, optional
-        Of ``camera, wheel, odom, imu, range``; default: all the recording has.
+        Of ``camera, wheel, odom, imu, range, gps``; default: all the recording has except GPS (an
+        absolute source is fused only when asked for, so that it can also serve as the reference).
     backend : str
         ``none | ekf | gtsam | all``.
     options : dict or FusionConfig, optional
@@ -169,9 +174,10 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
         "odom": recording.has_odom(),
         "imu": recording.has_imu(),
         "range": recording.has_range(),
+        "gps": recording.has_gps() if hasattr(recording, "has_gps") else False,
     }
     if sensors is None:
-        sensors = [s for s in SENSORS if present[s] and not (s == "odom" and present["wheel"])]
+        sensors = [s for s in SENSORS if present[s] and s != "gps" and not (s == "odom" and present["wheel"])]
     sensors = list(sensors)
     for s in sensors:
         if s not in SENSORS:
@@ -193,6 +199,7 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
         camera_height=height,
         camera_height_sigma=_height_sigma(recording) if "camera" in sensors else None,
         range_in_visual=bool(getattr(visual, "range_scaled", False)),
+        gps=recording.gps() if "gps" in sensors and present["gps"] else None,
     )
     return streams.select(sensors)
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fusion_vo.errors import InputError
+from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
 from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
@@ -147,6 +148,14 @@ class FusionConfig:
     wheel, odom, imu, range : WheelNoise, WheelNoise, ImuNoise, RangeNoise
         Sensor noise models (``wheel`` for encoder ticks, ``odom`` for an odometry twist, see
         :func:`~fusion_vo.sensors.wheel.odom_twist_noise`).
+    gps : GpsNoise
+        Gate and robust kernel of GPS fixes (:class:`~fusion_vo.sensors.gps.GpsNoise`: ``gate_chi2``,
+        ``kernel``, ``kernel_width``, ``min_sigma``); the fixes carry their own covariance.
+    gps_reacquire : float
+        After every fix of this many seconds [s] has failed the gate, the estimate rather than the fixes
+        is taken to be wrong (a drift during an outage, a bad start): the next fix is applied anyway, the
+        EKF first widening its position covariance by the squared innovation (default 5; the recovery
+        of PX4's EKF2 after GPS rejection). A multipath jump lasting longer is then followed.
     ekf, graph : EkfConfig, GraphConfig
         Backend options.
     """
@@ -174,6 +183,8 @@ class FusionConfig:
     odom: WheelNoise = field(default_factory=odom_twist_noise)
     imu: ImuNoise = field(default_factory=ImuNoise)
     range: RangeNoise = field(default_factory=RangeNoise)
+    gps: GpsNoise = field(default_factory=GpsNoise)
+    gps_reacquire: float = 5.0
     ekf: EkfConfig = field(default_factory=EkfConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
 
@@ -270,3 +281,5 @@ def _from_dict(cls, data: Any, prefix: str, path):
         return cls(**kwargs)
     except InputError as exc:
         raise InputError(exc.message, path) from None
+    except ValueError as exc:  # a sensor's own validation (e.g. GpsNoise)
+        raise InputError(f"'{prefix.rstrip('.') or 'config'}': {exc}", path) from None

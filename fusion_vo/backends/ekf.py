@@ -33,6 +33,7 @@ Measurements over an interval (all sensors are integrated onto the same interval
     AHRS     z = ψ_AHRS (at the node)   h = ψ + o_ψ                     R = σ_ψ²
     range    z = h_range (at the node)  h = h_c / k_v                   R = σ_r²
     still    z = 0 (wheels at rest)     h = ω                           R = σ_still²
+    GPS      z = fix (east, north)      h = p + R(ψ) l (antenna)        R = fix covariance / robust weight
 
 The wheels' heading error on a skid-steered base is correlated over a turn; its variance per
 interval is inflated by its correlation time (``WheelNoise.yaw_scale_time``, see
@@ -62,6 +63,13 @@ Each sensor's block is gated before the update by its squared Mahalanobis distan
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
+A GPS fix is applied at its own node (every fix time is one, :mod:`fusion_vo.backends.timeline`)
+with the one measurement model of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check
+<fusion_vo.sensors.gps.GpsModel.check>`: residual, Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ``
+and the Huber/Cauchy weight); rejected fixes (a multipath jump) change nothing and are counted. The
+state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
+the fixes, with that alignment's uncertainty.
+
 The smoother runs backwards over the stored priors and posteriors::
 
     C_k = P_k Fᵀ_{k+1} (P⁻_{k+1})⁻¹
@@ -82,6 +90,8 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.gps import GpsModel
+from fusion_vo.sensors.gps import predict as gps_predict
 from fusion_vo.sensors.wheel import arc_twist, standstill
 
 logger = logging.getLogger(__name__)
@@ -90,6 +100,7 @@ PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
 DIM = 11
 _FROZEN_VAR = 1e-12
 _DROPPED_VAR = 1e8
+OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
   # variance of a measurement row the consistency monitor dropped
 
@@ -114,7 +125,7 @@ class PlanarEkf:
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
-                 wheel_scale_sigma: float | None = None):
+                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None):
         self.config = config
         calib = config.self_calibration
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
@@ -122,11 +133,11 @@ class PlanarEkf:
         self.camera_height = camera_height
         self.kf = ExtendedKalmanFilter(dim_x=DIM, dim_z=1)
         x = np.zeros(DIM)
-        x[:3] = config.initial_pose
+        x[:3] = config.initial_pose if initial_pose is None else initial_pose
         x[KV] = x[KB] = x[KR] = 1.0
         self.kf.x = x.reshape(DIM, 1)
         var = np.zeros(DIM)
-        var[:3] = 1e-10
+        var[:3] = 1e-10 if initial_sigma is None else np.square(initial_sigma)
         var[VX] = var[VY] = config.initial_velocity_sigma**2
         var[W] = 0.5**2
         var[BG] = config.imu.gyro_bias_sigma**2
@@ -231,6 +242,29 @@ class PlanarEkf:
         H = np.zeros((1, DIM))
         H[0, KV] = -self.camera_height / kv**2
         return "range", np.array([height]), np.array([self.camera_height / kv]), H, np.array([[var]]), None
+
+    # ------------------------------------------------------------------ GPS
+    def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+        """Apply one fix through ``model`` (gate, robust weight); returns whether it was accepted."""
+        chk = model.check(self.x[:3], fix, covariance, self.kf.P[:3, :3], t)
+        if not chk.accepted:
+            return False
+        H = np.zeros((2, DIM))
+        H[:, :3] = chk.H
+        y = chk.residual.reshape(2, 1)
+        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=chk.R)
+        self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
+        return True
+
+    def gps_reacquire(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+        """Apply a fix that failed the gate after widening the position covariance by the squared
+        innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
+        model.n_rejected -= 1
+        if model.rejected_t:
+            model.rejected_t.pop()
+        r = np.asarray(fix, dtype=np.float64)[:2] - gps_predict(self.x[:3], model.lever_arm)
+        self.kf.P[:2, :2] += np.eye(2) * float(r @ r)
+        return self.gps_update(model, fix, covariance, t)
 
     # ------------------------------------------------------------------ update
     def update(self, blocks) -> None:
@@ -347,8 +381,10 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
-    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma)
+    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
+                    iv.initial_pose, iv.initial_sigma)
     meas = interval_measurements(iv, config)
+    gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
     K = iv.n_steps
     dt = iv.dt
     xs = np.zeros((K + 1, DIM))
@@ -359,17 +395,37 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     ahr = meas.get("ahrs")
     if ahr is not None and ahr[0][0]:
         ekf.update([ekf.heading_block(ahr[1][0], ahr[2])])
+    reacquire = GpsReacquire(config.gps_reacquire)
+    result_notes: list[str] = []
+    last_fix = None
+    if gps is not None and iv.gps_ok[0]:
+        reacquire(ekf, gps, iv, 0)
+        last_fix = float(iv.t[0])
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
         Fs[k + 1] = ekf.predict(dt[k])
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
         ekf.update(step_blocks(ekf, meas, k))
+        if gps is not None and iv.gps_ok[k + 1]:
+            if last_fix is not None and iv.t[k + 1] - last_fix >= OUTAGE_NOTE_S:
+                # the first fix after an outage measures how far the estimate drifted without GPS
+                drift = float(np.linalg.norm(iv.gps_enu[k + 1] - gps_predict(ekf.x[:3], gps.lever_arm)))
+                sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
+                result_notes.append(f"ekf: gps outage from {last_fix - iv.t[0]:.2f} to {iv.t[k + 1] - iv.t[0]:.2f} s in: "
+                                    f"drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
+            last_fix = float(iv.t[k + 1])
+            reacquire(ekf, gps, iv, k + 1)
         xs[k + 1], Ps[k + 1] = ekf.x, ekf.P
+    if gps is not None:
+        ekf.counts["gps"] = SensorCount(used=gps.n_used, gated=gps.n_rejected)
     result = FusionResult()
     result.trajectories["ekf"] = PoseData(iv.t.copy(), xs[:, :3].copy())
     result.covariances["ekf"] = Ps[:, :3, :3].copy()
     counts = _merge_counts(iv.counts, ekf.counts)
     result.counts["ekf"] = counts
+    if gps is not None:
+        result.notes.append(gps_note("ekf", gps, iv, reacquire.times))
+        result.notes.extend(result_notes)
     result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:
@@ -382,6 +438,55 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
         result.timing["ekf_smoothed"] = time.process_time() - t1
     result.notes.extend(iv.notes)
     return result
+
+
+class GpsReacquire:
+    """Fixes through the gate, and after ``after`` seconds of rejections one applied anyway
+    (``FusionConfig.gps_reacquire``); ``times`` holds when that happened."""
+
+    def __init__(self, after: float):
+        self.after = after
+        self.last_ok: float | None = None
+        self.times: list[float] = []
+
+    def __call__(self, ekf: "PlanarEkf", model: GpsModel, iv: Intervals, k: int) -> bool:
+        t = float(iv.t[k])
+        if ekf.gps_update(model, iv.gps_enu[k], iv.gps_cov[k], t):
+            self.last_ok = t
+            return True
+        if self.last_ok is None:
+            self.last_ok = t
+        if t - self.last_ok < self.after:
+            return False
+        self.times.append(t)
+        self.last_ok = t
+        return ekf.gps_reacquire(model, iv.gps_enu[k], iv.gps_cov[k], t)
+
+    def due(self, t: float, accepted: bool) -> bool:
+        """For a backend that gates itself: whether a rejected fix at ``t`` is to be applied anyway."""
+        if accepted or self.last_ok is None:
+            self.last_ok = t
+            return False
+        if t - self.last_ok < self.after:
+            return False
+        self.times.append(t)
+        self.last_ok = t
+        return True
+
+
+def gps_note(backend: str, model: GpsModel, iv: Intervals, reacquired: list | None = None) -> str:
+    """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the fixes skipped on reading."""
+    text = f"{backend}: gps {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
+    if model.rejected_t:
+        when = sorted(model.rejected_t)
+        text += f" (t={when[0]:.2f} to {when[-1]:.2f}, {when[0] - iv.t[0]:.2f} to {when[-1] - iv.t[0]:.2f} s in)"
+    if reacquired:
+        text += (f"; {len(reacquired)} times a fix was applied anyway after rejections for gps_reacquire seconds "
+                 f"(the estimate re-acquired the fixes; first at {reacquired[0] - iv.t[0]:.2f} s in)")
+    skipped = sum((iv.gps.skipped or {}).values()) if iv.gps is not None else 0
+    if skipped:
+        text += f"; {skipped} skipped on reading ({', '.join(f'{n} {k}' for k, n in iv.gps.skipped.items() if n)})"
+    return text
 
 
 def calibration_observable(iv: Intervals) -> tuple[bool, bool]:

@@ -28,6 +28,7 @@ Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)
     heading    e = ψ_k + O_c - ψ_AHRS                            σ² = σ_ψ²         (CustomFactor)
     range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
     motion     weak constant-twist BetweenFactorPose2 where no sensor measures an interval's translation
+    GPS        e = X_k.t + R(ψ_k) l - z    Σ = the fix's covariance, Huber/Cauchy  (sensors.gps factor)
 
 The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
 the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
@@ -46,6 +47,16 @@ Without self-calibration the visual factor is a plain ``BetweenFactorPose2``. Vi
 and AHRS factors use a robust noise model (Huber or Cauchy, ``GraphConfig.robust``), so a wrong
 visual match costs at most linearly and cannot drag the trajectory; the linear heading factors are not
 robust, their inputs are gated upstream (gyro spikes, encoder jumps).
+
+GPS
+---
+Every fix time is a node (:mod:`fusion_vo.backends.timeline`) and a keyframe. A fix is gated
+(:meth:`fusion_vo.sensors.gps.GpsModel.check`) against the prediction of its node from the iSAM2
+estimate of the previous node and that node's marginal covariance (against the prediction alone when
+iSAM2 is off); an accepted fix adds the unary factor of :func:`fusion_vo.sensors.gps.gps_factor` inside
+the model's robust kernel, to all three solvers. A rejected fix (a multipath jump) adds nothing and is
+counted. With GPS the first pose's prior is the ENU pose aligned to the fixes
+(:mod:`fusion_vo.backends.world`) with that alignment's uncertainty instead of the exact initial pose.
 
 Solvers
 -------
@@ -77,11 +88,12 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import calibration_observable, gyro_turn
+from fusion_vo.backends.ekf import GpsReacquire, calibration_observable, gps_note, gyro_turn
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.gps import GpsModel
 from fusion_vo.sensors.wheel import arc_covariance, arc_increment, standstill
 
 logger = logging.getLogger(__name__)
@@ -244,6 +256,8 @@ class GraphBuilder:
         nodes = np.arange(0, len(iv.t), every)
         if nodes[-1] != len(iv.t) - 1:
             nodes = np.append(nodes, len(iv.t) - 1)
+        if iv.gps_ok is not None and every > 1:  # a fix's node is always a keyframe
+            nodes = np.union1d(nodes, np.flatnonzero(iv.gps_ok))
         self.grid = nodes  # node index -> interval-grid index
         self.t = iv.t[nodes]
         # bias and calibration variables: one per segment of `calibration_interval` seconds
@@ -264,6 +278,7 @@ class GraphBuilder:
             self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
                                              np.diff(iv.t), self._turn)
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
+        self.reacquire = GpsReacquire(config.gps_reacquire)
 
     # ------------------------------------------------------------------ helpers
     def noise(self, cov: np.ndarray, robust: bool = True):
@@ -293,14 +308,45 @@ class GraphBuilder:
                 chain = None
         return out
 
+    def initial_pose(self) -> np.ndarray:
+        """The first pose: aligned to the GPS fixes when fused, else the configured one."""
+        if self.iv.initial_pose is not None:
+            return np.asarray(self.iv.initial_pose, dtype=np.float64)
+        return np.asarray(self.config.initial_pose, dtype=np.float64)
+
+    def gps_factor(self, nf: NodeFactors, n: int, model: GpsModel, pose_cov: np.ndarray | None) -> None:
+        """Gate the fix at node ``n`` against its predicted pose; add the robust factor when accepted."""
+        iv = self.iv
+        g = int(self.grid[n])
+        if iv.gps_ok is None or not iv.gps_ok[g]:
+            return
+        key = X(self.offset + n)
+        guess = nf.values[key]
+        chk = model.check(np.array([guess.x(), guess.y(), guess.theta()]), iv.gps_enu[g], iv.gps_cov[g], pose_cov,
+                          float(iv.t[g]))
+        if not chk.accepted and self.reacquire.due(float(iv.t[g]), False):
+            model.n_rejected -= 1  # applied after all: a use, not a rejection
+            model.rejected_t.pop()
+            model.n_used += 1
+        elif chk.accepted:
+            self.reacquire.due(float(iv.t[g]), True)
+        else:
+            self.counts.setdefault("gps", SensorCount()).gated += 1
+            return
+        nf.factors.append(model.factor(key, iv.gps_enu[g], iv.gps_cov[g]))
+        nf.sensors.append("gps")
+
     # ------------------------------------------------------------------ per node
     def first_node(self, estimate: dict | None = None) -> NodeFactors:
         """Priors on the first pose, bias and calibration (``estimate`` gives initial values)."""
         cfg = self.config
         est = estimate or {}
         nf = NodeFactors(0, float(self.t[0]))
-        pose = gtsam.Pose2(*cfg.initial_pose)
-        nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, gtsam.noiseModel.Isotropic.Sigma(3, 1e-4)))
+        pose = gtsam.Pose2(*self.initial_pose())
+        sigma = 1e-4 if self.iv.initial_sigma is None else None
+        nm = (gtsam.noiseModel.Isotropic.Sigma(3, sigma) if sigma is not None
+              else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(self.iv.initial_sigma, dtype=np.float64)))
+        nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, nm))
         nf.values[X(0)] = pose
         priors = []  # (key, prior mean, prior sigma, initial value)
         if self.iv.uses("gyro"):
@@ -619,14 +665,24 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     graph = gtsam.NonlinearFactorGraph()
     values = gtsam.Values()
     dims: dict[int, int] = {}
-    isam = gtsam.ISAM2(isam_params()) if gcfg.online else None
-    lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, isam_params()) if gcfg.fixed_lag > 0 else None
+    qr = iv.gps_ok is not None
+    isam = gtsam.ISAM2(isam_params(qr)) if gcfg.online else None
+    lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, isam_params(qr)) if gcfg.fixed_lag > 0 else None
     t_online = 0.0
     t_build = time.process_time()
     estimate: dict = dict(builder.initial_estimate)
-    prev_pose = gtsam.Pose2(*config.initial_pose)
+    prev_pose = gtsam.Pose2(*builder.initial_pose())
+    gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
+        if gps is not None:
+            if n == 0:
+                pose_cov = None if iv.initial_sigma is None else np.diag(np.square(iv.initial_sigma))
+            elif isam is not None:
+                pose_cov = world_covariances(online_poses[n - 1:n, 2], online_cov[n - 1:n])[0]
+            else:
+                pose_cov = None
+            builder.gps_factor(nf, n, gps, pose_cov)
         builder.count(nf)
         new_values = gtsam.Values()
         insert_values(new_values, nf.values)
@@ -661,6 +717,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             lag_poses[n] = (p.x(), p.y(), p.theta())
     t_graph = time.process_time() - t_build - t_online
     counts = builder.counts
+    if gps is not None:
+        result.notes.append(gps_note("gtsam", gps, iv, builder.reacquire.times))
     if isam is not None:
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
         result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
@@ -791,7 +849,7 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     return out
 
 
-def isam_params() -> gtsam.ISAM2Params:
+def isam_params(qr: bool = False) -> gtsam.ISAM2Params:
     """iSAM2 settings that keep the cost per node nearly constant.
 
     The gyro bias and the calibration couple every heading to the whole history: a small change of the
@@ -806,4 +864,8 @@ def isam_params() -> gtsam.ISAM2Params:
     params.relinearizeSkip = 10
     params.enablePartialRelinearizationCheck = True
     params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(1.0))
+    if qr:
+        # with GPS the first heading's prior is loose (estimated from the fixes) beside near-exact wheel
+        # heading changes at low speed: a conditioning that Cholesky reports as indeterminate
+        params.setFactorization("QR")
     return params

@@ -20,6 +20,13 @@ node interval is integrated exactly as in batch use (:func:`~fusion_vo.backends.
 and handed to the EKF (``backend="ekf"``) or to iSAM2 (``backend="gtsam"``). A visual increment whose
 ``t0`` is not the previous node (it spans frames the stream has already passed) cannot be applied
 causally and is counted as late.
+
+GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the pose there through
+:class:`~fusion_vo.sensors.gps.GpsModel` (gate, robust weight). Until the robot has moved enough for
+:func:`~fusion_vo.sensors.gps.align_to_fixes` to fix the heading of ENU, estimates are in the start frame
+(``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
+(plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
+and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
 """
 
 from __future__ import annotations
@@ -27,6 +34,7 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,7 +46,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
-    ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
+    GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
     WheelData, WheelTicks,
 )
 
@@ -55,6 +63,7 @@ class Estimate:
     t: float
     pose: np.ndarray
     covariance: np.ndarray
+    frame: str = "start"
 
 
 class StreamingFusion:
@@ -75,11 +84,15 @@ class StreamingFusion:
         EuRoC noise keys of ``imu0/sensor.yaml``.
     camera_height : float, optional
         Height the visual increments assume (needed for ``range``).
+    gps_lever_arm : array_like, optional
+        Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
+        (default: at the body origin).
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
-                 imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None):
+                 imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
+                 gps_lever_arm=None):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         self.config = as_config(config)
@@ -92,6 +105,8 @@ class StreamingFusion:
             raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(SENSORS)})")
         if "wheel" in self.sensors and wheel_config is None:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
+        if "gps" in self.sensors and backend != "ekf":
+            raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
@@ -109,6 +124,16 @@ class StreamingFusion:
         self._notes: list[str] = []
         self._ekf: PlanarEkf | None = None
         self._graph = None
+        from fusion_vo.sensors.gps import GpsModel
+
+        lever = np.zeros(3) if gps_lever_arm is None else np.asarray(gps_lever_arm, dtype=np.float64).ravel()
+        self._gps_model = GpsModel(lever, self.config.gps)
+        self._gps_lever = lever
+        self._gps: list[GpsFix] = []  # pending fixes, in time order
+        self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
+        self._frame = "start"
+        self._gps_reacquire = None
+        self._gps_bad = 0
 
     # ------------------------------------------------------------------ input
     def add_visual(self, inc: VisualIncrement) -> None:
@@ -135,12 +160,29 @@ class StreamingFusion:
     def add_range(self, m: RangeSample) -> None:
         self._add("range", m.t, float(m.distance))
 
+    def add_gps(self, fix: GpsFix) -> None:
+        """One fix (east, north in ENU at the datum, 2x2 covariance); a non-finite or non-positive-definite
+        one is counted as gated."""
+        self._check("gps")
+        if self._late("gps", fix.t):
+            return
+        enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
+        cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
+        if not (np.all(np.isfinite(enu)) and np.all(np.isfinite(cov))) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
+            self._gps_bad += 1
+            self._count("gps").gated += 1
+            return
+        if self._gps and fix.t < self._gps[-1].t:
+            self._count("gps").reordered += 1
+        bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
+        self._advance(fix.t)
+
     # ------------------------------------------------------------------ output
     def current_estimate(self) -> Estimate | None:
         """The latest processed node's estimate, or None before the first node."""
         if not self._t_nodes:
             return None
-        return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy())
+        return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
 
     def finish(self) -> FusionResult:
         """Process everything buffered and return the online trajectory (``ekf`` or ``gtsam_online``)."""
@@ -152,6 +194,11 @@ class StreamingFusion:
             result.covariances[name] = np.array(self._covs)
         result.counts[name] = self.counts
         result.notes = list(self._notes)
+        if "gps" in self.sensors:
+            m = self._gps_model
+            self._notes.append(f"ekf: gps {m.n_used} fixes used, {m.n_rejected} rejected by the gate; world frame: "
+                               + ("ENU at the datum" if self._frame == "enu" else
+                                  "the start frame (the fixes never fixed the heading of ENU)"))
         late = {s: c.late for s, c in self.counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
@@ -201,14 +248,18 @@ class StreamingFusion:
         """The node after ``after``: the next frame if it comes within 1.5 steps, else a fill-in node."""
         step = 1.0 / self.config.step_hz
         frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
+        fixes = [f.t for f in self._gps if f.t > after + 1e-9]
         if frames and frames[0] <= after + 1.5 * step:
-            return frames[0] if frames[0] <= until else None
-        fill = after + step
-        return fill if fill <= until else None
+            nxt = frames[0]
+        else:
+            nxt = after + step
+        if fixes and fixes[0] < nxt - 1e-3:  # a fix is a node of its own (timeline.GPS_SNAP)
+            nxt = fixes[0]
+        return nxt if nxt <= until else None
 
     def _start_time(self) -> float | None:
         times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
-        return min(times) if times else None
+        return min(times) if times else None  # a fix alone does not start the track
 
     def _process(self, until: float) -> None:
         if not self._t_nodes:
@@ -310,12 +361,64 @@ class StreamingFusion:
         meas = interval_measurements(iv, self.config)
         ekf.predict(float(iv.dt[0]))
         ekf.update(step_blocks(ekf, meas, 0))
+        t1 = float(iv.t[-1])
+        for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
+            self._gps.remove(fix)
+            if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
+                self._count("gps").late += 1
+            else:
+                self._apply_gps(fix)
         for sensor, c in ekf.counts.items():
             own = self._count(sensor)
             own.used += c.used
             own.gated += c.gated
         ekf.counts = {}
         self._record(ekf.x[:3], ekf.P[:3, :3])
+
+    def _apply_gps(self, fix: GpsFix) -> None:
+        from fusion_vo.backends.ekf import YAW, GpsReacquire
+        from fusion_vo.backends.world import prior_from_alignment
+        from fusion_vo.sensors.gps import align_to_fixes
+
+        ekf, model = self._ekf, self._gps_model
+        if self._frame == "start":
+            self._gps_seen.append(fix)
+            poses = np.array(self._poses + [ekf.x[:3]])
+            times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
+            seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
+                [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
+                np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
+                np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
+            fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
+            if fit is None:
+                self._count("gps").missing += 1  # kept for the alignment, not applied
+                return
+            sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
+            _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+            c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
+            T = np.eye(ekf.kf.P.shape[0])
+            T[:2, :2] = [[c, -s_], [s_, c]]
+            ekf.kf.x[:3, 0] = fit.apply(ekf.x[:3])[0]
+            ekf.kf.P = T @ ekf.kf.P @ T.T
+            ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
+            ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
+            rot = np.eye(3)
+            rot[:2, :2] = T[:2, :2]
+            self._poses = [p for p in fit.apply(np.array(self._poses))]
+            self._covs = [rot @ cv @ rot.T for cv in self._covs]
+            self._frame = "enu"
+            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
+                self._heading_offset -= fit.yaw
+            self._gps_reacquire = GpsReacquire(self.config.gps_reacquire)
+            self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
+                               f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
+        accepted = ekf.gps_update(model, fix.enu, fix.covariance, fix.t)
+        if not accepted and self._gps_reacquire.due(fix.t, False):
+            ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
+        elif accepted:
+            self._gps_reacquire.due(fix.t, True)
+        count = self._count("gps")
+        count.used, count.gated = model.n_used, model.n_rejected + self._gps_bad
 
     def _graph_step(self, iv) -> None:
         pose, cov, sensors = self._graph.step(iv)

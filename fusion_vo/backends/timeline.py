@@ -10,7 +10,10 @@ measurement is applied at its own time:
   are interpolated linearly at the node times (exact for constant speed between two samples, whatever
   the rates and jitter), so each node interval gets ``d_l = L(T_{k+1}) - L(T_k)`` etc.;
 * AHRS headings and range readings are interpolated at the node times; the AHRS's north is aligned
-  to the initial heading over its first quarter second (the gyro carries the heading within it).
+  to the initial heading over its first quarter second (the gyro carries the heading within it);
+* GPS fixes are not interpolated: every fix time is a node (a fix within 1 ms of a camera frame uses
+  that frame's node), so both backends apply the fix to the pose at its own time. A camera increment
+  that a fix node splits spans two intervals (the backends already handle increments spanning several).
 
 An interval is only given a wheel or gyro measurement when the stream covers it without a gap longer
 than ``max_gap`` and without a gated sample; otherwise the sensor is counted as missing there and the
@@ -29,14 +32,16 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import ImuData, RangeData, TwistData, VisualIncrement, WheelData
+from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
 from fusion_vo.sensors.imu import ahrs_heading, cumulative_angle, gyro_yaw
 from fusion_vo.sensors.range import camera_height
 from fusion_vo.sensors.wheel import WheelTravel, ticks_to_travel, twist_to_travel
 
 logger = logging.getLogger(__name__)
 
-SENSORS = ("camera", "wheel", "odom", "imu", "range")
+SENSORS = ("camera", "wheel", "odom", "imu", "range", "gps")
+#: a fix closer than this to an existing node [s] is applied at that node
+GPS_SNAP = 1e-3
 
 
 @dataclass
@@ -58,6 +63,7 @@ class SensorStreams:
     camera_height: float | None = None
     camera_height_sigma: float | None = None
     range_in_visual: bool = False
+    gps: GpsData | None = None
 
     def available(self) -> list[str]:
         """Sensor names with data."""
@@ -67,6 +73,7 @@ class SensorStreams:
             "odom": self.odom is not None and len(self.odom) > 1,
             "imu": self.imu is not None and len(self.imu) > 1,
             "range": self.range is not None and len(self.range) > 0,
+            "gps": self.gps is not None and len(self.gps) > 0,
         }
         return [s for s in SENSORS if have[s]]
 
@@ -86,7 +93,7 @@ class SensorStreams:
         missing = [s for s in sensors if s not in available]
         if missing:
             where = {"camera": "cam0/ frames or visual increments", "wheel": "wheel0/ or odom0/", "odom": "odom0/",
-                     "imu": "imu0/", "range": "range0/"}
+                     "imu": "imu0/", "range": "range0/", "gps": "gps0/ (usable fixes)"}
             raise InputError(f"sensor '{missing[0]}' was asked for but the recording has no {where[missing[0]]} data")
         if not sensors:
             raise InputError("no sensors selected")
@@ -101,6 +108,7 @@ class SensorStreams:
             camera_height=self.camera_height,
             camera_height_sigma=self.camera_height_sigma,
             range_in_visual=self.range_in_visual,
+            gps=self.gps if "gps" in sensors else None,
         )
 
 
@@ -150,6 +158,14 @@ class Intervals:
         ``FusionConfig.visual_scale_sigma`` and ``FusionConfig.wheel_scale_sigma``. The common scale of
         camera and wheels is unobservable from the two alone: their ratio is measured, and these priors
         (or a range finder) decide how a disagreement is shared.
+    gps_ok, gps_enu, gps_cov : ndarray (K+1,), (K+1, 2), (K+1, 2, 2)
+        The GPS fix (east, north [m] in ENU at the datum, and its covariance [m²]) at each node that has one.
+    gps : GpsData or None
+        The fixes (lever arm, datum, skip counts) when GPS is fused.
+    initial_pose, initial_sigma : ndarray (3,) or None
+        Start pose and its standard deviations ``(x, y, yaw)`` when the world frame was aligned to the
+        fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
+        ``initial_pose``, taken as exact.
     """
 
     t: np.ndarray
@@ -178,6 +194,12 @@ class Intervals:
     episodes: list = field(default_factory=list)
     visual_scale_sigma: float = 0.05
     wheel_scale_sigma: float = 0.01
+    gps_ok: np.ndarray | None = None
+    gps_enu: np.ndarray | None = None
+    gps_cov: np.ndarray | None = None
+    gps: GpsData | None = None
+    initial_pose: np.ndarray | None = None
+    initial_sigma: np.ndarray | None = None
 
     @property
     def n_steps(self) -> int:
@@ -231,7 +253,7 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         if len(cam):
             starts.append(cam[0])
             ends.append(cam[-1])
-    for data in (streams.wheel, streams.odom, streams.imu, streams.range):
+    for data in (streams.wheel, streams.odom, streams.imu, streams.range, streams.gps):
         if data is not None and len(data.t):
             tt = np.asarray(data.t, dtype=np.float64)
             tt = tt[np.isfinite(tt)]
@@ -252,6 +274,12 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
             if g > 1.5 * step]
     if fill:
         nodes = np.unique(np.concatenate([nodes] + fill))
+    if streams.gps is not None and len(streams.gps.t):
+        fixes = np.asarray(streams.gps.t, dtype=np.float64)
+        fixes = fixes[np.isfinite(fixes)]
+        j = np.clip(np.searchsorted(nodes, fixes), 1, len(nodes) - 1)
+        near = np.minimum(np.abs(nodes[j] - fixes), np.abs(nodes[j - 1] - fixes)) <= GPS_SNAP
+        nodes = np.unique(np.concatenate([nodes, fixes[~near]]))
     if len(nodes) < 2:
         raise InputError("the measurements span no time (need at least two distinct timestamps)")
     return nodes
@@ -295,6 +323,8 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
                      "not used again as a height measurement")
     elif streams.range is not None:
         _add_range(iv, streams.range, config, counts)
+    if streams.gps is not None:
+        _add_gps(iv, streams.gps, counts)
     iv.wheel_yaw_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources against each other
         from fusion_vo.backends.monitor import check_heading_sources
@@ -405,6 +435,28 @@ def _add_range(iv: Intervals, rng: RangeData, config: FusionConfig, counts) -> N
     iv.range_ok = ok
     iv.range_height = np.where(ok, np.interp(T, ht, hv), np.nan)
     count.used += int(ok.sum())
+
+
+def _add_gps(iv: Intervals, gps: GpsData, counts) -> None:
+    """Each fix at the node of its time (:data:`GPS_SNAP`); fixes outside the node span are counted missing."""
+    count = counts.setdefault("gps", SensorCount())
+    T = iv.t
+    iv.gps = gps
+    iv.gps_ok = np.zeros(len(T), bool)
+    iv.gps_enu = np.zeros((len(T), 2))
+    iv.gps_cov = np.tile(np.eye(2), (len(T), 1, 1))
+    idx, n_re, n_dup = time_order(gps.t)
+    count.reordered += n_re
+    count.gated += n_dup
+    for i in idx:
+        k = int(np.clip(np.searchsorted(T, gps.t[i]), 0, len(T) - 1))
+        k = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - gps.t[i]))
+        if abs(T[k] - gps.t[i]) > GPS_SNAP or iv.gps_ok[k]:
+            count.missing += 1
+            continue
+        iv.gps_ok[k] = True
+        iv.gps_enu[k] = gps.enu[i, :2]
+        iv.gps_cov[k] = gps.covariance[i]
 
 
 def _add_visual(iv: Intervals, visual: list[VisualIncrement], counts, notes) -> None:

@@ -1,12 +1,11 @@
 """A pause in every stream (the robot's logger stopped for a while): never the process, never a wrong
-answer. These are for the estimators to fix; they are marked as expected failures until then."""
+answer."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from fault_tools import cli
 
@@ -29,9 +28,6 @@ def pause(rec: Path, after_s: float, seconds: float) -> None:
         p.write_text("\n".join(out) + "\n")
 
 
-@pytest.mark.xfail(strict=True, reason="the factor graph has no constraint across a pause longer than max_gap "
-                                       "(gtsam IndeterminateLinearSystemException); the backends must split or "
-                                       "bridge the estimate")
 def test_a_pause_in_every_stream_does_not_stop_the_factor_graph(recording, tmp_path, capsys):
     pause(recording, 0.8, 20.0)
     status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "gtsam",

@@ -173,7 +173,7 @@ def test_cli_errors_are_one_line_with_status_2(tmp_path, capsys):
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--config", str(cfg)]) == 2
     assert "c.yaml" in capsys.readouterr().err
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--sensors", "camera,lidar"]) == 2
-    assert "sensors[1]: expected one of 'camera', 'wheel', 'imu', 'odom' or 'range', got 'lidar'" in capsys.readouterr().err
+    assert "sensors[1]: expected one of 'camera', 'wheel', 'imu', 'odom', 'range' or 'gps', got 'lidar'" in capsys.readouterr().err
     (tmp_path / "afile").write_text("")
     assert main(["run", str(root), "--out", str(tmp_path / "afile")]) == 2
     assert "must be a folder" in capsys.readouterr().err

@@ -1,0 +1,103 @@
+"""The world frame when GPS is fused: East-North-Up at the datum, with an estimated first heading.
+
+Without GPS the world frame W is the first pose (``FusionConfig.initial_pose``). With GPS it is ENU at
+the datum of ``gps0/sensor.yaml``, and nothing tells the backends which way the robot first faced:
+
+1. a GPS-free pass of the EKF (and its RTS smoother) over the same intervals gives a dead-reckoned
+   track in the start frame;
+2. :func:`~fusion_vo.sensors.gps.align_to_fixes` fits the rigid planar transform (heading, offset)
+   that carries that track's antenna positions onto the first fixes (robust to multipath jumps); the
+   window grows from 2 s of fixes, doubling, until the fitted heading's standard deviation
+   (from the fixes' noise) is below :data:`TARGET_YAW_SIGMA`, or the whole recording is used;
+3. the AHRS headings, aligned to the configured initial heading, are turned by the same rotation;
+4. both backends then start at the aligned first pose, with a prior of three times the fit's
+   standard deviations (heading at least :data:`MIN_YAW_SIGMA`), and the fixes themselves refine it.
+
+While the robot has not moved a few fix sigmas the heading is unobservable; the configured initial
+heading is then kept, the first pose is put under the first fix, and a note says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+
+import numpy as np
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.timeline import Intervals
+from fusion_vo.sensors.gps import align_to_fixes, predict
+
+logger = logging.getLogger(__name__)
+
+TARGET_YAW_SIGMA = 0.01  # [rad]
+MIN_YAW_SIGMA = 0.02  # [rad]
+MAX_YAW_SIGMA = 0.5  # [rad]
+
+
+def prior_from_alignment(fit, pose0: np.ndarray, fix_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """First pose in ENU and its prior standard deviations from an :class:`~fusion_vo.sensors.gps.Alignment`."""
+    pose = fit.apply(np.asarray(pose0, dtype=np.float64))[0]
+    sxy = 3.0 * max(fit.rms, fix_sigma)
+    syaw = float(np.clip(3.0 * fit.yaw_sigma, MIN_YAW_SIGMA, MAX_YAW_SIGMA))
+    return pose, np.array([sxy, sxy, syaw])
+
+
+def fallback_prior(iv: Intervals, config: FusionConfig, fix_sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """First pose under the first fix with the configured heading (heading not observable)."""
+    k = int(np.argmax(iv.gps_ok))
+    yaw = float(config.initial_pose[2])
+    lever = iv.gps.lever_arm
+    antenna = predict(np.array([0.0, 0.0, yaw]), lever)
+    pose = np.array([*(iv.gps_enu[k] - antenna), yaw])
+    return pose, np.array([3.0 * fix_sigma, 3.0 * fix_sigma, 1e-3])
+
+
+def rotate_ahrs(iv: Intervals, yaw: float) -> None:
+    """AHRS headings re-expressed in the rotated world frame: they were aligned to the configured
+    initial heading, which the world alignment turned by ``yaw``."""
+    from fusion_vo.geometry import se2
+
+    if iv.ahrs_ok.any():
+        iv.ahrs_yaw = se2.wrap_angle(iv.ahrs_yaw + yaw)
+    if iv.heading_offset is not None:
+        iv.heading_offset = float(iv.heading_offset - yaw)
+
+
+def align_world(iv: Intervals, config: FusionConfig) -> None:
+    """Set ``iv.initial_pose`` / ``iv.initial_sigma`` in ENU from the fixes (module docstring); adds a note."""
+    if iv.gps_ok is None or not iv.gps_ok.any():
+        return
+    from fusion_vo.backends.ekf import run_ekf
+
+    free = dataclasses.replace(iv, gps_ok=None, notes=[], initial_pose=None, initial_sigma=None)
+    track = run_ekf(free, config)
+    traj = track.trajectories.get("ekf_smoothed") or track.trajectories["ekf"]
+    gps = iv.gps
+    fix_sigma = math.sqrt(float(np.median(np.trace(gps.covariance, axis1=1, axis2=2))) / 2.0)
+    t_first = float(iv.t[np.argmax(iv.gps_ok)])
+    fit = None
+    window = 2.0
+    while True:
+        t_end = t_first + window
+        candidate = align_to_fixes(traj.t, traj.xyyaw, gps, t_end=t_end)
+        if candidate is not None:
+            fit = candidate
+            if fit.yaw_sigma <= TARGET_YAW_SIGMA:
+                break
+        if t_end >= traj.t[-1]:
+            break
+        window *= 2.0
+    if fit is None:
+        iv.initial_pose, iv.initial_sigma = fallback_prior(iv, config, fix_sigma)
+        iv.notes.append("gps: the antenna never moved enough to estimate the first heading from the fixes; the "
+                        f"configured initial heading {math.degrees(config.initial_pose[2]):.1f} deg is assumed")
+        return
+    iv.initial_pose, iv.initial_sigma = prior_from_alignment(fit, traj.xyyaw[0], fix_sigma)
+    rotate_ahrs(iv, fit.yaw)
+    iv.notes.append(f"gps: world frame is ENU at the datum {tuple(round(v, 7) for v in gps.datum)}; first heading "
+                    f"{math.degrees(iv.initial_pose[2]):.2f} deg (east = 0, counter-clockwise) estimated from the "
+                    f"fixes of the first {min(window, traj.t[-1] - t_first):.0f} s (± {math.degrees(fit.yaw_sigma):.2f} deg, "
+                    f"fit residual {fit.rms:.3f} m, {fit.n_outliers} of {fit.n} fixes ignored as outliers)")
+    logger.info("%s", iv.notes[-1])
