@@ -23,6 +23,7 @@ failures the current frame, if textured, becomes the new reference (restart).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import cv2
@@ -32,7 +33,7 @@ from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
 from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
-from frontends.frame_check import check_frame
+from frontends.frame_check import check_frame, texture_measure
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, apply_similarity, estimate_similarity, judge_fit
@@ -203,6 +204,25 @@ class _Frame:
     small: np.ndarray | None = None  # reduced copy for the exposure comparison
 
 
+@dataclass
+class PreparedFrame:
+    """A frame with its corners and descriptors, made ahead of :meth:`FeatureFrontend.process`.
+
+    Attributes
+    ----------
+    image : ndarray
+        The frame as given.
+    texture : float
+        :func:`frontends.frame_check.texture_measure` of its 8-bit version.
+    described : _Frame
+        Corners, descriptors, rectified positions and the exposure thumbnail (time not yet set).
+    """
+
+    image: np.ndarray
+    texture: float
+    described: _Frame
+
+
 class FeatureFrontend:
     """Frame-to-frame similarity from matched corners.
 
@@ -223,6 +243,8 @@ class FeatureFrontend:
         self._lk = LkSettings(window=cfg.window, fb_threshold=cfg.fb_threshold, border=2)
         self._rng = np.random.default_rng(cfg.seed)
         self._orb = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
+        # prepare() runs in another thread: it gets its own ORB object
+        self._orb_ahead = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
         self._shape: tuple[int, int] | None = None
         self.reset()
 
@@ -231,31 +253,55 @@ class FeatureFrontend:
         self._ref: _Frame | None = None
         self._history = MotionHistory(self.config.max_prediction_gap, self.config.max_failures)
 
-    def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
-        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
+    def process(self, image: np.ndarray | PreparedFrame, timestamp: float) -> FrameMotion:
+        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`).
+
+        ``image`` may also be the :meth:`prepare`-d frame; the result is the same.
+        """
         return timed_measurement(self._process, self._failed, image, timestamp)
 
+    def prepare(self, image: np.ndarray) -> PreparedFrame | np.ndarray:
+        """Corners and descriptors of a frame, for a thread ahead of :meth:`process` (they do not
+        depend on earlier frames).
+
+        Safe to run in one other thread while :meth:`process` runs (it reads only the configuration
+        and the point map, and has its own ORB object). A frame that is not a 2-D ``uint8``/``uint16``
+        array, or that OpenCV refuses, is returned as it is (the checks of :meth:`process` report it).
+        """
+        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
+                or min(image.shape) < 32:
+            return image
+        grey = np.ascontiguousarray((image // 257).astype(np.uint8) if image.dtype == np.uint16 else image)
+        try:
+            return PreparedFrame(image, texture_measure(grey), self._describe(grey, float("nan"), self._orb_ahead))
+        except cv2.error:
+            return image
+
     # -------------------------------------------------------------- pipeline
-    def _describe(self, img: np.ndarray, t: float) -> _Frame:
+    def _describe(self, img: np.ndarray, t: float, orb=None) -> _Frame:
         pts = detect_corners(img, self._detector)
         if self.config.descriptor == "orb":
-            desc, idx = orb_descriptors(img, pts, self._orb)
+            desc, idx = orb_descriptors(img, pts, orb if orb is not None else self._orb)
         else:
             desc, idx = patch_descriptors(img, pts, self.config.patch_radius)
         pts = pts[idx]
         rect = self.point_map.to_rectified(pts.astype(np.float64))
         return _Frame(img, t, pts, desc, rect, small=reduce_for_exposure(img))
 
-    def _process(self, image: np.ndarray, t: float) -> FrameMotion:
+    def _process(self, image: np.ndarray | PreparedFrame, t: float) -> FrameMotion:
         cfg = self.config
+        prepared = image if isinstance(image, PreparedFrame) else None
+        if prepared is not None:
+            image = prepared.image
         ref_texture = None if self._ref is None else self._ref.texture
-        check = check_frame(image, self._shape, cfg.min_texture, ref_texture, cfg.min_texture_ratio)
+        check = check_frame(image, self._shape, cfg.min_texture, ref_texture, cfg.min_texture_ratio,
+                            texture=None if prepared is None else prepared.texture)
         if check.status is not None:
             return self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         if self._ref is not None and not t > self._ref.time:
             return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref.time}")
-        cur = self._describe(img, t)
+        cur = self._describe(img, t) if prepared is None else dataclasses.replace(prepared.described, time=t)
         cur.texture = check.texture
         if self._ref is None:
             self._shape = img.shape

@@ -64,6 +64,7 @@ def check_frame(
     reference_texture: float | None = None,
     min_ratio: float = 0.0,
     min_size: int = 32,
+    texture: float | None = None,
 ) -> FrameCheck:
     """Validate a frame and measure its texture; never raises.
 
@@ -81,6 +82,9 @@ def check_frame(
         Smallest acceptable ratio of this frame's texture to ``reference_texture``.
     min_size : int
         Smallest acceptable side length [px].
+    texture : float, optional
+        :func:`texture_measure` of the frame when it was already computed (by a frontend's
+        ``prepare`` in another thread); measured here otherwise.
     """
     if not isinstance(image, np.ndarray):
         return FrameCheck(MotionStatus.BAD_FRAME, None, float("nan"), "not an array")
@@ -97,7 +101,7 @@ def check_frame(
     if min(image.shape) < min_size:
         return FrameCheck(MotionStatus.BAD_FRAME, None, float("nan"), f"frame too small {image.shape}")
     image = np.ascontiguousarray(image)
-    g = texture_measure(image)
+    g = texture_measure(image) if texture is None else float(texture)
     if g < min_texture:
         return FrameCheck(MotionStatus.TOO_FEW_FEATURES, image, g, f"texture {g:.2f} below {min_texture:g}")
     if reference_texture is not None and g < min_ratio * reference_texture:

@@ -38,7 +38,7 @@ import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
-from frontends.frame_check import check_frame
+from frontends.frame_check import check_frame, texture_measure
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, judge_fit
 from frontends.tracking import LkSettings, exposure_correction, fit_affine, reduce_for_exposure, track_points
@@ -201,6 +201,25 @@ class KltConfig(ConfigMixin):
 
 
 @dataclass
+class PreparedFrame:
+    """The work on a frame that does not depend on earlier frames (see :meth:`KltFrontend.prepare`).
+
+    Attributes
+    ----------
+    image : ndarray
+        The frame as given.
+    texture : float
+        :func:`frontends.frame_check.texture_measure` of its 8-bit version.
+    small : ndarray
+        :func:`frontends.tracking.reduce_for_exposure` of its 8-bit version.
+    """
+
+    image: np.ndarray
+    texture: float
+    small: np.ndarray
+
+
+@dataclass
 class _Attempt:
     """One tracking attempt from a given initial guess."""
 
@@ -245,19 +264,43 @@ class KltFrontend:
         self._cur_small: np.ndarray | None = None
 
     # ------------------------------------------------------------ public API
-    def process(self, image: np.ndarray, timestamp: float) -> FrameMotion:
-        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`)."""
+    def process(self, image: np.ndarray | PreparedFrame, timestamp: float) -> FrameMotion:
+        """Measure the motion from the reference frame to ``image`` (see :mod:`frontends.base`).
+
+        ``image`` may also be the :meth:`prepare`-d frame; the result is the same.
+        """
         return timed_measurement(self._process, self._failed, image, timestamp)
 
+    @staticmethod
+    def prepare(image: np.ndarray) -> PreparedFrame | np.ndarray:
+        """The per-frame work that does not depend on earlier frames, for a thread ahead of :meth:`process`.
+
+        Thread-safe (it reads no state). Measures the texture and reduces the frame for the exposure
+        comparison; a frame that is not a 2-D ``uint8``/``uint16`` array is returned as it is (the
+        checks of :meth:`process` report it).
+        """
+        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
+                or min(image.shape) < 8:
+            return image
+        grey = np.ascontiguousarray((image // 257).astype(np.uint8) if image.dtype == np.uint16 else image)
+        try:
+            return PreparedFrame(image, texture_measure(grey), reduce_for_exposure(grey))
+        except cv2.error:  # left to process(), which reports it for this frame
+            return image
+
     # -------------------------------------------------------------- pipeline
-    def _process(self, image: np.ndarray, t: float) -> FrameMotion:
+    def _process(self, image: np.ndarray | PreparedFrame, t: float) -> FrameMotion:
         cfg = self.config
-        check = check_frame(image, self._shape, cfg.min_texture, self._ref_texture, cfg.min_texture_ratio)
+        prepared = image if isinstance(image, PreparedFrame) else None
+        if prepared is not None:
+            image = prepared.image
+        check = check_frame(image, self._shape, cfg.min_texture, self._ref_texture, cfg.min_texture_ratio,
+                            texture=None if prepared is None else prepared.texture)
         if check.status is not None:
             return self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         self._cur_texture = check.texture
-        self._cur_small = reduce_for_exposure(img)
+        self._cur_small = reduce_for_exposure(img) if prepared is None else prepared.small
         if self._ref_img is None:
             self._shape = img.shape
             self._set_reference(img, t, np.zeros((0, 2), np.float32))

@@ -12,7 +12,9 @@ find a small residual translation of undeformed patches:
 
 ``q1`` is then the position in the current frame of the reference point ``p0``. Every point is tracked
 back from ``q1`` (starting from the same guess, so the check is symmetric) and kept only if it returns
-within ``fb_threshold`` of ``q0``.
+within ``fb_threshold`` of ``q0``. When no point moved more than ``fb_direct_reach`` pixels from its
+guess, the backward pass starts within that distance of every answer and runs on full resolution only
+(no pyramid to build; Lucas-Kanade's reach there is half a window).
 
 Lucas-Kanade has no model of brightness change either: a 15 % exposure step between two frames
 tilts the measured rotation by several thousandths of a degree. :func:`exposure_change` measures the
@@ -41,6 +43,7 @@ class LkSettings:
     warp_tolerance: float = 1e-3
     forward_backward: bool = True
     exposure_tolerance: float = 0.01
+    fb_direct_reach: float = 2.0
 
 
 @dataclass
@@ -136,8 +139,10 @@ def track_points(
     q0k, q1k, gk = q0[idx], q1[idx], guess[idx]
     # backward from where the points landed, started from the same guess (symmetric check)
     back = np.ascontiguousarray(q1k - (gk - q0k), dtype=np.float32)
+    # a start within a few pixels of the answer needs no pyramid (nor the time to build one)
+    back_levels = 0 if np.abs(q1k - gk).max() <= s.fb_direct_reach else levels
     q0b, st2, _ = cv2.calcOpticalFlowPyrLK(
-        img, ref, q1k, back, winSize=win, maxLevel=levels,
+        img, ref, q1k, back, winSize=win, maxLevel=back_levels,
         criteria=criteria, flags=flags, minEigThreshold=s.min_eigen,
     )
     d = q0b - q0k

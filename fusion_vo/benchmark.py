@@ -1,13 +1,20 @@
-"""Speed of the visual odometry chain on a recording, single-threaded.
+"""Speed of the visual odometry chain on a recording, beside the plain OpenCV script.
 
-Three timings per frontend, per frame:
+End to end (:func:`compare_end_to_end`): the wall time of :func:`fusion_vo.odometry.run_visual_odometry`
+over the whole recording, decoding included, with one thread and with all threads, and the wall time of
+the plain OpenCV script (``benchmarks/baseline_opencv.py``: Shi-Tomasi corners, pyramidal LK, RANSAC
+similarity, one frame at a time) over the same frames. The runs are interleaved and repeated, and each
+ratio is taken between runs made next to each other, so that a shared machine's changing speed
+affects both sides alike.
+
+Where the time goes (:func:`time_frontend`), three timings per frontend, per frame:
 
 ``decode``     reading and decoding the PNG (``cv2.imread``)
 ``frontend``   the frontend's ``process`` on the decoded image
 ``geometry``   rectification is inside the frontend; this is the similarity -> body increment step
 
-Times are CPU time of the process (``time.process_time``) with OpenCV limited to one thread, so the
-figures do not depend on what else the machine is doing. Frames per second are reported with decode
+Times are CPU time of the process (``time.process_time``) with OpenCV and the BLAS libraries limited
+to one thread, so the figures depend less on what else the machine is doing. Frames per second are reported with decode
 included (the end-to-end figure) and excluded. Memory is
 sampled as the process's resident set size after each quarter of the frames: flat in recording length
 means the last quarter is no larger than the first.
@@ -15,17 +22,25 @@ means the last quarter is no larger than the first.
 
 from __future__ import annotations
 
+import importlib.util
 import logging
+import os
 import resource
+import statistics
+import tempfile
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import cv2
 
 from frontends import make_frontend
 from fusion_vo.geometry.ground import GroundGeometry
+from fusion_vo.odometry import OdometryConfig, available_cores, opencv_threads, run_visual_odometry
 from fusion_vo.recording import Recording
+from fusion_vo.recording.csvio import read_frame_list
 
 log = logging.getLogger(__name__)
 
@@ -58,16 +73,22 @@ def _rss_mb() -> float:
 def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = None,
                   options: dict | None = None) -> FrontendTiming:
     """Time decode + frontend + geometry over the frames of a recording (one thread)."""
-    cv2.setNumThreads(1)
     rec = Recording(sequence)
     geometry = GroundGeometry(rec.camera)
     fe = make_frontend(frontend, options or {}, point_map=geometry.rectifier)
     n = len(rec) if max_frames is None else min(max_frames, len(rec))
+    frames = rec.frames(stop=n)  # decoding happens in next(): timed as decode
+    with opencv_threads(1):
+        dec, fro, geo, ok, rss = _time_stages(frames, n, fe, geometry)
+    return FrontendTiming(frontend, n, 1000 * dec / n, 1000 * fro / n, 1000 * geo / n,
+                          ok / max(n - 1, 1), rss)
+
+
+def _time_stages(frames, n, fe, geometry) -> tuple[float, float, float, int, list]:
     dec = fro = geo = 0.0
     ok = 0
     rss = []
     quarter = max(n // 4, 1)
-    frames = rec.frames(stop=n)  # decoding happens in next(): timed as decode
     for i in range(n):
         a = time.process_time()
         frame = next(frames)
@@ -83,8 +104,7 @@ def time_frontend(sequence: str | Path, frontend: str, max_frames: int | None = 
         geo += d - c
         if (i + 1) % quarter == 0:
             rss.append(round(_rss_mb(), 1))
-    return FrontendTiming(frontend, n, 1000 * dec / n, 1000 * fro / n, 1000 * geo / n,
-                          ok / max(n - 1, 1), rss)
+    return dec, fro, geo, ok, rss
 
 
 def format_timing(t: FrontendTiming) -> str:
@@ -97,3 +117,231 @@ def format_timing(t: FrontendTiming) -> str:
 def summary_table(timings: list[FrontendTiming]) -> str:
     return "\n".join(format_timing(t) for t in timings)
 
+
+
+# ---------------------------------------------------------------------- end to end, beside the baseline
+#: ``run(seq) -> (results, wall seconds)`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``)
+BaselineRun = Callable[[str | Path], tuple[list, float]]
+
+
+@dataclass
+class EndToEnd:
+    """Frames per second over repeated, interleaved runs on one recording.
+
+    Attributes
+    ----------
+    name : str
+        ``"plain OpenCV script"`` or the frontend's name.
+    threads : int or None
+        Threads given to fusion-vo (``None`` for the plain script, which uses OpenCV's default).
+    frames : int
+        Frames in the recording.
+    fps : list of float
+        Frames per second of each repeat, decoding included.
+    ratio : list of float
+        Each repeat's frames per second over the faster of the plain script's two runs (OpenCV's default
+        threads, one thread) in the same repeat (empty for the script).
+    failed : int
+        Frames the run could not measure (last repeat).
+    baseline : bool
+        Whether this is the plain script.
+    rss_mb : list of float
+        Resident memory of the process after each quarter of the frames (last repeat; fusion-vo only).
+    cpu_ms : list of float
+        CPU time of the process per frame [ms] (all its threads), per repeat: less sensitive than the
+        wall clock to other work on the machine.
+    """
+
+    name: str
+    threads: int | None
+    frames: int
+    fps: list = field(default_factory=list)
+    ratio: list = field(default_factory=list)
+    failed: int = 0
+    baseline: bool = False
+    rss_mb: list = field(default_factory=list)
+    cpu_ms: list = field(default_factory=list)
+
+    @property
+    def label(self) -> str:
+        if self.baseline:
+            if self.threads is None:
+                return f"{self.name}, OpenCV's default threads ({cv2.getNumThreads()})"
+            return f"{self.name}, OpenCV on {self.threads} thread{'s' if self.threads > 1 else ''}"
+        return f"{self.name}, {self.threads} thread{'s' if self.threads > 1 else ''}"
+
+
+def current_rss_mb() -> float:
+    """Resident memory of this process now [MB] (Linux ``/proc``; the peak elsewhere)."""
+    try:
+        with open("/proc/self/statm") as fh:
+            return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+    except (OSError, ValueError, IndexError):
+        return _rss_mb()
+
+
+def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int, list, float]:
+    """Frames per second of visual odometry over a recording (wall clock, decoding included), failures,
+    the resident memory after each quarter of the frames [MB] and the CPU time per frame [ms]."""
+    rec = Recording(sequence)
+    n = len(rec)
+    quarter = max(n // 4, 1)
+    rss: list = []
+
+    def progress(done: int, total: int) -> None:
+        if done % quarter == 0 and len(rss) < 4:
+            rss.append(round(current_rss_mb(), 1))
+
+    cpu = time.process_time()
+    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads), progress=progress)
+    cpu = time.process_time() - cpu
+    return n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped), rss, 1000 * cpu / n
+
+
+def time_baseline(sequence: str | Path, baseline: BaselineRun, threads: int | None = None) -> tuple[float, int, float]:
+    """Frames per second of the plain OpenCV script over a recording, the frame pairs it failed on and
+    its CPU time per frame [ms].
+
+    ``threads`` limits OpenCV's threads for the run (``None``: OpenCV's default, as the script is).
+    """
+    cpu = time.process_time()
+    with opencv_threads(threads) if threads is not None else nullcontext():
+        results, seconds = baseline(sequence)
+    cpu = time.process_time() - cpu
+    return (len(results) + 1) / seconds, sum(m is None for *_, m in results), 1000 * cpu / (len(results) + 1)
+
+
+def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: BaselineRun,
+                       thread_counts: list[int] | None = None, repeats: int = 3,
+                       report: Callable[[str], None] | None = None) -> list[EndToEnd]:
+    """fusion-vo beside the plain OpenCV script, frames per second end to end.
+
+    Each repeat runs the plain script twice (OpenCV's default threads, as written, and OpenCV on one
+    thread), then every frontend with every thread count, on the same recording; each ratio is taken
+    against the faster of the two script runs of the same repeat.
+
+    Parameters
+    ----------
+    sequence : path
+    frontends : list of str
+    baseline : callable
+        ``run`` of ``benchmarks/baseline_opencv.py``.
+    thread_counts : list of int, optional
+        Default ``[1, cores available]`` (just ``[1]`` on one core).
+    repeats : int
+    report : callable, optional
+        Called with a line after each run (progress).
+    """
+    if thread_counts is None:
+        thread_counts = sorted({1, available_cores()})
+    n = len(Recording(sequence))
+    bases = [EndToEnd("plain OpenCV script", None, n, baseline=True),
+             EndToEnd("plain OpenCV script", 1, n, baseline=True)]
+    rows = [EndToEnd(fe, th, n) for fe in frontends for th in thread_counts]
+    for r in range(repeats):
+        for base in bases:
+            fps, base.failed, cpu = time_baseline(sequence, baseline, base.threads)
+            base.fps.append(fps)
+            base.cpu_ms.append(cpu)
+            if report:
+                report(f"repeat {r + 1}/{repeats}: {base.label} {fps:.1f} frames/s")
+        best = max(base.fps[-1] for base in bases)
+        for row in rows:
+            fps, row.failed, row.rss_mb, cpu = time_run(sequence, row.name, row.threads)
+            row.fps.append(fps)
+            row.cpu_ms.append(cpu)
+            row.ratio.append(fps / best)
+            if report:
+                report(f"repeat {r + 1}/{repeats}: {row.label} {fps:.1f} frames/s ({row.ratio[-1]:.2f}x)")
+    return [*bases, *rows]
+
+
+def _span(values: list[float], fmt: str) -> str:
+    med = statistics.median(values)
+    if len(values) == 1:
+        return format(med, fmt)
+    return f"{format(med, fmt)} ({format(min(values), fmt)}-{format(max(values), fmt)})"
+
+
+def end_to_end_table(rows: list[EndToEnd]) -> str:
+    """A Markdown table: frames/s and the ratio to the plain script (median, and range over repeats)."""
+    lines = ["| run | frames/s end to end | x plain script (the faster run) | CPU time per frame | failed frames "
+             "| memory after each quarter |", "|---|---|---|---|---|---|"]
+    for row in rows:
+        ratio = _span(row.ratio, ".2f") if row.ratio else "–"
+        memory = " / ".join(f"{m:.0f}" for m in row.rss_mb) + " MB" if row.rss_mb else "–"
+        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {_span(row.cpu_ms, '.2f')} ms | {row.failed} "
+                     f"| {memory} |")
+    return "\n".join(lines)
+
+
+def first_frames(sequence: str | Path, n: int, out: str | Path) -> Path:
+    """A recording of the first ``n`` frames of ``sequence`` (its camera only; frame files linked, not copied)."""
+    sequence, out = Path(sequence), Path(out)
+    t_ns, names, _ = read_frame_list(sequence / "cam0" / "data.csv")
+    (out / "cam0" / "data").mkdir(parents=True)
+    (out / "cam0" / "sensor.yaml").write_bytes((sequence / "cam0" / "sensor.yaml").read_bytes())
+    with open(out / "cam0" / "data.csv", "w", newline="") as fh:
+        fh.write("#timestamp [ns],filename\n")
+        for stamp, name in zip(t_ns[:n], names[:n]):
+            os.symlink((sequence / "cam0" / "data" / name).resolve(), out / "cam0" / "data" / Path(name).name)
+            fh.write(f"{int(stamp)},{Path(name).name}\n")
+    return out
+
+
+#: where the plain OpenCV script lives in a source checkout
+BASELINE_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "baseline_opencv.py"
+
+
+def load_baseline(path: str | Path = BASELINE_SCRIPT) -> BaselineRun | None:
+    """``run`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``), or ``None`` when absent.
+
+    The script belongs to the source tree, not to the installed package.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return None
+    spec = importlib.util.spec_from_file_location("baseline_opencv", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.run
+
+
+def run_benchmark(sequence: str | Path, frontends: list[str], baseline: BaselineRun | None,
+                  thread_counts: list[int] | None = None, repeats: int = 3, max_frames: int | None = None,
+                  stages: bool = True, out: Callable[[str], None] = print) -> list[EndToEnd]:
+    """The whole benchmark of ``fusion-vo bench`` and ``benchmarks/bench_frontends.py``; prints as it goes.
+
+    With ``max_frames`` both fusion-vo and the plain script run on the first ``max_frames`` frames.
+    Without a ``baseline``, the fusion-vo figures are printed without ratios.
+    """
+    with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
+        seq = Path(sequence)
+        if max_frames is not None and max_frames < len(Recording(seq)):
+            seq = first_frames(seq, max_frames, Path(tmp) / "first")
+        n = len(Recording(seq))
+        out(f"{n} frames of {Recording(seq).camera.width}x{Recording(seq).camera.height} from {sequence}; "
+            f"{available_cores()} cores available; {repeats} interleaved repeats; load average "
+            f"{os.getloadavg()[0]:.2f} before")
+        if baseline is None:
+            out(f"note: {BASELINE_SCRIPT} not found (it is part of the source tree): no plain-script baseline")
+            rows = [EndToEnd(fe, th, n) for fe in frontends for th in (thread_counts or sorted({1, available_cores()}))]
+            for _ in range(repeats):
+                for row in rows:
+                    fps, row.failed, row.rss_mb, cpu = time_run(seq, row.name, row.threads)
+                    row.fps.append(fps)
+                    row.cpu_ms.append(cpu)
+        else:
+            rows = compare_end_to_end(seq, frontends, baseline, thread_counts, repeats, report=out)
+        out("")
+        out(f"load average {os.getloadavg()[0]:.2f} after; frames per second end to end (decoding included, "
+            "wall clock), median (range) over the repeats; each ratio is taken against the faster plain-script "
+            "run of the same repeat:")
+        out("")
+        out(end_to_end_table(rows))
+        if stages:
+            out("")
+            out("where the time goes, one thread, CPU time per frame:")
+            for fe in frontends:
+                out(format_timing(time_frontend(seq, fe)))
+    return rows

@@ -12,17 +12,33 @@ and counted; the fused backends do better by leaning on the wheels and the gyro 
 
 The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
 real time between the two frames (not a nominal frame rate).
+
+Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``threads >= 2`` a reader
+thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
+per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
+calling thread tracks. OpenCV releases the GIL while it decodes and filters, so they overlap on the
+cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
+small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
+flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
+the calling thread, OpenCV single-threaded).
 """
 
 from __future__ import annotations
 
 import logging
+import os
+import queue
+import threading
 import time
 from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator, TypeVar
 
+import cv2
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
@@ -30,7 +46,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
-from fusion_vo.recording import Recording
+from fusion_vo.recording import Frame, Recording
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +70,11 @@ class OdometryConfig:
     max_bad_start_frames : int
         If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an
         error instead of skipping them one by one.
+    threads : int or None
+        Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
+        single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
+        (:func:`prepared_frames`) and lets OpenCV use ``N`` threads. ``None`` (the default) uses the
+        cores available to the process. The results do not depend on it.
     """
 
     frontend: str = "klt"
@@ -63,6 +84,16 @@ class OdometryConfig:
     min_sigma_xy: float = 2e-5
     min_sigma_yaw: float = 2e-5
     max_bad_start_frames: int = 5
+    threads: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.threads is not None and (isinstance(self.threads, bool) or not isinstance(self.threads, int)
+                                         or self.threads < 1):
+            raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
+
+    def thread_count(self) -> int:
+        """The number of threads to use (``threads``, or the cores available when it is ``None``)."""
+        return self.threads if self.threads is not None else available_cores()
 
     @classmethod
     def from_dict(cls, d: dict) -> "OdometryConfig":
@@ -153,8 +184,11 @@ class VisualOdometry:
         """Latest ``(x, y, yaw)`` of the visual track (``None`` before the first frame)."""
         return self.poses[-1] if self.poses else None
 
-    def process(self, image: np.ndarray, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
-        """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame)."""
+    def process(self, image, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
+        """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame).
+
+        ``image`` is the frame, or what the frontend's ``prepare`` made of it.
+        """
         motion = self.frontend.process(image, t)
         if motion.status is MotionStatus.FIRST:
             if not self.poses:
@@ -184,6 +218,119 @@ class VisualOdometry:
         return PoseData(np.asarray(self.t, dtype=np.float64), np.asarray(self.poses, dtype=np.float64).reshape(-1, 3))
 
 
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity where the system reports it)."""
+    try:
+        return max(len(os.sched_getaffinity(0)), 1)
+    except AttributeError:  # not Linux
+        return max(os.cpu_count() or 1, 1)
+
+
+T = TypeVar("T")
+
+
+def read_ahead(items: Iterable[T], depth: int) -> Iterator[T]:
+    """Iterate ``items`` in a background thread, at most ``depth`` items ahead of the consumer.
+
+    The items come out in their order; an exception raised by ``items`` is raised here at the same
+    position. When the consumer stops early (an error, ``close()``), the background thread stops after
+    the item it is producing and closes ``items``.
+
+    Parameters
+    ----------
+    items : iterable
+        Typically a generator that decodes frames; it is only ever advanced by the background thread.
+    depth : int
+        Largest number of produced items waiting for the consumer (memory bound).
+    """
+    buffer: queue.Queue = queue.Queue(maxsize=max(int(depth), 1))
+    stop = threading.Event()
+    end = object()
+
+    def put(entry) -> bool:
+        while not stop.is_set():
+            try:
+                buffer.put(entry, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        iterator = iter(items)
+        try:
+            for item in iterator:
+                if not put((item, None)):
+                    break
+            else:
+                put((end, None))
+        except BaseException as exc:  # handed to the consumer, raised there
+            put((end, exc))
+        finally:
+            close = getattr(iterator, "close", None)
+            if close is not None:
+                close()
+
+    worker = threading.Thread(target=produce, name="fusion-vo-read-ahead", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item, exc = buffer.get()
+            if exc is not None:
+                raise exc
+            if item is end:
+                return
+            yield item
+    finally:
+        stop.set()
+        worker.join()
+
+
+def prepared_frames(frames: Iterable[Frame], prepare: Callable | None, threads: int) -> Iterator[tuple[Frame, object]]:
+    """``(frame, prepare(frame.image))`` in order, decoded and prepared ahead of the caller with ``threads > 1``.
+
+    With one thread everything happens in the calling thread. Otherwise one reader thread advances
+    ``frames`` (decoding them: a recording's frame reader keeps state from frame to frame) and hands
+    each frame to a pool of ``threads`` workers for ``prepare``; at most ``2 * threads + 2`` frames are
+    decoded ahead of the caller (:func:`read_ahead`). A frame that failed to load (``image is None``)
+    is passed through unprepared, as is every frame when ``prepare`` is ``None``.
+    """
+
+    def work(frame: Frame) -> tuple[Frame, object]:
+        if prepare is None or frame.image is None:
+            return frame, frame.image
+        return frame, prepare(frame.image)
+
+    if threads <= 1:
+        yield from map(work, frames)
+        return
+    pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="fusion-vo-prepare")
+    ahead = read_ahead((pool.submit(work, frame) for frame in frames), depth=2 * threads + 2)
+    try:
+        for future in ahead:
+            yield future.result()
+    finally:
+        ahead.close()
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextmanager
+def opencv_threads(n: int):
+    """Let OpenCV's kernels use ``n`` threads inside the block, the BLAS libraries one; then restore both.
+
+    The matrices of a frame (descriptor distances: 150 x 121) are far too small for a multi-threaded
+    BLAS, whose waiting workers cost more than they compute (OpenCV's ``gemm`` goes to the OpenBLAS
+    that opencv-python bundles); parallelism comes from the frame pipeline instead.
+    """
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(int(n))
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
+    finally:
+        cv2.setNumThreads(before)
+
+
 def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
     if not recording.has_range():
@@ -210,6 +357,9 @@ def run_visual_odometry(
         Called after every frame (for a progress bar).
     frames : iterable of Frame, optional
         Frames to use instead of ``recording.frames()``.
+
+    With ``config.threads`` other than 1 the frames are decoded and prepared in other threads ahead of
+    the tracker (:func:`prepared_frames`); the results are the same as with one thread.
     """
     config = config or OdometryConfig()
     cam = recording.camera
@@ -229,33 +379,37 @@ def run_visual_odometry(
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
     skipped: list[str] = []
     bad_run = 0
+    threads = config.thread_count()
     start = time.perf_counter()
-    for k, frame in enumerate(frames if frames is not None else recording.frames()):
-        if frame.image is None:
-            skipped.append(frame.error or frame.source)
-            bad_run += 1
-            if bad_run >= config.max_bad_start_frames and not frame_t:
-                raise InputError(f"the first {bad_run} frames cannot be used; first problem: {skipped[0]}")
-            log.warning("skipping frame %d: %s", frame.index, frame.error)
+    source = prepared_frames(frames if frames is not None else recording.frames(),
+                             getattr(frontend, "prepare", None), threads)
+    with opencv_threads(threads), closing(source):
+        for k, (frame, image) in enumerate(source):
+            if frame.image is None:
+                skipped.append(frame.error or frame.source)
+                bad_run += 1
+                if bad_run >= config.max_bad_start_frames and not frame_t:
+                    raise InputError(f"the first {bad_run} frames cannot be used; first problem: {skipped[0]}")
+                log.warning("skipping frame %d: %s", frame.index, frame.error)
+                if progress:
+                    progress(k + 1, total)
+                continue
+            bad_run = 0
+            h = None if heights is None else float(heights[frame.index])
+            motion, inc = vo.process(image, frame.t, h)
+            frame_t.append(frame.t)
+            status.append(motion.status.value)
+            inliers.append(motion.n_inliers)
+            if inc is not None:
+                increments.append(inc)
+            if inc is not None and inc.ok and inc.dt > 0:
+                vel.append(se2.log(inc.delta) / inc.dt)
+                ratio.append(inc.height_ratio)
+            else:
+                vel.append(np.full(3, np.nan))
+                ratio.append(np.nan)
             if progress:
                 progress(k + 1, total)
-            continue
-        bad_run = 0
-        h = None if heights is None else float(heights[frame.index])
-        motion, inc = vo.process(frame.image, frame.t, h)
-        frame_t.append(frame.t)
-        status.append(motion.status.value)
-        inliers.append(motion.n_inliers)
-        if inc is not None:
-            increments.append(inc)
-        if inc is not None and inc.ok and inc.dt > 0:
-            vel.append(se2.log(inc.delta) / inc.dt)
-            ratio.append(inc.height_ratio)
-        else:
-            vel.append(np.full(3, np.nan))
-            ratio.append(np.nan)
-        if progress:
-            progress(k + 1, total)
     elapsed = time.perf_counter() - start
     if not frame_t:
         raise InputError("no usable frame in the recording", recording.path / "cam0")

@@ -1,51 +1,85 @@
-"""``fusion-vo bench [SEQ]``: frames per second of the visual odometry chain, one thread."""
+"""``fusion-vo bench [SEQ]``: frames per second of visual odometry beside the plain OpenCV script."""
 
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
-#: numerical libraries that start worker threads unless told otherwise (read when numpy loads)
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+from fusion_vo.cli.run import positive_int
+from fusion_vo.errors import InputError
+
+#: the frontends that can be measured
+FRONTENDS = ("klt", "features")
+
+#: the recording generated when none is given (the same as benchmarks/bench_frontends.py)
+STANDARD = "random60"
+
+
+def frontend_list(text: str) -> list[str]:
+    """An ``argparse`` type: comma-separated frontend names, each of :data:`FRONTENDS`."""
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError(f"expected one or more of {', '.join(FRONTENDS)}")
+    for name in names:
+        if name not in FRONTENDS:
+            raise argparse.ArgumentTypeError(f"unknown frontend '{name}' (choose from {', '.join(FRONTENDS)})")
+    return list(dict.fromkeys(names))
+
+
+def thread_list(text: str) -> list[int]:
+    """An ``argparse`` type: comma-separated thread counts, each at least 1."""
+    values = [positive_int(s.strip()) for s in text.split(",") if s.strip()]
+    if not values:
+        raise argparse.ArgumentTypeError("expected one or more thread counts")
+    return sorted(set(values))
+
+
+def frame_count(text: str) -> int:
+    """An ``argparse`` type: a number of frames, at least 2 (one frame pair)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
+    if value < 2:
+        raise argparse.ArgumentTypeError(f"must be at least 2 (one frame pair), not {value}")
+    return value
 
 
 def register(sub) -> None:
-    p = sub.add_parser("bench", help="measure frames per second of the frontends (single-threaded)",
-                       description="Time PNG decode, frontend and ground geometry per frame on a recording "
-                                   "(default: a generated 30 s random drive at 640x360), single-threaded.")
-    p.add_argument("sequence", nargs="?", help="recording folder with PNG frames (default: generate one)")
-    p.add_argument("--frontend", default="klt,features", help="comma-separated frontends (default: klt,features)")
-    p.add_argument("--frames", type=int, default=None, help="use at most this many frames")
-    p.add_argument("--seed", type=int, default=0)
+    p = sub.add_parser("bench", help="frames per second of visual odometry beside a plain OpenCV script",
+                       description="Frames per second of visual odometry, end to end (decoding included), with "
+                                   "one thread and with all threads, beside the plain OpenCV script "
+                                   "benchmarks/baseline_opencv.py run on the same frames in the same run; then "
+                                   "the time per frame of decoding, frontend and ground geometry on one thread. "
+                                   f"Default recording: the standard '{STANDARD}' drive (generated, 1201 frames "
+                                   "of 640x360), as benchmarks/bench_frontends.py.")
+    p.add_argument("sequence", nargs="?", help=f"recording folder (default: generate the standard '{STANDARD}')")
+    p.add_argument("--frontend", type=frontend_list, default=list(FRONTENDS),
+                   help="comma-separated frontends (default: klt,features)")
+    p.add_argument("--frames", type=frame_count, default=None, help="use the first N frames only (N >= 2)")
+    p.add_argument("--threads", type=thread_list, default=None,
+                   help="comma-separated thread counts to measure (default: 1 and the cores available)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="interleaved repeats (default: 3)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if any(os.environ.get(v) != "1" for v in THREAD_VARIABLES):
-        # numpy is already loaded with multi-threaded BLAS, whose idle workers would be counted as CPU
-        # time: measure in a fresh interpreter limited to one thread.
-        env = {**os.environ, **{v: "1" for v in THREAD_VARIABLES}}
-        argv = [sys.executable, "-m", "fusion_vo.cli.main", "bench", "--frontend", args.frontend, "--seed", str(args.seed)]
-        if args.frames is not None:
-            argv += ["--frames", str(args.frames)]
-        if args.sequence is not None:
-            argv.append(args.sequence)
-        return subprocess.run(argv, env=env, check=False).returncode
-
-    from fusion_vo.benchmark import format_timing, time_frontend
+    from fusion_vo.benchmark import load_baseline, run_benchmark
+    from fusion_vo.recording import Recording
 
     with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
         seq = args.sequence
         if seq is None:
-            from fusion_vo.simulation import simulate
+            from fusion_vo.simulation.standard import make_standard
 
-            seq = Path(tmp) / "random30"
-            print("generating a 30 s random drive (640x360, 20 frames/s) ...")
-            simulate(seq, profile="random", seed=args.seed, duration=30.0)
-        for name in [s.strip() for s in args.frontend.split(",") if s.strip()]:
-            print(format_timing(time_frontend(seq, name, args.frames)))
+            print(f"generating the standard '{STANDARD}' recording (60 s, 640x360, 20 frames/s) ...", flush=True)
+            seq = make_standard(STANDARD, Path(tmp) / STANDARD)
+        else:
+            rec = Recording(seq)
+            if not rec.has_camera():
+                raise InputError("this recording has no camera stream (cam0/data.csv is missing)", rec.path)
+            rec.camera, rec.frame_times  # noqa: B018 -- a one-line error for a bad sensor.yaml or data.csv
+        run_benchmark(seq, args.frontend, load_baseline(), args.threads, args.repeats, args.frames,
+                      out=lambda line: print(line, flush=True))
     return 0

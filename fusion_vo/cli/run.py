@@ -11,6 +11,17 @@ from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config
 from fusion_vo.errors import InputError
 
 
+def positive_int(text: str) -> int:
+    """An ``argparse`` type: a whole number of at least 1 (a usage error otherwise)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
+    return value
+
+
 def register(sub) -> None:
     p = sub.add_parser("run", help="run visual odometry (and fusion) on a recording",
                        description="Run visual odometry on a recording folder, fuse it with the wheels and the IMU, "
@@ -21,6 +32,9 @@ def register(sub) -> None:
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: what the recording has)")
+    p.add_argument("--threads", type=positive_int, metavar="N",
+                   help="threads for decoding frames ahead of the tracker and for OpenCV (default: the cores "
+                        "available); the results do not depend on it")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
     p.add_argument("--print-config", action="store_true", help="print the default configuration and exit")
     p.set_defaults(func=run)
@@ -33,6 +47,8 @@ def apply_overrides(cfg, args):
         cfg.backend = args.backend
     if args.sensors:
         cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
+    if getattr(args, "threads", None) is not None:
+        cfg.odometry = {**cfg.odometry, "threads": args.threads}
     if getattr(args, "no_evaluate", False):
         cfg.evaluate = False
     cfg.validate()

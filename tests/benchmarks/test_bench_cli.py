@@ -1,0 +1,66 @@
+"""``fusion-vo bench``: usage errors are one line with status 2; a short run prints both sides and the ratios."""
+
+import pytest
+
+from fusion_vo.benchmark import BASELINE_SCRIPT, first_frames, load_baseline, run_benchmark
+from fusion_vo.cli.main import main
+from fusion_vo.recording import Recording
+from fusion_vo.simulation.standard import make_standard
+
+
+@pytest.mark.parametrize("argv, key", [
+    (["--frames", "0"], "--frames"),
+    (["--frames", "1"], "--frames"),
+    (["--frames", "-3"], "--frames"),
+    (["--frontend", "bogus"], "--frontend"),
+    (["--frontend", "klt,bogus"], "--frontend"),
+    (["--frontend", ","], "--frontend"),
+    (["--threads", "0"], "--threads"),
+    (["--threads", "1,-2"], "--threads"),
+    (["--repeats", "0"], "--repeats"),
+])
+def test_bad_options_are_one_line_usage_errors(argv, key, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", *argv])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and key in err and "Traceback" not in err
+
+
+def test_a_folder_without_frames_is_a_one_line_error(tmp_path, capsys):
+    assert main(["bench", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "cam0/data.csv" in err
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    return make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+
+
+def test_first_frames_links_the_first_n(short, tmp_path):
+    part = Recording(first_frames(short, 7, tmp_path / "part"))
+    full = Recording(short)
+    assert len(part) == 7
+    assert list(part.frame_times) == list(full.frame_times[:7])
+    a, b = next(part.frames(start=6)), next(full.frames(start=6))
+    assert (a.image == b.image).all()
+
+
+@pytest.mark.slow
+def test_short_benchmark_prints_both_sides_and_ratios(short):
+    assert BASELINE_SCRIPT.is_file()
+    lines = []
+    rows = run_benchmark(short, ["klt"], load_baseline(), [1, 2], repeats=1, max_frames=40, stages=False,
+                         out=lines.append)
+    default, single, one, two = rows
+    assert default.baseline and single.baseline and (default.threads, single.threads) == (None, 1)
+    assert default.frames == single.frames == 40 and default.failed == single.failed == 0
+    assert (one.threads, two.threads) == (1, 2) and one.failed == two.failed == 0
+    for row in (one, two):
+        assert row.ratio == [pytest.approx(row.fps[0] / max(default.fps[0], single.fps[0]))]
+        assert len(row.rss_mb) == 4 and all(m > 10 for m in row.rss_mb)
+    table = "\n".join(lines)
+    for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
+                  "klt, 1 thread |", "klt, 2 threads |"):
+        assert f"| {label}" in table
