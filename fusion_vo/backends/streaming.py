@@ -128,18 +128,25 @@ class StreamingFusion:
     horizon : float
         Largest prediction [s] :meth:`current_estimate` makes beyond the newest measurement, and how far
         ahead of the newest measurement a new one may be before it is rejected (default 1).
+    steps_per_call : int or None
+        Most nodes one ``add_*`` call processes (default 1); the rest is caught up by the next calls,
+        which bounds the latency of a call when a late measurement makes the EKF re-filter several
+        nodes. None processes everything due at once. :meth:`finish` always processes everything.
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
-                 history: float = 2.0, horizon: float = 1.0):
+                 history: float = 2.0, horizon: float = 1.0, steps_per_call: int | None = 1):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         if not (np.isfinite(history) and history >= 0 and np.isfinite(horizon) and horizon > 0):
             raise InputError(f"history must be >= 0 and horizon > 0 seconds (got history={history}, horizon={horizon})")
         self.history = float(history) if backend == "ekf" else 0.0
         self.horizon = float(horizon)
+        if steps_per_call is not None and (not isinstance(steps_per_call, int) or steps_per_call < 1):
+            raise InputError(f"steps_per_call must be a positive integer or None, not {steps_per_call!r}")
+        self.steps_per_call = steps_per_call
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
@@ -181,7 +188,7 @@ class StreamingFusion:
             values = [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
             if not self._valid("camera", inc.t1, values):
                 return
-            if self._late("camera", inc.t0 if inc.ok else inc.t1):
+            if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
                 return
             if not inc.ok:
                 self._count("camera").missing += 1
@@ -301,11 +308,11 @@ class StreamingFusion:
             return False
         return True
 
-    def _late(self, sensor: str, t: float) -> bool:
+    def _late(self, sensor: str, t: float, back: int = 2) -> bool:
         """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
         if not self._t_nodes or t >= self._t_nodes[-1] - 1e-9:
             return False
-        i = self._rewind_index(t)
+        i = self._rewind_index(t, back)
         if i is None:
             self._count(sensor).late += 1
             logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
@@ -338,18 +345,19 @@ class StreamingFusion:
 
     def _advance(self, t: float) -> None:
         self._latest = max(self._latest, float(t))
-        self._process(self._latest - self.config.reorder_window)
+        self._process(self._latest - self.config.reorder_window, self.steps_per_call)
 
     # ------------------------------------------------------------------ history (EKF rewind)
-    def _rewind_index(self, t: float) -> int | None:
+    def _rewind_index(self, t: float, back: int) -> int | None:
         """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history.
 
         A sample at ``t`` changes the interval that contains it and, through interpolation at that
-        interval's start, the one before; so the filter restarts two nodes before ``t``.
+        interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
+        increment is applied from its ``t0`` node (``back=0``).
         """
         if self.backend != "ekf" or self.history <= 0:
             return None
-        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - 2, 0)
+        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
         if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
             return None
         return i
@@ -393,18 +401,21 @@ class StreamingFusion:
         times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
         return min(times) if times else None
 
-    def _process(self, until: float) -> None:
+    def _process(self, until: float, budget: int | None = None) -> None:
+        """Process the nodes up to ``until``, at most ``budget`` of them (None: all)."""
         if not self._t_nodes:
             start = self._start_time()
             if start is None or start > until:
                 return
             self._first_node(start)
-        while True:
+        done = 0
+        while budget is None or done < budget:
             t0 = self._t_nodes[-1]
             t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
             if t1 is None:
                 return
             self._step(t0, t1)
+            done += 1
 
     def _last_time(self) -> float:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
