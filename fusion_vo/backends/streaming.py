@@ -538,6 +538,43 @@ class StreamingFusion:
         self._record(pose, cov)
 
 
+def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
+    """The samples of ``streams`` as ``(arrival time, kind, message)`` in arrival order.
+
+    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``). Samples arrive at their own
+    time, the visual increments ``camera_delay`` seconds after their ``t1`` (frontend latency).
+    """
+    msgs: list[tuple[float, int, str, object]] = []
+    if streams.visual:
+        msgs += [(v.t1 + camera_delay, 0, "visual", v) for v in streams.visual]
+    if streams.wheel is not None:
+        w = streams.wheel
+        msgs += [(t, 1, "wheel", WheelTicks(t, int(lt), int(rt))) for t, lt, rt in zip(w.t, w.left, w.right)]
+    if streams.odom is not None:
+        o = streams.odom
+        msgs += [(t, 1, "twist", TwistSample(t, vx, vy, wz)) for t, vx, vy, wz in zip(o.t, o.vx, o.vy, o.wz)]
+    if streams.imu is not None:
+        m = streams.imu
+        q = m.orientation if m.orientation is not None else [None] * len(m.t)
+        msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
+    if streams.range is not None:
+        msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    msgs.sort(key=lambda m: (m[0], m[1]))
+    return [(float(m[0]), m[2], m[3]) for m in msgs]
+
+
+def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionConfig | dict | None = None,
+                  **kwargs) -> StreamingFusion:
+    """A :class:`StreamingFusion` for the sensors and calibrations of ``streams`` (keyword arguments pass on)."""
+    sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
+                                          ("odom", streams.odom is not None), ("imu", streams.imu is not None),
+                                          ("range", streams.range is not None)) if present]
+    imu = streams.imu
+    return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
+                           imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,
+                           camera_height=streams.camera_height, **kwargs)
+
+
 def _merge_into(total: dict, part: dict) -> None:
     for sensor, c in part.items():
         own = total.setdefault(sensor, SensorCount())

@@ -18,6 +18,7 @@ from fusion_vo.errors import InputError
 COMMANDS = [
     "demo",
     "run",
+    "replay",
     "simulate",
     "evaluate",
     "compare",

@@ -1,6 +1,8 @@
 """Streaming inside a live stack: a pose for now, late data re-applied, bad input counted, several threads."""
 
+import json
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -187,3 +189,61 @@ def test_concurrent_producers_and_a_reader(drive, backend, name):
         assert b.counts[name][sensor].used == c.used and b.counts[name][sensor].late == 0
     np.testing.assert_allclose(b.trajectories[name].t, a.trajectories[name].t, atol=1e-12)
     np.testing.assert_allclose(b.trajectories[name].xyyaw, a.trajectories[name].xyyaw, atol=1e-9, rtol=0)
+
+
+# ---------------------------------------------------------------------------- fusion-vo replay
+@pytest.fixture(scope="module")
+def short_recording(tmp_path_factory):
+    from fusion_vo.simulation.standard import make_standard
+
+    return make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+
+
+def _read_tum(path):
+    return np.loadtxt(path, ndmin=2)
+
+
+def test_replay_writes_live_poses_at_a_fixed_rate_beside_the_batch_result(short_recording, tmp_path):
+    from fusion_vo.cli.main import main
+
+    out = tmp_path / "replay"
+    rc = main(["-q", "replay", str(short_recording), "--out", str(out), "--speed", "0", "--rate", "50",
+               "--camera-delay", "0.15", "--window", "0.05"])
+    assert rc == 0
+    live = np.loadtxt(out / "live_ekf.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert len(live) > 200
+    np.testing.assert_allclose(np.diff(live[:, 0]), 0.02, atol=1e-6)  # one row every 1/50 s of recording time
+    age = (live[:, 0] - live[:, 1])[live[:, 0] <= live[:, 1].max()]  # (after the last sample nothing is new)
+    assert len(age) > 200 and np.all(age >= -1e-9) and np.max(age) <= 0.0051  # at most one IMU period (200 Hz)
+    batch = _read_tum(out / "ekf.tum")
+    x = np.interp(live[:, 0], batch[:, 0], batch[:, 1])
+    y = np.interp(live[:, 0], batch[:, 0], batch[:, 2])
+    moving = live[:, 0] > live[0, 0] + 0.5
+    gap = np.hypot(live[moving, 2] - x[moving], live[moving, 3] - y[moving])
+    assert np.median(gap) < 0.01 and np.max(gap) < 0.05  # the live pose tracks the batch filter
+    info = json.loads((out / "replay.json").read_text())
+    assert info["rewinds"] > 50 and info["counts"]["camera"]["late"] == 0 and info["counts"]["camera"]["used"] > 50
+    assert (out / "stream_ekf.tum").exists() and (out / "ekf_smoothed.tum").exists()
+
+
+def test_replay_keeps_the_recording_pace(short_recording, tmp_path):
+    from fusion_vo.cli.main import main
+
+    t0 = time.perf_counter()
+    rc = main(["-q", "replay", str(short_recording), "--out", str(tmp_path / "r"), "--sensors", "wheel,imu",
+               "--speed", "5"])
+    assert rc == 0
+    info = json.loads((tmp_path / "r" / "replay.json").read_text())
+    assert info["sensors"] == ["wheel", "imu"]
+    assert time.perf_counter() - t0 >= 4.9 / 5  # a 5 s recording at 5x takes at least a second
+
+
+def test_replay_bad_input_is_one_line_exit_2_and_writes_nothing(short_recording, tmp_path, capsys):
+    from fusion_vo.cli.main import main
+
+    assert main(["replay", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert "recording folder not found" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    assert main(["replay", str(short_recording), "--out", str(tmp_path / "o"), "--sensors", "sonar"]) == 2
+    assert "sonar" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
