@@ -6,7 +6,8 @@ arriving ``--camera-delay`` seconds (default 0.15) after their time as a fronten
 every sample the caller asks for ``current_estimate()``, as a controller would. Printed per backend:
 
 * latency percentiles (p50, p90, p99, max) of one call ``add_*(sample)`` + ``current_estimate()``,
-  in wall-clock milliseconds (what the caller's thread waits);
+  in wall-clock milliseconds (what the caller's thread waits), and the p99 and max of the same calls'
+  CPU time (this thread's), which other processes on a shared machine do not inflate;
 * the age of the returned pose behind the newest measurement (median and max), beside the age of
   the processed state (``processed_estimate()``, the pose the reorder window holds back);
 * position error of the returned pose against the truth at the newest measurement time.
@@ -32,18 +33,15 @@ import time
 
 import numpy as np
 
-from fusion_vo.backends import FusionConfig, StreamingFusion
-from fusion_vo.measurements import ImuSample, WheelTicks
+from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion
+from fusion_vo.backends.streaming import time_ordered_messages
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
 def messages(s, camera_delay: float) -> list:
     """(arrival time, kind, message) in arrival order."""
-    msgs = [(v.t1 + camera_delay, 0, "visual", v) for v in s.visual]
-    msgs += [(t, 1, "wheel", WheelTicks(t, l, r)) for t, l, r in zip(s.wheel.t, s.wheel.left, s.wheel.right)]
-    msgs += [(t, 2, "imu", ImuSample(t, g, a)) for t, g, a in zip(s.imu.t, s.imu.gyro, s.imu.accel)]
-    msgs.sort(key=lambda m: (m[0], m[1]))
-    return [(m[0], m[2], m[3]) for m in msgs]
+    streams = SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height)
+    return time_ordered_messages(streams, camera_delay)
 
 
 def truth_at(s, t: np.ndarray) -> np.ndarray:
@@ -54,15 +52,16 @@ def truth_at(s, t: np.ndarray) -> np.ndarray:
 def run_backend(s, msgs, backend: str, window: float) -> dict:
     fusion = StreamingFusion(backend, FusionConfig(reorder_window=window), ["camera", "wheel", "imu"],
                              wheel_config=s.wheel.config, imu_noise=s.imu.noise)
-    lat, age, age_held, t_new, pos = [], [], [], [], []
+    lat, cpu, age, age_held, t_new, pos = [], [], [], [], [], []
     newest = -np.inf
-    clock = time.perf_counter
+    clock, cpu_clock = time.perf_counter, time.thread_time
     for t, kind, m in msgs:
         add = getattr(fusion, f"add_{kind}")
-        c0 = clock()
+        c0, p0 = clock(), cpu_clock()
         add(m)
         est = fusion.current_estimate()
         lat.append(clock() - c0)
+        cpu.append(cpu_clock() - p0)
         t_m = m.t1 if kind == "visual" else m.t
         newest = max(newest, t_m)
         if est is not None:
@@ -75,7 +74,7 @@ def run_backend(s, msgs, backend: str, window: float) -> dict:
     name = "ekf" if backend == "ekf" else "gtsam_online"
     err = np.linalg.norm(np.array(pos) - truth_at(s, np.array(t_new)), axis=1)
     late = sum(c.late for c in result.counts[name].values())
-    return {"lat": np.array(lat), "age": np.array(age), "age_held": np.array(age_held), "err": err,
+    return {"lat": np.array(lat), "cpu": np.array(cpu), "age": np.array(age), "age_held": np.array(age_held), "err": err,
             "late": late, "rewinds": fusion.rewinds}
 
 
@@ -89,10 +88,10 @@ def run_dead_reckoning(s, msgs) -> dict:
     per_tick = 2.0 * np.pi / cfg.ticks_per_revolution
     pose = np.zeros(3)
     prev = None
-    lat, t_new, pos = [], [], []
-    clock = time.perf_counter
+    lat, cpu, t_new, pos = [], [], [], []
+    clock, cpu_clock = time.perf_counter, time.thread_time
     for t, kind, m in msgs:
-        c0 = clock()
+        c0, p0 = clock(), cpu_clock()
         if kind == "wheel":
             if prev is not None:
                 dl = _wrap32(m.left - prev[0]) * per_tick * cfg.wheel_radius_left
@@ -104,11 +103,12 @@ def run_dead_reckoning(s, msgs) -> dict:
             t_last = m.t
         out = pose.copy()
         lat.append(clock() - c0)
+        cpu.append(cpu_clock() - p0)
         if prev is not None:
             t_new.append(t_last)
             pos.append(out[:2])
     err = np.linalg.norm(np.array(pos) - truth_at(s, np.array(t_new)), axis=1)
-    return {"lat": np.array(lat), "err": err}
+    return {"lat": np.array(lat), "cpu": np.array(cpu), "err": err}
 
 
 def main() -> int:
@@ -131,14 +131,16 @@ def main() -> int:
     print(f"{args.seconds:.0f} s drive, {len(msgs)} samples (camera 20 Hz arriving {args.camera_delay * 1e3:.0f} ms "
           f"late, wheels 50 Hz, IMU 200 Hz), {args.repeat} interleaved runs; latency = add_*() + current_estimate()")
     print(f"{'':>15} {'window':>7} {'p50 ms':>7} {'p90 ms':>7} {'p99 ms':>7} {'max ms':>7} {'age p50/max ms':>15} "
-          f"{'held-back age p50 ms':>21} {'err p50 cm':>10} {'late':>5} {'rewinds':>8}")
+          f"{'held-back age p50 ms':>21} {'err p50 cm':>10} {'late':>5} {'rewinds':>8} {'CPU p99/max ms':>15}")
     for name, rs in runs.items():
         lat = np.concatenate([r["lat"] for r in rs]) * 1e3
         err = np.concatenate([r["err"] for r in rs]) * 100
+        cpu = np.concatenate([r["cpu"] for r in rs]) * 1e3
+        cpu_txt = f"{np.percentile(cpu, 99):.3f} / {cpu.max():.3f}"
         p50, p90, p99 = np.percentile(lat, [50, 90, 99])
         if name == "dead reckoning":
             print(f"{name:>15} {'-':>7} {p50:>7.3f} {p90:>7.3f} {p99:>7.3f} {lat.max():>7.3f} {'0 / 0':>15} {'-':>21} "
-                  f"{np.median(err):>10.2f} {'-':>5} {'-':>8}")
+                  f"{np.median(err):>10.2f} {'-':>5} {'-':>8} {cpu_txt:>15}")
             continue
         age = np.concatenate([r["age"] for r in rs]) * 1e3
         held = np.concatenate([r["age_held"] for r in rs]) * 1e3
@@ -146,7 +148,7 @@ def main() -> int:
         rewinds = sum(r["rewinds"] for r in rs) // len(rs)
         print(f"{name:>15} {windows[name]:>7.2f} {p50:>7.3f} {p90:>7.3f} {p99:>7.3f} {lat.max():>7.3f} "
               f"{f'{np.median(age):.1f} / {age.max():.1f}':>15} {np.median(held):>21.1f} {np.median(err):>10.2f} "
-              f"{late:>5d} {rewinds:>8d}")
+              f"{late:>5d} {rewinds:>8d} {cpu_txt:>15}")
     return 0
 
 

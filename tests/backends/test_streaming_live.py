@@ -247,3 +247,20 @@ def test_replay_bad_input_is_one_line_exit_2_and_writes_nothing(short_recording,
     assert main(["replay", str(short_recording), "--out", str(tmp_path / "o"), "--sensors", "sonar"]) == 2
     assert "sonar" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_ros2_example_compiles_and_its_fusion_runs_on_twist_and_imu():
+    from pathlib import Path
+
+    from fusion_vo.measurements import TwistSample
+
+    source = (Path(__file__).resolve().parents[2] / "examples" / "ros2_node.py").read_text()
+    compile(source, "ros2_node.py", "exec")  # rclpy is not on PyPI: the example is documented code
+    fusion = StreamingFusion("ekf", FusionConfig(reorder_window=0.05), sensors=["camera", "odom", "imu"],
+                             camera_height=0.095, history=2.0, horizon=0.5)
+    for k in range(200):
+        t = 100.0 + 0.01 * k
+        fusion.add_twist(TwistSample(t, 0.5, 0.0, 0.0))
+        fusion.add_imu(ImuSample(t, np.zeros(3), np.zeros(3)))
+    est = fusion.current_estimate(102.3)
+    assert est.t == pytest.approx(102.3) and est.pose[0] == pytest.approx(0.5 * 2.3, abs=0.02)
