@@ -10,6 +10,7 @@ Available frontends
 -------------------
 KltFrontend      pyramidal Lucas-Kanade tracking with track-and-replenish (``frontends.klt``)
 FeatureFrontend  corners + descriptors + matching (``frontends.features``)
+DirectFrontend   whole-image photometric alignment, coarse to fine (``frontends.direct``)
 """
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
@@ -18,7 +19,7 @@ __all__ = ["FrameMotion", "IdentityMap", "MotionStatus", "PointMap", "make_front
 
 
 def make_frontend(name: str, config: dict | None = None, point_map: PointMap | None = None):
-    """Build a frontend by name (``"klt"`` or ``"features"``) from a plain config mapping."""
+    """Build a frontend by name (``"klt"``, ``"features"`` or ``"direct"``) from a plain config mapping."""
     if name == "klt":
         from frontends.klt import KltConfig, KltFrontend
 
@@ -27,4 +28,8 @@ def make_frontend(name: str, config: dict | None = None, point_map: PointMap | N
         from frontends.features import FeatureConfig, FeatureFrontend
 
         return FeatureFrontend(FeatureConfig.from_dict(config or {}), point_map=point_map)
-    raise ValueError(f"unknown frontend {name!r} (choose 'klt' or 'features')")
+    if name == "direct":
+        from frontends.direct import DirectConfig, DirectFrontend
+
+        return DirectFrontend(DirectConfig.from_dict(config or {}), point_map=point_map)
+    raise ValueError(f"unknown frontend {name!r} (choose 'klt', 'features' or 'direct')")

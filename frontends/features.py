@@ -32,6 +32,7 @@ import numpy as np
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
+from frontends.direct import DenseFallback
 from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
 from frontends.frame_check import check_frame, texture_measure
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
@@ -118,6 +119,14 @@ class FeatureConfig(ConfigMixin):
         The prediction is continued over at most this many times the last interval.
     max_failures : int
         Consecutive failures after which the frontend restarts from the current frame.
+    dense_fallback : bool
+        When the corners cannot measure a frame that still has texture, align the whole frames
+        photometrically instead (:class:`frontends.direct.DenseFallback`).
+    verify_below : int
+        A corner estimate with fewer inliers than this is checked against a dense alignment started
+        from it, which replaces it when they disagree by more than ``verify_tolerance`` px (0: never).
+    verify_tolerance : float
+        See ``verify_below`` [px].
     """
 
     detector: str = "shi_tomasi"
@@ -154,6 +163,9 @@ class FeatureConfig(ConfigMixin):
     min_texture_ratio: float = 0.35
     max_prediction_gap: float = 4.0
     max_failures: int = 3
+    dense_fallback: bool = True
+    verify_below: int = 30
+    verify_tolerance: float = 1.0
 
     def __post_init__(self) -> None:
         self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
@@ -246,6 +258,7 @@ class FeatureFrontend:
         # prepare() runs in another thread: it gets its own ORB object
         self._orb_ahead = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
         self._shape: tuple[int, int] | None = None
+        self._dense = DenseFallback(self.point_map) if cfg.dense_fallback else None
         self.reset()
 
     def reset(self) -> None:
@@ -297,7 +310,8 @@ class FeatureFrontend:
         check = check_frame(image, self._shape, cfg.min_texture, ref_texture, cfg.min_texture_ratio,
                             texture=None if prepared is None else prepared.texture)
         if check.status is not None:
-            return self._failed(t, check.status, check.reason, texture=check.texture)
+            dense = self._dense_motion(check.image, t, check.texture, check.reason) if check.image is not None else None
+            return dense or self._failed(t, check.status, check.reason, texture=check.texture)
         img = check.image
         if self._ref is not None and not t > self._ref.time:
             return self._failed(t, MotionStatus.BAD_FRAME, f"timestamp {t} not after reference {self._ref.time}")
@@ -309,6 +323,9 @@ class FeatureFrontend:
             return FrameMotion(t, None, status=MotionStatus.FIRST, n_features=len(cur.pts), info={"path": "first"})
         ref = self._ref
         if len(ref.pts) < cfg.min_inliers or len(cur.pts) < cfg.min_inliers:
+            dense = self._dense_motion(img, t, check.texture, "too few corners", cur)
+            if dense is not None:
+                return dense
             return self._failed(t, MotionStatus.TOO_FEW_FEATURES, "too few corners", check.texture, cur)
 
         dt = t - ref.time
@@ -324,7 +341,11 @@ class FeatureFrontend:
         path, status, fit, n_matches, reason = results[-1]
         info = {"path": path, "attempts": [r[0] for r in results], "n_matches": n_matches, "texture": check.texture}
         if status is not MotionStatus.OK:
-            motion = self._failed(t, status, "; ".join(f"{r[0]}: {r[4]}" for r in results), check.texture, cur)
+            why = "; ".join(f"{r[0]}: {r[4]}" for r in results)
+            dense = self._dense_motion(img, t, check.texture, why, cur)
+            if dense is not None:
+                return dense
+            motion = self._failed(t, status, why, check.texture, cur)
             motion.info.update(info)
             motion.n_candidates = n_matches
             motion.n_inliers = fit.n_inliers if fit is not None else 0
@@ -334,8 +355,32 @@ class FeatureFrontend:
             status=MotionStatus.OK, n_candidates=n_matches, n_inliers=fit.n_inliers,
             residual_rms=fit.residual_rms, n_features=len(cur.pts), info=info,
         )
-        self._history.succeeded(fit.matrix, dt)
+        if self._dense is not None and fit.n_inliers < cfg.verify_below:
+            checked = self._dense.verify(ref.image, img, motion, cfg.verify_tolerance)
+            if checked is not None:
+                checked.info["texture"] = check.texture
+                motion = checked
+        self._history.succeeded(motion.matrix, dt)
         self._ref = cur
+        return motion
+
+    def _dense_motion(self, img: np.ndarray, t: float, texture: float, why: str,
+                      cur: _Frame | None = None) -> FrameMotion | None:
+        """The per-frame dense fallback (``None`` when disabled or when it fails too)."""
+        ref = self._ref
+        if self._dense is None or ref is None or ref.image.shape != img.shape or not t > ref.time:
+            return None
+        dt = t - ref.time
+        motion = self._dense.motion(ref.image, img, t, ref.time, self._history.predict(dt), texture, why,
+                                   self.config.min_texture)
+        if motion is None:
+            return None
+        if cur is None:
+            cur = self._describe(img, t)
+        cur.texture = texture
+        self._history.succeeded(motion.matrix, dt)
+        self._ref = cur
+        motion.n_features = len(cur.pts)
         return motion
 
     def _attempt(self, path: str, dist: np.ndarray, ref: _Frame, cur: _Frame):

@@ -2,12 +2,13 @@
 
 A configuration file has one section per stage; any key left out keeps its default::
 
-    frontend: klt            # or: features
+    frontend: klt            # or: features, direct
     sensors: [camera, wheel, imu]   # default: those the recording has
     backend: all             # none | ekf | gtsam | all
     odometry: {height: null, use_range: true, min_sigma_xy: 2.0e-5, min_sigma_yaw: 2.0e-5}
     klt: {...}               # frontends.klt.KltConfig
     features: {...}          # frontends.features.FeatureConfig
+    direct: {...}            # frontends.direct.DirectConfig
     fusion: {...}            # backend options (fusion_vo.backends)
     evaluate: true           # compute metrics and plots when the recording has ground truth
 
@@ -26,6 +27,7 @@ from fusion_vo.odometry import OdometryConfig
 
 SENSORS = ("camera", "wheel", "imu", "odom", "range")
 BACKENDS = ("none", "ekf", "gtsam", "all")
+FRONTENDS = ("klt", "features", "direct")
 
 
 @dataclass
@@ -35,7 +37,7 @@ class RunConfig:
     Attributes
     ----------
     frontend : str
-        Visual frontend: ``klt`` or ``features``.
+        Visual frontend: ``klt``, ``features`` or ``direct``.
     sensors : list of str or None
         Sensors the backends may use (of :data:`SENSORS`); the recording must have them. ``None``
         (the default) uses the camera, wheels and IMU the recording has.
@@ -43,8 +45,8 @@ class RunConfig:
         ``none`` (visual and wheel dead reckoning only), ``ekf``, ``gtsam`` or ``all``.
     odometry : dict
         :class:`fusion_vo.odometry.OdometryConfig` fields except ``frontend``.
-    klt, features : dict
-        Options of the two frontends.
+    klt, features, direct : dict
+        Options of the three frontends.
     fusion : dict
         Backend options, passed to :mod:`fusion_vo.backends`.
     evaluate : bool
@@ -57,18 +59,19 @@ class RunConfig:
     odometry: dict = field(default_factory=dict)
     klt: dict = field(default_factory=dict)
     features: dict = field(default_factory=dict)
+    direct: dict = field(default_factory=dict)
     fusion: dict = field(default_factory=dict)
     evaluate: bool = True
 
     def odometry_config(self) -> OdometryConfig:
         opts = dict(self.odometry)
         opts["frontend"] = self.frontend
-        opts["frontend_options"] = dict(self.klt if self.frontend == "klt" else self.features)
+        opts["frontend_options"] = dict(getattr(self, self.frontend if self.frontend in FRONTENDS else "klt"))
         return OdometryConfig.from_dict(opts)
 
     def validate(self, path: Path | None = None) -> None:
-        if self.frontend not in ("klt", "features"):
-            raise InputError(f"frontend must be 'klt' or 'features', not '{self.frontend}'", path)
+        if self.frontend not in FRONTENDS:
+            raise InputError(f"frontend must be one of {', '.join(FRONTENDS)}, not '{self.frontend}'", path)
         if self.backend not in BACKENDS:
             raise InputError(f"backend must be one of {', '.join(BACKENDS)}, not '{self.backend}'", path)
         bad = [s for s in (self.sensors or []) if s not in SENSORS]
@@ -93,7 +96,7 @@ def load_config(path: str | Path | None) -> RunConfig:
     unknown = sorted(set(data) - known)
     if unknown:
         raise InputError(f"unknown section '{unknown[0]}' (known: {', '.join(sorted(known))})", path)
-    for key in ("odometry", "klt", "features", "fusion"):
+    for key in ("odometry", "klt", "features", "direct", "fusion"):
         if key in data and data[key] is not None and not isinstance(data[key], dict):
             raise InputError(f"'{key}' must be a mapping of option: value", path)
     if "sensors" in data and isinstance(data["sensors"], str):
@@ -120,6 +123,12 @@ def default_config_text() -> str:
         from frontends.features import FeatureConfig
 
         d["features"] = dataclasses.asdict(FeatureConfig())
+    except ImportError:
+        pass
+    try:
+        from frontends.direct import DirectConfig
+
+        d["direct"] = dataclasses.asdict(DirectConfig())
     except ImportError:
         pass
     return "# fusion-vo run configuration (defaults)\n" + yaml.safe_dump(d, sort_keys=False, default_flow_style=None)

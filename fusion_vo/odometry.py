@@ -44,6 +44,8 @@ from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
+from fusion_vo.geometry.camera import uncalibrated_camera
+from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
@@ -70,6 +72,15 @@ class OdometryConfig:
     max_bad_start_frames : int
         If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an
         error instead of skipping them one by one.
+    gyro_derotation : bool
+        When the recording has an IMU, remove the image motion of the camera's roll and pitch from
+        every similarity before it becomes body motion (:mod:`fusion_vo.geometry.derotation`).
+    uncalibrated : bool
+        Run without the intrinsics of ``cam0/sensor.yaml``: a pinhole without distortion, principal
+        point at the image centre, focal length ``focal_length`` (or the file's, or a 60 degree
+        horizontal field of view). Without it, a ``sensor.yaml`` without intrinsics is an error.
+    focal_length : float or None
+        Approximate focal length [px] for ``uncalibrated``.
     threads : int or None
         Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
         single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
@@ -84,6 +95,9 @@ class OdometryConfig:
     min_sigma_xy: float = 2e-5
     min_sigma_yaw: float = 2e-5
     max_bad_start_frames: int = 5
+    gyro_derotation: bool = True
+    uncalibrated: bool = False
+    focal_length: float | None = None
     threads: int | None = None
 
     def __post_init__(self) -> None:
@@ -169,11 +183,15 @@ class VisualOdometry:
     ----------
     frontend : object with ``process(image, t) -> FrameMotion``
     geometry : GroundGeometry
+
+    derotation : GyroDerotation, optional
+        Removes the roll and pitch image motion before the geometry.
     """
 
-    def __init__(self, frontend, geometry: GroundGeometry):
+    def __init__(self, frontend, geometry: GroundGeometry, derotation: GyroDerotation | None = None):
         self.frontend = frontend
         self.geometry = geometry
+        self.derotation = derotation
         self.t: list[float] = []
         self.poses: list[np.ndarray] = []
         self.bridged_s = 0.0
@@ -195,6 +213,9 @@ class VisualOdometry:
                 self.t.append(t)
                 self.poses.append(np.zeros(3))
             return motion, None
+        if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
+            motion.info["measured_matrix"] = motion.matrix
+            motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
         inc = self.geometry.increment(motion, height)
         if inc.ok:
             self._append(inc)
@@ -362,7 +383,11 @@ def run_visual_odometry(
     the tracker (:func:`prepared_frames`); the results are the same as with one thread.
     """
     config = config or OdometryConfig()
-    cam = recording.camera
+    if config.uncalibrated:
+        cam = uncalibrated_camera(recording.path / "cam0" / "sensor.yaml", config.focal_length)
+        recording.camera = cam  # every later reader of this recording sees the same model
+    else:
+        cam = recording.camera
     try:
         geometry = GroundGeometry(cam, height=config.height, min_sigma_xy=config.min_sigma_xy,
                                   min_sigma_yaw=config.min_sigma_yaw)
@@ -373,7 +398,10 @@ def run_visual_odometry(
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None
     heights = heights_for(recording, recording.frame_times) if config.use_range else None
-    vo = VisualOdometry(frontend, geometry)
+    derotation = None
+    if config.gyro_derotation and recording.has_imu():
+        derotation = GyroDerotation(recording.imu(), geometry)
+    vo = VisualOdometry(frontend, geometry, derotation)
     total = len(recording)
     increments: list[VisualIncrement] = []
     frame_t, status, inliers, vel, ratio = [], [], [], [], []

@@ -19,7 +19,7 @@ def register(sub) -> None:
                                    "odometry and both fusion backends on it, print the accuracy against ground truth "
                                    "and write a trajectory plot and an HTML report.")
     p.add_argument("--out", "-o", default="fusion-vo-demo", help="output folder (default: ./fusion-vo-demo)")
-    p.add_argument("--frontend", choices=["klt", "features"], default="klt")
+    p.add_argument("--frontend", choices=["klt", "features", "direct"], default="klt")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=run)
 

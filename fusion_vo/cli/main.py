@@ -22,6 +22,8 @@ COMMANDS = [
     "simulate",
     "evaluate",
     "compare",
+    "batch",
+    "sweep",
     "show_matches",
     "import_bag",
     "calibrate",

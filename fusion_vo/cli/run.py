@@ -28,7 +28,7 @@ def register(sub) -> None:
                                    "and evaluate against ground truth when the recording has it.")
     p.add_argument("sequence", nargs="?", help="recording folder (EuRoC layout plus wheel0/, see datasets/README.md)")
     p.add_argument("--out", "-o", help="output folder (created if needed)")
-    p.add_argument("--frontend", choices=["klt", "features"], help="visual frontend (default: klt)")
+    p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: what the recording has)")
@@ -36,6 +36,9 @@ def register(sub) -> None:
                    help="threads for decoding frames ahead of the tracker and for OpenCV (default: the cores "
                         "available); the results do not depend on it")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
+    p.add_argument("--uncalibrated", action="store_true",
+                   help="the camera has no calibration: ignore missing intrinsics (pinhole, no distortion)")
+    p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
     p.add_argument("--print-config", action="store_true", help="print the default configuration and exit")
     p.set_defaults(func=run)
 
@@ -51,6 +54,10 @@ def apply_overrides(cfg, args):
         cfg.odometry = {**cfg.odometry, "threads": args.threads}
     if getattr(args, "no_evaluate", False):
         cfg.evaluate = False
+    if getattr(args, "uncalibrated", False):
+        cfg.odometry = {**cfg.odometry, "uncalibrated": True}
+    if getattr(args, "focal_length", None) is not None:
+        cfg.odometry = {**cfg.odometry, "focal_length": args.focal_length}
     cfg.validate()
     return cfg
 

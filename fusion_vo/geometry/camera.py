@@ -157,7 +157,9 @@ class CameraModel:
     def from_dict(cls, data: dict, path: str | Path | None = None) -> "CameraModel":
         def need(key):
             if key not in data:
-                raise InputError(f"missing key '{key}'", path)
+                hint = (" (a camera without calibration: run with --uncalibrated [--focal-length PX], or 'uncalibrated: true'"
+                        " under 'odometry' in the configuration)") if key == "intrinsics" else ""
+                raise InputError(f"missing key '{key}'{hint}", path)
             return data[key]
 
         try:
@@ -205,6 +207,41 @@ class CameraModel:
 
     def write_yaml(self, path: str | Path) -> None:
         write_yaml_atomic(path, self.to_dict())
+
+
+def uncalibrated_camera(path: str | Path, focal_length: float | None = None) -> CameraModel:
+    """A pinhole model for a camera without a calibration (``cam0/sensor.yaml`` without intrinsics).
+
+    The resolution, rate and ``T_BS`` are read from the file; the lens is taken as distortion-free
+    with its principal point at the image centre. The focal length is ``focal_length`` when given,
+    else the file's ``fu, fv`` when it has intrinsics, else that of a 60 degree horizontal field of
+    view (``0.866 * width``): the metric scale is then only as good as that guess (a fused run can
+    re-estimate it as the camera height, whose ratio to the focal length is all that matters).
+    """
+    import logging
+
+    path = Path(path)
+    data = load_yaml(path)
+    try:
+        res = [int(v) for v in data["resolution"]]
+        if len(res) != 2 or min(res) <= 0:
+            raise ValueError
+    except (KeyError, TypeError, ValueError):
+        raise InputError("uncalibrated mode still needs 'resolution: [width, height]'", path) from None
+    if focal_length is not None:
+        fu = fv = float(focal_length)
+    elif "intrinsics" in data:
+        intr = [float(v) for v in data["intrinsics"]][:2]
+        fu, fv = intr[0], intr[1]
+    else:
+        fu = fv = res[0] / (2.0 * np.tan(np.radians(30.0)))
+        logging.getLogger(__name__).warning(
+            "%s: no focal length given; assuming a 60 degree horizontal field of view (%.0f px)", path, fu)
+    if not (np.isfinite(fu) and np.isfinite(fv) and fu > 0 and fv > 0):
+        raise InputError("focal_length must be a positive number of pixels", path)
+    T = parse_matrix(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
+    return CameraModel(width=res[0], height=res[1], fu=fu, fv=fv, cu=(res[0] - 1) / 2.0, cv=(res[1] - 1) / 2.0,
+                       distortion_model="none", T_BS=T, rate_hz=float(data.get("rate_hz", 20.0)))
 
 
 def _default_T_BS() -> np.ndarray:

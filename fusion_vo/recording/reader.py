@@ -113,6 +113,11 @@ class Recording:
             self._camera = CameraModel.from_yaml(self.path / "cam0" / "sensor.yaml")
         return self._camera
 
+    @camera.setter
+    def camera(self, model: CameraModel) -> None:
+        """Use ``model`` instead of ``cam0/sensor.yaml`` (e.g. a camera run without its calibration)."""
+        self._camera = model
+
     def _frames_index(self) -> tuple[np.ndarray, list[str], np.ndarray]:
         if self._frame_list is None:
             self._frame_list = read_frame_list(self._need("camera", "cam0"))

@@ -33,6 +33,7 @@ from fusion_vo.geometry.camera import DISTORTION_MODELS, CameraModel
 from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
+from fusion_vo.simulation.realistic import RealisticCamera, RealisticRenderer
 from fusion_vo.simulation.render import Renderer
 from fusion_vo.simulation.robot import PROFILES, Limits, Motion, make_motion
 from fusion_vo.simulation.sensors import (GpsSimulation, ImuNoise, WheelTruth, gps_fixes, imu_samples,
@@ -71,6 +72,10 @@ class SimulationOptions:
         [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
     IMU
         imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
+    Independent camera
+        realistic: a mapping of :class:`fusion_vo.simulation.realistic.RealisticCamera` options; when
+        given, frames are rendered through that module's own lens, optics and sensor instead of the
+        estimator's camera model (``photometry`` options and ``fu .. distortion`` are then unused).
     GPS
         gps (write gps0), gps_rate [Hz], gps_noise [m per horizontal axis], gps_lever_arm [m, body x y z],
         gps_outages ``[[t0, t1], ...]`` [s], gps_jumps ``[[t0, t1, de, dn], ...]`` [s, m],
@@ -144,6 +149,8 @@ class SimulationOptions:
     gyro_random_walk: float = 2.0e-5
     accel_noise_density: float = 2.0e-3
     accel_random_walk: float = 3.0e-3
+    # independent camera
+    realistic: dict | None = None
     # gps
     gps: bool = False
     gps_rate: float = 5.0
@@ -199,6 +206,10 @@ class SimulationOptions:
             value = getattr(self, name)
             if value is not None and len(value) != n:
                 raise ValueError(f"option '{name}' needs {n} numbers")
+        if self.realistic is not None:
+            if not isinstance(self.realistic, dict):
+                raise ValueError("option 'realistic' must be a mapping of option: value")
+            RealisticCamera.from_dict(self.realistic)
         for name, n, what in (("gps_outages", 2, "[t0, t1]"), ("gps_jumps", 4, "[t0, t1, de, dn]")):
             for item in getattr(self, name):
                 if not isinstance(item, (list, tuple)) or len(item) != n or item[1] < item[0]:
@@ -235,6 +246,8 @@ def _check_type(name: str, annotation: str, value) -> None:
             raise ValueError(f"option '{name}' needs a value")
         return
     kind = annotation.split("|")[0].strip()
+    if kind == "dict":
+        return
     if kind in ("float", "int"):
         _check_number(name, value, kind == "int")
     elif kind == "bool":
@@ -327,8 +340,12 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     # ---- camera frames
     cam = CameraModel(o.width, o.height, o.fu, o.fv, o.cu, o.cv, o.distortion_model, np.array(o.distortion, float),
                       T_BS, o.camera_rate)
-    floor = Floor.photographed(o.texture, o.texel_size, featureless=_featureless_rectangles(o, motion, T_BS))
-    renderer = Renderer(cam, floor, o.supersample)
+    real_cam = RealisticCamera.from_dict(o.realistic) if o.realistic is not None else None
+    if real_cam is not None:
+        real = RealisticRenderer(real_cam, o.width, o.height, o.exposure_time, o.blur_samples)
+    else:
+        floor = Floor.photographed(o.texture, o.texel_size, featureless=_featureless_rectangles(o, motion, T_BS))
+        renderer = Renderer(cam, floor, o.supersample)
     photo = Photometric(Photometry(o.gain, o.exposure_drift, o.exposure_period, o.vignetting, o.highlight_radius,
                                    tuple(o.highlight_center), o.noise, o.shot_noise), o.width, o.height)
     half = o.exposure_time / 2
@@ -342,18 +359,31 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     png = [cv2.IMWRITE_PNG_COMPRESSION, int(o.png_compression)]
     if o.png_compression == 0:  # stored, not compressed: row filters would only cost time
         png += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
+
+    def camera_pose(ts: float) -> np.ndarray:
+        """True ``T_WS`` of the independent camera at ``ts`` (height changes and rocking included)."""
+        x, y, yaw = motion.pose_at(np.array([ts]))[0]
+        T = T_BS.copy()
+        T[2, 3] = o.camera_height + o.height_vibration * math.sin(2 * math.pi * o.vibration_frequency * ts)
+        rock = np.eye(4)
+        rock[:3, :3] = real_cam.rocking(ts)[0]
+        return body_pose(x, y, yaw) @ T @ rock
+
     for i, t in enumerate(frame_t):
         if not keep[i]:
             continue
-        times = [t] if o.exposure_time <= 0 else list(np.linspace(t - half, t + half, max(o.blur_samples, 2)))
-        poses = []
-        for ts in times:
-            x, y, yaw = motion.pose_at(np.array([ts]))[0]
-            T = T_BS.copy()
-            T[2, 3] = o.camera_height + o.height_vibration * math.sin(2 * math.pi * o.vibration_frequency * ts)
-            poses.append(body_pose(x, y, yaw) @ T)
-        radiance = renderer.radiance_blurred(poses)
-        img = photo.apply(radiance, float(t), rng)
+        if real_cam is not None:
+            img = real.frame(camera_pose, float(t), rng)
+        else:
+            times = [t] if o.exposure_time <= 0 else list(np.linspace(t - half, t + half, max(o.blur_samples, 2)))
+            poses = []
+            for ts in times:
+                x, y, yaw = motion.pose_at(np.array([ts]))[0]
+                T = T_BS.copy()
+                T[2, 3] = o.camera_height + o.height_vibration * math.sin(2 * math.pi * o.vibration_frequency * ts)
+                poses.append(body_pose(x, y, yaw) @ T)
+            radiance = renderer.radiance_blurred(poses)
+            img = photo.apply(radiance, float(t), rng)
         name = f"{ns(t)}.png"
         cv2.imwrite(str(root / "cam0" / "data" / name), img, png)
         rows.append(f"{ns(t)},{name}")
@@ -362,7 +392,12 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     (root / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n" + "\n".join(rows) + "\n")
     T_written = T_BS.copy()
     T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
-    _yaml(root / "cam0" / "sensor.yaml", dataclasses.replace(cam, T_BS=T_written).to_dict())
+    cam_yaml = dataclasses.replace(cam, T_BS=T_written).to_dict()
+    if real_cam is not None:
+        for key in ("intrinsics", "distortion_model", "distortion_coefficients"):
+            cam_yaml.pop(key)
+        cam_yaml.update(real.sensor_calibration())
+    _yaml(root / "cam0" / "sensor.yaml", cam_yaml)
 
     # ---- wheels
     truth = WheelTruth(o.wheel_radius * (1 + o.radius_error_left), o.wheel_radius * (1 + o.radius_error_right),
@@ -384,6 +419,8 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     noise = ImuNoise(o.gyro_noise_density, o.gyro_random_walk, o.accel_noise_density, o.accel_random_walk,
                      tuple(o.gyro_bias), tuple(o.accel_bias))
     gyro, accel, bias_g = imu_samples(motion, it, noise, rng)
+    if real_cam is not None and real_cam.rocking_deg > 0:  # the camera's roll and pitch, seen by the gyro
+        gyro = gyro + np.array([T_BS[:3, :3] @ real_cam.rocking(float(ti))[1] for ti in it])
     _write_csv(root / "imu0" / "data.csv",
                "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
                "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]", ns(it), np.column_stack([gyro, accel]), "%.9g")

@@ -37,7 +37,38 @@ STANDARD: dict[str, tuple[str, int, dict, str]] = {
                                   "gps_jumps": [[40.0, 41.0, 12.0, 16.0]]},
                    "60 s random drive with GPS at 5 Hz (5 cm noise, antenna 0.1 m behind the axle, 0.4 m up), "
                    "a 10 s outage from 20 s and a 20 m multipath jump from 40 to 41 s"),
+    # rendered through fusion_vo.simulation.realistic: a lens, optics and sensor the estimator does not model
+    "real_fisheye_checker": (
+        "random", 21,
+        {"duration": 15.0, "width": 320, "height": 240, "camera_rate": 60.0, "camera_height": 0.25,
+         "height_vibration": 0.1, "vibration_frequency": 0.05, "exposure_time": 0.008, "blur_samples": 3,
+         "range_finder": True,
+         "realistic": {"lens": "equisolid", "focal": 170.0, "checker_size": 0.08, "rocking_deg": 3.0,
+                       "rolling_shutter": 0.012, "defocus": 0.8, "focus_height": 0.25, "defocus_per_metre": 8.0}},
+        "15 s at 60 Hz, 320x240, equisolid fisheye (calibration: fitted equidistant model), coarse 8 cm "
+        "checkerboard, camera 0.15-0.35 m high, 3 deg rocking, rolling shutter, motion blur, defocus"),
+    "real_barrel_coarse": (
+        "random", 22,
+        {"duration": 30.0, "exposure_time": 0.004, "blur_samples": 3,
+         "realistic": {"lens": "polynomial", "checker_size": 0.04, "defocus": 1.2}},
+        "30 s at 20 Hz, 640x360, four-term barrel lens (calibration: fitted three-term model), checkerboard "
+        "squares a quarter of the image wide, defocus, motion blur, auto-exposure"),
+    "real_barrel_fine": (
+        "random", 23,
+        {"duration": 30.0, "exposure_time": 0.004, "blur_samples": 3,
+         "realistic": {"lens": "polynomial", "checker_size": 0.01, "defocus": 1.2}},
+        "as real_barrel_coarse over a 1 cm checkerboard"),
+    "real_gravel_focal_only": (
+        "random", 24,
+        {"duration": 20.0, "camera_rate": 30.0, "height_vibration": 0.01, "vibration_frequency": 0.2,
+         "range_finder": True, "exposure_time": 0.004, "blur_samples": 3,
+         "realistic": {"lens": "polynomial", "calibration": "focal", "checker_size": 0.0, "defocus": 1.0}},
+        "20 s at 30 Hz, 640x360, barrel lens over the gravel photograph, sensor.yaml states the focal length "
+        "only (no distortion), camera 0.09-0.11 m high"),
 }
+
+#: the recordings of the independent renderer (benchmarks/bench_realistic.py)
+REALISTIC = [name for name in STANDARD if name.startswith("real_")]
 
 
 def make_standard(name: str, out_dir: str | Path) -> Path:

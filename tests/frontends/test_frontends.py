@@ -13,7 +13,7 @@ from frontends.klt import KltConfig
 
 from frontend_frames import HEIGHT, WIDTH, as3, pair, render, sequence, similarity_about, start_map
 
-KINDS = ["klt", "features"]
+KINDS = ["klt", "features", "direct"]
 CENTRE = np.array([WIDTH / 2, HEIGHT / 2])
 
 WARPS = [  # (texture, tx, ty, angle [deg], scale), rotation and scale about the image centre
@@ -53,7 +53,8 @@ def test_recovers_known_warp(kind, warp):
     assert centre_error(m.matrix, truth) < 0.1
     assert abs(math.degrees(err[2])) < 0.01
     assert abs(err[3]) < 2e-4
-    assert m.n_inliers >= 10 and m.residual_rms < 0.1
+    if kind != "direct":  # the direct frontend has no points
+        assert m.n_inliers >= 10 and m.residual_rms < 0.1
     assert m.prev_timestamp == 0.0 and m.timestamp == 0.05
     assert m.info["path"] in ("predicted", "retry", "global") and m.info["time_ms"] > 0
 
@@ -92,6 +93,10 @@ BAD = {
     "white": lambda f: np.full_like(f, 255),
     "saturated": lambda f: np.clip(f.astype(int) * 6, 0, 255).astype(np.uint8),
     "constant": lambda f: np.full_like(f, 128),
+}
+
+#: frames the corners cannot measure but a whole-image alignment can: measured, with a larger covariance
+DEGRADED = {
     "blurred": lambda f: cv2.GaussianBlur(f, (0, 0), 8),
     "dark": lambda f: (f // 12).astype(np.uint8),
 }
@@ -127,6 +132,24 @@ def test_bad_frames_fail_cleanly_and_next_frame_uses_last_good(kind, bad):
 
 
 @pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("bad", list(DEGRADED))
+def test_degraded_frames_are_measured_with_an_honest_covariance(kind, bad):
+    motions = [similarity_about(*CENTRE, 4.0, 9.0, 0.5)] * 3
+    frames, truths = zip(*sequence(motions))
+    fe = make_frontend(kind)
+    fe.process(frames[0], 0.0)
+    fe.process(frames[1], 0.05)
+    m = fe.process(DEGRADED[bad](frames[2]), 0.10)
+    sharp = measure("direct", [frames[1], frames[2]])[1]  # the photometric covariance of the sharp frame
+    if not m.ok:  # a failed frame is allowed, but must say so and keep the last good reference
+        assert m.status is MotionStatus.TOO_FEW_FEATURES and m.prev_timestamp == 0.05
+        return
+    sigma = math.sqrt(max(m.covariance[0, 0], m.covariance[1, 1]))
+    assert sigma > math.sqrt(sharp.covariance[0, 0])
+    assert centre_error(m.matrix, truths[2]) < 4.0 * sigma + 0.02
+
+
+@pytest.mark.parametrize("kind", KINDS)
 def test_restart_after_repeated_failures(kind):
     frames = [f for f, _ in sequence([similarity_about(*CENTRE, 3.0, 5.0, 0.0)] * 6)]
     fe = make_frontend(kind, {"max_failures": 2})
@@ -157,7 +180,7 @@ def test_covariance_is_honest_on_noisy_frames(kind):
     for k in range(16):
         n0 = np.clip(f0 + rng.normal(0, 8.0, f0.shape), 0, 255).astype(np.uint8)
         n1 = np.clip(f1 + rng.normal(0, 8.0, f1.shape), 0, 255).astype(np.uint8)
-        m = measure(kind, [n0, n1], {"seed": k})[1]
+        m = measure(kind, [n0, n1], {} if kind == "direct" else {"seed": k})[1]
         assert m.ok
         e = m.params - similarity_params(truth)
         nees.append(e @ np.linalg.solve(m.covariance, e))
@@ -207,7 +230,7 @@ def test_point_map_undistorts_points(kind):
     assert m.ok
     assert centre_error(m.matrix, truth) < 0.1
     assert abs(m.params[3]) < 2e-4 and abs(math.degrees(m.params[2]) - 2.0) < 0.01
-    plain = make_frontend(kind, {"threshold": 3.0, "min_inlier_ratio": 0.0})
+    plain = make_frontend(kind, {} if kind == "direct" else {"threshold": 3.0, "min_inlier_ratio": 0.0})
     plain.process(frames[0], 0.0)
     m_plain = plain.process(frames[1], 0.05)
     assert not m_plain.ok or centre_error(m_plain.matrix, truth) > 0.2 or abs(m_plain.params[3]) > 5e-4
@@ -280,7 +303,7 @@ def test_klt_global_fallback_catches_a_sudden_jump():
     m = measure("klt", [f0, f1])[1]
     assert m.ok and m.info["path"] == "global" and m.info["attempts"] == ["retry", "global"]
     assert centre_error(m.matrix, truth) < 0.1
-    blind = measure("klt", [f0, f1], {"global_fallback": False})[1]
+    blind = measure("klt", [f0, f1], {"global_fallback": False, "dense_fallback": False})[1]
     assert not blind.ok
 
 

@@ -1,0 +1,161 @@
+"""Every frontend beside the plain OpenCV script on the recordings of the independent renderer.
+
+The recordings (``fusion_vo.simulation.standard.REALISTIC``, ``datasets/generated.md``) are rendered
+through :mod:`fusion_vo.simulation.realistic`: lenses the estimator does not model (a four-term barrel
+lens, a true equisolid fisheye), defocus, rolling shutter, motion blur, noise, auto-exposure, coarse
+checkerboards. For each recording the script prints one table: per frontend the frame pairs measured,
+the failures by reason, the end-point and heading error of the visual track alone (anchored at the
+start, end-point in % of the path), the RMS speed error against ground truth, and frames per second
+end to end (decode included, wall clock, one process). The plain script
+(``benchmarks/baseline_opencv.py``, used unchanged) runs in the same process; its pixel similarities
+become body motion through the same ground geometry with a distortion-free pinhole of the recording's
+focal length (the script does not undistort), the same heights (range finder) and the same
+constant-velocity bridging of failed frames.
+
+    python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
+                                         [--uncalibrated] [--no-derotation]
+
+Recordings are generated into ``--data`` (default ``./realistic-data``) unless already there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import baseline_opencv  # noqa: E402
+
+from frontends.base import FrameMotion, MotionStatus  # noqa: E402
+from fusion_vo.geometry import se2  # noqa: E402
+from fusion_vo.geometry.ground import GroundGeometry  # noqa: E402
+from fusion_vo.measurements import PoseData  # noqa: E402
+from fusion_vo.odometry import OdometryConfig, VisualOdometry, heights_for, run_visual_odometry  # noqa: E402
+from fusion_vo.recording import Recording  # noqa: E402
+from fusion_vo.simulation.standard import REALISTIC, STANDARD, make_standard  # noqa: E402
+
+FRONTENDS = ("klt", "features", "direct")
+
+
+@dataclasses.dataclass
+class Row:
+    name: str
+    pairs: int
+    measured: int
+    failures: Counter
+    end_pct: float
+    heading_deg: float
+    speed_rmse: float
+    fps: float
+
+
+def _gt_at(gt: PoseData, t: np.ndarray) -> np.ndarray:
+    yaw = np.unwrap(gt.xyyaw[:, 2])
+    return np.column_stack([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]),
+                            np.interp(t, gt.t, yaw)])
+
+
+def score(track: PoseData, gt: PoseData) -> tuple[float, float, float]:
+    """End-point error [% of path], heading error [deg], RMS speed error [m/s] of an anchored track."""
+    ref = _gt_at(gt, track.t)
+    est = np.array([se2.compose(ref[0], se2.between(track.xyyaw[0], p)) for p in track.xyyaw])
+    err = float(np.linalg.norm(est[-1, :2] - ref[-1, :2]))
+    m = (gt.t >= track.t[0]) & (gt.t <= track.t[-1])
+    length = float(np.sum(np.linalg.norm(np.diff(gt.xyyaw[m, :2], axis=0), axis=1)))
+    heading = float(np.degrees(abs(se2.wrap_angle(np.unwrap(est[:, 2])[-1] - ref[-1, 2]))))
+    dt = np.diff(track.t)
+    ok = dt > 1e-6
+    v_est = np.linalg.norm(np.diff(est[:, :2], axis=0), axis=1)[ok] / dt[ok]
+    v_ref = np.linalg.norm(np.diff(ref[:, :2], axis=0), axis=1)[ok] / dt[ok]
+    return 100.0 * err / max(length, 1e-9), heading, float(np.sqrt(np.mean((v_est - v_ref) ** 2)))
+
+
+class _Replay:
+    """A frontend that returns the plain script's precomputed similarities, one per frame."""
+
+    def __init__(self, results):
+        self._results = list(results)
+        self._k = -1
+        self._ref_t: float | None = None
+
+    def process(self, image, t: float) -> FrameMotion:
+        self._k += 1
+        if self._k == 0:
+            self._ref_t = t
+            return FrameMotion(t, None, status=MotionStatus.FIRST)
+        t0, t1, m = self._results[self._k - 1]
+        prev = self._ref_t
+        if m is None:
+            return FrameMotion(t, prev, status=MotionStatus.TOO_FEW_FEATURES)
+        self._ref_t = t
+        return FrameMotion(t, prev, matrix=np.asarray(m, float), covariance=np.eye(4) * 1e-4, status=MotionStatus.OK)
+
+
+def run_baseline(rec: Recording) -> Row:
+    results, seconds = baseline_opencv.run(rec.path)
+    cam = rec.camera
+    plain = dataclasses.replace(cam, distortion_model="none", distortion=np.zeros(4))
+    vo = VisualOdometry(_Replay(results), GroundGeometry(plain))
+    times = rec.frame_times
+    heights = heights_for(rec, times)
+    for k, t in enumerate(times):
+        vo.process(None, float(t), None if heights is None else float(heights[k]))
+    measured = sum(m is not None for _, _, m in results)
+    end, heading, speed = score(vo.track(), rec.groundtruth())
+    return Row("plain OpenCV script", len(results), measured, Counter({"failed": len(results) - measured}),
+               end, heading, speed, (len(results) + 1) / seconds)
+
+
+def run_frontend(rec: Recording, frontend: str, odometry: dict) -> Row:
+    start = time.perf_counter()
+    vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend, **odometry))
+    seconds = time.perf_counter() - start
+    pairs = len(vo.status) - 1
+    measured = sum(s == "ok" for s in vo.status)
+    end, heading, speed = score(vo.track, rec.groundtruth())
+    return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds)
+
+
+def print_table(name: str, rows: list[Row]) -> None:
+    print(f"\n{name}: {STANDARD[name][3]}")
+    print(f"  {'frontend':<20} {'measured':>11} {'failures by reason':<34} {'end-point %':>11} "
+          f"{'heading deg':>11} {'speed RMS mm/s':>14} {'frames/s':>8}")
+    for r in rows:
+        fails = ", ".join(f"{k} {v}" for k, v in sorted(r.failures.items()) if v) or "none"
+        print(f"  {r.name:<20} {r.measured:>5}/{r.pairs:<5} {fails:<34} {r.end_pct:11.3f} {r.heading_deg:11.3f} "
+              f"{1000 * r.speed_rmse:14.2f} {r.fps:8.1f}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default="realistic-data", help="folder of the recordings (generated when missing)")
+    ap.add_argument("--recordings", default=",".join(REALISTIC), help="comma-separated standard names")
+    ap.add_argument("--frontends", default=",".join(FRONTENDS))
+    ap.add_argument("--uncalibrated", action="store_true",
+                    help="run the frontends without the lens distortion of sensor.yaml (its focal length only)")
+    ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
+    args = ap.parse_args(argv)
+    odometry = {"uncalibrated": args.uncalibrated, "gyro_derotation": not args.no_derotation}
+    root = Path(args.data)
+    for name in args.recordings.split(","):
+        seq = root / name
+        if not (seq / "simulation.yaml").is_file():
+            print(f"generating {name} ...", flush=True)
+            make_standard(name, seq)
+        rec = Recording(seq)
+        rows = [run_baseline(rec)]
+        for fe in args.frontends.split(","):
+            rows.append(run_frontend(rec, fe, odometry))
+        print_table(name, rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,23 @@
+"""Many recordings, or many parameter sets, on a Dask cluster; one table out.
+
+Each task runs one recording through :func:`fusion_vo.pipeline.run_pipeline`, exactly as ``fusion-vo
+run`` does, on a Dask worker that reads the recording from its path. The results are one table
+(``results.csv``, ``results.parquet``: one row per recording and trajectory) and ``report.html``::
+
+    from fusion_vo.batch import run_batch, run_sweep
+
+    table = run_batch(["rec1/", "rec2/"], "run.yaml", out="batch/")          # a LocalCluster
+    table = run_sweep(["rec1/"], "examples/thesis_sweep.yaml", out="sweep/")
+
+    from distributed import Client
+    table = run_batch(recordings, config, Client("tcp://scheduler:8786"), out="/shared/batch")
+
+Needs the ``batch`` extra (dask[distributed], pandas, pyarrow, optuna).
+"""
+
+from fusion_vo.batch.grid import Grid, ParameterSet, load_grid, parse_grid
+from fusion_vo.batch.runner import best_sets, plan_batch, plan_sweep, run_batch, run_sweep
+from fusion_vo.batch.tasks import COLUMNS, METRICS, Task, run_task
+
+__all__ = ["COLUMNS", "METRICS", "Grid", "ParameterSet", "Task", "best_sets", "load_grid", "parse_grid",
+           "plan_batch", "plan_sweep", "run_batch", "run_sweep", "run_task"]

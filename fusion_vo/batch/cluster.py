@@ -1,0 +1,103 @@
+"""The Dask cluster a batch runs on: a LocalCluster by default, or a running scheduler by address."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+import threading
+from typing import Callable, Iterator
+
+from fusion_vo.errors import InputError
+
+log = logging.getLogger(__name__)
+
+#: seconds to wait for a scheduler given by address before giving up
+CONNECT_TIMEOUT_S = 5.0
+
+EXTRA_HINT = "install the batch extra: pip install 'fusion-vo[batch]'"
+
+
+def require_dask() -> None:
+    """Raise :class:`InputError` (one line) when Dask distributed or pandas is not installed."""
+    try:
+        import distributed  # noqa: F401
+        import pandas  # noqa: F401
+    except ImportError as exc:
+        raise InputError(f"batches and sweeps need {exc.name}; {EXTRA_HINT}") from None
+
+
+@contextlib.contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Start worker processes with SIGINT ignored (kept across their start-up), so that Ctrl-C on a
+    terminal, which reaches the whole process group, stops the command, and the command stops them."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def open_client(workers: int | None = None, scheduler: str | None = None, dashboard: bool = True,
+                announce: Callable[[str], None] | None = None) -> Iterator:
+    """A ``distributed.Client``: connected to ``scheduler``, or to a new LocalCluster of ``workers``.
+
+    The LocalCluster has one single-threaded worker process per core (or ``workers``), so that each
+    task has a core of its own; it is closed on exit.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Worker processes of the LocalCluster (default: the number of cores).
+    scheduler : str, optional
+        Address of a running scheduler (``tcp://host:8786``); excludes ``workers``.
+    dashboard : bool
+        Serve the Dask dashboard of the LocalCluster (needs bokeh).
+    announce : callable, optional
+        Receives one line with the dashboard address when a LocalCluster starts.
+
+    Raises
+    ------
+    InputError
+        When the scheduler cannot be reached within :data:`CONNECT_TIMEOUT_S`.
+    """
+    require_dask()
+    from distributed import Client, LocalCluster
+
+    if scheduler and workers:
+        raise InputError("give either --workers (a local cluster) or --scheduler (a running one), not both")
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=CONNECT_TIMEOUT_S)
+        except Exception as exc:  # noqa: BLE001 - refused, timed out, malformed, or not a Dask scheduler
+            reason = " ".join(str(exc).split())[:200] or type(exc).__name__
+            raise InputError(f"cannot reach the Dask scheduler at {scheduler} (waited at most "
+                             f"{CONNECT_TIMEOUT_S:.0f} s): {reason}") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = workers or os.cpu_count() or 1
+    if n < 1:
+        raise InputError(f"--workers must be at least 1, not {n}")
+    address = ":0" if dashboard else None
+    with contextlib.ExitStack() as stack:
+        if dashboard:
+            try:
+                import bokeh  # noqa: F401
+            except ImportError:
+                address = None
+        with _workers_ignore_ctrl_c():
+            cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                                       dashboard_address=address, silence_logs=logging.ERROR))
+        client = stack.enter_context(Client(cluster))
+        if announce:
+            link = client.dashboard_link if address else "off (the dashboard needs bokeh)"
+            announce(f"Dask LocalCluster: {n} workers, dashboard {link}")
+        yield client

@@ -1,0 +1,270 @@
+"""Parameter sweeps: which configuration keys to vary and the values to try (``GRID.yaml``).
+
+A grid file names configuration keys as dotted paths into the run configuration
+(``fusion-vo run --print-config`` lists them), and either every combination of values::
+
+    grid:
+      features.detector: [harris, shi_tomasi]
+      features.harris_k: [0.04, 0.08]
+
+or ``random: N`` samples from ranges (a mapping ``{low, high}``, with ``log: true`` for a log-uniform
+draw; integers when both bounds are integers) or from a list of choices::
+
+    random: 20
+    seed: 0
+    ranges:
+      features.harris_k: {low: 0.01, high: 0.2, log: true}
+      features.max_corners: {low: 50, high: 400}
+      features.detector: [harris, shi_tomasi, fast]
+
+An optional ``fixed:`` mapping sets keys to one value in every parameter set (e.g.
+``fixed: {frontend: features}``). Every key and every parameter set is checked against the
+configuration schema (:class:`fusion_vo.config.RunConfig`) before anything runs.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fusion_vo.config import RunConfig, default_config_text
+from fusion_vo.errors import InputError
+from fusion_vo.geometry.camera import load_yaml
+
+log = logging.getLogger(__name__)
+
+#: the sections of a grid file
+GRID_SECTIONS = ("grid", "random", "seed", "ranges", "fixed")
+
+
+@dataclass(frozen=True)
+class ParameterSet:
+    """One point of a sweep.
+
+    Attributes
+    ----------
+    name : str
+        Short identifier (``p000``, ``p001``, ...), also the name of its run folders.
+    values : dict
+        Dotted configuration key -> value (the swept keys only).
+    """
+
+    name: str
+    values: dict
+
+
+def _schema() -> dict:
+    """The full default configuration as a nested mapping (the known keys)."""
+    return yaml.safe_load(default_config_text())
+
+
+def check_key(key: str, path: Path | None, schema: dict | None = None) -> None:
+    """Raise :class:`InputError` unless ``key`` is a dotted path into the run configuration.
+
+    A key inside a section whose default is an empty mapping (``fusion``: options passed to the
+    backends) is accepted here and checked when the configuration is built.
+    """
+    schema = _schema() if schema is None else schema
+    if not isinstance(key, str) or not key or any(not part for part in key.split(".")):
+        raise InputError(f"'{key}' is not a configuration key (use dotted paths such as features.harris_k)", path)
+    node = schema
+    walked = []
+    for part in key.split("."):
+        if isinstance(node, dict) and not node and walked:  # an open section
+            return
+        if not isinstance(node, dict) or part not in node:
+            where = ".".join(walked) or "the configuration"
+            known = ", ".join(sorted(node)) if isinstance(node, dict) else "none: it is a value"
+            raise InputError(f"unknown configuration key '{key}' ('{part}' is not in {where}; known: {known})", path)
+        node = node[part]
+        walked.append(part)
+
+
+def config_data(config: RunConfig) -> dict:
+    """The full configuration as plain data (what a task carries and the cache key hashes)."""
+    return config.to_dict()
+
+
+def build_config(data: dict, path: Path | None = None) -> RunConfig:
+    """A validated :class:`RunConfig` from plain data (the inverse of :func:`config_data`)."""
+    config = RunConfig(**data)
+    config.validate(path)
+    return config
+
+
+def _set_dotted(config: dict, key: str, value) -> None:
+    node = config
+    parts = key.split(".")
+    for part in parts[:-1]:
+        if node.get(part) is None:
+            node[part] = {}
+        node = node[part]
+    node[parts[-1]] = value
+
+
+def apply_values(base: RunConfig, values: dict, path: Path | None = None) -> RunConfig:
+    """A copy of ``base`` with the dotted keys of ``values`` set, validated by the configuration schema.
+
+    Raises
+    ------
+    InputError
+        Naming ``path`` and the key, for an unknown key or a value the configuration rejects.
+    """
+    data = config_data(base)
+    for key, value in values.items():
+        _set_dotted(data, key, value)
+    keys = describe(values)
+    try:
+        config = build_config(data, path)
+    except InputError as exc:
+        raise InputError(f"{exc.message} (parameter set {keys})", path) from None
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"{str(exc).splitlines()[0]} (parameter set {keys})", path) from None
+    _check_sections(config, keys, path)
+    return config
+
+
+def describe(values: dict) -> str:
+    """``key=value, ...`` of a parameter set."""
+    return ", ".join(f"{k}={v}" for k, v in values.items())
+
+
+def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
+    """Build the options of both frontends and of the backends, so that a misspelt option of a section the
+    run would not otherwise check (the frontend that is not selected, ``fusion``) is an error here."""
+    from frontends.features import FeatureConfig
+    from frontends.klt import KltConfig
+    from fusion_vo.backends.batch import as_config
+
+    checks = {"klt": lambda: KltConfig.from_dict(config.klt), "features": lambda: FeatureConfig.from_dict(config.features),
+              "fusion": lambda: as_config(config.fusion)}
+    for section, check in checks.items():
+        try:
+            check()
+        except InputError as exc:
+            raise InputError(f"{section}: {exc.message} (parameter set {keys})", path) from None
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{section}: {str(exc).splitlines()[0]} (parameter set {keys})", path) from None
+
+
+def _as_list(key: str, values, path: Path | None) -> list:
+    if isinstance(values, (list, tuple)):
+        if not values:
+            raise InputError(f"grid key '{key}' has no values to try", path)
+        return list(values)
+    return [values]
+
+
+def _draw(key: str, spec, rng: np.random.Generator, path: Path | None):
+    if isinstance(spec, (list, tuple)):
+        if not spec:
+            raise InputError(f"range '{key}' has no choices", path)
+        return spec[int(rng.integers(len(spec)))]
+    if isinstance(spec, dict):
+        unknown = sorted(set(spec) - {"low", "high", "log"})
+        if unknown or "low" not in spec or "high" not in spec:
+            raise InputError(f"range '{key}' must be {{low: A, high: B}} (optionally log: true) or a list of choices", path)
+        low, high, use_log = spec["low"], spec["high"], bool(spec.get("log", False))
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in (low, high)):
+            raise InputError(f"range '{key}': low and high must be finite numbers", path)
+        if low > high or (use_log and low <= 0):
+            raise InputError(f"range '{key}': needs low <= high (and low > 0 with log: true)", path)
+        if isinstance(low, int) and isinstance(high, int):
+            if use_log:
+                return int(round(math.exp(rng.uniform(math.log(low), math.log(high)))))
+            return int(rng.integers(low, high + 1))
+        if use_log:
+            return float(math.exp(rng.uniform(math.log(low), math.log(high))))
+        return float(rng.uniform(low, high))
+    raise InputError(f"range '{key}' must be {{low: A, high: B}} or a list of choices", path)
+
+
+def _plain(value):
+    """NumPy scalars as Python values (for YAML, JSON and the configuration)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+@dataclass
+class Grid:
+    """A parsed grid file: the parameter sets to run, each already validated.
+
+    Attributes
+    ----------
+    keys : list of str
+        The swept keys, in file order (the extra columns of ``results.csv``).
+    sets : list of ParameterSet
+    configs : list of RunConfig
+        The full configuration of each parameter set.
+    path : Path or None
+        The grid file (for messages).
+    """
+
+    keys: list[str]
+    sets: list[ParameterSet]
+    configs: list[RunConfig]
+    path: Path | None = None
+
+
+def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
+    """Expand and validate a grid mapping (the contents of ``GRID.yaml``) on top of ``base``."""
+    unknown = sorted(set(data) - set(GRID_SECTIONS))
+    if unknown:
+        raise InputError(f"unknown grid section '{unknown[0]}' (known: {', '.join(GRID_SECTIONS)})", path)
+    has_grid, has_random = data.get("grid") is not None, data.get("random") is not None
+    if has_grid == has_random:
+        raise InputError("a grid file needs exactly one of 'grid:' (every combination) or 'random: N' with 'ranges:'", path)
+    schema = _schema()
+    fixed = data.get("fixed") or {}
+    if not isinstance(fixed, dict):
+        raise InputError("'fixed' must be a mapping of key: value", path)
+    for key in fixed:
+        check_key(key, path, schema)
+    if has_grid:
+        grid = data["grid"]
+        if not isinstance(grid, dict) or not grid:
+            raise InputError("the grid is empty: 'grid:' must map configuration keys to lists of values", path)
+        for key in grid:
+            check_key(key, path, schema)
+        keys = list(grid)
+        combos = [dict(zip(keys, combo)) for combo in itertools.product(*(_as_list(k, grid[k], path) for k in keys))]
+    else:
+        n = data["random"]
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise InputError(f"'random' must be a positive number of samples, not {n!r}", path)
+        ranges = data.get("ranges")
+        if not isinstance(ranges, dict) or not ranges:
+            raise InputError("the grid is empty: 'random: N' needs 'ranges:' mapping configuration keys to ranges", path)
+        for key in ranges:
+            check_key(key, path, schema)
+        seed = data.get("seed", 0)
+        if isinstance(seed, bool) or not isinstance(seed, int):
+            raise InputError(f"'seed' must be an integer, not {seed!r}", path)
+        rng = np.random.default_rng(seed)
+        keys = list(ranges)
+        combos = [{k: _plain(_draw(k, ranges[k], rng, path)) for k in keys} for _ in range(n)]
+    overlap = sorted(set(fixed) & set(keys))
+    if overlap:
+        raise InputError(f"key '{overlap[0]}' is both fixed and swept", path)
+    sets, configs, seen = [], [], set()
+    width = max(3, len(str(len(combos) - 1)))
+    for values in combos:
+        marker = yaml.safe_dump(values, sort_keys=True)
+        if marker in seen:  # random draws of choices can repeat
+            continue
+        seen.add(marker)
+        configs.append(apply_values(base, {**fixed, **values}, path))
+        sets.append(ParameterSet(f"p{len(sets):0{width}d}", values))
+    log.info("%d parameter sets over %s", len(sets), ", ".join(keys))
+    return Grid(keys=keys, sets=sets, configs=configs, path=path)
+
+
+def load_grid(path: str | Path, base: RunConfig) -> Grid:
+    """Read and expand ``GRID.yaml``; errors name the file and the key."""
+    path = Path(path)
+    return parse_grid(load_yaml(path), base, path)

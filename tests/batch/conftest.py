@@ -1,0 +1,38 @@
+"""Small generated recordings and a local Dask cluster of 2 worker processes, shared by the batch tests."""
+
+import shutil
+
+import pytest
+
+pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
+
+from fusion_vo.simulation import simulate  # noqa: E402
+
+#: 4 s random drives on 320 x 180 frames (seeds whose robot moves)
+SEEDS = (3, 4, 6)
+
+
+def small_recording(path, seed):
+    return simulate(path, profile="random", seed=seed, duration=4.0, width=320, height=180, cu=160.0, cv=90.0)
+
+
+@pytest.fixture(scope="session")
+def recordings(tmp_path_factory):
+    """Three good recordings and one whose IMU file has a NaN (``broken``)."""
+    root = tmp_path_factory.mktemp("recordings")
+    good = [small_recording(root / f"drive{seed}", seed) for seed in SEEDS]
+    broken = root / "broken"
+    shutil.copytree(good[0], broken)
+    lines = (broken / "imu0" / "data.csv").read_text().splitlines()
+    lines[20] = lines[20].split(",")[0] + ",nan,0,0,0,0,9.8"
+    (broken / "imu0" / "data.csv").write_text("\n".join(lines) + "\n")
+    return good, broken
+
+
+@pytest.fixture(scope="session")
+def client():
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as c:
+        yield c

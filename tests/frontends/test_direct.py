@@ -1,0 +1,37 @@
+"""The direct frontend's registration, its options, and the dense check of few sliding points."""
+
+import numpy as np
+import pytest
+from frontend_frames import HEIGHT, WIDTH, pair, similarity_about
+
+from frontends import make_frontend
+from frontends.base import FrameMotion, IdentityMap, MotionStatus
+from frontends.direct import DenseFallback, DirectConfig
+from fusion_vo.config import RunConfig, load_config
+from fusion_vo.errors import InputError
+
+
+def test_direct_is_a_run_option(tmp_path):
+    path = tmp_path / "run.yaml"
+    path.write_text("frontend: direct\ndirect: {iterations: 12, max_pixels: 5000}\n")
+    cfg = load_config(path)
+    odo = cfg.odometry_config()
+    assert odo.frontend == "direct" and odo.frontend_options == {"iterations": 12, "max_pixels": 5000}
+    assert make_frontend("direct", odo.frontend_options).config.iterations == 12
+    with pytest.raises(ValueError, match="iterations"):
+        make_frontend("direct", {"iterations": 0})
+    with pytest.raises(InputError, match="frontend must be one of"):
+        RunConfig(frontend="dense").validate()
+
+
+def test_dense_check_replaces_a_wrong_point_estimate_and_keeps_a_right_one():
+    truth = similarity_about(WIDTH / 2, HEIGHT / 2, 6.0, -4.0, 0.8)
+    f0, f1 = pair(truth)
+    fallback = DenseFallback(IdentityMap(), DirectConfig())
+    right = FrameMotion(0.05, 0.0, matrix=truth.copy(), status=MotionStatus.OK)
+    assert fallback.verify(f0, f1, right, tolerance=1.0) is None
+    short = truth.copy()
+    short[:, 2] *= 0.8  # a motion 20 % short, as points sliding along edges give
+    fixed = fallback.verify(f0, f1, FrameMotion(0.05, 0.0, matrix=short, status=MotionStatus.OK), tolerance=1.0)
+    assert fixed is not None and fixed.info["path"] == "dense"
+    assert np.abs(fixed.matrix - truth).max() < 0.05
