@@ -9,25 +9,49 @@ A configuration file has one section per stage; any key left out keeps its defau
     klt: {...}               # frontends.klt.KltConfig
     features: {...}          # frontends.features.FeatureConfig
     direct: {...}            # frontends.direct.DirectConfig
-    fusion: {...}            # backend options (fusion_vo.backends)
+    fusion: {...}            # fusion_vo.backends.FusionConfig (ekf, graph, sensor noise models)
     evaluate: true           # compute metrics and plots when the recording has ground truth
 
-``fusion-vo run --print-config`` prints the full default configuration.
+The schema is derived from those dataclasses by :mod:`fusion_vo.schema` (pydantic), so an option is
+defined once, where it is used. ``fusion-vo run --print-config`` prints every option with its default
+and description; ``fusion-vo run --print-schema`` prints the JSON schema (for editors). A mistake names
+the file, the key path and what was expected::
+
+    run.yaml: fusion.ekf.accel_sigma: expected a number, got 'abc'
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
+import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Literal
 
-from fusion_vo.errors import InputError
+from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
+
+from fusion_vo import schema
 from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.odometry import OdometryConfig
 
 SENSORS = ("camera", "wheel", "imu", "odom", "range")
 BACKENDS = ("none", "ekf", "gtsam", "all")
 FRONTENDS = ("klt", "features", "direct")
+
+#: fields of OdometryConfig that the run sets itself (from ``frontend`` and the frontend's section)
+_ODOMETRY_EXCLUDE = ("frontend", "frontend_options")
+
+
+def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
+    """The sections that are a stage's configuration dataclass: name -> (dataclass, fields not in the file)."""
+    from frontends.direct import DirectConfig
+    from frontends.features import FeatureConfig
+    from frontends.klt import KltConfig
+    from fusion_vo.backends.config import FusionConfig
+
+    return {"odometry": (OdometryConfig, _ODOMETRY_EXCLUDE), "klt": (KltConfig, ()),
+            "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ())}
 
 
 @dataclass
@@ -39,16 +63,20 @@ class RunConfig:
     frontend : str
         Visual frontend: ``klt``, ``features`` or ``direct``.
     sensors : list of str or None
-        Sensors the backends may use (of :data:`SENSORS`); the recording must have them. ``None``
-        (the default) uses the camera, wheels and IMU the recording has.
+        Sensors the backends may use (of camera, wheel, imu, odom, range); the recording must have them.
+        ``None`` (the default) uses the camera, wheels and IMU the recording has.
     backend : str
         ``none`` (visual and wheel dead reckoning only), ``ekf``, ``gtsam`` or ``all``.
     odometry : dict
-        :class:`fusion_vo.odometry.OdometryConfig` fields except ``frontend``.
-    klt, features, direct : dict
-        Options of the three frontends.
+        Visual odometry options: the fields of ``fusion_vo.odometry.OdometryConfig`` except ``frontend``.
+    klt : dict
+        Options of the KLT frontend (``frontends.klt.KltConfig``).
+    features : dict
+        Options of the corner-feature frontend (``frontends.features.FeatureConfig``).
+    direct : dict
+        Options of the direct (photometric) frontend (``frontends.direct.DirectConfig``).
     fusion : dict
-        Backend options, passed to :mod:`fusion_vo.backends`.
+        Backend options (``fusion_vo.backends.FusionConfig``).
     evaluate : bool
         Evaluate against ground truth at the end of the run when the recording has it.
     """
@@ -64,71 +92,96 @@ class RunConfig:
     evaluate: bool = True
 
     def odometry_config(self) -> OdometryConfig:
+        """The visual odometry configuration, with the chosen frontend's options."""
         opts = dict(self.odometry)
         opts["frontend"] = self.frontend
-        opts["frontend_options"] = dict(getattr(self, self.frontend if self.frontend in FRONTENDS else "klt"))
+        opts["frontend_options"] = dict(getattr(self, self.frontend, None) or {})  # the section named by frontend
         return OdometryConfig.from_dict(opts)
 
+    def fusion_config(self, path: Path | None = None):
+        """The backends' :class:`~fusion_vo.backends.FusionConfig` (validated by the schema)."""
+        from fusion_vo.backends.config import FusionConfig
+
+        return schema.build(FusionConfig, self.fusion, path, ("fusion",))
+
     def validate(self, path: Path | None = None) -> None:
-        if self.frontend not in FRONTENDS:
-            raise InputError(f"frontend must be one of {', '.join(FRONTENDS)}, not '{self.frontend}'", path)
-        if self.backend not in BACKENDS:
-            raise InputError(f"backend must be one of {', '.join(BACKENDS)}, not '{self.backend}'", path)
-        bad = [s for s in (self.sensors or []) if s not in SENSORS]
-        if bad:
-            raise InputError(f"unknown sensor '{bad[0]}' (known: {', '.join(SENSORS)})", path)
-        try:
-            self.odometry_config()
-        except (TypeError, ValueError) as exc:
-            raise InputError(str(exc), path) from None
+        """Check every section against the schema; raise :class:`InputError` naming the key path."""
+        validate_config(self.to_dict(), path)
+
+    def resolved(self, path: Path | None = None) -> "RunConfig":
+        """This configuration with every option of every section filled in (for ``run.yaml``)."""
+        return validate_config(self.to_dict(), path)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
 
 
+def _split_sensors(value):
+    if isinstance(value, str):
+        return [s.strip() for s in value.split(",") if s.strip()]
+    return value
+
+
+@functools.cache
+def run_model() -> type[BaseModel]:
+    """The pydantic model of the whole run configuration (sections built from their dataclasses)."""
+    docs = schema.field_docs(RunConfig)
+    fields: dict[str, Any] = {
+        "frontend": (Literal[FRONTENDS], Field("klt", description=docs["frontend"])),
+        "sensors": (list[Literal[SENSORS]] | None, Field(None, description=docs["sensors"])),
+        "backend": (Literal[BACKENDS], Field("all", description=docs["backend"])),
+    }
+    for name, (cls, exclude) in _sections().items():
+        section = schema.model_of(cls, exclude)
+        fields[name] = (section, Field(default_factory=section, description=docs[name]))
+    fields["evaluate"] = (bool, Field(True, description=docs["evaluate"]))
+    validators = {"split_sensors": field_validator("sensors", mode="before")(_split_sensors)}
+    return create_model("RunConfig", __config__=ConfigDict(extra="forbid", title="fusion-vo run configuration"),
+                        __doc__="Configuration of fusion-vo run (a YAML file given with --config).",
+                        __validators__=validators, **fields)
+
+
+def validate_config(data: dict, path: Path | None = None) -> RunConfig:
+    """Validate a run configuration mapping and return the :class:`RunConfig` with every option filled in.
+
+    Raises
+    ------
+    InputError
+        For an unknown key, a value of the wrong type or a combination of options a stage rejects; the
+        message names ``path`` and the key path.
+    """
+    if isinstance(data, dict):  # a top-level key left empty keeps its default
+        data = {k: v for k, v in data.items() if v is not None}
+    values = schema.validate(run_model(), data, path)
+    sections = {}
+    for name, (cls, exclude) in _sections().items():
+        built = schema.to_dataclass(cls, getattr(values, name), path, (name,))  # the stage's own checks
+        sections[name] = {k: v for k, v in schema.plain(built).items() if k not in exclude}
+    return RunConfig(frontend=values.frontend, sensors=None if values.sensors is None else list(values.sensors),
+                     backend=values.backend, evaluate=values.evaluate, **sections)
+
+
 def load_config(path: str | Path | None) -> RunConfig:
-    """Read a YAML configuration (missing keys keep their defaults); ``None`` gives the defaults."""
+    """Read a YAML configuration (missing keys keep their defaults); ``None`` gives the defaults.
+
+    The returned sections hold every option of their stage (the file's values and the defaults).
+    """
     if path is None:
         return RunConfig()
     path = Path(path)
-    data = load_yaml(path)
-    known = {f.name for f in dataclasses.fields(RunConfig)}
-    unknown = sorted(set(data) - known)
-    if unknown:
-        raise InputError(f"unknown section '{unknown[0]}' (known: {', '.join(sorted(known))})", path)
-    for key in ("odometry", "klt", "features", "direct", "fusion"):
-        if key in data and data[key] is not None and not isinstance(data[key], dict):
-            raise InputError(f"'{key}' must be a mapping of option: value", path)
-    if "sensors" in data and isinstance(data["sensors"], str):
-        data["sensors"] = [s.strip() for s in data["sensors"].split(",") if s.strip()]
-    cfg = RunConfig(**{k: v for k, v in data.items() if v is not None})
-    cfg.validate(path)
-    return cfg
+    return validate_config(load_yaml(path), path)
 
 
-def default_config_text() -> str:
-    """The full default configuration as commented YAML (for ``--print-config``)."""
-    import yaml
+def default_config_text(config: RunConfig | None = None) -> str:
+    """The configuration as commented YAML (for ``--print-config``): every option, with its value in
+    ``config`` (default: the defaults) and the first sentence of its description."""
+    model = run_model()
+    values = None if config is None else schema.validate(model, config.to_dict())
+    lines = [f"# fusion-vo run configuration: every option with its {'default' if config is None else 'value'}",
+             "# (units in square brackets; fusion-vo run --print-schema gives the full descriptions)"]
+    return "\n".join(lines + schema.commented_yaml(model, values)) + "\n"
 
-    cfg = RunConfig()
-    d = cfg.to_dict()
-    d["odometry"] = {k: v for k, v in dataclasses.asdict(OdometryConfig()).items() if k not in ("frontend", "frontend_options")}
-    try:
-        from frontends.klt import KltConfig
 
-        d["klt"] = dataclasses.asdict(KltConfig())
-    except ImportError:
-        pass
-    try:
-        from frontends.features import FeatureConfig
-
-        d["features"] = dataclasses.asdict(FeatureConfig())
-    except ImportError:
-        pass
-    try:
-        from frontends.direct import DirectConfig
-
-        d["direct"] = dataclasses.asdict(DirectConfig())
-    except ImportError:
-        pass
-    return "# fusion-vo run configuration (defaults)\n" + yaml.safe_dump(d, sort_keys=False, default_flow_style=None)
+def schema_text() -> str:
+    """The JSON schema of the run configuration (for ``--print-schema``)."""
+    return json.dumps(schema.json_schema(run_model()), indent=2) + "\n"

@@ -7,6 +7,9 @@ malformed row, an inconsistent configuration). The command line turns it into a 
 
 from __future__ import annotations
 
+import errno
+import os
+import stat
 from pathlib import Path
 
 
@@ -37,3 +40,25 @@ class InputError(Exception):
                 where += f":{self.line}"
             where += ": "
         return where + self.message
+
+
+def check_file(path: str | Path) -> Path:
+    """Raise :class:`InputError` naming ``path`` unless it is a regular file that can be opened.
+
+    The message says what is wrong: not found, a broken symbolic link, a symbolic link loop, a folder, not
+    a regular file, or the system's reason (permission denied ...).
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InputError("symbolic link loop", path) from None
+        if exc.errno == errno.ENOENT:
+            raise InputError("broken symbolic link" if os.path.islink(path) else "file not found", path) from None
+        raise InputError(f"cannot read file ({exc.strerror})", path) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise InputError("is a folder, not a file", path)
+    if not stat.S_ISREG(st.st_mode):
+        raise InputError("not a regular file", path)
+    return path

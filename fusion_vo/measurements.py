@@ -109,12 +109,17 @@ class GpsFix:
 # --------------------------------------------------------------------------- per-stream arrays
 @dataclass
 class WheelConfig:
-    """Differential-drive calibration (``wheel0/sensor.yaml``)."""
+    """Differential-drive calibration (``wheel0/sensor.yaml``).
+
+    ``radius_sigma`` is the standard deviation [m] of the wheel radii (their common error, from tyre
+    pressure, wear and load), or None when the file does not state it.
+    """
 
     ticks_per_revolution: float
     wheel_radius_left: float
     wheel_radius_right: float
     wheel_base: float
+    radius_sigma: float | None = None
 
 
 @dataclass

@@ -111,11 +111,14 @@ class OdometryConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> "OdometryConfig":
-        known = set(cls.__dataclass_fields__)
-        unknown = set(d) - known
-        if unknown:
-            raise ValueError(f"unknown visual odometry option '{sorted(unknown)[0]}' (known: {', '.join(sorted(known))})")
-        return cls(**d)
+        """Build from a mapping through the configuration schema (:func:`fusion_vo.schema.build`);
+        unknown keys and values of the wrong type raise ``ValueError`` naming the key."""
+        from fusion_vo import schema
+
+        try:
+            return schema.build(cls, d)
+        except InputError as exc:
+            raise ValueError(exc.message) from None
 
 
 @dataclass
@@ -145,6 +148,9 @@ class OdometryResult:
         Time spent bridging gaps at constant velocity [s].
     elapsed_s : float
         Wall-clock time of the run [s].
+    range_scaled : bool
+        The increments were scaled frame by frame with the range finder's height (``use_range``), so the
+        range finder is already in them and the backends must not use it again.
     """
 
     increments: list[VisualIncrement]
@@ -157,6 +163,7 @@ class OdometryResult:
     skipped: list[str]
     bridged_s: float
     elapsed_s: float
+    range_scaled: bool = False
 
     @property
     def n_frames(self) -> int:
@@ -452,4 +459,5 @@ def run_visual_odometry(
         skipped=skipped,
         bridged_s=vo.bridged_s,
         elapsed_s=elapsed,
+        range_scaled=heights is not None,
     )

@@ -1,8 +1,20 @@
 """The whole ``fusion-vo run`` job, as a library call.
 
-    recording -> visual odometry (frontend + ground geometry) -> backends -> files -> evaluation
+    check every input -> visual odometry (frontend + ground geometry) -> backends -> files -> evaluation
 
-Outputs (in ``out_dir``; written under a temporary folder and moved into place only when complete):
+Before any work, :func:`check_inputs` validates the whole configuration and reads every stream the run
+will use, so that a mistake anywhere (a malformed row, a broken stream, a bad option, streams on different
+clocks, unusable ground truth) stops the run at once with a message naming the file, line or key.
+
+The output folder belongs to one run. Everything, the evaluation included, is written into a hidden
+staging folder beside it and moved into place in one rename only when all of it succeeded
+(:class:`fusion_vo.outputs.OutputFolder`): a failed or interrupted run leaves the previous folder as it
+was and nothing that looks complete; a later run replaces the folder as a whole, so no file of an earlier
+run survives into it; while a run writes, the folder is locked against a second run. An existing folder
+is replaced only if it is empty or was written by ``fusion-vo run`` (it holds ``.fusion-vo-run``),
+unless ``force``.
+
+Outputs (in ``out_dir``):
 
 ``vo.tum``            visual dead reckoning (TUM: ``t x y z qx qy qz qw``, pose of B in W)
 ``velocities.csv``    ``t,vx,vy,yaw_rate,status,inliers,height_ratio`` per camera frame (``height_ratio``
@@ -14,15 +26,15 @@ Outputs (in ``out_dir``; written under a temporary folder and moved into place o
                       the upper triangle of the (x, y, yaw) covariance in m², m·rad, rad²
 ``run.yaml``          the configuration used and the recording's path
 ``summary.json``      counts, timings and notes of the run
+``metrics.json``, figures, ``report.html``   the evaluation, when the recording has ground truth
 """
 
 from __future__ import annotations
 
+import io
 import json
 import logging
-import os
-import shutil
-import tempfile
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,9 +46,12 @@ import yaml
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
+from fusion_vo.evaluation import EVO_MISSING
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
+from fusion_vo.outputs import OutputFolder, check_replaceable, write_atomic
 from fusion_vo.recording import Recording, write_tum
+from fusion_vo.recording.reader import STREAM_FOLDERS, read_groundtruth_csv
 
 log = logging.getLogger(__name__)
 
@@ -61,14 +76,25 @@ class RunSummary:
 
     def line(self) -> str:
         fails = sum(self.failures.values())
-        parts = [f"{self.frames} frames", f"{fails} failed"]
-        if self.skipped_frames:
-            parts.append(f"{self.skipped_frames} skipped (unreadable)")
-        parts += [f"{self.distance_m:.3f} m travelled", f"{self.vo_fps:.0f} frames/s"]
+        parts = []
+        if self.frames:
+            parts = [f"{self.frames} frames", f"{fails} failed"]
+            if self.skipped_frames:
+                parts.append(f"{self.skipped_frames} skipped (unreadable)")
+            parts += [f"{self.distance_m:.3f} m travelled", f"{self.vo_fps:.0f} frames/s"]
+        else:
+            parts.append("no camera")
         if self.backend_seconds:
             parts.append(", ".join(f"{k[:-3]} {v:.2f} ms" if k.endswith("_ms") else f"{k} {v:.2f} s"
                                    for k, v in self.backend_seconds.items()))
         return "; ".join(parts) + f" -> {self.out_dir}"
+
+
+#: marker file of a run folder (its presence allows a later run to replace the folder)
+RUN_MARKER = ".fusion-vo-run"
+
+#: a jump between two consecutive timestamps of one stream longer than this is a clock error [s]
+MAX_JUMP_S = 86400.0
 
 
 def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
@@ -84,16 +110,190 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
         return chosen
     for s in config.sensors:
         if not present[s]:
-            folder = {"camera": "cam0", "wheel": "wheel0", "imu": "imu0", "odom": "odom0", "range": "range0"}[s]
-            raise InputError(f"sensor '{s}' was asked for but the recording has no {folder}/data.csv", rec.path)
+            raise InputError(f"the sensors to use include '{s}' but the recording has no {STREAM_FOLDERS[s]}/",
+                             rec.path)
     return list(config.sensors)
 
 
+@dataclass
+class RunInputs:
+    """What :func:`check_inputs` found: the recording, the sensors to use and each stream's time span [s]."""
+
+    recording: Recording
+    sensors: list[str]
+    spans: dict[str, tuple[float, float]]
+    groundtruth: PoseData | None
+    times: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+def _config_error(exc: Exception, config_path: Path | None, key: str) -> InputError:
+    """An error in the configuration, blamed on the configuration file and the key."""
+    message = exc.message if isinstance(exc, InputError) else str(exc)
+    where = f"{key}: " if key and not message.startswith(key) else ""
+    return InputError(f"{where}{message}", config_path)
+
+
+def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Path | None = None) -> RunInputs:
+    """Validate the whole configuration and read every input the run will use, before any work.
+
+    Raises
+    ------
+    InputError
+        Naming the configuration file and key, or the recording's file and line, of the first problem
+        found: any option, a stream that is malformed, broken or missing, frame names outside
+        ``cam0/data/``, streams whose time spans do not overlap (different clocks), a timestamp that jumps by
+        more than a day, or ground truth that cannot be used for the evaluation.
+    """
+    from fusion_vo.backends.batch import as_config
+
+    config_path = None if config_path is None else Path(config_path)
+    _check_number_types(config, config_path)
+    try:
+        config.validate(config_path)
+    except InputError as exc:
+        raise InputError(exc.message, exc.path or config_path, exc.line) from None
+    try:
+        as_config(config.fusion)
+    except (InputError, TypeError, ValueError) as exc:
+        raise _config_error(exc, config_path, "fusion") from None
+    odometry = config.odometry_config()
+
+    rec = Recording(sequence)
+    sensors = resolve_sensors(rec, config)
+    spans: dict[str, tuple[float, float]] = {}
+    files: dict[str, Path] = {}
+    times: dict[str, np.ndarray] = {}
+
+    def note(name: str, t: np.ndarray, folder: str) -> None:
+        if len(t):
+            spans[name] = (float(t[0]), float(t[-1]))
+            files[name] = rec.path / folder / "data.csv"
+            times[name] = t
+
+    if "camera" in sensors:
+        cam = rec.camera  # cam0/sensor.yaml
+        t_ns, _, _ = rec._frames_index()  # cam0/data.csv, frame names inside cam0/data/
+        if len(t_ns) < 2:
+            raise InputError(f"{len(t_ns)} frame listed: visual odometry needs at least two",
+                             rec.path / "cam0" / "data.csv")
+        if not (rec.path / "cam0" / "data").is_dir() and rec.video_path() is None:
+            raise InputError("no frames: neither cam0/data/ nor cam0/video.<ext> exists", rec.path / "cam0")
+        rec.pixel_shift()  # a bad bit_depth in cam0/sensor.yaml
+        from fusion_vo.geometry.ground import GroundGeometry
+
+        try:
+            geometry = GroundGeometry(cam, height=odometry.height, min_sigma_xy=odometry.min_sigma_xy,
+                                      min_sigma_yaw=odometry.min_sigma_yaw)
+        except ValueError as exc:
+            if odometry.height is not None:
+                raise _config_error(exc, config_path, "odometry.height") from None
+            raise InputError(str(exc), rec.path / "cam0" / "sensor.yaml") from None
+        from frontends import make_frontend
+
+        for name in ("klt", "features"):  # both sections, not only the frontend in use
+            try:
+                make_frontend(name, getattr(config, name), point_map=geometry.rectifier)
+            except (InputError, TypeError, ValueError) as exc:
+                raise _config_error(exc, config_path, name) from None
+        note("camera", t_ns * 1e-9, "cam0")
+    if "wheel" in sensors and rec.has_wheel():
+        note("wheel", rec.wheel().t, "wheel0")
+    if ("odom" in sensors or ("wheel" in sensors and not rec.has_wheel())) and rec.has_odom():
+        note("odom", rec.odom().t, "odom0")
+    if "imu" in sensors:
+        note("imu", rec.imu().t, "imu0")
+    if rec.has_range() and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
+        note("range", rec.range().t, "range0")
+
+    for name, path in files.items():  # a jump of more than a day inside one stream: another clock
+        step = np.diff(times[name])
+        if len(step) and step.max() > MAX_JUMP_S:
+            i = int(np.argmax(step))
+            line = _line_of(rec, name, i + 1)
+            raise InputError(f"timestamp jumps by {step[i]:.0f} s from the row before; all rows of a stream must "
+                             "be on the recording's clock", path, line)
+    names = list(spans)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            (a0, a1), (b0, b1) = spans[a], spans[b]
+            if a1 < b0 or b1 < a0:
+                raise InputError(f"the {a} and {b} streams do not overlap in time ({a} {_span(spans[a])}, "
+                                 f"{b} {_span(spans[b])}): all streams must be stamped on one clock", rec.path)
+
+    groundtruth = None
+    if config.evaluate and rec.has_groundtruth():
+        gt_path = rec.path / "state_groundtruth_estimate0" / "data.csv"
+        groundtruth = read_groundtruth_csv(rec._need("ground truth", "state_groundtruth_estimate0"), min_poses=2)
+        g0, g1 = float(groundtruth.t[0]), float(groundtruth.t[-1])
+        if spans:
+            lo = min(v[0] for v in spans.values())
+            hi = max(v[1] for v in spans.values())
+            if g1 < lo or hi < g0:
+                raise InputError(f"ground truth {_span((g0, g1))} does not overlap the sensors' "
+                                 f"{_span((lo, hi))}: it must be stamped on the recording's clock", gt_path)
+    if config.evaluate and groundtruth is None and rec.has_gps():
+        rec.gps()  # the fixes the evaluation scores against: a malformed file stops the run before any work
+    return RunInputs(rec, sensors, spans, groundtruth, times)
+
+
+def _longest_common_pause(times: dict[str, np.ndarray] | None) -> tuple[float, float] | None:
+    """The longest interval [s] in which no stream has a sample, or ``None``."""
+    if not times:
+        return None
+    t = np.unique(np.concatenate([np.asarray(v, dtype=np.float64) for v in times.values()]))
+    if len(t) < 2:
+        return None
+    i = int(np.argmax(np.diff(t)))
+    return float(t[i]), float(t[i + 1])
+
+
+def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
+    """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
+    import dataclasses
+
+    from frontends.features import FeatureConfig
+    from frontends.klt import KltConfig
+    from fusion_vo.odometry import OdometryConfig
+
+    for section, cls in (("odometry", OdometryConfig), ("klt", KltConfig), ("features", FeatureConfig)):
+        values = getattr(config, section) or {}
+        if not isinstance(values, dict):
+            raise InputError(f"'{section}' must be a mapping of option: value", config_path)
+        defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+        for key, value in values.items():
+            default = defaults.get(key, dataclasses.MISSING)
+            number = isinstance(default, (int, float)) and not isinstance(default, bool)
+            if key == "height" and section == "odometry":
+                number = True
+            if number and value is not None and (isinstance(value, (bool, str)) or
+                                                 not isinstance(value, (int, float))):
+                raise InputError(f"{section}.{key} must be a number, not {value!r}", config_path)
+            if number and isinstance(value, float) and not math.isfinite(value):
+                raise InputError(f"{section}.{key} must be finite, not {value}", config_path)
+
+
+def _line_of(rec: Recording, name: str, row: int) -> int | None:
+    if name == "camera":
+        return int(rec._frames_index()[2][row])
+    from fusion_vo.recording.csvio import read_table
+
+    folder = STREAM_FOLDERS[name]
+    try:
+        return int(read_table(rec.path / folder / "data.csv", (1, 64), "values").lines[row])
+    except (InputError, IndexError):
+        return None
+
+
+def _span(span: tuple[float, float]) -> str:
+    return f"{span[0]:.3f} s to {span[1]:.3f} s"
+
+
 def write_velocities(path: Path, vo: OdometryResult) -> None:
-    with open(path, "w") as f:
-        f.write("t,vx,vy,yaw_rate,status,inliers,height_ratio\n")
-        for t, v, s, n, r in zip(vo.frame_t, vo.velocity, vo.status, vo.inliers, vo.height_ratio):
-            f.write(f"{t:.9f},{v[0]:.9g},{v[1]:.9g},{v[2]:.9g},{s},{int(n)},{r:.7f}\n")
+    f = io.StringIO()
+    f.write("t,vx,vy,yaw_rate,status,inliers,height_ratio\n")
+    for t, v, s, n, r in zip(vo.frame_t, vo.velocity, vo.status, vo.inliers, vo.height_ratio):
+        f.write(f"{t:.9f},{v[0]:.9g},{v[1]:.9g},{v[2]:.9g},{s},{int(n)},{r:.7f}\n")
+    write_atomic(path, f.getvalue())
 
 
 def run_pipeline(
@@ -101,29 +301,40 @@ def run_pipeline(
     out_dir: str | Path,
     config: RunConfig | None = None,
     progress: Callable[[int, int], None] | None = None,
+    force: bool = False,
+    config_path: str | Path | None = None,
 ) -> RunSummary:
-    """Run visual odometry, the backends and the evaluation on one recording.
+    """Check every input, then run visual odometry, the backends and the evaluation on one recording.
+
+    Parameters
+    ----------
+    sequence : the recording folder.
+    out_dir : the output folder, created or replaced as a whole (see the module's rules).
+    config : the run's configuration (default: every default).
+    progress : callable ``(done, total)`` called after every frame.
+    force : replace an output folder that is not empty and was not written by ``fusion-vo run``.
+    config_path : the file ``config`` was read from, named in configuration errors.
 
     Raises
     ------
     InputError
-        For anything wrong with the recording or the configuration.
+        For anything wrong with the recording, the configuration or the output folder, before any work
+        when it can be found by reading the inputs.
     """
     config = config or RunConfig()
-    config.validate()
-    rec = Recording(sequence)
-    sensors = resolve_sensors(rec, config)
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise InputError("the output must be a folder, but a file of that name exists", out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    read = [Path(sequence)] + ([Path(config_path)] if config_path is not None else [])
+    check_replaceable(out_dir, RUN_MARKER, force, read)  # the output folder first: it is quick
+    inputs = check_inputs(sequence, config, config_path)
+    rec, sensors = inputs.recording, inputs.sensors
     summary = RunSummary(sequence=str(rec.path), out_dir=str(out_dir))
-    staging = Path(tempfile.mkdtemp(prefix=".fusion-vo-partial-", dir=out_dir))
-    try:
+    with OutputFolder(out_dir, RUN_MARKER, force=force, inputs=read, what="output folder") as folder:
+        staging = folder.path
         trajectories: dict[str, PoseData] = {}
         vo = None
         if "camera" in sensors:
             vo = run_visual_odometry(rec, config.odometry_config(), progress)
+            _check_camera_result(vo, rec, sensors, summary)
             trajectories["vo"] = vo.track
             write_velocities(staging / "velocities.csv", vo)
             summary.frames = vo.n_frames
@@ -136,39 +347,69 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
-        fused, covariances = _run_backends(rec, vo, sensors, config, summary)
+        fused, covariances = _run_backends(rec, vo, sensors, config, summary, inputs.times)
         trajectories.update(fused)
         for name, traj in trajectories.items():
-            if len(traj):
+            if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
                 write_tum(staging / f"{name}.tum", traj.t, traj.xyyaw)
                 summary.trajectories.append(name)
                 cov = covariances.get(name)
                 if cov is not None and len(cov) == len(traj):
                     write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
-        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}
-        with open(staging / "run.yaml", "w") as f:
-            yaml.safe_dump(run_info, f, sort_keys=False)
-        with open(staging / "summary.json", "w") as f:
-            json.dump({k: v for k, v in summary.__dict__.items() if k != "metrics"}, f, indent=2, default=_json_default)
-        for p in staging.iterdir():
-            os.replace(p, out_dir / p.name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    if config.evaluate and (rec.has_groundtruth() or rec.has_gps()):
-        summary.metrics = _evaluate(out_dir, rec.path)
+        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
+        write_atomic(staging / "run.yaml", yaml.safe_dump(run_info, sort_keys=False))
+        fields = {k: v for k, v in summary.__dict__.items() if k != "metrics"}
+        write_atomic(staging / "summary.json", json.dumps(_finite(fields), indent=2, default=_json_default) + "\n")
+        if config.evaluate and (inputs.groundtruth is not None or rec.has_gps()):
+            summary.metrics = _evaluate(staging, rec.path)
+            if summary.metrics is None:
+                summary.notes.append(EVO_MISSING.replace("evaluation against ground truth needs",
+                                                         "no evaluation against ground truth: it needs"))
+        folder.commit()
     return summary
 
 
+def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str], summary: RunSummary) -> None:
+    """A camera that gave no motion at all: an error when it is the only motion sensor, else a note."""
+    ok = sum(1 for s in vo.status if s == "ok")
+    if ok:
+        return
+    why = ", ".join(f"{n} {k}" for k, n in sorted(vo.failures.items())) or "none could be read"
+    others = [s for s in sensors if s in ("wheel", "odom", "imu")]
+    if not others:
+        first = f"; first unreadable frame: {vo.skipped[0]}" if vo.skipped else ""
+        raise InputError(f"no frame gave a motion estimate ({vo.n_frames} frames: {why}){first}; "
+                         "nothing to estimate the motion from", rec.path / "cam0" / "data.csv")
+    summary.notes.append(f"the camera gave no motion estimate in any of its {vo.n_frames} frames ({why}); "
+                         f"the estimate comes from {', '.join(others)} alone")
+    log.warning("%s: no frame gave a motion estimate (%s)", rec.path / "cam0", why)
+
+
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
-                  summary: RunSummary) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
+                  summary: RunSummary, spans_times: dict[str, np.ndarray] | None = None
+                  ) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
     """Wheel dead reckoning and the fused backends; returns name -> trajectory and name -> (N, 3, 3)
     pose covariances."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
-    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion)
+    try:
+        result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion_config())
+    except RuntimeError as exc:
+        if "Indeterminate" not in str(exc):
+            raise
+        pause = _longest_common_pause(spans_times)
+        where = (f"every stream pauses for {pause[1] - pause[0]:.1f} s from {pause[0]:.3f} s: " if pause else "")
+        raise InputError(f"{where}the factor graph has nothing to tie the poses across it (gtsam: "
+                         "indeterminate linear system); use --backend ekf, or split the recording there",
+                         rec.path) from None
     summary.backend_seconds.update(result.seconds or {})
-    summary.notes.extend(result.notes or [])
+    alone = not any(s in sensors for s in ("wheel", "odom", "imu"))
+    for note in result.notes or []:
+        if alone and "the other sensors carried the estimate" in note:  # there are none
+            note = note.replace("the other sensors carried the estimate",
+                                "no other sensor: the estimate there is extrapolated")
+        summary.notes.append(note)
     summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
@@ -182,11 +423,23 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
 
 
 def _evaluate(out_dir: Path, seq: Path) -> dict | None:
-    try:
-        from fusion_vo.evaluation import evaluate_run
-    except ImportError:
+    """The run's metrics against ground truth, or ``None`` when evo (the ``eval`` extra) is not installed."""
+    from fusion_vo import evaluation
+
+    if not evaluation.evo_available():
         return None
-    return evaluate_run(out_dir, seq)
+    return evaluation.evaluate_run(out_dir, seq)
+
+
+def _finite(value):
+    """NaN and infinities (not valid JSON) as ``None``."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, (float, np.floating)) and not math.isfinite(value):
+        return None
+    return value
 
 
 def _json_default(o):

@@ -191,6 +191,8 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
         imu=recording.imu() if "imu" in sensors and present["imu"] else None,
         range=recording.range() if "range" in sensors and present["range"] else None,
         camera_height=height,
+        camera_height_sigma=_height_sigma(recording) if "camera" in sensors else None,
+        range_in_visual=bool(getattr(visual, "range_scaled", False)),
     )
     return streams.select(sensors)
 
@@ -205,3 +207,9 @@ def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = N
     else:
         return None
     return wheel_track(travel, config.initial_pose)
+
+
+def _height_sigma(recording) -> float | None:
+    """``height_sigma`` of the recording's ``cam0/sensor.yaml`` (None when absent or not a folder recording)."""
+    read = getattr(recording, "camera_height_sigma", None)
+    return read() if read is not None and recording.has_camera() else None

@@ -106,7 +106,13 @@ class FusionConfig:
     self_calibration : bool
         Estimate the visual scale (camera height) and the wheel base (default True).
     visual_scale_sigma, wheel_base_sigma : float
-        Prior standard deviations of those two factors around 1 (default 0.05 each).
+        Prior standard deviations of those two factors around 1 (default 0.05 each). A
+        ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces ``visual_scale_sigma`` by
+        ``height_sigma / height``.
+    wheel_scale_sigma : float
+        Prior standard deviation of the wheels' distance scale ``k_r`` (their common radius error)
+        around 1 (default 0.01); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml`` replaces it by
+        ``radius_sigma / radius``.
     odom_base_sigma : float
         Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
         (default 0.3: the effective track width of a skid-steered base is known only roughly).
@@ -152,6 +158,7 @@ class FusionConfig:
     self_calibration: bool = True
     visual_scale_sigma: float = 0.05
     wheel_base_sigma: float = 0.05
+    wheel_scale_sigma: float = 0.01
     odom_base_sigma: float = 0.3
     sync_odometry: bool = True
     max_odom_delay: float = 1.0

@@ -2,12 +2,17 @@
 
 State (10)::
 
-    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b,  o_ψ]
+    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b,  o_ψ,  k_r]
 
 pose of B in W, the body twist ``u = (v_x, v_y, ω)`` *averaged over the interval that ends at the node*,
 the gyro bias, the visual scale ``k_v = h_configured / h_true`` and the wheel-base factor
-``k_b = b_true / b_configured`` (these two are frozen when self-calibration is off), and the offset
-``o_ψ`` of the AHRS heading from the true heading.
+``k_b = b_true / b_configured`` (these two are frozen when self-calibration is off), the offset
+``o_ψ`` of the AHRS heading from the true heading, and the wheels' distance scale
+``k_r = r_configured / r_true`` (their common radius error; frozen with self-calibration off).
+
+Camera and wheels measure only the ratio ``k_v / k_r``; their common scale is set by the priors on
+``k_v`` (``height_sigma`` of ``cam0/sensor.yaml``) and ``k_r`` (``radius_sigma`` of
+``wheel0/sensor.yaml``) or by a range finder, so neither sensor owns the scale by construction.
 
 Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
 
@@ -23,7 +28,7 @@ Measurements over an interval (all sensors are integrated onto the same interval
 :mod:`fusion_vo.backends.timeline`, so each one constrains the twist of *that* interval)::
 
     visual   z = log(Δ_vis)/Δt          h = (k_v v_x, k_v v_y, ω)       R = Σ_vis / Δt²
-    wheel    z = (d, 0, θ)/Δt (arc)     h = (v_x, v_y, k_b ω)           R = wheel noise model / Δt²
+    wheel    z = (d, 0, θ)/Δt (arc)     h = (k_r v_x, k_r v_y, k_b ω)   R = wheel noise model / Δt²
     gyro     z = Θ/Δt (mean rate)       h = ω + b_g                     R = σ_g² / Δt
     AHRS     z = ψ_AHRS (at the node)   h = ψ + o_ψ                     R = σ_ψ²
     range    z = h_range (at the node)  h = h_c / k_v                   R = σ_r²
@@ -81,8 +86,8 @@ from fusion_vo.sensors.wheel import arc_twist, standstill
 
 logger = logging.getLogger(__name__)
 
-PX, PY, YAW, VX, VY, W, BG, KV, KB, AO = range(10)
-DIM = 10
+PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
+DIM = 11
 _FROZEN_VAR = 1e-12
 _DROPPED_VAR = 1e8
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
@@ -98,14 +103,18 @@ class PlanarEkf:
     camera_height : float, optional
         Height the visual increments assume (for range updates).
     estimate_visual_scale, estimate_wheel_base : bool, optional
-        Whether the two calibration factors are observable (default: as ``config.self_calibration``).
+        Whether the two calibration factors are observable (default: as ``config.self_calibration``);
+        the wheels' distance scale is estimated with the wheel base.
+    visual_scale_sigma, wheel_scale_sigma : float, optional
+        Priors of ``k_v`` and ``k_r`` (default: ``config.visual_scale_sigma``, ``config.wheel_scale_sigma``).
     twist : bool
         The wheels are an odometry twist (``config.odom`` noise and ``odom_base_sigma`` prior).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
-                 twist: bool = False):
+                 twist: bool = False, visual_scale_sigma: float | None = None,
+                 wheel_scale_sigma: float | None = None):
         self.config = config
         calib = config.self_calibration
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
@@ -114,14 +123,17 @@ class PlanarEkf:
         self.kf = ExtendedKalmanFilter(dim_x=DIM, dim_z=1)
         x = np.zeros(DIM)
         x[:3] = config.initial_pose
-        x[KV] = x[KB] = 1.0
+        x[KV] = x[KB] = x[KR] = 1.0
         self.kf.x = x.reshape(DIM, 1)
         var = np.zeros(DIM)
         var[:3] = 1e-10
         var[VX] = var[VY] = config.initial_velocity_sigma**2
         var[W] = 0.5**2
         var[BG] = config.imu.gyro_bias_sigma**2
-        var[KV] = config.visual_scale_sigma**2 if self.estimate_kv else _FROZEN_VAR
+        sv = config.visual_scale_sigma if visual_scale_sigma is None else visual_scale_sigma
+        sr = config.wheel_scale_sigma if wheel_scale_sigma is None else wheel_scale_sigma
+        var[KV] = sv**2 if self.estimate_kv else _FROZEN_VAR
+        var[KR] = sr**2 if self.estimate_kv and self.estimate_kb else _FROZEN_VAR
         var[KB] = config.wheel_model(twist)[1] ** 2 if self.estimate_kb else _FROZEN_VAR
         # the AHRS north is aligned to the initial heading; no offset walk: an AHRS trusted as absolute
         var[AO] = config.imu.ahrs_yaw_sigma**2 if config.imu.ahrs_offset_walk > 0 else _FROZEN_VAR
@@ -193,9 +205,10 @@ class PlanarEkf:
     def wheel_block(self, z, R):
         x = self.x
         H = np.zeros((3, DIM))
-        H[0, VX] = H[1, VY] = 1.0
+        H[0, VX] = H[1, VY] = x[KR]
+        H[0, KR], H[1, KR] = x[VX], x[VY]
         H[2, W], H[2, KB] = x[KB], x[W]
-        return "wheel", np.asarray(z, float), np.array([x[VX], x[VY], x[KB] * x[W]]), H, R, None
+        return "wheel", np.asarray(z, float), np.array([x[KR] * x[VX], x[KR] * x[VY], x[KB] * x[W]]), H, R, None
 
     def gyro_block(self, rate: float, var: float):
         x = self.x
@@ -334,7 +347,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
-    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist)
+    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt
@@ -413,6 +426,9 @@ def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
         out["visual_scale_sigma"] = float(np.sqrt(P[KV, KV]))
         if iv.camera_height:
             out["camera_height"] = float(iv.camera_height / x[KV])
+    if config.self_calibration and kv_ok and kb_ok:
+        out["wheel_scale"] = float(x[KR])
+        out["wheel_scale_sigma"] = float(np.sqrt(P[KR, KR]))
     if config.self_calibration and kb_ok:
         out["wheel_base_factor"] = float(x[KB])
         out["wheel_base"] = float(iv.wheel_base * x[KB])

@@ -107,6 +107,10 @@ def W(k: int) -> int:
     return gtsam.symbol("w", k)
 
 
+def R(k: int) -> int:
+    return gtsam.symbol("r", k)
+
+
 # --------------------------------------------------------------------------- factor error functions
 def _relative(values: gtsam.Values, ki: int, kj: int) -> tuple[float, float, float]:
     """``(d_x, d_y, d_ψ)`` of ``X_i⁻¹ X_j``."""
@@ -234,6 +238,8 @@ class GraphBuilder:
         if calibrate is None:
             calibrate = calibration_observable(iv)
         self.kv_on, self.kb_on = calibrate if config.self_calibration else (False, False)
+        # the wheels' distance scale: with the visual scale, only their ratio is measured
+        self.kr_on = self.kv_on and self.kb_on
         every = config.graph.keyframe_every
         nodes = np.arange(0, len(iv.t), every)
         if nodes[-1] != len(iv.t) - 1:
@@ -302,9 +308,11 @@ class GraphBuilder:
         if self.ahrs_offset_on:
             priors.append((O(0), 0.0, cfg.imu.ahrs_yaw_sigma, est.get("ahrs_offset", 0.0)))
         if self.kv_on:
-            priors.append((S(0), 1.0, cfg.visual_scale_sigma, est.get("visual_scale", 1.0)))
+            priors.append((S(0), 1.0, self.iv.visual_scale_sigma, est.get("visual_scale", 1.0)))
         if self.kb_on:
             priors.append((W(0), 1.0, cfg.wheel_model(self.iv.twist)[1], est.get("wheel_base_factor", 1.0)))
+        if self.kr_on:
+            priors.append((R(0), 1.0, self.iv.wheel_scale_sigma, est.get("wheel_scale", 1.0)))
         for key, mean, sigma, guess in priors:
             nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
             nf.values[key] = guess
@@ -340,19 +348,25 @@ class GraphBuilder:
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
                 cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
+                if self.kr_on:
+                    nf.factors.append(gtsam.CustomFactor(self.noise(cov_xy), [xi, xj, R(c)], scaled_between_error(m)))
+                else:
+                    nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
             elif self.kb_on:
                 # translation from the arc; the heading change goes through the wheel-base factor
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
                 cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
+                if self.kr_on:  # distance scaled by the wheels' radius factor
+                    nf.factors.append(gtsam.CustomFactor(self.noise(cov_xy), [xi, xj, R(c)], scaled_between_error(m)))
+                else:
+                    nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
                 wheel_heading = (float(m[2]), float(np.sqrt(cov[2, 2])))
             else:
                 nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov)))
                 wheel_heading = None
             nf.sensors.append("wheel")
-            translation, heading = m[:2], m[2] / est.get("wheel_base_factor", 1.0)
+            translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
             xs = X(self.offset + start)
@@ -421,6 +435,8 @@ class GraphBuilder:
             walks.append((S, cfg.ekf.scale_random_walk, estimate.get("visual_scale", 1.0)))
         if self.kb_on:
             walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
+        if self.kr_on:
+            walks.append((R, cfg.ekf.scale_random_walk, estimate.get("wheel_scale", 1.0)))
         for key, q, guess in walks:
             sigma = max(q * np.sqrt(span), 1e-7)
             nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
@@ -432,7 +448,7 @@ class GraphBuilder:
         c = int(self.segment[n])
         keys = [B(c)] if self.iv.uses("gyro") else []
         keys += [O(c)] if self.ahrs_offset_on else []
-        return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else [])
+        return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
 
     def _unary(self, nf: NodeFactors, n: int) -> None:
         iv, cfg = self.iv, self.config
@@ -741,6 +757,8 @@ def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: Node
         estimate["visual_scale"] = isam.calculateEstimateDouble(S(int(builder.segment[n])))
     if builder.kb_on:
         estimate["wheel_base_factor"] = isam.calculateEstimateDouble(W(int(builder.segment[n])))
+    if builder.kr_on:
+        estimate["wheel_scale"] = isam.calculateEstimateDouble(R(int(builder.segment[n])))
     estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
 
 
@@ -768,6 +786,8 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
         kb = float(values.atDouble(W(last)))
         out["wheel_base_factor"] = kb
         out["wheel_base"] = float(iv.wheel_base * kb)
+    if builder.kr_on:
+        out["wheel_scale"] = float(values.atDouble(R(last)))
     return out
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -118,16 +117,14 @@ def write_pose_covariances(path: str | Path, t: np.ndarray, cov: np.ndarray) -> 
         raise ValueError(f"{len(t)} timestamps but {len(cov)} covariances")
     iu = np.triu_indices(3)
     data = np.column_stack([t, cov[:, iu[0], iu[1]]])
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(COV_HEADER + "\n")
-            np.savetxt(f, data, fmt=["%.9f"] + ["%.9e"] * 6, delimiter=",")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    import io
+
+    from fusion_vo.outputs import write_atomic
+
+    buf = io.StringIO()
+    buf.write(COV_HEADER + "\n")
+    np.savetxt(buf, data, fmt=["%.9f"] + ["%.9e"] * 6, delimiter=",")
+    write_atomic(path, buf.getvalue())  # renamed into place; the mode follows the umask
 
 
 def read_pose_covariances(path: str | Path) -> tuple[np.ndarray, np.ndarray]:

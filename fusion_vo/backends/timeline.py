@@ -44,7 +44,10 @@ class SensorStreams:
     """The measurements a fusion run may use (any may be None when not recorded or not wanted).
 
     ``visual`` is the frontend's time-ordered list of increments; the others are per-stream arrays.
-    ``camera_height`` is the height the visual increments were computed with (for the range finder).
+    ``camera_height`` is the height the visual increments were computed with (for the range finder),
+    ``camera_height_sigma`` its standard deviation [m] as ``cam0/sensor.yaml`` states it (``height_sigma``).
+    ``range_in_visual`` says the visual increments were already scaled with the range finder's heights
+    (visual odometry's ``use_range``): the range finder is then not used again as a height measurement.
     """
 
     visual: list[VisualIncrement] | None = None
@@ -53,6 +56,8 @@ class SensorStreams:
     imu: ImuData | None = None
     range: RangeData | None = None
     camera_height: float | None = None
+    camera_height_sigma: float | None = None
+    range_in_visual: bool = False
 
     def available(self) -> list[str]:
         """Sensor names with data."""
@@ -94,6 +99,8 @@ class SensorStreams:
             imu=self.imu if "imu" in sensors else None,
             range=self.range if "range" in sensors else None,
             camera_height=self.camera_height,
+            camera_height_sigma=self.camera_height_sigma,
+            range_in_visual=self.range_in_visual,
         )
 
 
@@ -136,6 +143,13 @@ class Intervals:
         None: everywhere the wheels are).
     episodes : list
         The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
+    visual_scale_sigma, wheel_scale_sigma : float
+        Prior standard deviations (relative) of the visual scale ``k_v`` (camera height) and of the
+        wheels' distance scale ``k_r`` (common wheel radius): ``height_sigma / height`` of
+        ``cam0/sensor.yaml`` and ``radius_sigma / radius`` of ``wheel0/sensor.yaml`` when stated, else
+        ``FusionConfig.visual_scale_sigma`` and ``FusionConfig.wheel_scale_sigma``. The common scale of
+        camera and wheels is unobservable from the two alone: their ratio is measured, and these priors
+        (or a range finder) decide how a disagreement is shared.
     """
 
     t: np.ndarray
@@ -162,6 +176,8 @@ class Intervals:
     twist: bool = False
     wheel_yaw_ok: np.ndarray | None = None
     episodes: list = field(default_factory=list)
+    visual_scale_sigma: float = 0.05
+    wheel_scale_sigma: float = 0.01
 
     @property
     def n_steps(self) -> int:
@@ -260,7 +276,13 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         gyro_ok=np.zeros(K, bool), gyro_angle=np.zeros(K), cx=np.ones(K), cy=np.ones(K),
         ahrs_ok=np.zeros(K + 1, bool), ahrs_yaw=np.zeros(K + 1), range_ok=np.zeros(K + 1, bool),
         range_height=np.full(K + 1, np.nan), camera_height=streams.camera_height, counts=counts, notes=notes,
+        visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma,
     )
+    if streams.camera_height_sigma is not None and streams.camera_height:
+        iv.visual_scale_sigma = float(streams.camera_height_sigma / streams.camera_height)
+    if streams.wheel is not None and streams.wheel.config.radius_sigma is not None:
+        wc = streams.wheel.config
+        iv.wheel_scale_sigma = float(2.0 * wc.radius_sigma / (wc.wheel_radius_left + wc.wheel_radius_right))
     iv.heading_offset = heading_offset
     if streams.imu is not None:
         _add_imu(iv, streams.imu, config, counts)
@@ -268,7 +290,10 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         _add_wheel(iv, streams, config, counts)
     if streams.visual is not None:
         _add_visual(iv, streams.visual, counts, notes)
-    if streams.range is not None:
+    if streams.range is not None and streams.visual is not None and streams.range_in_visual:
+        notes.append("range finder: already in the visual increments (their per-frame height), "
+                     "not used again as a height measurement")
+    elif streams.range is not None:
         _add_range(iv, streams.range, config, counts)
     iv.wheel_yaw_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources against each other

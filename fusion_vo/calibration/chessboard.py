@@ -134,7 +134,11 @@ def read_image(path: str | Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise InputError("image file not found", path)
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:  # decoded from bytes: cv2.imread fails on paths that are not valid UTF-8
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read image file ({exc.strerror})", path) from None
+    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
     if img is None or img.size == 0:
         raise InputError("not a readable image", path)
     return img

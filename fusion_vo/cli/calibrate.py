@@ -1,7 +1,9 @@
 """``fusion-vo calibrate``: camera intrinsics, the camera over the floor, the lever arm and the wheels.
 
-Each calibration prints its values with their standard deviations and writes the ``sensor.yaml`` file of
-the recording layout it determines (``cam0/sensor.yaml`` or ``wheel0/sensor.yaml``).
+Each calibration prints its values with their standard deviations. ``intrinsics`` and ``floor`` always
+write the ``cam0/sensor.yaml`` named by ``--out``; ``height``, ``lever-arm`` and ``wheels`` write a
+``sensor.yaml`` (``cam0/`` or ``wheel0/``) only when ``--out`` names one, so a recording is never changed
+unless asked. Files are replaced atomically and follow the umask.
 """
 
 from __future__ import annotations
@@ -119,6 +121,7 @@ def run_floor(args: argparse.Namespace) -> int:
 
 def _camera_out(recording, out: str | None, change) -> None:
     if not out:
+        print("(not written: give --out cam0/sensor.yaml to write it)")
         return
     camera = recording.camera
     change(camera)
@@ -178,4 +181,6 @@ def run_wheels(args: argparse.Namespace) -> int:
     if args.out:
         write_yaml_atomic(args.out, r.to_dict())
         print(f"-> {args.out}")
+    else:
+        print("(not written: give --out wheel0/sensor.yaml to write it)")
     return 0

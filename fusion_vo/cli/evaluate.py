@@ -31,13 +31,20 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def show_metrics(metrics: dict, name: str) -> None:
-    """Print the position, velocity and per-leg error tables of one run."""
+def console():
+    """A rich console for tables: the terminal's width, or wide enough never to cut a number in a file or pipe."""
+    import sys
+
     from rich.console import Console
 
+    return Console() if sys.stdout.isatty() else Console(width=1000)
+
+
+def show_metrics(metrics: dict, name: str) -> None:
+    """Print the position, velocity and per-leg error tables of one run."""
     from fusion_vo.evaluation.table import POSE_COLUMNS, VELOCITY_COLUMNS, legs_table, metrics_table
 
-    console = Console()
+    console = globals()["console"]()
     if any("gps_rms_m" in figures for figures in metrics.values()):
         from rich import box
         from rich.table import Table

@@ -21,7 +21,7 @@ def register(subparsers) -> None:
                     "A stream whose topic is not given takes the bag's only topic of that message type.",
     )
     parser.add_argument("bag", help="ROS 1 .bag file, ROS 2 bag folder, or .mcap/.db3 file")
-    parser.add_argument("out", nargs="?", help="recording folder to create")
+    parser.add_argument("out", nargs="?", help="recording folder: new, empty, or a recording fusion-vo wrote (replaced)")
     parser.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic (cam0)")
     parser.add_argument("--imu-topic", help="sensor_msgs/Imu topic (imu0)")
     parser.add_argument("--odom-topic", help="nav_msgs/Odometry topic (odom0)")
@@ -31,15 +31,17 @@ def register(subparsers) -> None:
                         help="a fixed transform missing from the bag's /tf_static, in static_transform_publisher "
                              "order (repeatable)")
     parser.add_argument("--list", action="store_true", help="only list the bag's topics")
-    parser.add_argument("--force", action="store_true", help="replace the output folder if it exists")
+    parser.add_argument("--force", action="store_true",
+                        help="replace a non-empty folder that is not a recording fusion-vo wrote")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     if args.list or args.out is None:
         if args.out is None and not args.list:
-            print("fusion-vo: error: give an output folder (or --list to only list the topics)")
-            return 2
+            from fusion_vo.errors import InputError
+
+            raise InputError("give an output folder (or --list to only list the topics)")
         for t in list_topics(args.bag):
             print(f"{t.topic:40s} {t.msgtype:32s} {t.count:8d}")
         return 0

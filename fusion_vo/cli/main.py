@@ -10,9 +10,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
 import sys
 
 from fusion_vo.errors import InputError
+from fusion_vo.outputs import Terminated, handle_signals
 
 #: sub-command modules, in the order ``--help`` lists them
 COMMANDS = [
@@ -24,6 +26,7 @@ COMMANDS = [
     "compare",
     "batch",
     "sweep",
+    "export",
     "show_matches",
     "import_bag",
     "calibrate",
@@ -66,7 +69,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return int(args.func(args) or 0)
+        with handle_signals():
+            return int(args.func(args) or 0)
     except InputError as exc:
         print(f"fusion-vo: error: {exc}", file=sys.stderr)
         return 2
@@ -74,9 +78,31 @@ def main(argv: list[str] | None = None) -> int:
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"fusion-vo: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader of our output went away (| head): nothing to report
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return 0
     except KeyboardInterrupt:
-        print("fusion-vo: interrupted", file=sys.stderr)
+        print("fusion-vo: interrupted; nothing was left half-written", file=sys.stderr)
         return 130
+    except Terminated as exc:
+        print(f"fusion-vo: {exc}; nothing was left half-written", file=sys.stderr)
+        return 128 + exc.signum
+    except MemoryError:
+        print("fusion-vo: error: out of memory", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a bug: one line, the traceback only with -vv
+        logging.getLogger("fusion_vo").debug("traceback of the internal error", exc_info=True)
+        print(f"fusion-vo: internal error: {type(exc).__name__}: {_one_line(exc)} "
+              "(please report it; -vv shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text[:300] + ("..." if len(text) > 300 else "")
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
-from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config
+from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
 
 
@@ -27,7 +27,9 @@ def register(sub) -> None:
                        description="Run visual odometry on a recording folder, fuse it with the wheels and the IMU, "
                                    "and evaluate against ground truth when the recording has it.")
     p.add_argument("sequence", nargs="?", help="recording folder (EuRoC layout plus wheel0/, see datasets/README.md)")
-    p.add_argument("--out", "-o", help="output folder (created if needed)")
+    p.add_argument("--out", "-o", help="output folder: new, empty, or an earlier run's (replaced as a whole)")
+    p.add_argument("--force", action="store_true",
+                   help="replace an output folder that is not empty and was not written by fusion-vo run")
     p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
@@ -39,7 +41,11 @@ def register(sub) -> None:
     p.add_argument("--uncalibrated", action="store_true",
                    help="the camera has no calibration: ignore missing intrinsics (pinhole, no distortion)")
     p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
-    p.add_argument("--print-config", action="store_true", help="print the default configuration and exit")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the configuration (every option, its default and description; with --config, the "
+                        "file's values) as YAML and exit")
+    p.add_argument("--print-schema", action="store_true",
+                   help="print the JSON schema of the configuration file (for editors) and exit")
     p.set_defaults(func=run)
 
 
@@ -63,8 +69,11 @@ def apply_overrides(cfg, args):
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.print_schema:
+        sys.stdout.write(schema_text())
+        return 0
     if args.print_config:
-        sys.stdout.write(default_config_text())
+        sys.stdout.write(default_config_text(load_config(args.config) if args.config else None))
         return 0
     if not args.sequence or not args.out:
         raise InputError("run needs a recording folder and --out DIR (see fusion-vo run --help)")
@@ -72,7 +81,8 @@ def run(args: argparse.Namespace) -> int:
 
     cfg = apply_overrides(load_config(args.config), args)
     with progress_bar("visual odometry") as update:
-        summary = run_pipeline(args.sequence, args.out, cfg, progress=update)
+        summary = run_pipeline(args.sequence, args.out, cfg, progress=update, force=args.force,
+                               config_path=args.config)
     for note in summary.notes:
         print(f"note: {note}")
     if summary.metrics:

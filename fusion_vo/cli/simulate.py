@@ -18,7 +18,9 @@ def register(sub) -> None:
                                    "robot drives a profile over a floor made from a photographed texture. "
                                    "Options are the fields of fusion_vo.simulation.SimulationOptions "
                                    "(see datasets/generated.md).")
-    p.add_argument("out", help="output folder (replaced if it exists)")
+    p.add_argument("out", nargs="?", help="output folder: new, empty, or a recording fusion-vo wrote (then replaced)")
+    p.add_argument("--force", action="store_true",
+                   help="replace a non-empty folder that is not a recording fusion-vo wrote")
     p.add_argument("--profile", choices=sorted(PROFILES), default="square")
     p.add_argument("--standard", choices=sorted(STANDARD), help="one of the standard recordings (fixes profile, options, seed)")
     p.add_argument("--seed", type=int, default=0)
@@ -27,10 +29,14 @@ def register(sub) -> None:
     p.add_argument("--config", help="YAML file of options")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="set an option (YAML value), e.g. -O tilt_x_deg=2 -O highlight_radius=20")
+    p.add_argument("--print-config", action="store_true",
+                   help="print every option with its value (defaults, or those of --standard, --config and -O) "
+                        "as YAML and exit")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion_vo import schema
     from fusion_vo.geometry.camera import load_yaml
     from fusion_vo.simulation import SimulationOptions, simulate
     from fusion_vo.simulation.standard import STANDARD
@@ -54,12 +60,16 @@ def run(args: argparse.Namespace) -> int:
         options["duration"] = args.duration
     if args.texture:
         options["texture"] = args.texture
+    opts = schema.build(SimulationOptions, options, args.config)
+    if args.print_config:
+        model = schema.model_of(SimulationOptions)
+        header = f"# fusion-vo simulate options (profile {profile}, seed {seed})"
+        print("\n".join([header] + schema.commented_yaml(model, schema.validate(model, schema.plain(opts)))))
+        return 0
+    if not args.out:
+        raise InputError("simulate needs an output folder (see fusion-vo simulate --help)")
     try:
-        opts = SimulationOptions.from_dict(options)
-    except (ValueError, TypeError) as exc:
-        raise InputError(str(exc), args.config) from None
-    try:
-        out = simulate(args.out, profile=profile, seed=seed, options=opts)
+        out = simulate(args.out, profile=profile, seed=seed, options=opts, force=args.force)
     except ValueError as exc:  # a combination of options the profile cannot drive
         raise InputError(str(exc), args.config) from None
     except OSError as exc:

@@ -30,7 +30,7 @@ def run_labels(run_dirs: list[Path]) -> list[str]:
 
 def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
                  sequence_dir: str | Path | None = None) -> dict[str, dict[str, dict]]:
-    """Evaluate several runs and write ``compare.json`` and ``compare.png`` into ``out_dir``.
+    """Evaluate several runs and write ``compare.json``, ``compare.csv`` and ``compare.png`` into ``out_dir``.
 
     Parameters
     ----------
@@ -68,7 +68,40 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         reference = reference or to_planar(gt)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_metrics(out_dir / "compare.json", table)
+    write_compare_csv(out_dir / "compare.csv", table)
     shared = len(set(sequences)) == 1
     plot_compare(reference if shared else None, overlay, out_dir / "compare.png")
     logger.info("compared %d runs into %s", len(run_dirs), out_dir)
     return table
+
+
+def write_compare_csv(path: str | Path, table: dict[str, dict[str, dict]]) -> Path:
+    """Write the comparison as CSV: one row per run and trajectory, every scalar figure at full precision.
+
+    Columns are ``run,trajectory`` and then the figures' names in the order they first appear; a figure a
+    trajectory lacks (or that is not finite) is an empty field.
+    """
+    import csv
+    import io
+    import math
+
+    from fusion_vo.outputs import write_atomic
+
+    columns: list[str] = []
+    for runs in table.values():
+        for figures in runs.values():
+            for key, value in figures.items():
+                if isinstance(value, (int, float)) and not isinstance(value, bool) and key not in columns:
+                    columns.append(key)
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(["run", "trajectory", *columns])
+    for label, runs in table.items():
+        for name, figures in runs.items():
+            row = []
+            for key in columns:
+                value = figures.get(key)
+                ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+                row.append((str(value) if isinstance(value, int) else repr(float(value))) if ok else "")
+            writer.writerow([label, name, *row])
+    return write_atomic(path, buf.getvalue())

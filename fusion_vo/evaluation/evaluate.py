@@ -8,6 +8,7 @@ without ground truth but with GPS fixes is scored against the fixes instead (:mo
 
 from __future__ import annotations
 
+import json
 import logging
 from collections import Counter
 from pathlib import Path
@@ -34,6 +35,19 @@ FIGURES = {
     "error_distance.png": "Position error against distance travelled",
     "frontend.png": "Inliers per frame and frames the visual frontend could not use",
 }
+
+
+def read_run_summary(run_dir: Path) -> dict:
+    """``summary.json`` of a run folder (notes, counts), or an empty mapping when absent or unreadable."""
+    path = run_dir / "summary.json"
+    if not path.is_file():
+        return {}
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        logger.warning("%s: not readable (%s); the report shows no notes or counts", path, exc)
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def has_groundtruth(sequence_dir: str | Path) -> bool:
@@ -155,9 +169,11 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
 
     report_config = dict(config)
     report_config.setdefault("sequence", str(sequence))
+    summary = read_run_summary(run_dir)
     write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, metrics,
                  {FIGURES[path.name]: path for path in images.values()},
-                 frontend_summary(frames) if frames is not None else None)
+                 frontend_summary(frames) if frames is not None else None,
+                 notes=summary.get("notes") or [], counts=(summary.get("fusion") or {}).get("counts"))
     logger.info("wrote metrics.json, %d figures and report.html to %s", len(images), run_dir)
     return metrics
 
@@ -175,9 +191,11 @@ def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Pat
     report_config.setdefault("sequence", str(sequence))
     headers, rows = gps_table(metrics)
     notes = [f"{n} GPS fixes skipped ({reason})" for reason, n in gps.skipped.items()]
+    summary = read_run_summary(run_dir)
     write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, {}, images,
+                 notes=summary.get("notes") or [], counts=(summary.get("fusion") or {}).get("counts"),
                  sections=[(f"Errors against GPS fixes (no ground truth; {gps_frame(metrics)})",
-                                headers, rows, notes)])
+                            headers, rows, notes)])
     logger.info("scored %d trajectories against %d GPS fixes; wrote metrics.json, gps.png and report.html to %s",
                 len(metrics), len(gps), run_dir)
     return metrics

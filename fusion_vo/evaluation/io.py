@@ -20,16 +20,20 @@ import json
 import logging
 import math
 import os
-import tempfile
 from dataclasses import dataclass
+from decimal import Decimal
+from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
 import yaml
-from evo.core.trajectory import PoseTrajectory3D
 
 from frontends.base import MotionStatus
 from fusion_vo.errors import InputError
+from fusion_vo.outputs import write_atomic  # noqa: F401  (the one atomic writer, used by plots and report)
+
+if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
+    from evo.core.trajectory import PoseTrajectory3D
 
 logger = logging.getLogger(__name__)
 
@@ -99,7 +103,7 @@ def _increasing_rows(t: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
     step = np.diff(t)
     back = np.nonzero(step < 0.0)[0]
     if back.size:
-        raise InputError(f"timestamp {t[back[0] + 1]!r} is earlier than the one before", path,
+        raise InputError(f"timestamp {float(t[back[0] + 1]):.9f} is earlier than the one before", path,
                          lines[int(back[0]) + 1])
     keep = np.append(step > 0.0, True)
     if not keep.all():
@@ -107,20 +111,30 @@ def _increasing_rows(t: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
     return np.nonzero(keep)[0]
 
 
-def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
-    """Read a TUM trajectory file.
+@dataclass
+class TumPoses:
+    """The poses of a TUM file, as arrays.
 
-    Parameters
+    Attributes
     ----------
-    path : str or Path
-        The file.
-    name : str, optional
-        Name given to the trajectory (default: the file stem).
+    t : ndarray, shape (n,)
+        Timestamps [s].
+    stamp_ns : ndarray of int64, shape (n,)
+        The same timestamps in integer nanoseconds, converted exactly from the file's decimal text.
+    xyz : ndarray, shape (n, 3)
+        Positions [m].
+    quat_wxyz : ndarray, shape (n, 4)
+        Unit quaternions ``(w, x, y, z)``.
+    """
 
-    Returns
-    -------
-    PoseTrajectory3D
-        The poses, with timestamps in seconds.
+    t: np.ndarray
+    stamp_ns: np.ndarray
+    xyz: np.ndarray
+    quat_wxyz: np.ndarray
+
+
+def read_tum_poses(path: str | Path) -> TumPoses:
+    """Read a TUM trajectory file (``timestamp x y z qx qy qz qw``) into arrays.
 
     Raises
     ------
@@ -129,7 +143,7 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
         length or a timestamp is earlier than the one before (a repeated timestamp keeps its last pose).
     """
     path = Path(path)
-    rows, line_numbers = [], []
+    rows, line_numbers, stamps = [], [], []
     for number, text in enumerate(_read_lines(path), start=1):
         text = text.strip()
         if not text or text.startswith("#"):
@@ -143,17 +157,43 @@ def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
             raise InputError("quaternion has zero length", path, number)
         rows.append(values)
         line_numbers.append(number)
+        stamps.append(int((Decimal(fields[0]) * 1_000_000_000).to_integral_value()))
     if not rows:
         raise InputError("no poses in trajectory file", path)
     data = np.array(rows)
-    data = data[_increasing_rows(data[:, 0], line_numbers, path)]
+    keep = _increasing_rows(data[:, 0], line_numbers, path)
+    data = data[keep]
     quat_wxyz = data[:, [7, 4, 5, 6]]
     quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
-    return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0], name=name or path.stem)
+    return TumPoses(data[:, 0], np.asarray(stamps, dtype=np.int64)[keep], data[:, 1:4], quat_wxyz)
+
+
+def read_tum(path: str | Path, name: str | None = None) -> PoseTrajectory3D:
+    """Read a TUM trajectory file as an evo trajectory (see :func:`read_tum_poses` for the rules).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    name : str, optional
+        Name given to the trajectory (default: the file stem).
+
+    Returns
+    -------
+    PoseTrajectory3D
+        The poses, with timestamps in seconds.
+    """
+    from evo.core.trajectory import PoseTrajectory3D
+
+    poses = read_tum_poses(path)
+    return PoseTrajectory3D(poses.xyz, poses.quat_wxyz, poses.t, name=name or Path(path).stem)
 
 
 def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     """Read ground truth in the EuRoC ``state_groundtruth_estimate0/data.csv`` format.
+
+    The rows are read by :func:`fusion_vo.recording.reader.read_groundtruth_csv`, the one reader of
+    ground truth (its rules: strictly increasing timestamps, unit quaternions, at least two poses).
 
     Parameters
     ----------
@@ -168,32 +208,18 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     Raises
     ------
     InputError
-        If the file is missing, has no rows, a row has fewer than 8 columns or non-numeric values, or a
-        timestamp is earlier than the one before.
+        Naming the file and line of any row that breaks the rules.
     """
+    from fusion_vo.recording.reader import read_groundtruth_csv
+
     path = Path(path)
     if path.is_dir():
         path = path / GROUNDTRUTH_CSV
-    rows, line_numbers = [], []
-    for number, text in enumerate(_read_lines(path), start=1):
-        text = text.strip()
-        if not text or text.startswith("#"):
-            continue
-        fields = [f.strip() for f in text.split(",")]
-        if len(fields) < 8:
-            raise InputError(f"expected at least 8 columns 'timestamp,p_x,p_y,p_z,q_w,q_x,q_y,q_z', "
-                             f"got {len(fields)}", path, number)
-        values = _floats(fields[:8], path, number)
-        if math.hypot(*values[4:8]) < 1e-9:
-            raise InputError("quaternion has zero length", path, number)
-        rows.append(values)
-        line_numbers.append(number)
-    if not rows:
-        raise InputError("no poses in ground truth file", path)
-    data = np.array(rows)
-    data = data[_increasing_rows(data[:, 0], line_numbers, path)]
-    quat_wxyz = data[:, 4:8] / np.linalg.norm(data[:, 4:8], axis=1, keepdims=True)
-    return PoseTrajectory3D(data[:, 1:4], quat_wxyz, data[:, 0] * 1e-9, name="groundtruth")
+    from evo.core.trajectory import PoseTrajectory3D
+
+    gt = read_groundtruth_csv(path, min_poses=2)
+    xyz = np.column_stack([gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.z])
+    return PoseTrajectory3D(xyz, np.asarray(gt.quat_wxyz, dtype=np.float64), gt.t, name="groundtruth")
 
 
 def read_velocities(path: str | Path) -> FrameVelocities:
@@ -291,22 +317,6 @@ def read_run_config(run_dir: str | Path) -> dict:
     if not isinstance(config, dict):
         raise InputError("expected a mapping at the top level", path)
     return config
-
-
-def write_atomic(path: str | Path, data: bytes | str) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
-    path = Path(path)
-    payload = data.encode("utf-8") if isinstance(data, str) else data
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(payload)
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
 
 
 def _json_safe(value):

@@ -150,18 +150,12 @@ def yaw_of(trajectory: PoseTrajectory3D) -> np.ndarray:
     return se2.yaw_of_quaternion(trajectory.orientations_quat_wxyz)
 
 
-def wrap_angle(angle):
-    """Wrap angles [rad] to [-pi, pi)."""
-    return (np.asarray(angle) + np.pi) % (2.0 * np.pi) - np.pi
-
-
 def planar_trajectory(t: np.ndarray, x: np.ndarray, y: np.ndarray, yaw: np.ndarray,
                       name: str | None = None) -> PoseTrajectory3D:
     """Build a trajectory with ``z = 0`` and rotations about z only."""
     t = np.asarray(t, dtype=float)
     xyz = np.column_stack([x, y, np.zeros_like(t)])
-    half = 0.5 * np.asarray(yaw, dtype=float)
-    quat = np.column_stack([np.cos(half), np.zeros_like(t), np.zeros_like(t), np.sin(half)])
+    quat = se2.quaternion_of_yaw(yaw)
     return PoseTrajectory3D(xyz, quat, t, name=name)
 
 
@@ -263,7 +257,7 @@ def relative_yaw_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
         return np.array([])
     i, j = pairs.T
     ref_yaw, est_yaw = yaw_of(reference), yaw_of(estimate)
-    return np.degrees(np.abs(wrap_angle((est_yaw[j] - est_yaw[i]) - (ref_yaw[j] - ref_yaw[i]))))
+    return np.degrees(np.abs(se2.wrap_angle((est_yaw[j] - est_yaw[i]) - (ref_yaw[j] - ref_yaw[i]))))
 
 
 def _rmse(values: np.ndarray) -> float:
@@ -283,7 +277,7 @@ def body_velocities(trajectory: PoseTrajectory3D) -> Velocities:
     with np.errstate(divide="ignore", invalid="ignore"):
         vx = (c * dx + s * dy) / dt
         vy = (-s * dx + c * dy) / dt
-        yaw_rate = wrap_angle(np.diff(yaw)) / dt
+        yaw_rate = se2.wrap_angle(np.diff(yaw)) / dt
     return Velocities(t[1:], vx, vy, yaw_rate)
 
 

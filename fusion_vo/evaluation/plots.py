@@ -12,13 +12,19 @@ import logging
 import zlib
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from evo.core.trajectory import PoseTrajectory3D
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from fusion_vo.geometry.se2 import yaw_of_quaternion
 from fusion_vo.evaluation.io import FRAME_STATUSES, FrameVelocities, write_atomic
-from fusion_vo.evaluation.metrics import TrajectoryErrors, Velocities, yaw_of
+
+if TYPE_CHECKING:  # evo (GPL-3.0, the ``eval`` extra) only for the trajectory plots, not for plot_matches
+    from evo.core.trajectory import PoseTrajectory3D
+
+    from fusion_vo.evaluation.metrics import TrajectoryErrors, Velocities
 
 logger = logging.getLogger(__name__)
 
@@ -155,7 +161,7 @@ def plot_heading(reference: PoseTrajectory3D | None, estimates: dict[str, PoseTr
     series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
     t0 = _start_time([trajectory.timestamps for _, trajectory in series], t0)
     for name, trajectory in series:
-        yaw = np.degrees(np.unwrap(yaw_of(trajectory)))
+        yaw = np.degrees(np.unwrap(yaw_of_quaternion(trajectory.orientations_quat_wxyz)))
         ax.plot(trajectory.timestamps - t0, yaw, color=colour_of(name),
                 lw=2.0 if name == "groundtruth" else 1.2, label=label_of(name))
     ax.set_xlabel("time [s]")

@@ -16,8 +16,6 @@ Distortion models (as in ``cam0/sensor.yaml``):
 
 from __future__ import annotations
 
-import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -25,7 +23,7 @@ import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 
 DISTORTION_MODELS = ("radial-tangential", "equidistant", "none")
 
@@ -269,9 +267,7 @@ def parse_matrix(entry, name: str, path: str | Path | None) -> np.ndarray:
 
 def load_yaml(path: str | Path) -> dict:
     """Load a YAML mapping, with :class:`InputError` for a missing, unreadable or malformed file."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     try:
         with open(path, encoding="utf-8") as f:
             text = f.read()
@@ -292,15 +288,9 @@ def load_yaml(path: str | Path) -> dict:
 
 
 def write_yaml_atomic(path: str | Path, data: dict) -> None:
-    """Write a YAML file under a temporary name, then rename it into place."""
+    """Write a YAML file under a temporary name, then rename it into place (mode from the umask)."""
+    from fusion_vo.outputs import make_folder, write_atomic
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            yaml.safe_dump(data, f, sort_keys=False, default_flow_style=None)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    make_folder(path.parent)
+    write_atomic(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
 def wrap_angle(a):
@@ -23,9 +24,16 @@ def wrap_angle(a):
 
 
 def yaw_of_quaternion(q_wxyz) -> np.ndarray:
-    """Yaw (rotation about the world z axis, ZYX convention) of quaternions ``(w, x, y, z)`` (N x 4)."""
-    w, x, y, z = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4).T
-    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    """Yaw (rotation about the world z axis, ZYX convention) of quaternions ``(w, x, y, z)`` (N x 4), in
+    [-pi, pi] (scipy's ``Rotation``; the quaternions are normalised first)."""
+    q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
+    return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_euler("ZYX")[:, 0]
+
+
+def quaternion_of_yaw(yaw) -> np.ndarray:
+    """Quaternions ``(w, x, y, z)`` (N x 4) of rotations by ``yaw`` [rad] about the z axis."""
+    q_xyzw = Rotation.from_euler("z", np.asarray(yaw, dtype=np.float64).reshape(-1, 1)).as_quat()
+    return q_xyzw[:, [3, 0, 1, 2]]
 
 
 def to_matrix(p) -> np.ndarray:
@@ -60,11 +68,26 @@ def between(a, b) -> np.ndarray:
     return compose(inverse(a), b)
 
 
+def sinc_terms(th):
+    """``sin(th)/th`` and ``(1 - cos th)/th`` of an angle or array of angles.
+
+    Written as ``sin(th)/th`` and ``(th/2) (sin(th/2)/(th/2))²`` (numpy's ``sinc`` for arrays), so both
+    are exact at 0 and free of cancellation near it: no small-angle cut-off or series is needed. A
+    scalar takes a ``math`` path (numpy's ``sinc`` costs tens of microseconds per call).
+    """
+    if isinstance(th, (int, float)) or np.ndim(th) == 0:
+        t = float(th)
+        if t == 0.0:
+            return 1.0, 0.0
+        half = 0.5 * t
+        s = math.sin(half) / half if half != 0.0 else 1.0  # half underflows for the smallest subnormal t
+        return math.sin(t) / t, half * s * s
+    th = np.asarray(th, dtype=np.float64)
+    return np.sinc(th / np.pi), 0.5 * th * np.sinc(th / (2.0 * np.pi)) ** 2
+
+
 def _v_coefficients(th: float) -> tuple[float, float]:
-    """``sin(th)/th`` and ``(1 - cos th)/th`` with their small-angle series."""
-    if abs(th) < 1e-6:
-        return 1.0 - th * th / 6.0, th / 2.0 - th**3 / 24.0
-    return math.sin(th) / th, (1.0 - math.cos(th)) / th
+    return sinc_terms(float(th))
 
 
 def exp(twist) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 
 
 @dataclass
@@ -47,9 +47,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
     allow_nan : keep ``nan`` values (for streams whose reader skips and counts such rows) instead of
         raising; infinite values still raise.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     lo, hi = (columns, columns) if isinstance(columns, int) else columns
     ts: list[int] = []
     rows: list[list[float]] = []
@@ -107,9 +105,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
 
 def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Read ``cam0/data.csv``: ``timestamp [ns], filename`` rows; returns (t_ns, names, lines)."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     ts: list[int] = []
     names: list[str] = []
     lines: list[int] = []

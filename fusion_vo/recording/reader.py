@@ -10,17 +10,26 @@ Layout (``datasets/README.md``)::
     SEQ/gps0/data.csv, gps0/sensor.yaml
     SEQ/state_groundtruth_estimate0/data.csv
 
-Every stream is optional; asking for one that is absent raises :class:`~fusion_vo.errors.InputError`.
+Every stream is optional. A stream is *present* when its folder (``imu0/``) or its ``data.csv`` exists; a
+present stream whose ``data.csv`` is missing or unreadable (a broken link, a link loop, a folder) is an
+:class:`~fusion_vo.errors.InputError` naming the file, never silently dropped. Asking for a stream that is
+absent raises :class:`~fusion_vo.errors.InputError` too.
 Camera frames are decoded lazily by :meth:`Recording.frames`. A frame that cannot be read (missing,
 corrupt, wrong size) is yielded with ``image=None`` and an ``error`` text, so that a long run can skip it
-with a warning and count it instead of stopping.
+with a warning and count it instead of stopping. Frame files are read as bytes and decoded in memory, so
+any path the operating system accepts works (OpenCV's own file functions fail on paths that are not valid
+UTF-8). Frame names in ``cam0/data.csv`` must stay inside ``cam0/data/`` (no absolute path, no ``..``).
+
+16-bit frames that hold 10-, 12- or 14-bit data (the top bits always zero) are scaled to the full 16-bit
+range: the bit depth is ``bit_depth`` in ``cam0/sensor.yaml`` if given, otherwise read off the first frame
+that decodes (its largest value).
 """
 
 from __future__ import annotations
 
+import io
 import logging
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -28,15 +37,23 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
 from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.outputs import make_folder, write_atomic
 from fusion_vo.recording.csvio import read_frame_list, read_table
 
 log = logging.getLogger(__name__)
 
 VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
+
+#: stream folders of the layout, by the name :meth:`Recording.streams` uses
+STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "odom0", "range": "range0",
+                  "gps": "gps0", "groundtruth": "state_groundtruth_estimate0"}
+
+#: bit depths a 16-bit frame may hold
+BIT_DEPTHS = (10, 12, 14, 16)
 
 
 @dataclass
@@ -67,41 +84,45 @@ class Recording:
             raise InputError("not a folder (a recording is a folder with cam0/, imu0/, wheel0/ ...)", self.path)
         self._camera: CameraModel | None = None
         self._frame_list: tuple[np.ndarray, list[str], np.ndarray] | None = None
+        self._shift: int | None = None
 
     def __repr__(self) -> str:
         return f"Recording({str(self.path)!r}, streams={self.streams()})"
 
     # ------------------------------------------------------------------ presence
+    def _present(self, folder: str) -> bool:
+        return os.path.lexists(self.path / folder)
+
     def has_camera(self) -> bool:
-        return (self.path / "cam0" / "data.csv").is_file()
+        return self._present("cam0")
 
     def has_imu(self) -> bool:
-        return (self.path / "imu0" / "data.csv").is_file()
+        return self._present("imu0")
 
     def has_wheel(self) -> bool:
-        return (self.path / "wheel0" / "data.csv").is_file()
+        return self._present("wheel0")
 
     def has_odom(self) -> bool:
-        return (self.path / "odom0" / "data.csv").is_file()
+        return self._present("odom0")
 
     def has_range(self) -> bool:
-        return (self.path / "range0" / "data.csv").is_file()
+        return self._present("range0")
 
     def has_gps(self) -> bool:
-        return (self.path / "gps0" / "data.csv").is_file()
+        return self._present("gps0")
 
     def has_groundtruth(self) -> bool:
-        return (self.path / "state_groundtruth_estimate0" / "data.csv").is_file()
+        return self._present("state_groundtruth_estimate0")
 
     def streams(self) -> list[str]:
         """Names of the streams present: camera, imu, wheel, odom, range, gps, groundtruth."""
-        names = ["camera", "imu", "wheel", "odom", "range", "gps", "groundtruth"]
-        return [n for n in names if getattr(self, f"has_{n}")()]
+        return [n for n, folder in STREAM_FOLDERS.items() if self._present(folder)]
 
     def _need(self, name: str, folder: str) -> Path:
+        if not self._present(folder):
+            raise InputError(f"this recording has no {name} stream (no {folder}/)", self.path)
         p = self.path / folder / "data.csv"
-        if not p.is_file():
-            raise InputError(f"this recording has no {name} stream ({folder}/data.csv is missing)", self.path)
+        check_file(p)
         return p
 
     # ------------------------------------------------------------------ camera
@@ -120,9 +141,14 @@ class Recording:
 
     def _frames_index(self) -> tuple[np.ndarray, list[str], np.ndarray]:
         if self._frame_list is None:
-            self._frame_list = read_frame_list(self._need("camera", "cam0"))
+            path = self._need("camera", "cam0")
+            self._frame_list = read_frame_list(path)
             if len(self._frame_list[0]) == 0:
-                raise InputError("no frames listed", self.path / "cam0" / "data.csv")
+                raise InputError("no frames listed", path)
+            for name, line in zip(self._frame_list[1], self._frame_list[2]):
+                if Path(name).is_absolute() or ".." in Path(name).parts:
+                    raise InputError(f"frame '{name}' is outside cam0/data/ (give a name relative to cam0/data/, "
+                                     "without '..')", path, int(line))
         return self._frame_list
 
     @property
@@ -154,14 +180,47 @@ class Recording:
         folder = self.path / "cam0" / "data"
         if not folder.is_dir():
             raise InputError("no frames: neither cam0/data/ nor cam0/video.<ext> exists", self.path / "cam0")
+        shift = self.pixel_shift()
         for i in range(start, stop):
             p = folder / names[i]
-            img, err = _read_image(p, size)
+            img, err = read_image(p, size, shift or 0)
+            if shift is None and img is not None:
+                shift = self.pixel_shift(img)
+                if shift:
+                    img = scale_bits(img, shift)
             if err is not None:
                 err = f"{p}: {err} (cam0/data.csv line {lines[i]})"
             yield Frame(i, t_ns[i] * 1e-9, img, str(p), err)
 
+    def pixel_shift(self, image: np.ndarray | None = None) -> int | None:
+        """Left shift that brings the camera's 16-bit frames to the full range (0 for 16-bit data or 8-bit frames).
+
+        ``bit_depth`` in ``cam0/sensor.yaml`` if given; otherwise found from the first frame decoded
+        (``image``), and ``None`` until then.
+        """
+        if self._shift is None:
+            depth = self._yaml("cam0", required=False).get("bit_depth")
+            if depth is not None:
+                if depth not in (8, *BIT_DEPTHS):
+                    raise InputError(f"'bit_depth' must be one of 8, {', '.join(map(str, BIT_DEPTHS))}, "
+                                     f"not {depth}", self.path / "cam0" / "sensor.yaml")
+                self._shift = 16 - depth if depth > 8 else 0
+            elif image is not None:
+                self._shift = 0
+                if image.dtype == np.uint16:
+                    bits = max(int(image.max()).bit_length(), 1)
+                    depth = next(d for d in BIT_DEPTHS if bits <= d)
+                    self._shift = 16 - depth
+                    if self._shift:
+                        log.info("%s: 16-bit frames hold %d-bit data; scaled to 16 bits", self.path / "cam0", depth)
+        return self._shift
+
     def _video_frames(self, video: Path, t_ns, start, stop, size) -> Iterator[Frame]:
+        try:
+            str(video).encode("utf-8")
+        except UnicodeEncodeError:
+            raise InputError("OpenCV cannot open a video whose path is not valid UTF-8; rename the folder",
+                             video) from None
         cap = cv2.VideoCapture(str(video))
         if not cap.isOpened():
             raise InputError("cannot open video file", video)
@@ -221,8 +280,14 @@ class Recording:
                 raise InputError(f"'{k}' must be a number", ypath) from None
             if not np.isfinite(vals[k]) or vals[k] <= 0:
                 raise InputError(f"'{k}' must be positive", ypath)
+        vals["radius_sigma"] = _optional_sigma(meta, "radius_sigma", ypath)
         counts = tab.values.astype(np.int64)
         return WheelData(tab.t, counts[:, 0], counts[:, 1], WheelConfig(**vals))
+
+    def camera_height_sigma(self) -> float | None:
+        """``height_sigma`` of ``cam0/sensor.yaml``: standard deviation [m] of the camera height its
+        ``T_BS`` states, or None when the file does not state it."""
+        return _optional_sigma(self._yaml("cam0", required=False), "height_sigma", self.path / "cam0" / "sensor.yaml")
 
     def odom(self) -> TwistData:
         """``odom0``: body-frame twist."""
@@ -246,39 +311,76 @@ class Recording:
         return read_gps(self.path / "gps0")
 
     def groundtruth(self) -> PoseData:
-        """``state_groundtruth_estimate0``: pose of B in W (planar part and the full quaternion)."""
-        path = self._need("ground truth", "state_groundtruth_estimate0")
-        tab = read_table(path, (7, 7), "pose values")
-        q = tab.values[:, 3:7]
-        norms = np.linalg.norm(q, axis=1)
-        bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
-        if len(bad):
-            raise InputError(f"quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
-        q = q / norms[:, None]
-        yaw = se2.yaw_of_quaternion(q)
-        xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
-        return PoseData(tab.t, xyyaw, tab.values[:, 2].copy(), q)
+        """``state_groundtruth_estimate0``: pose of B in W; see :func:`read_groundtruth_csv` for the rules."""
+        return read_groundtruth_csv(self._need("ground truth", "state_groundtruth_estimate0"))
 
     def _yaml(self, folder: str, required: bool) -> dict:
         p = self.path / folder / "sensor.yaml"
-        if not p.is_file():
-            if required:
-                raise InputError("file not found", p)
+        if not os.path.lexists(p) and not required:
             return {}
         return load_yaml(p)
 
 
+# ---------------------------------------------------------------------- ground truth
+def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
+    """Read ground truth (``state_groundtruth_estimate0/data.csv``): the one reader of it.
+
+    Rules: rows ``timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z``, further columns ignored, as every
+    stream of the layout; timestamps increase strictly (a repeated or earlier timestamp is an error naming
+    the line, as in every other stream); each quaternion's norm is within 0.05 of 1 (it is normalised); at
+    least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
+    """
+    path = Path(path)
+    tab = read_table(path, (7, 7), "pose values")
+    if len(tab) < min_poses:
+        raise InputError(f"ground truth needs at least {min_poses} poses, found {len(tab)}", path)
+    q = tab.values[:, 3:7]
+    norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
+    if len(bad):
+        raise InputError(f"quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
+    q = q / norms[:, None]
+    yaw = se2.yaw_of_quaternion(q)
+    xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
+    return PoseData(tab.t, xyyaw, tab.values[:, 2].copy(), q)
+
+
 # ---------------------------------------------------------------------- images
-def _read_image(path: Path, size: tuple[int, int]) -> tuple[np.ndarray | None, str | None]:
-    if not path.is_file():
+def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tuple[np.ndarray | None, str | None]:
+    """Read and decode one frame file: ``(grey image, None)`` or ``(None, reason)``.
+
+    The file is read as bytes and decoded in memory (any valid path works). ``size`` is ``(height,
+    width)`` to check, or ``None``; ``shift`` scales 16-bit frames holding fewer bits (see
+    :meth:`Recording.pixel_shift`).
+    """
+    try:
+        data = Path(path).read_bytes()
+    except FileNotFoundError:
         return None, "image file missing"
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except OSError as exc:
+        return None, f"cannot read image file ({exc.strerror})"
+    if not data:
+        return None, "empty image file"
+    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         return None, "unreadable or corrupt image"
-    return _to_grey(img, size)
+    img, err = _to_grey(img, size)
+    if img is not None and shift:
+        img = scale_bits(img, shift)
+    return img, err
 
 
-def _to_grey(img: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray | None, str | None]:
+def scale_bits(image: np.ndarray, shift: int) -> np.ndarray:
+    """Scale a 16-bit frame holding ``16 - shift`` bits to the full 16-bit range (8-bit frames unchanged)."""
+    if image.dtype != np.uint16 or not shift:
+        return image
+    return np.left_shift(np.minimum(image, (1 << (16 - shift)) - 1), shift).astype(np.uint16)
+
+
+_read_image = read_image  # older name
+
+
+def _to_grey(img: np.ndarray, size: tuple[int, int] | None) -> tuple[np.ndarray | None, str | None]:
     if img.ndim == 3:
         if img.shape[2] == 4:
             img = cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY)
@@ -288,7 +390,7 @@ def _to_grey(img: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray | None,
             img = img[:, :, 0]
     if img.dtype not in (np.uint8, np.uint16):
         return None, f"unsupported pixel type {img.dtype}"
-    if img.shape != size:
+    if size is not None and img.shape != size:
         return None, f"frame is {img.shape[1]}x{img.shape[0]} but cam0/sensor.yaml says {size[1]}x{size[0]}"
     return img, None
 
@@ -303,14 +405,21 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
         np.asarray(t, dtype=np.float64), xyyaw[:, 0], xyyaw[:, 1], np.zeros(len(xyyaw)),
         np.zeros(len(xyyaw)), np.zeros(len(xyyaw)), np.sin(half), np.cos(half),
     ])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    buf = io.StringIO()
+    buf.write("# timestamp x y z qx qy qz qw\n")
+    np.savetxt(buf, data, fmt=["%.9f"] + ["%.9f"] * 7)
+    make_folder(path.parent)
+    write_atomic(path, buf.getvalue())
+
+
+def _optional_sigma(meta: dict, key: str, path: Path) -> float | None:
+    """An optional positive standard deviation of a ``sensor.yaml``; a bad value is an InputError naming the key."""
+    if meta.get(key) is None:
+        return None
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write("# timestamp x y z qx qy qz qw\n")
-            np.savetxt(f, data, fmt=["%.9f"] + ["%.9f"] * 7)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        value = float(meta[key])
+    except (TypeError, ValueError):
+        raise InputError(f"'{key}' must be a number", path) from None
+    if not np.isfinite(value) or value <= 0:
+        raise InputError(f"'{key}' must be positive", path)
+    return value

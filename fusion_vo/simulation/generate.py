@@ -19,9 +19,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,6 +27,7 @@ import numpy as np
 import yaml
 
 from fusion_vo.geometry.camera import DISTORTION_MODELS, CameraModel
+from fusion_vo.recording.writer import RecordingWriter, check_target
 from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
@@ -60,7 +58,8 @@ class SimulationOptions:
     Camera
         width, height, fu, fv, cu, cv, distortion_model, distortion, camera_rate [Hz], camera_height
         [m], lever_arm [m], lateral_offset [m], tilt_x_deg, tilt_y_deg, height_error (fraction: the
-        sensor.yaml height is the true one times 1 + height_error), height_vibration [m amplitude],
+        sensor.yaml height is the true one times 1 + height_error; ``height_sigma`` states that error,
+        at least 0.1 mm), height_vibration [m amplitude],
         vibration_frequency [Hz], exposure_time [s] (motion blur; 0 = none), blur_samples,
         supersample, dropped_frames (fraction of frames missing), png_compression (0-9).
     Photometry
@@ -68,7 +67,8 @@ class SimulationOptions:
         highlight_center (fractions of width, height), noise [grey levels], shot_noise.
     Wheels
         wheel_rate [Hz], ticks_per_revolution, wheel_radius [m], wheel_base [m], radius_error_left,
-        radius_error_right, base_error (fractions: true = nominal · (1 + error)), slip
+        radius_error_right, base_error (fractions: true = nominal · (1 + error); ``radius_sigma`` of
+        wheel0/sensor.yaml states the larger radius error), slip
         [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
     IMU
         imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
@@ -222,12 +222,15 @@ class SimulationOptions:
 
     @classmethod
     def from_dict(cls, d: dict) -> "SimulationOptions":
-        """Options from a mapping (a YAML file); unknown keys and bad values raise ``ValueError``."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        for k in d:
-            if k not in known:
-                raise ValueError(f"unknown simulation option '{k}'")
-        return cls(**d)
+        """Options from a mapping (a YAML file) through the configuration schema
+        (:func:`fusion_vo.schema.build`); unknown keys and bad values raise ``ValueError``."""
+        from fusion_vo import schema
+        from fusion_vo.errors import InputError
+
+        try:
+            return schema.build(cls, d)
+        except InputError as exc:
+            raise ValueError(exc.message) from None
 
 
 def _check_number(name: str, value, integer: bool) -> None:
@@ -286,23 +289,13 @@ def _featureless_rectangles(o: SimulationOptions, motion: Motion, T_BS: np.ndarr
     return rects
 
 
-def _write_csv(path: Path, header: str, t_ns: np.ndarray, cols: np.ndarray, fmt: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as f:
-        f.write(header + "\n")
-        for t, row in zip(t_ns, cols):
-            f.write(f"{int(t)}," + ",".join(fmt % v for v in row) + "\n")
-
-
-def _yaml(path: Path, data: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w") as f:
-        yaml.safe_dump(data, f, sort_keys=False, default_flow_style=None)
-
-
 def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
-             options: SimulationOptions | None = None, **overrides) -> Path:
-    """Generate a recording in ``out_dir`` (replaced if it exists); returns its path.
+             options: SimulationOptions | None = None, force: bool = False, **overrides) -> Path:
+    """Generate a recording in ``out_dir``; returns its path.
+
+    The folder is written by :class:`~fusion_vo.recording.writer.RecordingWriter`: it appears only when
+    complete, and an existing ``out_dir`` is replaced only if it is empty or a recording fusion-vo wrote
+    (``force`` replaces any other folder, but never the current folder or one above it).
 
     Parameters
     ----------
@@ -310,28 +303,28 @@ def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
     profile : one of :data:`fusion_vo.simulation.robot.PROFILES`.
     seed : seed of every random choice (motion, noise, dropped frames).
     options : SimulationOptions, optional
+    force : replace a non-empty folder that is not a recording fusion-vo wrote.
     **overrides : option fields, applied on top of ``options``.
+
+    Raises
+    ------
+    InputError
+        If ``out_dir`` may not be replaced (see above) or another command is writing it.
     """
     if profile not in PROFILES:
         raise ValueError(f"unknown profile '{profile}' (choose one of {', '.join(PROFILES)})")
     o = dataclasses.replace(options or SimulationOptions(), **overrides) if overrides else (options or SimulationOptions())
     rng = np.random.default_rng(seed)
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.partial-", dir=out_dir.parent))
-    try:
-        info = _generate(tmp, profile, seed, o, rng)
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        os.replace(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    check_target(out_dir, force)
+    with RecordingWriter(out_dir, force=force, source=f"simulate --profile {profile} --seed {seed}") as writer:
+        info = _generate(writer, profile, seed, o, rng)
+        writer.commit()
     log.info("generated %s: %d frames, %.1f s, %.2f m", out_dir, info["frames"], info["duration_s"], info["path_length_m"])
     return out_dir
 
 
-def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np.random.Generator) -> dict:
+def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOptions, rng: np.random.Generator) -> dict:
     motion = _motion_for(profile, o, rng)
     t_end = motion.t[-1]
     T_BS = camera_mount(o.lever_arm, o.camera_height, o.tilt_x_deg, o.tilt_y_deg, o.lateral_offset)
@@ -354,8 +347,7 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     frame_t = frame_t[frame_t + half <= t_end]
     keep = rng.random(len(frame_t)) >= o.dropped_frames
     keep[0] = True
-    (root / "cam0" / "data").mkdir(parents=True)
-    rows = []
+    stamps, names = [], []
     png = [cv2.IMWRITE_PNG_COMPRESSION, int(o.png_compression)]
     if o.png_compression == 0:  # stored, not compressed: row filters would only cost time
         png += [cv2.IMWRITE_PNG_FILTER, cv2.IMWRITE_PNG_FILTER_NONE]
@@ -384,34 +376,37 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
                 poses.append(body_pose(x, y, yaw) @ T)
             radiance = renderer.radiance_blurred(poses)
             img = photo.apply(radiance, float(t), rng)
-        name = f"{ns(t)}.png"
-        cv2.imwrite(str(root / "cam0" / "data" / name), img, png)
-        rows.append(f"{ns(t)},{name}")
+        stamps.append(ns(t))
+        names.append(writer.image(f"{ns(t)}.png", img, png))
         if (i + 1) % 200 == 0:
             log.info("rendered %d / %d frames", i + 1, len(frame_t))
-    (root / "cam0" / "data.csv").write_text("#timestamp [ns],filename\n" + "\n".join(rows) + "\n")
+    writer.frame_list(np.array(stamps, dtype=np.int64), names)
     T_written = T_BS.copy()
     T_written[2, 3] = o.camera_height * (1.0 + o.height_error)
+    # the calibration's stated uncertainty: the size of the error written into it (at least 0.1 mm)
     cam_yaml = dataclasses.replace(cam, T_BS=T_written).to_dict()
+    cam_yaml["height_sigma"] = float(max(abs(o.height_error) * o.camera_height, 1e-4))
     if real_cam is not None:
         for key in ("intrinsics", "distortion_model", "distortion_coefficients"):
             cam_yaml.pop(key)
         cam_yaml.update(real.sensor_calibration())
-    _yaml(root / "cam0" / "sensor.yaml", cam_yaml)
+    writer.yaml("cam0/sensor.yaml", cam_yaml)
 
     # ---- wheels
     truth = WheelTruth(o.wheel_radius * (1 + o.radius_error_left), o.wheel_radius * (1 + o.radius_error_right),
                        o.wheel_base * (1 + o.base_error), o.wheel_radius, o.wheel_base, o.ticks_per_revolution)
     wt = sample_times(0.0, t_end, o.wheel_rate, o.jitter, rng)
     left, right = wheel_ticks(motion, truth, wt, o.slip, o.wheel_start_count, rng)
-    _write_csv(root / "wheel0" / "data.csv", "#timestamp [ns],left_ticks,right_ticks", ns(wt),
+    writer.csv("wheel0/data.csv", "#timestamp [ns],left_ticks,right_ticks", ns(wt),
                np.column_stack([left, right]), "%d")
-    _yaml(root / "wheel0" / "sensor.yaml", {"ticks_per_revolution": int(o.ticks_per_revolution),
+    writer.yaml("wheel0/sensor.yaml", {"ticks_per_revolution": int(o.ticks_per_revolution),
                                              "wheel_radius_left": o.wheel_radius, "wheel_radius_right": o.wheel_radius,
-                                             "wheel_base": o.wheel_base})
+                                             "wheel_base": o.wheel_base,
+                                             "radius_sigma": float(max(abs(o.radius_error_left), abs(o.radius_error_right))
+                                                                   * o.wheel_radius) or 1e-4})
     if o.odometry:
         tw = odometry_twist(wt, left, right, truth)
-        _write_csv(root / "odom0" / "data.csv", "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]",
+        writer.csv("odom0/data.csv", "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]",
                    ns(wt[1:]), tw[1:], "%.9g")
 
     # ---- IMU
@@ -421,10 +416,10 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     gyro, accel, bias_g = imu_samples(motion, it, noise, rng)
     if real_cam is not None and real_cam.rocking_deg > 0:  # the camera's roll and pitch, seen by the gyro
         gyro = gyro + np.array([T_BS[:3, :3] @ real_cam.rocking(float(ti))[1] for ti in it])
-    _write_csv(root / "imu0" / "data.csv",
+    writer.csv("imu0/data.csv",
                "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
                "a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]", ns(it), np.column_stack([gyro, accel]), "%.9g")
-    _yaml(root / "imu0" / "sensor.yaml", {
+    writer.yaml("imu0/sensor.yaml", {
         "sensor_type": "imu", "rate_hz": float(o.imu_rate),
         "T_BS": {"cols": 4, "rows": 4, "data": [float(v) for v in np.eye(4).ravel()]},
         "gyroscope_noise_density": o.gyro_noise_density, "gyroscope_random_walk": o.gyro_random_walk,
@@ -435,7 +430,7 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
         rt = sample_times(0.0, t_end, o.camera_rate * 2, 0.0, rng)
         h = o.camera_height + o.height_vibration * np.sin(2 * math.pi * o.vibration_frequency * rt)
         h = h + o.range_noise * rng.standard_normal(len(rt))
-        _write_csv(root / "range0" / "data.csv", "#timestamp [ns],distance [m]", ns(rt), h[:, None], "%.6f")
+        writer.csv("range0/data.csv", "#timestamp [ns],distance [m]", ns(rt), h[:, None], "%.6f")
 
     # ---- ground truth
     gt_t = sample_times(0.0, t_end, o.gt_rate, 0.0, rng)
@@ -443,17 +438,17 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     half_yaw = p[:, 2] / 2
     gt = np.column_stack([p[:, 0], p[:, 1], np.zeros(len(p)), np.cos(half_yaw), np.zeros(len(p)), np.zeros(len(p)),
                           np.sin(half_yaw)])
-    _write_csv(root / "state_groundtruth_estimate0" / "data.csv",
+    writer.csv("state_groundtruth_estimate0/data.csv",
                "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []",
                ns(gt_t), gt, "%.9f")
 
     # ---- GPS (last, so that recordings without it keep their random streams)
     gps_truth = {}
     if o.gps:
-        gps_truth = _write_gps(root / "gps0", motion, o, t_end, ns, rng)
+        gps_truth = _write_gps(writer, motion, o, t_end, ns, rng)
 
     info = {"frames": int(keep.sum()), "duration_s": float(t_end), "path_length_m": motion.path_length}
-    _yaml(root / "simulation.yaml", {
+    writer.yaml("simulation.yaml", {
         "profile": profile, "seed": int(seed), "options": dataclasses.asdict(o), "summary": info,
         "truth": {"camera_height": o.camera_height, "lever_arm": o.lever_arm, "lateral_offset": o.lateral_offset,
                   "tilt_x_deg": o.tilt_x_deg, "tilt_y_deg": o.tilt_y_deg,
@@ -464,7 +459,7 @@ def _generate(root: Path, profile: str, seed: int, o: SimulationOptions, rng: np
     return info
 
 
-def _write_gps(folder: Path, motion: Motion, o: SimulationOptions, t_end: float, ns, rng) -> dict:
+def _write_gps(writer: RecordingWriter, motion: Motion, o: SimulationOptions, t_end: float, ns, rng) -> dict:
     """``gps0/data.csv`` and ``sensor.yaml`` of simulated fixes; returns the truth for simulation.yaml."""
     from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
 
@@ -475,11 +470,10 @@ def _write_gps(folder: Path, motion: Motion, o: SimulationOptions, t_end: float,
     geo = enu_to_geodetic(enu, o.gps_datum)
     var = o.gps_noise ** 2
     rows = format_rows(ns(t), geo, enu, np.zeros(n), np.full(n, 2), np.tile([var, 0.0, var], (n, 1)))
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "data.csv").write_text("\n".join([HEADER, *rows]) + "\n")
+    writer.lines("gps0/data.csv", HEADER, rows)
     T = np.eye(4)
     T[:3, 3] = o.gps_lever_arm
-    _yaml(folder / "sensor.yaml", {
+    writer.yaml("gps0/sensor.yaml", {
         "sensor_type": "gnss", "rate_hz": float(o.gps_rate),
         "T_BS": {"cols": 4, "rows": 4, "data": [float(v) for v in T.ravel()]},
         "horizontal_sigma_m": float(o.gps_noise),

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion_vo.geometry import se2
+
 
 @dataclass
 class Motion:
@@ -68,11 +70,12 @@ def integrate(v: np.ndarray, w: np.ndarray, dt: float, start=(0.0, 0.0, 0.0)) ->
     yaw = start[2] + np.concatenate([[0.0], np.cumsum(w[:-1] * dt)])
     th0 = yaw[:-1]
     dth = w[:-1] * dt
-    small = np.abs(dth) < 1e-9
-    safe = np.where(small, 1.0, dth)
-    # displacement of an arc in the world: v dt (sin(th0+dth) - sin th0)/dth, ...
-    dx = np.where(small, v[:-1] * dt * np.cos(th0 + dth / 2), v[:-1] * dt * (np.sin(th0 + dth) - np.sin(th0)) / safe)
-    dy = np.where(small, v[:-1] * dt * np.sin(th0 + dth / 2), v[:-1] * dt * (np.cos(th0) - np.cos(th0 + dth)) / safe)
+    # displacement of an arc in the world: the body-frame arc (v dt) (sin dth/dth, (1 - cos dth)/dth)
+    # rotated by the heading at its start
+    a, b = se2.sinc_terms(dth)
+    step = v[:-1] * dt
+    dx = step * (np.cos(th0) * a - np.sin(th0) * b)
+    dy = step * (np.sin(th0) * a + np.cos(th0) * b)
     x = start[0] + np.concatenate([[0.0], np.cumsum(dx)])
     y = start[1] + np.concatenate([[0.0], np.cumsum(dy)])
     return np.column_stack([x, y, yaw])

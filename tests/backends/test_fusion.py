@@ -108,3 +108,16 @@ def test_ahrs_heading_bounds_the_heading_drift():
         late = slice(len(err) // 2, None)  # once the bias has been learnt
         assert err[late].max() < 0.025 and err_without[late].max() > 2 * err[late].max(), name
         assert with_ahrs.counts[name]["ahrs"].used > 500
+
+
+def test_range_finder_already_in_the_visual_increments_is_not_used_again():
+    # increments scaled frame by frame with the range finder's height carry the range already: the backends
+    # must not add it a second time as a height measurement (the same noise counted twice)
+    s = synthetic_streams(SyntheticOptions(duration=10.0, range_hz=10.0), seed=13)
+    streams = streams_of(s).select(["camera", "imu", "range"])
+    once = fuse(streams, "ekf")
+    assert once.counts["ekf"]["range"].used > 50
+    streams.range_in_visual = True
+    result = fuse(streams, "ekf")
+    assert "range" not in result.counts["ekf"]
+    assert any("range finder: already in the visual increments" in n for n in result.notes)

@@ -16,7 +16,7 @@ def _predict(x, dt):
 
 
 def test_ekf_transition_jacobian():
-    x = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05])
+    x = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05, 0.98])
     _, F = _predict(x, 0.05)
     eps = 1e-7
     num = np.zeros((DIM, DIM))
@@ -25,6 +25,25 @@ def test_ekf_transition_jacobian():
         d[i] = eps
         num[:, i] = (_predict(x + d, 0.05)[0] - _predict(x - d, 0.05)[0]) / (2 * eps)
     np.testing.assert_allclose(F, num, atol=1e-7)
+
+
+def test_ekf_wheel_block_jacobian_includes_the_wheel_scale():
+    x0 = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05, 0.98])
+
+    def block(x):
+        ekf = PlanarEkf(FusionConfig())
+        ekf.kf.x = np.asarray(x, dtype=float).reshape(DIM, 1)
+        return ekf.wheel_block(np.zeros(3), np.eye(3))
+
+    _, _, h, H, _, _ = block(x0)
+    np.testing.assert_allclose(h, [0.98 * 0.4, 0.98 * 0.02, 0.99 * 0.8])
+    eps = 1e-7
+    num = np.zeros((3, DIM))
+    for i in range(DIM):
+        d = np.zeros(DIM)
+        d[i] = eps
+        num[:, i] = (block(x0 + d)[2] - block(x0 - d)[2]) / (2 * eps)
+    np.testing.assert_allclose(H, num, atol=1e-7)
 
 
 def test_ekf_prediction_follows_the_arc():

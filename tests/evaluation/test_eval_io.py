@@ -58,7 +58,7 @@ def test_groundtruth_in_nanoseconds_with_extra_columns(tmp_path):
     np.testing.assert_allclose(traj.timestamps - traj.timestamps[0], [0.0, 0.005], atol=1e-6)
     np.testing.assert_allclose(traj.orientations_quat_wxyz[1], [0, 0, 0, 1])
     path.write_text("#timestamp\n1,1,2,3,1,0,0,0\n2,1,2,3,1,0,0\n")
-    with pytest.raises(InputError, match="at least 8 columns") as info:
+    with pytest.raises(InputError, match="expected a timestamp and 7 pose values") as info:
         io.read_groundtruth(path)
     assert info.value.line == 3
 

@@ -16,11 +16,12 @@ def test_direct_is_a_run_option(tmp_path):
     path.write_text("frontend: direct\ndirect: {iterations: 12, max_pixels: 5000}\n")
     cfg = load_config(path)
     odo = cfg.odometry_config()
-    assert odo.frontend == "direct" and odo.frontend_options == {"iterations": 12, "max_pixels": 5000}
+    assert odo.frontend == "direct"
+    assert odo.frontend_options["iterations"] == 12 and odo.frontend_options["max_pixels"] == 5000
     assert make_frontend("direct", odo.frontend_options).config.iterations == 12
     with pytest.raises(ValueError, match="iterations"):
         make_frontend("direct", {"iterations": 0})
-    with pytest.raises(InputError, match="frontend must be one of"):
+    with pytest.raises(InputError, match="frontend: expected one of"):
         RunConfig(frontend="dense").validate()
 
 

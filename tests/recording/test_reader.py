@@ -71,8 +71,8 @@ def test_reads_every_stream(tmp_path):
 def test_frames_are_decoded_lazily(tmp_path, monkeypatch):
     rec = Recording(make_recording(tmp_path / "seq", n_frames=3))
     calls = []
-    real = cv2.imread
-    monkeypatch.setattr(cv2, "imread", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    real = cv2.imdecode
+    monkeypatch.setattr(cv2, "imdecode", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
     it = rec.frames()
     next(it)
     assert len(calls) == 1
@@ -140,8 +140,15 @@ def test_missing_calibration_key(tmp_path):
 def test_missing_stream_is_a_clear_error(tmp_path):
     root = make_recording(tmp_path / "seq")
     (root / "imu0" / "data.csv").unlink()
+    with pytest.raises(InputError, match="file not found") as info:  # imu0/ is there: a broken stream
+        Recording(root).imu()
+    assert info.value.path == root / "imu0" / "data.csv"
+    assert "imu" in Recording(root).streams()
+    (root / "imu0" / "sensor.yaml").unlink()
+    (root / "imu0").rmdir()
     with pytest.raises(InputError, match="no IMU stream"):
         Recording(root).imu()
+    assert "imu" not in Recording(root).streams()
 
 
 def test_tum_round_trip(tmp_path):
@@ -166,7 +173,7 @@ def test_cli_errors_are_one_line_with_status_2(tmp_path, capsys):
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--config", str(cfg)]) == 2
     assert "c.yaml" in capsys.readouterr().err
     assert main(["run", str(root), "--out", str(tmp_path / "out"), "--sensors", "camera,lidar"]) == 2
-    assert "unknown sensor 'lidar'" in capsys.readouterr().err
+    assert "sensors[1]: expected one of 'camera', 'wheel', 'imu', 'odom' or 'range', got 'lidar'" in capsys.readouterr().err
     (tmp_path / "afile").write_text("")
     assert main(["run", str(root), "--out", str(tmp_path / "afile")]) == 2
     assert "must be a folder" in capsys.readouterr().err

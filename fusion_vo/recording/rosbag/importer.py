@@ -13,21 +13,18 @@ Each supported topic becomes one stream of the recording folder::
 IMU noise densities, when the messages carry covariances, are ``sqrt(median(covariance) / rate_hz)``;
 the GPS horizontal sigma is the median of ``sqrt((cov_xx + cov_yy) / 2)``.
 
-The output is written to a temporary folder next to the target and renamed into place only when
-complete, so an interrupted import never leaves a folder that looks like a finished recording.
+The output is written by :class:`fusion_vo.recording.writer.RecordingWriter` (a staging folder moved into
+place only when complete, so an interrupted import never leaves a folder that looks like a finished
+recording; an existing folder is replaced only if fusion-vo wrote it, or with ``overwrite``).
 """
 
 from __future__ import annotations
 
 import logging
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Sequence
 
-import cv2
 import numpy as np
 
 from fusion_vo.errors import InputError
@@ -45,7 +42,8 @@ from fusion_vo.recording.rosbag.reader import (
     opened,
     select_topics,
 )
-from fusion_vo.recording.rosbag.streams import Rows, finite, matrix_entry, write_csv, yaml_text
+from fusion_vo.recording.rosbag.streams import Rows, finite, matrix_entry
+from fusion_vo.recording.writer import RecordingWriter, check_target, write_csv, write_image, write_lines, write_yaml
 from fusion_vo.recording.rosbag.summary import ImportSummary, StreamSummary
 from fusion_vo.recording.rosbag.transforms import (
     StaticTransform,
@@ -95,7 +93,8 @@ def import_bag(
         without ``overwrite``, or a bag without any supported topic.
     """
     bag, out = Path(bag), Path(out)
-    _check_target(out, overwrite)
+    inputs = [bag] + ([Path(camera_yaml)] if camera_yaml is not None else [])
+    check_target(out, overwrite, inputs)  # before reading the bag; again when the writer opens
     cam_yaml = load_yaml(camera_yaml) if camera_yaml is not None else None
     with opened(bag) as reader:
         topics = bag_topics(reader)
@@ -107,38 +106,16 @@ def import_bag(
         if cam_yaml is not None and "cam0" not in chosen:
             raise InputError("--camera-yaml given but the bag has no image topic", bag)
         summary = ImportSummary(bag, out, topics)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
-        try:
-            _Importer(reader, bag, tmp, chosen, topics, cam_yaml, camera_yaml, list(static_tfs), summary).run()
-            _move_into_place(tmp, out, overwrite)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
+        with RecordingWriter(out, force=overwrite, inputs=inputs, source=f"import-bag {bag.name}") as writer:
+            _Importer(reader, bag, writer.root, chosen, topics, cam_yaml, camera_yaml, list(static_tfs),
+                      summary).run()
+            writer.commit()
     for s in summary.streams:
         log.debug("%s <- %s: %d rows, %.1f Hz, %d duplicates, %d dropped", s.stream, s.topic, s.written,
                  s.rate_hz or 0.0, s.duplicates, s.dropped)
     for note in summary.notes:
         log.debug("note: %s", note)
     return summary
-
-
-def _check_target(out: Path, overwrite: bool) -> None:
-    if out.exists() and not out.is_dir():
-        raise InputError("output exists and is not a folder", out)
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise InputError("output folder exists and is not empty (use --force to replace it)", out)
-
-
-def _move_into_place(tmp: Path, out: Path, overwrite: bool) -> None:
-    if out.exists():
-        _check_target(out, overwrite)
-        old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-        os.replace(out, old / out.name)
-        os.replace(tmp, out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        os.replace(tmp, out)
 
 
 class _Importer:
@@ -227,9 +204,7 @@ class _Importer:
                         *size, *self.image_size)
             return
         path = self.root / "cam0" / "data" / f"{t}.png"
-        path.parent.mkdir(parents=True, exist_ok=True)
-        if not cv2.imwrite(str(path), img):
-            raise InputError("cannot write image", path)
+        write_image(path, img)
         self.written_images.add(t)
         rows.add(t, (path.name,))
 
@@ -334,10 +309,9 @@ class _Importer:
         if (model.width, model.height) != tuple(self.image_size):
             raise InputError(f"camera calibration is for {model.width}x{model.height} but the images are "
                              f"{self.image_size[0]}x{self.image_size[1]}", self.cam_yaml_path or self.bag)
-        text = yaml_text([f"camera of {rows.summary.topic} ({rows.summary.msgtype}), calibration {source}",
-                           f"T_BS {how}" if "T_BS" in data else "T_BS: default mounting, not from the bag"],
-                          model.to_dict())
-        (self.root / "cam0" / "sensor.yaml").write_text(text, encoding="utf-8")
+        write_yaml(self.root / "cam0" / "sensor.yaml", model.to_dict(),
+                   [f"camera of {rows.summary.topic} ({rows.summary.msgtype}), calibration {source}",
+                    f"T_BS {how}" if "T_BS" in data else "T_BS: default mounting, not from the bag"])
 
     def _finish_imu0(self) -> None:
         rows = self.rows["imu0"]
@@ -370,7 +344,7 @@ class _Importer:
                 data[key] = float(f"{math.sqrt(float(np.median(var)) / rate):.6g}")
         if len(data) > 3:
             comments.append("noise densities = sqrt(message covariance / rate_hz)")
-        (self.root / "imu0" / "sensor.yaml").write_text(yaml_text(comments, data), encoding="utf-8")
+        write_yaml(self.root / "imu0" / "sensor.yaml", data, comments)
 
     def _finish_odom0(self) -> None:
         rows = self.rows["odom0"]
@@ -388,10 +362,8 @@ class _Importer:
         table = np.array(values, dtype=float).reshape(-1, 8)
         fixes = table[:, :3]
         enu = geodetic_to_enu(fixes[:, 0], fixes[:, 1], fixes[:, 2], fixes[0]) if len(fixes) else fixes
-        path = self.root / "gps0" / "data.csv"
-        path.parent.mkdir(parents=True, exist_ok=True)
         lines = gps_rows(t, fixes, enu, table[:, 3], table[:, 4], table[:, 5:8])
-        path.write_text("\n".join([GPS_HEADER, *lines]) + "\n", encoding="utf-8")
+        write_lines(self.root / "gps0" / "data.csv", GPS_HEADER, lines)
         T, how = self._extrinsics("gps0")
         data = {"sensor_type": "gnss", "rate_hz": rows.summary.rate_hz}
         if len(fixes):
@@ -404,4 +376,4 @@ class _Importer:
         if T is not None:
             data["T_BS"] = matrix_entry(T)
             comments.append(f"T_BS (antenna in the body frame) {how}")
-        (self.root / "gps0" / "sensor.yaml").write_text(yaml_text(comments, data), encoding="utf-8")
+        write_yaml(self.root / "gps0" / "sensor.yaml", data, comments)

@@ -1,4 +1,4 @@
-"""Rows of one output stream and the text files they are written to.
+"""Rows of one output stream, sorted and de-duplicated before they are written.
 
 Each stream is sorted by time; a sample whose stamp equals an earlier one of the same stream is dropped
 (the first one in bag order is kept) and counted. The stream's rate is the inverse of the median
@@ -8,11 +8,9 @@ interval between the written timestamps.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-import yaml
 
 from fusion_vo.recording.rosbag.summary import StreamSummary
 
@@ -51,23 +49,8 @@ def _measure(summary: StreamSummary, t: np.ndarray) -> None:
         summary.rate_hz = round(float(1.0 / dt), 3) if dt > 0 else None
 
 
-def write_csv(path: Path, header: str, t: np.ndarray, rows: Sequence[Sequence], fmt: str | Sequence[str]) -> None:
-    """Write ``timestamp,v1,v2,...`` rows; ``fmt`` is one %-format for all values or one per column."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(header + "\n")
-        for ti, row in zip(t, rows):
-            fmts = [fmt] * len(row) if isinstance(fmt, str) else fmt
-            f.write(f"{int(ti)}," + ",".join(fm % v for fm, v in zip(fmts, row)) + "\n")
-
-
 def finite(values: Sequence[float]) -> bool:
     return all(math.isfinite(v) for v in values)
-
-
-def yaml_text(comments: Sequence[str], data: dict) -> str:
-    head = "".join(f"# {c}\n" for c in comments)
-    return head + yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
 
 
 def matrix_entry(T: np.ndarray) -> dict:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Iterable
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from fusion_vo.errors import InputError
 
@@ -29,27 +30,23 @@ class StaticTransform:
 
 
 def quat_to_matrix(w: float, x: float, y: float, z: float) -> np.ndarray:
-    """Rotation matrix of a (normalised) quaternion ``w + xi + yj + zk``."""
-    q = np.array([w, x, y, z], dtype=float)
+    """Rotation matrix of a quaternion ``w + xi + yj + zk`` (normalised first; scipy's ``Rotation``).
+
+    Raises
+    ------
+    ValueError
+        For a zero or non-finite quaternion.
+    """
+    q = np.array([x, y, z, w], dtype=float)
     n = np.linalg.norm(q)
     if not np.isfinite(n) or n < 1e-9:
         raise ValueError("zero or non-finite quaternion")
-    w, x, y, z = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return Rotation.from_quat(q / n).as_matrix()
 
 
 def ypr_to_matrix(yaw: float, pitch: float, roll: float) -> np.ndarray:
     """``Rz(yaw) Ry(pitch) Rx(roll)``, the rotation of ``static_transform_publisher x y z yaw pitch roll``."""
-    cy, sy, cp, sp, cr, sr = (math.cos(yaw), math.sin(yaw), math.cos(pitch), math.sin(pitch),
-                              math.cos(roll), math.sin(roll))
-    Rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])
-    Ry = np.array([[cp, 0.0, sp], [0.0, 1.0, 0.0], [-sp, 0.0, cp]])
-    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]])
-    return Rz @ Ry @ Rx
+    return Rotation.from_euler("ZYX", [yaw, pitch, roll]).as_matrix()
 
 
 def parse_static_tf(text: str) -> StaticTransform:

@@ -1,0 +1,47 @@
+"""``fusion-vo export RUN --to rosbag2|mcap OUT``: a run's trajectories as ROS 2 odometry and /tf."""
+
+from __future__ import annotations
+
+import argparse
+
+from fusion_vo.errors import InputError
+
+
+def register(sub) -> None:
+    p = sub.add_parser(
+        "export", help="write a run's trajectories as ROS 2 nav_msgs/Odometry and /tf (rosbag2 or MCAP)",
+        description="Write every trajectory of RUN (NAME.tum, with its covariance from NAME.cov.csv when present) "
+                    "as nav_msgs/msg/Odometry on /fusion_vo/NAME/odometry plus /tf, stamped on the recording's "
+                    "clock, to a rosbag2 folder or an MCAP file (open either in Foxglove; play the rosbag2 folder "
+                    "with 'ros2 bag play' for RViz). With the recording's ground truth (run.yaml's sequence) it is "
+                    "exported too, as 'groundtruth'.")
+    p.add_argument("run_dir", metavar="RUN", help="folder written by 'fusion-vo run'")
+    p.add_argument("out", metavar="OUT", help="rosbag2 folder or .mcap file to create (must not exist)")
+    p.add_argument("--to", dest="fmt", choices=["rosbag2", "mcap"], required=True, help="output format")
+    p.add_argument("--trajectories", help="comma-separated names to export, 'groundtruth' among them for the "
+                                          "recording's (default: every *.tum of RUN and the ground truth)")
+    p.add_argument("--frame-id", default="odom", help="fixed frame of the poses (default: odom)")
+    p.add_argument("--no-groundtruth", action="store_true", help="leave the recording's ground truth out")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fusion_vo.export.ros import export_trajectories, groundtruth_of_run, load_run_trajectories
+
+    names = [n.strip() for n in args.trajectories.split(",") if n.strip()] if args.trajectories else None
+    want_gt = not args.no_groundtruth and (names is None or "groundtruth" in names)
+    run_names = [n for n in names if n != "groundtruth"] if names else None
+    trajectories = load_run_trajectories(args.run_dir, run_names) if run_names or names is None else []
+    if want_gt:
+        gt = groundtruth_of_run(args.run_dir)
+        if gt is not None:
+            trajectories.append(gt)
+        elif names:
+            raise InputError("no ground truth: run.yaml names no recording with state_groundtruth_estimate0/",
+                             args.run_dir)
+    out = export_trajectories(trajectories, args.out, args.fmt, args.frame_id)
+    for traj in trajectories:
+        cov = "with covariance" if traj.covariance is not None else "covariance unknown"
+        print(f"{traj.topic}: {len(traj.stamp_ns)} poses ({cov})")
+    print(f"wrote {args.fmt} -> {out}")
+    return 0

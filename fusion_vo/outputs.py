@@ -1,0 +1,317 @@
+"""Writing outputs safely: atomic files, whole output folders, and never deleting what fusion-vo did not write.
+
+Every file and folder fusion-vo writes goes through this module, so every output follows the user's umask
+(a file is created with mode ``0o666`` and a folder with ``0o777``, both reduced by the umask, exactly as
+``open()`` and ``mkdir`` do).
+
+:func:`write_atomic`
+    One file, written to a hidden temporary file in the same folder and renamed into place: a reader sees
+    the old file or the new one, never half of it.
+:class:`OutputFolder`
+    A whole output folder (a run, a generated or imported recording). Everything is written into a hidden
+    staging folder beside the target; :meth:`OutputFolder.commit` swaps it into place in one rename and only
+    then removes the previous folder. If anything fails, or the process is interrupted, the staging folder
+    is removed and the target is left as it was. While it is open the target is locked, so two commands
+    writing the same folder at once fail cleanly instead of mixing their files.
+
+The folder rules (the reason of this module): an existing target is replaced only if it is empty or holds
+the marker file that fusion-vo writes into every output folder of that kind (``marker``); any other folder
+needs ``force=True``. Even with ``force``, the current folder, a folder above it, a folder that holds one
+of the command's inputs, and an existing folder inside an input that fusion-vo did not write are never
+replaced.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import logging
+import os
+import secrets
+import shutil
+import signal
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterable, Iterator
+
+from fusion_vo.errors import InputError
+
+log = logging.getLogger(__name__)
+
+#: prefix of the hidden staging folders (removed when a command ends, whatever happens)
+STAGING_PREFIX = ".fusion-vo-staging-"
+
+
+class Terminated(BaseException):
+    """Raised in the main thread when the process receives SIGTERM or SIGHUP (see :func:`handle_signals`)."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        super().__init__(f"terminated by signal {signal.Signals(signum).name}")
+
+
+@contextmanager
+def handle_signals() -> Iterator[None]:
+    """Turn SIGTERM and SIGHUP into :class:`Terminated` while the block runs, so ``finally`` clauses clean up.
+
+    SIGINT already raises ``KeyboardInterrupt``. Outside the main thread this does nothing.
+    """
+    def raise_terminated(signum, frame):
+        raise Terminated(signum)
+
+    previous = {}
+    try:
+        for name in ("SIGTERM", "SIGHUP"):
+            sig = getattr(signal, name, None)
+            if sig is not None:
+                previous[sig] = signal.signal(sig, raise_terminated)
+    except ValueError:  # not the main thread
+        pass
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _random_name(prefix: str) -> str:
+    return f"{prefix}{secrets.token_hex(4)}"
+
+
+def make_folder(path: str | Path) -> Path:
+    """Create a folder and its parents (mode ``0o777`` less the umask); an existing folder is fine."""
+    path = Path(path)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def write_atomic(path: str | Path, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename.
+
+    The file's mode is ``0o666`` less the umask, like any file ``open(path, "w")`` creates; replacing an
+    existing file does not change that rule.
+    """
+    path = Path(path)
+    payload = data.encode("utf-8") if isinstance(data, str) else data
+    parent = path.parent
+    for _ in range(100):
+        tmp = parent / _random_name(f".{path.name}.tmp-")
+        try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+            break
+        except FileExistsError:
+            continue
+        except OSError as exc:  # name the file being written, not the temporary name
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+    else:  # pragma: no cover - 100 collisions of 32 random bits
+        raise FileExistsError(errno.EEXIST, "cannot create a temporary file", str(parent))
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(payload)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        if isinstance(exc, OSError):  # a full disk, a quota: name the file being written
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
+    return path
+
+
+def _inside(path: Path, folder: Path) -> bool:
+    """Whether ``path`` is ``folder`` or lies under it (both resolved)."""
+    try:
+        path.relative_to(folder)
+        return True
+    except ValueError:
+        return False
+
+
+def check_replaceable(target: str | Path, marker: str, force: bool = False,
+                      inputs: Iterable[str | Path] = (), what: str = "output folder") -> None:
+    """Raise :class:`InputError` unless ``target`` may be written (and an existing one replaced).
+
+    Parameters
+    ----------
+    target : the folder to write.
+    marker : name of the marker file fusion-vo leaves in folders of this kind.
+    force : allow replacing a non-empty folder without the marker.
+    inputs : paths the command reads; the target may not be or contain any of them.
+    what : words for the folder in messages.
+    """
+    target = Path(target)
+    resolved = target.resolve()
+    if resolved == Path(resolved.anchor):
+        raise InputError(f"refusing to use the root folder as the {what}", target)
+    cwd = Path.cwd().resolve()
+    if _inside(cwd, resolved):
+        raise InputError(f"refusing to replace the current folder or a folder above it; give a new {what}", target)
+    for p in inputs:
+        if _inside(Path(p).resolve(), resolved):
+            raise InputError(f"the {what} holds an input of this command ({p}); give another {what}", target)
+    if os.path.lexists(target) and not target.is_dir():
+        raise InputError(f"the {what} must be a folder, but a file of that name exists", target)
+    if target.is_dir() and not (target / marker).is_file():
+        for p in inputs:
+            if _inside(resolved, Path(p).resolve()) and any(target.iterdir()):
+                raise InputError(f"the {what} is part of an input of this command ({p}); give another "
+                                 f"{what}", target)
+    if target.is_dir() and not (target / marker).is_file() and not force:
+        try:
+            empty = not any(target.iterdir())
+        except OSError as exc:
+            raise InputError(f"cannot read the {what} ({exc.strerror})", target) from None
+        if not empty:
+            raise InputError(f"the {what} exists, is not empty and was not written by fusion-vo; "
+                             f"give a new folder, or --force to replace it", target)
+
+
+class OutputFolder:
+    """Write a whole folder under a staging name and move it into place when complete.
+
+    Use as a context manager::
+
+        with OutputFolder(out, marker=".fusion-vo-run") as staging:
+            ...write into staging (a folder named like ``out``)...
+            staging_folder.commit()
+
+    Leaving the block without :meth:`commit` (an error, an interrupt) removes the staging folder and
+    leaves ``out`` untouched. :class:`InputError` raised inside the block that name a path in the staging
+    folder are re-raised with the final path, so messages never show the staging name.
+
+    Parameters
+    ----------
+    target : the folder to write.
+    marker : marker file written into the folder (its presence later allows replacing it).
+    force : replace a non-empty folder without the marker.
+    inputs : paths the command reads (never replaced, never inside the target).
+    what : words for the folder in messages.
+    marker_text : content of the marker file.
+    """
+
+    def __init__(self, target: str | Path, marker: str, force: bool = False, inputs: Iterable[str | Path] = (),
+                 what: str = "output folder", marker_text: str = "written by fusion-vo\n"):
+        self.target = Path(target)
+        if self.target.name in ("", ".", ".."):  # name the folder itself, not a relative step
+            self.target = Path(os.path.abspath(self.target))
+        self.marker = marker
+        self.force = force
+        self.inputs = list(inputs)
+        self.what = what
+        self.marker_text = marker_text
+        self.path: Path | None = None  # the staging folder, named like the target
+        self._holder: Path | None = None
+        self._lock_fd: int | None = None
+        self._lock_path: Path | None = None
+        self.committed = False
+
+    # ------------------------------------------------------------------ context
+    def __enter__(self) -> "OutputFolder":
+        check_replaceable(self.target, self.marker, self.force, self.inputs, self.what)
+        parent = self.target.parent
+        make_folder(parent)
+        self._lock()
+        try:
+            check_replaceable(self.target, self.marker, self.force, self.inputs, self.what)  # again, under the lock
+            self._remove_stale_staging()
+            self._holder = parent / _random_name(STAGING_PREFIX)
+            os.mkdir(self._holder, 0o777)
+            self.path = self._holder / self.target.name
+            os.mkdir(self.path, 0o777)
+        except BaseException:
+            self._cleanup()
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._cleanup()
+        if isinstance(exc, InputError) and self.path is not None:
+            fixed = None if exc.path is None else self.public(exc.path)
+            message = exc.message.replace(str(self.path), str(self.target))
+            if fixed != exc.path or message != exc.message:
+                raise InputError(message, fixed, exc.line) from None
+        if isinstance(exc, OSError) and exc.filename and self.path is not None:
+            exc.filename = str(self.public(exc.filename))
+        return None
+
+    def public(self, path: str | Path) -> Path:
+        """The final path of a path inside the staging folder (other paths are returned unchanged)."""
+        path = Path(path)
+        if self.path is not None and _inside(path, self.path):
+            return self.target / path.relative_to(self.path)
+        return path
+
+    # ------------------------------------------------------------------ commit
+    def commit(self) -> Path:
+        """Write the marker and move the staging folder into place, replacing the previous folder."""
+        assert self.path is not None, "commit() outside the with block"
+        write_atomic(self.path / self.marker, self.marker_text)
+        old = None
+        if self.target.is_dir():
+            old = self._holder / _random_name(".previous-")
+            os.rename(self.target, old)
+        try:
+            os.rename(self.path, self.target)
+        except BaseException:
+            if old is not None:
+                os.rename(old, self.target)
+            raise
+        self.committed = True
+        return self.target
+
+    # ------------------------------------------------------------------ internals
+    def _lock(self) -> None:
+        """Take an exclusive lock on ``.NAME.lock`` beside the target; fail at once if another command has it."""
+        lock_path = self.target.parent / f".{self.target.name}.lock"
+        while True:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                raise InputError(f"another fusion-vo command is writing this {self.what}; "
+                                 "wait for it to finish", self.target) from None
+            try:  # the holder before us may have removed the lock file after we opened it: retry
+                same = os.fstat(fd).st_ino == os.stat(lock_path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                self._lock_fd, self._lock_path = fd, lock_path
+                return
+            os.close(fd)
+
+    def _remove_stale_staging(self) -> None:
+        """Remove staging folders of this target left by a process that was killed (SIGKILL, power loss).
+
+        Only folders that look exactly like ours are removed: named ``STAGING_PREFIX...`` beside the target and
+        holding nothing but a folder of the target's name or a previous version. Any writer of this target
+        would hold the lock we now hold, so such a folder belongs to no running command.
+        """
+        parent = self.target.parent
+        try:
+            candidates = [p for p in parent.iterdir() if p.name.startswith(STAGING_PREFIX) and p.is_dir()
+                          and not p.is_symlink()]
+        except OSError:
+            return
+        for holder in candidates:
+            try:
+                names = [c.name for c in holder.iterdir()]
+            except OSError:
+                continue
+            if names and all(n == self.target.name or n.startswith(".previous-") for n in names):
+                log.info("removing %s, left by an interrupted command", holder)
+                shutil.rmtree(holder, ignore_errors=True)
+
+    def _cleanup(self) -> None:
+        if self._holder is not None:
+            shutil.rmtree(self._holder, ignore_errors=True)
+            self._holder = None
+        if self._lock_fd is not None:
+            try:
+                os.unlink(self._lock_path)
+            except FileNotFoundError:
+                pass
+            os.close(self._lock_fd)
+            self._lock_fd = None

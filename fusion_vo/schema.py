@@ -1,0 +1,339 @@
+"""One configuration schema, derived from the configuration dataclasses.
+
+Every option is defined once, as a field of the dataclass that uses it (``KltConfig``, ``FeatureConfig``,
+``OdometryConfig``, ``FusionConfig`` and its noise models, ``SimulationOptions``), with its default in
+the field and its description and unit in the class's numpy-style ``Attributes`` docstring. This module
+turns such a dataclass into a pydantic model (:func:`model_of`) — a new field needs no change here — and
+uses it to
+
+* validate a mapping read from YAML and build the dataclass (:func:`build`), with errors that name the
+  file, the key path and the expected type::
+
+      run.yaml: fusion.ekf.accel_sigma: expected a number, got 'abc'
+
+* print every option with its default and description as YAML (:func:`commented_yaml`), and
+* give the JSON schema for editors (``model.model_json_schema()``).
+
+The checks that involve several fields stay in the dataclasses' ``__post_init__``; their messages are
+reported at the key path of the section.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+import types
+import typing
+from typing import Annotated, Any
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, create_model
+from pydantic.json_schema import GenerateJsonSchema
+
+from fusion_vo.errors import InputError
+
+_UNIT = re.compile(r"\[([^\[\]]{1,32})\]")
+
+#: pydantic error types -> the expected kind of value, in words
+_EXPECTED = {
+    "float_parsing": "a number", "float_type": "a number", "finite_number": "a finite number",
+    "int_parsing": "an integer", "int_type": "an integer", "int_from_float": "an integer",
+    "bool_parsing": "true or false", "bool_type": "true or false",
+    "string_type": "a string", "list_type": "a list", "tuple_type": "a list", "set_type": "a list",
+    "dict_type": "a mapping of key: value", "model_type": "a mapping of key: value",
+    "model_attributes_type": "a mapping of key: value", "dataclass_type": "a mapping of key: value",
+}
+
+
+def field_docs(cls: type) -> dict[str, str]:
+    """Field name -> description, from the ``Attributes`` (or ``Parameters``) section of a docstring.
+
+    A line ``name : type`` (or ``a, b : type``) at the section's indentation starts an entry; the
+    indented lines below it are its description, joined into one line.
+    """
+    doc = inspect.cleandoc(cls.__doc__ or "")
+    lines = doc.splitlines()
+    docs: dict[str, str] = {}
+    in_section = False
+    names: list[str] = []
+    text: list[str] = []
+
+    def flush() -> None:
+        if names:
+            for name in names:
+                docs[name] = " ".join(text).strip()
+
+    for i, line in enumerate(lines):
+        if line.strip() in ("Attributes", "Parameters") and i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}:
+            in_section = True
+            continue
+        if not in_section or set(line.strip()) == {"-"}:
+            continue
+        if line and not line[0].isspace():
+            flush()
+            names, text = [], []
+            if " : " in line or line.rstrip().endswith(":"):
+                head = line.split(" : ", 1)[0] if " : " in line else line.rstrip(": ")
+                names = [n.strip() for n in head.split(",") if n.strip().isidentifier()]
+            else:  # the next section of the docstring
+                in_section = False
+        elif names:
+            text.append(line.strip())
+    flush()
+    return docs
+
+
+def _unit(description: str) -> str | None:
+    match = _UNIT.search(description or "")
+    return match.group(1) if match else None
+
+
+class _JsonSchema(GenerateJsonSchema):
+    """JSON schema generation that describes a field of a type JSON schema cannot express (an array, a
+    callable) as "any value" instead of failing."""
+
+    def handle_invalid_for_json_schema(self, schema, error_info):
+        return {}
+
+    def encode_default(self, dft):
+        return super().encode_default(plain(dft))
+
+
+def json_schema(model: type[BaseModel]) -> dict:
+    """The JSON schema of a model (for editors)."""
+    return model.model_json_schema(schema_generator=_JsonSchema)
+
+
+def _first_sentence(text: str, limit: int = 110) -> str:
+    text = text.replace("``", "").replace("i.e.", "i\u2024e\u2024").replace("e.g.", "e\u2024g\u2024")
+    sentence = re.split(r"(?<=[a-z0-9\)\]])\. ", text, maxsplit=1)[0].rstrip(".")
+    sentence = sentence.replace("\u2024", ".")
+    return sentence if len(sentence) <= limit else sentence[: limit - 3].rstrip() + "..."
+
+
+def _defaults_key(instance) -> tuple:
+    return tuple((f.name, repr(getattr(instance, f.name))) for f in dataclasses.fields(instance))
+
+
+_MODELS: dict[tuple, type[BaseModel]] = {}
+
+
+def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> type[BaseModel]:
+    """The pydantic model of a configuration dataclass (cached).
+
+    Parameters
+    ----------
+    cls : type
+        A dataclass whose fields all have defaults.
+    exclude : tuple of str
+        Fields left out of the model.
+    defaults : instance of ``cls``, optional
+        Take the defaults from this instance instead of the fields (a nested section whose default
+        differs from the class's, e.g. the odometry twist's noise).
+
+    Returns
+    -------
+    type of BaseModel
+        Unknown keys are rejected; nested dataclasses become nested models; each field carries the
+        description (and the unit found in square brackets) from the dataclass's docstring.
+    """
+    key = (cls, exclude, None if defaults is None else _defaults_key(defaults))
+    if key in _MODELS:
+        return _MODELS[key]
+    try:
+        hints = typing.get_type_hints(cls)
+    except (NameError, TypeError):  # an annotation that cannot be resolved: such fields accept any value
+        hints = {f.name: f.type for f in dataclasses.fields(cls) if not isinstance(f.type, str)}
+    docs = field_docs(cls)
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.name in exclude or not f.init:
+            continue
+        if defaults is not None:
+            default = getattr(defaults, f.name)
+        elif f.default is not dataclasses.MISSING:
+            default = f.default
+        elif f.default_factory is not dataclasses.MISSING:
+            default = f.default_factory()
+        else:
+            raise TypeError(f"{cls.__name__}.{f.name} has no default")
+        description = docs.get(f.name)
+        extra = {"unit": _unit(description)} if _unit(description) else None
+        if dataclasses.is_dataclass(default):
+            nested = model_of(type(default), defaults=default)
+            fields[f.name] = (nested, Field(default_factory=nested, description=description))
+        else:
+            annotation = _no_bool_for_numbers(hints.get(f.name, Any))
+            fields[f.name] = (annotation, Field(default=default, description=description, json_schema_extra=extra))
+    summary = inspect.cleandoc(cls.__doc__ or "").split("\n\n", 1)[0].replace("\n", " ")
+    model = create_model(cls.__name__, __config__=ConfigDict(extra="forbid", arbitrary_types_allowed=True,
+                                                             title=cls.__name__), __doc__=summary, **fields)
+    _MODELS[key] = model
+    return model
+
+
+def _reject_bool(expected: str):
+    def check(value):
+        if isinstance(value, bool):
+            raise ValueError(f"expected {expected}, got {value!r}")
+        return value
+    return check
+
+
+def _no_bool_for_numbers(annotation):
+    """A number field (``int``, ``float``, optionally ``None``) that rejects ``true``/``false`` (pydantic's
+    lax mode would read them as 1 and 0)."""
+    args = set(typing.get_args(annotation)) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
+        else {annotation}
+    numbers = args - {type(None)}
+    if numbers == {int}:
+        return Annotated[annotation, BeforeValidator(_reject_bool("an integer"))]
+    if numbers and numbers <= {int, float}:
+        return Annotated[annotation, BeforeValidator(_reject_bool("a number"))]
+    return annotation
+
+
+def _location(loc: tuple) -> str:
+    text = ""
+    for part in loc:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
+
+
+def _known_keys(model: type[BaseModel], loc: tuple) -> list[str]:
+    for part in loc:
+        field = model.model_fields.get(part) if isinstance(part, str) else None
+        sub = getattr(field, "annotation", None) if field else None
+        if not (inspect.isclass(sub) and issubclass(sub, BaseModel)):
+            return []
+        model = sub
+    return list(model.model_fields)
+
+
+def _shown(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def describe_error(error: dict, model: type[BaseModel], prefix: tuple = ()) -> str:
+    """One line for one pydantic error: ``key.path: expected ..., got ...``."""
+    loc = tuple(error.get("loc", ()))
+    where = _location(prefix + loc) or "(top level)"
+    kind = error.get("type", "")
+    if kind == "extra_forbidden":
+        known = _known_keys(model, loc[:-1])
+        return f"{where}: unknown key" + (f" (known: {', '.join(known)})" if known else "")
+    if kind in _EXPECTED:
+        return f"{where}: expected {_EXPECTED[kind]}, got {_shown(error.get('input'))}"
+    if kind == "literal_error":
+        return f"{where}: expected one of {error['ctx']['expected']}, got {_shown(error.get('input'))}"
+    message = error.get("msg", "invalid value")
+    message = message.removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    return f"{where}: {message}"
+
+
+def config_error(exc: ValidationError, model: type[BaseModel], path=None, prefix: tuple = ()) -> InputError:
+    """The first error of a validation as an :class:`InputError` naming the file and the key path."""
+    errors = exc.errors()
+    message = describe_error(errors[0], model, prefix)
+    if len(errors) > 1:
+        message += f" (and {len(errors) - 1} more)"
+    return InputError(message, path)
+
+
+def validate(model: type[BaseModel], data: Any, path=None, prefix: tuple = ()) -> BaseModel:
+    """Validate a mapping against a model; raise :class:`InputError` naming the file and key path."""
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        where = _location(prefix) or "the file"
+        raise InputError(f"{where}: expected a mapping of key: value, got {_shown(data)}", path)
+    try:
+        return model.model_validate(_drop_empty_sections(model, data))
+    except ValidationError as exc:
+        raise config_error(exc, model, path, prefix) from None
+
+
+def _drop_empty_sections(model: type[BaseModel], data: dict) -> dict:
+    """A section left empty in YAML (``fusion:`` with every line below commented out) reads as null: it
+    keeps its defaults, like a section left out."""
+    out = {}
+    for key, value in data.items():
+        field = model.model_fields.get(key) if isinstance(key, str) else None
+        sub = getattr(field, "annotation", None)
+        if inspect.isclass(sub) and issubclass(sub, BaseModel):
+            if value is None:
+                continue
+            if isinstance(value, dict):
+                value = _drop_empty_sections(sub, value)
+        out[key] = value
+    return out
+
+
+def to_dataclass(cls: type, values: BaseModel, path=None, prefix: tuple = ()):
+    """Build the dataclass from validated values; its own checks (``__post_init__``) name the section."""
+    kwargs = {}
+    for name in type(values).model_fields:
+        value = getattr(values, name)
+        if isinstance(value, BaseModel):
+            sub_cls = next(type(f.default) if f.default is not dataclasses.MISSING else type(f.default_factory())
+                           for f in dataclasses.fields(cls) if f.name == name)
+            value = to_dataclass(sub_cls, value, path, prefix + (name,))
+        kwargs[name] = value
+    try:
+        return cls(**kwargs)
+    except InputError as exc:
+        raise InputError(f"{_location(prefix)}: {exc.message}" if prefix else exc.message, path) from None
+    except (ValueError, TypeError) as exc:
+        raise InputError(f"{_location(prefix)}: {exc}" if prefix else str(exc), path) from None
+
+
+def build(cls: type, data: Any, path=None, prefix: tuple = (), exclude: tuple[str, ...] = ()):
+    """Validate a mapping (e.g. a YAML section) and build the dataclass ``cls`` from it.
+
+    Raises
+    ------
+    InputError
+        For an unknown key, a value of the wrong type or a combination the dataclass rejects; the
+        message names ``path`` and the key path (``prefix`` is the section's own path).
+    """
+    model = model_of(cls, exclude)
+    return to_dataclass(cls, validate(model, data, path, prefix), path, prefix)
+
+
+def plain(value):
+    """Validated values as plain YAML-safe Python (tuples become lists, models mappings)."""
+    if isinstance(value, BaseModel):
+        return {k: plain(getattr(value, k)) for k in type(value).model_fields}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, (list, tuple)):
+        return [plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: plain(v) for k, v in value.items()}
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy arrays and scalars
+        return value.tolist()
+    return value
+
+
+def _scalar(value) -> str:
+    text = yaml.safe_dump(plain(value), default_flow_style=True, width=10_000).strip()
+    return text.removesuffix("\n...").removesuffix("...").strip()
+
+
+def commented_yaml(model: type[BaseModel], values: BaseModel | None = None, indent: int = 0) -> list[str]:
+    """Lines of YAML with every field of ``model`` (its value in ``values``, else its default) and a
+    comment with the first sentence of its description."""
+    values = values if values is not None else model()
+    lines = []
+    pad = " " * indent
+    for name, field in model.model_fields.items():
+        value = getattr(values, name)
+        comment = f"  # {_first_sentence(field.description)}" if field.description else ""
+        if isinstance(value, BaseModel):
+            lines.append(f"{pad}{name}:{comment}")
+            lines.extend(commented_yaml(type(value), value, indent + 2))
+        else:
+            lines.append(f"{pad}{name}: {_scalar(value)}{comment}")
+    return lines

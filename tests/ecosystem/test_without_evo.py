@@ -1,0 +1,47 @@
+"""Without the eval extra (evo), run writes its trajectories and says the evaluation was skipped;
+evaluate stops with a one-line message naming the extra."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+
+_SCRIPT = textwrap.dedent("""
+    import importlib.abc, sys
+
+    class BlockEvo(importlib.abc.MetaPathFinder):
+        def find_spec(self, name, path=None, target=None):
+            if name == "evo" or name.startswith("evo."):
+                raise ImportError("evo is blocked")
+            return None
+
+    sys.meta_path.insert(0, BlockEvo())
+    from fusion_vo.cli.main import main
+    sys.exit(main(sys.argv[1:]))
+""")
+
+
+def _cli(*args):
+    return subprocess.run([sys.executable, "-c", _SCRIPT, *args], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+
+
+def test_run_and_evaluate_without_evo(tmp_path):
+    rec, out = tmp_path / "rec", tmp_path / "run"
+    made = _cli("simulate", str(rec), "--profile", "random", "--duration", "1", "-O", "width=320", "-O", "height=180",
+                "-O", "fu=210", "-O", "fv=210", "-O", "cu=159.5", "-O", "cv=89.5")
+    assert made.returncode == 0, made.stderr
+    done = _cli("-q", "run", str(rec), "--out", str(out), "--backend", "ekf")
+    assert done.returncode == 0, done.stderr
+    assert "note: no evaluation against ground truth: it needs evo (GPL-3.0)" in done.stdout
+    assert "pip install 'fusion-vo[eval]'" in done.stdout
+    assert (out / "ekf.tum").is_file() and (out / "vo.tum").is_file() and not (out / "metrics.json").exists()
+    failed = _cli("evaluate", str(out))
+    assert failed.returncode == 2
+    assert failed.stderr.strip().splitlines() == [
+        "fusion-vo: error: evaluation against ground truth needs evo (GPL-3.0), which is not installed: "
+        "pip install 'fusion-vo[eval]'"]

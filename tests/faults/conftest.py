@@ -1,0 +1,30 @@
+"""A small generated recording, broken in many ways by the fault-injection tests.
+
+Every fault is checked against the same promise: exit status 0 or 2, no traceback, a one-line error that
+names the file (and line, or key), nothing half-written, and nothing outside the output folder touched.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from fusion_vo.simulation import simulate
+
+#: a 160 x 120 camera over 5 cm of straight drive: 33 frames, most of which the KLT frontend tracks
+SMALL = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
+         "length": 0.05, "gt_rate": 50.0, "imu_rate": 100.0}
+
+
+@pytest.fixture(scope="session")
+def pristine(tmp_path_factory) -> Path:
+    """The unbroken recording (never modify it: use ``recording``)."""
+    return simulate(tmp_path_factory.mktemp("faults") / "rec", profile="straight", seed=4, **SMALL)
+
+
+@pytest.fixture
+def recording(pristine, tmp_path) -> Path:
+    """A fresh copy of the recording in ``tmp_path/rec`` to break."""
+    return Path(shutil.copytree(pristine, tmp_path / "rec", symlinks=True))

@@ -1,0 +1,204 @@
+"""The output folder of ``fusion-vo run`` belongs to one run: replaced as a whole, locked while written,
+left untouched by a failed or interrupted run, never a folder fusion-vo did not write; outputs follow the
+umask."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fault_tools import assert_error, cli, snapshot
+from fusion_vo.outputs import STAGING_PREFIX
+
+QUICK = ("--backend", "ekf", "--no-evaluate")
+
+
+def test_a_later_run_replaces_the_folder_as_a_whole(recording, tmp_path, capsys):
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "run", recording, "--out", out, *QUICK)
+    assert status == 0, err
+    assert (out / "vo.tum").is_file() and (out / ".fusion-vo-run").is_file()
+    (out / "notes.txt").write_text("mine")  # a file the user put there goes with the folder it is in
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--sensors", "wheel,imu", *QUICK)
+    assert status == 0, err
+    assert not (out / "vo.tum").exists() and not (out / "velocities.csv").exists()  # no stale camera output
+    assert not (out / "notes.txt").exists()
+    assert (out / "ekf.tum").is_file() and (out / "wheel.tum").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "rec"]  # no staging folder, no lock file
+
+
+def test_a_folder_fusion_vo_did_not_write_is_refused_unless_forced(recording, tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("precious")
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "run", recording, "--out", out, *QUICK)
+    assert_error(status, err, "mine", "not empty", "--force")
+    assert snapshot(tmp_path) == before
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--force", *QUICK)
+    assert status == 0, err
+    assert not (out / "thesis.tex").exists() and (out / "ekf.tum").is_file()
+
+
+@pytest.mark.parametrize("where", ["cwd", "parent_of_cwd", "holds_the_recording", "is_the_recording",
+                                   "inside_the_recording"])
+def test_never_the_current_folder_its_parents_or_the_input(where, recording, tmp_path, capsys, monkeypatch):
+    work = tmp_path / "work" / "sub"
+    work.mkdir(parents=True)
+    if where in ("cwd", "parent_of_cwd"):
+        monkeypatch.chdir(work)
+    out = {"cwd": ".", "parent_of_cwd": "..", "holds_the_recording": str(tmp_path),
+           "is_the_recording": str(recording), "inside_the_recording": str(recording / "cam0")}[where]
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--force", *QUICK)
+    expected = {"cwd": "refusing", "parent_of_cwd": "refusing", "inside_the_recording": "part of an input"}
+    assert_error(status, err, expected.get(where, "holds an input"))
+    assert snapshot(tmp_path) == before
+
+
+def test_a_second_run_into_a_folder_being_written_fails_cleanly(recording, tmp_path, capsys):
+    out = tmp_path / "out"
+    lock = tmp_path / ".out.lock"
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # as a run in progress holds it
+        status, _, err = cli(capsys, "run", recording, "--out", out, *QUICK)
+        assert_error(status, err, "another fusion-vo command is writing")
+        assert not out.exists()
+    finally:
+        os.close(fd)
+
+
+def test_a_failure_in_the_evaluation_leaves_the_previous_run_untouched(recording, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--backend", "ekf")
+    assert status == 0, err
+    before = snapshot(tmp_path)
+
+    def broken(run_dir, seq):
+        (Path(run_dir) / "metrics.json").write_text("{}")
+        raise OSError(28, "No space left on device", str(Path(run_dir) / "trajectories.png"))
+
+    monkeypatch.setattr("fusion_vo.pipeline._evaluate", broken)
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--backend", "ekf")
+    assert_error(status, err, "No space left on device", str(out / "trajectories.png"))
+    assert STAGING_PREFIX not in err
+    assert snapshot(tmp_path) == before
+
+
+def test_an_internal_error_is_one_line_with_status_1_and_cleans_up(recording, tmp_path, capsys, monkeypatch):
+    def bug(*args, **kwargs):
+        raise RuntimeError("Indeterminant linear system detected while working near variable 7")
+
+    monkeypatch.setattr("fusion_vo.pipeline._run_backends", bug)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert status == 1 and err.count("\n") == 1 and "internal error: RuntimeError" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_run_leaves_nothing(sig, recording, tmp_path):
+    """The run is stopped by a signal while visual odometry runs (a slow frontend makes sure it is)."""
+    script = (
+        "import sys, time\n"
+        "import fusion_vo.odometry as o\n"
+        "real = o.VisualOdometry.process\n"
+        "def slow(self, *a, **k):\n"
+        "    time.sleep(0.2)\n"
+        "    return real(self, *a, **k)\n"
+        "o.VisualOdometry.process = slow\n"
+        "from fusion_vo.cli.main import main\n"
+        "sys.exit(main(sys.argv[1:]))\n"
+    )
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-c", script, "run", str(recording), "--out", str(out), *QUICK],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not any(p.name.startswith(STAGING_PREFIX) for p in tmp_path.iterdir()):
+        assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it was interrupted"
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + sig, err
+    assert "Traceback" not in err and "nothing was left half-written" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+@pytest.mark.parametrize("umask", [0o022, 0o077])
+def test_every_output_follows_the_umask(umask, recording, tmp_path, capsys):
+    old = os.umask(umask)
+    try:
+        status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf")
+        assert status == 0, err
+        status, _, err = cli(capsys, "simulate", tmp_path / "sim", "--profile", "straight", "-O", "length=0.01",
+                             "-O", "width=32", "-O", "height=24", "-O", "fu=40", "-O", "fv=40", "-O", "cu=15.5",
+                             "-O", "cv=11.5", "-O", "supersample=1")
+        assert status == 0, err
+    finally:
+        os.umask(old)
+    for root in (tmp_path / "out", tmp_path / "sim"):
+        paths = [root, *root.rglob("*")]
+        assert len(paths) > 10
+        for p in paths:
+            want = (0o777 if p.is_dir() else 0o666) & ~umask
+            assert p.stat().st_mode & 0o777 == want, f"{p}: {oct(p.stat().st_mode & 0o777)} != {oct(want)}"
+
+
+def test_calibrate_out_follows_the_umask(pristine, tmp_path, capsys):
+    target = tmp_path / "cam0" / "sensor.yaml"
+    target.parent.mkdir()
+    target.write_text("old: 1\n")
+    os.chmod(target, 0o644)
+    old = os.umask(0o022)
+    try:
+        status, out, err = cli(capsys, "calibrate", "height", pristine, "--distance", "0.05", "--allow-failed",
+                               "--out", target)
+    finally:
+        os.umask(old)
+    assert status == 0, err
+    assert target.stat().st_mode & 0o777 == 0o644 and "intrinsics" in target.read_text()
+    assert sorted(p.name for p in target.parent.iterdir()) == ["sensor.yaml"]  # no temporary file left
+
+
+def test_a_staging_folder_left_by_a_killed_run_is_removed_by_the_next(recording, tmp_path, capsys):
+    stale = tmp_path / f"{STAGING_PREFIX}dead" / "out"
+    stale.mkdir(parents=True)
+    (stale / "vo.tum").write_text("half")
+    other = tmp_path / f"{STAGING_PREFIX}other" / "another_name"  # not this target's: left alone
+    other.mkdir(parents=True)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert status == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([f"{STAGING_PREFIX}other", "out", "rec"])
+
+
+def test_a_full_disk_names_the_file_not_a_temporary_name(recording, tmp_path, capsys, monkeypatch):
+    import fusion_vo.outputs as outputs
+
+    real = os.fdopen
+
+    class Full:
+        def __init__(self, fd, mode):
+            self.handle = real(fd, mode)
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            self.handle.close()
+
+        def write(self, data):
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(outputs.os, "fdopen", Full)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert_error(status, err, "No space left on device", str(tmp_path / "out") + "/")
+    assert ".tmp-" not in err and STAGING_PREFIX not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]

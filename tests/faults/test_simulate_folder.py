@@ -1,0 +1,59 @@
+"""``fusion-vo simulate`` and ``import-bag`` never delete what fusion-vo did not write."""
+
+from __future__ import annotations
+
+import pytest
+
+from fault_tools import assert_error, cli, snapshot
+
+TINY = ("--profile", "straight", "-O", "length=0.01", "-O", "width=32", "-O", "height=24", "-O", "fu=40",
+        "-O", "fv=40", "-O", "cu=15.5", "-O", "cv=11.5", "-O", "supersample=1")
+
+
+@pytest.mark.parametrize("target", [".", "..", "../..", "./"])
+def test_simulate_never_replaces_the_current_folder_or_its_parents(target, tmp_path, capsys, monkeypatch):
+    work = tmp_path / "a" / "b"
+    work.mkdir(parents=True)
+    (tmp_path / "a" / "keep.txt").write_text("mine")
+    (work / "keep.txt").write_text("mine too")
+    monkeypatch.chdir(work)
+    before = snapshot(tmp_path)
+    for force in ((), ("--force",)):
+        status, _, err = cli(capsys, "simulate", target, *TINY, *force)
+        assert_error(status, err, "refusing to replace the current folder")
+        assert snapshot(tmp_path) == before
+
+
+def test_simulate_refuses_a_folder_that_is_not_its_recording(tmp_path, capsys):
+    out = tmp_path / "photos"
+    out.mkdir()
+    (out / "holiday.jpg").write_bytes(b"\xff\xd8")
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", out, *TINY)
+    assert_error(status, err, "photos", "not empty", "--force")
+    assert snapshot(tmp_path) == before
+    status, _, err = cli(capsys, "simulate", out, *TINY, "--force")
+    assert status == 0, err
+    assert not (out / "holiday.jpg").exists() and (out / ".fusion-vo-recording").is_file()
+
+
+def test_simulate_replaces_its_own_recording_and_an_empty_folder(tmp_path, capsys):
+    out = tmp_path / "rec"
+    out.mkdir()
+    status, _, err = cli(capsys, "simulate", out, *TINY)
+    assert status == 0, err
+    (out / "cam0" / "extra.png").write_bytes(b"")
+    status, _, err = cli(capsys, "simulate", out, *TINY, "--seed", "3")
+    assert status == 0, err
+    assert not (out / "cam0" / "extra.png").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+def test_import_bag_refuses_a_folder_it_did_not_write(tmp_path, capsys):
+    out = tmp_path / "thesis"
+    out.mkdir()
+    (out / "main.tex").write_text("precious")
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "import-bag", tmp_path / "missing.bag", out)
+    assert_error(status, err, "thesis", "not empty")
+    assert snapshot(tmp_path) == before
