@@ -27,6 +27,38 @@ GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the p
 (``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
 (plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
 and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+
+A pose for now
+--------------
+:meth:`StreamingFusion.current_estimate` returns the processed state *predicted* to the newest
+measurement time (or to a requested time at most ``horizon`` seconds ahead of it) with the constant-twist
+model, its covariance grown by that model's process noise; the state held back by the reorder window is
+never what a controller sees. :meth:`StreamingFusion.processed_estimate` returns the processed node itself.
+
+Late data
+---------
+The EKF keeps the last ``history`` seconds (default 2 s) of its states, the increments it consumed
+and the raw samples. A measurement older than the last processed node but within the history rewinds
+the filter to the node before it and re-filters everything after it, so the result is the one the same
+data would have given in time order. iSAM2 cannot rewind: for ``backend="gtsam"`` late data is applied
+only within the reorder window (set it to the latency of the slowest input; the prediction keeps the
+returned pose current). Measurements older than the history (or than the window for iSAM2) are counted
+as ``late`` and reported by :meth:`finish`.
+
+Bad input
+---------
+A measurement with a non-finite time or value, or a time more than ``horizon`` seconds ahead of the
+newest one, is counted as ``gated`` and logged; no exception reaches the caller for bad data.
+Undeclared sensors and bad construction arguments raise :class:`~fusion_vo.errors.InputError`
+(programming errors, not data).
+
+Threads
+-------
+Every public method takes one re-entrant lock, so inputs may come from several threads (a camera
+thread, a serial thread, a timer reading :meth:`current_estimate`): each call is atomic and sees the
+effects of every call that returned before it started. Samples of one stream must still be added
+by one thread at a time in (roughly) time order, as any stream would be; arrival order across threads
+is what the reorder window and the history absorb.
 """
 
 from __future__ import annotations
@@ -35,7 +67,8 @@ import bisect
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass
+import threading
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -58,12 +91,27 @@ _COUNTED_AS = {"imu": "gyro", "odom": "wheel"}
 
 @dataclass
 class Estimate:
-    """The current estimate: time [s], pose ``(x, y, yaw)`` of B in W, its 3x3 covariance."""
+    """The current estimate: time [s], pose ``(x, y, yaw)`` of B in W, its 3x3 covariance.
+
+    ``predicted`` is how far [s] the pose was predicted beyond the last processed node (0 for a
+    processed node).
+    """
 
     t: float
     pose: np.ndarray
     covariance: np.ndarray
     frame: str = "start"
+    predicted: float = 0.0
+
+
+@dataclass
+class _NodeRecord:
+    """What processing one node changed, kept while the node is within the history (EKF rewind)."""
+
+    state: tuple | None  # EKF (x, P) after the node's update
+    heading_offset: float | None
+    counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
+    visual: list = field(default_factory=list)  # increments this node's step consumed
 
 
 class StreamingFusion:
@@ -87,14 +135,32 @@ class StreamingFusion:
     gps_lever_arm : array_like, optional
         Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
         (default: at the body origin).
+    history : float
+        Seconds of states and samples the EKF keeps to re-apply late measurements (default 2).
+    horizon : float
+        Largest prediction [s] :meth:`current_estimate` makes beyond the newest measurement, and how far
+        ahead of the newest measurement a new one may be before it is rejected (default 1).
+    steps_per_call : int or None
+        Most nodes one ``add_*`` call processes (default 1); the rest is caught up by the next calls,
+        which bounds the latency of a call when a late measurement makes the EKF re-filter several
+        nodes. None processes everything due at once. :meth:`finish` always processes everything.
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
-                 gps_lever_arm=None):
+                 gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
+                 steps_per_call: int | None = 1):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
+        if not (np.isfinite(history) and history >= 0 and np.isfinite(horizon) and horizon > 0):
+            raise InputError(f"history must be >= 0 and horizon > 0 seconds (got history={history}, horizon={horizon})")
+        self.history = float(history) if backend == "ekf" else 0.0
+        self.horizon = float(horizon)
+        if steps_per_call is not None and (not isinstance(steps_per_call, int) or steps_per_call < 1):
+            raise InputError(f"steps_per_call must be a positive integer or None, not {steps_per_call!r}")
+        self.steps_per_call = steps_per_call
+        self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
             self.config = dataclasses.replace(self.config, imu=self.config.imu.with_sensor_keys(imu_noise))
@@ -107,13 +173,19 @@ class StreamingFusion:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
         if "gps" in self.sensors and backend != "ekf":
             raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
+        if "gps" in self.sensors:  # the switch to ENU re-expresses the recorded states: no rewind across it
+            self.history = 0.0
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
         self.imu_T_BS = np.eye(4) if imu_T_BS is None else np.asarray(imu_T_BS, dtype=np.float64)
         self.imu_noise = dict(imu_noise or {})
         self.camera_height = camera_height
-        self.counts: dict[str, SensorCount] = {}
+        self._input_counts: dict[str, SensorCount] = {}
+        self._records: list[_NodeRecord | None] = []
+        self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
+        self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
+        self.rewinds = 0
         self._buffers: dict[str, list] = {name: [] for name in ("wheel", "odom", "imu", "range")}
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
@@ -137,71 +209,128 @@ class StreamingFusion:
 
     # ------------------------------------------------------------------ input
     def add_visual(self, inc: VisualIncrement) -> None:
-        self._check("camera")
-        if self._late("camera", inc.t1):
-            return
-        if not inc.ok:
-            self._count("camera").missing += 1
+        """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame)."""
+        with self._lock:
+            self._check("camera")
+            values = [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
+            if not self._valid("camera", inc.t1, values):
+                return
+            if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
+                return
+            if not inc.ok:
+                self._count("camera").missing += 1
+                self._advance(inc.t1)
+                return
+            self._insert_visual(inc)
             self._advance(inc.t1)
-            return
-        self._insert_visual(inc)
-        self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
-        self._add("wheel", m.t, (int(m.left), int(m.right)))
+        """Add one sample of cumulative wheel ticks."""
+        with self._lock:
+            self._add("wheel", m.t, (m.left, m.right))
 
     def add_twist(self, m: TwistSample) -> None:
-        self._add("odom", m.t, (m.vx, m.vy, m.wz))
+        """Add one wheel-odometry twist ``(vx, vy, wz)`` in the body frame."""
+        with self._lock:
+            self._add("odom", m.t, (m.vx, m.vy, m.wz))
 
     def add_imu(self, m: ImuSample) -> None:
-        q = None if m.orientation is None else np.asarray(m.orientation, dtype=np.float64)
-        self._add("imu", m.t, (np.asarray(m.gyro, dtype=np.float64), np.asarray(m.accel, dtype=np.float64), q))
+        """Add one IMU sample (gyro, accel and optionally an orientation quaternion)."""
+        with self._lock:
+            q = None if m.orientation is None else np.asarray(m.orientation, dtype=np.float64)
+            self._add("imu", m.t, (np.asarray(m.gyro, dtype=np.float64), np.asarray(m.accel, dtype=np.float64), q))
 
     def add_range(self, m: RangeSample) -> None:
-        self._add("range", m.t, float(m.distance))
+        """Add one range-finder distance to the ground."""
+        with self._lock:
+            self._add("range", m.t, float(m.distance))
 
     def add_gps(self, fix: GpsFix) -> None:
         """One fix (east, north in ENU at the datum, 2x2 covariance); a non-finite or non-positive-definite
         one is counted as gated."""
-        self._check("gps")
-        if self._late("gps", fix.t):
-            return
-        enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
-        cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
-        if not (np.all(np.isfinite(enu)) and np.all(np.isfinite(cov))) or np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-            self._gps_bad += 1
-            self._count("gps").gated += 1
-            return
-        if self._gps and fix.t < self._gps[-1].t:
-            self._count("gps").reordered += 1
-        bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
-        self._advance(fix.t)
+        with self._lock:
+            self._check("gps")
+            if not self._valid("gps", fix.t, [fix.enu, fix.covariance]):
+                self._gps_bad += 1  # the gps count is set from the model's and these at the end
+                return
+            if self._late("gps", fix.t):
+                return
+            enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
+            cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
+            if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
+                self._gps_bad += 1
+                self._count("gps").gated += 1
+                return
+            if self._gps and fix.t < self._gps[-1].t:
+                self._count("gps").reordered += 1
+            bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
+            self._advance(fix.t)
 
     # ------------------------------------------------------------------ output
-    def current_estimate(self) -> Estimate | None:
-        """The latest processed node's estimate, or None before the first node."""
-        if not self._t_nodes:
-            return None
-        return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
+    def current_estimate(self, t: float | None = None) -> Estimate | None:
+        """The pose for now: the processed state predicted to ``t`` (default: the newest measurement time).
+
+        The covariance is grown by the prediction. ``t`` may be at most ``horizon`` seconds beyond the
+        newest measurement (:class:`~fusion_vo.errors.InputError` otherwise); a ``t`` at or before the
+        last processed node returns the processed node at or before it (within the history). None
+        before the first node.
+        """
+        with self._lock:
+            if not self._t_nodes:
+                return None
+            target = self._latest if t is None else float(t)
+            if not np.isfinite(target) or target > self._latest + self.horizon:
+                raise InputError(f"current_estimate: t={t} is more than horizon={self.horizon} s beyond the "
+                                 f"newest measurement (t={self._latest:.3f})")
+            t_node = self._t_nodes[-1]
+            if target <= t_node + 1e-9:
+                i = max(bisect.bisect_right(self._t_nodes, target + 1e-9) - 1, 0)
+                return Estimate(self._t_nodes[i], self._poses[i].copy(), self._covs[i].copy(), self._frame)
+            pose, cov = self._predict(target - t_node)
+            return Estimate(target, pose, cov, self._frame, target - t_node)
+
+    def processed_estimate(self) -> Estimate | None:
+        """The last processed node (held back by the reorder window), or None before the first node."""
+        with self._lock:
+            if not self._t_nodes:
+                return None
+            return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
+
+    @property
+    def counts(self) -> dict[str, SensorCount]:
+        """Sensor name -> :class:`SensorCount` of everything added so far."""
+        with self._lock:
+            total: dict[str, SensorCount] = {}
+            parts = [self._input_counts, self._retired_counts] + [r.counts for r in self._records if r is not None]
+            for part in parts:
+                _merge_into(total, part)
+            return total
 
     def finish(self) -> FusionResult:
         """Process everything buffered and return the online trajectory (``ekf`` or ``gtsam_online``)."""
+        with self._lock:
+            return self._finish()
+
+    def _finish(self) -> FusionResult:
         self._process(np.inf)
         name = "ekf" if self.backend == "ekf" else "gtsam_online"
         result = FusionResult()
         if self._t_nodes:
             result.trajectories[name] = PoseData(np.array(self._t_nodes), np.array(self._poses))
             result.covariances[name] = np.array(self._covs)
-        result.counts[name] = self.counts
+        counts = self.counts
+        result.counts[name] = counts
         result.notes = list(self._notes)
         if "gps" in self.sensors:
             m = self._gps_model
             self._notes.append(f"ekf: gps {m.n_used} fixes used, {m.n_rejected} rejected by the gate; world frame: "
                                + ("ENU at the datum" if self._frame == "enu" else
                                   "the start frame (the fixes never fixed the heading of ENU)"))
-        late = {s: c.late for s, c in self.counts.items() if c.late}
+        late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
+        if self.rewinds:
+            result.notes.append(f"late measurements re-applied by rewinding the filter {self.rewinds} times")
         return result
 
     # ------------------------------------------------------------------ buffering
@@ -210,22 +339,50 @@ class StreamingFusion:
             raise InputError(f"sensor '{sensor}' was not declared (sensors={self.sensors})")
 
     def _count(self, sensor: str) -> SensorCount:
-        return self.counts.setdefault(sensor, SensorCount())
+        return self._input_counts.setdefault(sensor, SensorCount())
 
-    def _late(self, sensor: str, t: float) -> bool:
-        if not np.isfinite(t):
+    def _valid(self, sensor: str, t, values) -> bool:
+        """Non-finite values and times beyond the horizon are counted as gated, never raised."""
+        try:
+            t = float(t)
+            parts = values if isinstance(values, (list, tuple)) else [values]
+            flat = [np.ravel(np.asarray(v, dtype=np.float64)) for v in parts]
+            finite = np.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in flat)
+        except (TypeError, ValueError):
+            finite = False
+        if not finite:
             self._count(sensor).gated += 1
-            return True
-        if self._t_nodes and t < self._t_nodes[-1] - 1e-9:
+            logger.warning("%s measurement at t=%s has a non-finite or malformed value; rejected", sensor, t)
+            return False
+        if np.isfinite(self._latest) and t > self._latest + self.horizon:
+            self._count(sensor).gated += 1
+            logger.warning("%s measurement at t=%.3f is more than %.3g s ahead of the newest (t=%.3f); rejected",
+                           sensor, t, self.horizon, self._latest)
+            return False
+        return True
+
+    def _late(self, sensor: str, t: float, back: int = 2) -> bool:
+        """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
+        if not self._t_nodes or t >= self._t_nodes[-1] - 1e-9:
+            return False
+        i = self._rewind_index(t, back)
+        if i is None:
             self._count(sensor).late += 1
-            logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed; not applied",
-                           sensor, t, self._t_nodes[-1])
+            logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
+                           "history); not applied", sensor, t, self._t_nodes[-1], self.history)
             return True
+        self._rewind(i)
         return False
 
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
         sensor = _COUNTED_AS.get(stream, stream)
+        if not self._valid(sensor, t, [x for x in payload if x is not None] if isinstance(payload, tuple)
+                           else payload):
+            return
+        t = float(t)
+        if stream == "wheel":
+            payload = (int(payload[0]), int(payload[1]))
         if self._late(sensor, t):
             return
         buf = self._buffers[stream]
@@ -241,7 +398,47 @@ class StreamingFusion:
 
     def _advance(self, t: float) -> None:
         self._latest = max(self._latest, float(t))
-        self._process(self._latest - self.config.reorder_window)
+        self._process(self._latest - self.config.reorder_window, self.steps_per_call)
+
+    # ------------------------------------------------------------------ history (EKF rewind)
+    def _rewind_index(self, t: float, back: int) -> int | None:
+        """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history.
+
+        A sample at ``t`` changes the interval that contains it and, through interpolation at that
+        interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
+        increment is applied from its ``t0`` node (``back=0``).
+        """
+        if self.backend != "ekf" or self.history <= 0:
+            return None
+        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
+        if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
+            return None
+        return i
+
+    def _rewind(self, i: int) -> None:
+        """Restore the filter to node ``i`` and forget the nodes after it (their inputs stay buffered)."""
+        rec = self._records[i]
+        for later in self._records[i + 1:]:
+            for v in later.visual:
+                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        x, P = rec.state
+        self._ekf.kf.x = x.reshape(-1, 1).copy()
+        self._ekf.kf.P = P.copy()
+        self._heading_offset = rec.heading_offset
+        del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
+        self.rewinds += 1
+
+    def _predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Pose and covariance of the last node predicted ``dt`` seconds ahead (constant twist)."""
+        if self.backend == "ekf":
+            kf = self._ekf.kf
+            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy()
+            try:
+                self._ekf.predict(dt)
+                return self._ekf.x[:3].copy(), self._ekf.P[:3, :3].copy()
+            finally:
+                kf.x, kf.P, kf.x_prior, kf.P_prior = saved
+        return _extrapolate(self._t_nodes, self._poses, self._covs, dt, self.config)
 
     # ------------------------------------------------------------------ processing
     def _next_node(self, after: float, until: float) -> float | None:
@@ -261,18 +458,21 @@ class StreamingFusion:
         times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
         return min(times) if times else None  # a fix alone does not start the track
 
-    def _process(self, until: float) -> None:
+    def _process(self, until: float, budget: int | None = None) -> None:
+        """Process the nodes up to ``until``, at most ``budget`` of them (None: all)."""
         if not self._t_nodes:
             start = self._start_time()
             if start is None or start > until:
                 return
             self._first_node(start)
-        while True:
+        done = 0
+        while budget is None or done < budget:
             t0 = self._t_nodes[-1]
             t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
             if t1 is None:
                 return
             self._step(t0, t1)
+            done += 1
 
     def _last_time(self) -> float:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
@@ -304,11 +504,13 @@ class StreamingFusion:
         return streams
 
     def _step(self, t0: float, t1: float) -> None:
+        self._step_counts = step = {}
         streams = self._streams_between(t0, t1)
-        usable = [v for v in self._visual if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
-        for v in self._visual:
-            if v.t1 <= t1 + 1e-9 and v not in usable:
-                self._count("camera").late += 1
+        consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
+        usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
+        for v in consumed:
+            if v not in usable:
+                step.setdefault("camera", SensorCount()).late += 1
         self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
         if usable:
             streams.visual = usable
@@ -316,18 +518,34 @@ class StreamingFusion:
         if iv.heading_offset is not None:
             self._heading_offset = iv.heading_offset
         for sensor, c in iv.counts.items():
-            own = self._count(sensor)
+            own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
             own.missing += c.missing
         if self.backend == "ekf":
             self._ekf_step(iv)
+            state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
         else:
             self._graph_step(iv)
+            state = None
         self._t_nodes.append(t1)
+        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed))
+        self._retire()
         self._prune(t0)
 
+    def _retire(self) -> None:
+        """Drop the rewind data of nodes older than the history (their counts are kept)."""
+        horizon = self._t_nodes[-1] - self.history - 1e-9
+        for j in range(len(self._records) - 1, -1, -1):  # the newest already-retired node ends the scan
+            if self._t_nodes[j] >= horizon:
+                continue
+            if self._records[j] is None:
+                break
+            rec = self._records[j]
+            _merge_into(self._retired_counts, rec.counts)
+            self._records[j] = None
+
     def _prune(self, t0: float) -> None:
-        keep_from = t0 - 2.0 * self.config.max_gap
+        keep_from = t0 - self.history - 2.0 * self.config.max_gap
         for name, buf in self._buffers.items():
             cut = bisect.bisect_left(buf, keep_from, key=lambda item: item[0]) - 2
             if cut > 0:
@@ -346,8 +564,10 @@ class StreamingFusion:
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
             self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
+            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
+            self._records.append(_NodeRecord(None, None))
             self._graph = _OnlineGraph(cfg, t, (kv, kb))
             pose, cov = self._graph.start()
             self._record(pose, cov)
@@ -369,7 +589,7 @@ class StreamingFusion:
             else:
                 self._apply_gps(fix)
         for sensor, c in ekf.counts.items():
-            own = self._count(sensor)
+            own = self._step_counts.setdefault(sensor, SensorCount())
             own.used += c.used
             own.gated += c.gated
         ekf.counts = {}
@@ -423,8 +643,81 @@ class StreamingFusion:
     def _graph_step(self, iv) -> None:
         pose, cov, sensors = self._graph.step(iv)
         for s in sensors:
-            self._count(s).used += 1
+            self._step_counts.setdefault(s, SensorCount()).used += 1
         self._record(pose, cov)
+
+
+def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
+    """The samples of ``streams`` as ``(arrival time, kind, message)`` in arrival order.
+
+    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``). Samples arrive at their own
+    time, the visual increments ``camera_delay`` seconds after their ``t1`` (frontend latency).
+    """
+    msgs: list[tuple[float, int, str, object]] = []
+    if streams.visual:
+        msgs += [(v.t1 + camera_delay, 0, "visual", v) for v in streams.visual]
+    if streams.wheel is not None:
+        w = streams.wheel
+        msgs += [(t, 1, "wheel", WheelTicks(t, int(lt), int(rt))) for t, lt, rt in zip(w.t, w.left, w.right)]
+    if streams.odom is not None:
+        o = streams.odom
+        msgs += [(t, 1, "twist", TwistSample(t, vx, vy, wz)) for t, vx, vy, wz in zip(o.t, o.vx, o.vy, o.wz)]
+    if streams.imu is not None:
+        m = streams.imu
+        q = m.orientation if m.orientation is not None else [None] * len(m.t)
+        msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
+    if streams.range is not None:
+        msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    msgs.sort(key=lambda m: (m[0], m[1]))
+    return [(float(m[0]), m[2], m[3]) for m in msgs]
+
+
+def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionConfig | dict | None = None,
+                  **kwargs) -> StreamingFusion:
+    """A :class:`StreamingFusion` for the sensors and calibrations of ``streams`` (keyword arguments pass on)."""
+    sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
+                                          ("odom", streams.odom is not None), ("imu", streams.imu is not None),
+                                          ("range", streams.range is not None)) if present]
+    imu = streams.imu
+    return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
+                           imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,
+                           camera_height=streams.camera_height, **kwargs)
+
+
+def _merge_into(total: dict, part: dict) -> None:
+    for sensor, c in part.items():
+        own = total.setdefault(sensor, SensorCount())
+        for key, value in c.as_dict().items():
+            setattr(own, key, getattr(own, key) + value)
+
+
+def _extrapolate(t_nodes, poses, covs, dt: float, config: FusionConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Constant-twist prediction of the last pose by ``dt`` from the twist between the last two nodes.
+
+    The covariance is propagated through the motion (a world-frame pose error rotates the
+    displacement) and grown by the EKF's acceleration noise integrated over ``dt``.
+    """
+    pose = poses[-1]
+    if len(t_nodes) < 2 or t_nodes[-1] - t_nodes[-2] <= 0:
+        twist = np.zeros(3)
+    else:
+        prev = poses[-2]
+        c, s = np.cos(prev[2]), np.sin(prev[2])
+        d = pose[:2] - prev[:2]
+        dyaw = np.arctan2(np.sin(pose[2] - prev[2]), np.cos(pose[2] - prev[2]))
+        twist = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], dyaw]) / (t_nodes[-1] - t_nodes[-2])
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    step = twist * dt  # small steps: the body-frame displacement is the twist times dt to first order
+    dx = c * step[0] - s * step[1]
+    dy = s * step[0] + c * step[1]
+    out = np.array([pose[0] + dx, pose[1] + dy, np.arctan2(np.sin(pose[2] + step[2]), np.cos(pose[2] + step[2]))])
+    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
+    q = np.array([config.ekf.accel_sigma, config.ekf.lateral_accel_sigma, config.ekf.yaw_accel_sigma]) ** 2
+    rot = np.array([[c, -s], [s, c]])
+    Q = np.zeros((3, 3))
+    Q[:2, :2] = rot @ np.diag(q[:2]) @ rot.T * dt**3 / 3.0
+    Q[2, 2] = q[2] * dt**3 / 3.0
+    return out, J @ covs[-1] @ J.T + Q
 
 
 class _OnlineGraph:

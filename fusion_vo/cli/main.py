@@ -20,6 +20,7 @@ from fusion_vo.outputs import Terminated, handle_signals
 COMMANDS = [
     "demo",
     "run",
+    "replay",
     "simulate",
     "evaluate",
     "compare",

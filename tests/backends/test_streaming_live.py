@@ -1,0 +1,266 @@
+"""Streaming inside a live stack: a pose for now, late data re-applied, bad input counted, several threads."""
+
+import json
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, StreamingFusion
+from fusion_vo.errors import InputError
+from fusion_vo.measurements import ImuSample, WheelTicks
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+SENSORS = ["camera", "wheel", "imu"]
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return synthetic_streams(SyntheticOptions(duration=8.0, visual_scale=1.02), seed=11)
+
+
+def _messages(s, camera_delay=0.0):
+    """(arrival time, kind, message) in arrival order; the camera's increments arrive ``camera_delay`` late."""
+    msgs = [(v.t1 + camera_delay, 0, "visual", v) for v in s.visual]
+    msgs += [(t, 1, "wheel", WheelTicks(t, l, r)) for t, l, r in zip(s.wheel.t, s.wheel.left, s.wheel.right)]
+    msgs += [(t, 2, "imu", ImuSample(t, g, a)) for t, g, a in zip(s.imu.t, s.imu.gyro, s.imu.accel)]
+    msgs.sort(key=lambda m: (m[0], m[1]))
+    return [(m[0], m[2], m[3]) for m in msgs]
+
+
+def _fusion(s, backend="ekf", window=0.05, **kw):
+    return StreamingFusion(backend, FusionConfig(reorder_window=window), SENSORS, wheel_config=s.wheel.config,
+                           imu_noise=s.imu.noise, **kw)
+
+
+def _feed(fusion, msgs):
+    for _, kind, m in msgs:
+        getattr(fusion, f"add_{kind}")(m)
+
+
+def _truth_at(s, t):
+    tr = s.truth
+    yaw = np.interp(t, tr.t, np.unwrap(tr.xyyaw[:, 2]))
+    return np.array([np.interp(t, tr.t, tr.xyyaw[:, 0]), np.interp(t, tr.t, tr.xyyaw[:, 1]), yaw])
+
+
+@pytest.mark.parametrize("backend", ["ekf", "gtsam"])
+def test_the_current_estimate_is_the_pose_of_now(drive, backend):
+    s = drive
+    fusion = _fusion(s, backend, window=0.3)
+    ages, err_now, err_processed, grown = [], [], [], []
+    for t, kind, m in _messages(s):
+        getattr(fusion, f"add_{kind}")(m)
+        now = fusion.current_estimate()
+        if now is None or t < 1.0:
+            continue
+        held = fusion.processed_estimate()
+        ages.append(t - now.t)
+        assert now.predicted == pytest.approx(now.t - held.t)
+        grown.append(np.trace(now.covariance[:2, :2]) > np.trace(held.covariance[:2, :2]))
+        err_now.append(np.linalg.norm(now.pose[:2] - _truth_at(s, t)[:2]))
+        err_processed.append(np.linalg.norm(held.pose[:2] - _truth_at(s, t)[:2]))
+    ages = np.array(ages)
+    assert np.max(ages) <= 1e-9  # predicted to the newest measurement: within one IMU period (5 ms)
+    assert np.mean(grown) > 0.99
+    # the window holds the processed state ~0.3 s behind: ~6 cm at 0.2 m/s; the prediction removes that
+    assert np.median(err_processed) > 0.04
+    assert np.median(err_now) < 0.25 * np.median(err_processed)
+
+
+def test_a_requested_time_is_predicted_within_the_horizon_only(drive):
+    s = drive
+    fusion = _fusion(s, horizon=0.5)
+    msgs = _messages(s)
+    _feed(fusion, [m for m in msgs if m[0] <= 4.0])
+    ahead = fusion.current_estimate(4.2)
+    assert ahead.t == pytest.approx(4.2) and np.linalg.norm(ahead.pose[:2] - _truth_at(s, 4.2)[:2]) < 0.02
+    past = fusion.current_estimate(3.0)
+    assert past.t <= 3.0 + 1e-9 and past.t > 2.9 and past.predicted == 0.0
+    with pytest.raises(InputError, match="horizon"):
+        fusion.current_estimate(4.6)
+
+
+def test_late_camera_increments_are_re_applied_exactly_as_in_order(drive):
+    s = drive
+    in_order = _fusion(s)
+    _feed(in_order, _messages(s))
+    late = _fusion(s)
+    _feed(late, _messages(s, camera_delay=0.15))  # typical frontend latency, three times the window
+    assert late.rewinds > 100
+    a, b = in_order.finish(), late.finish()
+    assert b.counts["ekf"]["camera"].late == 0
+    assert b.counts["ekf"]["camera"].used == a.counts["ekf"]["camera"].used > 100
+    ta, tb = a.trajectories["ekf"], b.trajectories["ekf"]
+    np.testing.assert_allclose(tb.t, ta.t, atol=1e-12)
+    np.testing.assert_allclose(tb.xyyaw, ta.xyyaw, atol=1e-9, rtol=0)
+
+
+def test_without_the_history_the_same_increments_are_lost(drive):
+    s = drive
+    late = _fusion(s, history=0.0)
+    _feed(late, _messages(s, camera_delay=0.15))
+    result = late.finish()
+    assert result.counts["ekf"]["camera"].late > 100
+    assert any("late measurements not applied: camera" in n for n in result.notes)
+
+
+def test_isam2_applies_late_increments_within_its_window(drive):
+    s = drive
+    in_order, late = _fusion(s, "gtsam", window=0.2), _fusion(s, "gtsam", window=0.2)
+    _feed(in_order, _messages(s))
+    _feed(late, _messages(s, camera_delay=0.15))
+    a, b = in_order.finish(), late.finish()
+    assert b.counts["gtsam_online"]["camera"].late == 0
+    ta, tb = a.trajectories["gtsam_online"], b.trajectories["gtsam_online"]
+    np.testing.assert_allclose(tb.t, ta.t, atol=1e-12)
+    np.testing.assert_allclose(tb.xyyaw, ta.xyyaw, atol=1e-6, rtol=0)
+
+
+def test_bad_measurements_are_counted_never_raised(drive):
+    s = drive
+    clean = _fusion(s, history=1.0)
+    _feed(clean, _messages(s))
+    dirty = _fusion(s, history=1.0)
+    msgs = _messages(s)
+    n_bad = 0
+    for i, (t, kind, m) in enumerate(msgs):
+        getattr(dirty, f"add_{kind}")(m)
+        if i % 97 == 50:
+            dirty.add_imu(ImuSample(t, np.array([np.nan, 0.0, 0.0]), np.zeros(3)))  # NaN gyro
+            dirty.add_wheel(WheelTicks(t + 3600.0, 0, 0))  # a clock an hour ahead
+            n_bad += 1
+    dirty.add_wheel(WheelTicks(1.0, 0, 0))  # long before the history
+    a, b = clean.finish(), dirty.finish()
+    assert b.counts["ekf"]["gyro"].gated - a.counts["ekf"]["gyro"].gated == n_bad
+    assert b.counts["ekf"]["wheel"].gated - a.counts["ekf"]["wheel"].gated == n_bad
+    assert b.counts["ekf"]["wheel"].late == 1
+    np.testing.assert_allclose(b.trajectories["ekf"].xyyaw, a.trajectories["ekf"].xyyaw, atol=1e-9, rtol=0)
+
+
+@pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_concurrent_producers_and_a_reader(drive, backend, name):
+    """A camera, a wheel and an IMU thread, 0.1 s of data per turn, and a controller thread reading."""
+    s = drive
+    msgs = _messages(s)
+    sequential = _fusion(s, backend, window=0.3)
+    _feed(sequential, msgs)
+    shared = _fusion(s, backend, window=0.3)
+    errors: list[BaseException] = []
+    done = threading.Event()
+    turn = threading.Barrier(3)
+    chunks = np.arange(0.0, msgs[-1][0] + 0.1, 0.1)
+    reads = []
+
+    def produce(kind):
+        try:
+            mine = [m for m in msgs if m[1] == kind]
+            for lo in chunks:
+                _feed(shared, [m for m in mine if lo <= m[0] < lo + 0.1])
+                turn.wait(timeout=30)
+        except BaseException as exc:  # noqa: BLE001 -- reported by the test
+            errors.append(exc)
+            turn.abort()
+
+    def read():
+        try:
+            while not done.is_set():
+                est = shared.current_estimate()
+                if est is not None:
+                    assert np.all(np.isfinite(est.pose)) and est.covariance.shape == (3, 3)
+                    reads.append(est.t)
+        except BaseException as exc:  # noqa: BLE001
+            errors.append(exc)
+
+    producers = [threading.Thread(target=produce, args=(k,)) for k in ("visual", "wheel", "imu")]
+    reader = threading.Thread(target=read)
+    reader.start()
+    for p in producers:
+        p.start()
+    for p in producers:
+        p.join()
+    done.set()
+    reader.join()
+    assert not errors
+    assert len(reads) > 10
+    a, b = sequential.finish(), shared.finish()
+    for sensor, c in a.counts[name].items():
+        assert b.counts[name][sensor].used == c.used and b.counts[name][sensor].late == 0
+    np.testing.assert_allclose(b.trajectories[name].t, a.trajectories[name].t, atol=1e-12)
+    np.testing.assert_allclose(b.trajectories[name].xyyaw, a.trajectories[name].xyyaw, atol=1e-9, rtol=0)
+
+
+# ---------------------------------------------------------------------------- fusion-vo replay
+@pytest.fixture(scope="module")
+def short_recording(tmp_path_factory):
+    from fusion_vo.simulation.standard import make_standard
+
+    return make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+
+
+def _read_tum(path):
+    return np.loadtxt(path, ndmin=2)
+
+
+def test_replay_writes_live_poses_at_a_fixed_rate_beside_the_batch_result(short_recording, tmp_path):
+    from fusion_vo.cli.main import main
+
+    out = tmp_path / "replay"
+    rc = main(["-q", "replay", str(short_recording), "--out", str(out), "--speed", "0", "--rate", "50",
+               "--camera-delay", "0.15", "--window", "0.05"])
+    assert rc == 0
+    live = np.loadtxt(out / "live_ekf.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert len(live) > 200
+    np.testing.assert_allclose(np.diff(live[:, 0]), 0.02, atol=1e-6)  # one row every 1/50 s of recording time
+    age = (live[:, 0] - live[:, 1])[live[:, 0] <= live[:, 1].max()]  # (after the last sample nothing is new)
+    assert len(age) > 200 and np.all(age >= -1e-9) and np.max(age) <= 0.0051  # at most one IMU period (200 Hz)
+    batch = _read_tum(out / "ekf.tum")
+    x = np.interp(live[:, 0], batch[:, 0], batch[:, 1])
+    y = np.interp(live[:, 0], batch[:, 0], batch[:, 2])
+    moving = live[:, 0] > live[0, 0] + 0.5
+    gap = np.hypot(live[moving, 2] - x[moving], live[moving, 3] - y[moving])
+    assert np.median(gap) < 0.01 and np.max(gap) < 0.05  # the live pose tracks the batch filter
+    info = json.loads((out / "replay.json").read_text())
+    assert info["rewinds"] > 50 and info["counts"]["camera"]["late"] == 0 and info["counts"]["camera"]["used"] > 50
+    assert (out / "stream_ekf.tum").exists() and (out / "ekf_smoothed.tum").exists()
+
+
+def test_replay_keeps_the_recording_pace(short_recording, tmp_path):
+    from fusion_vo.cli.main import main
+
+    t0 = time.perf_counter()
+    rc = main(["-q", "replay", str(short_recording), "--out", str(tmp_path / "r"), "--sensors", "wheel,imu",
+               "--speed", "5"])
+    assert rc == 0
+    info = json.loads((tmp_path / "r" / "replay.json").read_text())
+    assert info["sensors"] == ["wheel", "imu"]
+    assert time.perf_counter() - t0 >= 4.9 / 5  # a 5 s recording at 5x takes at least a second
+
+
+def test_replay_bad_input_is_one_line_exit_2_and_writes_nothing(short_recording, tmp_path, capsys):
+    from fusion_vo.cli.main import main
+
+    assert main(["replay", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert "recording folder not found" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    assert main(["replay", str(short_recording), "--out", str(tmp_path / "o"), "--sensors", "sonar"]) == 2
+    assert "sonar" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_ros2_example_compiles_and_its_fusion_runs_on_twist_and_imu():
+    from pathlib import Path
+
+    from fusion_vo.measurements import TwistSample
+
+    source = (Path(__file__).resolve().parents[2] / "examples" / "ros2_node.py").read_text()
+    compile(source, "ros2_node.py", "exec")  # rclpy is not on PyPI: the example is documented code
+    fusion = StreamingFusion("ekf", FusionConfig(reorder_window=0.05), sensors=["camera", "odom", "imu"],
+                             camera_height=0.095, history=2.0, horizon=0.5)
+    for k in range(200):
+        t = 100.0 + 0.01 * k
+        fusion.add_twist(TwistSample(t, 0.5, 0.0, 0.0))
+        fusion.add_imu(ImuSample(t, np.zeros(3), np.zeros(3)))
+    est = fusion.current_estimate(102.3)
+    assert est.t == pytest.approx(102.3) and est.pose[0] == pytest.approx(0.5 * 2.3, abs=0.02)
