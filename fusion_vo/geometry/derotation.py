@@ -29,7 +29,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from frontends.similarity import fit_least_squares
 from fusion_vo.geometry.ground import GroundGeometry
@@ -72,6 +71,8 @@ class GyroDerotation:
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         """The body's roll-and-pitch rotation ``ΔR_B`` from ``t0`` to ``t1`` (3x3)."""
+        from scipy.spatial.transform import Rotation  # loaded with the first frame (a recording with an IMU)
+
         if len(self.t) < 2 or t0 < self.t[0] or t1 > self.t[-1]:
             return np.eye(3)
         a = np.array([np.interp(t1, self.t, self._cum[:, k]) - np.interp(t0, self.t, self._cum[:, k]) for k in range(3)])
