@@ -1,11 +1,13 @@
-"""CPU time per frame of a frontend's ``process``, this checkout beside an earlier revision, in one run.
+"""CPU time per frame of the tracking thread's work, this checkout beside an earlier revision, in one run.
 
 The code of ``--against REV`` (``frontends/`` and ``fusion_vo/``) is exported with ``git archive`` to a
 temporary folder. Then, interleaved and repeated, a fresh interpreter for each side decodes the frames
-into memory, runs the frontend's ``prepare`` on them (as the reader threads of a run do) and times its
-``process`` over them on one thread (OpenCV and BLAS on one thread, ``time.thread_time``: CPU time, so
-the other jobs of a loaded machine weigh less than on the wall clock). The measured motions of both sides
-are compared bit for bit. Each side also times the point map's ``to_image`` on every pixel of a frame
+into memory, runs the frontend's ``prepare`` on them (as the reader threads of a run do) and times
+``VisualOdometry.process`` over them on one thread: the frontend, the gyro derotation (the recording
+has an IMU) and the ground geometry, i.e. what the tracking thread of a run does per frame. OpenCV and
+BLAS run on one thread; the time is ``time.thread_time`` (CPU time, so the other jobs of a loaded
+machine weigh less than on the wall clock). The frontend's motions and the body increments of both
+sides are compared bit for bit. Each side also times the point map's ``to_image`` on every pixel of a frame
 (what the dense fallback's rectification grid costs once per run).
 
 Usage::
@@ -35,8 +37,9 @@ import json, sys, time
 import numpy as np
 sys.path.insert(0, sys.argv[1])
 from frontends import make_frontend
+from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
-from fusion_vo.odometry import opencv_threads
+from fusion_vo.odometry import VisualOdometry, opencv_threads
 from fusion_vo.recording import Recording
 seq, name, frames, out = sys.argv[2], sys.argv[3], int(sys.argv[4]), sys.argv[5]
 rec = Recording(seq)
@@ -44,18 +47,21 @@ raw = [(f.image, f.t) for f in rec.frames(stop=frames) if f.image is not None]
 geometry = GroundGeometry(rec.camera)
 with opencv_threads(1):
     fe = make_frontend(name, {}, point_map=geometry.rectifier)
+    vo = VisualOdometry(fe, geometry, GyroDerotation(rec.imu(), geometry) if rec.has_imu() else None)
     prepare = getattr(fe, "prepare", None)
     frames = [(prepare(im) if prepare else im, t) for im, t in raw]
     start = time.thread_time()
-    motions = [fe.process(im, t) for im, t in frames]
+    done = [vo.process(im, t) for im, t in frames]
     cpu = time.thread_time() - start
+    motions = [m for m, _ in done]
+    deltas = [inc.delta if inc is not None and inc.ok else np.full(3, np.nan) for _, inc in done]
     h, w = raw[0][0].shape
     grid = np.stack(np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)), -1).reshape(-1, 2)
     start = time.thread_time()
     geometry.rectifier.to_image(grid)
     grid_cpu = time.thread_time() - start
 ok = [m.matrix if m.ok else np.full((2, 3), np.nan) for m in motions]
-np.save(out, np.array(ok))
+np.save(out, np.hstack([np.array(ok).reshape(len(ok), -1), np.array(deltas)]))
 print(json.dumps({"ms": 1000 * cpu / len(frames), "grid_ms": 1000 * grid_cpu, "frames": len(frames),
                   "ok": sum(m.ok for m in motions), "module": sys.modules["frontends"].__file__}))
 """
@@ -99,10 +105,10 @@ def main() -> int:
             seq = make_standard(args.standard, tmp / args.standard)
         sides = {args.against: export(args.against, tmp), "this checkout": REPO}
         load = os.getloadavg()[0]
-        print(f"{seq}, first {args.frames} frames; one thread; CPU time of process() per frame, median (range) of "
+        print(f"{seq}, first {args.frames} frames; one thread; CPU time of VisualOdometry.process per frame, median (range) of "
               f"{args.repeats} interleaved repeats; load average {load:.1f} before")
         print("| frontend | code | CPU time per frame | time relative to the other side | to_image on a frame's pixels | "
-              "same motions |")
+              "same motions and increments |")
         print("|---|---|---|---|---|---|")
         for frontend in args.frontend.split(","):
             times = {side: [] for side in sides}

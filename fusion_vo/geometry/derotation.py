@@ -34,6 +34,8 @@ from frontends.similarity import fit_least_squares
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import ImuData
 
+_EYE = np.eye(3)
+
 
 class GyroDerotation:
     """Corrects rectified similarities for the roll and pitch measured by a gyro.
@@ -68,6 +70,18 @@ class GyroDerotation:
         w, h = cam.width, cam.height
         gx, gy = np.meshgrid(np.linspace(0, w - 1, 16), np.linspace(0, h - 1, 10))
         self._grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
+        self._angles: dict[float, np.ndarray] = {}
+
+    def _angle(self, t: float) -> np.ndarray:
+        """The integrated body rates at ``t`` (linear interpolation); the last two times are remembered,
+        since each frame's time is asked for again as the start of the next interval."""
+        cached = self._angles.get(t)
+        if cached is None:
+            cached = np.array([np.interp(t, self.t, self._cum[:, k]) for k in range(3)])
+            if len(self._angles) >= 2:
+                self._angles.pop(next(iter(self._angles)))
+            self._angles[t] = cached
+        return cached
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         """The body's roll-and-pitch rotation ``ΔR_B`` from ``t0`` to ``t1`` (3x3)."""
@@ -75,8 +89,7 @@ class GyroDerotation:
 
         if len(self.t) < 2 or t0 < self.t[0] or t1 > self.t[-1]:
             return np.eye(3)
-        a = np.array([np.interp(t1, self.t, self._cum[:, k]) - np.interp(t0, self.t, self._cum[:, k]) for k in range(3)])
-        return Rotation.from_rotvec(a).as_matrix()
+        return Rotation.from_rotvec(self._angle(t1) - self._angle(t0)).as_matrix()
 
     def correction(self, t0: float, t1: float, matrix: np.ndarray | None = None) -> np.ndarray:
         """The 3x3 similarity ``H^{-1}`` (best fit) that removes the rotation's image motion.
@@ -86,7 +99,7 @@ class GyroDerotation:
         second frame), keeping those still in view.
         """
         dR = self.rotation(t0, t1)
-        if np.allclose(dR, np.eye(3), atol=1e-12):
+        if np.all(np.abs(dR - _EYE) <= 1e-12 + 1e-5 * _EYE):  # np.allclose(dR, I, atol=1e-12) in a fifth of the time
             return np.eye(3)
         pts = self._grid
         if matrix is not None:
