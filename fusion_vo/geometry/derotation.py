@@ -70,6 +70,7 @@ class GyroDerotation:
         w, h = cam.width, cam.height
         gx, gy = np.meshgrid(np.linspace(0, w - 1, 16), np.linspace(0, h - 1, 10))
         self._grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
+        self._lo, self._hi = self._grid.min(axis=0), self._grid.max(axis=0)
         self._angles: dict[float, np.ndarray] = {}
 
     def _angle(self, t: float) -> np.ndarray:
@@ -89,7 +90,8 @@ class GyroDerotation:
 
         if len(self.t) < 2 or t0 < self.t[0] or t1 > self.t[-1]:
             return np.eye(3)
-        return Rotation.from_rotvec(self._angle(t1) - self._angle(t0)).as_matrix()
+        start = self._angle(t0)  # first: it is usually the previous interval's end, still remembered
+        return Rotation.from_rotvec(self._angle(t1) - start).as_matrix()
 
     def correction(self, t0: float, t1: float, matrix: np.ndarray | None = None) -> np.ndarray:
         """The 3x3 similarity ``H^{-1}`` (best fit) that removes the rotation's image motion.
@@ -105,8 +107,7 @@ class GyroDerotation:
         if matrix is not None:
             m = np.asarray(matrix, dtype=np.float64)
             moved = pts @ m[:, :2].T + m[:, 2]
-            lo, hi = self._grid.min(axis=0), self._grid.max(axis=0)
-            inside = np.all((moved >= lo) & (moved <= hi), axis=1)
+            inside = np.all((moved >= self._lo) & (moved <= self._hi), axis=1)
             if np.count_nonzero(inside) >= 6:
                 pts = moved[inside]
         # H^{-1} = K R_VB dR R_BV K^{-1}: a pixel seen at the second frame back to where it was
