@@ -107,8 +107,9 @@ PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
 DIM = 11
 #: state columns of each measurement-model argument (:mod:`fusion_vo.sensors.model`); the interval
 #: models are evaluated per unit time, on the twist state
-STATE_COLUMNS = {"motion": [VX, VY, W], "heading": [YAW], "gyro_bias": [BG], "visual_scale": [KV],
-                 "wheel_scale": [KR], "wheel_base_factor": [KB], "ahrs_offset": [AO]}
+STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gyro_bias": slice(BG, BG + 1),
+                 "visual_scale": slice(KV, KV + 1), "wheel_scale": slice(KR, KR + 1),
+                 "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12
 _DROPPED_VAR = 1e8  # variance of a measurement row the consistency monitor dropped
 OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
@@ -227,7 +228,8 @@ class PlanarEkf:
         for name, J in jac.items():
             H[:, STATE_COLUMNS[name]] = J
         angle = model.angle_rows[0] if model.angle_rows else None
-        return model.name, np.asarray(z, dtype=np.float64).reshape(model.dim), h, H, np.asarray(R, dtype=np.float64).reshape(model.dim, model.dim), angle
+        R = np.asarray(R, dtype=np.float64).reshape(model.dim, model.dim)
+        return model.name, np.asarray(z, dtype=np.float64).reshape(model.dim), h, H, R, angle
 
     # ------------------------------------------------------------------ GPS
     def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:

@@ -23,6 +23,7 @@ and of a pose's heading ``∂ψ/∂ξ = (0, 0, 1)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import gtsam
@@ -72,17 +73,57 @@ class ModelFactor:
         return (self.model, tuple(n for n in self.model.args if n in self.keys), tuple(sorted(self.fixed)),
                 tuple(sorted(self.params)), self.rows, self.robust)
 
-    def linearized(self, lookup) -> gtsam.LinearContainerFactor:
-        """The factor linearised at ``lookup(key)`` values (Pose2 or float), for the incremental solvers."""
-        group = ModelFactors([self])
-        lin = gtsam.Values()
-        for key in self.all_keys():
-            v = lookup(key)
-            if isinstance(v, gtsam.Pose2):
-                lin.insert(key, v)
+    def linearized(self, lookup, point: gtsam.Values | None = None) -> gtsam.LinearContainerFactor:
+        """The factor linearised at ``lookup(key)`` values (Pose2 or float), for the incremental solvers:
+        the same linearisation as :meth:`ModelFactors.linearize`, for one factor. ``point`` may hold these
+        values already (:class:`ValuesMaker`; it may hold others too)."""
+        model = self.model
+        rows = list(range(model.dim)) if self.rows is None else list(self.rows)
+        args, links, current = {}, [], {}
+        for name in model.args:
+            if name not in self.keys:
+                continue
+            keys = self.keys[name]
+            for key in keys:
+                current[key] = lookup(key)
+            if name == "motion":
+                args[name], d_i, d_j = _relative_one(current[keys[0]], current[keys[1]])
+                links += [(name, d_i, keys[0]), (name, d_j, keys[1])]
+            elif name == "heading":
+                args[name] = np.array([current[keys[0]].theta()])
+                links.append((name, _HEADING[0], keys[0]))
             else:
-                lin.insert(key, float(v))
-        return gtsam.LinearContainerFactor(group.linearize(lin)[0], lin)
+                args[name] = np.array([float(current[keys[0]])])
+                links.append((name, None, keys[0]))
+        for name, value in self.fixed.items():
+            args[name] = np.array([float(value)])
+        h, jac = model.evaluate(**args, **self.params)
+        sub = self.rows is not None
+        e = h[rows] - self.z[rows] if sub else h - self.z
+        for i in self._wrapped_rows(rows):
+            e[i] = (e[i] + math.pi) % (2.0 * math.pi) - math.pi
+        cov = np.atleast_2d(self.covariance)
+        if len(cov) == 1:
+            W = np.array([[1.0 / math.sqrt(float(cov[0, 0]))]])
+        else:  # GTSAM's own whitening of this covariance (as a CustomFactor's linearisation)
+            W = gtsam.noiseModel.Gaussian.Covariance(cov).R()
+        ew = W @ e
+        if self.robust is not None:
+            scale = math.sqrt(robust_weight(math.sqrt(float(ew @ ew)), *self.robust))
+            W = W * scale
+            ew = ew * scale
+        items = []
+        for name, link, key in links:
+            WJ = W @ (jac[name][rows] if sub else jac[name])
+            items += [int(key), WJ if link is None else WJ @ link]
+        factor = gtsam.JacobianFactor(*items, -ew, gtsam.noiseModel.Unit.Create(len(rows)))
+        if point is None:
+            point = ValuesMaker().make(current)
+        return gtsam.LinearContainerFactor(factor, point)
+
+    def _wrapped_rows(self, rows: list) -> list:
+        wrapped = self.model.angle_rows + self.model.turn_rows
+        return [i for i, r in enumerate(rows) if r in wrapped]
 
     def noise_model(self):
         base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(self.covariance, dtype=np.float64))
@@ -136,14 +177,7 @@ class ModelFactors:
                       for n in f0.fixed}
         self.params = {n: np.array([f.params[n] for f in factors], dtype=np.float64) for n in f0.params}
         self.z = np.array([np.asarray(f.z, dtype=np.float64).reshape(-1) for f in factors])
-        cov = np.array([np.atleast_2d(f.covariance) for f in factors], dtype=np.float64)
-        # GTSAM's noiseModel.Gaussian.Covariance treats a covariance whose off-diagonal entries are all
-        # within 1e-9 (absolute) of zero as diagonal; the same here, so both give the same factor
-        m = cov.shape[1]
-        off = np.abs(cov - cov * np.eye(m)).reshape(len(cov), -1).max(axis=1) if m > 1 else np.zeros(len(cov))
-        cov[off <= _DIAGONAL_TOL] *= np.eye(m)
-        # whitening W with Wᵀ W = Σ⁻¹: W = C⁻¹ for Σ = C Cᵀ
-        self.whiten = np.linalg.inv(np.linalg.cholesky(cov))
+        self.whiten = whitening(np.array([np.atleast_2d(f.covariance) for f in factors], dtype=np.float64))
         self.robust = f0.robust
         self.wrap = [i for i, r in enumerate(self.rows) if r in f0.model.angle_rows + f0.model.turn_rows]
 
@@ -210,6 +244,71 @@ class ModelFactors:
 
 _HEADING = np.array([[[0.0, 0.0, 1.0]]])
 _DIAGONAL_TOL = 1e-9
+
+
+def whitening(cov: np.ndarray) -> np.ndarray:
+    """Whitening matrices ``W`` (N, m, m) with ``Wᵀ W = Σ⁻¹`` of covariances ``Σ`` (N, m, m).
+
+    As GTSAM's ``noiseModel.Gaussian.Covariance`` does, a covariance whose off-diagonal entries are all
+    within 1e-9 (absolute) of zero is taken as diagonal, so both give the same factor.
+    """
+    cov = np.array(cov, dtype=np.float64)
+    m = cov.shape[1]
+    if m == 1:
+        return 1.0 / np.sqrt(cov)
+    off = np.abs(cov - cov * np.eye(m)).reshape(len(cov), -1).max(axis=1)
+    cov[off <= _DIAGONAL_TOL] *= np.eye(m)
+    return np.linalg.inv(np.linalg.cholesky(cov))  # W = C⁻¹ for Σ = C Cᵀ
+
+
+def _relative_one(pi: gtsam.Pose2, pj: gtsam.Pose2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_relative` of one pair of poses, without array overhead."""
+    ti = pi.theta()
+    c, s = math.cos(ti), math.sin(ti)
+    tx, ty = pj.x() - pi.x(), pj.y() - pi.y()
+    dx, dy = c * tx + s * ty, -s * tx + c * ty
+    dpsi = (pj.theta() - ti + math.pi) % (2.0 * math.pi) - math.pi
+    cp, sp = math.cos(dpsi), math.sin(dpsi)
+    d_i = np.array([[-1.0, 0.0, dy], [0.0, -1.0, -dx], [0.0, 0.0, -1.0]])
+    d_j = np.array([[cp, -sp, 0.0], [sp, cp, 0.0], [0.0, 0.0, 1.0]])
+    return np.array([dx, dy, dpsi]), d_i, d_j
+
+
+class ValuesMaker:
+    """Small ``gtsam.Values`` of Pose2 and scalar values, made quickly.
+
+    Inserting a Python float into ``gtsam.Values`` costs tens of microseconds (the binding tries its
+    many ``insert`` overloads first); retracting a Values of zeros for the same keys by a
+    ``VectorValues`` costs a few. The zero templates are kept per set of scalar keys (a node's
+    segment variables change once per segment).
+    """
+
+    def __init__(self, capacity: int = 64):
+        self._templates: dict[tuple, gtsam.Values] = {}
+        self._capacity = capacity
+
+    def make(self, items: dict) -> gtsam.Values:
+        """``gtsam.Values`` holding ``key -> Pose2 or float`` items."""
+        scalars = tuple(sorted(k for k, v in items.items() if not isinstance(v, gtsam.Pose2)))
+        if scalars:
+            base = self._templates.get(scalars)
+            if base is None:
+                if len(self._templates) >= self._capacity:
+                    self._templates.clear()
+                base = gtsam.Values()
+                for key in scalars:
+                    base.insert(key, 0.0)
+                self._templates[scalars] = base
+            delta = gtsam.VectorValues()
+            for key in scalars:
+                delta.insert(key, np.array([float(items[key])]))
+            out = base.retract(delta)
+        else:
+            out = gtsam.Values()
+        for key, v in items.items():
+            if isinstance(v, gtsam.Pose2):
+                out.insert(key, v)
+        return out
 
 
 def _poses(values: gtsam.Values, keys: np.ndarray, poses: dict | None) -> np.ndarray:

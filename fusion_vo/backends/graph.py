@@ -106,7 +106,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.backends.factors import ModelFactor, ModelFactors, group, pose_table
+from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors.gps import GpsModel
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.range import RANGE
@@ -504,7 +504,7 @@ def _compose_with_covariance(a, cov_a, b, cov_b):
     return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
 
 
-def freeze_custom_factors(factors: list, lookup) -> list:
+def freeze_custom_factors(factors: list, lookup, maker: ValuesMaker | None = None) -> list:
     """Replace each sensor-model factor (:class:`~fusion_vo.backends.factors.ModelFactor`, or a
     :class:`gtsam.CustomFactor`) by its linearisation at ``lookup(key)`` values.
 
@@ -516,9 +516,11 @@ def freeze_custom_factors(factors: list, lookup) -> list:
     gyro enters with a small weight. The batch solution relinearises them at every iteration.
     """
     out = []
+    keys = {key for f in factors if isinstance(f, ModelFactor) for key in f.all_keys()}
+    point = (maker or ValuesMaker()).make({key: lookup(key) for key in keys}) if keys else None
     for f in factors:
         if isinstance(f, ModelFactor):
-            out.append(f.linearized(lookup))
+            out.append(f.linearized(lookup, point))
         elif isinstance(f, gtsam.CustomFactor):
             lin = gtsam.Values()
             insert_values(lin, {key: lookup(key) for key in f.keys()})
@@ -617,6 +619,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     estimate: dict = dict(builder.initial_estimate)
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
+    maker = ValuesMaker()
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
         if gps is not None:
@@ -628,8 +631,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 pose_cov = None
             builder.gps_factor(nf, n, gps, pose_cov)
         builder.count(nf)
-        new_values = gtsam.Values()
-        insert_values(new_values, nf.values)
+        new_values = maker.make(nf.values)
         if gcfg.batch:
             for f in nf.factors:
                 if isinstance(f, ModelFactor):
@@ -643,7 +645,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         new_graph = gtsam.NonlinearFactorGraph()
         if isam is not None or lag is not None:
             lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
-            for f in freeze_custom_factors(nf.factors, lookup):
+            for f in freeze_custom_factors(nf.factors, lookup, maker):
                 new_graph.add(f)
         if isam is not None:
             isam.update(new_graph, new_values)

@@ -237,6 +237,10 @@ class GyroModel(MeasurementModel):
 
     def evaluate(self, motion, gyro_bias, dt=1.0):
         d = np.asarray(motion, dtype=np.float64)
+        if d.ndim == 1 and np.ndim(dt) == 0:  # one measurement: without array overhead
+            t = float(dt)
+            return (np.array([float(d[2]) + float(np.asarray(gyro_bias).flat[0]) * t]),
+                    {"motion": np.array([[0.0, 0.0, 1.0]]), "gyro_bias": np.array([[t]])})
         b = np.asarray(gyro_bias, dtype=np.float64)
         dt = np.asarray(dt, dtype=np.float64)
         h = d[..., 2:3] + b * dt[..., None] if dt.ndim else d[..., 2:3] + b * float(dt)
@@ -267,6 +271,8 @@ class AhrsModel(MeasurementModel):
         psi = np.asarray(heading, dtype=np.float64)
         o = np.asarray(ahrs_offset, dtype=np.float64)
         h = psi + o
+        if h.ndim == 1:
+            return h, {"heading": np.array([[1.0]]), "ahrs_offset": np.array([[1.0]])}
         one = np.ones(h.shape[:-1] + (1, 1))
         return h, {"heading": one, "ahrs_offset": one.copy()}
 

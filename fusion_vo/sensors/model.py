@@ -78,10 +78,18 @@ def scaled_motion(motion, k_xy, k_yaw) -> tuple[np.ndarray, np.ndarray, np.ndarr
     height; wheels: the radius) and of its turn (wheels: the wheel base).
     """
     d = np.asarray(motion, dtype=np.float64)
+    if d.ndim == 1:  # one measurement (the EKF, an incremental solver): without array overhead
+        dx, dy, dpsi = float(d[0]), float(d[1]), float(d[2])
+        kx, ky = float(np.asarray(k_xy).flat[0]), float(np.asarray(k_yaw).flat[0])
+        return (np.array([kx * dx, kx * dy, ky * dpsi]), np.array([[kx, 0.0, 0.0], [0.0, kx, 0.0], [0.0, 0.0, ky]]),
+                np.array([[dx], [dy], [0.0]]), np.array([[0.0], [0.0], [dpsi]]))
     kx = np.asarray(k_xy, dtype=np.float64)[..., 0]
     ky = np.asarray(k_yaw, dtype=np.float64)[..., 0]
-    h = np.stack([kx * d[..., 0], kx * d[..., 1], ky * d[..., 2]], axis=-1)
     shape = d.shape[:-1]
+    h = np.empty(shape + (3,))
+    h[..., 0] = kx * d[..., 0]
+    h[..., 1] = kx * d[..., 1]
+    h[..., 2] = ky * d[..., 2]
     j_d = np.zeros(shape + (3, 3))
     j_d[..., 0, 0] = j_d[..., 1, 1] = kx
     j_d[..., 2, 2] = ky
@@ -133,6 +141,11 @@ class Gate:
 def robust_weight(distance, kernel: str | None, k: float):
     """Weight of a residual at whitened distance ``distance`` under GTSAM's ``mEstimator`` ``kernel``
     (``"huber"``, ``"cauchy"`` or None)."""
+    if isinstance(distance, float):  # one factor: without array overhead
+        d = abs(distance)
+        if kernel == "huber":
+            return 1.0 if d <= k else k / d
+        return k * k / (k * k + d * d) if kernel == "cauchy" else 1.0
     d = np.abs(np.asarray(distance, dtype=np.float64))
     if kernel == "huber":
         return np.where(d <= k, 1.0, k / np.maximum(d, 1e-300))

@@ -361,9 +361,11 @@ class StandstillModel(MeasurementModel):
 
     def evaluate(self, motion):
         d = np.asarray(motion, dtype=np.float64)
+        if d.ndim == 1:
+            return np.array([float(d[2])]), {"motion": np.array([[0.0, 0.0, 1.0]])}
         j = np.zeros(d.shape[:-1] + (1, 3))
         j[..., 0, 2] = 1.0
-        return d[..., 2:3], {"motion": j}
+        return d[..., 2:3].copy(), {"motion": j}
 
 
 WHEEL = WheelModel()
