@@ -222,14 +222,15 @@ class PlanarEkf:
         The model's arguments are read from the state (:data:`STATE_COLUMNS`) and its Jacobians become
         the columns of ``H``; ``params`` go to :meth:`~fusion_vo.sensors.model.MeasurementModel.evaluate`.
         """
-        x = self.x
+        x = self.kf.x[:, 0]
         h, jac = model.evaluate(**{name: x[STATE_COLUMNS[name]] for name in model.args}, **params)
         H = np.zeros((model.dim, DIM))
         for name, J in jac.items():
             H[:, STATE_COLUMNS[name]] = J
         angle = model.angle_rows[0] if model.angle_rows else None
-        R = np.asarray(R, dtype=np.float64).reshape(model.dim, model.dim)
-        return model.name, np.asarray(z, dtype=np.float64).reshape(model.dim), h, H, R, angle
+        if model.dim == 1:
+            return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
+        return model.name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
 
     # ------------------------------------------------------------------ GPS
     def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:

@@ -103,20 +103,29 @@ class ModelFactor:
         for i in self._wrapped_rows(rows):
             e[i] = (e[i] + math.pi) % (2.0 * math.pi) - math.pi
         cov = np.atleast_2d(self.covariance)
-        if len(cov) == 1:
-            W = np.array([[1.0 / math.sqrt(float(cov[0, 0]))]])
+        items = []
+        if len(rows) == 1:  # one row: scalars instead of 1x1 matrices
+            w = 1.0 / math.sqrt(float(cov[0, 0]))
+            ew = w * float(e[0])
+            if self.robust is not None:
+                w *= math.sqrt(robust_weight(abs(ew), *self.robust))
+                ew = w * float(e[0])
+            for name, link, key in links:
+                J = jac[name][rows] if sub else jac[name]
+                items += [int(key), w * (J if link is None else J @ link)]
+            b = np.array([-ew])
         else:  # GTSAM's own whitening of this covariance (as a CustomFactor's linearisation)
             W = gtsam.noiseModel.Gaussian.Covariance(cov).R()
-        ew = W @ e
-        if self.robust is not None:
-            scale = math.sqrt(robust_weight(math.sqrt(float(ew @ ew)), *self.robust))
-            W = W * scale
-            ew = ew * scale
-        items = []
-        for name, link, key in links:
-            WJ = W @ (jac[name][rows] if sub else jac[name])
-            items += [int(key), WJ if link is None else WJ @ link]
-        factor = gtsam.JacobianFactor(*items, -ew, gtsam.noiseModel.Unit.Create(len(rows)))
+            ew = W @ e
+            if self.robust is not None:
+                scale = math.sqrt(robust_weight(math.sqrt(float(ew @ ew)), *self.robust))
+                W = W * scale
+                ew = ew * scale
+            for name, link, key in links:
+                WJ = W @ (jac[name][rows] if sub else jac[name])
+                items += [int(key), WJ if link is None else WJ @ link]
+            b = -ew
+        factor = gtsam.JacobianFactor(*items, b, _UNIT[len(rows)])
         if point is None:
             point = ValuesMaker().make(current)
         return gtsam.LinearContainerFactor(factor, point)
@@ -179,6 +188,8 @@ class ModelFactors:
         self.z = np.array([np.asarray(f.z, dtype=np.float64).reshape(-1) for f in factors])
         self.whiten = whitening(np.array([np.atleast_2d(f.covariance) for f in factors], dtype=np.float64))
         self.robust = f0.robust
+        #: exact as a linear factor: a linear model without a robust kernel
+        self.linear = f0.model.linear and f0.robust is None
         self.wrap = [i for i, r in enumerate(self.rows) if r in f0.model.angle_rows + f0.model.turn_rows]
 
     def __len__(self) -> int:
@@ -243,6 +254,7 @@ class ModelFactors:
 
 
 _HEADING = np.array([[[0.0, 0.0, 1.0]]])
+_UNIT = {m: gtsam.noiseModel.Unit.Create(m) for m in (1, 2, 3)}
 _DIAGONAL_TOL = 1e-9
 
 
@@ -322,10 +334,12 @@ def _poses(values: gtsam.Values, keys: np.ndarray, poses: dict | None) -> np.nda
     return out
 
 
-def pose_table(values: gtsam.Values) -> dict:
-    """All Pose2 values at once: ``{"keys": sorted keys, "xyyaw": (N, 3)}``."""
+def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:
+    """All Pose2 values at once: ``{"keys": sorted keys, "xyyaw": (N, 3)}`` (``keys``: those of an
+    earlier table of values with the same variables)."""
     xyyaw = gtsam.utilities.extractPose2(values)
-    keys = np.array([k for k in values.keys() if chr(gtsam.Symbol(k).chr()) == "x"], dtype=np.int64)
+    if keys is None:
+        keys = np.array([k for k in values.keys() if chr(gtsam.Symbol(k).chr()) == "x"], dtype=np.int64)
     return {"keys": keys, "xyyaw": np.asarray(xyyaw, dtype=np.float64).reshape(-1, 3)}
 
 

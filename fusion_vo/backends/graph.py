@@ -550,14 +550,24 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
     Returns ``(solution, iterations, linear_graph)``; the last linearisation serves the marginals.
     """
     groups = model_factors or []
+    pose_keys = pose_table(values)["keys"] if groups else None
+    if any(g.linear for g in groups):
+        # linear, non-robust factors (gyro, standstill) are exact as linear factors: linearised once
+        graph = gtsam.NonlinearFactorGraph(graph)
+        poses = pose_table(values, pose_keys)
+        for g in groups:
+            if g.linear:
+                for f in g.linearize(values, poses):
+                    graph.add(gtsam.LinearContainerFactor(f, values))
+        groups = [g for g in groups if not g.linear]
 
     def total_error(v: gtsam.Values) -> float:
-        poses = pose_table(v) if groups else None
+        poses = pose_table(v, pose_keys) if groups else None
         return graph.error(v) + sum(g.error(v, poses) for g in groups)
 
     def linearize(v: gtsam.Values) -> gtsam.GaussianFactorGraph:
         lin = graph.linearize(v)
-        poses = pose_table(v) if groups else None
+        poses = pose_table(v, pose_keys) if groups else None
         for g in groups:
             for f in g.linearize(v, poses):
                 lin.add(f)

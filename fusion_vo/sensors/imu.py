@@ -231,15 +231,16 @@ class GyroModel(MeasurementModel):
     """
 
     name: str = "gyro"
+    linear: bool = True
     args: tuple = ("motion", "gyro_bias")
     dim: int = 1
     turn_rows: tuple = (0,)
 
     def evaluate(self, motion, gyro_bias, dt=1.0):
         d = np.asarray(motion, dtype=np.float64)
-        if d.ndim == 1 and np.ndim(dt) == 0:  # one measurement: without array overhead
+        if d.ndim == 1 and isinstance(dt, (int, float)):  # one measurement: without array overhead
             t = float(dt)
-            return (np.array([float(d[2]) + float(np.asarray(gyro_bias).flat[0]) * t]),
+            return (np.array([float(d[2]) + float(gyro_bias[0]) * t]),
                     {"motion": np.array([[0.0, 0.0, 1.0]]), "gyro_bias": np.array([[t]])})
         b = np.asarray(gyro_bias, dtype=np.float64)
         dt = np.asarray(dt, dtype=np.float64)
@@ -263,6 +264,7 @@ class AhrsModel(MeasurementModel):
     """
 
     name: str = "ahrs"
+    linear: bool = True
     args: tuple = ("heading", "ahrs_offset")
     dim: int = 1
     angle_rows: tuple = (0,)

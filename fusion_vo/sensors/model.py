@@ -46,6 +46,9 @@ ARGUMENT_SIZES = {"motion": 3, "heading": 1, "gyro_bias": 1, "visual_scale": 1, 
 class MeasurementModel:
     """Base of the sensor models: a name, the arguments, the measurement's size and its angle rows.
 
+    ``linear`` says the prediction is linear in the arguments (the graph then linearises it once:
+    a pose's heading is additive in GTSAM's Pose2 chart, so a factor on headings and scalars is exact
+    as a linear factor);
     ``angle_rows`` are absolute angles (wrapped to [-π, π) wherever they are compared);
     ``turn_rows`` are heading changes over the measurement's interval, wrapped where the interval's
     motion is an increment (the graph) and not where it is a rate (the EKF evaluates per unit time).
@@ -57,6 +60,7 @@ class MeasurementModel:
     dim: int = 0
     angle_rows: tuple = ()
     turn_rows: tuple = ()
+    linear: bool = False
 
     def evaluate(self, **args) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Prediction ``h`` (..., dim) and Jacobians ``{arg: (..., dim, size)}`` at the given arguments."""
@@ -71,6 +75,11 @@ class MeasurementModel:
         return r, jac
 
 
+def _first(v) -> float:
+    """The value of a one-element argument (array or number)."""
+    return float(v) if isinstance(v, (int, float)) else float(v[0])
+
+
 def scaled_motion(motion, k_xy, k_yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """``(k_xy d_x, k_xy d_y, k_yaw d_ψ)`` and its Jacobians with respect to the motion, ``k_xy`` and ``k_yaw``.
 
@@ -80,7 +89,7 @@ def scaled_motion(motion, k_xy, k_yaw) -> tuple[np.ndarray, np.ndarray, np.ndarr
     d = np.asarray(motion, dtype=np.float64)
     if d.ndim == 1:  # one measurement (the EKF, an incremental solver): without array overhead
         dx, dy, dpsi = float(d[0]), float(d[1]), float(d[2])
-        kx, ky = float(np.asarray(k_xy).flat[0]), float(np.asarray(k_yaw).flat[0])
+        kx, ky = _first(k_xy), _first(k_yaw)
         return (np.array([kx * dx, kx * dy, ky * dpsi]), np.array([[kx, 0.0, 0.0], [0.0, kx, 0.0], [0.0, 0.0, ky]]),
                 np.array([[dx], [dy], [0.0]]), np.array([[0.0], [0.0], [dpsi]]))
     kx = np.asarray(k_xy, dtype=np.float64)[..., 0]

@@ -28,7 +28,8 @@ class VisualModel(MeasurementModel):
     turn_rows: tuple = (2,)
 
     def evaluate(self, motion, visual_scale):
-        h, j_d, j_k, _ = scaled_motion(motion, visual_scale, np.ones_like(np.asarray(visual_scale, dtype=np.float64)))
+        one = 1.0 if np.ndim(motion) == 1 else np.ones_like(np.asarray(visual_scale, dtype=np.float64))
+        h, j_d, j_k, _ = scaled_motion(motion, visual_scale, one)
         return h, {"motion": j_d, "visual_scale": j_k}
 
 

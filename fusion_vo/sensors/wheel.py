@@ -355,6 +355,7 @@ class StandstillModel(MeasurementModel):
     """
 
     name: str = "standstill"
+    linear: bool = True
     args: tuple = ("motion",)
     dim: int = 1
     turn_rows: tuple = (0,)
