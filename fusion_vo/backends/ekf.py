@@ -86,7 +86,6 @@ import logging
 import time
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.result import FusionResult, SensorCount
@@ -137,6 +136,10 @@ class PlanarEkf:
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
                  wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None):
+        # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
+        from filterpy.kalman import ExtendedKalmanFilter
+        from scipy.stats import chi2
+
         self.config = config
         calib = config.self_calibration
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale

@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def wrap_angle(a):
@@ -26,12 +25,16 @@ def wrap_angle(a):
 def yaw_of_quaternion(q_wxyz) -> np.ndarray:
     """Yaw (rotation about the world z axis, ZYX convention) of quaternions ``(w, x, y, z)`` (N x 4), in
     [-pi, pi] (scipy's ``Rotation``; the quaternions are normalised first)."""
+    from scipy.spatial.transform import Rotation  # on first use: scipy.spatial is slow to load
+
     q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
     return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_euler("ZYX")[:, 0]
 
 
 def quaternion_of_yaw(yaw) -> np.ndarray:
     """Quaternions ``(w, x, y, z)`` (N x 4) of rotations by ``yaw`` [rad] about the z axis."""
+    from scipy.spatial.transform import Rotation
+
     q_xyzw = Rotation.from_euler("z", np.asarray(yaw, dtype=np.float64).reshape(-1, 1)).as_quat()
     return q_xyzw[:, [3, 0, 1, 2]]
 
