@@ -37,13 +37,21 @@ never what a controller sees. :meth:`StreamingFusion.processed_estimate` returns
 
 Late data
 ---------
-The EKF keeps the last ``history`` seconds (default 2 s) of its states, the increments it consumed
-and the raw samples. A measurement older than the last processed node but within the history rewinds
-the filter to the node before it and re-filters everything after it, so the result is the one the same
-data would have given in time order. iSAM2 cannot rewind: for ``backend="gtsam"`` late data is applied
-only within the reorder window (set it to the latency of the slowest input; the prediction keeps the
-returned pose current). Measurements older than the history (or than the window for iSAM2) are counted
-as ``late`` and reported by :meth:`finish`.
+Both backends keep the last ``history`` seconds (default 2 s) of the raw samples and of what each
+node consumed. A measurement older than the last processed node but within the history is applied:
+
+* the EKF keeps its states too: it rewinds to the node before the measurement and re-filters
+  everything after it, so the result is the one the same data would have given in time order;
+* iSAM2 rebuilds the node intervals the measurement changes (its own interval and those whose
+  interpolation, gating or spike median its neighbours feed) and swaps their factors for the new ones
+  in one update (``removeFactorIndices``), when the next node is due; the custom factors are linearised
+  at the current estimate, twice. The node times stay those already processed, so a late visual
+  increment is applied only if its ``t0`` and ``t1`` are consecutive nodes (a camera later than the
+  reorder window finds fill-in nodes in its place: set the window to the camera's latency), and the
+  online poses of the rebuilt nodes become iSAM2's estimates after the swap (:meth:`smoothed` gives the
+  whole current estimate).
+
+Measurements older than the history are counted as ``late`` and reported by :meth:`finish`.
 
 Bad input
 ---------
@@ -136,7 +144,7 @@ class StreamingFusion:
         Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
         (default: at the body origin).
     history : float
-        Seconds of states and samples the EKF keeps to re-apply late measurements (default 2).
+        Seconds of samples (and EKF states) kept to re-apply late measurements (default 2).
     horizon : float
         Largest prediction [s] :meth:`current_estimate` makes beyond the newest measurement, and how far
         ahead of the newest measurement a new one may be before it is rejected (default 1).
@@ -155,7 +163,7 @@ class StreamingFusion:
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         if not (np.isfinite(history) and history >= 0 and np.isfinite(horizon) and horizon > 0):
             raise InputError(f"history must be >= 0 and horizon > 0 seconds (got history={history}, horizon={horizon})")
-        self.history = float(history) if backend == "ekf" else 0.0
+        self.history = float(history)
         self.horizon = float(horizon)
         if steps_per_call is not None and (not isinstance(steps_per_call, int) or steps_per_call < 1):
             raise InputError(f"steps_per_call must be a positive integer or None, not {steps_per_call!r}")
@@ -186,6 +194,7 @@ class StreamingFusion:
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
         self.rewinds = 0
+        self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
         self._buffers: dict[str, list] = {name: [] for name in ("wheel", "odom", "imu", "range")}
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
@@ -222,6 +231,7 @@ class StreamingFusion:
                 self._advance(inc.t1)
                 return
             self._insert_visual(inc)
+            self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
             self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
@@ -295,6 +305,14 @@ class StreamingFusion:
             if not self._t_nodes:
                 return None
             return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
+
+    def smoothed(self) -> PoseData | None:
+        """iSAM2 only: its current estimate of every node so far (each pose given all data up to now),
+        beside the online track (each pose as it was when its node was the newest). None for the EKF."""
+        with self._lock:
+            if self._graph is None:
+                return None
+            return PoseData(np.array(self._t_nodes[:self._graph.n + 1]), self._graph.poses())
 
     @property
     def counts(self) -> dict[str, SensorCount]:
@@ -371,8 +389,17 @@ class StreamingFusion:
             logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
                            "history); not applied", sensor, t, self._t_nodes[-1], self.history)
             return True
-        self._rewind(i)
-        return False
+        if self.backend == "ekf":
+            self._rewind(i)
+        return False  # iSAM2: the intervals the sample changes are marked once it is buffered (_mark)
+
+    def _mark(self, t_lo: float, t_hi: float) -> None:
+        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding."""
+        if self.backend == "ekf" or not self._t_nodes or t_lo >= self._t_nodes[-1]:
+            return
+        first = max(bisect.bisect_left(self._t_nodes, t_lo - 1e-9), 1)
+        last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
+        self._dirty.update(range(first, last + 1))
 
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
@@ -388,7 +415,10 @@ class StreamingFusion:
         buf = self._buffers[stream]
         if buf and t < buf[-1][0]:
             self._count(sensor).reordered += 1
-        bisect.insort(buf, (float(t), payload), key=lambda item: item[0])
+        k = bisect.bisect_right(buf, t, key=lambda item: item[0])
+        buf.insert(k, (t, payload))
+        # a sample changes the interpolation, gating and spike medians of its neighbours' intervals only
+        self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
 
     def _insert_visual(self, inc: VisualIncrement) -> None:
@@ -408,7 +438,7 @@ class StreamingFusion:
         interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
         increment is applied from its ``t0`` node (``back=0``).
         """
-        if self.backend != "ekf" or self.history <= 0:
+        if self.history <= 0:
             return None
         i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
         if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
@@ -460,6 +490,10 @@ class StreamingFusion:
 
     def _process(self, until: float, budget: int | None = None) -> None:
         """Process the nodes up to ``until``, at most ``budget`` of them (None: all)."""
+        if self._dirty and (budget is None or self._next_node(self._t_nodes[-1], until) is not None):
+            # late data is swapped in when the next node is due (several late samples, one update)
+            dirty, self._dirty = sorted(self._dirty), set()
+            self._replace(dirty)
         if not self._t_nodes:
             start = self._start_time()
             if start is None or start > until:
@@ -503,8 +537,13 @@ class StreamingFusion:
                 streams.range = RangeData(t, np.array([r[1] for r in rows]))
         return streams
 
-    def _step(self, t0: float, t1: float) -> None:
-        self._step_counts = step = {}
+    def _interval(self, t0: float, t1: float, heading_offset: float | None):
+        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments)``.
+
+        Consumes the buffered visual increments ending at or before ``t1``; those that do not span
+        exactly this interval cannot be applied and are counted as late.
+        """
+        step: dict[str, SensorCount] = {}
         streams = self._streams_between(t0, t1)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
         usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
@@ -514,13 +553,18 @@ class StreamingFusion:
         self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
         if usable:
             streams.visual = usable
-        iv = build_intervals(streams, self.config, np.array([t0, t1]), self._heading_offset)
-        if iv.heading_offset is not None:
-            self._heading_offset = iv.heading_offset
+        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
         for sensor, c in iv.counts.items():
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
             own.missing += c.missing
+        return iv, step, consumed
+
+    def _step(self, t0: float, t1: float) -> None:
+        iv, step, consumed = self._interval(t0, t1, self._heading_offset)
+        self._step_counts = step
+        if iv.heading_offset is not None:
+            self._heading_offset = iv.heading_offset
         if self.backend == "ekf":
             self._ekf_step(iv)
             state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
@@ -531,6 +575,31 @@ class StreamingFusion:
         self._records.append(_NodeRecord(state, self._heading_offset, step, consumed))
         self._retire()
         self._prune(t0)
+
+    def _replace(self, nodes: list[int]) -> None:
+        """iSAM2: rebuild the intervals ending at ``nodes`` from the buffers (late data now in them) and
+        swap their factors in one update; their recorded poses become iSAM2's estimates after it."""
+        batches = []
+        for j in nodes:
+            rec = self._records[j]
+            if rec is None or self._records[j - 1] is None:  # left the history meanwhile
+                continue
+            for v in rec.visual:
+                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+            prev = self._records[j - 1]
+            iv, step, consumed = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            rec.counts, rec.visual = step, consumed
+            rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
+            batches.append((j, iv))
+        if not batches:
+            return
+        self._heading_offset = self._records[-1].heading_offset
+        for j, pose, cov, sensors in self._graph.replace(batches):
+            counts = self._records[j].counts
+            for s in sensors:
+                counts.setdefault(s, SensorCount()).used += 1
+            self._poses[j], self._covs[j] = pose, cov
+        self.rewinds += 1
 
     def _retire(self) -> None:
         """Drop the rewind data of nodes older than the history (their counts are kept)."""
@@ -543,6 +612,8 @@ class StreamingFusion:
             rec = self._records[j]
             _merge_into(self._retired_counts, rec.counts)
             self._records[j] = None
+            if self._graph is not None:
+                self._graph.forget(j)
 
     def _prune(self, t0: float) -> None:
         keep_from = t0 - self.history - 2.0 * self.config.max_gap
@@ -745,10 +816,16 @@ class _OnlineGraph:
             g.add(f)
         values = self.gtsam.Values()
         self.graph.insert_values(values, nf.values)
-        self.isam.update(g, values)
+        result = self.isam.update(g, values)
+        self.factors[self.n] = list(result.getNewFactorsIndices())
         key = self.graph.X(self.n)
         pose = self.isam.calculateEstimatePose2(key)
         self.prev_pose = pose
+        return self._pose_cov(self.n)
+
+    def _pose_cov(self, n: int):
+        key = self.graph.X(n)
+        pose = self.isam.calculateEstimatePose2(key)
         cov = self.graph.world_covariances(np.array([pose.theta()]), self.isam.marginalCovariance(key)[None])[0]
         return np.array([pose.x(), pose.y(), pose.theta()]), cov
 
@@ -756,22 +833,75 @@ class _OnlineGraph:
         cfg = self.config
         # the first node's own factors come with the first interval (which knows the sensors)
         self._pending_first = True
+        self.factors: dict[int, list[int]] = {}  # node -> indices of its factors in iSAM2
         return np.asarray(cfg.initial_pose, dtype=np.float64), np.diag([1e-8, 1e-8, 1e-8])
 
-    def step(self, iv):
-        builder = self.graph.GraphBuilder(iv, self.config, offset=self.n, t_origin=self.t_origin,
+    def _node_factors(self, n: int, iv, first: bool, previous_pose):
+        builder = self.graph.GraphBuilder(iv, self.config, offset=n - 1, t_origin=self.t_origin,
                                           calibrate=self.calibrate)
-        if self._pending_first:
-            first = builder.first_node()
-            nf = builder.node(1, self.prev_pose, self.estimate)
-            first.factors.extend(nf.factors)
-            first.values.update(nf.values)
-            first.sensors = nf.sensors
-            nf = first
-            self._pending_first = False
-        else:
-            nf = builder.node(1, self.prev_pose, self.estimate)
+        nf = builder.node(1, previous_pose, self.estimate)
+        if first:
+            head = builder.first_node()
+            head.factors.extend(nf.factors)
+            head.values.update(nf.values)
+            head.sensors = nf.sensors
+            nf = head
+        return builder, nf
+
+    def step(self, iv):
+        builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
+        self._pending_first = False
         self.n += 1
         pose, cov = self._update(nf)
         self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
         return pose, cov, nf.sensors
+
+    def replace(self, batches, passes: int = 2):
+        """Swap the factors of nodes ``n`` for those of their rebuilt intervals.
+
+        ``batches`` holds ``(n, Intervals)`` in node order (nodes that exist already). The custom
+        factors are linearised at the current estimate and swapped in one iSAM2 update; ``passes`` > 1
+        linearises them again at the estimate that update gave (the late data may have moved it) and
+        swaps again. Returns ``(n, pose, covariance, sensors)`` per node.
+        """
+        built = []
+        builder = nf = None
+        for n, iv in batches:
+            previous = self.isam.calculateEstimatePose2(self.graph.X(n - 1))
+            builder, nf = self._node_factors(n, iv, n == 1, previous)
+            built.append((n, nf))
+        new_keys: set = set()
+        for p in range(passes):
+            g = self.gtsam.NonlinearFactorGraph()
+            values = self.gtsam.Values()
+            remove, sizes = [], []
+            for n, nf in built:
+                new = {k: v for k, v in nf.values.items() if not self.isam.valueExists(k) and not values.exists(k)}
+                new_keys.update(new)
+                previous = self.isam.calculateEstimatePose2(self.graph.X(n - 1))
+                lookup = self.graph.current_value_lookup(new, self.isam, previous, n - 1)
+                frozen = self.graph.freeze_custom_factors(nf.factors, lookup)
+                for f in frozen:
+                    g.add(f)
+                self.graph.insert_values(values, new)
+                remove += self.factors.get(n, [])
+                sizes.append(len(frozen))
+            index = list(self.isam.update(g, values, remove).getNewFactorsIndices())
+            for (n, _), size in zip(built, sizes):
+                self.factors[n], index = index[:size], index[size:]
+        out = [(n, *self._pose_cov(n), nf.sensors) for n, nf in built]
+        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
+        if builder is not None and built[-1][0] == self.n:
+            self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
+        return out
+
+    def poses(self) -> np.ndarray:
+        """Current estimates ``(x, y, yaw)`` of nodes 0 .. n."""
+        est = self.isam.calculateEstimate()
+        if self.n == 0:
+            return np.array([np.asarray(self.config.initial_pose, dtype=np.float64)])
+        return np.array([[p.x(), p.y(), p.theta()] for p in (est.atPose2(self.graph.X(k)) for k in range(self.n + 1))])
+
+    def forget(self, n: int) -> None:
+        """Node ``n`` left the history: its factors are no longer replaced."""
+        self.factors.pop(n, None)
