@@ -83,6 +83,7 @@ import numpy as np
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
+from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
@@ -120,6 +121,8 @@ class _NodeRecord:
     heading_offset: float | None
     counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
     visual: list = field(default_factory=list)  # increments this node's step consumed
+    monitor: MonitorState | None = None  # the heading monitor after this node
+    dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
 
 
 class StreamingFusion:
@@ -194,6 +197,7 @@ class StreamingFusion:
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
         self.rewinds = 0
+        self._monitor = LiveHeadingMonitor(self.config)
         self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
         self._buffers: dict[str, list] = {name: [] for name in ("wheel", "odom", "imu", "range")}
         self._visual: list[VisualIncrement] = []
@@ -340,15 +344,20 @@ class StreamingFusion:
         result.counts[name] = counts
         result.notes = list(self._notes)
         if "gps" in self.sensors:
-            m = self._gps_model
-            self._notes.append(f"ekf: gps {m.n_used} fixes used, {m.n_rejected} rejected by the gate; world frame: "
-                               + ("ENU at the datum" if self._frame == "enu" else
-                                  "the start frame (the fixes never fixed the heading of ENU)"))
+            gps = counts.get("gps", SensorCount())
+            result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
+                                "world frame: " + ("ENU at the datum" if self._frame == "enu" else
+                                                   "the start frame (the fixes never fixed the heading of ENU)"))
+        if self._t_nodes:
+            episodes = self._monitor.all_episodes(self._t_nodes[-1])
+            result.inconsistent = [ep.as_dict() for ep in episodes]
+            result.notes.extend("live monitor: " + ep.note(self._t_nodes[0]) for ep in episodes)
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
         if self.rewinds:
-            result.notes.append(f"late measurements re-applied by rewinding the filter {self.rewinds} times")
+            how = "rewinding the filter" if self.backend == "ekf" else "swapping iSAM2 factors"
+            result.notes.append(f"late measurements re-applied by {how} {self.rewinds} times")
         return result
 
     # ------------------------------------------------------------------ buffering
@@ -455,6 +464,8 @@ class StreamingFusion:
         self._ekf.kf.x = x.reshape(-1, 1).copy()
         self._ekf.kf.P = P.copy()
         self._heading_offset = rec.heading_offset
+        if rec.monitor is not None:
+            self._monitor.restore(rec.monitor)
         del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
         self.rewinds += 1
 
@@ -565,6 +576,10 @@ class StreamingFusion:
         self._step_counts = step
         if iv.heading_offset is not None:
             self._heading_offset = iv.heading_offset
+        self._monitor.add(iv)
+        self._monitor.check()
+        dropped = frozenset(self._monitor.dropped)
+        self._monitor.apply(iv)
         if self.backend == "ekf":
             self._ekf_step(iv)
             state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
@@ -572,7 +587,8 @@ class StreamingFusion:
             self._graph_step(iv)
             state = None
         self._t_nodes.append(t1)
-        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed))
+        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed,
+                                         self._monitor.state() if state is not None else None, dropped))
         self._retire()
         self._prune(t0)
 
@@ -589,6 +605,8 @@ class StreamingFusion:
             prev = self._records[j - 1]
             iv, step, consumed = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
             rec.counts, rec.visual = step, consumed
+            self._monitor.update(j - 1, iv)
+            self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
             batches.append((j, iv))
         if not batches:
@@ -635,7 +653,8 @@ class StreamingFusion:
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
             self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
-            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None))
+            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
+                                             monitor=self._monitor.state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(_NodeRecord(None, None))
@@ -804,7 +823,9 @@ class _OnlineGraph:
         self.config = config
         self.t_origin = t_origin
         self.calibrate = calibrate
-        self.isam = gtsam.ISAM2(graph.isam_params())
+        # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
+        # a conditioning that Cholesky can report as indeterminate
+        self.isam = gtsam.ISAM2(graph.isam_params(True))
         self.n = 0
         self.estimate: dict = {}
         self.prev_pose = gtsam.Pose2(*config.initial_pose)
