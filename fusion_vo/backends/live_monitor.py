@@ -228,7 +228,7 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     """The gyro's bias over the kept intervals and whether it was measured at rest.
 
     With ten intervals at rest, the median rate there (as the whole-recording check does). Without,
-    the rate difference to the AHRS heading (else to the wheels' yaw)
+    the rate difference to the AHRS heading (else the camera's, else the wheels' yaw)
     is averaged over the span where both are measured: the heading change telescopes, so a few
     seconds give the bias to ``σ_ψ / T``, where the median of per-interval rate differences (what the
     whole-recording check uses when there is no standstill) follows the AHRS' interval noise.
@@ -247,6 +247,15 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:] & iv.gyro_ok
     if np.count_nonzero(ok) >= 10:
         refs.append((ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
+    if len(iv.vis_i0):  # the camera's heading increments (independent of every calibration)
+        ok = np.zeros(len(dt), bool)
+        angle = np.zeros(len(dt))
+        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
+            ok[a:b] = True
+            angle[a:b] = delta[2] / (b - a)
+        ok &= iv.gyro_ok
+        if np.count_nonzero(ok) >= 10:
+            refs.append((ok, angle))
     if iv.uses("wheel"):
         ok = iv.wheel_ok & iv.gyro_ok
         if np.count_nonzero(ok) >= 10:
