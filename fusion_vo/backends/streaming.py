@@ -27,6 +27,11 @@ GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the p
 (``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
 (plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
 and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
+kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
+as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).
+Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
+(kept for the alignment) or late.
 
 A pose for now
 --------------
@@ -122,6 +127,8 @@ class _NodeRecord:
     counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
     visual: list = field(default_factory=list)  # increments this node's step consumed
     monitor: MonitorState | None = None  # the heading monitor after this node
+    fixes: list = field(default_factory=list)  # GPS fixes this node's step consumed
+    gps: tuple | None = None  # GPS bookkeeping after this node (_gps_state)
     dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
 
 
@@ -184,8 +191,6 @@ class StreamingFusion:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
         if "gps" in self.sensors and backend != "ekf":
             raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
-        if "gps" in self.sensors:  # the switch to ENU re-expresses the recorded states: no rewind across it
-            self.history = 0.0
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
@@ -218,7 +223,8 @@ class StreamingFusion:
         self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
         self._frame = "start"
         self._gps_reacquire = None
-        self._gps_bad = 0
+        self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
+        self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
 
     # ------------------------------------------------------------------ input
     def add_visual(self, inc: VisualIncrement) -> None:
@@ -265,14 +271,12 @@ class StreamingFusion:
         with self._lock:
             self._check("gps")
             if not self._valid("gps", fix.t, [fix.enu, fix.covariance]):
-                self._gps_bad += 1  # the gps count is set from the model's and these at the end
                 return
             if self._late("gps", fix.t):
                 return
             enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
             cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
             if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-                self._gps_bad += 1
                 self._count("gps").gated += 1
                 return
             if self._gps and fix.t < self._gps[-1].t:
@@ -460,6 +464,7 @@ class StreamingFusion:
         for later in self._records[i + 1:]:
             for v in later.visual:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        self._rewind_gps(i, rec.gps)
         x, P = rec.state
         self._ekf.kf.x = x.reshape(-1, 1).copy()
         self._ekf.kf.P = P.copy()
@@ -574,6 +579,7 @@ class StreamingFusion:
     def _step(self, t0: float, t1: float) -> None:
         iv, step, consumed = self._interval(t0, t1, self._heading_offset)
         self._step_counts = step
+        self._step_fixes = []
         if iv.heading_offset is not None:
             self._heading_offset = iv.heading_offset
         self._monitor.add(iv)
@@ -587,8 +593,10 @@ class StreamingFusion:
             self._graph_step(iv)
             state = None
         self._t_nodes.append(t1)
+        keep = state is not None
         self._records.append(_NodeRecord(state, self._heading_offset, step, consumed,
-                                         self._monitor.state() if state is not None else None, dropped))
+                                         monitor=self._monitor.state() if keep else None, dropped=dropped,
+                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None))
         self._retire()
         self._prune(t0)
 
@@ -654,7 +662,7 @@ class StreamingFusion:
             twist = "odom" in self.sensors and "wheel" not in self.sensors
             self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
             self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
-                                             monitor=self._monitor.state()))
+                                             monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(_NodeRecord(None, None))
@@ -674,8 +682,9 @@ class StreamingFusion:
         t1 = float(iv.t[-1])
         for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
             self._gps.remove(fix)
+            self._step_fixes.append(fix)
             if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
-                self._count("gps").late += 1
+                self._step_counts.setdefault("gps", SensorCount()).late += 1
             else:
                 self._apply_gps(fix)
         for sensor, c in ekf.counts.items():
@@ -701,7 +710,7 @@ class StreamingFusion:
                 np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
             fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
             if fit is None:
-                self._count("gps").missing += 1  # kept for the alignment, not applied
+                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
                 return
             sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
             _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
@@ -714,6 +723,7 @@ class StreamingFusion:
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
             rot = np.eye(3)
             rot[:2, :2] = T[:2, :2]
+            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
             self._poses = [p for p in fit.apply(np.array(self._poses))]
             self._covs = [rot @ cv @ rot.T for cv in self._covs]
             self._frame = "enu"
@@ -724,11 +734,44 @@ class StreamingFusion:
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
         accepted = ekf.gps_update(model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
-            ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
+            accepted = ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
         elif accepted:
             self._gps_reacquire.due(fix.t, True)
-        count = self._count("gps")
-        count.used, count.gated = model.n_used, model.n_rejected + self._gps_bad
+        count = self._step_counts.setdefault("gps", SensorCount())
+        if accepted:
+            count.used += 1
+        else:
+            count.gated += 1
+
+    def _gps_state(self) -> tuple | None:
+        """What a rewind restores of the GPS bookkeeping (frame, fixes kept for the alignment, re-acquisition)."""
+        if "gps" not in self.sensors:
+            return None
+        re = self._gps_reacquire
+        return (self._frame, len(self._gps_seen), None if re is None else (re.last_ok, len(re.times)),
+                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)))
+
+    def _rewind_gps(self, i: int, state: tuple | None) -> None:
+        """Back to the GPS bookkeeping after node ``i``; undo the switch to ENU if it came after ``i``."""
+        for rec in self._records[i + 1:]:
+            for fix in rec.fixes:
+                bisect.insort(self._gps, fix, key=lambda f: f.t)
+        if state is None:
+            return
+        frame, n_seen, reacquire, model = state
+        if self._frame == "enu" and frame == "start":
+            _, poses, covs, n_notes = self._start_frame
+            self._poses[:i + 1] = [p.copy() for p in poses[:i + 1]]
+            self._covs[:i + 1] = [c.copy() for c in covs[:i + 1]]
+            del self._notes[n_notes:]
+            self._frame, self._gps_reacquire, self._start_frame = "start", None, None
+        del self._gps_seen[n_seen:]
+        if reacquire is not None:
+            self._gps_reacquire.last_ok = reacquire[0]
+            del self._gps_reacquire.times[reacquire[1]:]
+        m = self._gps_model
+        m.n_used, m.n_rejected = model[0], model[1]
+        del m.rejected_t[model[2]:]
 
     def _graph_step(self, iv) -> None:
         pose, cov, sensors = self._graph.step(iv)
