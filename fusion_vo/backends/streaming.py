@@ -528,12 +528,17 @@ class StreamingFusion:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
         return max(times) if times else -np.inf
 
-    def _streams_between(self, t0: float, t1: float) -> SensorStreams:
-        margin = self.config.max_gap
+    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None) -> SensorStreams:
+        """The buffered samples an interval needs: those inside it, the ones bracketing it, and the
+        neighbours the spike check's running median reads around those (the same values as in batch
+        use); until the AHRS offset is known, the IMU's first quarter second after ``t0`` too."""
+        extra = int(self.config.imu.spike_window) + 1
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
-            lo = max(bisect.bisect_left(buf, t0 - margin, key=lambda item: item[0]) - 1, 0)
-            hi = bisect.bisect_right(buf, t1 + margin, key=lambda item: item[0]) + 1
+            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - extra, 0)
+            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + extra
+            if name == "imu" and heading_offset is None:
+                hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
             if len(rows) < (1 if name == "range" else 2):
                 continue
@@ -560,7 +565,7 @@ class StreamingFusion:
         exactly this interval cannot be applied and are counted as late.
         """
         step: dict[str, SensorCount] = {}
-        streams = self._streams_between(t0, t1)
+        streams = self._streams_between(t0, t1, heading_offset)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
         usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
         for v in consumed:
