@@ -15,7 +15,8 @@ every sample the caller asks for ``current_estimate()``, as a controller would. 
 Baseline, measured in the same run and order: plain wheel dead reckoning (pose integrated from each
 tick pair, returned after every sample), the cheapest possible "pose for now". The backends run
 interleaved ``--repeat`` times (default 3) and the figures pool the repeats, so load on a shared
-machine affects all of them alike. Targets: p99 <= 2 ms and worst <= 10 ms per call.
+machine affects all of them alike; the machine's load average before and after is printed. Targets:
+p99 <= 2 ms and worst <= 10 ms per call.
 Usage::
 
     python benchmarks/bench_latency.py [--seconds 60] [--repeat 3] [--camera-delay 0.15]
@@ -119,6 +120,7 @@ def main() -> int:
     parser.add_argument("--window", type=float, default=0.05,
                         help="reorder window of the EKF [s]; iSAM2 uses camera-delay + 0.05 (it cannot rewind)")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     s = synthetic_streams(SyntheticOptions(duration=args.seconds, visual_scale=1.02), seed=1)
     msgs = messages(s, args.camera_delay)
     windows = {"ekf": args.window, "gtsam": args.camera_delay + 0.05}
@@ -128,6 +130,8 @@ def main() -> int:
         runs["dead reckoning"].append(run_dead_reckoning(s, msgs))
         for backend in ("ekf", "gtsam"):
             runs[backend].append(run_backend(s, msgs, backend, windows[backend]))
+    load_after = os.getloadavg()
+    print(f"load average (1 min) {load_before[0]:.1f} before, {load_after[0]:.1f} after, on {os.cpu_count()} cores")
     print(f"{args.seconds:.0f} s drive, {len(msgs)} samples (camera 20 Hz arriving {args.camera_delay * 1e3:.0f} ms "
           f"late, wheels 50 Hz, IMU 200 Hz), {args.repeat} interleaved runs; latency = add_*() + current_estimate()")
     print(f"{'':>15} {'window':>7} {'p50 ms':>7} {'p90 ms':>7} {'p99 ms':>7} {'max ms':>7} {'age p50/max ms':>15} "

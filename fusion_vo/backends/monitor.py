@@ -25,7 +25,8 @@ judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for t
 its offset is no longer known.
 
 The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
-(:class:`~fusion_vo.backends.streaming.StreamingFusion`) does not run it yet, and speeds (the wheels'
+(:class:`~fusion_vo.backends.streaming.StreamingFusion`) runs it causally over a sliding window
+(:mod:`fusion_vo.backends.live_monitor`), and speeds (the wheels'
 against the camera's) are not checked yet: only heading sources are.
 
 Only the inconsistent *component* is dropped, for as long as it disagrees (it comes back after a
