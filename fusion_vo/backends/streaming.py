@@ -81,6 +81,8 @@ import dataclasses
 import logging
 import math
 import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -162,13 +164,18 @@ class StreamingFusion:
         Most nodes one ``add_*`` call processes (default 1); the rest is caught up by the next calls,
         which bounds the latency of a call when a late measurement makes the EKF re-filter several
         nodes. None processes everything due at once. :meth:`finish` always processes everything.
+    background : bool
+        iSAM2 only: run its updates (and the linearisation, relinearisation and marginal covariance that
+        come with them) on a worker thread, off the caller's; GTSAM releases the GIL while it works. A node's
+        recorded pose is its initial guess (the last estimate composed with the interval's odometry) until
+        its update has finished; results are taken in by the next call.
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
                  gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
-                 steps_per_call: int | None = 1):
+                 steps_per_call: int | None = 1, background: bool = False):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         if not (np.isfinite(history) and history >= 0 and np.isfinite(horizon) and horizon > 0):
@@ -178,6 +185,9 @@ class StreamingFusion:
         if steps_per_call is not None and (not isinstance(steps_per_call, int) or steps_per_call < 1):
             raise InputError(f"steps_per_call must be a positive integer or None, not {steps_per_call!r}")
         self.steps_per_call = steps_per_call
+        if background and backend != "gtsam":
+            raise InputError("background updates are for backend 'gtsam' (the EKF's steps are cheap)")
+        self.background = bool(background)
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
@@ -294,6 +304,7 @@ class StreamingFusion:
         before the first node.
         """
         with self._lock:
+            self._collect()
             if not self._t_nodes:
                 return None
             target = self._latest if t is None else float(t)
@@ -310,6 +321,7 @@ class StreamingFusion:
     def processed_estimate(self) -> Estimate | None:
         """The last processed node (held back by the reorder window), or None before the first node."""
         with self._lock:
+            self._collect()
             if not self._t_nodes:
                 return None
             return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
@@ -320,6 +332,7 @@ class StreamingFusion:
         with self._lock:
             if self._graph is None:
                 return None
+            self._collect(wait=True)
             return PoseData(np.array(self._t_nodes[:self._graph.n + 1]), self._graph.poses())
 
     @property
@@ -339,6 +352,7 @@ class StreamingFusion:
 
     def _finish(self) -> FusionResult:
         self._process(np.inf)
+        self._collect(wait=True)
         name = "ekf" if self.backend == "ekf" else "gtsam_online"
         result = FusionResult()
         if self._t_nodes:
@@ -430,8 +444,9 @@ class StreamingFusion:
             self._count(sensor).reordered += 1
         k = bisect.bisect_right(buf, t, key=lambda item: item[0])
         buf.insert(k, (t, payload))
-        # a sample changes the interpolation, gating and spike medians of its neighbours' intervals only
-        self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
+        if self._t_nodes and t < self._t_nodes[-1]:
+            # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
+            self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
 
     def _insert_visual(self, inc: VisualIncrement) -> None:
@@ -440,6 +455,7 @@ class StreamingFusion:
         bisect.insort(self._visual, inc, key=lambda v: v.t1)
 
     def _advance(self, t: float) -> None:
+        self._collect()
         self._latest = max(self._latest, float(t))
         self._process(self._latest - self.config.reorder_window, self.steps_per_call)
 
@@ -621,14 +637,14 @@ class StreamingFusion:
             self._monitor.update(j - 1, iv)
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
-            batches.append((j, iv))
+            batches.append((j, iv, self._poses[j - 1]))
         if not batches:
             return
         self._heading_offset = self._records[-1].heading_offset
-        for j, pose, cov, sensors in self._graph.replace(batches):
-            counts = self._records[j].counts
-            for s in sensors:
-                counts.setdefault(s, SensorCount()).used += 1
+        sensors, results = self._graph.replace(batches)
+        for j, used in sensors:
+            self._count_used(j, used)
+        for j, pose, cov, _ in results:
             self._poses[j], self._covs[j] = pose, cov
         self.rewinds += 1
 
@@ -671,7 +687,7 @@ class StreamingFusion:
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(_NodeRecord(None, None))
-            self._graph = _OnlineGraph(cfg, t, (kv, kb))
+            self._graph = _OnlineGraph(cfg, t, (kv, kb), self.background)
             pose, cov = self._graph.start()
             self._record(pose, cov)
 
@@ -780,9 +796,32 @@ class StreamingFusion:
 
     def _graph_step(self, iv) -> None:
         pose, cov, sensors = self._graph.step(iv)
+        if cov is None:  # background update under way: the guess, with the last covariance
+            cov = self._covs[-1]
         for s in sensors:
             self._step_counts.setdefault(s, SensorCount()).used += 1
         self._record(pose, cov)
+
+    def _collect(self, wait: bool = False) -> None:
+        """Take in the results of finished background iSAM2 updates (all of them with ``wait``)."""
+        if self._graph is None or not self.background:
+            return
+        for n, pose, cov, sensors in self._graph.collect(wait):
+            if n < len(self._poses):
+                self._poses[n], self._covs[n] = pose, cov
+            self._count_used(n, sensors)
+
+    def _count_used(self, n: int, sensors) -> None:
+        """Node ``n``'s factors are now those of ``sensors`` (None: unchanged): its ``used`` counts follow."""
+        if sensors is None:
+            return
+        rec = self._records[n] if n < len(self._records) else None
+        if rec is None:  # left the history while its update ran: its counts were merged already
+            return
+        for c in rec.counts.values():
+            c.used = 0
+        for s in sensors:
+            rec.counts.setdefault(s, SensorCount()).used += 1
 
 
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
@@ -861,7 +900,7 @@ def _extrapolate(t_nodes, poses, covs, dt: float, config: FusionConfig) -> tuple
 class _OnlineGraph:
     """iSAM2 fed one node interval at a time through :class:`~fusion_vo.backends.graph.GraphBuilder`."""
 
-    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool]):
+    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False):
         import gtsam
 
         from fusion_vo.backends import graph
@@ -877,20 +916,42 @@ class _OnlineGraph:
         self.n = 0
         self.estimate: dict = {}
         self.prev_pose = gtsam.Pose2(*config.initial_pose)
+        # background: one worker thread owns iSAM2 (it is not thread-safe); jobs run in order
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="isam2") if background else None
+        self._jobs: deque = deque()
 
-    def _update(self, nf):
+    def _update(self, n: int, nf, prev_pose=None):
+        """Freeze ``nf``'s custom factors at the current estimate and add node ``n`` to iSAM2."""
         g = self.gtsam.NonlinearFactorGraph()
-        lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, self.n - 1)
+        if prev_pose is None:  # background: the previous node's estimate, now that its update is done
+            prev_pose = nf.values.get(self.graph.X(n - 1)) or self.isam.calculateEstimatePose2(self.graph.X(n - 1))
+            if nf.guess is not None:  # the guess composed on that estimate rather than on the caller's guess
+                nf.values[self.graph.X(n)] = prev_pose.compose(self.gtsam.Pose2(*nf.guess))
+        lookup = self.graph.current_value_lookup(nf.values, self.isam, prev_pose, n - 1)
         for f in self.graph.freeze_custom_factors(nf.factors, lookup):
             g.add(f)
         values = self.gtsam.Values()
         self.graph.insert_values(values, nf.values)
         result = self.isam.update(g, values)
-        self.factors[self.n] = list(result.getNewFactorsIndices())
-        key = self.graph.X(self.n)
-        pose = self.isam.calculateEstimatePose2(key)
-        self.prev_pose = pose
-        return self._pose_cov(self.n)
+        self.factors[n] = list(result.getNewFactorsIndices())
+        return self._pose_cov(n)
+
+    def _background_step(self, n: int, nf, builder):
+        pose, cov = self._update(n, nf)
+        estimate = dict(self.estimate)
+        self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
+        self.estimate = estimate  # swapped whole: the caller's thread reads it for guesses
+        return [(n, pose, cov, None)]
+
+    def collect(self, wait: bool = False) -> list:
+        """Results ``(n, pose, covariance, sensors)`` of the finished background jobs, in order."""
+        out = []
+        while self._jobs and (wait or self._jobs[0].done()):
+            out += self._jobs.popleft().result()
+        if out and out[-1][0] == self.n:  # re-anchor the guesses on the newest estimate
+            p = out[-1][1]
+            self.prev_pose = self.gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
+        return out
 
     def _pose_cov(self, n: int):
         key = self.graph.X(n)
@@ -918,33 +979,50 @@ class _OnlineGraph:
         return builder, nf
 
     def step(self, iv):
+        """Add the node ending ``iv``: ``(pose, covariance, sensors)``; in the background, the pose is
+        the initial guess and the covariance None (the estimate comes through :meth:`collect`)."""
         builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
         self._pending_first = False
         self.n += 1
-        pose, cov = self._update(nf)
+        if self._pool is not None:
+            self._jobs.append(self._pool.submit(self._background_step, self.n, nf, builder))
+            guess = nf.values[self.graph.X(self.n)]
+            self.prev_pose = guess
+            return np.array([guess.x(), guess.y(), guess.theta()]), None, nf.sensors
+        pose, cov = self._update(self.n, nf, self.prev_pose)
+        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
         self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
         return pose, cov, nf.sensors
 
     def replace(self, batches, passes: int = 2):
         """Swap the factors of nodes ``n`` for those of their rebuilt intervals.
 
-        ``batches`` holds ``(n, Intervals)`` in node order (nodes that exist already). The custom
-        factors are linearised at the current estimate and swapped in one iSAM2 update; ``passes`` > 1
-        linearises them again at the estimate that update gave (the late data may have moved it) and
-        swaps again. Returns ``(n, pose, covariance, sensors)`` per node.
+        ``batches`` holds ``(n, Intervals, pose of node n-1)`` in node order (nodes that exist already;
+        the pose only seeds guesses). The factors are built now; the swap runs now or as a background
+        job (its results then come through :meth:`collect`). Returns the sensors of each node's new
+        factors and the results ``(n, pose, covariance, None)`` of a swap that ran.
         """
         built = []
-        builder = nf = None
-        for n, iv in batches:
-            previous = self.isam.calculateEstimatePose2(self.graph.X(n - 1))
-            builder, nf = self._node_factors(n, iv, n == 1, previous)
-            built.append((n, nf))
+        for n, iv, previous in batches:
+            builder, nf = self._node_factors(n, iv, n == 1, self.gtsam.Pose2(*map(float, previous)))
+            built.append((n, nf, builder))
+        sensors = [(n, nf.sensors) for n, nf, _ in built]
+        if self._pool is None:
+            return sensors, self._swap(built, passes)
+        self._jobs.append(self._pool.submit(self._swap, built, passes))
+        return sensors, []
+
+    def _swap(self, built, passes: int):
+        """The custom factors are linearised at the current estimate and swapped in one iSAM2 update;
+        ``passes`` > 1 linearises them again at the estimate that update gave (the late data may have
+        moved it) and swaps again."""
+        builder, nf = built[-1][2], built[-1][1]
         new_keys: set = set()
         for p in range(passes):
             g = self.gtsam.NonlinearFactorGraph()
             values = self.gtsam.Values()
             remove, sizes = [], []
-            for n, nf in built:
+            for n, nf, _ in built:
                 new = {k: v for k, v in nf.values.items() if not self.isam.valueExists(k) and not values.exists(k)}
                 new_keys.update(new)
                 previous = self.isam.calculateEstimatePose2(self.graph.X(n - 1))
@@ -956,12 +1034,15 @@ class _OnlineGraph:
                 remove += self.factors.get(n, [])
                 sizes.append(len(frozen))
             index = list(self.isam.update(g, values, remove).getNewFactorsIndices())
-            for (n, _), size in zip(built, sizes):
+            for (n, _, _), size in zip(built, sizes):
                 self.factors[n], index = index[:size], index[size:]
-        out = [(n, *self._pose_cov(n), nf.sensors) for n, nf in built]
-        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
-        if builder is not None and built[-1][0] == self.n:
-            self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
+        out = [(n, *self._pose_cov(n), None) for n, _, _ in built]
+        if self._pool is None:
+            self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
+        if built[-1][0] == self.n:
+            estimate = dict(self.estimate)
+            self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
+            self.estimate = estimate
         return out
 
     def poses(self) -> np.ndarray:

@@ -293,3 +293,22 @@ def test_isam2_inserts_late_samples_at_their_nodes(drive):
     # the same factors, linearised at other points (iSAM2 keeps custom factors at their first linearisation)
     assert gap < 0.015 and gap < 0.25 * gap_lost
     assert np.linalg.norm(b.trajectories["gtsam_online"].xyyaw[-1, :2] - a.trajectories["gtsam_online"].xyyaw[-1, :2]) < 0.01
+
+
+def test_isam2_in_the_background_gives_the_same_track(drive):
+    """Updates on a worker thread: the same counts and poses (to 1 mm) as on the caller's, late data too."""
+    s = drive
+    with pytest.raises(InputError, match="background"):
+        _fusion(s, "ekf", background=True)
+    for msgs in (_messages(s), _wheels_late(s, 1.5)):
+        sync, worker = _fusion(s, "gtsam"), _fusion(s, "gtsam", background=True)
+        _feed(sync, msgs)
+        _feed(worker, msgs)
+        assert worker.current_estimate() is not None
+        a, b = sync.finish(), worker.finish()
+        ca, cb = a.counts["gtsam_online"], b.counts["gtsam_online"]
+        assert {k: v.as_dict() for k, v in cb.items()} == {k: v.as_dict() for k, v in ca.items()}
+        ta, tb = a.trajectories["gtsam_online"], b.trajectories["gtsam_online"]
+        np.testing.assert_allclose(tb.t, ta.t, atol=1e-12)
+        assert np.abs(tb.xyyaw - ta.xyyaw).max() < 1e-3
+        np.testing.assert_allclose(b.covariances["gtsam_online"], a.covariances["gtsam_online"], rtol=0.05, atol=1e-9)
