@@ -72,6 +72,11 @@ thread, a serial thread, a timer reading :meth:`current_estimate`): each call is
 effects of every call that returned before it started. Samples of one stream must still be added
 by one thread at a time in (roughly) time order, as any stream would be; arrival order across threads
 is what the reorder window and the history absorb.
+
+With ``background=True`` (iSAM2) the updates run on one worker thread that owns iSAM2; the caller's
+thread builds the factors and returns. A node's pose is the initial guess (the last estimate composed
+with the interval's odometry) until its update is done; each later call takes the finished results in,
+and :meth:`finish` and :meth:`smoothed` wait for all of them.
 """
 
 from __future__ import annotations

@@ -231,10 +231,12 @@ def test_replay_keeps_the_recording_pace(short_recording, tmp_path):
 
     t0 = time.perf_counter()
     rc = main(["-q", "replay", str(short_recording), "--out", str(tmp_path / "r"), "--sensors", "wheel,imu",
-               "--speed", "5"])
+               "--speed", "5", "--backend", "gtsam", "--background"])
     assert rc == 0
     info = json.loads((tmp_path / "r" / "replay.json").read_text())
-    assert info["sensors"] == ["wheel", "imu"]
+    assert info["sensors"] == ["wheel", "imu"] and info["backend"] == "gtsam"
+    live = np.loadtxt(tmp_path / "r" / "live_gtsam.csv", delimiter=",", skiprows=1, ndmin=2)
+    assert len(live) > 200 and np.isfinite(live[:, 2:5]).all()
     assert time.perf_counter() - t0 >= 4.9 / 5  # a 5 s recording at 5x takes at least a second
 
 
@@ -246,6 +248,9 @@ def test_replay_bad_input_is_one_line_exit_2_and_writes_nothing(short_recording,
     assert not (tmp_path / "o").exists()
     assert main(["replay", str(short_recording), "--out", str(tmp_path / "o"), "--sensors", "sonar"]) == 2
     assert "sonar" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+    assert main(["replay", str(short_recording), "--out", str(tmp_path / "o"), "--background"]) == 2
+    assert "--background is for --backend gtsam" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
 
 
