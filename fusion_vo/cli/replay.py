@@ -67,6 +67,8 @@ def register(sub) -> None:
                    help="seconds after its frame that a visual increment arrives (frontend latency, default 0)")
     p.add_argument("--window", type=_non_negative,
                    help="reorder window [s] (default: the configuration's reorder_window)")
+    p.add_argument("--background", action="store_true",
+                   help="with --backend gtsam: run iSAM2's updates on a worker thread, off the caller's")
     p.set_defaults(func=run)
 
 
@@ -82,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.pipeline import resolve_sensors
     from fusion_vo.recording import Recording, write_tum
 
+    if args.background and args.backend != "gtsam":
+        raise InputError("--background is for --backend gtsam (the EKF's steps are cheap)")
     cfg = load_config(args.config)
     if args.sensors:
         cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
@@ -104,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     msgs = time_ordered_messages(streams, args.camera_delay)
     if not msgs:
         raise InputError("the recording has no samples of the chosen sensors", rec.path)
-    fusion = streaming_for(streams, args.backend, fusion_cfg)
+    fusion = streaming_for(streams, args.backend, fusion_cfg, background=args.background)
     rows, call_ms = _play(fusion, msgs, args.speed, args.rate)
     online = fusion.finish()
     offline = fuse(streams, args.backend, fusion_cfg)

@@ -89,6 +89,26 @@ def sinc_terms(th):
     return np.sinc(th / np.pi), 0.5 * th * np.sinc(th / (2.0 * np.pi)) ** 2
 
 
+def sinc_derivatives(th):
+    """Derivatives of ``sin(th)/th`` and ``(1 - cos th)/th`` with respect to ``th`` (scalar or array).
+
+    ``(th cos th - sin th)/th²`` and ``(th sin th - (1 - cos th))/th²``, by their series
+    ``-th/3`` and ``1/2 - th²/8`` below ``|th| < 1e-4`` (where the closed forms cancel).
+    """
+    if isinstance(th, (int, float)) or np.ndim(th) == 0:
+        t = float(th)
+        if abs(t) < 1e-4:
+            return -t / 3.0, 0.5 - t * t / 8.0
+        s, c = math.sin(t), math.cos(t)
+        return (t * c - s) / (t * t), (t * s - (1.0 - c)) / (t * t)
+    th = np.asarray(th, dtype=np.float64)
+    small = np.abs(th) < 1e-4
+    safe = np.where(small, 1.0, th)
+    da = np.where(small, -th / 3.0, (safe * np.cos(safe) - np.sin(safe)) / safe**2)
+    db = np.where(small, 0.5 - th**2 / 8.0, (safe * np.sin(safe) - (1.0 - np.cos(safe))) / safe**2)
+    return da, db
+
+
 def _v_coefficients(th: float) -> tuple[float, float]:
     return sinc_terms(float(th))
 
