@@ -221,6 +221,7 @@ def standstill_factor(ki: int, kj: int, sigma: float, pose_i: gtsam.Pose2,
 _H_HEADING_I = np.array([[0.0, 0.0, -1.0]])
 _H_HEADING_J = np.array([[0.0, 0.0, 1.0]])
 _FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
+_FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose speed the monitor dropped
 
 
 # --------------------------------------------------------------------------- graph construction
@@ -389,6 +390,11 @@ class GraphBuilder:
             still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
             yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
+            speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())
+            if not speed_ok:  # speed dropped by the consistency monitor: a free translation
+                cov = cov.copy()
+                cov[:2, :] = cov[:, :2] = 0.0
+                cov[0, 0] = cov[1, 1] = _FREE_TRANSLATION_SIGMA**2
             if not yaw_ok:  # yaw component dropped by the consistency monitor: translation only
                 m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
                 cov_xy = cov.copy()
@@ -413,6 +419,7 @@ class GraphBuilder:
                 wheel_heading = None
             nf.sensors.append("wheel")
             translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
+            translation = translation if speed_ok else None
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
             xs = X(self.offset + start)
