@@ -183,6 +183,9 @@ def main(argv: list[str] | None = None) -> int:
     for label, b in (("standstill bias", bias0), ("bias 0", 0.0), ("bias +0.0005", 0.0005), ("bias -0.0005", -0.0005)):
         print(f"  {label:36s} {rms(gps_errors(dead_reckoning(odom, gyro, b, delay), t_gps, enu)):5.2f}")
     print(f"  {'best constant bias ' + f'{biases[best]:+.5f}':36s} {scan[best]:5.2f}  (hindsight from GPS)")
+    lags = [rms(gps_errors(dead_reckoning(odom, gyro, bias0, d), t_gps, enu)) for d in (0.0, 0.2, delay, 0.6)]
+    print(f"  {'standstill bias, twist delay 0/0.2/' + f'{delay:.2f}' + '/0.6 s':36s} "
+          + " / ".join(f"{v:.2f}" for v in lags))
     for scale in (0.96, 0.97, 0.98):
         print(f"  {f'standstill bias, speed x {scale}':36s} "
               f"{rms(gps_errors(dead_reckoning(odom, gyro, bias0, delay, scale), t_gps, enu)):5.2f}  (scale from GPS)")

@@ -124,9 +124,9 @@ class FusionConfig:
     max_odom_delay : float
         Largest delay [s] searched (default 1).
     monitor : bool
-        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) against each other over windows
-        and drop the component that contradicts the others there (:mod:`fusion_vo.backends.monitor`;
-        default True).
+        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) and the speeds (wheels, camera)
+        against each other over windows and drop the component that contradicts the others there
+        (:mod:`fusion_vo.backends.monitor`; default True).
     monitor_window : float
         Window length [s] of that check (default 2).
     monitor_probability : float

@@ -49,8 +49,9 @@ happened to be quiet; a component found inconsistent over more than ``monitor_wh
 the time it was checked is dropped for the whole recording, since its quiet windows are no evidence
 that it is right there): the wheels' speed
 stays in use while their yaw rate is dropped (``Intervals.wheel_yaw_ok``), a dropped gyro or AHRS
-span clears ``gyro_ok`` / ``ahrs_ok`` there, and the visual increments that overlap a dropped camera
-heading are removed (an increment is one estimate; its translation is expressed in its wrong heading). Each drop becomes an :class:`Episode` (sensor, component,
+span clears ``gyro_ok`` / ``ahrs_ok`` there; in a span where the camera's heading is dropped, each
+visual increment is tested on its own against the other sources and removed if it fails (an increment
+is one estimate; its translation is expressed in its wrong heading). Each drop becomes an :class:`Episode` (sensor, component,
 start, end, largest NIS), a plain note and an entry of ``summary.json``; it never makes the run fail.
 """
 
@@ -235,18 +236,24 @@ def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
         drop[1:] |= bad["ahrs"]
         iv.ahrs_ok = iv.ahrs_ok & ~drop
     if "camera" in bad and bad["camera"].any():
-        drop_visual_heading(iv, bad["camera"])
+        # within the flagged windows, each increment is tested on its own against the other sources
+        keep = np.ones(len(iv.vis_i0), bool)
+        for m, (a, b) in enumerate(zip(iv.vis_i0, iv.vis_i1)):
+            if bad["camera"][a:b].any():
+                theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
+                nis = _window_nis("camera", theta, var)
+                keep[m] = nis is None or nis <= threshold
+        drop_visual_increments(iv, keep)
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes
 
 
-def drop_visual_heading(iv, bad: np.ndarray) -> None:
-    """Remove every visual increment that overlaps a node interval flagged in ``bad`` (K,): an increment
-    is one estimate of the frontend, and one whose heading is wrong has its translation expressed in a
-    wrong frame too (measured on the ``hard`` recording: keeping the translation with a free heading
-    made GTSAM batch 8.4 mm instead of 1.5 mm). The other sensors carry the estimate there."""
-    keep = np.array([not bad[a:b].any() for a, b in zip(iv.vis_i0, iv.vis_i1)], dtype=bool)
+def drop_visual_increments(iv, keep: np.ndarray) -> None:
+    """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
+    estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
+    frame too (measured on the ``hard`` recording: keeping the translation with a free heading made GTSAM
+    batch 8.4 mm instead of 1.5 mm). The other sensors carry the estimate there."""
     if keep.all():
         return
     iv.vis_i0, iv.vis_i1 = iv.vis_i0[keep], iv.vis_i1[keep]
