@@ -96,7 +96,8 @@ def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
     yaw = np.unwrap(gt.xyyaw[:, 2])
 
     def pose(t):
-        return np.array([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]), np.interp(t, gt.t, yaw)])
+        return np.array([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]),
+                         np.interp(t, gt.t, yaw)])
 
     errors, nis, sigmas = [], [], []
     for inc in vo.increments:
@@ -156,7 +157,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="keep the recordings and runs here (default: a temporary folder)")
     parser.add_argument("--only", help="comma-separated standard recordings (default: all with camera and wheels)")
-    parser.add_argument("--variants", action="store_true", help="also re-fuse each recording's increments with VARIANTS")
+    parser.add_argument("--variants", action="store_true",
+                        help="also re-fuse each recording's increments with VARIANTS")
     args = parser.parse_args(argv)
     names = args.only.split(",") if args.only else [n for n in STANDARD if n not in SKIP]
     out = args.out or Path(tempfile.mkdtemp(prefix="fusion-vs-best-"))

@@ -129,7 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     for a, b in runs(at_imu):
         if gyro.t[b - 1] - gyro.t[a] > 1.0:
             r = gyro.rate[a:b]
-            print(f"  standstill {gyro.t[a] - t0:6.1f}-{gyro.t[b - 1] - t0:6.1f} s: gyro median {np.median(r):+.5f} rad/s, "
+            print(f"  standstill {gyro.t[a] - t0:6.1f}-{gyro.t[b - 1] - t0:6.1f} s: "
+                  f"gyro median {np.median(r):+.5f} rad/s, "
                   f"scatter {np.std(r):.5f} rad/s = noise density {np.std(r) / np.sqrt(rate_hz):.2e} rad/s/sqrt(Hz) "
                   f"(recording claims {claimed:.2e})")
     bias0 = float(np.median(gyro.rate[at_imu])) if at_imu.sum() > 10 else 0.0

@@ -51,8 +51,9 @@ that it is right there): the wheels' speed
 stays in use while their yaw rate is dropped (``Intervals.wheel_yaw_ok``), a dropped gyro or AHRS
 span clears ``gyro_ok`` / ``ahrs_ok`` there; in a span where the camera's heading is dropped, each
 visual increment is tested on its own against the other sources and removed if it fails (an increment
-is one estimate; its translation is expressed in its wrong heading). Each drop becomes an :class:`Episode` (sensor, component,
-start, end, largest NIS), a plain note and an entry of ``summary.json``; it never makes the run fail.
+is one estimate; its translation is expressed in its wrong heading). Each drop becomes an
+:class:`Episode` (sensor, component, start, end, largest NIS), a plain note and an entry of
+``summary.json``; it never makes the run fail.
 """
 
 from __future__ import annotations

@@ -40,7 +40,8 @@ def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound():
     from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
     means = {}
-    for label, wheel in (("too small", {"k": 0.001, "k_lateral": 0.0005}), ("too large", {"k": 0.1, "k_lateral": 0.05})):
+    broken = (("too small", {"k": 0.001, "k_lateral": 0.0005}), ("too large", {"k": 0.1, "k_lateral": 0.05}))
+    for label, wheel in broken:
         values = []
         for seed in range(2):
             s = synthetic_streams(SyntheticOptions(duration=20.0), seed=seed)
