@@ -1,4 +1,4 @@
-"""Per-component consistency of the heading sources: a stream that lies is caught before fusion.
+"""Per-component consistency of the heading sources and the speeds: a stream that lies is caught before fusion.
 
 Four streams may measure how much the robot turned over a window of ``W`` seconds
 (``FusionConfig.monitor_window``):
