@@ -11,9 +11,14 @@ configuration, KLT frontend) and prints, per recording:
 * the largest difference [percentage points] between a fused track's leg-length error and visual
   odometry's over the straight legs of the ground truth (``legs`` of ``metrics.json``).
 
+With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
+same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
+divided by 4, other robust kernels of the factor graph), printing the fused ATEs of each: what tells
+which input or which part of the model makes a fused track worse than the best single sensor.
+
 Run::
 
-    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle]
+    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--variants]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -26,9 +31,18 @@ import tempfile
 import time
 from pathlib import Path
 
+import dataclasses
+
+import numpy as np
+
+from fusion_vo import backends
 from fusion_vo.config import RunConfig
+from fusion_vo.errors import InputError
 from fusion_vo.evaluation import evaluate_run
+from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
+from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
+from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import STANDARD, make_standard
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
@@ -60,10 +74,91 @@ def compare(seq: Path, run_dir: Path) -> dict:
     }
 
 
+#: re-fusion variants: name -> (sensors or None for all but GPS, camera covariance factor, fusion options)
+VARIANTS = {
+    "default": (None, 1.0, {}),
+    "camera + wheels": (["camera", "wheel"], 1.0, {}),
+    "camera + gyro": (["camera", "imu"], 1.0, {}),
+    "camera covariance / 4": (None, 0.25, {}),
+    "graph kernel none": (None, 1.0, {"graph": {"robust": "none"}}),
+    "graph kernel cauchy": (None, 1.0, {"graph": {"robust": "cauchy", "robust_k": 2.3849}}),
+}
+
+
+def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
+    """How honest the inputs' stated noise is on this recording: the visual increments' RMS errors and
+    mean NIS against the true increments (3 if their covariances are right), and the gyro's scatter about
+    the true yaw rate beside the scatter its ``sensor.yaml`` density states."""
+    from fusion_vo.geometry import se2
+    from fusion_vo.sensors.imu import ImuNoise, gyro_yaw
+
+    gt = rec.groundtruth()
+    yaw = np.unwrap(gt.xyyaw[:, 2])
+
+    def pose(t):
+        return np.array([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]),
+                         np.interp(t, gt.t, yaw)])
+
+    errors, nis, sigmas = [], [], []
+    for inc in vo.increments:
+        if not inc.ok:
+            continue
+        e = np.asarray(inc.delta, dtype=float) - se2.between(pose(inc.t0), pose(inc.t1))
+        e[2] = se2.wrap_angle(e[2])
+        cov = np.asarray(inc.covariance, dtype=float)
+        errors.append(e)
+        nis.append(float(e @ np.linalg.solve(cov, e)))
+        sigmas.append(np.sqrt(np.diag(cov)))
+    rms = np.sqrt(np.mean(np.square(errors), axis=0))
+    out = {"camera rms x [m]": rms[0], "camera rms yaw [rad]": rms[2],
+           "camera median sigma x [m]": float(np.median(np.array(sigmas)[:, 0])),
+           "camera median sigma yaw [rad]": float(np.median(np.array(sigmas)[:, 2])),
+           "camera mean NIS (3 if honest)": float(np.mean(nis))}
+    if rec.has_imu():
+        imu = rec.imu()
+        gyro = gyro_yaw(imu, ImuNoise().with_sensor_keys(imu.noise))
+        rate = np.interp(gyro.t, gt.t, np.gradient(yaw, gt.t))
+        residual = gyro.rate - rate
+        out["gyro scatter about the truth [rad/s]"] = float(np.std(residual))
+        out["gyro scatter stated [rad/s]"] = float(ImuNoise().with_sensor_keys(imu.noise).gyro_noise_density
+                                                   * np.sqrt(1.0 / np.median(np.diff(gyro.t))))
+    return out
+
+
+def variants(seq: Path) -> dict[str, dict[str, float]]:
+    """Fused ATE [mm] per track for each of :data:`VARIANTS`, re-fusing one visual odometry run."""
+    rec = Recording(seq)
+    vo = run_visual_odometry(rec)
+    for key, value in inputs_against_truth(rec, vo).items():
+        print(f"    {seq.name} {key}: {value:.3g}")
+    gt = rec.groundtruth()
+    reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
+
+    def ate(track) -> float:
+        est = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
+        ref, est = associate(reference, est)
+        return ape_rmse(ref, align_se2(ref, est)) * 1e3
+
+    out = {}
+    for name, (sensors, factor, options) in VARIANTS.items():
+        increments = vo.increments if factor == 1.0 else [
+            dataclasses.replace(i, covariance=np.asarray(i.covariance) * factor) for i in vo.increments]
+        try:
+            result = backends.run_backends(rec, dataclasses.replace(vo, increments=increments), sensors=sensors,
+                                           backend="all", options=options)
+        except InputError as exc:  # e.g. GTSAM finding a sensor subset indeterminate
+            out[name] = {"failed": str(exc)}
+            continue
+        out[name] = {k: ate(result.trajectories[k]) for k in FUSED if k in result.trajectories}
+    return out
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="keep the recordings and runs here (default: a temporary folder)")
     parser.add_argument("--only", help="comma-separated standard recordings (default: all with camera and wheels)")
+    parser.add_argument("--variants", action="store_true",
+                        help="also re-fuse each recording's increments with VARIANTS")
     args = parser.parse_args(argv)
     names = args.only.split(",") if args.only else [n for n in STANDARD if n not in SKIP]
     out = args.out or Path(tempfile.mkdtemp(prefix="fusion-vs-best-"))
@@ -79,6 +174,10 @@ def main(argv=None) -> int:
                      *("yes" if r[k] else "NO" for k in ("fused_le_best", "smoothed_le_ekf", "batch_le_online")),
                      f"{max(r['legs'].values()):.3f}"]
             print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+            if args.variants:
+                for label, ate in variants(seq).items():
+                    print(f"    {name} {label:24s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
+                                                             for k, v in ate.items()), flush=True)
     finally:
         if args.out is None:
             shutil.rmtree(out, ignore_errors=True)

@@ -124,9 +124,9 @@ class FusionConfig:
     max_odom_delay : float
         Largest delay [s] searched (default 1).
     monitor : bool
-        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) against each other over windows
-        and drop the component that contradicts the others there (:mod:`fusion_vo.backends.monitor`;
-        default True).
+        Check the heading sources (wheel yaw rate, gyro, AHRS, camera) and the speeds (wheels, camera)
+        against each other over windows and drop the component that contradicts the others there
+        (:mod:`fusion_vo.backends.monitor`; default True).
     monitor_window : float
         Window length [s] of that check (default 2).
     monitor_probability : float
@@ -135,6 +135,9 @@ class FusionConfig:
     monitor_whole_fraction : float
         A component inconsistent over more than this fraction of the time it was checked is dropped
         for the whole recording (default 0.5).
+    monitor_scale_sigma : float
+        How far [relative] the ratio of the wheels' to the camera's distance may wander from its median
+        over the recording before a window counts as a disagreement of speeds (default 0.02).
     monitor_bias_sigma : float
         Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
         (default 0.001; a median over many samples at rest).
@@ -175,6 +178,7 @@ class FusionConfig:
     monitor_window: float = 2.0
     monitor_probability: float = 0.9999
     monitor_bias_sigma: float = 0.001
+    monitor_scale_sigma: float = 0.02
     monitor_whole_fraction: float = 0.5
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)

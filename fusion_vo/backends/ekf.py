@@ -326,6 +326,12 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
             R = R.copy()
             R[drop, 2, :] = R[drop, :, 2] = 0.0
             R[drop, 2, 2] = _DROPPED_VAR
+        if iv.wheel_speed_ok is not None and not iv.wheel_speed_ok.all():
+            # speed dropped by the monitor (disagrees with the camera's): the yaw row stays
+            drop = ~iv.wheel_speed_ok
+            R = R.copy()
+            R[drop, :2, :] = R[drop, :, :2] = 0.0
+            R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
         out["wheel"] = (iv.wheel_ok, u, R)
         noise = config.wheel_model(iv.twist)[0]
         still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)

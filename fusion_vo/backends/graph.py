@@ -145,6 +145,7 @@ def R(k: int) -> int:
 
 
 _FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
+_FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose speed the monitor dropped
 
 
 # --------------------------------------------------------------------------- graph construction
@@ -321,6 +322,11 @@ class GraphBuilder:
             still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
             yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
+            speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())
+            if not speed_ok:  # speed dropped by the consistency monitor: a free translation
+                cov = cov.copy()
+                cov[:2, :] = cov[:, :2] = 0.0
+                cov[0, 0] = cov[1, 1] = _FREE_TRANSLATION_SIGMA**2
             if not yaw_ok or self.kb_on:
                 # translation from the arc; the heading change goes through the wheel-base factor, or
                 # not at all where the consistency monitor dropped the wheels' yaw component
@@ -340,6 +346,7 @@ class GraphBuilder:
                 nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov)))
             nf.sensors.append("wheel")
             translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
+            translation = translation if speed_ok else None
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
             xs = X(self.offset + start)

@@ -149,6 +149,9 @@ class Intervals:
     wheel_yaw_ok : ndarray (K,) or None
         Where the wheels' yaw component may be used (False where the consistency monitor dropped it;
         None: everywhere the wheels are).
+    wheel_speed_ok : ndarray (K,) or None
+        Where the wheels' speed (translation) may be used (False where the monitor found it disagreeing
+        with the camera's; None: everywhere the wheels are).
     episodes : list
         The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
     visual_scale_sigma, wheel_scale_sigma : float
@@ -191,6 +194,7 @@ class Intervals:
     heading_offset: float | None = None
     twist: bool = False
     wheel_yaw_ok: np.ndarray | None = None
+    wheel_speed_ok: np.ndarray | None = None
     episodes: list = field(default_factory=list)
     visual_scale_sigma: float = 0.05
     wheel_scale_sigma: float = 0.01
@@ -326,10 +330,13 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     if streams.gps is not None:
         _add_gps(iv, streams.gps, counts)
     iv.wheel_yaw_ok = np.ones(K, bool)
-    if nodes is None:  # whole-recording use: check the heading sources against each other
-        from fusion_vo.backends.monitor import check_heading_sources
+    iv.wheel_speed_ok = np.ones(K, bool)
+    if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
+        from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 
         iv.episodes = check_heading_sources(iv, config)
+        iv.episodes += check_speed_sources(iv, config)
+        iv.episodes.sort(key=lambda e: e.start)
         notes.extend(ep.note(T[0]) for ep in iv.episodes)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:

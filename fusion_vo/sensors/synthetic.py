@@ -6,7 +6,8 @@ The robot drives a smooth path with twist ``v(t) = v₀ (1 + 0.3 sin(0.3 t))``,
 * visual increments at ``camera_hz`` (with timestamp jitter): the true increment with its translation
   scaled by ``visual_scale`` (a camera-height error) plus Gaussian noise of the stated covariance;
 * cumulative signed-32-bit encoder counts at ``wheel_hz`` starting near the wrap point, from the true
-  wheel travel of a robot whose real wheel base is ``wheel_base * wheel_base_factor``;
+  wheel travel of a robot whose real wheel base is ``wheel_base * wheel_base_factor`` and whose real
+  wheel radius is ``wheel_radius * wheel_radius_factor`` (the configuration states ``wheel_radius``);
 * gyro samples at ``imu_hz`` with a constant bias and white noise;
 * optional range readings of the true camera height;
 * optional AHRS orientations (true heading plus noise of ``ahrs_sigma``, an unknown heading offset).
@@ -43,6 +44,7 @@ class SyntheticOptions:
     wheel_radius: float = 0.05
     ticks_per_revolution: float = 4096.0
     wheel_base_factor: float = 1.0
+    wheel_radius_factor: float = 1.0
     wheel_slip: float = 0.01
     gyro_bias: float = 0.01
     gyro_noise_density: float = 2e-3
@@ -123,7 +125,7 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
         return np.concatenate([[0.0], np.cumsum(steps)])
 
     left, right = left + slip(left), right + slip(right)
-    per_tick = 2 * np.pi * o.wheel_radius / o.ticks_per_revolution
+    per_tick = 2 * np.pi * o.wheel_radius * o.wheel_radius_factor / o.ticks_per_revolution  # the true radius
     start = 2**31 - 20000
     tl = np.floor(left / per_tick).astype(np.int64) + start
     tr = np.floor(right / per_tick).astype(np.int64) + start

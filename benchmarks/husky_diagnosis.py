@@ -1,0 +1,227 @@
+"""Why the fused tracks of robot_localization's Husky log drift: the figures behind the README's "Real robots".
+
+The recording is ``tests/data/robot_localization/test1.bag`` (BSD; 395 s, 359 m, odometry twist 10 Hz,
+IMU 30 Hz, GPS 2.5 Hz), imported as :mod:`examples.husky_gps` does. GPS is never fused here: it is the
+reference (after the least-squares SE(2) alignment of each track to the fixes). The script prints
+
+1. time offsets between the streams (odometry twist vs gyro from their yaw rates, odometry speed vs
+   GPS speed), the standstills the odometry reports and the gyro's median rate and scatter there
+   (its bias and its real noise, beside the noise the recording claims);
+2. the wheels' yaw rate against the gyro's: the skid-steer ratio in turns and on the long, gently
+   curved legs, and the gyro bias the wheels imply on those legs;
+3. the odometry's speed scale against the GPS path (per 40 s and overall) and the AHRS heading's
+   largest departure from the gyro's integral (why the consistency monitor drops it);
+4. baselines measured in the same run: wheel + gyro dead reckoning with a constant gyro bias (the
+   whole-log standstill median, zero, the best constant in hindsight) and with the odometry's speed
+   scaled (what a scale known from outside would give);
+5. the EKF's gyro-bias estimate over time (filtered and smoothed) against the standstill median, for
+   the default configuration and two ablations (wheel yaw rate not used; a 0.002 rad/s bias prior);
+6. each track's error against GPS over time (50 s bins): dead reckoning, EKF, EKF+RTS, GTSAM batch, iSAM2.
+
+Usage::
+
+    python benchmarks/husky_diagnosis.py [BAG]
+
+Takes about a minute (GTSAM batch and iSAM2 over the whole log once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "examples"))
+
+from husky_gps import DEFAULT_BAG, HUSKY_IMU_TF, gps_errors, read_gps  # noqa: E402
+
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse  # noqa: E402
+from fusion_vo.backends import ekf as ekf_mod  # noqa: E402
+from fusion_vo.backends.batch import synchronise_odometry, with_recorded_noise  # noqa: E402
+from fusion_vo.backends.timeline import build_intervals  # noqa: E402
+from fusion_vo.measurements import PoseData  # noqa: E402
+from fusion_vo.recording import Recording  # noqa: E402
+from fusion_vo.recording.rosbag import import_bag, parse_static_tf  # noqa: E402
+from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro_yaw  # noqa: E402
+from fusion_vo.sensors.sync import rate_delay  # noqa: E402
+
+BINS = 50.0  # [s] error-over-time bins
+
+
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``[a, b)`` index runs where ``mask`` is True."""
+    edges = np.diff(np.concatenate([[0], mask.astype(int), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+
+
+def dead_reckoning(odom, gyro, bias: float, delay: float, speed_scale: float = 1.0) -> PoseData:
+    """Odometry speed along the gyro's heading minus a constant ``bias``, twist moved back by ``delay``."""
+    t = np.asarray(odom.t) - delay
+    angle = cumulative_angle(gyro) - bias * (gyro.t - gyro.t[0])
+    dist = np.diff(t) * np.asarray(odom.vx)[:-1] * speed_scale
+    dyaw = np.diff(np.interp(t, gyro.t, angle))
+    yaw = np.concatenate([[0.0], np.cumsum(dyaw)])
+    mid = yaw[:-1] + 0.5 * dyaw
+    x = np.concatenate([[0.0], np.cumsum(dist * np.cos(mid))])
+    y = np.concatenate([[0.0], np.cumsum(dist * np.sin(mid))])
+    return PoseData(t, np.stack([x, y, yaw], axis=1))
+
+
+def rms(err: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(err**2)))
+
+
+def ekf_bias_track(streams: SensorStreams, config: FusionConfig, drop_wheel_yaw: bool = False):
+    """Node times, filtered and smoothed gyro bias and its sigma, and the filtered/smoothed tracks."""
+    config = with_recorded_noise(config, streams)
+    streams, _ = synchronise_odometry(streams, config)
+    iv = build_intervals(streams, config)
+    if drop_wheel_yaw:
+        iv.wheel_yaw_ok[:] = False
+    kv, kb = ekf_mod.calibration_observable(iv)
+    f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma)
+    meas = ekf_mod.interval_measurements(iv, config)
+    n = iv.n_steps + 1
+    xs, Ps = np.zeros((n, ekf_mod.DIM)), np.zeros((n, ekf_mod.DIM, ekf_mod.DIM))
+    xp, Pp, Fs = np.zeros_like(xs), np.zeros_like(Ps), np.zeros_like(Ps)
+    xs[0], Ps[0] = f.x, f.P
+    for k in range(iv.n_steps):
+        Fs[k + 1] = f.predict(iv.dt[k])
+        xp[k + 1], Pp[k + 1] = f.x, f.P
+        f.update(ekf_mod.step_blocks(f, meas, k))
+        xs[k + 1], Ps[k + 1] = f.x, f.P
+    xsm, Psm = ekf_mod.rts_smooth(xs, Ps, xp, Pp, Fs)
+    b = ekf_mod.BG
+    return (iv.t, xs[:, b], np.sqrt(Ps[:, b, b]), xsm[:, b],
+            PoseData(iv.t.copy(), xs[:, :3].copy()), PoseData(iv.t.copy(), xsm[:, :3].copy()))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("bag", nargs="?", default=str(DEFAULT_BAG), help="robot_localization's test1.bag")
+    args = parser.parse_args(argv)
+    with tempfile.TemporaryDirectory() as tmp:
+        seq = Path(tmp) / "husky"
+        import_bag(args.bag, seq, static_tfs=[parse_static_tf(HUSKY_IMU_TF)], overwrite=True)
+        rec = Recording(seq)
+        odom, imu = rec.odom(), rec.imu()
+        t_gps, enu = read_gps(seq)
+    t0 = float(odom.t[0])
+    claimed = float(imu.noise.get("gyroscope_noise_density", np.nan))
+    gyro = gyro_yaw(imu, ImuNoise())
+    rate_hz = 1.0 / float(np.median(np.diff(gyro.t)))
+
+    print("1. clocks and standstills")
+    delay = rate_delay(odom.t, odom.wz, gyro.t, gyro.rate) or 0.0
+    print(f"  odometry twist behind the gyro (yaw-rate cross-correlation): {delay * 1e3:.0f} ms")
+    gspeed = np.linalg.norm(np.diff(enu, axis=0), axis=1) / np.diff(t_gps)
+    gps_delay = rate_delay(t_gps[1:] - 0.5 * np.diff(t_gps), gspeed, odom.t - delay, np.abs(odom.vx),
+                           min_correlation=0.3)
+    print("  GPS speed behind the odometry speed: "
+          + ("not resolved" if gps_delay is None else f"{gps_delay * 1e3:.0f} ms"))
+    still = (np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)
+    at_imu = np.interp(gyro.t, odom.t, still.astype(float)) > 0.999
+    for a, b in runs(at_imu):
+        if gyro.t[b - 1] - gyro.t[a] > 1.0:
+            r = gyro.rate[a:b]
+            print(f"  standstill {gyro.t[a] - t0:6.1f}-{gyro.t[b - 1] - t0:6.1f} s: "
+                  f"gyro median {np.median(r):+.5f} rad/s, "
+                  f"scatter {np.std(r):.5f} rad/s = noise density {np.std(r) / np.sqrt(rate_hz):.2e} rad/s/sqrt(Hz) "
+                  f"(recording claims {claimed:.2e})")
+    bias0 = float(np.median(gyro.rate[at_imu])) if at_imu.sum() > 10 else 0.0
+    print(f"  whole-log standstill bias (used by the dead-reckoning baseline): {bias0:+.5f} rad/s")
+    window = int(round(2.0 * rate_hz))
+    quiet = np.array([np.std(gyro.rate[i:i + window]) for i in range(0, len(gyro.rate) - window, window)])
+    print(f"  gyro scatter over 2 s windows while driving: 5th percentile {np.quantile(quiet, 0.05):.4f} rad/s "
+          f"(at rest {np.std(gyro.rate[at_imu]):.4f}): a gyro-variance detector finds no other standstill")
+
+    print("2. wheels' yaw rate against the gyro's (twist moved back by its delay)")
+    g = np.interp(odom.t - delay, gyro.t, gyro.rate) - bias0
+    moving = np.abs(odom.vx) > 0.1
+    for name, sel in (("turns |w| > 0.1 rad/s", moving & (np.abs(g) > 0.1)),
+                      ("gentle curves 0.002 < |w| < 0.05", moving & (np.abs(g) > 0.002) & (np.abs(g) < 0.05))):
+        ratio = float(np.sum(odom.wz[sel] * g[sel]) / np.sum(g[sel] ** 2))
+        print(f"  {name:34s} wheels/gyro {ratio:.2f} over {sel.sum() / 10:.0f} s")
+    legs = moving & (np.abs(g) < 0.05)
+    k_turn = float(np.sum(odom.wz[moving & (np.abs(g) > 0.1)] * g[moving & (np.abs(g) > 0.1)])
+                   / np.sum(g[moving & (np.abs(g) > 0.1)] ** 2))
+    pull = []
+    for s in range(0, 240, 40):
+        m = legs & (odom.t - t0 >= s) & (odom.t - t0 < s + 40)
+        if m.sum() > 20:
+            pull.append(float(np.mean(g[m] + bias0 - odom.wz[m] / k_turn)))
+    print(f"  gyro bias the wheels imply on the legs before the stop (turn ratio {k_turn:.2f}), per 40 s: "
+          + " ".join(f"{p:+.4f}" for p in pull) + f" rad/s (standstill: {bias0:+.5f})")
+
+    print("3. odometry speed scale against GPS, AHRS heading")
+    ratios = []
+    for s in range(0, int(t_gps[-1] - t_gps[0]), 40):
+        m = (t_gps - t_gps[0] >= s) & (t_gps - t_gps[0] < s + 40)
+        path_gps = float(np.sum(np.linalg.norm(np.diff(enu[m][::5], axis=0), axis=1)))
+        mo = (odom.t - t0 >= s) & (odom.t - t0 < s + 40)
+        path_odom = float(np.sum(np.abs(odom.vx[mo][:-1]) * np.diff(odom.t[mo])))
+        ratios.append(path_gps / path_odom)
+    print("  GPS path / odometry path per 40 s (fixes every 2 s): " + " ".join(f"{r:.2f}" for r in ratios)
+          + f"; median {np.median(ratios):.3f}")
+    heading = ahrs_heading(imu)
+    if heading is not None:
+        yaw = np.unwrap(heading.yaw[heading.valid])
+        ht = heading.t[heading.valid]
+        gi = np.interp(ht, gyro.t, cumulative_angle(gyro) - bias0 * (gyro.t - gyro.t[0]))
+        dev = (yaw - yaw[0]) - (gi - gi[0])
+        print(f"  AHRS heading minus the gyro's integral: largest {np.degrees(np.abs(dev).max()):.0f} deg "
+              f"(at {ht[np.argmax(np.abs(dev))] - t0:.0f} s)")
+
+    print("4. dead-reckoning baselines (odometry speed, gyro heading), RMS against GPS [m]")
+    biases = np.linspace(-0.0008, 0.0004, 25)
+    scan = [rms(gps_errors(dead_reckoning(odom, gyro, b, delay), t_gps, enu)) for b in biases]
+    best = int(np.argmin(scan))
+    for label, b in (("standstill bias", bias0), ("bias 0", 0.0), ("bias +0.0005", 0.0005), ("bias -0.0005", -0.0005)):
+        print(f"  {label:36s} {rms(gps_errors(dead_reckoning(odom, gyro, b, delay), t_gps, enu)):5.2f}")
+    print(f"  {'best constant bias ' + f'{biases[best]:+.5f}':36s} {scan[best]:5.2f}  (hindsight from GPS)")
+    lags = [rms(gps_errors(dead_reckoning(odom, gyro, bias0, d), t_gps, enu)) for d in (0.0, 0.2, delay, 0.6)]
+    print(f"  {'standstill bias, twist delay 0/0.2/' + f'{delay:.2f}' + '/0.6 s':36s} "
+          + " / ".join(f"{v:.2f}" for v in lags))
+    for scale in (0.96, 0.97, 0.98):
+        print(f"  {f'standstill bias, speed x {scale}':36s} "
+              f"{rms(gps_errors(dead_reckoning(odom, gyro, bias0, delay, scale), t_gps, enu)):5.2f}  (scale from GPS)")
+
+    print("5. EKF gyro bias [rad/s] over time (GPS not fused)")
+    base = SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=None))
+    variants = {"default": (FusionConfig(), False),
+                "wheel yaw rate not used": (FusionConfig(), True),
+                "bias prior 0.002": (FusionConfig.from_dict({"imu": {"gyro_bias_sigma": 0.002}}), False)}
+    marks = (20, 100, 200, 235, 250, 395)
+    print(f"  {'variant':26s} " + " ".join(f"{m:>16d}" for m in marks) + "   EKF / RTS RMS m")
+    for name, (cfg, drop) in variants.items():
+        t, bf, sf, bs, trk, trk_s = ekf_bias_track(base, cfg, drop)
+        idx = [int(np.searchsorted(t - t0, m)) - 1 for m in marks]
+        print(f"  {name:26s} " + " ".join(f"{bf[i]:+.4f}/{bs[i]:+.4f}" for i in idx)
+              + f"   {rms(gps_errors(trk, t_gps, enu)):.2f} / {rms(gps_errors(trk_s, t_gps, enu)):.2f}")
+        if name == "default":
+            print(f"  {'(filter sigma)':26s} " + " ".join(f"{sf[i]:16.4f}" for i in idx))
+    print("  (filtered/smoothed; the standstill median is " f"{bias0:+.5f})")
+
+    print("6. error against GPS over time [m], mean per 50 s bin (default configuration, gyro only)")
+    result = fuse(base, "all", FusionConfig())
+    tracks = {"dead reckoning (standstill bias)": dead_reckoning(odom, gyro, bias0, delay)}
+    tracks.update({k: result.trajectories[k] for k in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")})
+    edges = np.arange(0.0, t_gps[-1] - t_gps[0] + BINS, BINS)
+    print(f"  {'track':34s} {'RMS':>5s} " + " ".join(f"{int(e):>5d}" for e in edges[:-1]))
+    for name, trk in tracks.items():
+        inside = (t_gps >= trk.t[0]) & (t_gps <= trk.t[-1])
+        err = gps_errors(trk, t_gps, enu)
+        tt = t_gps[inside][: len(err)] - t_gps[0]
+        bins = [float(np.mean(err[(tt >= a) & (tt < b)])) if np.any((tt >= a) & (tt < b)) else np.nan
+                for a, b in zip(edges[:-1], edges[1:])]
+        print(f"  {name:34s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

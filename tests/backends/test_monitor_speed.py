@@ -1,0 +1,109 @@
+"""The consistency monitor on speeds: the wheels' distance against the camera's, per window."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+from backend_synth import position_errors, streams_of
+
+FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+LIE = (20.0, 35.0)  # [s] span in which one stream's speed is scaled by 1.3
+
+
+def _wheel_scaled(wheel, t0: float, t1: float, k: float):
+    """Encoder counts whose increments in ``(t0, t1]`` are ``k`` times the recorded ones (both wheels)."""
+    dl = np.diff(wheel.left.astype(np.int64))
+    dr = np.diff(wheel.right.astype(np.int64))
+    inside = (wheel.t[1:] > t0) & (wheel.t[1:] <= t1)
+    dl = np.where(inside, np.round(dl * k), dl).astype(np.int64)
+    dr = np.where(inside, np.round(dr * k), dr).astype(np.int64)
+    left = np.concatenate([[wheel.left[0]], wheel.left[0] + np.cumsum(dl)])
+    right = np.concatenate([[wheel.right[0]], wheel.right[0] + np.cumsum(dr)])
+    return dataclasses.replace(wheel, left=left, right=right)
+
+
+def _camera_scaled(visual, t0: float, t1: float, k: float):
+    """Visual increments whose translation is ``k`` times too long in ``(t0, t1]``."""
+    out = []
+    for inc in visual:
+        if t0 < inc.t1 <= t1:
+            delta = np.array(inc.delta, dtype=float)
+            delta[:2] *= k
+            inc = dataclasses.replace(inc, delta=delta)
+        out.append(inc)
+    return out
+
+
+def _speed_episodes(result):
+    return [e for e in result.inconsistent if e["component"] == "speed"]
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return synthetic_streams(SyntheticOptions(duration=60.0), seed=0)
+
+
+def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
+    streams = dataclasses.replace(streams_of(drive), wheel=_wheel_scaled(drive.wheel, *LIE, 1.3))
+    result = fuse(streams, "all", FusionConfig())
+    eps = _speed_episodes(result)
+    assert len(eps) == 1, result.inconsistent
+    ep = eps[0]
+    assert ep["sensor"] == "wheel" and ep["against"] == "camera"
+    # found within a monitor window (2 s) of where the lie starts and ends, not over the whole drive
+    assert LIE[0] - 2.5 <= ep["start"] <= LIE[0] + 0.5 and LIE[1] - 0.5 <= ep["end"] <= LIE[1] + 2.5, ep
+    assert ep["max_nis"] > 15.1
+    assert "ratio 1.2" in ep["detail"] or "ratio 1.3" in ep["detail"], ep["detail"]
+    assert any(n.startswith("wheel speed inconsistent with camera from t=") and "20." in n for n in result.notes)
+    # what summary.json's fusion.inconsistent gets: JSON-friendly, with the times
+    import json
+
+    entry = next(e for e in json.loads(json.dumps(result.summary()["inconsistent"])) if e["component"] == "speed")
+    assert entry["component"] == "speed" and entry["start"] == ep["start"] and entry["end"] == ep["end"]
+    clean = fuse(streams_of(drive), "all", FusionConfig())
+    unchecked = fuse(streams, "all", FusionConfig(monitor=False))
+    for name in FUSED:
+        _, rms = position_errors(result.trajectories[name], drive.truth)
+        _, rms_clean = position_errors(clean.trajectories[name], drive.truth)
+        _, rms_unchecked = position_errors(unchecked.trajectories[name], drive.truth)
+        # the camera carries the translation there: close to the clean drive, far better than believing the wheels
+        assert rms < 1.5 * rms_clean + 0.02 and rms < 0.5 * rms_unchecked, (name, rms, rms_clean, rms_unchecked)
+
+
+def test_camera_scale_gone_wrong_is_reported_with_its_span(drive):
+    streams = dataclasses.replace(streams_of(drive), visual=_camera_scaled(drive.visual, *LIE, 1.3))
+    result = fuse(streams, "ekf", FusionConfig())
+    eps = _speed_episodes(result)
+    assert len(eps) == 1, result.inconsistent
+    ep = eps[0]
+    assert LIE[0] - 2.5 <= ep["start"] <= LIE[0] + 0.5 and LIE[1] - 0.5 <= ep["end"] <= LIE[1] + 2.5, ep
+    # the wheel/camera ratio there is about 1/1.3 of the recording's: the reader sees which stream moved
+    there, overall = (float(x) for x in
+                      ep["detail"].split("ratio ")[1].split(" over")[0].replace(" there,", "").split())
+    assert 0.7 < there / overall < 0.85, ep["detail"]
+    assert np.isfinite(result.trajectories["ekf"].xyyaw).all()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_no_speed_disagreement_on_clean_drives(seed):
+    s = synthetic_streams(SyntheticOptions(duration=60.0), seed=seed)
+    result = fuse(streams_of(s), "ekf", FusionConfig())
+    assert _speed_episodes(result) == [], result.inconsistent
+
+
+def test_a_constant_scale_ratio_is_calibration_not_a_lie():
+    """A camera height 8 % off for the whole drive: the backends estimate it; the monitor stays quiet."""
+    s = synthetic_streams(SyntheticOptions(duration=60.0, visual_scale=1.08), seed=1)
+    result = fuse(streams_of(s), "ekf", FusionConfig())
+    assert _speed_episodes(result) == [], result.inconsistent
+
+
+def test_monitor_scale_sigma_is_checked():
+    from fusion_vo.errors import InputError
+
+    with pytest.raises(InputError, match="monitor_scale_sigma"):
+        FusionConfig.from_dict({"monitor_scale_sigma": 0.0})
