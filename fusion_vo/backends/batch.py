@@ -27,7 +27,8 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import run_ekf
-from fusion_vo.backends.result import FusionResult
+from fusion_vo.backends.pauses import chain, find_pauses, note, sample_times, spans_time, split
+from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
@@ -77,6 +78,12 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     FusionResult
         ``ekf``, ``ekf_smoothed``, ``gtsam``, ``gtsam_online`` (and ``gtsam_fixed_lag``) trajectories,
         plus ``wheel`` dead reckoning when wheels are used.
+
+    Notes
+    -----
+    Where no stream has a sample for longer than ``config.max_gap`` (a pause in every stream), the
+    streams are cut there, each piece is fused on its own and the pieces are chained
+    (:mod:`fusion_vo.backends.pauses`); ``FusionResult.pauses`` and the notes say where and how.
     """
     config = with_recorded_noise(as_config(config), streams)
     names = backend_names(backend)
@@ -86,8 +93,63 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         result.trajectories["wheel"] = wheel
     if not names:
         return result
-    t0 = time.process_time()
     streams, delay = synchronise_odometry(streams, config)
+    pauses = find_pauses(streams, config.max_gap)
+    if not pauses:
+        whole = _fuse_piece(streams, names, config, delay)
+        result.merge(whole)
+        result.inconsistent = whole.inconsistent
+        for text in result.notes:
+            logger.info("%s", text)
+        return result
+    # a pause in every stream: fuse the pieces between pauses on their own and chain them
+    pieces = split(streams, pauses)
+    results: list[FusionResult | None] = []
+    absolute: list[bool] = []
+    origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
+    for piece in pieces:
+        if not spans_time(piece):
+            results.append(None)
+            absolute.append(False)
+            continue
+        first = not any(r is not None for r in results)
+        gps = piece.gps is not None and len(piece.gps) > 0
+        results.append(_fuse_piece(piece, names, config if first or gps else origin, delay))
+        absolute.append(first or gps)
+    used = [r for r in results if r is not None]
+    tracks, covs, joined = chain(results, pauses, absolute)
+    result.trajectories.update(tracks)
+    result.covariances.update(covs)
+    result.pauses = joined
+    t_first = float(sample_times(streams)[0])
+    longest = max(used, key=lambda r: max((len(tr) for tr in r.trajectories.values()), default=0))
+    result.calibration.update(longest.calibration)
+    for r in used:
+        for backend_name, counts in r.counts.items():
+            total = result.counts.setdefault(backend_name, {})
+            for sensor, count in counts.items():
+                acc = total.setdefault(sensor, SensorCount())
+                for key, value in count.as_dict().items():
+                    setattr(acc, key, getattr(acc, key) + value)
+        for key, value in r.timing.items():
+            result.timing[key] = result.timing.get(key, 0.0) + value
+        result.inconsistent.extend(r.inconsistent)
+    result.notes.extend(note(entry, t_first) for entry in joined)
+    for r in used:
+        result.notes.extend(n for n in r.notes if n not in result.notes)
+    if len(used) > 1:
+        result.notes.append(f"{len(used)} pieces fused on their own between the pauses; the calibration estimates "
+                            "are those of the longest piece")
+    for text in result.notes:
+        logger.info("%s", text)
+    return result
+
+
+def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
+                delay: float | None = None) -> FusionResult:
+    """The backends ``names`` over streams without a pause in every stream."""
+    result = FusionResult()
+    t0 = time.process_time()
     iv = build_intervals(streams, config)
     if iv.gps_ok is not None:
         from fusion_vo.backends.world import align_world
@@ -110,8 +172,6 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
             where = where[where.find("near variable"):].split(".")[0] if "near variable" in where else where[:80]
             raise InputError(f"gtsam: the factor graph cannot be solved ({where}); a configured noise makes a "
                              "variable unobservable -- check the fusion sigmas, or use --backend ekf") from None
-    for note in result.notes:
-        logger.info("%s", note)
     return result
 
 
