@@ -27,7 +27,7 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import run_ekf
-from fusion_vo.backends.pauses import chain, find_pauses, note, sample_times, spans_time, split
+from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
@@ -95,33 +95,42 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         return result
     streams, delay = synchronise_odometry(streams, config)
     pauses = find_pauses(streams, config.max_gap)
-    if not pauses:
+    # split at the pauses, except where a camera slower than max_gap alone bridges its frame gaps
+    cut = cuts(streams, pauses)
+    bridged = [{"start": p.start, "end": p.end, "seconds": p.seconds, "joined": "camera"}
+               for p in pauses if all(p is not c for c in cut)]
+    t_first = float(sample_times(streams)[0]) if pauses else 0.0
+    if not cut:
         whole = _fuse_piece(streams, names, config, delay)
         result.merge(whole)
         result.inconsistent = whole.inconsistent
+        result.pauses = bridged
+        result.notes[:0] = pause_notes(bridged, t_first)
         for text in result.notes:
             logger.info("%s", text)
         return result
-    # a pause in every stream: fuse the pieces between pauses on their own and chain them
-    pieces = split(streams, pauses)
+    # fuse the pieces between the pauses on their own and chain them
+    pieces = split(streams, cut)
     results: list[FusionResult | None] = []
-    absolute: list[bool] = []
+    placed: list[bool] = []  # by the piece's own GPS fixes
     origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
     for piece in pieces:
+        gps = piece.gps is not None and len(piece.gps) > 0
+        placed.append(gps)
         if not spans_time(piece):
             results.append(None)
-            absolute.append(False)
             continue
         first = not any(r is not None for r in results)
-        gps = piece.gps is not None and len(piece.gps) > 0
         results.append(_fuse_piece(piece, names, config if first or gps else origin, delay))
-        absolute.append(first or gps)
     used = [r for r in results if r is not None]
-    tracks, covs, joined = chain(results, pauses, absolute)
+    if not used:
+        raise InputError(f"no two samples of the sensors used are within fusion.max_gap ({config.max_gap:g} s) of "
+                         "each other: every one is cut off by a pause, nothing to estimate (raise fusion.max_gap "
+                         "for sparse sensors)")
+    tracks, covs, joined = chain(results, cut, placed)
     result.trajectories.update(tracks)
     result.covariances.update(covs)
-    result.pauses = joined
-    t_first = float(sample_times(streams)[0])
+    result.pauses = sorted(bridged + joined, key=lambda entry: entry["start"])
     longest = max(used, key=lambda r: max((len(tr) for tr in r.trajectories.values()), default=0))
     result.calibration.update(longest.calibration)
     for r in used:
@@ -134,7 +143,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         for key, value in r.timing.items():
             result.timing[key] = result.timing.get(key, 0.0) + value
         result.inconsistent.extend(r.inconsistent)
-    result.notes.extend(note(entry, t_first) for entry in joined)
+    result.notes.extend(pause_notes(result.pauses, t_first))
     for r in used:
         result.notes.extend(n for n in r.notes if n not in result.notes)
     if len(used) > 1:

@@ -2,24 +2,27 @@
 
 A *pause* is a stretch longer than ``FusionConfig.max_gap`` in which no stream the run uses has a
 sample (no camera frame, no wheel, IMU, range or GPS reading): the logger stopped, or the recording
-was cut and joined. Nothing was measured in it, so the backends are not asked to bridge it (a factor
-graph has nothing to tie the poses across it, a constant-velocity model would invent the motion, and a
-grid of nodes over an hour-long pause would cost time for no data). Instead :func:`split` cuts the
-streams into pieces at every pause, each piece is fused on its own (starting at the origin), and
-:func:`chain` puts the pieces one after the other, for every trajectory separately:
+was cut and joined. Nothing was sampled in it, so the backends are not asked to estimate inside it (a
+factor graph has nothing to tie the poses across it, a constant-velocity model would invent the motion,
+and a grid of nodes over an hour would cost time for no data). :func:`split` cuts the streams into
+pieces at every pause, each piece is fused on its own (starting at the origin), and :func:`chain` puts
+the pieces one after the other, for every trajectory separately:
 
-* **camera**: the frontend matched the frames on both sides of the pause (its increment spans the
-  pause): the piece starts at the previous piece's last pose composed with that increment, and the
-  increment's covariance is added to the start's;
+* **camera**: the frontend matched the frames on both sides of the pause (one of its increments spans
+  it): the piece starts at the pose of the frame before the pause composed with that increment, and
+  the increment's covariance is added to the start's;
 * **held**: nothing measured the motion during the pause: the piece starts at the previous piece's
   last pose (with its covariance); the motion during the pause is unknown and is *not* in the
   covariance, which a note says;
 * **gps**: a piece with GPS fixes is placed in the world frame (ENU) by its own fixes; nothing is
   chained into it.
 
-Each pause becomes a note and an entry of :attr:`FusionResult.pauses <fusion_vo.backends.result.FusionResult>`
-(``start``, ``end``, ``seconds`` on the recording clock, ``joined``). Work therefore scales with the
-samples, never with the seconds between them.
+A camera slower than ``max_gap`` alone has a pause between every two frames; :func:`cuts` leaves those
+to the backends, which bridge them on the camera's increments (the node grid of
+:mod:`fusion_vo.backends.timeline` is not filled where no stream has samples). Work therefore grows with
+the samples, never with the seconds between them. Each pause becomes a note (:func:`pause_notes`) and
+an entry of :attr:`FusionResult.pauses <fusion_vo.backends.result.FusionResult>` (``start``, ``end``,
+``seconds`` on the recording clock, ``joined``: ``camera``, ``held`` or ``gps``).
 """
 
 from __future__ import annotations
@@ -116,7 +119,7 @@ def _slice(data, lo: float, hi: float):
 def split(streams: SensorStreams, pauses: list[Pause]) -> list[SensorStreams]:
     """The streams cut at ``pauses``: one :class:`SensorStreams` per piece, in time order.
 
-    A camera increment that spans a pause belongs to no piece (it is the pause's ``join``).
+    A camera increment that spans a cut belongs to no piece (it is the pause's ``join``).
     """
     edges = [-np.inf] + [x for p in pauses for x in (p.start, p.end)] + [np.inf]
     pieces = []
@@ -158,13 +161,15 @@ def _place(track: PoseData, cov: np.ndarray | None, start: np.ndarray, start_cov
     return placed, _compose_cov(start, start_cov, track.xyyaw, np.asarray(cov))
 
 
-def chain(pieces: list, pauses: list[Pause], absolute: list[bool]) -> tuple[dict, dict, list[dict]]:
+def chain(pieces: list, pauses: list[Pause], placed: list[bool]) -> tuple[dict, dict, list[dict]]:
     """Chain the pieces' results (:class:`~fusion_vo.backends.result.FusionResult` or None for a piece
     with nothing to estimate) into whole trajectories.
 
-    ``absolute[i]`` says piece ``i`` is already in the world frame (its own GPS fixes placed it; also
-    the first piece, which starts at the configured initial pose). Returns name -> trajectory,
-    name -> covariances, and one dict per pause (``start``, ``end``, ``seconds``, ``joined``).
+    ``placed[i]`` says piece ``i`` was placed in the world frame by its own GPS fixes. The first piece
+    with a result starts at the configured initial pose and is taken as it is; every later piece that
+    its fixes did not place started at the origin and is moved to start at the previous piece's last
+    pose, or where the camera's increment across the pause puts it. Returns name -> trajectory, name -> covariances, and one dict per pause (``start``, ``end``,
+    ``seconds``, ``joined``).
     """
     tracks: dict[str, list[PoseData]] = {}
     covs: dict[str, list[np.ndarray]] = {}
@@ -174,7 +179,7 @@ def chain(pieces: list, pauses: list[Pause], absolute: list[bool]) -> tuple[dict
         pause = pauses[i - 1] if i else None
         how = None
         if pause is not None:
-            how = "gps" if absolute[i] else "camera" if pause.join is not None else "held"
+            how = "gps" if placed[i] else "camera" if pause.join is not None else "held"
             if result is None:
                 how = "nothing to estimate after it"
             joined.append({"start": pause.start, "end": pause.end, "seconds": pause.seconds, "joined": how})
@@ -182,7 +187,7 @@ def chain(pieces: list, pauses: list[Pause], absolute: list[bool]) -> tuple[dict
             continue
         for name, track in result.trajectories.items():
             cov = result.covariances.get(name)
-            if i and not absolute[i] and name in ends:
+            if not placed[i] and name in ends:
                 start, start_cov = ends[name]
                 if pause is not None and pause.join is not None:
                     # the frame before the pause (on the previous track) ⊕ the camera's increment is the
@@ -213,14 +218,45 @@ def _pose_at(track: PoseData, t: float) -> np.ndarray:
     return np.asarray(track.xyyaw)[int(np.argmin(np.abs(np.asarray(track.t) - t)))]
 
 
+def cuts(streams: SensorStreams, pauses: list[Pause]) -> list[Pause]:
+    """The pauses to split the estimate at: all, except those the camera spans next to a piece with
+    fewer than two sample times (a camera slower than ``max_gap`` alone: its frame gaps are pauses, and
+    cutting there would leave nothing to estimate; the backends bridge them on its increments)."""
+    chosen = list(pauses)
+    while True:
+        pieces = split(streams, chosen)
+        short = [i for i, piece in enumerate(pieces) if not spans_time(piece)]
+        drop = {id(p) for i in short for p in (chosen[i - 1] if i else None, chosen[i] if i < len(chosen) else None)
+                if p is not None and p.join is not None}
+        if not drop:
+            return chosen
+        chosen = [p for p in chosen if id(p) not in drop]
+
+
 def note(entry: dict, t_first: float) -> str:
-    """The run's note for one pause (``entry`` from :func:`chain`)."""
+    """The run's note for one pause (an entry of :attr:`FusionResult.pauses`)."""
     where = (f"no sample in any stream for {entry['seconds']:.2f} s from t={entry['start']:.2f} "
              f"({entry['start'] - t_first:.2f} s in)")
     how = {
-        "camera": "the estimate is split there and joined by the camera's increment across it",
+        "camera": "the camera's increment across it joins the estimate on either side",
         "held": "the estimate is split there and the next piece starts at the last pose: the motion during "
                 "the pause is not measured and not in the covariance",
         "gps": "the estimate is split there; the next piece is placed by its own GPS fixes",
     }.get(entry["joined"], f"the estimate is split there ({entry['joined']})")
     return f"pause: {where}; {how}"
+
+
+#: more pauses bridged by the camera than this are summed up in one note (a slow camera alone)
+MAX_NOTES = 5
+
+
+def pause_notes(entries: list[dict], t_first: float) -> list[str]:
+    """Notes for the pauses: one each, except that many the camera bridged are summed up in one."""
+    bridged = [e for e in entries if e["joined"] == "camera"]
+    if len(bridged) <= MAX_NOTES:
+        return [note(e, t_first) for e in entries]
+    longest = max(bridged, key=lambda e: e["seconds"])
+    summary = (f"pause: {len(bridged)} times no sample in any stream for longer than max_gap between two camera "
+               f"frames (the longest {longest['seconds']:.2f} s from t={longest['start']:.2f}); the camera's "
+               "increments carry the estimate through (all in summary.json)")
+    return [summary] + [note(e, t_first) for e in entries if e["joined"] != "camera"]
