@@ -8,7 +8,9 @@ the increments gives the visual dead-reckoning track::
 
 When the frontend loses the image (a dark, blurred or featureless stretch) and restarts, the gap between
 the last measured frame and the restart is bridged with the last measured body twist (constant velocity)
-and counted; the fused backends do better by leaning on the wheels and the gyro instead.
+and counted; the fused backends do better by leaning on the wheels and the gyro instead. A gap longer
+than ``max_bridge`` (a pause in the recording, a long dark stretch) is not bridged: nothing says the
+robot kept moving, so the track holds its last pose there and the gap is listed (``held``).
 
 The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
 real time between the two frames (not a nominal frame rate).
@@ -82,6 +84,9 @@ class OdometryConfig:
         horizontal field of view). Without it, a ``sensor.yaml`` without intrinsics is an error.
     focal_length : float or None
         Approximate focal length [px] for ``uncalibrated``.
+    max_bridge : float
+        Longest gap [s] between the last measured frame and a restart of the frontend that the visual
+        track bridges at constant velocity (default 1); across a longer gap it holds its last pose.
     threads : int or None
         Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
         single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
@@ -99,9 +104,12 @@ class OdometryConfig:
     gyro_derotation: bool = True
     uncalibrated: bool = False
     focal_length: float | None = None
+    max_bridge: float = 1.0
     threads: int | None = None
 
     def __post_init__(self) -> None:
+        if isinstance(self.max_bridge, bool) or not self.max_bridge >= 0:
+            raise ValueError(f"max_bridge must be a number of seconds of at least 0, not {self.max_bridge!r}")
         if self.threads is not None and (isinstance(self.threads, bool) or not isinstance(self.threads, int)
                                          or self.threads < 1):
             raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
@@ -147,6 +155,8 @@ class OdometryResult:
         Frames that could not be loaded (file and reason).
     bridged_s : float
         Time spent bridging gaps at constant velocity [s].
+    held : list of tuple
+        ``(start, end)`` [s] of the gaps longer than ``max_bridge`` across which the track held its pose.
     elapsed_s : float
         Wall-clock time of the run [s].
     range_scaled : bool
@@ -165,6 +175,7 @@ class OdometryResult:
     bridged_s: float
     elapsed_s: float
     range_scaled: bool = False
+    held: list = field(default_factory=list)
 
     @property
     def n_frames(self) -> int:
@@ -196,13 +207,16 @@ class VisualOdometry:
         Removes the roll and pitch image motion before the geometry.
     """
 
-    def __init__(self, frontend, geometry: GroundGeometry, derotation: GyroDerotation | None = None):
+    def __init__(self, frontend, geometry: GroundGeometry, derotation: GyroDerotation | None = None,
+                 max_bridge: float = 1.0):
         self.frontend = frontend
         self.geometry = geometry
         self.derotation = derotation
+        self.max_bridge = max_bridge
         self.t: list[float] = []
         self.poses: list[np.ndarray] = []
         self.bridged_s = 0.0
+        self.held: list[tuple[float, float]] = []
         self._last_twist = np.zeros(3)
 
     @property
@@ -243,7 +257,11 @@ class VisualOdometry:
             self.t.append(inc.t0)
             self.poses.append(np.zeros(3))
         gap = inc.t0 - self.t[-1]
-        if gap > 1e-6:  # the frontend restarted: bridge at constant velocity
+        if gap > self.max_bridge:  # a pause or a long loss: nothing says the robot kept moving
+            self.held.append((self.t[-1], inc.t0))
+            self.poses.append(self.poses[-1])
+            self.t.append(inc.t0)
+        elif gap > 1e-6:  # the frontend restarted: bridge at constant velocity
             self.poses.append(se2.compose(self.poses[-1], se2.exp(self._last_twist * gap)))
             self.t.append(inc.t0)
             self.bridged_s += gap
@@ -428,7 +446,7 @@ def run_visual_odometry(
     derotation = None
     if config.gyro_derotation and recording.has_imu():
         derotation = GyroDerotation(recording.imu(), geometry)
-    vo = VisualOdometry(frontend, geometry, derotation)
+    vo = VisualOdometry(frontend, geometry, derotation, max_bridge=config.max_bridge)
     total = len(recording)
     increments: list[VisualIncrement] = []
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
@@ -492,6 +510,7 @@ def run_visual_odometry(
         track=vo.track(),
         skipped=skipped,
         bridged_s=vo.bridged_s,
+        held=vo.held,
         elapsed_s=elapsed,
         range_scaled=heights is not None,
     )

@@ -7,6 +7,10 @@ Every file and folder fusion-vo writes goes through this module, so every output
 :func:`write_atomic`
     One file, written to a hidden temporary file in the same folder and renamed into place: a reader sees
     the old file or the new one, never half of it.
+:class:`StagedFiles`
+    New files added to an existing folder (``fusion-vo evaluate`` adding its metrics, figures and report
+    to a run folder): written into a hidden staging folder inside it and renamed into place only when all
+    of them were written.
 :class:`OutputFolder`
     A whole output folder (a run, a generated or imported recording). Everything is written into a hidden
     staging folder beside the target; :meth:`OutputFolder.commit` swaps it into place in one rename and only
@@ -227,21 +231,13 @@ class OutputFolder:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         self._cleanup()
-        if isinstance(exc, InputError) and self.path is not None:
-            fixed = None if exc.path is None else self.public(exc.path)
-            message = exc.message.replace(str(self.path), str(self.target))
-            if fixed != exc.path or message != exc.message:
-                raise InputError(message, fixed, exc.line) from None
-        if isinstance(exc, OSError) and exc.filename and self.path is not None:
-            exc.filename = str(self.public(exc.filename))
+        if self.path is not None:
+            _name_final_paths(exc, self.path, self.target)
         return None
 
     def public(self, path: str | Path) -> Path:
         """The final path of a path inside the staging folder (other paths are returned unchanged)."""
-        path = Path(path)
-        if self.path is not None and _inside(path, self.path):
-            return self.target / path.relative_to(self.path)
-        return path
+        return _final_path(path, self.path, self.target)
 
     # ------------------------------------------------------------------ commit
     def commit(self) -> Path:
@@ -264,23 +260,7 @@ class OutputFolder:
     # ------------------------------------------------------------------ internals
     def _lock(self) -> None:
         """Take an exclusive lock on ``.NAME.lock`` beside the target; fail at once if another command has it."""
-        lock_path = self.target.parent / f".{self.target.name}.lock"
-        while True:
-            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except BlockingIOError:
-                os.close(fd)
-                raise InputError(f"another fusion-vo command is writing this {self.what}; "
-                                 "wait for it to finish", self.target) from None
-            try:  # the holder before us may have removed the lock file after we opened it: retry
-                same = os.fstat(fd).st_ino == os.stat(lock_path).st_ino
-            except FileNotFoundError:
-                same = False
-            if same:
-                self._lock_fd, self._lock_path = fd, lock_path
-                return
-            os.close(fd)
+        self._lock_fd, self._lock_path = lock_folder(self.target, self.what)
 
     def _remove_stale_staging(self) -> None:
         """Remove staging folders of this target left by a process that was killed (SIGKILL, power loss).
@@ -309,9 +289,119 @@ class OutputFolder:
             shutil.rmtree(self._holder, ignore_errors=True)
             self._holder = None
         if self._lock_fd is not None:
-            try:
-                os.unlink(self._lock_path)
-            except FileNotFoundError:
-                pass
-            os.close(self._lock_fd)
+            unlock_folder(self._lock_fd, self._lock_path)
+            self._lock_fd = None
+
+
+def _final_path(path: str | Path, staging: Path | None, final: Path) -> Path:
+    """``path`` with the staging folder ``staging`` replaced by ``final`` (other paths unchanged)."""
+    path = Path(path)
+    if staging is not None and _inside(path, staging):
+        return final / path.relative_to(staging)
+    return path
+
+
+def _name_final_paths(exc: BaseException | None, staging: Path, final: Path) -> None:
+    """Errors name the final paths, never the staging folder: an :class:`InputError` naming it is raised
+    again with the final path; an ``OSError``'s file name is corrected in place."""
+    if isinstance(exc, InputError):
+        fixed = None if exc.path is None else _final_path(exc.path, staging, final)
+        message = exc.message.replace(str(staging), str(final))
+        if fixed != exc.path or message != exc.message:
+            raise InputError(message, fixed, exc.line) from None
+    if isinstance(exc, OSError) and exc.filename:
+        exc.filename = str(_final_path(exc.filename, staging, final))
+
+
+def lock_folder(target: Path, what: str = "output folder") -> tuple[int, Path]:
+    """Take the exclusive lock on ``.NAME.lock`` beside ``target`` (the lock every writer of that folder
+    takes); fail at once with :class:`InputError` if another command has it. Returns the descriptor and path."""
+    lock_path = target.parent / f".{target.name}.lock"
+    while True:
+        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(fd)
+            raise InputError(f"another fusion-vo command is writing this {what}; "
+                             "wait for it to finish", target) from None
+        try:  # the holder before us may have removed the lock file after we opened it: retry
+            same = os.fstat(fd).st_ino == os.stat(lock_path).st_ino
+        except FileNotFoundError:
+            same = False
+        if same:
+            return fd, lock_path
+        os.close(fd)
+
+
+def unlock_folder(fd: int, lock_path: Path) -> None:
+    """Release a lock taken by :func:`lock_folder` (and remove its file)."""
+    try:
+        os.unlink(lock_path)
+    except FileNotFoundError:
+        pass
+    os.close(fd)
+
+
+class StagedFiles:
+    """New files for an existing folder (an evaluation added to a run folder), all or nothing.
+
+    Use as a context manager::
+
+        with StagedFiles(run_dir, replaces=("metrics.json", "report.html", "*.png")) as staged:
+            ...write the new files into staged.path...
+            staged.commit()
+
+    The files are written into a hidden staging folder inside ``folder``; :meth:`commit` renames each into
+    place and then removes the earlier files matching ``replaces`` that the new set does not hold (a
+    figure an earlier evaluation drew and this one does not). Leaving the block without :meth:`commit`
+    (an error, an interrupt) removes the staging folder: the folder keeps its earlier files, untouched.
+    The folder is locked meanwhile with the lock of :class:`OutputFolder`, so a run writing it at the
+    same time fails cleanly. Errors raised inside that name a staged file name the final file instead.
+    """
+
+    def __init__(self, folder: str | Path, replaces: Iterable[str] = (), what: str = "run folder"):
+        self.folder = Path(folder)
+        self.replaces = tuple(replaces)
+        self.what = what
+        self.path: Path | None = None
+        self._lock_fd: int | None = None
+        self._lock_path: Path | None = None
+
+    def __enter__(self) -> "StagedFiles":
+        self._lock_fd, self._lock_path = lock_folder(self.folder, self.what)
+        try:
+            for stale in self.folder.glob(STAGING_PREFIX + "*"):  # left by a killed process (we hold the lock)
+                if stale.is_dir() and not stale.is_symlink():
+                    shutil.rmtree(stale, ignore_errors=True)
+            self.path = self.folder / _random_name(STAGING_PREFIX)
+            os.mkdir(self.path, 0o777)
+        except BaseException:
+            self._cleanup()
+            raise
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._cleanup()
+        if self.path is not None:
+            _name_final_paths(exc, self.path, self.folder)
+        return None
+
+    def commit(self) -> list[Path]:
+        """Move the new files into the folder; returns their final paths."""
+        assert self.path is not None, "commit() outside the with block"
+        names = sorted(p.name for p in self.path.iterdir())
+        for name in names:
+            os.replace(self.path / name, self.folder / name)
+        for pattern in self.replaces:
+            for old in self.folder.glob(pattern):
+                if old.name not in names and old.is_file():
+                    old.unlink()
+        return [self.folder / name for name in names]
+
+    def _cleanup(self) -> None:
+        if self.path is not None:
+            shutil.rmtree(self.path, ignore_errors=True)
+        if self._lock_fd is not None:
+            unlock_folder(self._lock_fd, self._lock_path)
             self._lock_fd = None

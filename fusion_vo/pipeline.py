@@ -236,17 +236,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     return RunInputs(rec, sensors, spans, groundtruth, times)
 
 
-def _longest_common_pause(times: dict[str, np.ndarray] | None) -> tuple[float, float] | None:
-    """The longest interval [s] in which no stream has a sample, or ``None``."""
-    if not times:
-        return None
-    t = np.unique(np.concatenate([np.asarray(v, dtype=np.float64) for v in times.values()]))
-    if len(t) < 2:
-        return None
-    i = int(np.argmax(np.diff(t)))
-    return float(t[i]), float(t[i + 1])
-
-
 def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
     """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
     import dataclasses
@@ -347,7 +336,10 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
-        fused, covariances = _run_backends(rec, vo, sensors, config, summary, inputs.times)
+            for a, b in vo.held:
+                summary.notes.append(f"visual track held its pose for {b - a:.2f} s from t={a:.2f}: no frame gave motion "
+                                     "there and the gap is too long to bridge at constant velocity (odometry.max_bridge)")
+        fused, covariances = _run_backends(rec, vo, sensors, config, summary)
         trajectories.update(fused)
         for name, traj in trajectories.items():
             if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
@@ -386,23 +378,14 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
 
 
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
-                  summary: RunSummary, spans_times: dict[str, np.ndarray] | None = None
+                  summary: RunSummary
                   ) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
     """Wheel dead reckoning and the fused backends; returns name -> trajectory and name -> (N, 3, 3)
     pose covariances."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
-    try:
-        result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion_config())
-    except RuntimeError as exc:
-        if "Indeterminate" not in str(exc):
-            raise
-        pause = _longest_common_pause(spans_times)
-        where = (f"every stream pauses for {pause[1] - pause[0]:.1f} s from {pause[0]:.3f} s: " if pause else "")
-        raise InputError(f"{where}the factor graph has nothing to tie the poses across it (gtsam: "
-                         "indeterminate linear system); use --backend ekf, or split the recording there",
-                         rec.path) from None
+    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion_config())
     summary.backend_seconds.update(result.seconds or {})
     alone = not any(s in sensors for s in ("wheel", "odom", "imu"))
     for note in result.notes or []:
@@ -410,7 +393,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
             note = note.replace("the other sensors carried the estimate",
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
-    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent")}
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates

@@ -10,6 +10,7 @@ Entry points
 Modules
 -------
 timeline   streams of different rates -> one grid of node times and per-interval measurements
+pauses     a pause in every stream: the estimate split there, its pieces fused on their own and chained
 monitor    heading sources checked against each other; a component that contradicts the others is dropped
 ekf        planar EKF with gating and a Rauch–Tung–Striebel smoother
 graph      GTSAM factor graph: batch Levenberg–Marquardt, iSAM2, fixed-lag smoother

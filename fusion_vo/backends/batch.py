@@ -27,7 +27,8 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import run_ekf
-from fusion_vo.backends.result import FusionResult
+from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
+from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
@@ -77,6 +78,12 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     FusionResult
         ``ekf``, ``ekf_smoothed``, ``gtsam``, ``gtsam_online`` (and ``gtsam_fixed_lag``) trajectories,
         plus ``wheel`` dead reckoning when wheels are used.
+
+    Notes
+    -----
+    Where no stream has a sample for longer than ``config.max_gap`` (a pause in every stream), the
+    streams are cut there, each piece is fused on its own and the pieces are chained
+    (:mod:`fusion_vo.backends.pauses`); ``FusionResult.pauses`` and the notes say where and how.
     """
     config = with_recorded_noise(as_config(config), streams)
     names = backend_names(backend)
@@ -86,8 +93,72 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         result.trajectories["wheel"] = wheel
     if not names:
         return result
-    t0 = time.process_time()
     streams, delay = synchronise_odometry(streams, config)
+    pauses = find_pauses(streams, config.max_gap)
+    # split at the pauses, except where a camera slower than max_gap alone bridges its frame gaps
+    cut = cuts(streams, pauses)
+    bridged = [{"start": p.start, "end": p.end, "seconds": p.seconds, "joined": "camera"}
+               for p in pauses if all(p is not c for c in cut)]
+    t_first = float(sample_times(streams)[0]) if pauses else 0.0
+    if not cut:
+        whole = _fuse_piece(streams, names, config, delay)
+        result.merge(whole)
+        result.inconsistent = whole.inconsistent
+        result.pauses = bridged
+        result.notes[:0] = pause_notes(bridged, t_first)
+        for text in result.notes:
+            logger.info("%s", text)
+        return result
+    # fuse the pieces between the pauses on their own and chain them
+    pieces = split(streams, cut)
+    results: list[FusionResult | None] = []
+    placed: list[bool] = []  # by the piece's own GPS fixes
+    origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
+    for piece in pieces:
+        gps = piece.gps is not None and len(piece.gps) > 0
+        placed.append(gps)
+        if not spans_time(piece):
+            results.append(None)
+            continue
+        first = not any(r is not None for r in results)
+        results.append(_fuse_piece(piece, names, config if first or gps else origin, delay))
+    used = [r for r in results if r is not None]
+    if not used:
+        raise InputError(f"no two samples of the sensors used are within fusion.max_gap ({config.max_gap:g} s) of "
+                         "each other: every one is cut off by a pause, nothing to estimate (raise fusion.max_gap "
+                         "for sparse sensors)")
+    tracks, covs, joined = chain(results, cut, placed)
+    result.trajectories.update(tracks)
+    result.covariances.update(covs)
+    result.pauses = sorted(bridged + joined, key=lambda entry: entry["start"])
+    longest = max(used, key=lambda r: max((len(tr) for tr in r.trajectories.values()), default=0))
+    result.calibration.update(longest.calibration)
+    for r in used:
+        for backend_name, counts in r.counts.items():
+            total = result.counts.setdefault(backend_name, {})
+            for sensor, count in counts.items():
+                acc = total.setdefault(sensor, SensorCount())
+                for key, value in count.as_dict().items():
+                    setattr(acc, key, getattr(acc, key) + value)
+        for key, value in r.timing.items():
+            result.timing[key] = result.timing.get(key, 0.0) + value
+        result.inconsistent.extend(r.inconsistent)
+    result.notes.extend(pause_notes(result.pauses, t_first))
+    for r in used:
+        result.notes.extend(n for n in r.notes if n not in result.notes)
+    if len(used) > 1:
+        result.notes.append(f"{len(used)} pieces fused on their own between the pauses; the calibration estimates "
+                            "are those of the longest piece")
+    for text in result.notes:
+        logger.info("%s", text)
+    return result
+
+
+def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
+                delay: float | None = None) -> FusionResult:
+    """The backends ``names`` over streams without a pause in every stream."""
+    result = FusionResult()
+    t0 = time.process_time()
     iv = build_intervals(streams, config)
     if iv.gps_ok is not None:
         from fusion_vo.backends.world import align_world
@@ -110,8 +181,6 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
             where = where[where.find("near variable"):].split(".")[0] if "near variable" in where else where[:80]
             raise InputError(f"gtsam: the factor graph cannot be solved ({where}); a configured noise makes a "
                              "variable unobservable -- check the fusion sigmas, or use --backend ekf") from None
-    for note in result.notes:
-        logger.info("%s", note)
     return result
 
 

@@ -1,7 +1,8 @@
 """Configuration of the fusion backends (dataclasses with documented defaults).
 
-:meth:`FusionConfig.from_dict` builds a configuration from a (YAML) mapping and raises
-:class:`~fusion_vo.errors.InputError` for unknown keys or values of the wrong type, so that a typo in a
+:meth:`FusionConfig.from_dict` builds a configuration from a (YAML) mapping through the one configuration
+schema (:func:`fusion_vo.schema.build`) and raises :class:`~fusion_vo.errors.InputError` naming the file,
+the key path and the expected type for unknown keys or values of the wrong type, so that a typo in a
 configuration file is an error rather than a silently ignored setting.
 """
 
@@ -10,7 +11,6 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
 
 from fusion_vo.errors import InputError
 from fusion_vo.sensors.gps import GpsNoise
@@ -225,9 +225,15 @@ class FusionConfig:
         return (self.odom, self.odom_base_sigma) if twist else (self.wheel, self.wheel_base_sigma)
 
     @classmethod
-    def from_dict(cls, data: dict | None, path=None) -> "FusionConfig":
-        """Build from a nested mapping; unknown keys and wrong types raise :class:`InputError`."""
-        return _from_dict(cls, data or {}, "", path)
+    def from_dict(cls, data: dict | None, path=None, prefix: tuple = ()) -> "FusionConfig":
+        """Build from a nested mapping through the configuration schema (:func:`fusion_vo.schema.build`).
+
+        Unknown keys, values of the wrong type and values that cannot work raise :class:`InputError`
+        naming ``path`` and the key path (``prefix`` is the mapping's own path, e.g. ``("fusion",)``).
+        """
+        from fusion_vo import schema
+
+        return schema.build(cls, data or {}, path, prefix)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -245,45 +251,3 @@ def _numbers(obj, prefix: str = ""):
             yield from _numbers(value, f"{prefix}{f.name}.")
         elif isinstance(value, float) and f.name not in ("initial_pose", "camera_height"):
             yield f"{prefix}{f.name}", value
-
-
-def _from_dict(cls, data: Any, prefix: str, path):
-    if not isinstance(data, dict):
-        raise InputError(f"'{prefix.rstrip('.') or 'config'}' must be a mapping", path)
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(fields))
-    if unknown:
-        raise InputError(f"unknown configuration key '{prefix}{unknown[0]}' (known: {', '.join(fields)})", path)
-    kwargs = {}
-    defaults = cls()
-    for name, value in data.items():
-        current = getattr(defaults, name)
-        if dataclasses.is_dataclass(current):
-            kwargs[name] = _from_dict(type(current), value, f"{prefix}{name}.", path)
-        elif isinstance(current, bool):
-            if not isinstance(value, bool):
-                raise InputError(f"'{prefix}{name}' must be true or false", path)
-            kwargs[name] = value
-        elif isinstance(current, (int, float)) and not isinstance(current, bool):
-            try:
-                kwargs[name] = type(current)(value)
-            except (TypeError, ValueError):
-                raise InputError(f"'{prefix}{name}' must be a number", path) from None
-        elif isinstance(current, tuple):
-            try:
-                kwargs[name] = tuple(float(v) for v in value)
-            except (TypeError, ValueError):
-                raise InputError(f"'{prefix}{name}' must be a list of numbers", path) from None
-        elif name == "camera_height":
-            try:
-                kwargs[name] = None if value is None else float(value)
-            except (TypeError, ValueError):
-                raise InputError(f"'{prefix}{name}' must be a number", path) from None
-        else:
-            kwargs[name] = value
-    try:
-        return cls(**kwargs)
-    except InputError as exc:
-        raise InputError(exc.message, path) from None
-    except ValueError as exc:  # a sensor's own validation (e.g. GpsNoise)
-        raise InputError(f"'{prefix.rstrip('.') or 'config'}': {exc}", path) from None

@@ -312,7 +312,7 @@ class GraphBuilder:
         xi, xj = X(self.offset + n - 1), X(self.offset + n)
         nf = NodeFactors(n, float(self.t[n]))
         if c != self.segment[n - 1]:
-            self._new_segment(nf, c, est)
+            self._new_segment(nf, c, est, int(self.segment[n - 1]))
         translation = heading = None
         wheel_heading = None
         still = False
@@ -403,10 +403,11 @@ class GraphBuilder:
         return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
                                  turn)[0]
 
-    def _new_segment(self, nf: NodeFactors, c: int, estimate: dict) -> None:
-        """Bias and calibration variables of segment ``c``, tied to segment ``c-1`` by random walks."""
+    def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:
+        """Bias and calibration variables of segment ``c``, tied to the ``previous`` segment (``c-1``, or an
+        earlier one across a stretch without nodes) by random walks over the time between them."""
         cfg = self.config
-        span = float(cfg.graph.calibration_interval)
+        span = float(cfg.graph.calibration_interval) * (c - previous)
         walks = []
         if self.iv.uses("gyro"):
             walks.append((B, cfg.imu.gyro_random_walk, estimate.get("gyro_bias", 0.0)))
@@ -421,7 +422,7 @@ class GraphBuilder:
         for key, q, guess in walks:
             sigma = max(q * np.sqrt(span), 1e-7)
             nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
-            nf.factors.append(gtsam.BetweenFactorDouble(key(c - 1), key(c), 0.0, nm))
+            nf.factors.append(gtsam.BetweenFactorDouble(key(previous), key(c), 0.0, nm))
             nf.values[key(c)] = guess
 
     def segment_keys(self, n: int) -> list[int]:

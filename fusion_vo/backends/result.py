@@ -63,6 +63,10 @@ class FusionResult:
         Spans in which a stream's component contradicted the others and was dropped (sensor,
         component, start, end [s on the recording clock], max_nis, against); see
         :mod:`fusion_vo.backends.monitor`.
+    pauses : list[dict]
+        Pauses in every stream at which the estimate was split (``start``, ``end``, ``seconds`` on the
+        recording clock, and ``joined``: ``camera``, ``held`` or ``gps``); see
+        :mod:`fusion_vo.backends.pauses`.
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -72,6 +76,7 @@ class FusionResult:
     notes: list[str] = field(default_factory=list)
     timing: dict[str, float] = field(default_factory=dict)
     inconsistent: list[dict] = field(default_factory=list)
+    pauses: list[dict] = field(default_factory=list)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -97,6 +102,7 @@ class FusionResult:
             "notes": list(self.notes),
             "timing_s": self.timing,
             "inconsistent": list(self.inconsistent),
+            "pauses": list(self.pauses),
         }
 
 

@@ -2,8 +2,9 @@
 
 Both backends estimate the robot at a sequence of *node times* ``T_0 < T_1 < … < T_K``: every camera
 frame time, plus fill-in nodes at ``step_hz`` wherever the camera leaves a gap longer than
-``1.5 / step_hz`` (no camera at all, dropped frames, the camera stream stopping early). Every
-measurement is applied at its own time:
+``1.5 / step_hz`` (no camera at all, dropped frames, the camera stream stopping early) and another
+stream has samples at most ``max_gap`` apart around it (where no stream has any, there is nothing to put
+on a node, and the nodes grow with the samples, not with the seconds). Every measurement is applied at its own time:
 
 * visual increments relate the nodes at their own ``t0`` and ``t1`` (which are node times);
 * wheel travel and the gyro's integrated angle are *cumulative* quantities ``L(t), R(t), Θ(t)``; they
@@ -249,7 +250,7 @@ def _ordered_fields(obj, names, count: SensorCount):
 # --------------------------------------------------------------------------- grid
 def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
     """Camera frame times plus fill-in nodes at ``step_hz`` over the span of all streams."""
-    starts, ends = [], []
+    starts, ends, others = [], [], []
     cam = np.zeros(0)
     if streams.visual:
         cam = np.array([v for inc in streams.visual for v in (inc.t0, inc.t1)], dtype=np.float64)
@@ -264,6 +265,7 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
             if len(tt):
                 starts.append(tt.min())
                 ends.append(tt.max())
+                others.append(tt)
     if not starts:
         raise InputError("no measurements to fuse")
     start, end = min(starts), max(ends)
@@ -277,7 +279,17 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
     fill = [np.linspace(a, b, int(np.ceil((b - a) / step)) + 1)[1:-1] for a, b, g in zip(nodes[:-1], nodes[1:], gaps)
             if g > 1.5 * step]
     if fill:
-        nodes = np.unique(np.concatenate([nodes] + fill))
+        fill = np.concatenate(fill)
+        # only between two samples of the other streams at most max_gap apart: a stretch without samples has
+        # nothing to put on the nodes, and filling it would make the work grow with its seconds, not the samples
+        sampled = np.unique(np.concatenate(others)) if others else np.zeros(0)
+        if len(sampled) > 1:
+            j = np.clip(np.searchsorted(sampled, fill, side="right"), 1, len(sampled) - 1)
+            covered = (fill >= sampled[0]) & (fill <= sampled[-1]) & (sampled[j] - sampled[j - 1] <= config.max_gap)
+            fill = fill[covered]
+        else:
+            fill = fill[:0]
+        nodes = np.unique(np.concatenate([nodes, fill]))
     if streams.gps is not None and len(streams.gps.t):
         fixes = np.asarray(streams.gps.t, dtype=np.float64)
         fixes = fixes[np.isfinite(fixes)]

@@ -6,7 +6,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from fusion_vo.cli.run import positive_int
+from fusion_vo.cli.arguments import frame_count, positive_int
 from fusion_vo.errors import InputError
 
 #: the frontends that can be measured
@@ -33,17 +33,6 @@ def thread_list(text: str) -> list[int]:
     if not values:
         raise argparse.ArgumentTypeError("expected one or more thread counts")
     return sorted(set(values))
-
-
-def frame_count(text: str) -> int:
-    """An ``argparse`` type: a number of frames, at least 2 (one frame pair)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
-    if value < 2:
-        raise argparse.ArgumentTypeError(f"must be at least 2 (one frame pair), not {value}")
-    return value
 
 
 def register(sub) -> None:

@@ -24,8 +24,16 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusion_vo.evaluation import evaluate_run
+    from fusion_vo.evaluation.evaluate import OUTPUTS
+    from fusion_vo.evaluation.io import find_trajectories
+    from fusion_vo.outputs import StagedFiles
 
-    metrics = evaluate_run(args.run_dir, args.gt)
+    run_dir = Path(args.run_dir)
+    find_trajectories(run_dir)  # a missing folder or one without trajectories: an error before anything is locked
+    # written into a staging folder and moved in only when all succeeded: a failure leaves the old results
+    with StagedFiles(run_dir, replaces=OUTPUTS) as staged:
+        metrics = evaluate_run(run_dir, args.gt, out_dir=staged.path)
+        staged.commit()
     show_metrics(metrics, Path(args.run_dir).resolve().name)
     print(f"report: {Path(args.run_dir) / 'report.html'}")
     return 0

@@ -6,20 +6,10 @@ import argparse
 import sys
 from pathlib import Path
 
+from fusion_vo.cli.arguments import positive_int
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
-
-
-def positive_int(text: str) -> int:
-    """An ``argparse`` type: a whole number of at least 1 (a usage error otherwise)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, not {value}")
-    return value
 
 
 def register(sub) -> None:

@@ -36,6 +36,9 @@ FIGURES = {
     "frontend.png": "Inliers per frame and frames the visual frontend could not use",
 }
 
+#: every file an evaluation writes into a run folder
+OUTPUTS = ("metrics.json", "report.html", "gps.png", *FIGURES)
+
 
 def read_run_summary(run_dir: Path) -> dict:
     """``summary.json`` of a run folder (notes, counts), or an empty mapping when absent or unreadable."""
@@ -115,7 +118,7 @@ def _measured_velocities(frames: FrameVelocities) -> Velocities:
     return Velocities(frames.t[ok], frames.vx[ok], frames.vy[ok], frames.yaw_rate[ok])
 
 
-def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) -> dict:
+def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None, out_dir: str | Path | None = None) -> dict:
     """Evaluate every trajectory of a run folder and write metrics, figures and the report into it.
 
     Parameters
@@ -124,6 +127,9 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
         Folder written by ``fusion-vo run``.
     sequence_dir : str or Path, optional
         Recording with the ground truth; by default the ``sequence`` named in ``run.yaml``.
+    out_dir : str or Path, optional
+        Where to write ``metrics.json``, the figures and ``report.html`` (default ``run_dir``;
+        ``fusion-vo evaluate`` writes them into a staging folder and moves them in when all succeeded).
 
     Returns
     -------
@@ -137,21 +143,22 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
         GPS.
     """
     run_dir = Path(run_dir)
+    out = Path(out_dir) if out_dir is not None else run_dir
     files = find_trajectories(run_dir)
     config = read_run_config(run_dir)
     sequence = resolve_sequence(run_dir, config, sequence_dir)
     if not has_groundtruth(sequence):
-        return evaluate_run_against_gps(run_dir, sequence, files, config)
+        return evaluate_run_against_gps(run_dir, sequence, files, config, out)
     reference = read_groundtruth(sequence / GROUNDTRUTH_CSV)
     results = evaluate_trajectories(reference, files)
     metrics = {name: result.figures for name, result in results.items()}
-    write_metrics(run_dir / "metrics.json", metrics)
+    write_metrics(out / "metrics.json", metrics)
 
     frames = read_velocities(run_dir / "velocities.csv") if (run_dir / "velocities.csv").is_file() else None
     ref_planar = to_planar(reference)
     anchored = {name: r.anchored for name, r in results.items()}
     images = {}
-    images["trajectories.png"] = plots.plot_trajectories(ref_planar, anchored, run_dir / "trajectories.png",
+    images["trajectories.png"] = plots.plot_trajectories(ref_planar, anchored, out / "trajectories.png",
                                                          title=f"Trajectories: {run_dir.name}")
     velocities = {name: r.velocities for name, r in results.items()}
     if frames is not None and np.any(frames.ok):
@@ -161,38 +168,41 @@ def evaluate_run(run_dir: str | Path, sequence_dir: str | Path | None = None) ->
         stamps = next(iter(results.values())).velocities.t
     t0 = float(reference.timestamps[0])
     images["velocities.png"] = plots.plot_velocities(reference_velocities(ref_planar, stamps), velocities,
-                                                     run_dir / "velocities.png", t0)
-    images["heading.png"] = plots.plot_heading(ref_planar, anchored, run_dir / "heading.png", t0)
-    images["error_distance.png"] = plots.plot_error_vs_distance(results, run_dir / "error_distance.png")
+                                                     out / "velocities.png", t0)
+    images["heading.png"] = plots.plot_heading(ref_planar, anchored, out / "heading.png", t0)
+    images["error_distance.png"] = plots.plot_error_vs_distance(results, out / "error_distance.png")
     if frames is not None and frames.t.size:
-        images["frontend.png"] = plots.plot_frontend(frames, run_dir / "frontend.png")
+        images["frontend.png"] = plots.plot_frontend(frames, out / "frontend.png")
 
     report_config = dict(config)
     report_config.setdefault("sequence", str(sequence))
     summary = read_run_summary(run_dir)
-    write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, metrics,
+    write_report(out / "report.html", f"fusion-vo run {run_dir.name}", report_config, metrics,
                  {FIGURES[path.name]: path for path in images.values()},
                  frontend_summary(frames) if frames is not None else None,
                  notes=summary.get("notes") or [], counts=(summary.get("fusion") or {}).get("counts"))
-    logger.info("wrote metrics.json, %d figures and report.html to %s", len(images), run_dir)
+    logger.info("wrote metrics.json, %d figures and report.html to %s", len(images), out)
     return metrics
 
 
 
-def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Path], config: dict) -> dict:
-    """Score a run's trajectories against the recording's GPS fixes (:mod:`.gps`); metrics, gps.png, report."""
+def evaluate_run_against_gps(run_dir: Path, sequence: Path, files: dict[str, Path], config: dict,
+                             out: Path | None = None) -> dict:
+    """Score a run's trajectories against the recording's GPS fixes (:mod:`.gps`); metrics, gps.png, report
+    (into ``out``, default ``run_dir``)."""
+    out = run_dir if out is None else out
     from fusion_vo.evaluation.gps import evaluate_against_gps, gps_frame, gps_table
     from fusion_vo.recording import Recording
 
     gps = Recording(sequence).gps()
-    metrics, images = evaluate_against_gps(run_dir, files, gps, config, sequence / "gps0" / "data.csv")
-    write_metrics(run_dir / "metrics.json", metrics)
+    metrics, images = evaluate_against_gps(out, files, gps, config, sequence / "gps0" / "data.csv")
+    write_metrics(out / "metrics.json", metrics)
     report_config = dict(config)
     report_config.setdefault("sequence", str(sequence))
     headers, rows = gps_table(metrics)
     notes = [f"{n} GPS fixes skipped ({reason})" for reason, n in gps.skipped.items()]
     summary = read_run_summary(run_dir)
-    write_report(run_dir / "report.html", f"fusion-vo run {run_dir.name}", report_config, {}, images,
+    write_report(out / "report.html", f"fusion-vo run {run_dir.name}", report_config, {}, images,
                  notes=summary.get("notes") or [], counts=(summary.get("fusion") or {}).get("counts"),
                  sections=[(f"Errors against GPS fixes (no ground truth; {gps_frame(metrics)})",
                             headers, rows, notes)])

@@ -22,6 +22,10 @@ has zero roll and pitch and is returned unchanged.
 Gyro biases in roll and pitch would otherwise be read as a constant drift; a platform cannot keep
 rotating in roll or pitch, so the mean roll and pitch rates of the whole recording are taken as the
 biases and removed.
+
+Where the gyro has no sample for longer than ``max_gap`` (a pause in the recording), nothing is known
+of the rotation; the integral does not grow there (a rocking platform is level on average), rather than
+holding the rate of the last sample over the whole gap.
 """
 
 from __future__ import annotations
@@ -48,9 +52,11 @@ class GyroDerotation:
         The ground geometry of the camera (its rectifier and ``T_BS``).
     remove_bias : bool
         Subtract the recording's mean roll and pitch rates (see the module description).
+    max_gap : float
+        Two gyro samples further apart than this [s] add no rotation (default 0.25).
     """
 
-    def __init__(self, imu: ImuData, geometry: GroundGeometry, remove_bias: bool = True):
+    def __init__(self, imu: ImuData, geometry: GroundGeometry, remove_bias: bool = True, max_gap: float = 0.25):
         w_B = np.asarray(imu.gyro, dtype=np.float64) @ np.asarray(imu.T_BS, dtype=np.float64)[:3, :3].T
         w_B = w_B.copy()
         w_B[:, 2] = 0.0  # yaw stays: it is the robot's own motion
@@ -60,7 +66,7 @@ class GyroDerotation:
         self._w = w_B
         # running integral of the body rates (small angles between consecutive frames)
         dt = np.diff(self.t)
-        mid = 0.5 * (w_B[1:] + w_B[:-1]) * dt[:, None]
+        mid = 0.5 * (w_B[1:] + w_B[:-1]) * np.where(dt > max_gap, 0.0, dt)[:, None]
         self._cum = np.vstack([np.zeros(3), np.cumsum(mid, axis=0)])
         rect = geometry.rectifier
         self.f = rect.f

@@ -47,43 +47,149 @@ PROFILE_SPEEDS = {"random": (0.3, 0.9), "square": (0.2, 1.0), "circle": (0.15, 0
 class SimulationOptions:
     """Everything a generated recording depends on (with the seed).
 
-    Motion
-        duration [s] (random, standstill), max_speed [m/s], max_turn_rate [rad/s] (None: profile
-        default), side [m] (square, umbmark), radius [m] (circle), length [m] (straight), angle [rad]
-        (turn_in_place).
-    Floor
-        texture (gravel, grass, brick: scikit-image's CC0 photographs), texel_size [m],
-        featureless: rectangles ``[x_min, y_min, x_max, y_max]`` of flat grey floor [m],
-        featureless_time: ``[t0, t1]`` [s]: the floor the camera sees in that time is flat grey.
-    Camera
-        width, height, fu, fv, cu, cv, distortion_model, distortion, camera_rate [Hz], camera_height
-        [m], lever_arm [m], lateral_offset [m], tilt_x_deg, tilt_y_deg, height_error (fraction: the
-        sensor.yaml height is the true one times 1 + height_error; ``height_sigma`` states that error,
-        at least 0.1 mm), height_vibration [m amplitude],
-        vibration_frequency [Hz], exposure_time [s] (motion blur; 0 = none), blur_samples,
-        supersample, dropped_frames (fraction of frames missing), png_compression (0-9).
-    Photometry
-        gain, exposure_drift, exposure_period [s], vignetting, highlight_radius [px] (0 = none),
-        highlight_center (fractions of width, height), noise [grey levels], shot_noise.
-    Wheels
-        wheel_rate [Hz], ticks_per_revolution, wheel_radius [m], wheel_base [m], radius_error_left,
-        radius_error_right, base_error (fractions: true = nominal · (1 + error); ``radius_sigma`` of
-        wheel0/sensor.yaml states the larger radius error), slip
-        [sqrt(m)], wheel_start_count (near 2**31 to make the counters wrap).
-    IMU
-        imu_rate [Hz], gyro_bias [rad/s, xyz], accel_bias [m/s², xyz], noise densities.
-    Independent camera
-        realistic: a mapping of :class:`fusion_vo.simulation.realistic.RealisticCamera` options; when
-        given, frames are rendered through that module's own lens, optics and sensor instead of the
-        estimator's camera model (``photometry`` options and ``fu .. distortion`` are then unused).
-    GPS
-        gps (write gps0), gps_rate [Hz], gps_noise [m per horizontal axis], gps_lever_arm [m, body x y z],
-        gps_outages ``[[t0, t1], ...]`` [s], gps_jumps ``[[t0, t1, de, dn], ...]`` [s, m],
-        gps_heading_deg (heading of the world x axis in ENU, counter-clockwise from east), gps_origin [m,
-        ENU position of the world origin], gps_datum [latitude deg, longitude deg, altitude m].
-    Other
-        range_finder (write range0), range_noise [m], odometry (write odom0), gt_rate [Hz],
-        jitter [s] (timestamp jitter of wheel and IMU samples), start_time_ns.
+    Attributes
+    ----------
+    duration : float or None
+        Length of the drive [s] (random, standstill; None: the profile's default).
+    max_speed : float or None
+        Top speed [m/s] (None: the profile's default).
+    max_turn_rate : float or None
+        Top turn rate [rad/s] (None: the profile's default).
+    side : float or None
+        Side of the square (square, umbmark) [m].
+    radius : float or None
+        Radius of the circle [m].
+    length : float or None
+        Length of the straight drive [m].
+    angle : float or None
+        Angle of a turn in place [rad].
+    texture : str
+        Floor photograph: gravel, grass or brick (scikit-image's CC0 images).
+    texel_size : float
+        Size on the floor of one pixel of the texture [m].
+    featureless : list
+        Rectangles of flat grey floor [m], each as x_min, y_min, x_max, y_max.
+    featureless_time : list or None
+        A time span [s] (t0, t1) in which the floor the camera sees is flat grey.
+    width, height : int
+        Image size [px].
+    fu, fv : float
+        Focal lengths [px].
+    cu, cv : float
+        Principal point [px].
+    distortion_model : str
+        radial-tangential, equidistant or none.
+    distortion : list
+        Distortion coefficients of that model.
+    camera_rate : float
+        Frame rate [Hz].
+    camera_height : float
+        Height of the camera above the floor [m].
+    lever_arm : float
+        Camera ahead of the wheel axle [m].
+    lateral_offset : float
+        Camera to the left of the centre line [m].
+    tilt_x_deg, tilt_y_deg : float
+        Camera tilt about the body's x and y axes [deg].
+    height_error : float
+        Fraction: the sensor.yaml height is the true one times 1 + height_error (``height_sigma`` states
+        that error, at least 0.1 mm).
+    height_vibration : float
+        Amplitude of the camera's vertical vibration [m].
+    vibration_frequency : float
+        Frequency of that vibration [Hz].
+    exposure_time : float
+        Exposure [s] (motion blur; 0: none).
+    blur_samples : int
+        Sub-frames rendered for motion blur.
+    supersample : int
+        Rendering supersampling factor per axis.
+    dropped_frames : float
+        Fraction of frames missing from the recording, in [0, 1).
+    png_compression : int
+        PNG compression level, 0-9.
+    gain : float
+        Image gain.
+    exposure_drift : float
+        Amplitude of the slow exposure change (fraction).
+    exposure_period : float
+        Period of that change [s].
+    vignetting : float
+        Brightness lost at the image corners (fraction).
+    highlight_radius : float
+        Radius of a specular highlight [px] (0: none).
+    highlight_center : list
+        Centre of the highlight (fractions of width and height).
+    noise : float
+        Image noise [grey levels].
+    shot_noise : float
+        Signal-dependent noise factor.
+    wheel_rate : float
+        Encoder sample rate [Hz].
+    ticks_per_revolution : int
+        Encoder ticks per wheel revolution.
+    wheel_radius : float
+        Nominal wheel radius [m].
+    wheel_base : float
+        Nominal wheel base [m].
+    radius_error_left, radius_error_right : float
+        Fractions: true radius = nominal · (1 + error); ``radius_sigma`` of wheel0/sensor.yaml states the
+        larger one.
+    base_error : float
+        Fraction: true wheel base = nominal · (1 + error).
+    slip : float
+        Wheel slip noise [sqrt(m)].
+    wheel_start_count : int
+        First encoder count (near 2**31 to make the counters wrap).
+    imu_rate : float
+        IMU sample rate [Hz].
+    gyro_bias : list
+        Gyro bias [rad/s] about x, y, z.
+    accel_bias : list
+        Accelerometer bias [m/s²] along x, y, z.
+    gyro_noise_density : float
+        Gyro white noise [rad/s/√Hz].
+    gyro_random_walk : float
+        Gyro bias random walk [rad/s²/√Hz].
+    accel_noise_density : float
+        Accelerometer white noise [m/s²/√Hz].
+    accel_random_walk : float
+        Accelerometer bias random walk [m/s³/√Hz].
+    realistic : dict or None
+        Options of :class:`fusion_vo.simulation.realistic.RealisticCamera`; when given, frames are rendered
+        through that module's own lens, optics and sensor instead of the estimator's camera model (the
+        photometry options and fu .. distortion are then unused).
+    gps : bool
+        Write gps0.
+    gps_rate : float
+        GPS fix rate [Hz].
+    gps_noise : float
+        GPS noise [m] per horizontal axis.
+    gps_lever_arm : list
+        Antenna position [m] in the body frame (x, y, z).
+    gps_outages : list
+        Time spans [s] without fixes, each as t0, t1.
+    gps_jumps : list
+        Time spans [s] whose fixes are offset east and north by de, dn metres (multipath), each as
+        t0, t1, de, dn.
+    gps_heading_deg : float
+        Heading of the world x axis in ENU [deg], counter-clockwise from east.
+    gps_origin : list
+        ENU position of the world origin [m].
+    gps_datum : list
+        Latitude [deg], longitude [deg] and altitude [m] of the ENU datum.
+    range_finder : bool
+        Write range0 (a downward range finder).
+    range_noise : float
+        Range finder noise [m].
+    odometry : bool
+        Write odom0 (an odometry twist).
+    gt_rate : float
+        Ground-truth rate [Hz].
+    jitter : float
+        Timestamp jitter of wheel and IMU samples [s].
+    start_time_ns : int
+        First timestamp [ns].
     """
 
     # motion

@@ -191,3 +191,19 @@ def test_empty_sections_keep_their_defaults(tmp_path):
     _, cfg = _load(tmp_path, "frontend:\nfusion:\n  ekf:\n  graph: {batch: false}\nklt:\nodometry: {height: null}\n")
     assert cfg == _load(tmp_path, "fusion: {graph: {batch: false}}\n")[1]
     assert cfg.fusion_config().graph.batch is False and cfg.odometry["height"] is None
+
+
+def test_every_option_has_a_description_and_every_parser_is_the_schema():
+    from frontends.features import FeatureConfig
+    from fusion_vo.simulation.generate import SimulationOptions
+
+    for cls in (SimulationOptions, FusionConfig, KltConfig, FeatureConfig):
+        props = schema.json_schema(schema.model_of(cls))["properties"]
+        assert [name for name, p in props.items() if not p.get("description")] == [], cls.__name__
+    sim = schema.json_schema(schema.model_of(SimulationOptions))["properties"]
+    assert sim["camera_rate"]["unit"] == "Hz" and sim["gps_outages"]["unit"] == "s"
+    # the dataclasses' own from_dict give the schema's messages (key path and expected type)
+    with pytest.raises(InputError, match=r"^fusion\.ekf\.accel_sigma: expected a number, got 'abc'$"):
+        FusionConfig.from_dict({"ekf": {"accel_sigma": "abc"}}, prefix=("fusion",))
+    with pytest.raises(ValueError, match=r"^KltConfig: max_tracks: expected an integer, got 'many'$"):
+        KltConfig.from_dict({"max_tracks": "many"})

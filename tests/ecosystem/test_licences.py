@@ -7,6 +7,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+from evo_blocker import BLOCK_EVO
+
 ROOT = Path(__file__).resolve().parents[2]
 
 #: packages whose every module must import without evo
@@ -17,16 +19,8 @@ CORE_MODULES = ["fusion_vo", "fusion_vo.config", "fusion_vo.odometry", "fusion_v
                 "fusion_vo.pipeline", "fusion_vo.cli.main", "fusion_vo.evaluation", "fusion_vo.evaluation.plots",
                 "fusion_vo.evaluation.report", "fusion_vo.evaluation.matches"]
 
-_SCRIPT = textwrap.dedent("""
-    import importlib, importlib.abc, pkgutil, sys
-
-    class BlockEvo(importlib.abc.MetaPathFinder):
-        def find_spec(self, name, path=None, target=None):
-            if name == "evo" or name.startswith("evo."):
-                raise ImportError("evo is blocked")
-            return None
-
-    sys.meta_path.insert(0, BlockEvo())
+_SCRIPT = BLOCK_EVO + textwrap.dedent("""
+    import importlib, pkgutil
     packages, modules = {packages!r}, {modules!r}
     imported = []
     for name in packages:

@@ -8,18 +8,11 @@ import sys
 import textwrap
 from pathlib import Path
 
+from evo_blocker import BLOCK_EVO
+
 ROOT = Path(__file__).resolve().parents[2]
 
-_SCRIPT = textwrap.dedent("""
-    import importlib.abc, sys
-
-    class BlockEvo(importlib.abc.MetaPathFinder):
-        def find_spec(self, name, path=None, target=None):
-            if name == "evo" or name.startswith("evo."):
-                raise ImportError("evo is blocked")
-            return None
-
-    sys.meta_path.insert(0, BlockEvo())
+_SCRIPT = BLOCK_EVO + textwrap.dedent("""
     from fusion_vo.cli.main import main
     sys.exit(main(sys.argv[1:]))
 """)

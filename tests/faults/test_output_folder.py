@@ -202,3 +202,46 @@ def test_a_full_disk_names_the_file_not_a_temporary_name(recording, tmp_path, ca
     assert_error(status, err, "No space left on device", str(tmp_path / "out") + "/")
     assert ".tmp-" not in err and STAGING_PREFIX not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]
+
+
+def test_a_failed_evaluate_leaves_the_earlier_results_intact(recording, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "run", recording, "--out", out, "--backend", "ekf")
+    assert status == 0, err
+    assert (out / "metrics.json").is_file() and (out / "report.html").is_file()
+    before = snapshot(tmp_path)
+    from fusion_vo.evaluation import plots
+
+    def full_disk(*args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(plots, "plot_heading", full_disk)  # after metrics.json and two figures were written
+    status, _, err = cli(capsys, "evaluate", out)
+    assert_error(status, err, "No space left on device")
+    after = snapshot(tmp_path)
+    after.pop("out"), before.pop("out")  # the folder's own time changes: a staging folder was made and removed in it
+    assert after == before  # metrics, figures and report as they were; no staging folder, no lock
+    monkeypatch.undo()
+    (out / "gps.png").write_bytes(b"an earlier evaluation's figure")
+    (out / "notes.txt").write_text("mine")
+    status, _, err = cli(capsys, "evaluate", out)
+    assert status == 0, err
+    assert not (out / "gps.png").exists()  # an output of an earlier evaluation that this one does not write
+    assert (out / "notes.txt").read_text() == "mine"  # anything else stays
+    assert (out / "metrics.json").stat().st_mtime_ns > before["out/metrics.json"][2]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "rec"]
+    assert not [p for p in out.iterdir() if p.name.startswith(STAGING_PREFIX)]
+
+
+def test_evaluate_fails_at_once_while_a_run_writes_the_folder(recording, tmp_path, capsys):
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "run", recording, "--out", out, *QUICK)
+    assert status == 0, err
+    fd = os.open(tmp_path / ".out.lock", os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        status, _, err = cli(capsys, "evaluate", out)
+        assert_error(status, err, "another fusion-vo command is writing this run folder", str(out))
+    finally:
+        os.close(fd)
+    assert not (out / "metrics.json").exists()

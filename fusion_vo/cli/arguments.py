@@ -1,0 +1,29 @@
+"""``argparse`` types shared by the commands (a bad value is a usage error naming the option, exit 2)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Callable
+
+
+def whole_number(minimum: int, reason: str = "") -> Callable[[str], int]:
+    """An ``argparse`` type: a whole number of at least ``minimum`` (``reason`` says why, in the error)."""
+    why = f" ({reason})" if reason else ""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"must be at least {minimum}{why}, not {value}")
+        return value
+
+    parse.__name__ = f"whole number >= {minimum}"
+    return parse
+
+
+#: a whole number of at least 1 (threads, repeats)
+positive_int = whole_number(1)
+#: a number of frames: at least one frame pair
+frame_count = whole_number(2, "one frame pair")
