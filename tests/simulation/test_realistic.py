@@ -137,26 +137,14 @@ def test_bad_realistic_options_are_refused(tmp_path):
 
 
 def _board_views(tmp_path, cam: RealisticCamera, size, n_views: int = 30):
-    """Views of a finite board (inner corners 8 x 5) from above, tilted up to 16 degrees."""
-    from scipy.spatial.transform import Rotation
+    """Views of a finite board (inner corners 8 x 5) from above, tilted up to 11 degrees, saved as PNG."""
+    import cv2
 
-    r = RealisticRenderer(cam, *size)
-    rng = np.random.default_rng(1)
-    centre = np.array([4.5, 3.0]) * cam.checker_size
     paths = []
-    for k in range(n_views):
-        tilt = Rotation.from_rotvec([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(-np.pi, np.pi)])
-        R = tilt.as_matrix() @ np.diag([1.0, -1.0, -1.0])  # looking down, then tilted
-        T = np.eye(4)
-        T[:3, :3] = R
-        T[:3, 3] = [*(centre + rng.uniform(-0.09, 0.09, 2)), 0.0]
-        T[:3, 3] -= R[:, 2] * rng.uniform(0.10, 0.14)  # back off along the optical axis
-        img = r.frame(lambda t: T, 0.0, rng)
+    for k, img in enumerate(realistic.board_views(cam, *size, n_views, distance=(0.10, 0.14), shift=0.09)):
         paths.append(tmp_path / f"view{k:02d}.png")
-        import cv2
-
         cv2.imwrite(str(paths[-1]), img)
-    return r, paths
+    return RealisticRenderer(cam, *size), paths
 
 
 def test_calibrating_the_fisheye_wins_back_its_lens(tmp_path):
