@@ -90,11 +90,11 @@ class DirectConfig(ConfigMixin):
     max_clipped : float
         A frame with more than this fraction of its pixels at 0 or 255 is saturated (or black) and
         not measured (``TOO_FEW_FEATURES``).
-    central_region : float
+    central_region : float or None
         Fraction of the rectified image's width and height, about its centre, whose pixels are used
-        (1: all). Without a lens model (``--uncalibrated``) the run sets it below 1: the
-        distortion the model leaves out grows with the distance from the centre, so the centre moves
-        most nearly by one similarity.
+        (``None``: all, or the central half when the run is ``--uncalibrated``: the distortion the
+        missing lens model leaves out grows with the distance from the centre, so the centre moves most
+        nearly by one similarity).
     """
 
     min_level_size: int = 24
@@ -114,7 +114,7 @@ class DirectConfig(ConfigMixin):
     min_sigma: float = 1e-3
     max_pixels: int = 12000
     max_clipped: float = 0.5
-    central_region: float = 1.0
+    central_region: float | None = None
 
     def __post_init__(self) -> None:
         if self.min_level_size < 8:
@@ -123,8 +123,13 @@ class DirectConfig(ConfigMixin):
             raise ValueError("finest_level must be >= 0 and iterations >= 1")
         if not 0.0 < self.min_overlap <= 1.0:
             raise ValueError("min_overlap must lie in (0, 1]")
-        if not 0.1 <= self.central_region <= 1.0:
+        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
             raise ValueError("central_region must lie in [0.1, 1]")
+
+    @property
+    def region(self) -> float:
+        """``central_region`` in effect (1: the whole image)."""
+        return 1.0 if self.central_region is None else float(self.central_region)
 
 
 @dataclass
@@ -417,7 +422,7 @@ class DirectAligner:
         cfg = self.config
         h, w = ref.image.shape
         border = 2
-        sd, xy, idx = ref.steepest_descent(border, cfg.max_pixels, cfg.central_region)
+        sd, xy, idx = ref.steepest_descent(border, cfg.max_pixels, cfg.region)
         sd_t = ref.steepest_descent_t()
         t0 = ref.image.ravel()[idx]
         centre = ref.centre

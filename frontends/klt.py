@@ -155,10 +155,11 @@ class KltConfig(ConfigMixin):
         grid). Every cell gets its strongest corner (:func:`frontends.corners.spread_corners`). Off by
         default: on the gravel recordings the spread-out corners are weaker and the end point moved
         from 0.0025 % to 0.0195 % of the path on ``random60`` (``README.md``, Real cameras).
-    central_region : float
+    central_region : float or None
         Fraction of the width and height, about the image centre, where corners are detected and kept
-        and whose pixels the dense fallback uses (1: all). Set below 1 by ``--uncalibrated``: the
-        distortion of a lens without a model grows with the distance from the centre.
+        and whose pixels the dense fallback uses (``None``: all, or the central half when the run is
+        ``--uncalibrated``: the distortion of a lens without a model grows with the distance from the
+        centre).
     """
 
     max_tracks: int = 60
@@ -201,7 +202,7 @@ class KltConfig(ConfigMixin):
     adaptive_corners: bool = True
     min_quality_level: float | None = None
     grid_cell: float = 0.0
-    central_region: float = 1.0
+    central_region: float | None = None
 
     def __post_init__(self) -> None:
         if self.window < 5 or self.window % 2 == 0:
@@ -212,11 +213,16 @@ class KltConfig(ConfigMixin):
             raise ValueError("pyramid levels must be non-negative")
         if not 0.0 <= self.min_inlier_ratio <= 1.0:
             raise ValueError("min_inlier_ratio must lie in [0, 1]")
-        if not 0.1 <= self.central_region <= 1.0:
+        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
             raise ValueError("central_region must lie in [0.1, 1]")
         if self.min_quality_level is not None and not 0.0 < self.min_quality_level <= self.quality_level:
             raise ValueError("need 0 < min_quality_level <= quality_level")
         self.robust_options()  # validates method, threshold, confidence
+
+    @property
+    def region(self) -> float:
+        """``central_region`` in effect (1: the whole image)."""
+        return 1.0 if self.central_region is None else float(self.central_region)
 
     def lk_settings(self) -> LkSettings:
         """The Lucas-Kanade settings derived from this configuration."""
@@ -509,7 +515,7 @@ class KltFrontend:
         self._ref_small = self._cur_small
         pts = np.asarray(pts, np.float32).reshape(-1, 2)
         plan = self._plan(img.shape)
-        if self.config.central_region < 1.0:
+        if self.config.region < 1.0:
             pts = pts[plan.inside(pts)]
         if len(pts) < plan.replenish_below:
             pts = np.vstack([pts, self._detect(img, pts)])
@@ -521,7 +527,7 @@ class KltFrontend:
             cfg = self.config
             if cfg.adaptive_corners:
                 plan = plan_corners(shape, cfg.min_distance, cfg.block_size, cfg.border, cfg.max_tracks,
-                                    cfg.replenish_below, cfg.central_region)
+                                    cfg.replenish_below, cfg.region)
             else:
                 h, w = shape
                 plan = CornerPlan(1.0, cfg.min_distance, cfg.block_size, cfg.border, cfg.max_tracks,

@@ -409,8 +409,8 @@ def run_visual_odometry(
         raise InputError(str(exc), recording.path / "cam0" / "sensor.yaml") from None
     try:
         options = dict(config.frontend_options)
-        if config.uncalibrated:
-            options.setdefault("central_region", UNCALIBRATED_CENTRAL_REGION)
+        if config.uncalibrated and options.get("central_region") is None:
+            options["central_region"] = UNCALIBRATED_CENTRAL_REGION
         frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None

@@ -113,7 +113,7 @@ def test_frame_rendering_is_deterministic_and_exposure_adapts():
     assert abs(means[-1] - cam.target_grey) < 0.3 * abs(means[0] - cam.target_grey)
 
 
-def test_missing_intrinsics_is_an_error_unless_uncalibrated(tmp_path):
+def test_missing_intrinsics_is_an_error_unless_uncalibrated(tmp_path, monkeypatch):
     seq = simulate(tmp_path / "uncal", profile="straight", seed=3, length=0.05, width=320, height=240,
                    realistic={"lens": "polynomial", "focal": 220.0, "calibration": "none", "supersample": 1})
     assert "intrinsics" not in (seq / "cam0" / "sensor.yaml").read_text()
@@ -126,6 +126,24 @@ def test_missing_intrinsics_is_an_error_unless_uncalibrated(tmp_path):
     travelled = float(np.linalg.norm(vo.track.xyyaw[-1, :2] - vo.track.xyyaw[0, :2]))
     # the barrel lens is ignored: distances come out a few percent off, not more
     assert abs(travelled - truth) < 0.1 * truth
+    # the image centre is used also when a configuration file gives the frontend's section (every key
+    # set to its default), and not when the file asks for the whole image
+    import fusion_vo.odometry as odometry
+    from frontends.klt import KltConfig
+
+    seen = []
+    real = odometry.make_frontend
+
+    def spy(name, options, point_map=None):
+        seen.append(options.get("central_region"))
+        return real(name, options, point_map=point_map)
+
+    monkeypatch.setattr(odometry, "make_frontend", spy)
+    for region in (None, 1.0):
+        options = {**KltConfig().to_dict(), "central_region": region}
+        run_visual_odometry(Recording(seq), OdometryConfig(frontend="klt", frontend_options=options, uncalibrated=True,
+                                                           focal_length=220.0))
+    assert seen == [odometry.UNCALIBRATED_CENTRAL_REGION, 1.0]
 
 
 def test_bad_realistic_options_are_refused(tmp_path):
