@@ -13,14 +13,17 @@ focal length (the script does not undistort), the same heights (range finder) an
 constant-velocity bridging of failed frames.
 
     python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
-                                         [--uncalibrated | --calibrate N] [--no-derotation] [--fusion]
+                                         [--uncalibrated | --calibrate N [--radial-terms 3]]
+                                         [--no-derotation] [--fusion]
 
 ``--uncalibrated`` runs the frontends without the lens model of ``sensor.yaml`` (a pinhole of its focal
 length, the image centre only). ``--calibrate N`` replaces the lens model by what
 ``fusion-vo calibrate intrinsics`` finds (:func:`fusion_vo.calibration.intrinsics.calibrate_images`) from
-``N`` views of a printed 9 x 6 board (2 cm squares) rendered through the recording's own lens
+``N`` views of a printed 9 x 6 board (2 cm squares, tilted up to 26 degrees) rendered through the
+recording's own lens
 (:func:`fusion_vo.simulation.realistic.board_views`; the radial-tangential model for the barrel lens,
-``--model fisheye`` for the fisheye), and prints how far that model reprojects the true lens.
+``--model fisheye`` for the fisheye; ``--radial-terms 3`` fits ``k3`` too), and prints how far that
+model reprojects the true lens.
 
 ``--fusion`` also runs ``fusion-vo run --backend all`` (default configuration, KLT) on each recording
 through :func:`fusion_vs_best.compare` and prints the ATE [mm, after SE(2) alignment] of visual
@@ -134,7 +137,7 @@ def run_frontend(rec: Recording, frontend: str, odometry: dict) -> Row:
     return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds)
 
 
-def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path):
+def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radial_terms: int = 2):
     """The recording's camera with the lens model calibrated from ``n_views`` rendered board views."""
     import cv2
 
@@ -156,10 +159,11 @@ def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path):
         distance = (0.8 * d, 1.1 * d)
     work.mkdir(parents=True, exist_ok=True)
     paths = []
-    for k, img in enumerate(board_views(cam, *size, n_views, distance=distance, shift=0.07)):
+    for k, img in enumerate(board_views(cam, *size, n_views, distance=distance, shift=0.07, tilt=0.45)):
         paths.append(work / f"{name}_view{k:02d}.png")
         cv2.imwrite(str(paths[-1]), img)
-    result = calibrate_images(paths, Board(8, 5, 0.02), model="fisheye" if fisheye else "pinhole")
+    result = calibrate_images(paths, Board(8, 5, 0.02), model="fisheye" if fisheye else "pinhole",
+                              radial_terms=2 if fisheye else radial_terms)
     K = result.K
     calibrated = CameraModel(model.width, model.height, K[0, 0], K[1, 1], K[0, 2], K[1, 2],
                              result.distortion_model, np.asarray(result.distortion, float), model.T_BS, model.rate_hz)
@@ -171,7 +175,8 @@ def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path):
     err = {label: np.linalg.norm(m.project(rays) - pix, axis=1)
            for label, m in (("calibrated", calibrated), ("sensor.yaml", model))}
     print(f"\n{name}: calibrated from {len(paths) - len(result.skipped)} of {len(paths)} views "
-          f"({'fisheye' if fisheye else 'radial-tangential'} model, RMS {result.rms:.2f} px); reprojection of the "
+          f"({'fisheye' if fisheye else f'radial-tangential, {radial_terms} radial terms'} model, RMS "
+          f"{result.rms:.2f} px); reprojection of the "
           f"true lens, worst / median: calibrated {err['calibrated'].max():.2f} / {np.median(err['calibrated']):.2f} "
           f"px, sensor.yaml's fitted model {err['sensor.yaml'].max():.2f} / {np.median(err['sensor.yaml']):.2f} px")
     return calibrated
@@ -196,6 +201,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="run the frontends without the lens distortion of sensor.yaml (its focal length only)")
     ap.add_argument("--calibrate", type=int, default=0, metavar="N",
                     help="replace the lens model by one calibrated from N rendered board views")
+    ap.add_argument("--radial-terms", type=int, choices=[2, 3], default=2,
+                    help="radial terms of the calibrated pinhole model (--calibrate; the fisheye model has its own)")
     ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
     ap.add_argument("--fusion", action="store_true", help="also fuse with wheels and IMU and print the ATE per track")
     args = ap.parse_args(argv)
@@ -211,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         rec = Recording(seq)
         rows = [run_baseline(rec)]
         if args.calibrate:
-            rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views")
+            rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views", args.radial_terms)
         for fe in args.frontends.split(","):
             rows.append(run_frontend(rec, fe, odometry))
         print_table(name, rows)

@@ -371,12 +371,13 @@ class RealisticRenderer:
 
 
 def board_views(cam: RealisticCamera, width: int, height: int, n_views: int, distance: tuple[float, float],
-                shift: float, seed: int = 1) -> list[np.ndarray]:
+                shift: float, seed: int = 1, tilt: float = 0.2) -> list[np.ndarray]:
     """Views of the finite board of ``cam`` (``checker_squares``) from above, for intrinsic calibration.
 
     Each view looks down at the board's centre shifted by up to ``shift`` metres, from ``distance``
     (a range, metres along the optical axis), rotated at random about the vertical and tilted by up to
-    0.2 rad about both horizontal axes, as a person waving a printed board under the camera would.
+    ``tilt`` rad about both horizontal axes, as a person waving a printed board under the camera would
+    (tilted views are what separate the focal length from the distance).
 
     Returns
     -------
@@ -392,8 +393,8 @@ def board_views(cam: RealisticCamera, width: int, height: int, n_views: int, dis
     centre = np.array(cam.checker_squares, float) / 2.0 * cam.checker_size
     views = []
     for _ in range(n_views):
-        tilt = Rotation.from_rotvec([rng.uniform(-0.2, 0.2), rng.uniform(-0.2, 0.2), rng.uniform(-np.pi, np.pi)])
-        R = tilt.as_matrix() @ np.diag([1.0, -1.0, -1.0])  # looking down, then tilted
+        turn = Rotation.from_rotvec([rng.uniform(-tilt, tilt), rng.uniform(-tilt, tilt), rng.uniform(-np.pi, np.pi)])
+        R = turn.as_matrix() @ np.diag([1.0, -1.0, -1.0])  # looking down, then tilted
         T = np.eye(4)
         T[:3, :3] = R
         T[:3, 3] = [*(centre + rng.uniform(-shift, shift, 2)), 0.0]
