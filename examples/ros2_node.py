@@ -60,7 +60,7 @@ class GroundCameraOdometry(Node):
         self.declare_parameter("wheel_odom_topic", "/odom")
         self.declare_parameter("imu_topic", "/imu/data")
         self.declare_parameter("output_topic", "/fusion_vo/odom")
-        self.declare_parameter("backend", "ekf")  # "gtsam" for iSAM2 (late data only within the window)
+        self.declare_parameter("backend", "ekf")  # "gtsam": iSAM2 (a late camera only within the window)
         self.declare_parameter("rate", 50.0)
         self.declare_parameter("camera_height", 0.095)  # [m] height the visual increments assume
         p = self.get_parameter

@@ -25,7 +25,8 @@ judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for t
 its offset is no longer known.
 
 The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
-(:class:`~fusion_vo.backends.streaming.StreamingFusion`) does not run it yet, and speeds (the wheels'
+(:class:`~fusion_vo.backends.streaming.StreamingFusion`) runs it causally over a sliding window
+(:mod:`fusion_vo.backends.live_monitor`), and speeds (the wheels'
 against the camera's) are not checked yet: only heading sources are.
 
 Only the inconsistent *component* is dropped, for as long as it disagrees (it comes back after a
@@ -113,8 +114,11 @@ def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None) -> fl
     return 0.0
 
 
-def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
-    """Find and drop the inconsistent heading components of ``iv`` (in place); returns the episodes."""
+def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = None) -> list[Episode]:
+    """Find and drop the inconsistent heading components of ``iv`` (in place); returns the episodes.
+
+    ``gyro_bias`` [rad/s] replaces the bias the check estimates itself (:func:`_gyro_bias`).
+    """
     from fusion_vo.sensors.wheel import arc_increment, standstill
 
     cfg = config
@@ -131,7 +135,9 @@ def check_heading_sources(iv, config: FusionConfig) -> list[Episode]:
         inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
         wheel_yaw = inc[:, 2]
         still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
-    bias = _gyro_bias(iv, wheel_yaw, still) if iv.uses("gyro") else 0.0
+    bias = 0.0
+    if iv.uses("gyro"):
+        bias = _gyro_bias(iv, wheel_yaw, still) if gyro_bias is None else float(gyro_bias)
     gyro = None
     if iv.uses("gyro"):
         gyro = iv.gyro_angle - bias * dt

@@ -27,6 +27,11 @@ GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the p
 (``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
 (plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
 and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
+kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
+as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).
+Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
+(kept for the alignment) or late.
 
 A pose for now
 --------------
@@ -37,13 +42,21 @@ never what a controller sees. :meth:`StreamingFusion.processed_estimate` returns
 
 Late data
 ---------
-The EKF keeps the last ``history`` seconds (default 2 s) of its states, the increments it consumed
-and the raw samples. A measurement older than the last processed node but within the history rewinds
-the filter to the node before it and re-filters everything after it, so the result is the one the same
-data would have given in time order. iSAM2 cannot rewind: for ``backend="gtsam"`` late data is applied
-only within the reorder window (set it to the latency of the slowest input; the prediction keeps the
-returned pose current). Measurements older than the history (or than the window for iSAM2) are counted
-as ``late`` and reported by :meth:`finish`.
+Both backends keep the last ``history`` seconds (default 2 s) of the raw samples and of what each
+node consumed. A measurement older than the last processed node but within the history is applied:
+
+* the EKF keeps its states too: it rewinds to the node before the measurement and re-filters
+  everything after it, so the result is the one the same data would have given in time order;
+* iSAM2 rebuilds the node intervals the measurement changes (its own interval and those whose
+  interpolation, gating or spike median its neighbours feed) and swaps their factors for the new ones
+  in one update (``removeFactorIndices``), when the next node is due; the custom factors are linearised
+  at the current estimate, twice. The node times stay those already processed, so a late visual
+  increment is applied only if its ``t0`` and ``t1`` are consecutive nodes (a camera later than the
+  reorder window finds fill-in nodes in its place: set the window to the camera's latency), and the
+  online poses of the rebuilt nodes become iSAM2's estimates after the swap (:meth:`smoothed` gives the
+  whole current estimate).
+
+Measurements older than the history are counted as ``late`` and reported by :meth:`finish`.
 
 Bad input
 ---------
@@ -59,6 +72,11 @@ thread, a serial thread, a timer reading :meth:`current_estimate`): each call is
 effects of every call that returned before it started. Samples of one stream must still be added
 by one thread at a time in (roughly) time order, as any stream would be; arrival order across threads
 is what the reorder window and the history absorb.
+
+With ``background=True`` (iSAM2) the updates run on one worker thread that owns iSAM2; the caller's
+thread builds the factors and returns. A node's pose is the initial guess (the last estimate composed
+with the interval's odometry) until its update is done; each later call takes the finished results in,
+and :meth:`finish` and :meth:`smoothed` wait for all of them.
 """
 
 from __future__ import annotations
@@ -68,6 +86,8 @@ import dataclasses
 import logging
 import math
 import threading
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,6 +95,7 @@ import numpy as np
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
+from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
 from fusion_vo.errors import InputError
@@ -112,6 +133,10 @@ class _NodeRecord:
     heading_offset: float | None
     counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
     visual: list = field(default_factory=list)  # increments this node's step consumed
+    monitor: MonitorState | None = None  # the heading monitor after this node
+    fixes: list = field(default_factory=list)  # GPS fixes this node's step consumed
+    gps: tuple | None = None  # GPS bookkeeping after this node (_gps_state)
+    dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
 
 
 class StreamingFusion:
@@ -136,7 +161,7 @@ class StreamingFusion:
         Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
         (default: at the body origin).
     history : float
-        Seconds of states and samples the EKF keeps to re-apply late measurements (default 2).
+        Seconds of samples (and EKF states) kept to re-apply late measurements (default 2).
     horizon : float
         Largest prediction [s] :meth:`current_estimate` makes beyond the newest measurement, and how far
         ahead of the newest measurement a new one may be before it is rejected (default 1).
@@ -144,22 +169,30 @@ class StreamingFusion:
         Most nodes one ``add_*`` call processes (default 1); the rest is caught up by the next calls,
         which bounds the latency of a call when a late measurement makes the EKF re-filter several
         nodes. None processes everything due at once. :meth:`finish` always processes everything.
+    background : bool
+        iSAM2 only: run its updates (and the linearisation, relinearisation and marginal covariance that
+        come with them) on a worker thread, off the caller's; GTSAM releases the GIL while it works. A node's
+        recorded pose is its initial guess (the last estimate composed with the interval's odometry) until
+        its update has finished; results are taken in by the next call.
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
                  gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
-                 steps_per_call: int | None = 1):
+                 steps_per_call: int | None = 1, background: bool = False):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
         if not (np.isfinite(history) and history >= 0 and np.isfinite(horizon) and horizon > 0):
             raise InputError(f"history must be >= 0 and horizon > 0 seconds (got history={history}, horizon={horizon})")
-        self.history = float(history) if backend == "ekf" else 0.0
+        self.history = float(history)
         self.horizon = float(horizon)
         if steps_per_call is not None and (not isinstance(steps_per_call, int) or steps_per_call < 1):
             raise InputError(f"steps_per_call must be a positive integer or None, not {steps_per_call!r}")
         self.steps_per_call = steps_per_call
+        if background and backend != "gtsam":
+            raise InputError("background updates are for backend 'gtsam' (the EKF's steps are cheap)")
+        self.background = bool(background)
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
@@ -173,8 +206,6 @@ class StreamingFusion:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
         if "gps" in self.sensors and backend != "ekf":
             raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
-        if "gps" in self.sensors:  # the switch to ENU re-expresses the recorded states: no rewind across it
-            self.history = 0.0
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
@@ -186,6 +217,8 @@ class StreamingFusion:
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
         self.rewinds = 0
+        self._monitor = LiveHeadingMonitor(self.config)
+        self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
         self._buffers: dict[str, list] = {name: [] for name in ("wheel", "odom", "imu", "range")}
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
@@ -205,7 +238,8 @@ class StreamingFusion:
         self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
         self._frame = "start"
         self._gps_reacquire = None
-        self._gps_bad = 0
+        self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
+        self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
 
     # ------------------------------------------------------------------ input
     def add_visual(self, inc: VisualIncrement) -> None:
@@ -222,6 +256,7 @@ class StreamingFusion:
                 self._advance(inc.t1)
                 return
             self._insert_visual(inc)
+            self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
             self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
@@ -251,14 +286,12 @@ class StreamingFusion:
         with self._lock:
             self._check("gps")
             if not self._valid("gps", fix.t, [fix.enu, fix.covariance]):
-                self._gps_bad += 1  # the gps count is set from the model's and these at the end
                 return
             if self._late("gps", fix.t):
                 return
             enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
             cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
             if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-                self._gps_bad += 1
                 self._count("gps").gated += 1
                 return
             if self._gps and fix.t < self._gps[-1].t:
@@ -276,6 +309,7 @@ class StreamingFusion:
         before the first node.
         """
         with self._lock:
+            self._collect()
             if not self._t_nodes:
                 return None
             target = self._latest if t is None else float(t)
@@ -292,9 +326,19 @@ class StreamingFusion:
     def processed_estimate(self) -> Estimate | None:
         """The last processed node (held back by the reorder window), or None before the first node."""
         with self._lock:
+            self._collect()
             if not self._t_nodes:
                 return None
             return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
+
+    def smoothed(self) -> PoseData | None:
+        """iSAM2 only: its current estimate of every node so far (each pose given all data up to now),
+        beside the online track (each pose as it was when its node was the newest). None for the EKF."""
+        with self._lock:
+            if self._graph is None:
+                return None
+            self._collect(wait=True)
+            return PoseData(np.array(self._t_nodes[:self._graph.n + 1]), self._graph.poses())
 
     @property
     def counts(self) -> dict[str, SensorCount]:
@@ -313,6 +357,7 @@ class StreamingFusion:
 
     def _finish(self) -> FusionResult:
         self._process(np.inf)
+        self._collect(wait=True)
         name = "ekf" if self.backend == "ekf" else "gtsam_online"
         result = FusionResult()
         if self._t_nodes:
@@ -322,15 +367,20 @@ class StreamingFusion:
         result.counts[name] = counts
         result.notes = list(self._notes)
         if "gps" in self.sensors:
-            m = self._gps_model
-            self._notes.append(f"ekf: gps {m.n_used} fixes used, {m.n_rejected} rejected by the gate; world frame: "
-                               + ("ENU at the datum" if self._frame == "enu" else
-                                  "the start frame (the fixes never fixed the heading of ENU)"))
+            gps = counts.get("gps", SensorCount())
+            result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
+                                "world frame: " + ("ENU at the datum" if self._frame == "enu" else
+                                                   "the start frame (the fixes never fixed the heading of ENU)"))
+        if self._t_nodes:
+            episodes = self._monitor.all_episodes(self._t_nodes[-1])
+            result.inconsistent = [ep.as_dict() for ep in episodes]
+            result.notes.extend("live monitor: " + ep.note(self._t_nodes[0]) for ep in episodes)
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
         if self.rewinds:
-            result.notes.append(f"late measurements re-applied by rewinding the filter {self.rewinds} times")
+            how = "rewinding the filter" if self.backend == "ekf" else "swapping iSAM2 factors"
+            result.notes.append(f"late measurements re-applied by {how} {self.rewinds} times")
         return result
 
     # ------------------------------------------------------------------ buffering
@@ -371,8 +421,17 @@ class StreamingFusion:
             logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
                            "history); not applied", sensor, t, self._t_nodes[-1], self.history)
             return True
-        self._rewind(i)
-        return False
+        if self.backend == "ekf":
+            self._rewind(i)
+        return False  # iSAM2: the intervals the sample changes are marked once it is buffered (_mark)
+
+    def _mark(self, t_lo: float, t_hi: float) -> None:
+        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding."""
+        if self.backend == "ekf" or not self._t_nodes or t_lo >= self._t_nodes[-1]:
+            return
+        first = max(bisect.bisect_left(self._t_nodes, t_lo - 1e-9), 1)
+        last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
+        self._dirty.update(range(first, last + 1))
 
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
@@ -388,7 +447,11 @@ class StreamingFusion:
         buf = self._buffers[stream]
         if buf and t < buf[-1][0]:
             self._count(sensor).reordered += 1
-        bisect.insort(buf, (float(t), payload), key=lambda item: item[0])
+        k = bisect.bisect_right(buf, t, key=lambda item: item[0])
+        buf.insert(k, (t, payload))
+        if self._t_nodes and t < self._t_nodes[-1]:
+            # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
+            self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
 
     def _insert_visual(self, inc: VisualIncrement) -> None:
@@ -397,6 +460,7 @@ class StreamingFusion:
         bisect.insort(self._visual, inc, key=lambda v: v.t1)
 
     def _advance(self, t: float) -> None:
+        self._collect()
         self._latest = max(self._latest, float(t))
         self._process(self._latest - self.config.reorder_window, self.steps_per_call)
 
@@ -408,7 +472,7 @@ class StreamingFusion:
         interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
         increment is applied from its ``t0`` node (``back=0``).
         """
-        if self.backend != "ekf" or self.history <= 0:
+        if self.history <= 0:
             return None
         i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
         if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
@@ -421,10 +485,13 @@ class StreamingFusion:
         for later in self._records[i + 1:]:
             for v in later.visual:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        self._rewind_gps(i, rec.gps)
         x, P = rec.state
         self._ekf.kf.x = x.reshape(-1, 1).copy()
         self._ekf.kf.P = P.copy()
         self._heading_offset = rec.heading_offset
+        if rec.monitor is not None:
+            self._monitor.restore(rec.monitor)
         del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
         self.rewinds += 1
 
@@ -460,6 +527,10 @@ class StreamingFusion:
 
     def _process(self, until: float, budget: int | None = None) -> None:
         """Process the nodes up to ``until``, at most ``budget`` of them (None: all)."""
+        if self._dirty and (budget is None or self._next_node(self._t_nodes[-1], until) is not None):
+            # late data is swapped in when the next node is due (several late samples, one update)
+            dirty, self._dirty = sorted(self._dirty), set()
+            self._replace(dirty)
         if not self._t_nodes:
             start = self._start_time()
             if start is None or start > until:
@@ -478,12 +549,17 @@ class StreamingFusion:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
         return max(times) if times else -np.inf
 
-    def _streams_between(self, t0: float, t1: float) -> SensorStreams:
-        margin = self.config.max_gap
+    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None) -> SensorStreams:
+        """The buffered samples an interval needs: those inside it, the ones bracketing it, and the
+        neighbours the spike check's running median reads around those (the same values as in batch
+        use); until the AHRS offset is known, the IMU's first quarter second after ``t0`` too."""
+        extra = int(self.config.imu.spike_window) + 1
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
-            lo = max(bisect.bisect_left(buf, t0 - margin, key=lambda item: item[0]) - 1, 0)
-            hi = bisect.bisect_right(buf, t1 + margin, key=lambda item: item[0]) + 1
+            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - extra, 0)
+            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + extra
+            if name == "imu" and heading_offset is None:
+                hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
             if len(rows) < (1 if name == "range" else 2):
                 continue
@@ -503,9 +579,14 @@ class StreamingFusion:
                 streams.range = RangeData(t, np.array([r[1] for r in rows]))
         return streams
 
-    def _step(self, t0: float, t1: float) -> None:
-        self._step_counts = step = {}
-        streams = self._streams_between(t0, t1)
+    def _interval(self, t0: float, t1: float, heading_offset: float | None):
+        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments)``.
+
+        Consumes the buffered visual increments ending at or before ``t1``; those that do not span
+        exactly this interval cannot be applied and are counted as late.
+        """
+        step: dict[str, SensorCount] = {}
+        streams = self._streams_between(t0, t1, heading_offset)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
         usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
         for v in consumed:
@@ -514,13 +595,23 @@ class StreamingFusion:
         self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
         if usable:
             streams.visual = usable
-        iv = build_intervals(streams, self.config, np.array([t0, t1]), self._heading_offset)
-        if iv.heading_offset is not None:
-            self._heading_offset = iv.heading_offset
+        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
         for sensor, c in iv.counts.items():
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
             own.missing += c.missing
+        return iv, step, consumed
+
+    def _step(self, t0: float, t1: float) -> None:
+        iv, step, consumed = self._interval(t0, t1, self._heading_offset)
+        self._step_counts = step
+        self._step_fixes = []
+        if iv.heading_offset is not None:
+            self._heading_offset = iv.heading_offset
+        self._monitor.add(iv)
+        self._monitor.check()
+        dropped = frozenset(self._monitor.dropped)
+        self._monitor.apply(iv)
         if self.backend == "ekf":
             self._ekf_step(iv)
             state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
@@ -528,9 +619,39 @@ class StreamingFusion:
             self._graph_step(iv)
             state = None
         self._t_nodes.append(t1)
-        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed))
+        keep = state is not None
+        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed,
+                                         monitor=self._monitor.state() if keep else None, dropped=dropped,
+                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None))
         self._retire()
         self._prune(t0)
+
+    def _replace(self, nodes: list[int]) -> None:
+        """iSAM2: rebuild the intervals ending at ``nodes`` from the buffers (late data now in them) and
+        swap their factors in one update; their recorded poses become iSAM2's estimates after it."""
+        batches = []
+        for j in nodes:
+            rec = self._records[j]
+            if rec is None or self._records[j - 1] is None:  # left the history meanwhile
+                continue
+            for v in rec.visual:
+                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+            prev = self._records[j - 1]
+            iv, step, consumed = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            rec.counts, rec.visual = step, consumed
+            self._monitor.update(j - 1, iv)
+            self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
+            rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
+            batches.append((j, iv, self._poses[j - 1]))
+        if not batches:
+            return
+        self._heading_offset = self._records[-1].heading_offset
+        sensors, results = self._graph.replace(batches)
+        for j, used in sensors:
+            self._count_used(j, used)
+        for j, pose, cov, _ in results:
+            self._poses[j], self._covs[j] = pose, cov
+        self.rewinds += 1
 
     def _retire(self) -> None:
         """Drop the rewind data of nodes older than the history (their counts are kept)."""
@@ -543,6 +664,8 @@ class StreamingFusion:
             rec = self._records[j]
             _merge_into(self._retired_counts, rec.counts)
             self._records[j] = None
+            if self._graph is not None:
+                self._graph.forget(j)
 
     def _prune(self, t0: float) -> None:
         keep_from = t0 - self.history - 2.0 * self.config.max_gap
@@ -564,11 +687,12 @@ class StreamingFusion:
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
             self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
-            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None))
+            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
+                                             monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(_NodeRecord(None, None))
-            self._graph = _OnlineGraph(cfg, t, (kv, kb))
+            self._graph = _OnlineGraph(cfg, t, (kv, kb), self.background)
             pose, cov = self._graph.start()
             self._record(pose, cov)
 
@@ -584,8 +708,9 @@ class StreamingFusion:
         t1 = float(iv.t[-1])
         for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
             self._gps.remove(fix)
+            self._step_fixes.append(fix)
             if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
-                self._count("gps").late += 1
+                self._step_counts.setdefault("gps", SensorCount()).late += 1
             else:
                 self._apply_gps(fix)
         for sensor, c in ekf.counts.items():
@@ -611,7 +736,7 @@ class StreamingFusion:
                 np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
             fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
             if fit is None:
-                self._count("gps").missing += 1  # kept for the alignment, not applied
+                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
                 return
             sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
             _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
@@ -624,6 +749,7 @@ class StreamingFusion:
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
             rot = np.eye(3)
             rot[:2, :2] = T[:2, :2]
+            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
             self._poses = [p for p in fit.apply(np.array(self._poses))]
             self._covs = [rot @ cv @ rot.T for cv in self._covs]
             self._frame = "enu"
@@ -634,17 +760,73 @@ class StreamingFusion:
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
         accepted = ekf.gps_update(model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
-            ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
+            accepted = ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
         elif accepted:
             self._gps_reacquire.due(fix.t, True)
-        count = self._count("gps")
-        count.used, count.gated = model.n_used, model.n_rejected + self._gps_bad
+        count = self._step_counts.setdefault("gps", SensorCount())
+        if accepted:
+            count.used += 1
+        else:
+            count.gated += 1
+
+    def _gps_state(self) -> tuple | None:
+        """What a rewind restores of the GPS bookkeeping (frame, fixes kept for the alignment, re-acquisition)."""
+        if "gps" not in self.sensors:
+            return None
+        re = self._gps_reacquire
+        return (self._frame, len(self._gps_seen), None if re is None else (re.last_ok, len(re.times)),
+                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)))
+
+    def _rewind_gps(self, i: int, state: tuple | None) -> None:
+        """Back to the GPS bookkeeping after node ``i``; undo the switch to ENU if it came after ``i``."""
+        for rec in self._records[i + 1:]:
+            for fix in rec.fixes:
+                bisect.insort(self._gps, fix, key=lambda f: f.t)
+        if state is None:
+            return
+        frame, n_seen, reacquire, model = state
+        if self._frame == "enu" and frame == "start":
+            _, poses, covs, n_notes = self._start_frame
+            self._poses[:i + 1] = [p.copy() for p in poses[:i + 1]]
+            self._covs[:i + 1] = [c.copy() for c in covs[:i + 1]]
+            del self._notes[n_notes:]
+            self._frame, self._gps_reacquire, self._start_frame = "start", None, None
+        del self._gps_seen[n_seen:]
+        if reacquire is not None:
+            self._gps_reacquire.last_ok = reacquire[0]
+            del self._gps_reacquire.times[reacquire[1]:]
+        m = self._gps_model
+        m.n_used, m.n_rejected = model[0], model[1]
+        del m.rejected_t[model[2]:]
 
     def _graph_step(self, iv) -> None:
         pose, cov, sensors = self._graph.step(iv)
+        if cov is None:  # background update under way: the guess, with the last covariance
+            cov = self._covs[-1]
         for s in sensors:
             self._step_counts.setdefault(s, SensorCount()).used += 1
         self._record(pose, cov)
+
+    def _collect(self, wait: bool = False) -> None:
+        """Take in the results of finished background iSAM2 updates (all of them with ``wait``)."""
+        if self._graph is None or not self.background:
+            return
+        for n, pose, cov, sensors in self._graph.collect(wait):
+            if n < len(self._poses):
+                self._poses[n], self._covs[n] = pose, cov
+            self._count_used(n, sensors)
+
+    def _count_used(self, n: int, sensors) -> None:
+        """Node ``n``'s factors are now those of ``sensors`` (None: unchanged): its ``used`` counts follow."""
+        if sensors is None:
+            return
+        rec = self._records[n] if n < len(self._records) else None
+        if rec is None:  # left the history while its update ran: its counts were merged already
+            return
+        for c in rec.counts.values():
+            c.used = 0
+        for s in sensors:
+            rec.counts.setdefault(s, SensorCount()).used += 1
 
 
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
@@ -723,7 +905,7 @@ def _extrapolate(t_nodes, poses, covs, dt: float, config: FusionConfig) -> tuple
 class _OnlineGraph:
     """iSAM2 fed one node interval at a time through :class:`~fusion_vo.backends.graph.GraphBuilder`."""
 
-    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool]):
+    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False):
         import gtsam
 
         from fusion_vo.backends import graph
@@ -733,22 +915,52 @@ class _OnlineGraph:
         self.config = config
         self.t_origin = t_origin
         self.calibrate = calibrate
-        self.isam = gtsam.ISAM2(graph.isam_params())
+        # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
+        # a conditioning that Cholesky can report as indeterminate
+        self.isam = gtsam.ISAM2(graph.isam_params(True))
         self.n = 0
         self.estimate: dict = {}
         self.prev_pose = gtsam.Pose2(*config.initial_pose)
+        # background: one worker thread owns iSAM2 (it is not thread-safe); jobs run in order
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="isam2") if background else None
+        self._jobs: deque = deque()
 
-    def _update(self, nf):
+    def _update(self, n: int, nf, prev_pose=None):
+        """Freeze ``nf``'s custom factors at the current estimate and add node ``n`` to iSAM2."""
         g = self.gtsam.NonlinearFactorGraph()
-        lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, self.n - 1)
+        if prev_pose is None:  # background: the previous node's estimate, now that its update is done
+            prev_pose = nf.values.get(self.graph.X(n - 1)) or self.isam.calculateEstimatePose2(self.graph.X(n - 1))
+            if nf.guess is not None:  # the guess composed on that estimate rather than on the caller's guess
+                nf.values[self.graph.X(n)] = prev_pose.compose(self.gtsam.Pose2(*nf.guess))
+        lookup = self.graph.current_value_lookup(nf.values, self.isam, prev_pose, n - 1)
         for f in self.graph.freeze_custom_factors(nf.factors, lookup):
             g.add(f)
         values = self.gtsam.Values()
         self.graph.insert_values(values, nf.values)
-        self.isam.update(g, values)
-        key = self.graph.X(self.n)
+        result = self.isam.update(g, values)
+        self.factors[n] = list(result.getNewFactorsIndices())
+        return self._pose_cov(n)
+
+    def _background_step(self, n: int, nf, builder):
+        pose, cov = self._update(n, nf)
+        estimate = dict(self.estimate)
+        self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
+        self.estimate = estimate  # swapped whole: the caller's thread reads it for guesses
+        return [(n, pose, cov, None)]
+
+    def collect(self, wait: bool = False) -> list:
+        """Results ``(n, pose, covariance, sensors)`` of the finished background jobs, in order."""
+        out = []
+        while self._jobs and (wait or self._jobs[0].done()):
+            out += self._jobs.popleft().result()
+        if out and out[-1][0] == self.n:  # re-anchor the guesses on the newest estimate
+            p = out[-1][1]
+            self.prev_pose = self.gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
+        return out
+
+    def _pose_cov(self, n: int):
+        key = self.graph.X(n)
         pose = self.isam.calculateEstimatePose2(key)
-        self.prev_pose = pose
         cov = self.graph.world_covariances(np.array([pose.theta()]), self.isam.marginalCovariance(key)[None])[0]
         return np.array([pose.x(), pose.y(), pose.theta()]), cov
 
@@ -756,22 +968,95 @@ class _OnlineGraph:
         cfg = self.config
         # the first node's own factors come with the first interval (which knows the sensors)
         self._pending_first = True
+        self.factors: dict[int, list[int]] = {}  # node -> indices of its factors in iSAM2
         return np.asarray(cfg.initial_pose, dtype=np.float64), np.diag([1e-8, 1e-8, 1e-8])
 
-    def step(self, iv):
-        builder = self.graph.GraphBuilder(iv, self.config, offset=self.n, t_origin=self.t_origin,
+    def _node_factors(self, n: int, iv, first: bool, previous_pose):
+        builder = self.graph.GraphBuilder(iv, self.config, offset=n - 1, t_origin=self.t_origin,
                                           calibrate=self.calibrate)
-        if self._pending_first:
-            first = builder.first_node()
-            nf = builder.node(1, self.prev_pose, self.estimate)
-            first.factors.extend(nf.factors)
-            first.values.update(nf.values)
-            first.sensors = nf.sensors
-            nf = first
-            self._pending_first = False
-        else:
-            nf = builder.node(1, self.prev_pose, self.estimate)
+        nf = builder.node(1, previous_pose, self.estimate)
+        if first:
+            head = builder.first_node()
+            head.factors.extend(nf.factors)
+            head.values.update(nf.values)
+            head.sensors = nf.sensors
+            nf = head
+        return builder, nf
+
+    def step(self, iv):
+        """Add the node ending ``iv``: ``(pose, covariance, sensors)``; in the background, the pose is
+        the initial guess and the covariance None (the estimate comes through :meth:`collect`)."""
+        builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
+        self._pending_first = False
         self.n += 1
-        pose, cov = self._update(nf)
+        if self._pool is not None:
+            self._jobs.append(self._pool.submit(self._background_step, self.n, nf, builder))
+            guess = nf.values[self.graph.X(self.n)]
+            self.prev_pose = guess
+            return np.array([guess.x(), guess.y(), guess.theta()]), None, nf.sensors
+        pose, cov = self._update(self.n, nf, self.prev_pose)
+        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
         self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
         return pose, cov, nf.sensors
+
+    def replace(self, batches, passes: int = 2):
+        """Swap the factors of nodes ``n`` for those of their rebuilt intervals.
+
+        ``batches`` holds ``(n, Intervals, pose of node n-1)`` in node order (nodes that exist already;
+        the pose only seeds guesses). The factors are built now; the swap runs now or as a background
+        job (its results then come through :meth:`collect`). Returns the sensors of each node's new
+        factors and the results ``(n, pose, covariance, None)`` of a swap that ran.
+        """
+        built = []
+        for n, iv, previous in batches:
+            builder, nf = self._node_factors(n, iv, n == 1, self.gtsam.Pose2(*map(float, previous)))
+            built.append((n, nf, builder))
+        sensors = [(n, nf.sensors) for n, nf, _ in built]
+        if self._pool is None:
+            return sensors, self._swap(built, passes)
+        self._jobs.append(self._pool.submit(self._swap, built, passes))
+        return sensors, []
+
+    def _swap(self, built, passes: int):
+        """The custom factors are linearised at the current estimate and swapped in one iSAM2 update;
+        ``passes`` > 1 linearises them again at the estimate that update gave (the late data may have
+        moved it) and swaps again."""
+        builder, nf = built[-1][2], built[-1][1]
+        new_keys: set = set()
+        for p in range(passes):
+            g = self.gtsam.NonlinearFactorGraph()
+            values = self.gtsam.Values()
+            remove, sizes = [], []
+            for n, nf, _ in built:
+                new = {k: v for k, v in nf.values.items() if not self.isam.valueExists(k) and not values.exists(k)}
+                new_keys.update(new)
+                previous = self.isam.calculateEstimatePose2(self.graph.X(n - 1))
+                lookup = self.graph.current_value_lookup(new, self.isam, previous, n - 1)
+                frozen = self.graph.freeze_custom_factors(nf.factors, lookup)
+                for f in frozen:
+                    g.add(f)
+                self.graph.insert_values(values, new)
+                remove += self.factors.get(n, [])
+                sizes.append(len(frozen))
+            index = list(self.isam.update(g, values, remove).getNewFactorsIndices())
+            for (n, _, _), size in zip(built, sizes):
+                self.factors[n], index = index[:size], index[size:]
+        out = [(n, *self._pose_cov(n), None) for n, _, _ in built]
+        if self._pool is None:
+            self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
+        if built[-1][0] == self.n:
+            estimate = dict(self.estimate)
+            self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
+            self.estimate = estimate
+        return out
+
+    def poses(self) -> np.ndarray:
+        """Current estimates ``(x, y, yaw)`` of nodes 0 .. n."""
+        est = self.isam.calculateEstimate()
+        if self.n == 0:
+            return np.array([np.asarray(self.config.initial_pose, dtype=np.float64)])
+        return np.array([[p.x(), p.y(), p.theta()] for p in (est.atPose2(self.graph.X(k)) for k in range(self.n + 1))])
+
+    def forget(self, n: int) -> None:
+        """Node ``n`` left the history: its factors are no longer replaced."""
+        self.factors.pop(n, None)

@@ -23,13 +23,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import shutil
 import tempfile
 import time
 from pathlib import Path
-
-import numpy as np
 
 from fusion_vo.errors import InputError
 
@@ -41,7 +40,7 @@ def _non_negative(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if not np.isfinite(value) or value < 0:
+    if not math.isfinite(value) or value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
     return value
 
@@ -68,10 +67,14 @@ def register(sub) -> None:
                    help="seconds after its frame that a visual increment arrives (frontend latency, default 0)")
     p.add_argument("--window", type=_non_negative,
                    help="reorder window [s] (default: the configuration's reorder_window)")
+    p.add_argument("--background", action="store_true",
+                   help="with --backend gtsam: run iSAM2's updates on a worker thread, off the caller's")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from fusion_vo.backends import batch
     from fusion_vo.backends.batch import as_config, fuse
     from fusion_vo.backends.result import write_pose_covariances
@@ -81,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.pipeline import resolve_sensors
     from fusion_vo.recording import Recording, write_tum
 
+    if args.background and args.backend != "gtsam":
+        raise InputError("--background is for --backend gtsam (the EKF's steps are cheap)")
     cfg = load_config(args.config)
     if args.sensors:
         cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
@@ -103,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     msgs = time_ordered_messages(streams, args.camera_delay)
     if not msgs:
         raise InputError("the recording has no samples of the chosen sensors", rec.path)
-    fusion = streaming_for(streams, args.backend, fusion_cfg)
+    fusion = streaming_for(streams, args.backend, fusion_cfg, background=args.background)
     rows, call_ms = _play(fusion, msgs, args.speed, args.rate)
     online = fusion.finish()
     offline = fuse(streams, args.backend, fusion_cfg)
@@ -153,6 +158,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _play(fusion, msgs, speed: float, rate: float) -> tuple[list, list]:
     """Feed ``msgs`` at ``speed`` and read the estimate every ``1/rate`` s of recording time."""
+    import numpy as np
+
     t_first = msgs[0][0]
     wall0 = time.perf_counter()
     period = 1.0 / rate

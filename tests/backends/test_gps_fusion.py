@@ -105,25 +105,50 @@ def test_drift_during_the_outage_is_larger_than_with_gps_and_bounded(fused, trut
     assert drift < 0.2 and drift > 0.5 * e[last_second].max()
 
 
-def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
+def _stream_with_gps(rec, gps_delay=0.0):
+    """The streaming EKF fed in arrival order, the fixes arriving ``gps_delay`` seconds after their time
+    (every other one twice that: they also arrive out of order)."""
     wheel, imu, gps = rec.wheel(), rec.imu(), rec.gps()
     fusion = StreamingFusion("ekf", sensors=["wheel", "imu", "gps"], wheel_config=wheel.config,
                              imu_T_BS=imu.T_BS, imu_noise=imu.noise, gps_lever_arm=gps.lever_arm)
     events = [(t, 0, i) for i, t in enumerate(wheel.t)] + [(t, 1, i) for i, t in enumerate(imu.t)]
-    events += [(t, 2, i) for i, t in enumerate(gps.t)]
-    for t, kind, i in sorted(events):
+    events += [(t + gps_delay * (1.0 + i % 2), 2, i) for i, t in enumerate(gps.t)]
+    for _, kind, i in sorted(events):
         if kind == 0:
-            fusion.add_wheel(WheelTicks(t, int(wheel.left[i]), int(wheel.right[i])))
+            fusion.add_wheel(WheelTicks(wheel.t[i], int(wheel.left[i]), int(wheel.right[i])))
         elif kind == 1:
-            fusion.add_imu(ImuSample(t, imu.gyro[i], imu.accel[i]))
+            fusion.add_imu(ImuSample(imu.t[i], imu.gyro[i], imu.accel[i]))
         else:
-            fusion.add_gps(GpsFix(t, gps.enu[i, :2], gps.covariance[i]))
+            fusion.add_gps(GpsFix(gps.t[i], gps.enu[i, :2], gps.covariance[i]))
+    return fusion
+
+
+def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
+    fusion = _stream_with_gps(rec)
     assert fusion.current_estimate().frame == "enu"
     result = fusion.finish()
     t, e = errors(result.trajectories["ekf"], truth)
     late = (t > OUTAGE[1] + 2.0)
     assert np.sqrt(np.mean(e[late] ** 2)) <= NOISE
-    assert result.counts["ekf"]["gps"].gated == 5
+    counts = result.counts["ekf"]["gps"]
+    assert counts.gated == 5
+    assert counts.used + counts.gated + counts.missing + counts.late == len(rec.gps().t)
+    assert any(f"ekf: gps {counts.used} fixes used, 5 rejected" in n for n in result.notes)
+
+
+def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec):
+    """Fixes 0.4-0.8 s late and out of order rewind the EKF, across the switch to ENU too."""
+    a, b = _stream_with_gps(rec).finish(), _stream_with_gps(rec, gps_delay=0.4)
+    assert b.rewinds > 50
+    b = b.finish()
+    ca, cb = a.counts["ekf"], b.counts["ekf"]
+    assert cb["gps"].reordered > 20
+    cb["gps"].reordered = 0
+    assert {k: v.as_dict() for k, v in cb.items()} == {k: v.as_dict() for k, v in ca.items()}
+    ta, tb = a.trajectories["ekf"], b.trajectories["ekf"]
+    np.testing.assert_allclose(tb.t, ta.t, atol=1e-12)
+    np.testing.assert_allclose(tb.xyyaw, ta.xyyaw, atol=1e-9, rtol=0)
+    assert [n for n in b.notes if "ENU" in n] == [n for n in a.notes if "ENU" in n]
 
 
 def test_bad_gps_option_is_a_one_line_error():

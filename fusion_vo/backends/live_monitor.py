@@ -1,0 +1,282 @@
+"""The heading-consistency monitor run causally, node by node, for streaming use.
+
+:func:`~fusion_vo.backends.monitor.check_heading_sources` judges a whole recording at once. A live
+stack cannot wait for the end: :class:`LiveHeadingMonitor` keeps the node intervals of the last
+``15 * monitor_window`` seconds (the longest window the check uses), runs the same check on them every
+``monitor_window / 2`` seconds of data, and a component the check drops in the newest interval is
+dropped from the intervals that follow until a later check no longer drops it there. The AHRS heading,
+once dropped, stays dropped (its offset is no longer known), as in the batch check. Each span in which
+a component was dropped becomes an :class:`~fusion_vo.backends.monitor.Episode`.
+
+Decisions only use data up to the interval they are applied to, so they can differ from the batch
+check's (which also sees what comes after): a lie is used until the check has seen enough of it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import numpy as np
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.monitor import Episode, check_heading_sources
+from fusion_vo.backends.timeline import Intervals
+
+logger = logging.getLogger(__name__)
+
+#: components the check can drop: (name in the check, how the streaming path masks it)
+_COMPONENTS = ("wheel", "gyro", "ahrs")
+_SENSOR = {"wheel": "wheel", "gyro": "imu", "ahrs": "imu"}
+_LABEL = {"wheel": "yaw rate", "gyro": "gyro yaw rate", "ahrs": "AHRS heading"}
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitorState:
+    """What a rewind restores: the dropped components, the open spans and the intervals kept."""
+
+    dropped: frozenset
+    open_spans: tuple
+    n_closed: int
+    next_check: float
+    n_intervals: int
+    rest_bias: float | None
+
+
+class LiveHeadingMonitor:
+    """Causal, windowed :func:`~fusion_vo.backends.monitor.check_heading_sources` over node intervals.
+
+    Parameters
+    ----------
+    config : FusionConfig
+        ``monitor``, ``monitor_window`` and the check's other settings.
+    """
+
+    def __init__(self, config: FusionConfig):
+        self.config = config
+        self.enabled = bool(config.monitor)
+        self.span = 15.0 * config.monitor_window
+        self.every = 0.5 * config.monitor_window
+        self.dropped: set[str] = set()
+        self.episodes: list[Episode] = []  # closed spans
+        self._open: dict[str, list] = {}  # component -> [start, max NIS, against]
+        self._next_check = -np.inf
+        self._t: list[float] = []  # node times: _t[0] starts the first kept interval
+        self._node: dict[str, list] = {}  # per-node fields, one entry per node time
+        self._interval: dict[str, list] = {}  # per-interval fields
+        self._vis: list[tuple] = []  # (interval position, delta, covariance)
+        self._uses: set[str] = set()
+        self._last: Intervals | None = None
+        self._dropped_before = 0  # intervals trimmed from the front
+        self._rest_bias: float | None = None  # the gyro's bias at the last standstill
+
+    # ------------------------------------------------------------------ intervals
+    def add(self, iv: Intervals) -> None:
+        """Keep one two-node interval (raw, before any masking); it must start where the last one ended."""
+        if not self.enabled:
+            return
+        fields = _split(iv)
+        if not self._t:
+            self._t = [float(iv.t[0])]
+            for name, v in fields[0].items():
+                self._node[name] = [v[0]]
+        self._t.append(float(iv.t[1]))
+        for name, v in fields[0].items():
+            self._node.setdefault(name, [v[0]] * (len(self._t) - 1)).append(v[1])
+        for name, v in fields[1].items():
+            self._interval.setdefault(name, []).append(v[0])
+        pos = len(self._t) - 2
+        for d, c in zip(iv.vis_delta, iv.vis_cov):
+            self._vis.append((pos, np.asarray(d), np.asarray(c)))
+        self._uses |= set(iv.counts)
+        self._last = iv
+        self._trim()
+
+    def update(self, index: int, iv: Intervals) -> None:
+        """Interval number ``index`` (counting every interval ever added), rebuilt with late data."""
+        pos = index - self._dropped_before
+        if not self.enabled or pos < 0 or pos >= len(self._t) - 1:
+            return
+        nodes, intervals = _split(iv)
+        for name, v in nodes.items():
+            if name in self._node:
+                self._node[name][pos + 1] = v[1]
+        for name, v in intervals.items():
+            if name in self._interval:
+                self._interval[name][pos] = v[0]
+        self._vis = [r for r in self._vis if r[0] != pos]
+        self._vis += [(pos, np.asarray(d), np.asarray(c)) for d, c in zip(iv.vis_delta, iv.vis_cov)]
+        self._vis.sort(key=lambda r: r[0])
+        self._uses |= set(iv.counts)
+
+    def _trim(self) -> None:
+        cut = int(np.searchsorted(self._t, self._t[-1] - self.span)) - 1
+        if cut < 64:  # trim in batches
+            return
+        del self._t[:cut]
+        for lst in self._node.values():
+            del lst[:cut]
+        for lst in self._interval.values():
+            del lst[:cut]
+        self._vis = [(p - cut, d, c) for p, d, c in self._vis if p >= cut]
+        self._dropped_before += cut
+
+    def _merged(self) -> Intervals:
+        last = self._last
+        kw = {}
+        for f in dataclasses.fields(Intervals):
+            if f.name in self._node:
+                kw[f.name] = np.array(self._node[f.name])
+            elif f.name in self._interval:
+                kw[f.name] = np.array(self._interval[f.name])
+            elif not f.name.startswith("vis_") and not isinstance(getattr(last, f.name), np.ndarray):
+                kw[f.name] = getattr(last, f.name)
+        kw["t"] = np.array(self._t)
+        kw["counts"] = {name: None for name in self._uses}
+        kw["notes"], kw["episodes"] = [], []
+        kw["vis_i0"] = np.array([p for p, _, _ in self._vis], dtype=int)
+        kw["vis_i1"] = kw["vis_i0"] + 1
+        kw["vis_delta"] = np.array([d for _, d, _ in self._vis]).reshape(-1, 3)
+        kw["vis_cov"] = np.array([c for _, _, c in self._vis]).reshape(-1, 3, 3)
+        kw["wheel_yaw_ok"] = np.ones(len(self._t) - 1, bool)
+        return Intervals(**kw)
+
+    # ------------------------------------------------------------------ decisions
+    def check(self) -> None:
+        """Run the check on the kept intervals when due; update the dropped components."""
+        if not self.enabled or len(self._t) < 3 or self._t[-1] < self._next_check:
+            return
+        self._next_check = self._t[-1] + self.every
+        iv = self._merged()
+        raw = {"wheel": iv.wheel_ok.copy(), "gyro": iv.gyro_ok.copy(), "ahrs": iv.ahrs_ok[1:] & iv.ahrs_ok[:-1]}
+        if "ahrs" in self.dropped:  # a heading known to drift judges nothing any more
+            iv.ahrs_ok = np.zeros(len(iv.t), bool)
+        bias, at_rest = _gyro_bias(iv, self.config)
+        if at_rest:
+            self._rest_bias = bias
+        elif self._rest_bias is not None:
+            bias = self._rest_bias  # the last standstill's bias beats one measured against a moving reference
+        episodes = check_heading_sources(iv, self.config, bias)
+        kept = {"wheel": iv.wheel_yaw_ok, "gyro": iv.gyro_ok, "ahrs": iv.ahrs_ok[1:]}
+        t_now = self._t[-1]
+        for name in _COMPONENTS:
+            if not raw[name][-1]:
+                continue  # not measured in the newest interval: no new evidence
+            liar = not kept[name][-1]
+            if liar and name not in self.dropped:
+                ep = next((e for e in reversed(episodes) if e.component == _LABEL[name]), None)
+                self.dropped.add(name)
+                self._open[name] = [t_now, 0.0 if ep is None else ep.max_nis, "" if ep is None else ep.against]
+                logger.info("live monitor: %s %s dropped at t=%.2f (inconsistent with %s)", _SENSOR[name],
+                            _LABEL[name], t_now, self._open[name][2])
+            elif liar:
+                ep = next((e for e in reversed(episodes) if e.component == _LABEL[name]), None)
+                if ep is not None:
+                    self._open[name][1] = max(self._open[name][1], ep.max_nis)
+            elif name in self.dropped and name != "ahrs":  # the AHRS' offset is lost for good
+                self._close(name, t_now)
+
+    def _close(self, name: str, t_end: float) -> None:
+        start, nis, against = self._open.pop(name)
+        self.dropped.discard(name)
+        self.episodes.append(Episode(_SENSOR[name], _LABEL[name], start, t_end, nis, against))
+
+    def apply(self, iv: Intervals, dropped=None) -> None:
+        """Mask the dropped components in ``iv`` (in place; default: the current decisions)."""
+        dropped = self.dropped if dropped is None else dropped
+        if "wheel" in dropped:
+            iv.wheel_yaw_ok = np.zeros(iv.n_steps, bool)
+        if "gyro" in dropped:
+            iv.gyro_ok = np.zeros(iv.n_steps, bool)
+        if "ahrs" in dropped:
+            iv.ahrs_ok = np.zeros(len(iv.t), bool)
+
+    def all_episodes(self, t_end: float) -> list[Episode]:
+        """Closed spans and the open ones, ending at ``t_end``."""
+        open_eps = [Episode(_SENSOR[n], _LABEL[n], s, t_end, nis, who) for n, (s, nis, who) in self._open.items()]
+        return sorted(self.episodes + open_eps, key=lambda e: e.start)
+
+    # ------------------------------------------------------------------ rewind
+    def state(self) -> MonitorState:
+        return MonitorState(frozenset(self.dropped), tuple((k, tuple(v)) for k, v in self._open.items()),
+                            len(self.episodes), self._next_check, self._dropped_before + max(len(self._t) - 1, 0),
+                           self._rest_bias)
+
+    def restore(self, state: MonitorState) -> None:
+        """Back to ``state`` (taken after an earlier interval); later intervals are forgotten."""
+        self.dropped = set(state.dropped)
+        self._open = {k: list(v) for k, v in state.open_spans}
+        del self.episodes[state.n_closed:]
+        self._next_check = state.next_check
+        self._rest_bias = state.rest_bias
+        self.truncate(state.n_intervals)
+
+    def truncate(self, n_intervals: int) -> None:
+        """Keep the first ``n_intervals`` intervals ever added (those trimmed stay trimmed)."""
+        keep = n_intervals - self._dropped_before
+        if keep < 0 or keep >= len(self._t) - 1 or not self._t:
+            return
+        del self._t[keep + 1:]
+        for lst in self._node.values():
+            del lst[keep + 1:]
+        for lst in self._interval.values():
+            del lst[keep:]
+        self._vis = [v for v in self._vis if v[0] < keep]
+
+
+def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]:
+    """The gyro's bias over the kept intervals and whether it was measured at rest.
+
+    With ten intervals at rest, the median rate there (as the whole-recording check does). Without,
+    the rate difference to the AHRS heading (else the camera's, else the wheels' yaw)
+    is averaged over the span where both are measured: the heading change telescopes, so a few
+    seconds give the bias to ``σ_ψ / T``, where the median of per-interval rate differences (what the
+    whole-recording check uses when there is no standstill) follows the AHRS' interval noise.
+    """
+    from fusion_vo.sensors.wheel import arc_increment, standstill
+
+    if not iv.uses("gyro"):
+        return None, False
+    dt = iv.dt
+    if iv.uses("wheel"):
+        noise, _ = config.wheel_model(iv.twist)
+        still = iv.wheel_ok & iv.gyro_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+        if np.count_nonzero(still) >= 10:
+            return float(np.median(iv.gyro_angle[still] / dt[still])), True
+    refs = []
+    ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:] & iv.gyro_ok
+    if np.count_nonzero(ok) >= 10:
+        refs.append((ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
+    if len(iv.vis_i0):  # the camera's heading increments (independent of every calibration)
+        ok = np.zeros(len(dt), bool)
+        angle = np.zeros(len(dt))
+        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
+            ok[a:b] = True
+            angle[a:b] = delta[2] / (b - a)
+        ok &= iv.gyro_ok
+        if np.count_nonzero(ok) >= 10:
+            refs.append((ok, angle))
+    if iv.uses("wheel"):
+        ok = iv.wheel_ok & iv.gyro_ok
+        if np.count_nonzero(ok) >= 10:
+            refs.append((ok, arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[:, 2]))
+    for ok, angle in refs:
+        return float(np.sum(iv.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
+    return None, False
+
+
+def _split(iv: Intervals) -> tuple[dict, dict]:
+    """Per-node and per-interval array fields of a two-node interval (the visual rows aside)."""
+    nodes, intervals = {}, {}
+    for f in dataclasses.fields(Intervals):
+        v = getattr(iv, f.name)
+        if f.name == "t" or f.name.startswith("vis_") or not isinstance(v, np.ndarray):
+            continue
+        if len(v) == 2:
+            nodes[f.name] = v
+        elif len(v) == 1:
+            intervals[f.name] = v
+    return nodes, intervals
+
+
+__all__ = ["LiveHeadingMonitor", "MonitorState"]

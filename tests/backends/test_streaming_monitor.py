@@ -1,0 +1,65 @@
+"""The heading-consistency monitor run causally in the streaming path."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, SensorStreams
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+
+from backend_synth import position_errors
+from husky_like import husky_like
+
+
+def _stream(streams, backend, config):
+    fusion = streaming_for(streams, backend, config)
+    for _, kind, m in time_ordered_messages(streams):
+        getattr(fusion, f"add_{kind}")(m)
+    return fusion.finish()
+
+
+@pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_a_lying_wheel_yaw_rate_is_dropped_while_streaming(backend, name):
+    """Odometry whose yaw rate is 7 x the truth next to a gyro and an AHRS, fed sample by sample."""
+    odom, imu, truth = husky_like(duration=40.0, stop=(15.0, 25.0), yaw_scale=7.0, ahrs_drift=0.0, gyro_bias=0.002)
+    streams = SensorStreams(odom=odom, imu=imu)
+    watched = _stream(streams, backend, FusionConfig())
+    wheel = [e for e in watched.inconsistent if e["component"] == "yaw rate"]
+    assert len(wheel) >= 1 and wheel[0]["sensor"] == "wheel", watched.inconsistent
+    assert wheel[0]["start"] <= truth.t[0] + 3.0  # caught within the first windows
+    assert all(e["component"] == "yaw rate" for e in watched.inconsistent), watched.inconsistent
+    assert any(n.startswith("live monitor: wheel yaw rate inconsistent with gyro, ahrs") for n in watched.notes)
+    _, rms = position_errors(watched.trajectories[name], truth)
+    assert rms < 0.1, rms  # the wheels' speed is still used
+
+
+def test_a_gyro_bias_step_is_dropped_from_the_step_on_while_streaming():
+    odom, imu, truth = husky_like(duration=60.0, stop=(15.0, 25.0), yaw_scale=1.0, ahrs_drift=0.0, gyro_bias=0.002)
+    gyro = imu.gyro.copy()
+    gyro[imu.t >= 40.0, 2] += 0.05
+    streams = SensorStreams(odom=odom, imu=dataclasses.replace(imu, gyro=gyro))
+    result = _stream(streams, "ekf", FusionConfig())
+    gyro_eps = [e for e in result.inconsistent if e["component"] == "gyro yaw rate"]
+    assert gyro_eps and 40.0 <= gyro_eps[0]["start"] <= 44.0, result.inconsistent
+    assert gyro_eps[-1]["end"] >= truth.t[-1] - 1.0
+    assert not [e for e in result.inconsistent if e["component"] == "AHRS heading"], result.inconsistent
+    _, rms = position_errors(result.trajectories["ekf"], truth)
+    assert rms < 0.1, rms
+
+
+def test_a_drifting_ahrs_heading_is_dropped_for_good_while_streaming(backend="ekf", name="ekf"):
+    """An AHRS heading that starts straying at 0.03 rad/s after 25 s, next to a gyro and wheels."""
+    odom, imu, truth = husky_like(duration=60.0, stop=(10.0, 15.0), yaw_scale=1.0, ahrs_drift=0.0, gyro_bias=0.002)
+    q = imu.orientation
+    heading = 2.0 * np.arctan2(q[:, 3], q[:, 0]) + 0.03 * np.clip(imu.t - 25.0, 0.0, None)
+    q = np.stack([np.cos(heading / 2), 0 * heading, 0 * heading, np.sin(heading / 2)], axis=1)
+    streams = SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=q))
+    watched = _stream(streams, backend, FusionConfig())
+    blind = _stream(streams, backend, FusionConfig(monitor=False))
+    ahrs = [e for e in watched.inconsistent if e["component"] == "AHRS heading"]
+    assert len(ahrs) == 1 and ahrs[0]["end"] >= truth.t[-1] - 0.1, watched.inconsistent
+    assert 25.0 <= ahrs[0]["start"] <= 35.0, ahrs
+    _, rms = position_errors(watched.trajectories[name], truth)
+    _, rms_blind = position_errors(blind.trajectories[name], truth)
+    assert rms < 0.3 * rms_blind, (rms, rms_blind)
