@@ -13,14 +13,14 @@ focal length (the script does not undistort), the same heights (range finder) an
 constant-velocity bridging of failed frames.
 
     python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
-                                         [--uncalibrated | --calibrate N [--radial-terms 3]]
+                                         [--uncalibrated | --calibrate N [--radial-terms 3] [--board-tilt R]]
                                          [--no-derotation] [--fusion]
 
 ``--uncalibrated`` runs the frontends without the lens model of ``sensor.yaml`` (a pinhole of its focal
 length, the image centre only). ``--calibrate N`` replaces the lens model by what
 ``fusion-vo calibrate intrinsics`` finds (:func:`fusion_vo.calibration.intrinsics.calibrate_images`) from
-``N`` views of a printed 9 x 6 board (2 cm squares, tilted up to 26 degrees) rendered through the
-recording's own lens
+``N`` views of a printed 9 x 6 board (2 cm squares, tilted up to ``--board-tilt`` rad, default 0.2)
+rendered through the recording's own lens
 (:func:`fusion_vo.simulation.realistic.board_views`; the radial-tangential model for the barrel lens,
 ``--model fisheye`` for the fisheye; ``--radial-terms 3`` fits ``k3`` too), and prints how far that
 model reprojects the true lens.
@@ -137,7 +137,8 @@ def run_frontend(rec: Recording, frontend: str, odometry: dict) -> Row:
     return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds)
 
 
-def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radial_terms: int = 2):
+def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radial_terms: int = 2,
+                      tilt: float = 0.2):
     """The recording's camera with the lens model calibrated from ``n_views`` rendered board views."""
     import cv2
 
@@ -159,7 +160,7 @@ def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radia
         distance = (0.8 * d, 1.1 * d)
     work.mkdir(parents=True, exist_ok=True)
     paths = []
-    for k, img in enumerate(board_views(cam, *size, n_views, distance=distance, shift=0.07, tilt=0.45)):
+    for k, img in enumerate(board_views(cam, *size, n_views, distance=distance, shift=0.07, tilt=tilt)):
         paths.append(work / f"{name}_view{k:02d}.png")
         cv2.imwrite(str(paths[-1]), img)
     result = calibrate_images(paths, Board(8, 5, 0.02), model="fisheye" if fisheye else "pinhole",
@@ -201,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="run the frontends without the lens distortion of sensor.yaml (its focal length only)")
     ap.add_argument("--calibrate", type=int, default=0, metavar="N",
                     help="replace the lens model by one calibrated from N rendered board views")
+    ap.add_argument("--board-tilt", type=float, default=0.2, metavar="RAD",
+                    help="largest tilt of the rendered board views (--calibrate)")
     ap.add_argument("--radial-terms", type=int, choices=[2, 3], default=2,
                     help="radial terms of the calibrated pinhole model (--calibrate; the fisheye model has its own)")
     ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
@@ -218,7 +221,8 @@ def main(argv: list[str] | None = None) -> int:
         rec = Recording(seq)
         rows = [run_baseline(rec)]
         if args.calibrate:
-            rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views", args.radial_terms)
+            rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views", args.radial_terms,
+                                           args.board_tilt)
         for fe in args.frontends.split(","):
             rows.append(run_frontend(rec, fe, odometry))
         print_table(name, rows)
