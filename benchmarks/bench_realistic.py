@@ -14,7 +14,7 @@ constant-velocity bridging of failed frames.
 
     python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
                                          [--uncalibrated | --calibrate N [--radial-terms 3] [--board-tilt R]]
-                                         [--no-derotation] [--fusion]
+                                         [--no-derotation] [--fusion] [--options JSON]
 
 ``--uncalibrated`` runs the frontends without the lens model of ``sensor.yaml`` (a pinhole of its focal
 length, the image centre only). ``--calibrate N`` replaces the lens model by what
@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from collections import Counter
@@ -127,9 +128,9 @@ def run_baseline(rec: Recording) -> Row:
                end, heading, speed, (len(results) + 1) / seconds)
 
 
-def run_frontend(rec: Recording, frontend: str, odometry: dict) -> Row:
+def run_frontend(rec: Recording, frontend: str, odometry: dict, options: dict | None = None) -> Row:
     start = time.perf_counter()
-    vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend, **odometry))
+    vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend, frontend_options=dict(options or {}), **odometry))
     seconds = time.perf_counter() - start
     pairs = len(vo.status) - 1
     measured = sum(s == "ok" for s in vo.status)
@@ -207,6 +208,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--radial-terms", type=int, choices=[2, 3], default=2,
                     help="radial terms of the calibrated pinhole model (--calibrate; the fisheye model has its own)")
     ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
+    ap.add_argument("--options", type=json.loads, default={}, metavar="JSON",
+                    help='options of the frontends, e.g. \'{"grid_cell": 160}\' (with one --frontends)')
     ap.add_argument("--fusion", action="store_true", help="also fuse with wheels and IMU and print the ATE per track")
     args = ap.parse_args(argv)
     if args.calibrate and args.uncalibrated:
@@ -224,7 +227,7 @@ def main(argv: list[str] | None = None) -> int:
             rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views", args.radial_terms,
                                            args.board_tilt)
         for fe in args.frontends.split(","):
-            rows.append(run_frontend(rec, fe, odometry))
+            rows.append(run_frontend(rec, fe, odometry, args.options))
         print_table(name, rows)
         if args.fusion:
             import fusion_vs_best
