@@ -13,7 +13,21 @@ focal length (the script does not undistort), the same heights (range finder) an
 constant-velocity bridging of failed frames.
 
     python benchmarks/bench_realistic.py [--data DIR] [--recordings a,b] [--frontends klt,direct]
-                                         [--uncalibrated] [--no-derotation]
+                                         [--uncalibrated | --calibrate N [--radial-terms 3] [--board-tilt R]]
+                                         [--no-derotation] [--fusion] [--options JSON]
+
+``--uncalibrated`` runs the frontends without the lens model of ``sensor.yaml`` (a pinhole of its focal
+length, the image centre only). ``--calibrate N`` replaces the lens model by what
+``fusion-vo calibrate intrinsics`` finds (:func:`fusion_vo.calibration.intrinsics.calibrate_images`) from
+``N`` views of a printed 9 x 6 board (2 cm squares, tilted up to ``--board-tilt`` rad, default 0.2)
+rendered through the recording's own lens
+(:func:`fusion_vo.simulation.realistic.board_views`; the radial-tangential model for the barrel lens,
+``--model fisheye`` for the fisheye; ``--radial-terms 3`` fits ``k3`` too), and prints how far that
+model reprojects the true lens.
+
+``--fusion`` also runs ``fusion-vo run --backend all`` (default configuration, KLT) on each recording
+through :func:`fusion_vs_best.compare` and prints the ATE [mm, after SE(2) alignment] of visual
+odometry, wheel dead reckoning and every fused track.
 
 Recordings are generated into ``--data`` (default ``./realistic-data``) unless already there.
 """
@@ -22,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from collections import Counter
@@ -113,14 +128,60 @@ def run_baseline(rec: Recording) -> Row:
                end, heading, speed, (len(results) + 1) / seconds)
 
 
-def run_frontend(rec: Recording, frontend: str, odometry: dict) -> Row:
+def run_frontend(rec: Recording, frontend: str, odometry: dict, options: dict | None = None) -> Row:
     start = time.perf_counter()
-    vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend, **odometry))
+    vo = run_visual_odometry(rec, OdometryConfig(frontend=frontend, frontend_options=dict(options or {}), **odometry))
     seconds = time.perf_counter() - start
     pairs = len(vo.status) - 1
     measured = sum(s == "ok" for s in vo.status)
     end, heading, speed = score(vo.track, rec.groundtruth())
     return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds)
+
+
+def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radial_terms: int = 2,
+                      tilt: float = 0.2):
+    """The recording's camera with the lens model calibrated from ``n_views`` rendered board views."""
+    import cv2
+
+    from fusion_vo.calibration.chessboard import Board
+    from fusion_vo.calibration.intrinsics import calibrate_images
+    from fusion_vo.geometry.camera import CameraModel
+    from fusion_vo.simulation.realistic import RealisticCamera, RealisticRenderer, board_views
+
+    options = dict(STANDARD[name][2]["realistic"])
+    cam = RealisticCamera.from_dict({**options, "checker_size": 0.02, "checker_squares": [9, 6], "grain": 0.0,
+                                     "rocking_deg": 0.0, "auto_exposure": 0.0, "defocus_per_metre": 0.0})
+    model = rec.camera
+    size = (model.width, model.height)
+    fisheye = cam.lens == "equisolid"
+    if fisheye:
+        distance = (0.10, 0.14)
+    else:  # the 18 cm board spans about half the image width
+        d = 0.18 / (0.5 * size[0] / cam.focal)
+        distance = (0.8 * d, 1.1 * d)
+    work.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k, img in enumerate(board_views(cam, *size, n_views, distance=distance, shift=0.07, tilt=tilt)):
+        paths.append(work / f"{name}_view{k:02d}.png")
+        cv2.imwrite(str(paths[-1]), img)
+    result = calibrate_images(paths, Board(8, 5, 0.02), model="fisheye" if fisheye else "pinhole",
+                              radial_terms=2 if fisheye else radial_terms)
+    K = result.K
+    calibrated = CameraModel(model.width, model.height, K[0, 0], K[1, 1], K[0, 2], K[1, 2],
+                             result.distortion_model, np.asarray(result.distortion, float), model.T_BS, model.rate_hz)
+    # reprojection of the true lens's rays by the calibrated model, over the whole image
+    truth = RealisticRenderer(RealisticCamera.from_dict(options), *size)
+    gu, gv = np.meshgrid(np.linspace(0, size[0] - 1, 17), np.linspace(0, size[1] - 1, 13))
+    pix = np.column_stack([gu.ravel(), gv.ravel()])
+    rays = truth.lens.rays(pix)
+    err = {label: np.linalg.norm(m.project(rays) - pix, axis=1)
+           for label, m in (("calibrated", calibrated), ("sensor.yaml", model))}
+    print(f"\n{name}: calibrated from {len(paths) - len(result.skipped)} of {len(paths)} views "
+          f"({'fisheye' if fisheye else f'radial-tangential, {radial_terms} radial terms'} model, RMS "
+          f"{result.rms:.2f} px); reprojection of the "
+          f"true lens, worst / median: calibrated {err['calibrated'].max():.2f} / {np.median(err['calibrated']):.2f} "
+          f"px, sensor.yaml's fitted model {err['sensor.yaml'].max():.2f} / {np.median(err['sensor.yaml']):.2f} px")
+    return calibrated
 
 
 def print_table(name: str, rows: list[Row]) -> None:
@@ -140,8 +201,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--frontends", default=",".join(FRONTENDS))
     ap.add_argument("--uncalibrated", action="store_true",
                     help="run the frontends without the lens distortion of sensor.yaml (its focal length only)")
+    ap.add_argument("--calibrate", type=int, default=0, metavar="N",
+                    help="replace the lens model by one calibrated from N rendered board views")
+    ap.add_argument("--board-tilt", type=float, default=0.2, metavar="RAD",
+                    help="largest tilt of the rendered board views (--calibrate)")
+    ap.add_argument("--radial-terms", type=int, choices=[2, 3], default=2,
+                    help="radial terms of the calibrated pinhole model (--calibrate; the fisheye model has its own)")
     ap.add_argument("--no-derotation", action="store_true", help="do not use the gyro to remove roll and pitch")
+    ap.add_argument("--options", type=json.loads, default={}, metavar="JSON",
+                    help='options of the frontends, e.g. \'{"grid_cell": 160}\' (with one --frontends)')
+    ap.add_argument("--fusion", action="store_true", help="also fuse with wheels and IMU and print the ATE per track")
     args = ap.parse_args(argv)
+    if args.calibrate and args.uncalibrated:
+        ap.error("--calibrate and --uncalibrated exclude each other")
     odometry = {"uncalibrated": args.uncalibrated, "gyro_derotation": not args.no_derotation}
     root = Path(args.data)
     for name in args.recordings.split(","):
@@ -151,9 +223,18 @@ def main(argv: list[str] | None = None) -> int:
             make_standard(name, seq)
         rec = Recording(seq)
         rows = [run_baseline(rec)]
+        if args.calibrate:
+            rec.camera = calibrated_camera(rec, name, args.calibrate, root / "calibration-views", args.radial_terms,
+                                           args.board_tilt)
         for fe in args.frontends.split(","):
-            rows.append(run_frontend(rec, fe, odometry))
+            rows.append(run_frontend(rec, fe, odometry, args.options))
         print_table(name, rows)
+        if args.fusion:
+            import fusion_vs_best
+
+            r = fusion_vs_best.compare(seq, root / f"run_{name}")
+            print("  fused (KLT, default configuration), ATE mm: "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in r["ate"].items()), flush=True)
     return 0
 
 

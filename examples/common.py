@@ -41,8 +41,15 @@ LIGHTING = {
 }
 
 
+#: simulator option of ``--realistic``: the independent camera (:mod:`fusion_vo.simulation.realistic`), a
+#: four-term barrel lens whose ``sensor.yaml`` holds the fitted three-term model, defocus, motion blur,
+#: noise and auto-exposure, over the same floor photograph
+REALISTIC = {"lens": "polynomial", "checker_size": 0.0, "defocus": 1.0}
+
+
 def example_parser(description: str) -> argparse.ArgumentParser:
-    """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``)."""
+    """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``,
+    ``--realistic``)."""
     parser = argparse.ArgumentParser(description=description,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
@@ -52,6 +59,10 @@ def example_parser(description: str) -> argparse.ArgumentParser:
                         help="shorter recordings and fewer variants (a fast smoke run)")
     parser.add_argument("--seed", type=int, default=None, metavar="N",
                         help="seed of the generated recordings (default: the standard recording's seed, or 0)")
+    parser.add_argument("--realistic", action="store_true",
+                        help="render through the independent camera (a barrel lens the estimator only "
+                             "approximates, defocus, motion blur, noise, auto-exposure) instead of the "
+                             "estimator's own camera model")
     return parser
 
 

@@ -20,6 +20,7 @@ Run::
 
     python examples/thesis_heading.py [--out DIR] [--seed N] [--quick]
 
+``--realistic`` renders through the independent camera (``examples/common.py``).
 ``--quick`` drives a smaller, faster circle.
 """
 
@@ -30,7 +31,7 @@ import time
 
 import numpy as np
 
-from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, to_trajectory
+from common import FRONTENDS, REALISTIC, example_parser, fmt, format_table, generate, output_dir, to_trajectory
 from fusion_vo.evaluation.metrics import evaluate_trajectory, to_planar
 from fusion_vo.evaluation.plots import plot_heading
 from fusion_vo.measurements import PoseData
@@ -51,6 +52,9 @@ def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
     args = parser.parse_args(argv)
     options = {"radius": 0.15, "supersample": 1} if args.quick else {}
+    if args.realistic:
+        options["realistic"] = REALISTIC  # exposure blur as the realistic standard recordings
+        options.update(exposure_time=0.004, blur_samples=3)
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
         seq = generate("circle", out / "circle", args.seed, **options)

@@ -90,6 +90,11 @@ class DirectConfig(ConfigMixin):
     max_clipped : float
         A frame with more than this fraction of its pixels at 0 or 255 is saturated (or black) and
         not measured (``TOO_FEW_FEATURES``).
+    central_region : float or None
+        Fraction of the rectified image's width and height, about its centre, whose pixels are used
+        (``None``: all, or the central half when the run is ``--uncalibrated``: the distortion the
+        missing lens model leaves out grows with the distance from the centre, so the centre moves most
+        nearly by one similarity).
     """
 
     min_level_size: int = 24
@@ -109,6 +114,7 @@ class DirectConfig(ConfigMixin):
     min_sigma: float = 1e-3
     max_pixels: int = 12000
     max_clipped: float = 0.5
+    central_region: float | None = None
 
     def __post_init__(self) -> None:
         if self.min_level_size < 8:
@@ -117,6 +123,13 @@ class DirectConfig(ConfigMixin):
             raise ValueError("finest_level must be >= 0 and iterations >= 1")
         if not 0.0 < self.min_overlap <= 1.0:
             raise ValueError("min_overlap must lie in (0, 1]")
+        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
+            raise ValueError("central_region must lie in [0.1, 1]")
+
+    @property
+    def region(self) -> float:
+        """``central_region`` in effect (1: the whole image)."""
+        return 1.0 if self.central_region is None else float(self.central_region)
 
 
 @dataclass
@@ -199,11 +212,13 @@ class _Level:
         self.centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
         self._sd: np.ndarray | None = None
 
-    def steepest_descent(self, border: int, max_pixels: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``SD`` (N x 4), the centred coordinates (N x 2) and the flat indices of the pixels used.
+    def steepest_descent(self, border: int, max_pixels: int, region: float = 1.0
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``SD`` (N x 4, float32), the centred coordinates (2 x N) and the flat indices of the pixels used.
 
-        When the level has more than ``max_pixels`` interior pixels, only those with the strongest
-        gradient are used (the others add little to the Hessian and cost the same).
+        Only the central ``region`` fraction of the width and height is used. When that holds more
+        than ``max_pixels`` interior pixels, only those with the strongest gradient are used (the
+        others add little to the Hessian and cost the same).
         """
         if self._sd is None:
             img = self.image
@@ -211,18 +226,30 @@ class _Level:
             gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
             gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
             inner = np.zeros((h, w), bool)
-            inner[border : h - border, border : w - border] = True
+            bx = max(border, int(round(0.5 * (1.0 - region) * w)))
+            by = max(border, int(round(0.5 * (1.0 - region) * h)))
+            inner[by : h - by, bx : w - bx] = True
             idx = np.flatnonzero(inner)
             if len(idx) > max_pixels:
                 mag = (gx * gx + gy * gy).ravel()[idx]
-                idx = np.sort(idx[np.argpartition(mag, len(idx) - max_pixels)[len(idx) - max_pixels:]])
-            gxf, gyf = gx.ravel()[idx].astype(np.float64), gy.ravel()[idx].astype(np.float64)
-            xf = (idx % w).astype(np.float64) - self.centre[0]
-            yf = (idx // w).astype(np.float64) - self.centre[1]
-            self._sd = np.column_stack([gxf * xf + gyf * yf, -gxf * yf + gyf * xf, gxf, gyf])
-            self._xy = np.column_stack([xf, yf])
+                # the gradient threshold that keeps about max_pixels, from a sample of at most 16384 pixels
+                step = max(1, len(idx) // 16384)
+                sample = mag[::step]
+                keep = len(sample) - max(1, (max_pixels * len(sample)) // len(idx))
+                limit = np.partition(sample, keep)[keep]
+                idx = idx[mag >= limit][:max_pixels] if step == 1 else idx[mag >= limit]
+            gxf, gyf = gx.ravel()[idx], gy.ravel()[idx]
+            xf = (idx % w).astype(np.float32) - np.float32(self.centre[0])
+            yf = (idx // w).astype(np.float32) - np.float32(self.centre[1])
+            self._sd_t = np.stack([gxf * xf + gyf * yf, -gxf * yf + gyf * xf, gxf, gyf])
+            self._sd = np.ascontiguousarray(self._sd_t.T)
+            self._xy = np.stack([xf, yf])
             self._idx = idx
         return self._sd, self._xy, self._idx
+
+    def steepest_descent_t(self) -> np.ndarray:
+        """``SD`` transposed (4 x N, contiguous) after :meth:`steepest_descent`."""
+        return self._sd_t
 
 
 def clipped_fraction(image: np.ndarray) -> float:
@@ -270,13 +297,17 @@ class DirectAligner:
         img = _normalise(self._rectifier(image))
         levels = []
         scale = 1.0
+        k = 0
         while True:
-            if len(levels) >= cfg.finest_level:
+            if k >= cfg.finest_level:
                 levels.append(_Level(img, scale, cfg.smoothing))
             if min(img.shape) // 2 < cfg.min_level_size:
                 break
             img = cv2.pyrDown(img)
             scale *= 0.5
+            k += 1
+        if not levels:  # finest_level beyond the coarsest level: use the coarsest
+            levels.append(_Level(img, scale, cfg.smoothing))
         return levels
 
     # ---------------------------------------------------------------- conversions
@@ -391,26 +422,35 @@ class DirectAligner:
         cfg = self.config
         h, w = ref.image.shape
         border = 2
-        sd, xy, idx = ref.steepest_descent(border, cfg.max_pixels)
-        t0 = ref.image.ravel()[idx].astype(np.float64)
+        sd, xy, idx = ref.steepest_descent(border, cfg.max_pixels, cfg.region)
+        sd_t = ref.steepest_descent_t()
+        t0 = ref.image.ravel()[idx]
         centre = ref.centre
         valid_frac = 0.0
-        e = w_pix = valid = None
+        reach = math.hypot(w, h) / 2
+        huber = np.float32(cfg.huber)
         for _ in range(cfg.iterations):
-            # warp the current frame back: sample I1 at W(x) for every reference pixel x
+            # warp the current frame back: sample I1 at W(x) for every reference pixel x (float32 throughout:
+            # the sums of the 4 x 4 normal equations lose nothing that matters at these pixel counts)
             i1 = _sample(cur.image, m, xy, centre)
             valid = np.isfinite(i1)
-            valid_frac = float(np.count_nonzero(valid)) / len(idx)
+            n_valid = int(np.count_nonzero(valid))
+            valid_frac = n_valid / len(idx)
             if valid_frac < cfg.min_overlap:
                 return None, f"only {100 * valid_frac:.0f} % of the reference stays in view"
-            e = np.where(valid, i1 - t0, 0.0)
-            # Huber weights on the normalised residual
-            sigma = 1.4826 * float(np.median(np.abs(e[valid]))) + 1e-6
-            r = np.abs(e) / (cfg.huber * sigma)
-            w_pix = np.where(valid, np.where(r <= 1.0, 1.0, 1.0 / np.maximum(r, 1e-12)), 0.0)
-            sdw = sd * w_pix[:, None]
-            H = sd.T @ sdw
-            g = sdw.T @ e
+            e = i1 - t0
+            e[~valid] = 0.0
+            abs_e = np.abs(e)
+            # Huber weights on the normalised residual; the scale from the median of at most 4096 residuals
+            sample = abs_e[valid]
+            if n_valid > 4096:
+                sample = sample[:: n_valid // 4096]
+            sigma = np.float32(1.4826 * float(np.median(sample)) + 1e-6)
+            w_pix = np.minimum(np.float32(1.0), (huber * sigma) / np.maximum(abs_e, np.float32(1e-12)))
+            w_pix[~valid] = 0.0
+            sdw_t = sd_t * w_pix
+            H = (sdw_t @ sd).astype(np.float64)
+            g = (sdw_t @ e).astype(np.float64)
             try:
                 dp = np.linalg.solve(H, g)
             except np.linalg.LinAlgError:
@@ -418,13 +458,14 @@ class DirectAligner:
             upd = np.array([[1 + dp[0], -dp[1], dp[2]], [dp[1], 1 + dp[0], dp[3]], [0.0, 0.0, 1.0]])
             m = (_mat3(m) @ np.linalg.inv(upd))[:2]
             # largest displacement of the update over the level's corners
-            reach = math.hypot(w, h) / 2
             if abs(dp[2]) + abs(dp[3]) + reach * (abs(dp[0]) + abs(dp[1])) < cfg.epsilon:
                 break
         if not final:
             return m, None
         # statistics on the final warp
-        i1 = _sample(cur.image, m, xy, centre)
+        i1 = _sample(cur.image, m, xy, centre).astype(np.float64)
+        t0 = t0.astype(np.float64)
+        sd = sd.astype(np.float64)
         valid = np.isfinite(i1)
         if np.count_nonzero(valid) < 64:
             return None, "the frames do not overlap"
@@ -447,11 +488,12 @@ class DirectAligner:
 
 def _sample(image: np.ndarray, m: np.ndarray, xy: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """``image`` (centred-coordinate similarity ``m``) at ``W(xy)``; NaN outside the image."""
-    q = xy @ m[:, :2].T + m[:, 2] + centre
-    mx = np.ascontiguousarray(q[:, 0], dtype=np.float32).reshape(1, -1)
-    my = np.ascontiguousarray(q[:, 1], dtype=np.float32).reshape(1, -1)
+    a = m[:, :2].astype(np.float32)
+    b = (m[:, 2] + centre).astype(np.float32)
+    mx = (xy[0] * a[0, 0] + xy[1] * a[0, 1] + b[0]).reshape(1, -1)
+    my = (xy[0] * a[1, 0] + xy[1] * a[1, 1] + b[1]).reshape(1, -1)
     out = cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
-    return out.ravel().astype(np.float64)
+    return out.ravel()
 
 
 def _correlation_inflation(values: np.ndarray, idx: np.ndarray, shape: tuple[int, int]) -> float:
@@ -461,7 +503,7 @@ def _correlation_inflation(values: np.ndarray, idx: np.ndarray, shape: tuple[int
     (smoothing and interpolation make it so), with ``ρ`` its measured lag-one correlation; ``κ`` is the
     number of pixels that carry the information of one independent sample.
     """
-    img = np.full(shape[0] * shape[1], np.nan)
+    img = np.full(shape[0] * shape[1], np.nan, np.float32)
     img[idx] = values
     img = img.reshape(shape)
     kappa = 1.0
@@ -469,7 +511,7 @@ def _correlation_inflation(values: np.ndarray, idx: np.ndarray, shape: tuple[int
         ok = np.isfinite(a) & np.isfinite(b)
         if np.count_nonzero(ok) < 16:
             continue
-        x, y = a[ok], b[ok]
+        x, y = a[ok].astype(np.float64), b[ok].astype(np.float64)
         rho = float(np.dot(x, y) / max(math.sqrt(float(np.dot(x, x)) * float(np.dot(y, y))), 1e-12))
         rho = min(max(rho, 0.0), 0.98)
         d = np.arange(1, 64, dtype=np.float64)

@@ -32,7 +32,7 @@ import numpy as np
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
-from frontends.direct import DenseFallback
+from frontends.direct import DenseFallback, DirectConfig
 from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
 from frontends.frame_check import check_frame, texture_measure
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
@@ -127,6 +127,11 @@ class FeatureConfig(ConfigMixin):
         from it, which replaces it when they disagree by more than ``verify_tolerance`` px (0: never).
     verify_tolerance : float
         See ``verify_below`` [px].
+    central_region : float or None
+        Fraction of the width and height, about the image centre, where corners are kept and whose
+        pixels the dense fallback uses (``None``: all, or the central half when the run is
+        ``--uncalibrated``: the distortion of a lens without a model grows with the distance from the
+        centre).
     """
 
     detector: str = "shi_tomasi"
@@ -166,6 +171,7 @@ class FeatureConfig(ConfigMixin):
     dense_fallback: bool = True
     verify_below: int = 30
     verify_tolerance: float = 1.0
+    central_region: float | None = None
 
     def __post_init__(self) -> None:
         self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
@@ -181,7 +187,14 @@ class FeatureConfig(ConfigMixin):
             raise ValueError(f"refine must be 'lk', 'subpix' or 'none', not {self.refine!r}")
         if self.max_corners < self.min_inliers:
             raise ValueError("max_corners must be at least min_inliers")
+        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
+            raise ValueError("central_region must lie in [0.1, 1]")
         self.robust_options(self.threshold)  # validates method, threshold, confidence
+
+    @property
+    def region(self) -> float:
+        """``central_region`` in effect (1: the whole image)."""
+        return 1.0 if self.central_region is None else float(self.central_region)
 
     @property
     def distance_limit(self) -> float:
@@ -258,7 +271,8 @@ class FeatureFrontend:
         # prepare() runs in another thread: it gets its own ORB object
         self._orb_ahead = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
         self._shape: tuple[int, int] | None = None
-        self._dense = DenseFallback(self.point_map) if cfg.dense_fallback else None
+        self._dense = DenseFallback(self.point_map, DirectConfig(central_region=cfg.central_region)) \
+            if cfg.dense_fallback else None
         self.reset()
 
     def reset(self) -> None:
@@ -293,6 +307,11 @@ class FeatureFrontend:
     # -------------------------------------------------------------- pipeline
     def _describe(self, img: np.ndarray, t: float, orb=None) -> _Frame:
         pts = detect_corners(img, self._detector)
+        if self.config.region < 1.0:
+            h, w = img.shape
+            half = 0.5 * self.config.region * np.array([w, h], np.float32)
+            centre = 0.5 * np.array([w - 1, h - 1], np.float32)
+            pts = pts[np.all(np.abs(pts - centre) <= half, axis=1)]
         if self.config.descriptor == "orb":
             desc, idx = orb_descriptors(img, pts, orb if orb is not None else self._orb)
         else:

@@ -55,6 +55,10 @@ from fusion_vo.recording import Frame, Recording
 
 log = logging.getLogger(__name__)
 
+#: fraction of the width and height, about the centre, that the frontends use without a lens model: the
+#: distortion left out grows with the distance from the centre (``central_region`` of every frontend)
+UNCALIBRATED_CENTRAL_REGION = 0.5
+
 
 @dataclass
 class OdometryConfig:
@@ -81,7 +85,10 @@ class OdometryConfig:
     uncalibrated : bool
         Run without the intrinsics of ``cam0/sensor.yaml``: a pinhole without distortion, principal
         point at the image centre, focal length ``focal_length`` (or the file's, or a 60 degree
-        horizontal field of view). Without it, a ``sensor.yaml`` without intrinsics is an error.
+        horizontal field of view). The frontends then use only the central half of the width and height
+        (``UNCALIBRATED_CENTRAL_REGION``, unless ``frontend_options`` sets ``central_region``), where
+        the lens distortion left out is smallest. Without it, a ``sensor.yaml`` without intrinsics is
+        an error.
     focal_length : float or None
         Approximate focal length [px] for ``uncalibrated``.
     max_bridge : float
@@ -439,7 +446,10 @@ def run_visual_odometry(
     except ValueError as exc:
         raise InputError(str(exc), recording.path / "cam0" / "sensor.yaml") from None
     try:
-        frontend = make_frontend(config.frontend, config.frontend_options, point_map=geometry.rectifier)
+        options = dict(config.frontend_options)
+        if config.uncalibrated and options.get("central_region") is None:
+            options["central_region"] = UNCALIBRATED_CENTRAL_REGION
+        frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None
     heights = heights_for(recording, recording.frame_times) if config.use_range else None

@@ -3,9 +3,10 @@
 Model: a board corner ``X_F`` seen in view ``k`` projects to ``u = pi(K, d, R_k X_F + t_k)`` where ``pi``
 is the pinhole projection followed by the lens distortion ``d``:
 
-``radial-tangential`` (OpenCV ``calibrateCamera``, ``k3`` fixed at 0)::
+``radial-tangential`` (OpenCV ``calibrateCamera``, ``k3`` fixed at 0 unless three radial terms are
+asked for)::
 
-    r^2 = x^2 + y^2,   x' = x (1 + k1 r^2 + k2 r^4) + 2 p1 x y + p2 (r^2 + 2 x^2)   (y' likewise)
+    r^2 = x^2 + y^2,   x' = x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2)   (y' likewise)
 
 ``equidistant`` (OpenCV ``fisheye``)::
 
@@ -68,7 +69,7 @@ class IntrinsicsResult:
     K : ndarray, shape (3, 3)
         Camera matrix.
     distortion : ndarray
-        ``(k1, k2, p1, p2)`` or ``(k1, k2, k3, k4)``.
+        ``(k1, k2, p1, p2)``, ``(k1, k2, p1, p2, k3)`` or ``(k1, k2, k3, k4)``.
     std : dict
         Standard deviation of each parameter by name (``fu``, ``fv``, ``cu``, ``cv``, ``k1`` ...).
     rms : float
@@ -97,7 +98,10 @@ class IntrinsicsResult:
 
     @property
     def parameter_names(self) -> list[str]:
-        dist = ["k1", "k2", "p1", "p2"] if self.distortion_model == "radial-tangential" else ["k1", "k2", "k3", "k4"]
+        if self.distortion_model == "radial-tangential":
+            dist = ["k1", "k2", "p1", "p2", "k3"][: len(self.distortion)]
+        else:
+            dist = ["k1", "k2", "k3", "k4"]
         return ["fu", "fv", "cu", "cv"] + dist
 
     def to_camera(self, base: CameraModel | None = None) -> CameraModel:
@@ -160,7 +164,7 @@ def detect_views(paths: Sequence[str | Path], board: Board) -> tuple[list[View],
 
 
 def calibrate_images(paths: Sequence[str | Path], board: Board, model: str = "pinhole",
-                     min_views: int = MIN_VIEWS) -> IntrinsicsResult:
+                     min_views: int = MIN_VIEWS, radial_terms: int = 2) -> IntrinsicsResult:
     """Detect the board in every image and calibrate; see :func:`calibrate_views`."""
     views, skipped, size = detect_views(paths, board)
     if not views:
@@ -169,13 +173,13 @@ def calibrate_images(paths: Sequence[str | Path], board: Board, model: str = "pi
     if len(views) < min_views:
         raise InputError(f"the board was found in only {len(views)} image(s) ({_name_list([v.name for v in views])}); "
                          f"at least {min_views} are needed. Not found in: {_name_list(skipped) or 'none'}")
-    result = calibrate_views(views, board, size, model, min_views)
+    result = calibrate_views(views, board, size, model, min_views, radial_terms)
     result.skipped = skipped
     return result
 
 
 def calibrate_views(views: Sequence[View], board: Board, image_size: tuple[int, int], model: str = "pinhole",
-                    min_views: int = MIN_VIEWS) -> IntrinsicsResult:
+                    min_views: int = MIN_VIEWS, radial_terms: int = 2) -> IntrinsicsResult:
     """Calibrate from detected corners.
 
     Parameters
@@ -185,9 +189,13 @@ def calibrate_views(views: Sequence[View], board: Board, image_size: tuple[int, 
     image_size : ``(width, height)`` [px].
     model : ``"pinhole"`` (radial-tangential distortion) or ``"fisheye"`` (equidistant).
     min_views : fewest views accepted.
+    radial_terms : ``2`` (``k1, k2``; ``k3`` fixed at 0, the default) or ``3`` (also ``k3``: for strong
+        barrel lenses, with views that reach the image corners) for the ``pinhole`` model.
     """
     if model not in MODELS:
         raise InputError(f"unknown camera model '{model}' (use {' or '.join(MODELS)})")
+    if radial_terms not in (2, 3) or (model == "fisheye" and radial_terms != 2):
+        raise InputError(f"radial terms: 2 or 3, for the pinhole model only (got {radial_terms} for {model})")
     if len(views) < min_views:
         raise InputError(f"{len(views)} view(s) given, at least {min_views} are needed: "
                          f"{_name_list([v.name for v in views]) or 'none'}")
@@ -196,7 +204,7 @@ def calibrate_views(views: Sequence[View], board: Board, image_size: tuple[int, 
             raise InputError(f"expected {board.n_corners} corners, got {len(v.corners)}", v.name)
     obj = board.object_points()
     if model == "pinhole":
-        K, dist, rvecs, tvecs, std = _calibrate_pinhole(views, obj, image_size)
+        K, dist, rvecs, tvecs, std = _calibrate_pinhole(views, obj, image_size, radial_terms)
         project = _project_pinhole
     else:
         K, dist, rvecs, tvecs, std = _calibrate_fisheye(views, obj, image_size)
@@ -228,18 +236,19 @@ def _project_fisheye(obj, rvec, tvec, K, dist) -> np.ndarray:
     return pts.reshape(-1, 2)
 
 
-def _calibrate_pinhole(views, obj, image_size):
+def _calibrate_pinhole(views, obj, image_size, radial_terms: int = 2):
     objs = [obj.astype(np.float32)] * len(views)
     imgs = [v.corners.astype(np.float32).reshape(-1, 1, 2) for v in views]
-    flags = cv2.CALIB_FIX_K3
+    flags = cv2.CALIB_FIX_K3 if radial_terms == 2 else 0
     try:
         out = cv2.calibrateCameraExtended(objs, imgs, tuple(image_size), None, None, flags=flags, criteria=_CRITERIA)
     except cv2.error as exc:
         raise InputError(f"calibration failed ({exc.err}); the views may not constrain the camera "
                          f"(vary the board's tilt and position): {_name_list([v.name for v in views])}") from None
     _, K, dist, rvecs, tvecs, std_intr, _, _ = out
-    dist = dist.ravel()[:4].astype(np.float64)
-    std = std_intr.ravel()[:8]  # fx, fy, cx, cy, k1, k2, p1, p2
+    n = 4 if radial_terms == 2 else 5
+    dist = dist.ravel()[:n].astype(np.float64)
+    std = std_intr.ravel()[: 4 + n]  # fx, fy, cx, cy, k1, k2, p1, p2 (, k3)
     return K, dist, [r.ravel() for r in rvecs], [t.ravel() for t in tvecs], std
 
 

@@ -26,6 +26,9 @@ def register(sub) -> None:
     _board_options(q)
     q.add_argument("--model", choices=["pinhole", "fisheye"], default="pinhole",
                    help="pinhole with radial-tangential distortion, or fisheye (equidistant)")
+    q.add_argument("--radial-terms", type=int, choices=[2, 3], default=2,
+                   help="radial distortion terms of the pinhole model: 2 (k3 fixed at 0) or 3, for strong "
+                        "barrel lenses with views reaching the image corners")
     q.add_argument("--out", required=True, metavar="FILE",
                    help="cam0/sensor.yaml to write (its T_BS and rate are kept if it exists)")
     q.set_defaults(func=run_intrinsics)
@@ -88,7 +91,7 @@ def run_intrinsics(args: argparse.Namespace) -> int:
     from fusion_vo.geometry.camera import CameraModel
 
     board = Board.parse(args.board, args.square)
-    result = calibrate_images(args.images, board, args.model)
+    result = calibrate_images(args.images, board, args.model, radial_terms=args.radial_terms)
     out = Path(args.out)
     base = CameraModel.from_yaml(out) if out.is_file() else None
     print(result.summary())

@@ -368,3 +368,36 @@ class RealisticRenderer:
             mean = max(float(out.mean()), 1.0)
             self._gain *= math.exp(cam.auto_exposure * math.log(cam.target_grey / mean))
         return out
+
+
+def board_views(cam: RealisticCamera, width: int, height: int, n_views: int, distance: tuple[float, float],
+                shift: float, seed: int = 1, tilt: float = 0.2) -> list[np.ndarray]:
+    """Views of the finite board of ``cam`` (``checker_squares``) from above, for intrinsic calibration.
+
+    Each view looks down at the board's centre shifted by up to ``shift`` metres, from ``distance``
+    (a range, metres along the optical axis), rotated at random about the vertical and tilted by up to
+    ``tilt`` rad about both horizontal axes, as a person waving a printed board under the camera would
+    (tilted views are what separate the focal length from the distance).
+
+    Returns
+    -------
+    list of ndarray
+        The 8-bit frames (the board may be cut off or not found in some of them).
+    """
+    from scipy.spatial.transform import Rotation
+
+    if len(cam.checker_squares) != 2 or cam.checker_size <= 0:
+        raise ValueError("board views need a finite board: checker_size and checker_squares [cols, rows]")
+    r = RealisticRenderer(cam, width, height)
+    rng = np.random.default_rng(seed)
+    centre = np.array(cam.checker_squares, float) / 2.0 * cam.checker_size
+    views = []
+    for _ in range(n_views):
+        turn = Rotation.from_rotvec([rng.uniform(-tilt, tilt), rng.uniform(-tilt, tilt), rng.uniform(-np.pi, np.pi)])
+        R = turn.as_matrix() @ np.diag([1.0, -1.0, -1.0])  # looking down, then tilted
+        T = np.eye(4)
+        T[:3, :3] = R
+        T[:3, 3] = [*(centre + rng.uniform(-shift, shift, 2)), 0.0]
+        T[:3, 3] -= R[:, 2] * rng.uniform(*distance)  # back off along the optical axis
+        views.append(r.frame(lambda t, T=T: T, 0.0, rng))
+    return views

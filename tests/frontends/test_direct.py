@@ -36,3 +36,17 @@ def test_dense_check_replaces_a_wrong_point_estimate_and_keeps_a_right_one():
     fixed = fallback.verify(f0, f1, FrameMotion(0.05, 0.0, matrix=short, status=MotionStatus.OK), tolerance=1.0)
     assert fixed is not None and fixed.info["path"] == "dense"
     assert np.abs(fixed.matrix - truth).max() < 0.05
+
+
+@pytest.mark.parametrize("finest", [0, 1])
+def test_alignment_from_a_coarser_finest_level(finest):
+    """``finest_level: 1`` aligns on the half-resolution image (fewer pixels): still accurate."""
+    truth = similarity_about(WIDTH / 2, HEIGHT / 2, 9.0, -3.0, 1.5)
+    f0, f1 = pair(truth)
+    fe = make_frontend("direct", {"finest_level": finest})
+    fe.process(f0, 0.0)
+    m = fe.process(f1, 0.05)
+    assert m.ok
+    corners = np.array([[0.0, 0.0], [WIDTH, 0.0], [0.0, HEIGHT], [WIDTH, HEIGHT]])
+    err = np.abs(corners @ (m.matrix - truth)[:, :2].T + (m.matrix - truth)[:, 2]).max()
+    assert err < (0.03 if finest == 0 else 0.06), err

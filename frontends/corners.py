@@ -1,0 +1,174 @@
+"""Corner detection that adapts to the image size and texture, spread over the frame.
+
+Fixed pixel values tuned on one image size do not carry over: a 320 x 240 frame needs closer corners
+than a 640 x 360 one to find as many, and a 1280 x 720 frame can hold more. :class:`CornerPlan` scales
+the settings of the reference size (640 x 360, where they are used unchanged):
+
+* the minimum distance between corners and the structure-tensor block in proportion to the image
+  diagonal;
+* the number of corners with the image area (never fewer than at the reference size);
+* a quality level lowered step by step (down to ``min_quality``) when too few corners come back, as
+  on a coarse checkerboard or a blurred frame, so that the tracker has points to try before it falls
+  back to a dense alignment;
+* optionally, detection over a grid of cells: every cell that the strongest corners overall leave
+  empty gets its own strongest corner (its quality judged within the cell) in place of the weakest of
+  them, so that the corners cover the frame instead of crowding into its most textured or brightest
+  part (a spread set fixes rotation and scale better and survives a part of the view going dark or
+  leaving it). On an even texture every cell is already covered and nothing changes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: the image size the frontends' pixel settings were chosen for
+REFERENCE_SIZE = (360, 640)
+
+
+@dataclass(frozen=True)
+class CornerPlan:
+    """Corner settings in effect for one image size (see :func:`plan_corners`).
+
+    Attributes
+    ----------
+    scale : float
+        Image diagonal over the reference diagonal.
+    min_distance : float
+        Minimum distance between corners [px of the full image].
+    block_size : int
+        Structure-tensor block [px of the detection image], odd.
+    border : int
+        Margin kept free of corners [px of the full image].
+    max_corners : int
+        Corners wanted after a full replenish.
+    replenish_below : int
+        Fewer surviving tracks than this trigger a new detection.
+    region : tuple of int
+        ``(x0, y0, x1, y1)``: the part of the image where corners are detected [px of the full image].
+    """
+
+    scale: float
+    min_distance: float
+    block_size: int
+    border: int
+    max_corners: int
+    replenish_below: int
+    region: tuple[int, int, int, int]
+
+    def inside(self, pts: np.ndarray) -> np.ndarray:
+        """Mask of the points (N x 2, full-image px) inside :attr:`region`."""
+        x0, y0, x1, y1 = self.region
+        pts = np.asarray(pts).reshape(-1, 2)
+        return (pts[:, 0] >= x0) & (pts[:, 0] < x1) & (pts[:, 1] >= y0) & (pts[:, 1] < y1)
+
+
+def plan_corners(shape: tuple[int, int], min_distance: float, block_size: int, border: int, max_corners: int,
+                 replenish_below: int, central_region: float = 1.0) -> CornerPlan:
+    """Scale reference-size corner settings to an image of ``shape`` (rows, cols).
+
+    Parameters
+    ----------
+    shape : tuple of int
+    min_distance, block_size, border, max_corners, replenish_below
+        The settings for a 640 x 360 image.
+    central_region : float
+        Fraction of the width and height, about the centre, where corners are detected (1: all).
+    """
+    h, w = shape
+    scale = math.hypot(h, w) / math.hypot(*REFERENCE_SIZE)
+    area = (h * w) / float(REFERENCE_SIZE[0] * REFERENCE_SIZE[1])
+    count = max(1.0, area * central_region**2)
+    block = max(3, int(round(block_size * scale)) | 1)
+    bx = max(int(round(border * scale)), int(round(0.5 * (1.0 - central_region) * w)), 4)
+    by = max(int(round(border * scale)), int(round(0.5 * (1.0 - central_region) * h)), 4)
+    return CornerPlan(
+        scale=scale,
+        min_distance=max(min_distance * scale, 6.0),
+        block_size=block,
+        border=max(int(round(border * scale)), 4),
+        max_corners=int(round(max_corners * count)),
+        replenish_below=int(round(replenish_below * count)),
+        region=(bx, by, w - bx, h - by),
+    )
+
+
+def grid_shape(shape: tuple[int, int], cell: float) -> tuple[int, int]:
+    """Rows and columns of a grid of cells about ``cell`` px wide over an image of ``shape``."""
+    h, w = shape
+    return max(1, int(round(h / cell))), max(1, int(round(w / cell)))
+
+
+def spread_corners(image: np.ndarray, mask: np.ndarray, wanted: int, quality: float, min_quality: float,
+                   min_distance: float, block_size: int, grid: tuple[int, int], enough: int) -> np.ndarray:
+    """Shi-Tomasi corners of ``image`` spread over a ``grid`` of cells, lowering the quality if needed.
+
+    Parameters
+    ----------
+    image : ndarray
+        ``uint8`` detection image.
+    mask : ndarray
+        Where corners may lie (``uint8``, non-zero allowed).
+    wanted : int
+        Corners to return at most.
+    quality : float
+        First quality level (minimum eigenvalue relative to the strongest corner).
+    min_quality : float
+        Lowest quality level tried; the level is divided by 4 while fewer than ``enough`` corners
+        come back.
+    min_distance : float
+        Minimum distance between corners [px of ``image``].
+    block_size : int
+        Structure-tensor block [px].
+    grid : tuple of int
+        Rows and columns of cells; every cell with texture gets at least one corner (up to half of
+        ``wanted`` are given to otherwise empty cells).
+    enough : int
+        Corner count below which a lower quality level is tried.
+
+    Returns
+    -------
+    ndarray, shape (N, 2), float32
+        Corner positions in ``image`` pixels.
+    """
+    if wanted <= 0:
+        return np.zeros((0, 2), np.float32)
+    level = quality
+    while True:
+        # the candidates come back strongest first; four times the count leaves every cell a choice
+        found = cv2.goodFeaturesToTrack(image, maxCorners=4 * wanted, qualityLevel=level, minDistance=min_distance,
+                                        mask=mask, blockSize=block_size)
+        pts = np.zeros((0, 2), np.float32) if found is None else found.reshape(-1, 2).astype(np.float32)
+        if len(pts) >= enough or level <= min_quality:
+            break
+        level = max(level / 4.0, min_quality)
+    if grid == (1, 1):
+        return pts[:wanted]
+    h, w = image.shape
+    rows, cols = grid
+    chosen = pts[:wanted]
+    cell = (np.minimum(chosen[:, 1] * rows // h, rows - 1) * cols
+            + np.minimum(chosen[:, 0] * cols // w, cols - 1)).astype(int)
+    covered = np.zeros(rows * cols, bool)
+    covered[cell] = True
+    # every cell the strongest corners leave empty gets its own strongest corner, its quality relative to
+    # the cell (a dim or low-contrast part of the frame), in place of the weakest corners overall; on an
+    # even texture every cell is covered and nothing changes
+    extra = []
+    for c in np.flatnonzero(~covered)[: max(wanted // 2, 1)]:
+        r, k = divmod(int(c), cols)
+        y0, y1, x0, x1 = r * h // rows, (r + 1) * h // rows, k * w // cols, (k + 1) * w // cols
+        sub_mask = np.ascontiguousarray(mask[y0:y1, x0:x1])
+        if min(y1 - y0, x1 - x0) <= 2 * block_size or not sub_mask.any():
+            continue
+        found = cv2.goodFeaturesToTrack(np.ascontiguousarray(image[y0:y1, x0:x1]), maxCorners=1, qualityLevel=0.5,
+                                        minDistance=min_distance, mask=sub_mask, blockSize=block_size)
+        if found is not None:
+            extra.append(found.reshape(-1, 2)[0] + np.array([x0, y0], np.float32))
+    if not extra:
+        return chosen
+    keep = max(min(len(chosen), wanted - len(extra)), 0)
+    return np.vstack([chosen[:keep], np.array(extra, np.float32)])
