@@ -34,7 +34,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
 from fusion_vo.geometry.se2 import wrap_angle
 
@@ -134,6 +133,8 @@ class Gate:
         """The chi-square quantile of ``probability`` with ``dim`` degrees of freedom."""
         t = self._thresholds.get(dim)
         if t is None:
+            from scipy.stats import chi2  # here: a camera-only run does not load scipy.stats
+
             t = float(chi2.ppf(self.probability, dim)) if self.probability < 1 else math.inf
             self._thresholds[dim] = t
         return t
