@@ -3,9 +3,9 @@
 Prints the wall time (median of the repeats) of:
 
 * ``python -c pass`` (the interpreter alone) and ``python -c "import numpy, cv2"`` (the libraries every run needs);
-* ``fusion-vo --help``;
-* importing ``fusion_vo.backends`` in a fresh interpreter (what ``run`` loads for the wheel dead reckoning
-  even with ``--backend none``);
+* ``fusion-vo --help`` and ``fusion-vo run --help`` (they load neither numpy nor OpenCV);
+* importing the EKF's libraries, filterpy and scipy.stats, beside numpy (what a camera-only run no longer
+  loads: ``fusion_vo.backends`` loads its modules on first use, the EKF its libraries when it is built);
 * the whole ``fusion-vo run SEQ --backend none --no-evaluate`` command, and the part of it spent outside
   visual odometry (start-up, imports, wheel dead reckoning, output writing);
 * writing the visual odometry outputs (``vo.tum`` and ``velocities.csv``) of that run, in this process;
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import subprocess
 import sys
@@ -58,7 +59,10 @@ def main() -> int:
             ("python -c pass", wall([py, "-c", "pass"], args.repeats)),
             ("python -c 'import numpy, cv2'", wall([py, "-c", "import numpy, cv2"], args.repeats)),
             ("fusion-vo --help", wall([*cli, "--help"], args.repeats)),
-            ("import fusion_vo.backends", wall([py, "-c", "import fusion_vo.backends"], args.repeats)),
+            ("fusion-vo run --help", wall([*cli, "run", "--help"], args.repeats)),
+            ("python -c 'import numpy'", wall([py, "-c", "import numpy"], args.repeats)),
+            ("python -c 'import numpy, filterpy.kalman, scipy.stats'",
+             wall([py, "-c", "import numpy, filterpy.kalman, scipy.stats"], args.repeats)),
         ]
         out = Path(tmp) / "out"
         run = [*cli, "-q", "run", str(seq), "--out", str(out), "--backend", "none", "--no-evaluate"]
@@ -88,6 +92,7 @@ def main() -> int:
             write_velocities(Path(tmp) / "velocities.csv", vo)
             times.append(time.perf_counter() - start)
         rows.append((f"writing vo.tum + velocities.csv ({frames} frames)", statistics.median(times)))
+    print(f"load average {os.getloadavg()[0]:.1f} at the end")
     print("| what | wall time, median of %d |" % args.repeats)
     print("|---|---|")
     for name, seconds in rows:

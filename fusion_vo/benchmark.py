@@ -150,6 +150,10 @@ class EndToEnd:
     cpu_ms : list of float
         CPU time of the process per frame [ms] (all its threads), per repeat: less sensitive than the
         wall clock to other work on the machine.
+    thread_ms : list of float
+        CPU time per frame [ms] of the calling thread alone, per repeat: in fusion-vo the thread that
+        tracks, which sets the pace with several threads (on an idle machine the wall time per frame
+        cannot be shorter).
     """
 
     name: str
@@ -161,6 +165,7 @@ class EndToEnd:
     baseline: bool = False
     rss_mb: list = field(default_factory=list)
     cpu_ms: list = field(default_factory=list)
+    thread_ms: list = field(default_factory=list)
 
     @property
     def label(self) -> str:
@@ -180,9 +185,10 @@ def current_rss_mb() -> float:
         return _rss_mb()
 
 
-def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int, list, float]:
+def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int, list, float, float]:
     """Frames per second of visual odometry over a recording (wall clock, decoding included), failures,
-    the resident memory after each quarter of the frames [MB] and the CPU time per frame [ms]."""
+    the resident memory after each quarter of the frames [MB], the CPU time per frame [ms] and that of
+    the calling thread (the tracker) alone [ms]."""
     rec = Recording(sequence)
     n = len(rec)
     quarter = max(n // 4, 1)
@@ -192,23 +198,25 @@ def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, 
         if done % quarter == 0 and len(rss) < 4:
             rss.append(round(current_rss_mb(), 1))
 
-    cpu = time.process_time()
+    cpu, own = time.process_time(), time.thread_time()
     result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads), progress=progress)
-    cpu = time.process_time() - cpu
-    return n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped), rss, 1000 * cpu / n
+    cpu, own = time.process_time() - cpu, time.thread_time() - own
+    return (n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped), rss, 1000 * cpu / n,
+            1000 * own / n)
 
 
-def time_baseline(sequence: str | Path, baseline: BaselineRun, threads: int | None = None) -> tuple[float, int, float]:
-    """Frames per second of the plain OpenCV script over a recording, the frame pairs it failed on and
-    its CPU time per frame [ms].
+def time_baseline(sequence: str | Path, baseline: BaselineRun, threads: int | None = None) -> tuple[float, int, float, float]:
+    """Frames per second of the plain OpenCV script over a recording, the frame pairs it failed on, its
+    CPU time per frame [ms] and that of the calling thread alone [ms].
 
     ``threads`` limits OpenCV's threads for the run (``None``: OpenCV's default, as the script is).
     """
-    cpu = time.process_time()
+    cpu, own = time.process_time(), time.thread_time()
     with opencv_threads(threads) if threads is not None else nullcontext():
         results, seconds = baseline(sequence)
-    cpu = time.process_time() - cpu
-    return (len(results) + 1) / seconds, sum(m is None for *_, m in results), 1000 * cpu / (len(results) + 1)
+    cpu, own = time.process_time() - cpu, time.thread_time() - own
+    n = len(results) + 1
+    return n / seconds, sum(m is None for *_, m in results), 1000 * cpu / n, 1000 * own / n
 
 
 def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: BaselineRun,
@@ -240,16 +248,18 @@ def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: Bas
     rows = [EndToEnd(fe, th, n) for fe in frontends for th in thread_counts]
     for r in range(repeats):
         for base in bases:
-            fps, base.failed, cpu = time_baseline(sequence, baseline, base.threads)
+            fps, base.failed, cpu, own = time_baseline(sequence, baseline, base.threads)
             base.fps.append(fps)
             base.cpu_ms.append(cpu)
+            base.thread_ms.append(own)
             if report:
                 report(f"repeat {r + 1}/{repeats}: {base.label} {fps:.1f} frames/s")
         best = max(base.fps[-1] for base in bases)
         for row in rows:
-            fps, row.failed, row.rss_mb, cpu = time_run(sequence, row.name, row.threads)
+            fps, row.failed, row.rss_mb, cpu, own = time_run(sequence, row.name, row.threads)
             row.fps.append(fps)
             row.cpu_ms.append(cpu)
+            row.thread_ms.append(own)
             row.ratio.append(fps / best)
             if report:
                 report(f"repeat {r + 1}/{repeats}: {row.label} {fps:.1f} frames/s ({row.ratio[-1]:.2f}x)")
@@ -265,13 +275,14 @@ def _span(values: list[float], fmt: str) -> str:
 
 def end_to_end_table(rows: list[EndToEnd]) -> str:
     """A Markdown table: frames/s and the ratio to the plain script (median, and range over repeats)."""
-    lines = ["| run | frames/s end to end | x plain script (the faster run) | CPU time per frame | failed frames "
-             "| memory after each quarter |", "|---|---|---|---|---|---|"]
+    lines = ["| run | frames/s end to end | x plain script (the faster run) | CPU time per frame | of it in the "
+             "calling thread | failed frames | memory after each quarter |", "|---|---|---|---|---|---|---|"]
     for row in rows:
         ratio = _span(row.ratio, ".2f") if row.ratio else "–"
         memory = " / ".join(f"{m:.0f}" for m in row.rss_mb) + " MB" if row.rss_mb else "–"
-        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {_span(row.cpu_ms, '.2f')} ms | {row.failed} "
-                     f"| {memory} |")
+        own = f"{_span(row.thread_ms, '.2f')} ms" if row.thread_ms else "–"
+        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {_span(row.cpu_ms, '.2f')} ms | {own} "
+                     f"| {row.failed} | {memory} |")
     return "\n".join(lines)
 
 
@@ -328,9 +339,10 @@ def run_benchmark(sequence: str | Path, frontends: list[str], baseline: Baseline
             rows = [EndToEnd(fe, th, n) for fe in frontends for th in (thread_counts or sorted({1, available_cores()}))]
             for _ in range(repeats):
                 for row in rows:
-                    fps, row.failed, row.rss_mb, cpu = time_run(seq, row.name, row.threads)
+                    fps, row.failed, row.rss_mb, cpu, own = time_run(seq, row.name, row.threads)
                     row.fps.append(fps)
                     row.cpu_ms.append(cpu)
+                    row.thread_ms.append(own)
         else:
             rows = compare_end_to_end(seq, frontends, baseline, thread_counts, repeats, report=out)
         out("")

@@ -29,11 +29,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator
+from typing import TYPE_CHECKING
 
-from fusion_vo import schema
-from fusion_vo.geometry.camera import load_yaml
-from fusion_vo.odometry import OdometryConfig
+if TYPE_CHECKING:  # the stages, pydantic and OpenCV are loaded when a configuration is built, not for --help
+    from pydantic import BaseModel
+
+    from fusion_vo.odometry import OdometryConfig
 
 SENSORS = ("camera", "wheel", "imu", "odom", "range", "gps")
 BACKENDS = ("none", "ekf", "gtsam", "all")
@@ -49,6 +50,7 @@ def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
     from frontends.features import FeatureConfig
     from frontends.klt import KltConfig
     from fusion_vo.backends.config import FusionConfig
+    from fusion_vo.odometry import OdometryConfig
 
     return {"odometry": (OdometryConfig, _ODOMETRY_EXCLUDE), "klt": (KltConfig, ()),
             "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ())}
@@ -94,6 +96,8 @@ class RunConfig:
 
     def odometry_config(self) -> OdometryConfig:
         """The visual odometry configuration, with the chosen frontend's options."""
+        from fusion_vo.odometry import OdometryConfig
+
         opts = dict(self.odometry)
         opts["frontend"] = self.frontend
         opts["frontend_options"] = dict(getattr(self, self.frontend, None) or {})  # the section named by frontend
@@ -101,6 +105,7 @@ class RunConfig:
 
     def fusion_config(self, path: Path | None = None):
         """The backends' :class:`~fusion_vo.backends.FusionConfig` (validated by the schema)."""
+        from fusion_vo import schema
         from fusion_vo.backends.config import FusionConfig
 
         return schema.build(FusionConfig, self.fusion, path, ("fusion",))
@@ -126,6 +131,10 @@ def _split_sensors(value):
 @functools.cache
 def run_model() -> type[BaseModel]:
     """The pydantic model of the whole run configuration (sections built from their dataclasses)."""
+    from pydantic import ConfigDict, Field, create_model, field_validator
+
+    from fusion_vo import schema
+
     docs = schema.field_docs(RunConfig)
     fields: dict[str, Any] = {
         "frontend": (Literal[FRONTENDS], Field("klt", description=docs["frontend"])),
@@ -151,6 +160,8 @@ def validate_config(data: dict, path: Path | None = None) -> RunConfig:
         For an unknown key, a value of the wrong type or a combination of options a stage rejects; the
         message names ``path`` and the key path.
     """
+    from fusion_vo import schema
+
     if isinstance(data, dict):  # a top-level key left empty keeps its default
         data = {k: v for k, v in data.items() if v is not None}
     values = schema.validate(run_model(), data, path)
@@ -169,6 +180,8 @@ def load_config(path: str | Path | None) -> RunConfig:
     """
     if path is None:
         return RunConfig()
+    from fusion_vo.geometry.camera import load_yaml
+
     path = Path(path)
     return validate_config(load_yaml(path), path)
 
@@ -176,6 +189,8 @@ def load_config(path: str | Path | None) -> RunConfig:
 def default_config_text(config: RunConfig | None = None) -> str:
     """The configuration as commented YAML (for ``--print-config``): every option, with its value in
     ``config`` (default: the defaults) and the first sentence of its description."""
+    from fusion_vo import schema
+
     model = run_model()
     values = None if config is None else schema.validate(model, config.to_dict())
     lines = [f"# fusion-vo run configuration: every option with its {'default' if config is None else 'value'}",
@@ -185,4 +200,6 @@ def default_config_text(config: RunConfig | None = None) -> str:
 
 def schema_text() -> str:
     """The JSON schema of the run configuration (for ``--print-schema``)."""
+    from fusion_vo import schema
+
     return json.dumps(schema.json_schema(run_model()), indent=2) + "\n"

@@ -16,7 +16,8 @@ real time between the two frames (not a nominal frame rate).
 Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``threads >= 2`` a reader
 thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
 per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
-calling thread tracks. OpenCV releases the GIL while it decodes and filters, so they overlap on the
+calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
+derotation, ground geometry, the track) while the frontend measures the next frame. OpenCV releases the GIL while it decodes and filters, so they overlap on the
 cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
@@ -30,7 +31,7 @@ import os
 import queue
 import threading
 import time
-from collections import Counter
+from collections import Counter, deque
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
@@ -215,18 +216,27 @@ class VisualOdometry:
         ``image`` is the frame, or what the frontend's ``prepare`` made of it.
         """
         motion = self.frontend.process(image, t)
+        return motion, self.finish(motion, height)
+
+    def finish(self, motion: FrameMotion, height: float | None = None) -> VisualIncrement | None:
+        """The second half of :meth:`process`: the body increment of the frontend's ``motion`` (``None``
+        for a first frame), derotated and through the ground geometry, appended to the track.
+
+        Nothing in it feeds back into the frontend, so a run does it in another thread while the frontend
+        measures the next frame (:func:`run_visual_odometry`); it must see the motions in frame order.
+        """
         if motion.status is MotionStatus.FIRST:
             if not self.poses:
-                self.t.append(t)
+                self.t.append(motion.timestamp)
                 self.poses.append(np.zeros(3))
-            return motion, None
+            return None
         if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
             motion.info["measured_matrix"] = motion.matrix
             motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
         inc = self.geometry.increment(motion, height)
         if inc.ok:
             self._append(inc)
-        return motion, inc
+        return inc
 
     def _append(self, inc: VisualIncrement) -> None:
         if not self.poses:
@@ -359,6 +369,16 @@ def opencv_threads(n: int):
         cv2.setNumThreads(before)
 
 
+@contextmanager
+def _shut_down(pool: ThreadPoolExecutor | None):
+    """Shut ``pool`` down when the block ends (cancelling what has not started), if there is one."""
+    try:
+        yield pool
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
 def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
     if not recording.has_range():
@@ -415,10 +435,24 @@ def run_visual_odometry(
     skipped: list[str] = []
     bad_run = 0
     threads = config.thread_count()
+
+    def collect(inc: VisualIncrement | None) -> None:
+        if inc is not None:
+            increments.append(inc)
+        if inc is not None and inc.ok and inc.dt > 0:
+            vel.append(se2.log(inc.delta) / inc.dt)
+            ratio.append(inc.height_ratio)
+        else:
+            vel.append(np.full(3, np.nan))
+            ratio.append(np.nan)
+
     start = time.perf_counter()
     source = prepared_frames(frames if frames is not None else recording.frames(),
                              getattr(frontend, "prepare", None), threads)
-    with opencv_threads(threads), closing(source):
+    # with threads, the increments are computed in a thread of their own, one frame behind the frontend
+    post = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-geometry") if threads > 1 else None
+    pending: deque = deque()
+    with opencv_threads(threads), closing(source), _shut_down(post):
         for k, (frame, image) in enumerate(source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
@@ -431,20 +465,20 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
-            motion, inc = vo.process(image, frame.t, h)
+            motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
             inliers.append(motion.n_inliers)
-            if inc is not None:
-                increments.append(inc)
-            if inc is not None and inc.ok and inc.dt > 0:
-                vel.append(se2.log(inc.delta) / inc.dt)
-                ratio.append(inc.height_ratio)
+            if post is None:
+                collect(vo.finish(motion, h))
             else:
-                vel.append(np.full(3, np.nan))
-                ratio.append(np.nan)
+                pending.append(post.submit(vo.finish, motion, h))
+                while pending and (pending[0].done() or len(pending) > 2 * threads + 2):
+                    collect(pending.popleft().result())
             if progress:
                 progress(k + 1, total)
+        while pending:
+            collect(pending.popleft().result())
     elapsed = time.perf_counter() - start
     if not frame_t:
         raise InputError("no usable frame in the recording", recording.path / "cam0")

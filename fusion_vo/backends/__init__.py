@@ -16,17 +16,14 @@ graph      GTSAM factor graph: batch Levenberg–Marquardt, iSAM2, fixed-lag smo
 streaming  the incremental interface with a reorder buffer for late measurements
 """
 
-from fusion_vo.backends.batch import (
-    BACKENDS, backend_names, fuse, run_backends, streams_from_recording, wheel_dead_reckoning,
-)
-from fusion_vo.backends.config import EkfConfig, FusionConfig, GraphConfig
-from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.streaming import Estimate, StreamingFusion
-from fusion_vo.backends.timeline import SENSORS, Intervals, SensorStreams, build_intervals
+import lazy_loader
 
-__all__ = [
-    "BACKENDS", "SENSORS", "EkfConfig", "Estimate", "FusionConfig", "FusionResult", "GraphConfig", "Intervals",
-    "SensorCount", "SensorStreams", "StreamingFusion", "backend_names", "build_intervals", "fuse", "run_backends",
-    "streams_from_recording",
-    "wheel_dead_reckoning",
-]
+# the submodules load on first use: a camera-only run that only writes results (``result``) does not
+# pay for filterpy, scipy.stats or GTSAM
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "batch": ["BACKENDS", "backend_names", "fuse", "run_backends", "streams_from_recording", "wheel_dead_reckoning"],
+    "config": ["EkfConfig", "FusionConfig", "GraphConfig"],
+    "result": ["FusionResult", "SensorCount"],
+    "streaming": ["Estimate", "StreamingFusion"],
+    "timeline": ["SENSORS", "Intervals", "SensorStreams", "build_intervals"],
+})

@@ -25,7 +25,10 @@ Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
 ``F = ∂f/∂x`` and ``Q = G diag(...) Gᵀ`` with ``G = ∂f/∂w`` (the twist noise also moves the pose).
 
 Measurements over an interval (all sensors are integrated onto the same interval by
-:mod:`fusion_vo.backends.timeline`, so each one constrains the twist of *that* interval)::
+:mod:`fusion_vo.backends.timeline`, so each one constrains the twist of *that* interval). Each is the
+sensor's measurement model of :mod:`fusion_vo.sensors` (:meth:`PlanarEkf.block`: the prediction and
+Jacobians of the model, whose arguments are read from the state, :data:`STATE_COLUMNS`), the same one
+the factor graph uses; the interval models are evaluated per unit time, on the twist::
 
     visual   z = log(Δ_vis)/Δt          h = (k_v v_x, k_v v_y, ω)       R = Σ_vis / Δt²
     wheel    z = (d, 0, θ)/Δt (arc)     h = (k_r v_x, k_r v_y, k_b ω)   R = wheel noise model / Δt²
@@ -59,7 +62,8 @@ offset's walk, while a heading that strays from the gyro's integral moves ``o_ψ
 pose. A sudden jump (a magnetic disturbance) fails the gate and is counted.
 
 Each sensor's block is gated before the update by its squared Mahalanobis distance
-``yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``; rejections are counted.
+``yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``
+(:class:`~fusion_vo.sensors.model.Gate`); rejections are counted.
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
@@ -82,8 +86,6 @@ import logging
 import time
 
 import numpy as np
-from filterpy.kalman import ExtendedKalmanFilter
-from scipy.stats import chi2
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.result import FusionResult, SensorCount
@@ -92,17 +94,25 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.gps import GpsModel
 from fusion_vo.sensors.gps import predict as gps_predict
-from fusion_vo.sensors.wheel import arc_twist, standstill
+from fusion_vo.sensors.imu import AHRS, GYRO
+from fusion_vo.sensors.model import Gate, MeasurementModel
+from fusion_vo.sensors.range import RANGE
+from fusion_vo.sensors.visual import VISUAL
+from fusion_vo.sensors.wheel import STANDSTILL, WHEEL, arc_twist, standstill
 
 logger = logging.getLogger(__name__)
 
 PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
 DIM = 11
+#: state columns of each measurement-model argument (:mod:`fusion_vo.sensors.model`); the interval
+#: models are evaluated per unit time, on the twist state
+STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gyro_bias": slice(BG, BG + 1),
+                 "visual_scale": slice(KV, KV + 1), "wheel_scale": slice(KR, KR + 1),
+                 "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12
-_DROPPED_VAR = 1e8
+_DROPPED_VAR = 1e8  # variance of a measurement row the consistency monitor dropped
 OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
-  # variance of a measurement row the consistency monitor dropped
 
 
 class PlanarEkf:
@@ -126,6 +136,10 @@ class PlanarEkf:
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
                  wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None):
+        # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
+        from filterpy.kalman import ExtendedKalmanFilter
+        from scipy.stats import chi2
+
         self.config = config
         calib = config.self_calibration
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
@@ -149,8 +163,7 @@ class PlanarEkf:
         # the AHRS north is aligned to the initial heading; no offset walk: an AHRS trusted as absolute
         var[AO] = config.imu.ahrs_yaw_sigma**2 if config.imu.ahrs_offset_walk > 0 else _FROZEN_VAR
         self.kf.P = np.diag(var)
-        self._thresholds = {m: float(chi2.ppf(config.gate_probability, m)) if config.gate_probability < 1 else np.inf
-                            for m in (1, 2, 3)}
+        self.gate = Gate(config.gate_probability, _REJECT_FACTOR)
         self.counts: dict[str, SensorCount] = {}
 
     # ------------------------------------------------------------------ state access
@@ -169,7 +182,8 @@ class PlanarEkf:
         x = self.x
         vx, vy, w = x[VX], x[VY], x[W]
         th = w * dt
-        a, b, da, db = _sinc(th)
+        a, b = se2.sinc_terms(th)
+        da, db = se2.sinc_derivatives(th)
         ax = dt * (a * vx - b * vy)
         ay = dt * (b * vx + a * vy)
         c, s = np.cos(x[YAW]), np.sin(x[YAW])
@@ -205,43 +219,21 @@ class PlanarEkf:
         return F
 
     # ------------------------------------------------------------------ measurement blocks
-    def visual_block(self, z, R):
-        x = self.x
-        H = np.zeros((3, DIM))
-        H[0, VX] = H[1, VY] = x[KV]
-        H[0, KV], H[1, KV] = x[VX], x[VY]
-        H[2, W] = 1.0
-        return "camera", np.asarray(z, float), np.array([x[KV] * x[VX], x[KV] * x[VY], x[W]]), H, R, None
+    def block(self, model: MeasurementModel, z, R, **params):
+        """``(sensor, z, h, H, R, angle_row)`` of one measurement through ``model`` at the current state.
 
-    def wheel_block(self, z, R):
-        x = self.x
-        H = np.zeros((3, DIM))
-        H[0, VX] = H[1, VY] = x[KR]
-        H[0, KR], H[1, KR] = x[VX], x[VY]
-        H[2, W], H[2, KB] = x[KB], x[W]
-        return "wheel", np.asarray(z, float), np.array([x[KR] * x[VX], x[KR] * x[VY], x[KB] * x[W]]), H, R, None
-
-    def gyro_block(self, rate: float, var: float):
-        x = self.x
-        H = np.zeros((1, DIM))
-        H[0, W] = H[0, BG] = 1.0
-        return "gyro", np.array([rate]), np.array([x[W] + x[BG]]), H, np.array([[var]]), None
-
-    def heading_block(self, yaw: float, var: float):
-        H = np.zeros((1, DIM))
-        H[0, YAW] = H[0, AO] = 1.0
-        return "ahrs", np.array([yaw]), np.array([self.x[YAW] + self.x[AO]]), H, np.array([[var]]), 0
-
-    def standstill_block(self, var: float):
-        H = np.zeros((1, DIM))
-        H[0, W] = 1.0
-        return "standstill", np.zeros(1), np.array([self.x[W]]), H, np.array([[var]]), None
-
-    def range_block(self, height: float, var: float):
-        kv = self.x[KV]
-        H = np.zeros((1, DIM))
-        H[0, KV] = -self.camera_height / kv**2
-        return "range", np.array([height]), np.array([self.camera_height / kv]), H, np.array([[var]]), None
+        The model's arguments are read from the state (:data:`STATE_COLUMNS`) and its Jacobians become
+        the columns of ``H``; ``params`` go to :meth:`~fusion_vo.sensors.model.MeasurementModel.evaluate`.
+        """
+        x = self.kf.x[:, 0]
+        h, jac = model.evaluate(**{name: x[STATE_COLUMNS[name]] for name in model.args}, **params)
+        H = np.zeros((model.dim, DIM))
+        for name, J in jac.items():
+            H[:, STATE_COLUMNS[name]] = J
+        angle = model.angle_rows[0] if model.angle_rows else None
+        if model.dim == 1:
+            return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
+        return model.name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
 
     # ------------------------------------------------------------------ GPS
     def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
@@ -280,18 +272,18 @@ class PlanarEkf:
             S = H @ P @ H.T + R
             d2 = float(y @ np.linalg.solve(S, y))
             count = self.counts.setdefault(sensor, SensorCount())
-            threshold = self._thresholds[len(y)]
-            if not np.isfinite(d2) or d2 > _REJECT_FACTOR * threshold:
+            factor = self.gate.inflation(d2, len(y))
+            if factor is None:
                 count.gated += 1
                 logger.debug("ekf: %s gated (d²=%.1f)", sensor, d2)
                 continue
             count.used += 1
-            if d2 > threshold:
+            if factor > 1.0:
                 # outside the gate but not absurd: down-weighted so that it sits on the gate (the
                 # bounded influence of the graph's robust kernel) rather than dropped -- a robot that
                 # brakes harder than the constant-twist model expects must not coast on
                 count.gated += 1
-                R = R * (d2 / threshold) + H @ P @ H.T * (d2 / threshold - 1.0)
+                R = R * factor + H @ P @ H.T * (factor - 1.0)
             keep.append((y, H, R))
         if not keep:
             return
@@ -359,21 +351,18 @@ def gyro_turn(iv: Intervals) -> np.ndarray | None:
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
     """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`."""
     blocks = []
-    vis, whl, gyr = meas.get("visual"), meas.get("wheel"), meas.get("gyro")
-    ahr, rng = meas.get("ahrs"), meas.get("range")
-    if vis is not None and vis[0][k]:
-        blocks.append(ekf.visual_block(vis[1][k], vis[2][k]))
-    if whl is not None and whl[0][k]:
-        blocks.append(ekf.wheel_block(whl[1][k], whl[2][k]))
-    if gyr is not None and gyr[0][k]:
-        blocks.append(ekf.gyro_block(gyr[1][k], gyr[2][k]))
+    for name, model in (("visual", VISUAL), ("wheel", WHEEL), ("gyro", GYRO)):
+        m = meas.get(name)
+        if m is not None and m[0][k]:
+            blocks.append(ekf.block(model, m[1][k], m[2][k]))
     still = meas.get("standstill")
     if still is not None and still[0][k]:
-        blocks.append(ekf.standstill_block(still[1]))
+        blocks.append(ekf.block(STANDSTILL, 0.0, still[1]))
+    ahr, rng = meas.get("ahrs"), meas.get("range")
     if ahr is not None and ahr[0][k + 1]:
-        blocks.append(ekf.heading_block(ahr[1][k + 1], ahr[2]))
+        blocks.append(ekf.block(AHRS, ahr[1][k + 1], ahr[2]))
     if rng is not None and rng[0][k + 1]:
-        blocks.append(ekf.range_block(rng[1][k + 1], rng[2]))
+        blocks.append(ekf.block(RANGE, rng[1][k + 1], rng[2], camera_height=ekf.camera_height))
     return blocks
 
 
@@ -394,7 +383,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     Fs = np.zeros((K + 1, DIM, DIM))
     ahr = meas.get("ahrs")
     if ahr is not None and ahr[0][0]:
-        ekf.update([ekf.heading_block(ahr[1][0], ahr[2])])
+        ekf.update([ekf.block(AHRS, ahr[1][0], ahr[2])])
     reacquire = GpsReacquire(config.gps_reacquire)
     result_notes: list[str] = []
     last_fix = None
@@ -559,11 +548,3 @@ def _block_diag(mats) -> np.ndarray:
         out[i:i + k, i:i + k] = m
         i += k
     return out
-
-
-def _sinc(th: float) -> tuple[float, float, float, float]:
-    """``sin θ/θ``, ``(1-cos θ)/θ`` and their derivatives."""
-    if abs(th) < 1e-4:
-        return 1.0 - th * th / 6.0, th / 2.0 - th**3 / 24.0, -th / 3.0, 0.5 - th * th / 8.0
-    s, c = np.sin(th), np.cos(th)
-    return s / th, (1.0 - c) / th, (th * c - s) / th**2, (th * s - (1.0 - c)) / th**2

@@ -14,21 +14,29 @@ between segments rather than single global variables (a variable shared by all f
 clique of the Bayes tree and each iSAM2 update would re-solve the whole history) or one per camera
 frame (long chains of nearly equal variables that every update nudges all the way back).
 
-Factors (``⊖`` is the SE(2) relative pose ``X_i⁻¹ X_j = (d_x, d_y, d_ψ)``)::
+Factors (``δ = X_i⁻¹ X_j = (d_x, d_y, d_ψ)``, the relative pose). Every sensor's factor is its measurement
+model of :mod:`fusion_vo.sensors` (the same prediction, Jacobians and noise the EKF uses), turned into
+GTSAM factors by :mod:`fusion_vo.backends.factors`; where GTSAM has a native factor that is the model,
+that factor is used::
 
     prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²),  O_0 ~ N(0, σ_ψ²)
-    visual     e = (S_c d_x - m_x, S_c d_y - m_y, d_ψ - m_ψ)   Σ = frontend covariance   (CustomFactor)
-    wheel      BetweenFactorPose2 with the arc increment       Σ = arc model (sensors.wheel)
-               with self-calibration its heading row is split off into
-               e = W_c d_ψ - m_ψ                                σ² = Σ_ψψ         (CustomFactor)
-    gyro       e = d_ψ - (Θ_ij - B_c Δt)                       σ² = σ_g² Δt      (exact linear factor)
-    standstill e = d_ψ   (wheels at rest over the interval)      σ = σ_still Δt   (exact linear factor)
+    visual     sensors.visual  e = (S_c d_x, S_c d_y, d_ψ) - m        Σ = frontend covariance
+               (without self-calibration: BetweenFactorPose2)
+    wheel      sensors.wheel   e = (R_c d_x, R_c d_y, d_ψ) - m        Σ = arc model, heading row free
+               and e = W_c d_ψ - m_ψ                                  σ² = Σ_ψψ
+               (without self-calibration: BetweenFactorPose2 with the whole arc covariance)
+    gyro       sensors.imu     e = d_ψ + B_c Δt - Θ_ij                σ² = σ_g² Δt      (linear)
+    standstill sensors.wheel   e = d_ψ   (wheels at rest)             σ = σ_still Δt   (linear)
     walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ),
                O_c - O_{c-1} ~ N(0, σ_ow² τ)                                           (τ: segment length)
-    heading    e = ψ_k + O_c - ψ_AHRS                            σ² = σ_ψ²         (CustomFactor)
-    range      S_c ~ N(h_c / z, (h_c σ_r / z²)²)
+    heading    sensors.imu     e = ψ_k + O_c - ψ_AHRS                 σ² = σ_ψ²
+               (an absolute AHRS, no offset: PriorFactorPose2 on the heading)
+    range      sensors.range   S_c ~ N(h_c / z, (h_c σ_r / z²)²)     (the model solved for S_c)
     motion     weak constant-twist BetweenFactorPose2 where no sensor measures an interval's translation
-    GPS        e = X_k.t + R(ψ_k) l - z    Σ = the fix's covariance, Huber/Cauchy  (sensors.gps factor)
+    GPS        sensors.gps     e = X_k.t + R(ψ_k) l - z    Σ = the fix's covariance, Huber/Cauchy
+
+GTSAM's ``BetweenFactorPose2`` expresses the noise in the frame at the end of the measured increment
+(its tangent space): it is the model with the covariance rotated by the increment's own turn.
 
 The noise of the wheels' heading is on the measurement ``m_ψ``, so the wheel-base factor must multiply
 the estimated heading change (``W d_ψ - m_ψ``); writing it as ``d_ψ - m_ψ / W`` would be linear but
@@ -65,16 +73,25 @@ Solvers
                       online (causal) trajectory;
 ``gtsam_fixed_lag``   ``IncrementalFixedLagSmoother`` with a lag of ``GraphConfig.fixed_lag`` seconds.
 
-The incremental solvers receive the two Python factors (visual with scale, wheel heading) linearised
-at the prediction of the newest pose (:func:`freeze_custom_factors`); the batch solution relinearises
-everything.
+The incremental solvers receive the sensor-model factors linearised at the prediction of the newest
+pose (:func:`freeze_custom_factors`); the batch solution relinearises everything at every iteration.
 
-The Levenberg–Marquardt loop is written out here on top of GTSAM's linearisation and sparse
-elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``): the wrapped
-optimizer re-enters Python for every :class:`gtsam.CustomFactor` at a cost that grows with the
-graph, while linearising from Python does not. The algorithm is the standard one: try the
-Gauss–Newton step, and while the cost does not decrease (or the undamped system is too poorly
-conditioned to factorise), add ``λ I`` damping (λ × 10) and retry.
+The batch Levenberg–Marquardt loop is written out here on top of GTSAM's linearisation and sparse
+elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``), with the
+sensor-model factors evaluated in numpy, one array operation per sensor, and handed to GTSAM as
+``JacobianFactor`` s. GTSAM's own optimizers need each of them as a :class:`gtsam.CustomFactor` that
+calls back into Python, and that is what costs: ``python benchmarks/bench_solvers.py`` (the batch graph
+of the 60 s drive of ``benchmarks/bench_fusion.py``, 5039 factors of which 4797 sensor-model factors,
+CPU time, 3 interleaved runs on a shared 2-core machine under heavy load) measured this loop at
+184–278 ms against 10.0–11.5 s for ``LevenbergMarquardtOptimizer``, 10.3–11.1 s for
+``GaussNewtonOptimizer`` and 13.6–15.2 s for ``DoglegOptimizer``, all reaching the same cost 1961.53 in
+3 iterations (Dogleg 4). With the earlier hand-written CustomFactors (no generic model layer in the
+callback) on a less loaded machine: loop 256–278 ms, LevenbergMarquardtOptimizer 3245–3378 ms,
+GaussNewtonOptimizer 3246–3452 ms, DoglegOptimizer 4287–4496 ms; with those factors frozen to linear
+ones GaussNewtonOptimizer took 85 ms and the loop 124 ms, so the cost is the callbacks, not GTSAM's
+solver. The algorithm is the standard one: try the Gauss–Newton step, and while the cost does not
+decrease (or the undamped system is too poorly conditioned to factorise), add ``λ I`` damping
+(λ × 10) and retry.
 """
 
 from __future__ import annotations
@@ -93,8 +110,12 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
+from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors.gps import GpsModel
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment, standstill
+from fusion_vo.sensors.imu import AHRS, GYRO
+from fusion_vo.sensors.range import RANGE
+from fusion_vo.sensors.visual import VISUAL
+from fusion_vo.sensors.wheel import STANDSTILL, WHEEL, arc_covariance, arc_increment, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -123,103 +144,6 @@ def R(k: int) -> int:
     return gtsam.symbol("r", k)
 
 
-# --------------------------------------------------------------------------- factor error functions
-def _relative(values: gtsam.Values, ki: int, kj: int) -> tuple[float, float, float]:
-    """``(d_x, d_y, d_ψ)`` of ``X_i⁻¹ X_j``."""
-    pi = values.atPose2(ki)
-    pj = values.atPose2(kj)
-    ti = pi.theta()
-    ci, si = math.cos(ti), math.sin(ti)
-    tx, ty = pj.x() - pi.x(), pj.y() - pi.y()
-    return ci * tx + si * ty, -si * tx + ci * ty, _wrap(pj.theta() - ti)
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def scaled_between_error(measured: np.ndarray):
-    """Error function of the visual factor on ``(X_i, X_j, S)``: ``(S d_x - m_x, S d_y - m_y, d_ψ - m_ψ)``."""
-    mx, my, mpsi = (float(v) for v in measured)
-
-    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
-        ki, kj, ks = this.keys()
-        dx, dy, dpsi = _relative(values, ki, kj)
-        k = values.atDouble(ks)
-        if H is not None:
-            c, s = math.cos(dpsi), math.sin(dpsi)
-            H[0] = np.array([[-k, 0.0, k * dy], [0.0, -k, -k * dx], [0.0, 0.0, -1.0]])
-            H[1] = np.array([[k * c, -k * s, 0.0], [k * s, k * c, 0.0], [0.0, 0.0, 1.0]])
-            H[2] = np.array([[dx], [dy], [0.0]])
-        return np.array([k * dx - mx, k * dy - my, _wrap(dpsi - mpsi)])
-
-    return error
-
-
-def wheel_heading_error(measured: float):
-    """Error function of the wheels' heading factor on ``(X_i, X_j, W)``: ``W d_ψ - m_ψ``."""
-    m = float(measured)
-
-    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
-        ki, kj, kw = this.keys()
-        d = _wrap(values.atPose2(kj).theta() - values.atPose2(ki).theta())
-        k = values.atDouble(kw)
-        if H is not None:
-            H[0] = np.array([[0.0, 0.0, -k]])
-            H[1] = np.array([[0.0, 0.0, k]])
-            H[2] = np.array([[d]])
-        return np.array([k * d - m])
-
-    return error
-
-
-def ahrs_heading_error(measured: float):
-    """Error function of the AHRS factor on ``(X_k, O)``: ``ψ_k + O - ψ_AHRS`` (wrapped)."""
-    m = float(measured)
-
-    def error(this: gtsam.CustomFactor, values: gtsam.Values, H) -> np.ndarray:
-        kx, ko = this.keys()
-        if H is not None:
-            H[0] = np.array([[0.0, 0.0, 1.0]])
-            H[1] = np.array([[1.0]])
-        return np.array([_wrap(values.atPose2(kx).theta() + values.atDouble(ko) - m)])
-
-    return error
-
-
-def heading_change_factor(ki: int, kj: int, kp: int, offset: float, gain: float, sigma: float,
-                          pose_i: gtsam.Pose2, pose_j: gtsam.Pose2, p0: float) -> gtsam.LinearContainerFactor:
-    """Factor ``e = d_ψ - offset - gain · P`` on ``(X_i, X_j, P)`` for a scalar variable ``P``.
-
-    The gyro is ``offset = Θ, gain = -Δt, P = B`` (``d_ψ = Θ - B Δt``). The error is linear in the
-    headings and ``P``, and a Pose2's heading coordinate is additive under GTSAM's retraction, so the
-    factor is exact as a linear factor about any linearisation point (while the heading stays within π
-    of it) and runs entirely in C++.
-    """
-    e0 = _wrap(pose_j.theta() - pose_i.theta() - offset - gain * p0)
-    jf = gtsam.JacobianFactor(ki, _H_HEADING_I, kj, _H_HEADING_J, kp, np.array([[-gain]]), np.array([-e0]),
-                              gtsam.noiseModel.Isotropic.Sigma(1, sigma))
-    lin = gtsam.Values()
-    lin.insert(ki, pose_i)
-    lin.insert(kj, pose_j)
-    lin.insert(kp, float(p0))
-    return gtsam.LinearContainerFactor(jf, lin)
-
-
-def standstill_factor(ki: int, kj: int, sigma: float, pose_i: gtsam.Pose2,
-                      pose_j: gtsam.Pose2) -> gtsam.LinearContainerFactor:
-    """Zero heading change ``e = d_ψ`` on ``(X_i, X_j)`` (wheels at rest), exact as a linear factor."""
-    e0 = _wrap(pose_j.theta() - pose_i.theta())
-    jf = gtsam.JacobianFactor(ki, _H_HEADING_I, kj, _H_HEADING_J, np.array([-e0]),
-                              gtsam.noiseModel.Isotropic.Sigma(1, sigma))
-    lin = gtsam.Values()
-    lin.insert(ki, pose_i)
-    lin.insert(kj, pose_j)
-    return gtsam.LinearContainerFactor(jf, lin)
-
-
-_H_HEADING_I = np.array([[0.0, 0.0, -1.0]])
-_H_HEADING_J = np.array([[0.0, 0.0, 1.0]])
 _FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
 
 
@@ -281,6 +205,14 @@ class GraphBuilder:
         self.reacquire = GpsReacquire(config.gps_reacquire)
 
     # ------------------------------------------------------------------ helpers
+    def model_factor(self, model, z, cov, keys: dict, fixed: dict | None = None, params: dict | None = None,
+                     rows: tuple | None = None, robust: bool = True) -> ModelFactor:
+        """A measurement of a sensor model (:mod:`fusion_vo.backends.factors`), in the robust kernel unless
+        ``robust`` is False."""
+        kernel = (self.config.graph.robust, self.config.graph.robust_k) if robust and self._robust is not None else None
+        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys,
+                           np.asarray(cov, dtype=np.float64), fixed or {}, params or {}, rows, kernel)
+
     def noise(self, cov: np.ndarray, robust: bool = True):
         base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
         if robust and self._robust is not None:
@@ -389,35 +321,30 @@ class GraphBuilder:
             still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
             m, cov = self._wheel_increment(g0, g1)
             yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
-            if not yaw_ok:  # yaw component dropped by the consistency monitor: translation only
-                m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
-                cov_xy = cov.copy()
-                cov_xy[2, :] = cov_xy[:, 2] = 0.0
-                cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-                if self.kr_on:
-                    nf.factors.append(gtsam.CustomFactor(self.noise(cov_xy), [xi, xj, R(c)], scaled_between_error(m)))
-                else:
-                    nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
-            elif self.kb_on:
-                # translation from the arc; the heading change goes through the wheel-base factor
+            if not yaw_ok or self.kb_on:
+                # translation from the arc; the heading change goes through the wheel-base factor, or
+                # not at all where the consistency monitor dropped the wheels' yaw component
+                if not yaw_ok:
+                    m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
                 cov_xy = cov.copy()
                 cov_xy[2, :] = cov_xy[:, 2] = 0.0
                 cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
                 if self.kr_on:  # distance scaled by the wheels' radius factor
-                    nf.factors.append(gtsam.CustomFactor(self.noise(cov_xy), [xi, xj, R(c)], scaled_between_error(m)))
+                    nf.factors.append(self.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (R(c),)},
+                                                        fixed={"wheel_base_factor": 1.0}))
                 else:
                     nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
-                wheel_heading = (float(m[2]), float(np.sqrt(cov[2, 2])))
+                if yaw_ok:
+                    wheel_heading = (m, float(np.sqrt(cov[2, 2])))
             else:
                 nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov)))
-                wheel_heading = None
             nf.sensors.append("wheel")
             translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
         # visual increments ending here
         for start, d, cov in self._visual_by_end.get(n, []):
             xs = X(self.offset + start)
             if self.kv_on:
-                nf.factors.append(gtsam.CustomFactor(self.noise(cov), [xs, xj, S(c)], scaled_between_error(d)))
+                nf.factors.append(self.model_factor(VISUAL, d, cov, {"motion": (xs, xj), "visual_scale": (S(c),)}))
             else:
                 nf.factors.append(gtsam.BetweenFactorPose2(xs, xj, gtsam.Pose2(*d), self.noise(cov)))
             nf.sensors.append("camera")
@@ -442,16 +369,17 @@ class GraphBuilder:
         nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
         nf.guess = guess
         if angle is not None:
-            sigma = cfg.imu.gyro_noise_density * np.sqrt(dt)
-            nf.factors.append(heading_change_factor(xi, xj, B(c), angle, -dt, sigma, previous_pose,
-                                                    nf.values[xj], est.get("gyro_bias", 0.0)))
+            var = GYRO.variance(cfg.imu.gyro_noise_density, dt)
+            nf.factors.append(self.model_factor(GYRO, [angle], [[var]], {"motion": (xi, xj), "gyro_bias": (B(c),)},
+                                                params={"dt": dt}, robust=False))
         if still:
             sigma = wheel_noise.standstill_yaw_rate * max(dt, 1e-3)
-            nf.factors.append(standstill_factor(xi, xj, sigma, previous_pose, nf.values[xj]))
+            nf.factors.append(self.model_factor(STANDSTILL, [0.0], [[sigma**2]], {"motion": (xi, xj)}, robust=False))
             nf.sensors.append("standstill")
         if wheel_heading is not None:
-            nm = self.noise(np.array([[wheel_heading[1] ** 2]]))
-            nf.factors.append(gtsam.CustomFactor(nm, [xi, xj, W(c)], wheel_heading_error(wheel_heading[0])))
+            nf.factors.append(self.model_factor(WHEEL, wheel_heading[0], [[wheel_heading[1] ** 2]],
+                                                {"motion": (xi, xj), "wheel_base_factor": (W(c),)},
+                                                fixed={"wheel_scale": 1.0}, rows=(2,)))
         self._unary(nf, n)
         return nf
 
@@ -500,21 +428,20 @@ class GraphBuilder:
         iv, cfg = self.iv, self.config
         g = int(self.grid[n])
         if iv.ahrs_ok[g] and self.ahrs_offset_on:
-            nm = self.noise(np.array([[cfg.imu.ahrs_yaw_sigma**2]]))
-            keys = [X(self.offset + n), O(int(self.segment[n]))]
-            nf.factors.append(gtsam.CustomFactor(nm, keys, ahrs_heading_error(float(iv.ahrs_yaw[g]))))
+            nf.factors.append(self.model_factor(AHRS, [float(iv.ahrs_yaw[g])], [[cfg.imu.ahrs_yaw_sigma**2]],
+                                                {"heading": (X(self.offset + n),), "ahrs_offset": (O(int(self.segment[n])),)}))
             nf.sensors.append("ahrs")
-        elif iv.ahrs_ok[g]:  # an AHRS trusted as absolute (no offset walk)
+        elif iv.ahrs_ok[g]:
+            # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
+            # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)
             nm = self.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]))
             heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
             nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), heading, nm))
             nf.sensors.append("ahrs")
         if self.kv_on and iv.range_ok[g] and iv.camera_height:
-            z = float(iv.range_height[g])
-            h = float(iv.camera_height)
-            sig = h * cfg.range.sigma / z**2
+            scale, sig = RANGE.scale_prior(iv.range_height[g], cfg.range.sigma, float(iv.camera_height))
             nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
-            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), h / z, nm))
+            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), scale, nm))
             nf.sensors.append("range")
 
     def count(self, nf: NodeFactors) -> None:
@@ -581,19 +508,24 @@ def _compose_with_covariance(a, cov_a, b, cov_b):
     return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
 
 
-def freeze_custom_factors(factors: list, lookup) -> list:
-    """Replace each :class:`gtsam.CustomFactor` by its linearisation at ``lookup(key)`` values.
+def freeze_custom_factors(factors: list, lookup, maker: ValuesMaker | None = None) -> list:
+    """Replace each sensor-model factor (:class:`~fusion_vo.backends.factors.ModelFactor`, or a
+    :class:`gtsam.CustomFactor`) by its linearisation at ``lookup(key)`` values.
 
-    Used for the incremental solvers: iSAM2 re-enters Python for a CustomFactor at a cost that grows
-    with the size of the whole problem, so the online estimators receive the (robustly weighted)
-    linearisation as a ``LinearContainerFactor`` instead. The factors are relative constraints between
-    close nodes, linearised at the prediction of the newest pose, where they are nearly linear; the
-    robust weight is fixed at that prediction, so a visual increment that disagrees with the wheels
-    and the gyro enters with a small weight. The batch solution keeps the nonlinear factors.
+    Used for the incremental solvers, which relinearise only GTSAM's own nonlinear factors: they receive
+    the (robustly weighted) linearisation as a ``LinearContainerFactor``. The factors are relative
+    constraints between close nodes, linearised at the prediction of the newest pose, where they are
+    nearly linear (the gyro's and the standstill's are exactly linear in the headings); the robust
+    weight is fixed at that prediction, so a visual increment that disagrees with the wheels and the
+    gyro enters with a small weight. The batch solution relinearises them at every iteration.
     """
     out = []
+    keys = {key for f in factors if isinstance(f, ModelFactor) for key in f.all_keys()}
+    point = (maker or ValuesMaker()).make({key: lookup(key) for key in keys}) if keys else None
     for f in factors:
-        if isinstance(f, gtsam.CustomFactor):
+        if isinstance(f, ModelFactor):
+            out.append(f.linearized(lookup, point))
+        elif isinstance(f, gtsam.CustomFactor):
             lin = gtsam.Values()
             insert_values(lin, {key: lookup(key) for key in f.keys()})
             out.append(gtsam.LinearContainerFactor(f.linearize(lin), lin))
@@ -613,17 +545,44 @@ def insert_values(values: gtsam.Values, items: dict) -> None:
 
 # --------------------------------------------------------------------------- batch
 def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, dims: dict[int, int],
-                        max_iterations: int = 20, relative_tolerance: float = 1e-3):
+                        max_iterations: int = 20, relative_tolerance: float = 1e-3,
+                        model_factors: list[ModelFactors] | None = None):
     """Levenberg–Marquardt on GTSAM's linearisation and elimination (see the module docstring).
 
+    ``graph`` holds GTSAM's own factors; ``model_factors`` the sensor-model factors, evaluated and
+    linearised in groups (:class:`~fusion_vo.backends.factors.ModelFactors`).
     Returns ``(solution, iterations, linear_graph)``; the last linearisation serves the marginals.
     """
-    error = graph.error(values)
+    groups = model_factors or []
+    pose_keys = pose_table(values)["keys"] if groups else None
+    if any(g.linear for g in groups):
+        # linear, non-robust factors (gyro, standstill) are exact as linear factors: linearised once
+        graph = gtsam.NonlinearFactorGraph(graph)
+        poses = pose_table(values, pose_keys)
+        for g in groups:
+            if g.linear:
+                for f in g.linearize(values, poses):
+                    graph.add(gtsam.LinearContainerFactor(f, values))
+        groups = [g for g in groups if not g.linear]
+
+    def total_error(v: gtsam.Values) -> float:
+        poses = pose_table(v, pose_keys) if groups else None
+        return graph.error(v) + sum(g.error(v, poses) for g in groups)
+
+    def linearize(v: gtsam.Values) -> gtsam.GaussianFactorGraph:
+        lin = graph.linearize(v)
+        poses = pose_table(v, pose_keys) if groups else None
+        for g in groups:
+            for f in g.linearize(v, poses):
+                lin.add(f)
+        return lin
+
+    error = total_error(values)
     lam = 0.0
     it = 0
     lin = None
     for it in range(1, max_iterations + 1):
-        lin = graph.linearize(values)
+        lin = linearize(values)
         while True:
             system = lin
             if lam > 0:
@@ -633,7 +592,7 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                                                     gtsam.noiseModel.Unit.Create(dim)))
             try:
                 trial = values.retract(system.optimize())
-                trial_error = graph.error(trial)
+                trial_error = total_error(trial)
             except RuntimeError as exc:  # a (nearly) singular Gauss-Newton system: damp it, as GTSAM's LM does
                 if "Indeterminate" not in str(exc):
                     raise
@@ -663,6 +622,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     online_cov = np.zeros((n_nodes, 3, 3))
     lag_poses = np.zeros((n_nodes, 3))
     graph = gtsam.NonlinearFactorGraph()
+    model_factors: list[ModelFactor] = []
     values = gtsam.Values()
     dims: dict[int, int] = {}
     qr = iv.gps_ok is not None
@@ -673,6 +633,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     estimate: dict = dict(builder.initial_estimate)
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
+    maker = ValuesMaker()
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
         if gps is not None:
@@ -684,11 +645,13 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 pose_cov = None
             builder.gps_factor(nf, n, gps, pose_cov)
         builder.count(nf)
-        new_values = gtsam.Values()
-        insert_values(new_values, nf.values)
+        new_values = maker.make(nf.values)
         if gcfg.batch:
             for f in nf.factors:
-                graph.add(f)
+                if isinstance(f, ModelFactor):
+                    model_factors.append(f)
+                else:
+                    graph.add(f)
             values.insert(new_values)
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
@@ -696,7 +659,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         new_graph = gtsam.NonlinearFactorGraph()
         if isam is not None or lag is not None:
             lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
-            for f in freeze_custom_factors(nf.factors, lookup):
+            for f in freeze_custom_factors(nf.factors, lookup, maker):
                 new_graph.add(f)
         if isam is not None:
             isam.update(new_graph, new_values)
@@ -737,18 +700,20 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         elif initial is not None:
             start_values = _seed_poses(values, initial, builder)
         solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations,
-                                                   gcfg.relative_tolerance)
+                                                   gcfg.relative_tolerance, group(model_factors))
         poses = np.array([[p.x(), p.y(), p.theta()] for p in (solution.atPose2(X(n)) for n in range(n_nodes))])
         result.trajectories["gtsam"] = PoseData(builder.t.copy(), poses)
         result.counts["gtsam"] = counts
         result.calibration["gtsam"] = _calibration(solution, builder)
         t_solve = time.process_time() - t0
         if gcfg.marginals:
+            t1 = time.process_time()
             result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
+            result.timing["gtsam_marginals"] = time.process_time() - t1
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
         result.timing["gtsam_solve"] = t_solve
-        logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size(), iters)
+        logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size() + len(model_factors), iters)
     result.notes.extend(iv.notes)
     return result
 

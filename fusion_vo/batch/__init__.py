@@ -15,9 +15,11 @@ run`` does, on a Dask worker that reads the recording from its path. The results
 Needs the ``batch`` extra (dask[distributed], pandas, pyarrow, optuna).
 """
 
-from fusion_vo.batch.grid import Grid, ParameterSet, load_grid, parse_grid
-from fusion_vo.batch.runner import best_sets, plan_batch, plan_sweep, run_batch, run_sweep
-from fusion_vo.batch.tasks import COLUMNS, METRICS, Task, run_task
+import lazy_loader
 
-__all__ = ["COLUMNS", "METRICS", "Grid", "ParameterSet", "Task", "best_sets", "load_grid", "parse_grid",
-           "plan_batch", "plan_sweep", "run_batch", "run_sweep", "run_task"]
+# the submodules load on first use (the command line's --help needs only the metric names)
+__getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
+    "grid": ["Grid", "ParameterSet", "load_grid", "parse_grid"],
+    "runner": ["best_sets", "plan_batch", "plan_sweep", "run_batch", "run_sweep"],
+    "tasks": ["COLUMNS", "METRICS", "Task", "run_task"],
+})

@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import argparse
 
-from fusion_vo.recording.rosbag import import_bag, list_topics, parse_static_tf
-
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -37,6 +35,8 @@ def register(subparsers) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion_vo.recording.rosbag import import_bag, list_topics, parse_static_tf
+
     if args.list or args.out is None:
         if args.out is None and not args.list:
             from fusion_vo.errors import InputError

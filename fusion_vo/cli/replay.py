@@ -23,13 +23,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import shutil
 import tempfile
 import time
 from pathlib import Path
-
-import numpy as np
 
 from fusion_vo.errors import InputError
 
@@ -41,7 +40,7 @@ def _non_negative(text: str) -> float:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if not np.isfinite(value) or value < 0:
+    if not math.isfinite(value) or value < 0:
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
     return value
 
@@ -74,6 +73,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from fusion_vo.backends import batch
     from fusion_vo.backends.batch import as_config, fuse
     from fusion_vo.backends.result import write_pose_covariances
@@ -157,6 +158,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _play(fusion, msgs, speed: float, rate: float) -> tuple[list, list]:
     """Feed ``msgs`` at ``speed`` and read the estimate every ``1/rate`` s of recording time."""
+    import numpy as np
+
     t_first = msgs[0][0]
     wall0 = time.perf_counter()
     period = 1.0 / rate

@@ -3,16 +3,32 @@
 from __future__ import annotations
 
 import argparse
-
-import yaml
+import importlib
 
 from fusion_vo.errors import InputError
 
 
-def register(sub) -> None:
-    from fusion_vo.simulation.robot import PROFILES
-    from fusion_vo.simulation.standard import STANDARD
+class _LazyNames:
+    """The sorted keys of ``module.attribute``, imported when argparse first looks at them.
 
+    As ``choices`` (with a ``metavar``), it keeps the simulator, and with it numpy and OpenCV, out of
+    ``fusion-vo --help`` and of every other command; ``simulate --help`` and a wrong name list them.
+    """
+
+    def __init__(self, module: str, attribute: str):
+        self._where = (module, attribute)
+
+    def _names(self) -> list[str]:
+        return sorted(getattr(importlib.import_module(self._where[0]), self._where[1]))
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+
+def register(sub) -> None:
     p = sub.add_parser("simulate", help="generate a recording (camera, wheels, IMU, ground truth)",
                        description="Generate a recording in the layout of datasets/README.md: a differential-drive "
                                    "robot drives a profile over a floor made from a photographed texture. "
@@ -21,8 +37,10 @@ def register(sub) -> None:
     p.add_argument("out", nargs="?", help="output folder: new, empty, or a recording fusion-vo wrote (then replaced)")
     p.add_argument("--force", action="store_true",
                    help="replace a non-empty folder that is not a recording fusion-vo wrote")
-    p.add_argument("--profile", choices=sorted(PROFILES), default="square")
-    p.add_argument("--standard", choices=sorted(STANDARD), help="one of the standard recordings (fixes profile, options, seed)")
+    p.add_argument("--profile", choices=_LazyNames("fusion_vo.simulation.robot", "PROFILES"), default="square",
+                   metavar="PROFILE", help="driving profile, one of %(choices)s (default: %(default)s)")
+    p.add_argument("--standard", choices=_LazyNames("fusion_vo.simulation.standard", "STANDARD"), metavar="NAME",
+                   help="one of the standard recordings, %(choices)s (fixes profile, options, seed)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, help="duration [s] (random, standstill)")
     p.add_argument("--texture", choices=["gravel", "grass", "brick"])
@@ -36,6 +54,8 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import yaml
+
     from fusion_vo import schema
     from fusion_vo.geometry.camera import load_yaml
     from fusion_vo.simulation import SimulationOptions, simulate

@@ -29,11 +29,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from frontends.similarity import fit_least_squares
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import ImuData
+
+_EYE = np.eye(3)
 
 
 class GyroDerotation:
@@ -69,13 +70,28 @@ class GyroDerotation:
         w, h = cam.width, cam.height
         gx, gy = np.meshgrid(np.linspace(0, w - 1, 16), np.linspace(0, h - 1, 10))
         self._grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
+        self._lo, self._hi = self._grid.min(axis=0), self._grid.max(axis=0)
+        self._angles: dict[float, np.ndarray] = {}
+
+    def _angle(self, t: float) -> np.ndarray:
+        """The integrated body rates at ``t`` (linear interpolation); the last two times are remembered,
+        since each frame's time is asked for again as the start of the next interval."""
+        cached = self._angles.get(t)
+        if cached is None:
+            cached = np.array([np.interp(t, self.t, self._cum[:, k]) for k in range(3)])
+            if len(self._angles) >= 2:
+                self._angles.pop(next(iter(self._angles)))
+            self._angles[t] = cached
+        return cached
 
     def rotation(self, t0: float, t1: float) -> np.ndarray:
         """The body's roll-and-pitch rotation ``ΔR_B`` from ``t0`` to ``t1`` (3x3)."""
+        from scipy.spatial.transform import Rotation  # loaded with the first frame (a recording with an IMU)
+
         if len(self.t) < 2 or t0 < self.t[0] or t1 > self.t[-1]:
             return np.eye(3)
-        a = np.array([np.interp(t1, self.t, self._cum[:, k]) - np.interp(t0, self.t, self._cum[:, k]) for k in range(3)])
-        return Rotation.from_rotvec(a).as_matrix()
+        start = self._angle(t0)  # first: it is usually the previous interval's end, still remembered
+        return Rotation.from_rotvec(self._angle(t1) - start).as_matrix()
 
     def correction(self, t0: float, t1: float, matrix: np.ndarray | None = None) -> np.ndarray:
         """The 3x3 similarity ``H^{-1}`` (best fit) that removes the rotation's image motion.
@@ -85,14 +101,13 @@ class GyroDerotation:
         second frame), keeping those still in view.
         """
         dR = self.rotation(t0, t1)
-        if np.allclose(dR, np.eye(3), atol=1e-12):
+        if np.all(np.abs(dR - _EYE) <= 1e-12 + 1e-5 * _EYE):  # np.allclose(dR, I, atol=1e-12) in a fifth of the time
             return np.eye(3)
         pts = self._grid
         if matrix is not None:
             m = np.asarray(matrix, dtype=np.float64)
             moved = pts @ m[:, :2].T + m[:, 2]
-            lo, hi = self._grid.min(axis=0), self._grid.max(axis=0)
-            inside = np.all((moved >= lo) & (moved <= hi), axis=1)
+            inside = np.all((moved >= self._lo) & (moved <= self._hi), axis=1)
             if np.count_nonzero(inside) >= 6:
                 pts = moved[inside]
         # H^{-1} = K R_VB dR R_BV K^{-1}: a pixel seen at the second frame back to where it was

@@ -15,7 +15,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 
 def wrap_angle(a):
@@ -26,12 +25,16 @@ def wrap_angle(a):
 def yaw_of_quaternion(q_wxyz) -> np.ndarray:
     """Yaw (rotation about the world z axis, ZYX convention) of quaternions ``(w, x, y, z)`` (N x 4), in
     [-pi, pi] (scipy's ``Rotation``; the quaternions are normalised first)."""
+    from scipy.spatial.transform import Rotation  # on first use: scipy.spatial is slow to load
+
     q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
     return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_euler("ZYX")[:, 0]
 
 
 def quaternion_of_yaw(yaw) -> np.ndarray:
     """Quaternions ``(w, x, y, z)`` (N x 4) of rotations by ``yaw`` [rad] about the z axis."""
+    from scipy.spatial.transform import Rotation
+
     q_xyzw = Rotation.from_euler("z", np.asarray(yaw, dtype=np.float64).reshape(-1, 1)).as_quat()
     return q_xyzw[:, [3, 0, 1, 2]]
 
@@ -84,6 +87,26 @@ def sinc_terms(th):
         return math.sin(t) / t, half * s * s
     th = np.asarray(th, dtype=np.float64)
     return np.sinc(th / np.pi), 0.5 * th * np.sinc(th / (2.0 * np.pi)) ** 2
+
+
+def sinc_derivatives(th):
+    """Derivatives of ``sin(th)/th`` and ``(1 - cos th)/th`` with respect to ``th`` (scalar or array).
+
+    ``(th cos th - sin th)/th²`` and ``(th sin th - (1 - cos th))/th²``, by their series
+    ``-th/3`` and ``1/2 - th²/8`` below ``|th| < 1e-4`` (where the closed forms cancel).
+    """
+    if isinstance(th, (int, float)) or np.ndim(th) == 0:
+        t = float(th)
+        if abs(t) < 1e-4:
+            return -t / 3.0, 0.5 - t * t / 8.0
+        s, c = math.sin(t), math.cos(t)
+        return (t * c - s) / (t * t), (t * s - (1.0 - c)) / (t * t)
+    th = np.asarray(th, dtype=np.float64)
+    small = np.abs(th) < 1e-4
+    safe = np.where(small, 1.0, th)
+    da = np.where(small, -th / 3.0, (safe * np.cos(safe) - np.sin(safe)) / safe**2)
+    db = np.where(small, 0.5 - th**2 / 8.0, (safe * np.sin(safe) - (1.0 - np.cos(safe))) / safe**2)
+    return da, db
 
 
 def _v_coefficients(th: float) -> tuple[float, float]:

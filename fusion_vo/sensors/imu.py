@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.measurements import ImuData
+from fusion_vo.sensors.model import MeasurementModel
 
 logger = logging.getLogger(__name__)
 
@@ -220,3 +221,66 @@ __all__ = [
     "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "running_median",
     "cumulative_angle", "quat_to_matrix", "ahrs_heading", "tilt_from_accel",
 ]
+
+
+# --------------------------------------------------------------------------- measurement models
+@dataclass(frozen=True)
+class GyroModel(MeasurementModel):
+    """The gyro's integrated angle over an interval ``Δt`` as a measurement of the heading change.
+
+    ``z = Θ = ∫ ω_z dt``, ``h(δ, b_g) = d_ψ + b_g Δt``, ``R = σ_g² Δt``; Jacobians ``∂h/∂δ = (0, 0, 1)``,
+    ``∂h/∂b_g = Δt``. Arguments ``motion``, ``gyro_bias``; parameter ``dt`` (the EKF evaluates it per
+    unit time: ``z = Θ/Δt``, ``R = σ_g²/Δt``, ``dt = 1``).
+    """
+
+    name: str = "gyro"
+    linear: bool = True
+    args: tuple = ("motion", "gyro_bias")
+    dim: int = 1
+    turn_rows: tuple = (0,)
+
+    def evaluate(self, motion, gyro_bias, dt=1.0):
+        d = np.asarray(motion, dtype=np.float64)
+        if d.ndim == 1 and isinstance(dt, (int, float)):  # one measurement: without array overhead
+            t = float(dt)
+            return (np.array([float(d[2]) + float(gyro_bias[0]) * t]),
+                    {"motion": np.array([[0.0, 0.0, 1.0]]), "gyro_bias": np.array([[t]])})
+        b = np.asarray(gyro_bias, dtype=np.float64)
+        dt = np.asarray(dt, dtype=np.float64)
+        h = d[..., 2:3] + b * dt[..., None] if dt.ndim else d[..., 2:3] + b * float(dt)
+        j_d = np.zeros(d.shape[:-1] + (1, 3))
+        j_d[..., 0, 2] = 1.0
+        j_b = np.broadcast_to(dt, d.shape[:-1]).astype(np.float64)[..., None, None].copy()
+        return h, {"motion": j_d, "gyro_bias": j_b}
+
+    @staticmethod
+    def variance(noise_density: float, dt):
+        """``σ_g² Δt`` of the integrated angle over ``dt`` [s]."""
+        return noise_density**2 * np.asarray(dt, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class AhrsModel(MeasurementModel):
+    """The AHRS heading: ``z = ψ_AHRS``, ``h(ψ, o_ψ) = ψ + o_ψ`` (wrapped), ``R = σ_ψ²``; both Jacobians 1.
+
+    Arguments ``heading``, ``ahrs_offset`` (an AHRS trusted as absolute has its offset fixed at 0).
+    """
+
+    name: str = "ahrs"
+    linear: bool = True
+    args: tuple = ("heading", "ahrs_offset")
+    dim: int = 1
+    angle_rows: tuple = (0,)
+
+    def evaluate(self, heading, ahrs_offset):
+        psi = np.asarray(heading, dtype=np.float64)
+        o = np.asarray(ahrs_offset, dtype=np.float64)
+        h = psi + o
+        if h.ndim == 1:
+            return h, {"heading": np.array([[1.0]]), "ahrs_offset": np.array([[1.0]])}
+        one = np.ones(h.shape[:-1] + (1, 1))
+        return h, {"heading": one, "ahrs_offset": one.copy()}
+
+
+GYRO = GyroModel()
+AHRS = AhrsModel()

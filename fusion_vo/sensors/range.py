@@ -19,6 +19,7 @@ import numpy as np
 
 from fusion_vo.measurements import RangeData
 from fusion_vo.sensors.imu import running_median
+from fusion_vo.sensors.model import MeasurementModel
 
 logger = logging.getLogger(__name__)
 
@@ -64,3 +65,33 @@ def camera_height(data: RangeData, noise: RangeNoise | None = None) -> CameraHei
     if n_gated:
         logger.info("range: gated %d readings", n_gated)
     return CameraHeight(np.asarray(data.t, dtype=np.float64), np.where(ok, d, np.nan), ok, n_gated)
+
+
+@dataclass(frozen=True)
+class RangeModel(MeasurementModel):
+    """The range reading as a measurement of the visual scale (module docstring).
+
+    ``h(k_v) = h_c / k_v``, ``∂h/∂k_v = -h_c / k_v²``; argument ``visual_scale``, parameter
+    ``camera_height`` (``h_c``, the height the visual increments assume).
+    """
+
+    name: str = "range"
+    args: tuple = ("visual_scale",)
+    dim: int = 1
+
+    def evaluate(self, visual_scale, camera_height=1.0):
+        k = np.asarray(visual_scale, dtype=np.float64)
+        return camera_height / k, {"visual_scale": (-camera_height / k**2)[..., None]}
+
+    @staticmethod
+    def scale_prior(reading, sigma: float, camera_height: float) -> tuple[float, float]:
+        """The reading solved for the scale: ``k_v = h_c / z`` with ``σ_k = h_c σ_r / z²`` (first order).
+
+        The factor graph uses this as a linear prior on ``k_v``; it has the model's information
+        ``(∂h/∂k_v)² / σ_r²`` at ``k_v = h_c / z``, where the model's residual is zero.
+        """
+        z = float(reading)
+        return camera_height / z, camera_height * sigma / z**2
+
+
+RANGE = RangeModel()

@@ -82,6 +82,7 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
+from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 
 logger = logging.getLogger(__name__)
 
@@ -239,26 +240,8 @@ def arc_increment(d_left, d_right, wheel_base: float) -> np.ndarray:
     dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
     d = 0.5 * (dr + dl)
     th = (dr - dl) / wheel_base
-    a, b = _sinc_terms(th)
+    a, b = se2.sinc_terms(th)
     return np.stack([d * a, d * b, th], axis=1)
-
-
-def _sinc_terms(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``sin θ / θ`` and ``(1 - cos θ) / θ`` with small-angle series, vectorised."""
-    small = np.abs(th) < 1e-4
-    safe = np.where(small, 1.0, th)
-    a = np.where(small, 1.0 - th**2 / 6.0, np.sin(safe) / safe)
-    b = np.where(small, th / 2.0 - th**3 / 24.0, (1.0 - np.cos(safe)) / safe)
-    return a, b
-
-
-def _sinc_derivatives(th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Derivatives of ``sin θ/θ`` and ``(1 - cos θ)/θ`` with respect to θ."""
-    small = np.abs(th) < 1e-4
-    safe = np.where(small, 1.0, th)
-    da = np.where(small, -th / 3.0, (safe * np.cos(safe) - np.sin(safe)) / safe**2)
-    db = np.where(small, 0.5 - th**2 / 8.0, (safe * np.sin(safe) - (1.0 - np.cos(safe))) / safe**2)
-    return da, db
 
 
 def travel_variances(d_left, d_right, noise: WheelNoise) -> tuple[np.ndarray, np.ndarray]:
@@ -293,8 +276,8 @@ def arc_covariance(d_left, d_right, wheel_base: float, noise: WheelNoise, dt=Non
     dr = np.atleast_1d(np.asarray(d_right, dtype=np.float64))
     d = 0.5 * (dr + dl)
     th = (dr - dl) / wheel_base
-    a, b = _sinc_terms(th)
-    da, db = _sinc_derivatives(th)
+    a, b = se2.sinc_terms(th)
+    da, db = se2.sinc_derivatives(th)
     # ∂Δ/∂(d, θ), then ∂(d, θ)/∂(d_l, d_r)
     j_d = np.stack([a, b, np.zeros_like(a)], axis=1)
     j_th = np.stack([d * da, d * db, np.ones_like(a)], axis=1)
@@ -340,6 +323,56 @@ def standstill(d_left, d_right, dt, noise: WheelNoise) -> np.ndarray:
     return (dl < limit) & (dr < limit)
 
 
+# --------------------------------------------------------------------------- measurement models
+@dataclass(frozen=True)
+class WheelModel(MeasurementModel):
+    """The wheels' arc increment as a measurement of the body motion, with their calibration.
+
+    ``z = (d, 0, θ)`` of the arc model (:func:`arc_increment`; the EKF uses its twist ``(d, 0, θ)/Δt``,
+    :func:`arc_twist`), ``h(δ, k_r, k_b) = (k_r d_x, k_r d_y, k_b d_ψ)`` with the distance scale
+    ``k_r = r_configured / r_true`` and the wheel-base factor ``k_b = b_true / b_configured``; noise
+    :func:`arc_covariance` (:func:`arc_twist` per unit time). Jacobians ``∂h/∂δ = diag(k_r, k_r, k_b)``,
+    ``∂h/∂k_r = (d_x, d_y, 0)ᵀ``, ``∂h/∂k_b = (0, 0, d_ψ)ᵀ``.
+    Arguments ``motion``, ``wheel_scale``, ``wheel_base_factor``.
+    """
+
+    name: str = "wheel"
+    args: tuple = ("motion", "wheel_scale", "wheel_base_factor")
+    dim: int = 3
+    turn_rows: tuple = (2,)
+
+    def evaluate(self, motion, wheel_scale, wheel_base_factor):
+        h, j_d, j_r, j_b = scaled_motion(motion, wheel_scale, wheel_base_factor)
+        return h, {"motion": j_d, "wheel_scale": j_r, "wheel_base_factor": j_b}
+
+
+@dataclass(frozen=True)
+class StandstillModel(MeasurementModel):
+    """Wheels at rest over an interval (:func:`standstill`): the heading change is zero.
+
+    ``z = 0``, ``h(δ) = d_ψ``, ``σ = standstill_yaw_rate Δt`` (per unit time: the yaw rate, ``σ`` =
+    ``standstill_yaw_rate``); ``∂h/∂δ = (0, 0, 1)``. Argument ``motion``.
+    """
+
+    name: str = "standstill"
+    linear: bool = True
+    args: tuple = ("motion",)
+    dim: int = 1
+    turn_rows: tuple = (0,)
+
+    def evaluate(self, motion):
+        d = np.asarray(motion, dtype=np.float64)
+        if d.ndim == 1:
+            return np.array([float(d[2])]), {"motion": np.array([[0.0, 0.0, 1.0]])}
+        j = np.zeros(d.shape[:-1] + (1, 3))
+        j[..., 0, 2] = 1.0
+        return d[..., 2:3].copy(), {"motion": j}
+
+
+WHEEL = WheelModel()
+STANDSTILL = StandstillModel()
+
+
 # --------------------------------------------------------------------------- dead reckoning
 def wheel_track(travel: WheelTravel, initial_pose=(0.0, 0.0, 0.0)) -> PoseData:
     """Dead-reckoned wheel-only trajectory at the encoder's sample times."""
@@ -364,4 +397,5 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
 __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
+    "WheelModel", "StandstillModel", "WHEEL", "STANDSTILL",
 ]

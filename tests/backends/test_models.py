@@ -1,11 +1,18 @@
-"""Jacobians of the EKF motion model and of the graph's custom factors against finite differences."""
+"""Jacobians of the EKF motion model and of the graph's sensor-model factors against finite differences;
+the graph's grouped linearisation equals GTSAM's own (CustomFactor, robust noise models), and the native
+GTSAM factors the graph keeps equal the models where it uses them."""
 
 import gtsam
 import numpy as np
+import pytest
 
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.ekf import DIM, PlanarEkf
-from fusion_vo.backends.graph import X, S, W, heading_change_factor, scaled_between_error, wheel_heading_error
+from fusion_vo.backends.factors import ModelFactor, ModelFactors, group
+from fusion_vo.backends.graph import B, O, X, S, W
+from fusion_vo.sensors.imu import AHRS, GYRO
+from fusion_vo.sensors.visual import VISUAL
+from fusion_vo.sensors.wheel import STANDSTILL, WHEEL
 
 
 def _predict(x, dt):
@@ -33,7 +40,7 @@ def test_ekf_wheel_block_jacobian_includes_the_wheel_scale():
     def block(x):
         ekf = PlanarEkf(FusionConfig())
         ekf.kf.x = np.asarray(x, dtype=float).reshape(DIM, 1)
-        return ekf.wheel_block(np.zeros(3), np.eye(3))
+        return ekf.block(WHEEL, np.zeros(3), np.eye(3))
 
     _, _, h, H, _, _ = block(x0)
     np.testing.assert_allclose(h, [0.98 * 0.4, 0.98 * 0.02, 0.99 * 0.8])
@@ -81,32 +88,118 @@ def _values():
     v.insert(X(1), gtsam.Pose2(0.25, -0.06, 0.47))
     v.insert(S(0), 1.03)
     v.insert(W(0), 0.98)
+    v.insert(B(0), 0.012)
+    v.insert(O(0), -0.1)
     return v
 
 
-def test_visual_and_wheel_heading_factor_jacobians():
-    v = _values()
-    unit3 = gtsam.noiseModel.Unit.Create(3)
-    unit1 = gtsam.noiseModel.Unit.Create(1)
-    cases = [
-        (gtsam.CustomFactor(unit3, [X(0), X(1), S(0)], scaled_between_error(np.array([0.05, 0.03, 0.06]))), 3),
-        (gtsam.CustomFactor(unit1, [X(0), X(1), W(0)], wheel_heading_error(0.068)), 1),
+COV3 = np.array([[1e-4, 2e-5, 0.0], [2e-5, 2e-4, 1e-6], [0.0, 1e-6, 1e-5]])
+NEAR_DIAGONAL = np.array([[7.6e-7, -8.4e-10, 0.0], [-8.4e-10, 3.9e-7, 0.0], [0.0, 0.0, 1e2]])
+
+
+def _factors(robust=("huber", 1.345)):
+    motion = {"motion": (X(0), X(1))}
+    return [
+        ModelFactor(VISUAL, np.array([0.05, 0.03, 0.06]), {**motion, "visual_scale": (S(0),)}, COV3, robust=robust),
+        ModelFactor(VISUAL, np.array([0.09, 0.03, 0.06]), {**motion, "visual_scale": (S(0),)}, COV3, robust=robust),
+        ModelFactor(WHEEL, np.array([0.05, 0.02, 0.0]), {**motion, "wheel_scale": (S(0),)}, NEAR_DIAGONAL,
+                    fixed={"wheel_base_factor": 1.0}, robust=robust),
+        ModelFactor(WHEEL, np.array([0.0, 0.0, 0.068]), {**motion, "wheel_base_factor": (W(0),)}, np.array([[1e-4]]),
+                    fixed={"wheel_scale": 1.0}, rows=(2,), robust=robust),
+        ModelFactor(GYRO, np.array([0.08]), {**motion, "gyro_bias": (B(0),)}, np.array([[1e-6]]), params={"dt": 0.05}),
+        ModelFactor(STANDSTILL, np.zeros(1), {**motion}, np.array([[1e-6]])),
+        ModelFactor(AHRS, np.array([0.35]), {"heading": (X(1),), "ahrs_offset": (O(0),)}, np.array([[4e-4]]), robust=robust),
     ]
-    for factor, dim in cases:
-        keys = list(factor.keys())
-        jac = factor.linearize(v)
-        A = jac.jacobian()[0]
-        num = np.hstack(_numeric_jacobians(factor, v, keys))
-        np.testing.assert_allclose(A, num, atol=1e-6)
 
 
-def test_linear_gyro_factor_is_exact_away_from_its_linearisation_point():
-    pi, pj = gtsam.Pose2(0, 0, 3.1), gtsam.Pose2(1, 0, -3.1)
-    f = heading_change_factor(X(0), X(1), S(0), 0.1, -0.05, 0.01, pi, pj, 0.0)
+def test_model_factor_jacobians_match_finite_differences():
+    v = _values()
+    for f in _factors(robust=None):
+        factor = f.custom_factor()
+        A = factor.linearize(v).jacobian()[0]
+        # undo the noise model's whitening to compare with the unwhitened error
+        R = gtsam.noiseModel.Gaussian.Covariance(np.atleast_2d(f.covariance)).R()
+        num = np.hstack(_numeric_jacobians(factor, v, list(factor.keys())))
+        np.testing.assert_allclose(np.linalg.solve(R, A), num, atol=1e-6, err_msg=f.model.name)
+
+
+@pytest.mark.parametrize("robust", [None, ("huber", 1.345), ("cauchy", 0.5)])
+def test_grouped_linearisation_equals_gtsams_custom_factor(robust):
+    """Error, information and gradient of each factor as GTSAM computes them for a CustomFactor with the same
+    (robust) noise model, including GTSAM's reading of a nearly diagonal covariance as diagonal."""
+    v = _values()
+    for values in (v, _moved(v)):
+        factors = _factors(robust)
+        groups = group(factors)
+        assert sum(len(g) for g in groups) == len(factors) and len(groups) == 6
+        for g in groups:
+            for f, mine in zip(g.factors, g.linearize(values)):
+                theirs = f.custom_factor().linearize(values)
+                A1, b1 = theirs.jacobian()
+                A2, b2 = mine.jacobian()
+                scale = np.abs(A1.T @ A1).max()
+                np.testing.assert_allclose(A2.T @ A2, A1.T @ A1, atol=1e-12 * scale, err_msg=f.model.name)
+                np.testing.assert_allclose(A2.T @ b2, A1.T @ b1, atol=1e-12 * np.sqrt(scale))
+            expected = sum(f.custom_factor().error(values) for f in g.factors)
+            assert np.isclose(g.error(values), expected, rtol=1e-12, atol=1e-300), g.model.name
+
+
+def _moved(v):
+    delta = gtsam.VectorValues()
+    delta.insert(X(1), np.array([0.01, -0.02, 0.03]))
+    return v.retract(delta)
+
+
+def test_frozen_model_factor_is_gtsams_linearisation():
+    """What the incremental solvers receive equals GTSAM's linearisation of the CustomFactor."""
+    v = _values()
+    for f in _factors():
+        frozen = f.linearized(lambda k: v.atPose2(k) if chr(gtsam.Symbol(k).chr()) == "x" else v.atDouble(k))
+        theirs = gtsam.LinearContainerFactor(f.custom_factor().linearize(v), v)
+        assert np.isclose(frozen.error(_moved(v)), theirs.error(_moved(v)), rtol=1e-10), f.model.name
+
+
+def test_gyro_factor_is_exact_away_from_its_linearisation_point():
+    """The gyro's factor is linear in the headings and the bias: linearised anywhere, it is exact (across ±π)."""
+    lin = {X(0): gtsam.Pose2(0, 0, 3.1), X(1): gtsam.Pose2(1, 0, -3.1), B(0): 0.0}
+    f = ModelFactor(GYRO, np.array([0.1]), {"motion": (X(0), X(1)), "gyro_bias": (B(0),)}, np.array([[1e-4]]),
+                    params={"dt": 0.05})
+    frozen = f.linearized(lin.__getitem__)
     v = gtsam.Values()
     v.insert(X(0), gtsam.Pose2(0.3, 0.1, 3.0))
     v.insert(X(1), gtsam.Pose2(1.2, 0.0, -3.0))
-    v.insert(S(0), 0.2)
-    # d_ψ wraps across ±π: (-3.0 - 3.0) + 2π; error = d_ψ - Θ - gain·b
-    e = (-3.0 - 3.0 + 2 * np.pi) - 0.1 + 0.05 * 0.2
-    assert np.isclose(f.error(v), 0.5 * (e / 0.01) ** 2)
+    v.insert(B(0), 0.2)
+    # d_ψ wraps across ±π: (-3.0 - 3.0) + 2π; error = d_ψ + b Δt - Θ
+    e = (-3.0 - 3.0 + 2 * np.pi) + 0.05 * 0.2 - 0.1
+    assert np.isclose(frozen.error(v), 0.5 * (e / 0.01) ** 2)
+    assert np.isclose(ModelFactors([f]).error(v), 0.5 * (e / 0.01) ** 2)
+
+
+def test_native_factors_the_graph_keeps_equal_the_models():
+    """Where GTSAM has a factor the graph uses it. A heading-only PriorFactorPose2 is the AHRS model with its
+    offset fixed at zero. BetweenFactorPose2 (wheels or camera without calibration) is the wheel model with
+    ``k_r = k_b = 1`` whose noise is expressed in the frame at the end of the measured increment ``z``
+    (GTSAM's tangent space): its error and Jacobians are the model's rotated by ``R(-z_ψ)``, the error to
+    second order in the residual, the Jacobians to first order."""
+    v = _values()
+    pose = v.atPose2(X(1))
+    prior = gtsam.PriorFactorPose2(X(1), gtsam.Pose2(0.0, 0.0, 0.4), gtsam.noiseModel.Diagonal.Sigmas([1e3, 1e3, 0.02]))
+    ahrs = ModelFactor(AHRS, np.array([0.4]), {"heading": (X(1),)}, np.array([[0.02**2]]), fixed={"ahrs_offset": 0.0})
+    e_model, blocks = ModelFactors([ahrs]).evaluate(v)
+    assert np.isclose(prior.unwhitenedError(v)[2], e_model[0, 0])
+    A = prior.linearize(v).jacobian()[0]
+    np.testing.assert_allclose(A[2] * 0.02, blocks[0][0, 0], atol=1e-12)
+    rel = gtsam.Pose2(0.2, -0.1, 0.4).between(pose)
+    for z in (np.array([rel.x(), rel.y(), rel.theta()]), np.array([rel.x() + 1e-4, rel.y() - 2e-4, rel.theta() + 1e-4])):
+        between = gtsam.BetweenFactorPose2(X(0), X(1), gtsam.Pose2(*z), gtsam.noiseModel.Unit.Create(3))
+        wheel = ModelFactor(WHEEL, z, {"motion": (X(0), X(1))}, np.eye(3),
+                            fixed={"wheel_scale": 1.0, "wheel_base_factor": 1.0})
+        e_model, blocks = ModelFactors([wheel]).evaluate(v)
+        c, s = np.cos(z[2]), np.sin(z[2])
+        rot = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        size = np.abs(e_model).max()
+        assert np.abs(between.unwhitenedError(v) - rot @ e_model[0]).max() <= 10 * size**2 + 1e-15
+        A = between.linearize(v).jacobian()[0]
+        np.testing.assert_allclose(A, rot @ np.concatenate(blocks, axis=2)[0], atol=1e-12 if size < 1e-12 else 10 * size)
+        if size > 0:  # and they do differ: the rotation matters
+            assert np.abs(A - np.concatenate(blocks, axis=2)[0]).max() > 0.01

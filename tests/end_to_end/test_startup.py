@@ -1,4 +1,9 @@
-"""Start-up cost: a camera-only run imports neither GTSAM nor matplotlib nor evo."""
+"""Start-up cost: what the command loads.
+
+A camera-only run imports neither GTSAM, matplotlib and evo nor the EKF's filterpy and scipy.stats;
+without an IMU it does not need scipy at all. ``--help`` loads neither numpy nor OpenCV. Each probe runs
+the command in a fresh interpreter and reports which of the watched modules ``sys.modules`` holds.
+"""
 
 import json
 import shutil
@@ -7,34 +12,55 @@ import sys
 
 import pytest
 
+WATCHED = ["gtsam", "matplotlib", "evo", "filterpy", "scipy", "scipy.stats", "scipy.spatial", "numpy", "cv2",
+           "pydantic"]
+
 PROBE = """
 import json, sys
 from fusion_vo.cli.main import main
-code = main(sys.argv[1:])
-heavy = sorted({m.split('.')[0] for m in sys.modules} & {'gtsam', 'matplotlib', 'evo'})
-print(json.dumps({'code': code, 'heavy': heavy}))
+try:
+    code = main(sys.argv[2:])
+except SystemExit as exc:  # --help
+    code = exc.code
+print(json.dumps({'code': code, 'loaded': sorted(set(json.loads(sys.argv[1])) & set(sys.modules))}))
 """
 
 
-def _imports(argv):
-    out = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, check=True).stdout
+def _loaded(argv):
+    out = subprocess.run([sys.executable, "-c", PROBE, json.dumps(WATCHED), *argv], capture_output=True, text=True,
+                         check=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
 @pytest.mark.slow
-def test_run_without_fusion_imports_no_gtsam_matplotlib_or_evo(standard_recording, tmp_path):
+def test_camera_only_run_loads_no_backend_library(standard_recording, tmp_path):
     seq = tmp_path / "seq"
     shutil.copytree(standard_recording("short"), seq)
     shutil.rmtree(seq / "state_groundtruth_estimate0")  # nothing to evaluate against
-    got = _imports(["-q", "run", str(seq), "--out", str(tmp_path / "out"), "--backend", "none"])
-    assert got == {"code": 0, "heavy": []}
-    assert (tmp_path / "out" / "vo.tum").is_file()
-    # the same probe sees GTSAM when the run does fuse with it (the probe can fail)
-    got = _imports(["-q", "run", str(seq), "--out", str(tmp_path / "out2"), "--backend", "gtsam"])
-    assert got["code"] == 0 and "gtsam" in got["heavy"]
+    got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out"), "--backend", "none"])
+    assert got["code"] == 0 and (tmp_path / "out" / "vo.tum").is_file()
+    # the IMU's derotation uses scipy's Rotation, so scipy.spatial may load, nothing more of the backends
+    assert set(got["loaded"]) <= {"numpy", "cv2", "pydantic", "scipy", "scipy.spatial"}
+    assert {"numpy", "cv2"} <= set(got["loaded"])  # the probe does see what the run loads
+    # without an IMU (camera and wheels) scipy is not needed at all
+    shutil.rmtree(seq / "imu0")
+    got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out2"), "--backend", "none"])
+    assert got["code"] == 0 and set(got["loaded"]) == {"numpy", "cv2", "pydantic"}
+    # the same probe sees the EKF's and GTSAM's libraries when the run does fuse
+    got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out3"), "--backend", "all"])
+    assert got["code"] == 0 and {"gtsam", "filterpy", "scipy.stats"} <= set(got["loaded"])
 
 
-def test_help_imports_no_gtsam_matplotlib_or_evo():
-    probe = PROBE.replace("code = main(sys.argv[1:])", "code = 0\nfrom fusion_vo.cli.main import build_parser\nbuild_parser()")
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout
-    assert json.loads(out.strip().splitlines()[-1])["heavy"] == []
+@pytest.mark.parametrize("argv", [["--help"], ["run", "--help"], ["bench", "--help"]])
+def test_help_loads_neither_numpy_nor_opencv(argv):
+    got = _loaded(argv)
+    assert got == {"code": 0, "loaded": []}
+
+
+def test_simulate_help_still_lists_the_profiles():
+    out = subprocess.run([sys.executable, "-m", "fusion_vo.cli.main", "simulate", "--help"], capture_output=True,
+                         text=True, check=True).stdout
+    assert "random" in out and "umbmark_cw" in " ".join(out.split()) and "random60" in out
+    bad = subprocess.run([sys.executable, "-m", "fusion_vo.cli.main", "simulate", "x", "--profile", "bogus"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "invalid choice: 'bogus'" in bad.stderr and "'square'" in bad.stderr

@@ -158,3 +158,25 @@ def test_compute_threads_are_set_inside_and_restored_after():
         assert all(i["num_threads"] == 1 for i in threadpool_info() if i["user_api"] == "blas")
     assert cv2.getNumThreads() == before_cv
     assert [i["num_threads"] for i in threadpool_info()] == before_blas
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_an_error_of_the_geometry_stage_reaches_the_caller(standard_recording, monkeypatch, threads):
+    from fusion_vo.geometry.ground import GroundGeometry
+
+    calls = []
+    original = GroundGeometry.increment
+
+    def failing(self, motion, height=None):
+        calls.append(threading.current_thread().name)
+        if len(calls) == 6:
+            raise RuntimeError("increment 6 failed")
+        return original(self, motion, height)
+
+    monkeypatch.setattr(GroundGeometry, "increment", failing)
+    with pytest.raises(RuntimeError, match="increment 6 failed"):
+        run_visual_odometry(Recording(standard_recording("short")), OdometryConfig(threads=threads))
+    # one thread stops at once; the geometry thread may have been handed the few frames queued behind it
+    assert len(calls) == 6 if threads == 1 else 6 <= len(calls) <= 6 + 2 * threads + 3
+    # with threads, the increments are made in a thread of their own, not in the tracker's
+    assert all(name.startswith("fusion-vo-geometry") for name in calls) == (threads > 1)

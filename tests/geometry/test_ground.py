@@ -140,3 +140,17 @@ def test_camera_not_looking_down_is_rejected():
     T[:3, 3] = [0, 0, 0.1]  # camera z along body z: looking up
     with pytest.raises(ValueError, match="straight down"):
         GroundGeometry(CameraModel(640, 360, 400, 400, 320, 180, T_BS=T))
+
+
+@pytest.mark.parametrize("coeffs", [[-0.3, 0.1, 0.001, -0.002], [-0.03, 0.01, 0.0005, -0.0003, 0.004],
+                                    [0.2, -0.5, -0.01, 0.02, 0.3]])
+def test_distortion_is_opencv_projectpoints_to_the_last_bit(coeffs):
+    cam = CameraModel(fu=412.5, fv=409.0, cu=321.7, cv=177.2, width=640, height=360,
+                      distortion_model="radial-tangential", distortion=coeffs)
+    xy = np.random.default_rng(3).uniform(-1.0, 1.0, (2000, 2))
+    expected, _ = cv2.projectPoints(np.column_stack([xy, np.ones(len(xy))]).reshape(-1, 1, 3), np.zeros(3), np.zeros(3),
+                                    cam.K, cam.distortion)
+    got = cam.denormalize(xy)
+    assert got.shape == (2000, 2) and np.array_equal(got, expected.reshape(-1, 2))
+    near = np.abs(xy).max(axis=1) < 0.5  # where OpenCV's iterative undistortion converges for every model here
+    assert np.allclose(cam.normalize(got[near]), xy[near], atol=1e-6)  # and normalize still inverts it

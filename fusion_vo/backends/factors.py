@@ -1,0 +1,351 @@
+"""GTSAM factors from the sensors' measurement models (:mod:`fusion_vo.sensors.model`).
+
+A :class:`ModelFactor` is one measurement of a sensor model between graph variables: the model, its
+reading ``z``, the variable keys of each model argument (``motion``: the two poses ``X_i, X_j`` whose
+relative pose ``X_i⁻¹ X_j`` is the motion; ``heading``: one pose; the others: one scalar variable),
+arguments held fixed, and the noise covariance (optionally inside the graph's robust kernel).
+
+The graph does not wrap these in Python factors that GTSAM calls back: :class:`ModelFactors`
+evaluates all factors of one kind at once with the model's vectorised prediction and Jacobians, and
+turns them into GTSAM's native linear factors (``JacobianFactor``, whitened and robustly reweighted as
+GTSAM's own ``noiseModel.Robust`` does) at each iteration of the solver; the incremental solvers
+receive each one linearised at its current estimate (:meth:`ModelFactor.linearized`). The same
+factor as a :class:`gtsam.CustomFactor` (:meth:`ModelFactor.custom_factor`, for GTSAM's own
+optimizers) gives the same error and linearisation (tests compare them).
+
+Jacobians of the relative pose ``δ = X_i⁻¹ X_j = (d_x, d_y, d_ψ)`` in GTSAM's tangent spaces (right
+perturbations ``X · Exp(ξ)``)::
+
+    ∂δ/∂ξ_i = [[-1, 0, d_y], [0, -1, -d_x], [0, 0, -1]],     ∂δ/∂ξ_j = [[cos d_ψ, -sin d_ψ, 0], [sin d_ψ, cos d_ψ, 0], [0, 0, 1]]
+
+and of a pose's heading ``∂ψ/∂ξ = (0, 0, 1)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from fusion_vo.geometry import se2
+from fusion_vo.sensors.model import MeasurementModel, robust_loss, robust_weight
+
+
+@dataclass
+class ModelFactor:
+    """One measurement of ``model`` in the graph.
+
+    Attributes
+    ----------
+    model : MeasurementModel
+    z : ndarray (dim,)
+        The reading (all of the model's rows, ``rows`` selects).
+    keys : dict
+        Argument name -> variable keys: ``motion`` -> ``(X_i, X_j)``, any other -> ``(key,)``.
+    covariance : ndarray (m, m)
+        Noise of the selected rows.
+    fixed : dict
+        Arguments held at a value (e.g. a wheel-base factor that is not estimated).
+    params : dict
+        Extra parameters of :meth:`MeasurementModel.evaluate` (e.g. the gyro's ``dt``).
+    rows : tuple or None
+        The model's rows this factor uses (None: all).
+    robust : tuple or None
+        ``(kernel, k)`` of GTSAM's ``mEstimator`` (``"huber"`` or ``"cauchy"``), or None.
+    """
+
+    model: MeasurementModel
+    z: np.ndarray
+    keys: dict
+    covariance: np.ndarray
+    fixed: dict = field(default_factory=dict)
+    params: dict = field(default_factory=dict)
+    rows: tuple | None = None
+    robust: tuple | None = None
+
+    def all_keys(self) -> list[int]:
+        return [k for name in self.model.args if name in self.keys for k in self.keys[name]]
+
+    def signature(self) -> tuple:
+        """Factors with the same signature are evaluated together."""
+        return (self.model, tuple(n for n in self.model.args if n in self.keys), tuple(sorted(self.fixed)),
+                tuple(sorted(self.params)), self.rows, self.robust)
+
+    def linearized(self, lookup, point: gtsam.Values | None = None) -> gtsam.LinearContainerFactor:
+        """The factor linearised at ``lookup(key)`` values (Pose2 or float), for the incremental solvers:
+        the same linearisation as :meth:`ModelFactors.linearize`, for one factor. ``point`` may hold these
+        values already (:class:`ValuesMaker`; it may hold others too)."""
+        model = self.model
+        rows = list(range(model.dim)) if self.rows is None else list(self.rows)
+        args, links, current = {}, [], {}
+        for name in model.args:
+            if name not in self.keys:
+                continue
+            keys = self.keys[name]
+            for key in keys:
+                current[key] = lookup(key)
+            if name == "motion":
+                args[name], d_i, d_j = _relative_one(current[keys[0]], current[keys[1]])
+                links += [(name, d_i, keys[0]), (name, d_j, keys[1])]
+            elif name == "heading":
+                args[name] = np.array([current[keys[0]].theta()])
+                links.append((name, _HEADING[0], keys[0]))
+            else:
+                args[name] = np.array([float(current[keys[0]])])
+                links.append((name, None, keys[0]))
+        for name, value in self.fixed.items():
+            args[name] = np.array([float(value)])
+        h, jac = model.evaluate(**args, **self.params)
+        sub = self.rows is not None
+        e = h[rows] - self.z[rows] if sub else h - self.z
+        for i in self._wrapped_rows(rows):
+            e[i] = (e[i] + math.pi) % (2.0 * math.pi) - math.pi
+        cov = np.atleast_2d(self.covariance)
+        items = []
+        if len(rows) == 1:  # one row: scalars instead of 1x1 matrices
+            w = 1.0 / math.sqrt(float(cov[0, 0]))
+            ew = w * float(e[0])
+            if self.robust is not None:
+                w *= math.sqrt(robust_weight(abs(ew), *self.robust))
+                ew = w * float(e[0])
+            for name, link, key in links:
+                J = jac[name][rows] if sub else jac[name]
+                items += [int(key), w * (J if link is None else J @ link)]
+            b = np.array([-ew])
+        else:  # GTSAM's own whitening of this covariance (as a CustomFactor's linearisation)
+            W = gtsam.noiseModel.Gaussian.Covariance(cov).R()
+            ew = W @ e
+            if self.robust is not None:
+                scale = math.sqrt(robust_weight(math.sqrt(float(ew @ ew)), *self.robust))
+                W = W * scale
+                ew = ew * scale
+            for name, link, key in links:
+                WJ = W @ (jac[name][rows] if sub else jac[name])
+                items += [int(key), WJ if link is None else WJ @ link]
+            b = -ew
+        factor = gtsam.JacobianFactor(*items, b, _UNIT[len(rows)])
+        if point is None:
+            point = ValuesMaker().make(current)
+        return gtsam.LinearContainerFactor(factor, point)
+
+    def _wrapped_rows(self, rows: list) -> list:
+        wrapped = self.model.angle_rows + self.model.turn_rows
+        return [i for i, r in enumerate(rows) if r in wrapped]
+
+    def noise_model(self):
+        base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(self.covariance, dtype=np.float64))
+        if self.robust is None:
+            return base
+        kernel, k = self.robust
+        est = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[kernel]
+        return gtsam.noiseModel.Robust.Create(est.Create(k), base)
+
+    def custom_factor(self) -> gtsam.CustomFactor:
+        """The same factor as a :class:`gtsam.CustomFactor` around the model's residual and Jacobians."""
+        one = ModelFactor(self.model, self.z, self.keys, np.eye(len(self.covariance)), self.fixed, self.params,
+                          self.rows, None)
+
+        def error(this, values, jacobians):
+            e, blocks = ModelFactors([one]).evaluate(values)
+            if jacobians is not None:
+                for i, J in enumerate(blocks):
+                    jacobians[i] = J[0]
+            return e[0]
+
+        return gtsam.CustomFactor(self.noise_model(), self.all_keys(), error)
+
+
+def _relative(pi: np.ndarray, pj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``X_i⁻¹ X_j`` (N, 3) of poses (N, 3) and its Jacobians (N, 3, 3) in GTSAM's tangent spaces."""
+    c, s = np.cos(pi[:, 2]), np.sin(pi[:, 2])
+    tx, ty = pj[:, 0] - pi[:, 0], pj[:, 1] - pi[:, 1]
+    d = np.stack([c * tx + s * ty, -s * tx + c * ty, se2.wrap_angle(pj[:, 2] - pi[:, 2])], axis=1)
+    n = len(d)
+    d_i = np.zeros((n, 3, 3))
+    d_i[:, 0, 0] = d_i[:, 1, 1] = d_i[:, 2, 2] = -1.0
+    d_i[:, 0, 2], d_i[:, 1, 2] = d[:, 1], -d[:, 0]
+    cp, sp = np.cos(d[:, 2]), np.sin(d[:, 2])
+    d_j = np.zeros((n, 3, 3))
+    d_j[:, 0, 0], d_j[:, 0, 1], d_j[:, 1, 0], d_j[:, 1, 1], d_j[:, 2, 2] = cp, -sp, sp, cp, 1.0
+    return d, d_i, d_j
+
+
+class ModelFactors:
+    """Factors of one signature (:meth:`ModelFactor.signature`), evaluated and linearised together."""
+
+    def __init__(self, factors: list[ModelFactor]):
+        f0 = factors[0]
+        self.factors = factors
+        self.model = f0.model
+        self.names = [n for n in f0.model.args if n in f0.keys]
+        self.rows = list(range(f0.model.dim)) if f0.rows is None else list(f0.rows)
+        self.keys = {n: np.array([f.keys[n] for f in factors], dtype=np.int64) for n in self.names}
+        self.fixed = {n: np.array([[f.fixed[n]] if np.ndim(f.fixed[n]) == 0 else f.fixed[n] for f in factors], dtype=np.float64)
+                      for n in f0.fixed}
+        self.params = {n: np.array([f.params[n] for f in factors], dtype=np.float64) for n in f0.params}
+        self.z = np.array([np.asarray(f.z, dtype=np.float64).reshape(-1) for f in factors])
+        self.whiten = whitening(np.array([np.atleast_2d(f.covariance) for f in factors], dtype=np.float64))
+        self.robust = f0.robust
+        #: exact as a linear factor: a linear model without a robust kernel
+        self.linear = f0.model.linear and f0.robust is None
+        self.wrap = [i for i, r in enumerate(self.rows) if r in f0.model.angle_rows + f0.model.turn_rows]
+
+    def __len__(self) -> int:
+        return len(self.factors)
+
+    def evaluate(self, values: gtsam.Values, poses: dict | None = None):
+        """Residuals ``h - z`` (N, m) of the selected rows and the Jacobian blocks, one (N, m, d) per key."""
+        args, chains = {}, []
+        for name in self.names:
+            keys = self.keys[name]
+            if name == "motion":
+                pi, pj = _poses(values, keys[:, 0], poses), _poses(values, keys[:, 1], poses)
+                args[name], d_i, d_j = _relative(pi, pj)
+                chains.append((name, [d_i, d_j]))
+            elif name == "heading":
+                args[name] = _poses(values, keys[:, 0], poses)[:, 2:3]
+                chains.append((name, [_HEADING]))
+            else:
+                args[name] = np.array([[values.atDouble(int(k))] for k in keys[:, 0]])
+                chains.append((name, [None]))
+        args.update(self.fixed)
+        h, jac = self.model.evaluate(**args, **self.params)
+        e = h[:, self.rows] - self.z[:, self.rows]
+        for i in self.wrap:
+            e[:, i] = se2.wrap_angle(e[:, i])
+        blocks = []
+        for name, links in chains:
+            J = jac[name][:, self.rows, :]
+            for link in links:
+                blocks.append(J if link is None else J @ link)
+        return e, blocks
+
+    def _whitened(self, values, poses=None):
+        e, blocks = self.evaluate(values, poses)
+        ew = np.einsum("nij,nj->ni", self.whiten, e)
+        dist = np.linalg.norm(ew, axis=1)
+        return ew, blocks, dist
+
+    def error(self, values: gtsam.Values, poses: dict | None = None) -> float:
+        """Sum of the factors' errors as GTSAM computes them (``ρ(‖W e‖)``, ``½‖W e‖²`` without a kernel)."""
+        _, _, dist = self._whitened(values, poses)
+        kernel, k = self.robust if self.robust is not None else (None, 0.0)
+        return float(np.sum(robust_loss(dist, kernel, k)))
+
+    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list[gtsam.JacobianFactor]:
+        """GTSAM's linearisation of each factor: ``W J`` and ``-W e``, scaled by ``√w(‖W e‖)`` in a robust kernel."""
+        ew, blocks, dist = self._whitened(values, poses)
+        scale = np.ones(len(ew))
+        if self.robust is not None:
+            scale = np.sqrt(robust_weight(dist, *self.robust))
+        b = -ew * scale[:, None]
+        A = [np.einsum("nij,njk->nik", self.whiten, J) * scale[:, None, None] for J in blocks]
+        keys = [self.keys[n][:, i] for n in self.names for i in range(self.keys[n].shape[1])]
+        unit = gtsam.noiseModel.Unit.Create(len(self.rows))
+        out = []
+        for r in range(len(ew)):
+            items = []
+            for key, a in zip(keys, A):
+                items += [int(key[r]), a[r]]
+            out.append(gtsam.JacobianFactor(*items, b[r], unit))
+        return out
+
+
+_HEADING = np.array([[[0.0, 0.0, 1.0]]])
+_UNIT = {m: gtsam.noiseModel.Unit.Create(m) for m in (1, 2, 3)}
+_DIAGONAL_TOL = 1e-9
+
+
+def whitening(cov: np.ndarray) -> np.ndarray:
+    """Whitening matrices ``W`` (N, m, m) with ``Wᵀ W = Σ⁻¹`` of covariances ``Σ`` (N, m, m).
+
+    As GTSAM's ``noiseModel.Gaussian.Covariance`` does, a covariance whose off-diagonal entries are all
+    within 1e-9 (absolute) of zero is taken as diagonal, so both give the same factor.
+    """
+    cov = np.array(cov, dtype=np.float64)
+    m = cov.shape[1]
+    if m == 1:
+        return 1.0 / np.sqrt(cov)
+    off = np.abs(cov - cov * np.eye(m)).reshape(len(cov), -1).max(axis=1)
+    cov[off <= _DIAGONAL_TOL] *= np.eye(m)
+    return np.linalg.inv(np.linalg.cholesky(cov))  # W = C⁻¹ for Σ = C Cᵀ
+
+
+def _relative_one(pi: gtsam.Pose2, pj: gtsam.Pose2) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_relative` of one pair of poses, without array overhead."""
+    ti = pi.theta()
+    c, s = math.cos(ti), math.sin(ti)
+    tx, ty = pj.x() - pi.x(), pj.y() - pi.y()
+    dx, dy = c * tx + s * ty, -s * tx + c * ty
+    dpsi = (pj.theta() - ti + math.pi) % (2.0 * math.pi) - math.pi
+    cp, sp = math.cos(dpsi), math.sin(dpsi)
+    d_i = np.array([[-1.0, 0.0, dy], [0.0, -1.0, -dx], [0.0, 0.0, -1.0]])
+    d_j = np.array([[cp, -sp, 0.0], [sp, cp, 0.0], [0.0, 0.0, 1.0]])
+    return np.array([dx, dy, dpsi]), d_i, d_j
+
+
+class ValuesMaker:
+    """Small ``gtsam.Values`` of Pose2 and scalar values, made quickly.
+
+    Inserting a Python float into ``gtsam.Values`` costs tens of microseconds (the binding tries its
+    many ``insert`` overloads first); retracting a Values of zeros for the same keys by a
+    ``VectorValues`` costs a few. The zero templates are kept per set of scalar keys (a node's
+    segment variables change once per segment).
+    """
+
+    def __init__(self, capacity: int = 64):
+        self._templates: dict[tuple, gtsam.Values] = {}
+        self._capacity = capacity
+
+    def make(self, items: dict) -> gtsam.Values:
+        """``gtsam.Values`` holding ``key -> Pose2 or float`` items."""
+        scalars = tuple(sorted(k for k, v in items.items() if not isinstance(v, gtsam.Pose2)))
+        if scalars:
+            base = self._templates.get(scalars)
+            if base is None:
+                if len(self._templates) >= self._capacity:
+                    self._templates.clear()
+                base = gtsam.Values()
+                for key in scalars:
+                    base.insert(key, 0.0)
+                self._templates[scalars] = base
+            delta = gtsam.VectorValues()
+            for key in scalars:
+                delta.insert(key, np.array([float(items[key])]))
+            out = base.retract(delta)
+        else:
+            out = gtsam.Values()
+        for key, v in items.items():
+            if isinstance(v, gtsam.Pose2):
+                out.insert(key, v)
+        return out
+
+
+def _poses(values: gtsam.Values, keys: np.ndarray, poses: dict | None) -> np.ndarray:
+    """Poses (N, 3) of ``keys``; ``poses`` (from :func:`pose_table`) avoids one lookup per key."""
+    if poses is not None:
+        return poses["xyyaw"][np.searchsorted(poses["keys"], keys)]
+    out = np.empty((len(keys), 3))
+    for i, k in enumerate(keys):
+        p = values.atPose2(int(k))
+        out[i] = (p.x(), p.y(), p.theta())
+    return out
+
+
+def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:
+    """All Pose2 values at once: ``{"keys": sorted keys, "xyyaw": (N, 3)}`` (``keys``: those of an
+    earlier table of values with the same variables)."""
+    xyyaw = gtsam.utilities.extractPose2(values)
+    if keys is None:
+        keys = np.array([k for k in values.keys() if chr(gtsam.Symbol(k).chr()) == "x"], dtype=np.int64)
+    return {"keys": keys, "xyyaw": np.asarray(xyyaw, dtype=np.float64).reshape(-1, 3)}
+
+
+def group(factors: list[ModelFactor]) -> list[ModelFactors]:
+    """The factors sorted into :class:`ModelFactors` by signature."""
+    by: dict = {}
+    for f in factors:
+        by.setdefault(f.signature(), []).append(f)
+    return [ModelFactors(fs) for fs in by.values()]

@@ -1,0 +1,173 @@
+"""What every sensor's measurement model provides, and the pieces the models share.
+
+A measurement model predicts a sensor's reading ``h`` from the states it touches and gives the
+Jacobian of that prediction with respect to each of them. Both backends use the same model:
+
+* the EKF (:mod:`fusion_vo.backends.ekf`) reads the arguments from its state vector, puts each
+  Jacobian into the columns of that state and gates the innovation ``z - h`` (:class:`Gate`);
+* the factor graph (:mod:`fusion_vo.backends.graph`) reads them from its variables and builds, from the
+  same prediction and Jacobians, GTSAM's linear factors (relinearised at every iteration of its
+  solver) or a :class:`gtsam.CustomFactor` (:func:`fusion_vo.backends.factors.custom_factor`).
+
+Arguments
+---------
+A model names its arguments; the backends know how to supply each name:
+
+``motion``             (3,) the body motion over the measurement's interval, ``(d_x, d_y, d_ψ)``: the
+                       relative pose ``X_i⁻¹ X_j`` in the graph; the EKF's twist state ``(v_x, v_y, ω)``,
+                       which is the interval's motion per unit time (its interval models are evaluated
+                       per unit time: readings and noise divided by the interval, ``dt = 1``);
+``heading``            (1,) the pose's heading ``ψ`` at the measurement's time;
+``gyro_bias``          (1,) ``b_g`` [rad/s];
+``visual_scale``       (1,) ``k_v = h_configured / h_true``;
+``wheel_scale``        (1,) ``k_r = r_configured / r_true``;
+``wheel_base_factor``  (1,) ``k_b = b_true / b_configured``;
+``ahrs_offset``        (1,) ``o_ψ`` [rad].
+
+Every function is vectorised over leading axes (one row per measurement), so the EKF evaluates a
+model on one interval and the graph on all of its factors of one kind at once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+from fusion_vo.geometry.se2 import wrap_angle
+
+ARGUMENT_SIZES = {"motion": 3, "heading": 1, "gyro_bias": 1, "visual_scale": 1, "wheel_scale": 1,
+                  "wheel_base_factor": 1, "ahrs_offset": 1}
+
+
+@dataclass(frozen=True)
+class MeasurementModel:
+    """Base of the sensor models: a name, the arguments, the measurement's size and its angle rows.
+
+    ``linear`` says the prediction is linear in the arguments (the graph then linearises it once:
+    a pose's heading is additive in GTSAM's Pose2 chart, so a factor on headings and scalars is exact
+    as a linear factor);
+    ``angle_rows`` are absolute angles (wrapped to [-π, π) wherever they are compared);
+    ``turn_rows`` are heading changes over the measurement's interval, wrapped where the interval's
+    motion is an increment (the graph) and not where it is a rate (the EKF evaluates per unit time).
+    Subclasses implement :meth:`evaluate`.
+    """
+
+    name: str = ""
+    args: tuple = ()
+    dim: int = 0
+    angle_rows: tuple = ()
+    turn_rows: tuple = ()
+    linear: bool = False
+
+    def evaluate(self, **args) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """Prediction ``h`` (..., dim) and Jacobians ``{arg: (..., dim, size)}`` at the given arguments."""
+        raise NotImplementedError
+
+    def residual(self, z, **args) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+        """``h(args) - z`` over an interval (angle and turn rows wrapped), and the Jacobians of ``h``."""
+        h, jac = self.evaluate(**args)
+        r = h - np.asarray(z, dtype=np.float64)
+        for row in self.angle_rows + self.turn_rows:
+            r[..., row] = wrap_angle(r[..., row])
+        return r, jac
+
+
+def _first(v) -> float:
+    """The value of a one-element argument (array or number)."""
+    return float(v) if isinstance(v, (int, float)) else float(v[0])
+
+
+def scaled_motion(motion, k_xy, k_yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(k_xy d_x, k_xy d_y, k_yaw d_ψ)`` and its Jacobians with respect to the motion, ``k_xy`` and ``k_yaw``.
+
+    The prediction of a sensor that sees the body motion up to a scale of its translation (camera: the
+    height; wheels: the radius) and of its turn (wheels: the wheel base).
+    """
+    d = np.asarray(motion, dtype=np.float64)
+    if d.ndim == 1:  # one measurement (the EKF, an incremental solver): without array overhead
+        dx, dy, dpsi = float(d[0]), float(d[1]), float(d[2])
+        kx, ky = _first(k_xy), _first(k_yaw)
+        return (np.array([kx * dx, kx * dy, ky * dpsi]), np.array([[kx, 0.0, 0.0], [0.0, kx, 0.0], [0.0, 0.0, ky]]),
+                np.array([[dx], [dy], [0.0]]), np.array([[0.0], [0.0], [dpsi]]))
+    kx = np.asarray(k_xy, dtype=np.float64)[..., 0]
+    ky = np.asarray(k_yaw, dtype=np.float64)[..., 0]
+    shape = d.shape[:-1]
+    h = np.empty(shape + (3,))
+    h[..., 0] = kx * d[..., 0]
+    h[..., 1] = kx * d[..., 1]
+    h[..., 2] = ky * d[..., 2]
+    j_d = np.zeros(shape + (3, 3))
+    j_d[..., 0, 0] = j_d[..., 1, 1] = kx
+    j_d[..., 2, 2] = ky
+    j_kx = np.zeros(shape + (3, 1))
+    j_kx[..., 0, 0], j_kx[..., 1, 0] = d[..., 0], d[..., 1]
+    j_ky = np.zeros(shape + (3, 1))
+    j_ky[..., 2, 0] = d[..., 2]
+    return h, j_d, j_kx, j_ky
+
+
+# --------------------------------------------------------------------------- gate
+@dataclass
+class Gate:
+    """Chi-square gate of an innovation, with the EKF's bounded influence beyond it.
+
+    A measurement whose squared Mahalanobis distance ``d² = yᵀ S⁻¹ y`` exceeds the chi-square quantile of
+    ``probability`` (for its number of rows) is down-weighted so that it sits on the gate (the bounded
+    influence of the graph's robust kernel), and beyond ``reject_factor`` times the quantile rejected.
+
+    Parameters
+    ----------
+    probability : float
+        Gate probability (1: no gate).
+    reject_factor : float
+        Beyond this many times the quantile a measurement is rejected outright.
+    """
+
+    probability: float = 0.999
+    reject_factor: float = 25.0
+    _thresholds: dict = field(default_factory=dict, repr=False)
+
+    def threshold(self, dim: int) -> float:
+        """The chi-square quantile of ``probability`` with ``dim`` degrees of freedom."""
+        t = self._thresholds.get(dim)
+        if t is None:
+            t = float(chi2.ppf(self.probability, dim)) if self.probability < 1 else math.inf
+            self._thresholds[dim] = t
+        return t
+
+    def inflation(self, d2: float, dim: int) -> float | None:
+        """``None``: reject; ``1``: use as is; ``f > 1``: use with its innovation covariance scaled by ``f``."""
+        threshold = self.threshold(dim)
+        if not math.isfinite(d2) or d2 > self.reject_factor * threshold:
+            return None
+        return d2 / threshold if d2 > threshold else 1.0
+
+
+# --------------------------------------------------------------------------- robust kernels (GTSAM's)
+def robust_weight(distance, kernel: str | None, k: float):
+    """Weight of a residual at whitened distance ``distance`` under GTSAM's ``mEstimator`` ``kernel``
+    (``"huber"``, ``"cauchy"`` or None)."""
+    if isinstance(distance, float):  # one factor: without array overhead
+        d = abs(distance)
+        if kernel == "huber":
+            return 1.0 if d <= k else k / d
+        return k * k / (k * k + d * d) if kernel == "cauchy" else 1.0
+    d = np.abs(np.asarray(distance, dtype=np.float64))
+    if kernel == "huber":
+        return np.where(d <= k, 1.0, k / np.maximum(d, 1e-300))
+    if kernel == "cauchy":
+        return k * k / (k * k + d * d)
+    return np.ones_like(d)
+
+
+def robust_loss(distance, kernel: str | None, k: float):
+    """GTSAM's ``mEstimator`` loss ``ρ(d)`` (``d²/2`` without a kernel)."""
+    d = np.abs(np.asarray(distance, dtype=np.float64))
+    if kernel == "huber":
+        return np.where(d <= k, 0.5 * d * d, k * d - 0.5 * k * k)
+    if kernel == "cauchy":
+        return 0.5 * k * k * np.log1p(d * d / (k * k))
+    return 0.5 * d * d
