@@ -105,15 +105,15 @@ def test_an_internal_error_is_one_line_with_status_1_and_cleans_up(recording, tm
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_an_interrupted_run_leaves_nothing(sig, recording, tmp_path):
-    """The run is stopped by a signal while visual odometry runs (a slow frontend makes sure it is)."""
+    """The run is stopped by a signal while visual odometry runs (a slowed KLT frontend, the default, makes sure it is)."""
     script = (
         "import sys, time\n"
-        "import fusion_vo.odometry as o\n"
-        "real = o.VisualOdometry.process\n"
+        "import frontends.klt as o\n"
+        "real = o.KltFrontend.process\n"
         "def slow(self, *a, **k):\n"
         "    time.sleep(0.2)\n"
         "    return real(self, *a, **k)\n"
-        "o.VisualOdometry.process = slow\n"
+        "o.KltFrontend.process = slow\n"
         "from fusion_vo.cli.main import main\n"
         "sys.exit(main(sys.argv[1:]))\n"
     )
