@@ -76,7 +76,9 @@ is what the reorder window and the history absorb.
 With ``background=True`` (iSAM2) the updates run on one worker thread that owns iSAM2; the caller's
 thread builds the factors and returns. A node's pose is the initial guess (the last estimate composed
 with the interval's odometry) until its update is done; each later call takes the finished results in,
-and :meth:`finish` and :meth:`smoothed` wait for all of them.
+and :meth:`finish` and :meth:`smoothed` wait for all of them. The factors are linearised around the
+newest finished estimate, so the track depends on how far the worker has got: it agrees with the
+caller-thread run to millimetres, not bit for bit.
 """
 
 from __future__ import annotations
