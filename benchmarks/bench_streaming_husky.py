@@ -33,25 +33,15 @@ import numpy as np
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-from fusion_vo.evaluation.metrics import align_se2, associate, planar_trajectory
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
 from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
 
 REPO = Path(__file__).resolve().parents[1]
-DEFAULT_BAG = REPO / "tests" / "data" / "robot_localization" / "test1.bag"
-HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
+sys.path.insert(0, str(REPO / "examples"))
 
-
-def gps_errors(track: PoseData, t_gps: np.ndarray, enu: np.ndarray) -> np.ndarray:
-    """Horizontal distances [m] to the fixes after the least-squares SE(2) alignment to them."""
-    inside = (t_gps >= track.t[0]) & (t_gps <= track.t[-1])
-    reference = planar_trajectory(t_gps[inside], enu[inside, 0], enu[inside, 1], np.zeros(np.count_nonzero(inside)))
-    estimate = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
-    ref, est = associate(reference, estimate)
-    aligned = align_se2(ref, est)
-    return np.linalg.norm(aligned.positions_xyz[:, :2] - ref.positions_xyz[:, :2], axis=1)
+from husky_gps import DEFAULT_BAG, HUSKY_IMU_TF, gps_errors  # noqa: E402
 
 
 def distance(a: PoseData, b: PoseData) -> np.ndarray:
