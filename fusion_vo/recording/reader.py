@@ -245,12 +245,7 @@ class Recording:
             raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
         orient = None
         if tab.values.shape[1] == 10:
-            orient = tab.values[:, 6:10]
-            norms = np.linalg.norm(orient, axis=1)
-            bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
-            if len(bad):
-                raise InputError(f"orientation quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
-            orient = orient / norms[:, None]
+            orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
         meta = self._yaml("imu0", required=False)
         T = parse_matrix(meta["T_BS"], "T_BS", self.path / "imu0" / "sensor.yaml") if "T_BS" in meta else np.eye(4)
         noise = {k: float(meta[k]) for k in (
@@ -322,6 +317,15 @@ class Recording:
 
 
 # ---------------------------------------------------------------------- ground truth
+def unit_quaternions(q: np.ndarray, lines: np.ndarray, path: Path, what: str) -> np.ndarray:
+    """``q`` (rows w, x, y, z) normalised; a row whose norm is more than 0.05 from 1 is an error naming its line."""
+    norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
+    if len(bad):
+        raise InputError(f"{what} has norm {norms[bad[0]]:.3f}, not 1", path, int(lines[bad[0]]))
+    return q / norms[:, None]
+
+
 def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
     """Read ground truth (``state_groundtruth_estimate0/data.csv``): the one reader of it.
 
@@ -334,12 +338,7 @@ def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
     tab = read_table(path, (7, 7), "pose values")
     if len(tab) < min_poses:
         raise InputError(f"ground truth needs at least {min_poses} poses, found {len(tab)}", path)
-    q = tab.values[:, 3:7]
-    norms = np.linalg.norm(q, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
-    if len(bad):
-        raise InputError(f"quaternion has norm {norms[bad[0]]:.3f}, not 1", path, int(tab.lines[bad[0]]))
-    q = q / norms[:, None]
+    q = unit_quaternions(tab.values[:, 3:7], tab.lines, path, "quaternion")
     yaw = se2.yaw_of_quaternion(q)
     xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
     return PoseData(tab.t, xyyaw, tab.values[:, 2].copy(), q)
