@@ -195,8 +195,11 @@ class ModelFactors:
     def __len__(self) -> int:
         return len(self.factors)
 
-    def evaluate(self, values: gtsam.Values, poses: dict | None = None):
-        """Residuals ``h - z`` (N, m) of the selected rows and the Jacobian blocks, one (N, m, d) per key."""
+    def evaluate(self, values: gtsam.Values, poses: dict | None = None, scalars: dict | None = None):
+        """Residuals ``h - z`` (N, m) of the selected rows and the Jacobian blocks, one (N, m, d) per key.
+
+        ``poses`` (:func:`pose_table`) and ``scalars`` (:func:`scalar_table`) hold the values already
+        (one lookup per variable instead of one per factor)."""
         args, chains = {}, []
         for name in self.names:
             keys = self.keys[name]
@@ -208,7 +211,7 @@ class ModelFactors:
                 args[name] = _poses(values, keys[:, 0], poses)[:, 2:3]
                 chains.append((name, [_HEADING]))
             else:
-                args[name] = np.array([[values.atDouble(int(k))] for k in keys[:, 0]])
+                args[name] = _scalars(values, keys[:, 0], scalars)
                 chains.append((name, [None]))
         args.update(self.fixed)
         h, jac = self.model.evaluate(**args, **self.params)
@@ -222,30 +225,37 @@ class ModelFactors:
                 blocks.append(J if link is None else J @ link)
         return e, blocks
 
-    def _whitened(self, values, poses=None):
-        e, blocks = self.evaluate(values, poses)
+    def _whitened(self, values, poses=None, scalars=None):
+        e, blocks = self.evaluate(values, poses, scalars)
         ew = np.einsum("nij,nj->ni", self.whiten, e)
         dist = np.linalg.norm(ew, axis=1)
         return ew, blocks, dist
 
-    def error(self, values: gtsam.Values, poses: dict | None = None) -> float:
+    def error(self, values: gtsam.Values, poses: dict | None = None, scalars: dict | None = None) -> float:
         """Sum of the factors' errors as GTSAM computes them (``ρ(‖W e‖)``, ``½‖W e‖²`` without a kernel)."""
-        _, _, dist = self._whitened(values, poses)
+        _, _, dist = self._whitened(values, poses, scalars)
         kernel, k = self.robust if self.robust is not None else (None, 0.0)
         return float(np.sum(robust_loss(dist, kernel, k)))
 
-    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list[gtsam.JacobianFactor]:
-        """GTSAM's linearisation of each factor: ``W J`` and ``-W e``, scaled by ``√w(‖W e‖)`` in a robust kernel."""
-        ew, blocks, dist = self._whitened(values, poses)
+    def jacobian(self, values: gtsam.Values, poses: dict | None = None, scalars: dict | None = None):
+        """GTSAM's linearisation of every factor as arrays: ``(keys, A, b)`` with ``keys[i]`` (N,) the
+        variable of Jacobian block ``A[i]`` (N, m, d) and ``b`` (N, m), so that each factor is
+        ``Σ_i A[i] δ_key[i] - b``: ``W J`` and ``-W e``, scaled by ``√w(‖W e‖)`` in a robust kernel."""
+        ew, blocks, dist = self._whitened(values, poses, scalars)
         scale = np.ones(len(ew))
         if self.robust is not None:
             scale = np.sqrt(robust_weight(dist, *self.robust))
         b = -ew * scale[:, None]
         A = [np.einsum("nij,njk->nik", self.whiten, J) * scale[:, None, None] for J in blocks]
         keys = [self.keys[n][:, i] for n in self.names for i in range(self.keys[n].shape[1])]
+        return keys, A, b
+
+    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list[gtsam.JacobianFactor]:
+        """:meth:`jacobian` as one GTSAM ``JacobianFactor`` per factor."""
+        keys, A, b = self.jacobian(values, poses)
         unit = gtsam.noiseModel.Unit.Create(len(self.rows))
         out = []
-        for r in range(len(ew)):
+        for r in range(len(b)):
             items = []
             for key, a in zip(keys, A):
                 items += [int(key[r]), a[r]]
@@ -332,6 +342,18 @@ def _poses(values: gtsam.Values, keys: np.ndarray, poses: dict | None) -> np.nda
         p = values.atPose2(int(k))
         out[i] = (p.x(), p.y(), p.theta())
     return out
+
+
+def _scalars(values: gtsam.Values, keys: np.ndarray, table: dict | None) -> np.ndarray:
+    """Scalar values (N, 1) of ``keys``; ``table`` (from :func:`scalar_table`) avoids one lookup per key."""
+    if table is not None:
+        return table["values"][np.searchsorted(table["keys"], keys)][:, None]
+    return np.array([[values.atDouble(int(k))] for k in keys])
+
+
+def scalar_table(keys: np.ndarray, values: np.ndarray) -> dict:
+    """``{"keys": sorted keys, "values": their values}`` of scalar variables (``keys`` sorted)."""
+    return {"keys": np.asarray(keys, dtype=np.int64), "values": np.asarray(values, dtype=np.float64)}
 
 
 def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:

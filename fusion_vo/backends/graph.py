@@ -104,6 +104,7 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from fusion_vo.backends import chain
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import GpsReacquire, calibration_observable, gps_note, gyro_turn
 from fusion_vo.backends.result import FusionResult, SensorCount
@@ -642,6 +643,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
     maker = ValuesMaker()
+    retired = Retired(builder)
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
         if gps is not None:
@@ -671,6 +673,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 new_graph.add(f)
         if isam is not None:
             isam.update(new_graph, new_values)
+            retired.step(isam, n)
             pose = isam.calculateEstimatePose2(X(n))
             online_poses[n] = (pose.x(), pose.y(), pose.theta())
             online_cov[n] = isam.marginalCovariance(X(n))
@@ -694,7 +697,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
         result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
         result.counts["gtsam_online"] = counts
-        result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
+        online_values = retired.complete(isam.calculateEstimate())
+        result.calibration["gtsam_online"] = _calibration(online_values, builder)
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
     if lag is not None:
@@ -704,11 +708,21 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         t0 = time.process_time()
         start_values = values
         if isam is not None:
-            start_values = isam.calculateEstimate()
+            start_values = online_values
         elif initial is not None:
             start_values = _seed_poses(values, initial, builder)
-        solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations,
-                                                   gcfg.relative_tolerance, group(model_factors))
+        groups = group(model_factors)
+        try:  # the block-tridiagonal solver of a chain-shaped graph (see fusion_vo.backends.chain)
+            problem = chain.ChainProblem(graph, groups, start_values, dims, time_rank(builder))
+        except chain.NotAChain as exc:
+            logger.info("gtsam: GTSAM's elimination for the batch solution (%s)", exc)
+            problem = None
+        if problem is not None:
+            solution, iters, lin = chain.levenberg_marquardt(problem, start_values, gcfg.max_iterations,
+                                                             gcfg.relative_tolerance)
+        else:
+            solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations,
+                                                       gcfg.relative_tolerance, groups)
         poses = np.array([[p.x(), p.y(), p.theta()] for p in (solution.atPose2(X(n)) for n in range(n_nodes))])
         result.trajectories["gtsam"] = PoseData(builder.t.copy(), poses)
         result.counts["gtsam"] = counts
@@ -716,7 +730,9 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         t_solve = time.process_time() - t0
         if gcfg.marginals:
             t1 = time.process_time()
-            result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
+            cov = (chain.pose_marginals(lin, [X(n) for n in range(n_nodes)]) if problem is not None
+                   else pose_marginals(lin, solution, n_nodes))
+            result.covariances["gtsam"] = world_covariances(poses[:, 2], cov)
             result.timing["gtsam_marginals"] = time.process_time() - t1
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
@@ -724,6 +740,82 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size() + len(model_factors), iters)
     result.notes.extend(iv.notes)
     return result
+
+
+def time_rank(builder: GraphBuilder):
+    """Position in time of variables (an array of keys): node ``n`` for its pose, just before the first
+    node of its segment for a segment's bias and calibration variables (the column order of the batch
+    solver, :mod:`fusion_vo.backends.chain`)."""
+    seg = np.asarray(builder.segment)
+
+    def rank(keys: np.ndarray) -> np.ndarray:
+        keys = np.asarray(keys, dtype=np.uint64)
+        letter = (keys >> np.uint64(56)).astype(np.int64)  # gtsam.Symbol: the letter in the top byte
+        index = (keys & np.uint64((1 << 56) - 1)).astype(np.int64)
+        first = np.searchsorted(seg, index).astype(np.float64) - 0.5  # a segment's first node, before it
+        return np.where(letter == ord("x"), index - builder.offset, first)
+
+    return rank
+
+
+#: iSAM2 keeps this many nodes (camera frames) behind the newest; older ones are marginalised
+ONLINE_HORIZON = 200
+
+
+class Retired:
+    """Marginalises the variables of iSAM2's oldest nodes, keeping its Bayes tree to the last
+    :data:`ONLINE_HORIZON` to :data:`2 ONLINE_HORIZON <ONLINE_HORIZON>` nodes, and remembers their estimates.
+
+    Why: the graph is a chain, so iSAM2's Bayes tree is a path as long as the drive, and GTSAM 4.3
+    destroys each update's temporary Bayes tree by visiting every clique below it (the breadth-first
+    ``BayesTree`` destructor that avoids deep recursion), which is the whole history: ``perf`` on a
+    400 s drive put 83 % of the update time there, and the cost per update grew from 0.3 ms at the
+    start of a 600 s drive to 4.8 ms at its end. No future factor touches a variable that old (a node's
+    factors reach its previous node and its segment's variables), the marginal keeps the information
+    of the old factors on the variables that remain (exact for their linearisation, which iSAM2 would
+    not revisit: relinearisation is checked only near the top of the tree, see :func:`isam_params`),
+    and the newest pose's estimate and covariance, the online output, are unchanged. The old nodes'
+    estimates are the ones at the time they leave (the batch solution starts from them).
+    """
+
+    def __init__(self, builder: GraphBuilder, horizon: int = ONLINE_HORIZON):
+        self.builder = builder
+        self.horizon = horizon
+        self.first = 0  # nodes before it are marginalised
+        self.values: dict = {}
+
+    def step(self, isam, n: int) -> None:
+        """Marginalise whole segments of nodes more than ``horizon`` behind node ``n`` (every ``horizon`` nodes)."""
+        if n - self.first < 2 * self.horizon:
+            return
+        b = self.builder
+        seg = np.asarray(b.segment)
+        end = int(np.searchsorted(seg, seg[n - self.horizon]))  # the first node of that node's segment
+        if end <= self.first:
+            return
+        keys = [X(b.offset + k) for k in range(self.first, end)]
+        seg_keys = []
+        for c in np.unique(seg[self.first:end]):
+            seg_keys += b.segment_keys(int(np.searchsorted(seg, c)))
+        estimates = {key: isam.calculateEstimatePose2(key) for key in keys}
+        estimates.update({key: isam.calculateEstimateDouble(key) for key in seg_keys})
+        leaves = gtsam.KeyList()
+        for key in keys + seg_keys:
+            leaves.push_back(key)
+        try:
+            isam.marginalizeLeaves(leaves)
+        except RuntimeError as exc:  # not the leaves of the tree: keep them for now
+            logger.debug("iSAM2: nodes %d-%d not marginalised (%s)", self.first, end - 1, exc)
+            return
+        self.values.update(estimates)
+        self.first = end
+
+    def complete(self, values: gtsam.Values) -> gtsam.Values:
+        """``values`` with the marginalised variables' estimates added."""
+        if self.values:
+            values = gtsam.Values(values)
+            insert_values(values, {k: v for k, v in self.values.items() if not values.exists(k)})
+        return values
 
 
 def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
