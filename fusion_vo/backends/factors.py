@@ -368,6 +368,6 @@ def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:
 def group(factors: list[ModelFactor]) -> list[ModelFactors]:
     """The factors sorted into :class:`ModelFactors` by signature."""
     by: dict = {}
-    for f in factors:
-        by.setdefault(f.signature(), []).append(f)
+    for f in factors:  # the signature's parts, without sorting (the builder makes each kind alike)
+        by.setdefault((id(f.model), tuple(f.keys), tuple(f.fixed), tuple(f.params), f.rows, f.robust), []).append(f)
     return [ModelFactors(fs) for fs in by.values()]

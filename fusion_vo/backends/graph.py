@@ -643,6 +643,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
     maker = ValuesMaker()
+    batch_values: dict = {}
     retired = Retired(builder)
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
@@ -655,19 +656,20 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 pose_cov = None
             builder.gps_factor(nf, n, gps, pose_cov)
         builder.count(nf)
-        new_values = maker.make(nf.values)
+        incremental = isam is not None or lag is not None
+        new_values = maker.make(nf.values) if incremental else None
         if gcfg.batch:
             for f in nf.factors:
                 if isinstance(f, ModelFactor):
                     model_factors.append(f)
                 else:
                     graph.add(f)
-            values.insert(new_values)
+            batch_values.update(nf.values)  # made into gtsam.Values at once after the loop
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
         t0 = time.process_time()
         new_graph = gtsam.NonlinearFactorGraph()
-        if isam is not None or lag is not None:
+        if incremental:
             lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
             for f in freeze_custom_factors(nf.factors, lookup, maker):
                 new_graph.add(f)
@@ -681,7 +683,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             t_online += time.process_time() - t0
             prev_pose = pose
         else:
-            prev_pose = new_values.atPose2(X(n))
+            prev_pose = nf.values[X(n)]
             estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
         if lag is not None:
             # the current segment's bias and calibration stay in the window while factors still use them
@@ -689,6 +691,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             lag.update(new_graph, new_values, stamps)
             p = lag.calculateEstimatePose2(X(n))
             lag_poses[n] = (p.x(), p.y(), p.theta())
+    if batch_values:
+        values = ValuesMaker().make(batch_values)
     t_graph = time.process_time() - t_build - t_online
     counts = builder.counts
     if gps is not None:
