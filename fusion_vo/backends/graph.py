@@ -75,11 +75,16 @@ Solvers
 
 The incremental solvers receive the sensor-model factors linearised at the prediction of the newest
 pose (:func:`freeze_custom_factors`); the batch solution relinearises everything at every iteration.
+iSAM2 marginalises the nodes more than :data:`ONLINE_HORIZON` behind the newest (:class:`Retired`), so
+that its cost per update does not grow with the drive.
 
-The batch Levenberg–Marquardt loop is written out here on top of GTSAM's linearisation and sparse
-elimination (``NonlinearFactorGraph.linearize``, ``GaussianFactorGraph.optimize``), with the
-sensor-model factors evaluated in numpy, one array operation per sensor, and handed to GTSAM as
-``JacobianFactor`` s. GTSAM's own optimizers need each of them as a :class:`gtsam.CustomFactor` that
+The batch Levenberg–Marquardt loop is written out, with the sensor-model factors evaluated in numpy,
+one array operation per sensor. Its linear systems are solved by :mod:`fusion_vo.backends.chain` (the
+block-tridiagonal normal equations of the chain-shaped graph, and the marginal covariances from the
+same factorisation; see there for why and what it measured), and by :func:`levenberg_marquardt` here,
+on GTSAM's linearisation and sparse elimination (``NonlinearFactorGraph.linearize``,
+``GaussianFactorGraph.optimize``) with the sensor-model factors handed to GTSAM as ``JacobianFactor`` s,
+when the graph is not such a chain. GTSAM's own optimizers need each of them as a :class:`gtsam.CustomFactor` that
 calls back into Python, and that is what costs: ``python benchmarks/bench_solvers.py`` (the batch graph
 of the 60 s drive of ``benchmarks/bench_fusion.py``, 5039 factors of which 4797 sensor-model factors,
 CPU time, 3 interleaved runs on a shared 2-core machine under heavy load) measured this loop at
@@ -801,12 +806,12 @@ class Retired:
         seg_keys = []
         for c in np.unique(seg[self.first:end]):
             seg_keys += b.segment_keys(int(np.searchsorted(seg, c)))
-        estimates = {key: isam.calculateEstimatePose2(key) for key in keys}
-        estimates.update({key: isam.calculateEstimateDouble(key) for key in seg_keys})
         leaves = gtsam.KeyList()
         for key in keys + seg_keys:
             leaves.push_back(key)
         try:
+            estimates = {key: isam.calculateEstimatePose2(key) for key in keys}
+            estimates.update({key: isam.calculateEstimateDouble(key) for key in seg_keys})
             isam.marginalizeLeaves(leaves)
         except RuntimeError as exc:  # not the leaves of the tree: keep them for now
             logger.debug("iSAM2: nodes %d-%d not marginalised (%s)", self.first, end - 1, exc)
