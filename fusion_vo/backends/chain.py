@@ -54,6 +54,12 @@ logger = logging.getLogger(__name__)
 # their arguments at tens of microseconds a call, more than the arithmetic on these small blocks
 _potrf, _trtrs, _trtri = lapack.dpotrf, lapack.dtrtrs, lapack.dtrtri
 
+# The sweeps are meant to run with a single-threaded BLAS (the caller wraps them in
+# ``threadpoolctl.threadpool_limits(1, "blas")``): on blocks of about 60 columns OpenBLAS's threads
+# cost more than they save, and on a busy machine far more. Measured on robot_localization's Jackal
+# log (1225 nodes, ``fusion-vo run --backend gtsam``, load average about 25 on 2 cores): the marginal
+# covariances took 0.93 s of CPU with OpenBLAS's default two threads and 0.011 s with one.
+
 #: the largest block (columns) of the block-tridiagonal system; beyond it GTSAM's elimination is used
 MAX_BLOCK = 400
 #: the smallest block: fewer, larger blocks mean fewer Python steps per sweep

@@ -108,6 +108,7 @@ from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from fusion_vo.backends import chain
 from fusion_vo.backends.config import FusionConfig
@@ -727,8 +728,9 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             logger.info("gtsam: GTSAM's elimination for the batch solution (%s)", exc)
             problem = None
         if problem is not None:
-            solution, iters, lin = chain.levenberg_marquardt(problem, start_values, gcfg.max_iterations,
-                                                             gcfg.relative_tolerance)
+            with threadpool_limits(limits=1, user_api="blas"):  # small blocks: see fusion_vo.backends.chain
+                solution, iters, lin = chain.levenberg_marquardt(problem, start_values, gcfg.max_iterations,
+                                                                 gcfg.relative_tolerance)
         else:
             solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations,
                                                        gcfg.relative_tolerance, groups)
@@ -739,8 +741,11 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         t_solve = time.process_time() - t0
         if gcfg.marginals:
             t1 = time.process_time()
-            cov = (chain.pose_marginals(lin, [X(n) for n in range(n_nodes)]) if problem is not None
-                   else pose_marginals(lin, solution, n_nodes))
+            if problem is not None:
+                with threadpool_limits(limits=1, user_api="blas"):
+                    cov = chain.pose_marginals(lin, [X(n) for n in range(n_nodes)])
+            else:
+                cov = pose_marginals(lin, solution, n_nodes)
             result.covariances["gtsam"] = world_covariances(poses[:, 2], cov)
             result.timing["gtsam_marginals"] = time.process_time() - t1
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
