@@ -785,11 +785,13 @@ class Retired:
     ``BayesTree`` destructor that avoids deep recursion), which is the whole history: ``perf`` on a
     400 s drive put 83 % of the update time there, and the cost per update grew from 0.3 ms at the
     start of a 600 s drive to 4.8 ms at its end. No future factor touches a variable that old (a node's
-    factors reach its previous node and its segment's variables), the marginal keeps the information
-    of the old factors on the variables that remain (exact for their linearisation, which iSAM2 would
-    not revisit: relinearisation is checked only near the top of the tree, see :func:`isam_params`),
-    and the newest pose's estimate and covariance, the online output, are unchanged. The old nodes'
-    estimates are the ones at the time they leave (the batch solution starts from them).
+    factors reach its previous node and its segment's variables), and the marginal keeps the
+    information of the old factors on the variables that remain, linearised where they are. That is
+    exact for the newest pose unless iSAM2 would have relinearised the old variables later: on the
+    generated drives and robot_localization's Jackal log nothing changes; on its Husky log the
+    standstill at 236 s, which reveals the gyro bias, used to relinearise the history behind it, and
+    the online track now moves by up to 1.12 m (RMS error against the GPS 6.17 m before, 6.08 m now).
+    The old nodes' estimates are the ones at the time they leave (the batch solution starts from them).
     """
 
     def __init__(self, builder: GraphBuilder, horizon: int = ONLINE_HORIZON):
