@@ -697,7 +697,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             lag.update(new_graph, new_values, stamps)
             p = lag.calculateEstimatePose2(X(n))
             lag_poses[n] = (p.x(), p.y(), p.theta())
-    if batch_values:
+    if batch_values and isam is None:  # with iSAM2 the batch starts from its estimate
         values = ValuesMaker().make(batch_values)
     t_graph = time.process_time() - t_build - t_online
     counts = builder.counts
