@@ -74,6 +74,9 @@ class GraphConfig:
         Compute marginal pose covariances of the batch solution (default True).
     calibration_interval : float
         Length [s] of the segments that share one gyro-bias and calibration variable (default 1).
+    residuals : bool
+        Compute each sensor's NIS at the batch and iSAM2 solutions (``FusionResult.residuals``,
+        :mod:`fusion_vo.backends.residuals`; a consistency check, costs joint marginals; default False).
     """
 
     robust: str = "huber"
@@ -86,6 +89,7 @@ class GraphConfig:
     relative_tolerance: float = 1e-3
     marginals: bool = True
     calibration_interval: float = 1.0
+    residuals: bool = False
 
 
 @dataclass

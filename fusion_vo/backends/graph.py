@@ -611,6 +611,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 else:
                     graph.add(f)
             values.insert(new_values)
+        elif gcfg.residuals:
+            model_factors.extend(f for f in nf.factors if isinstance(f, ModelFactor))
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
         t0 = time.process_time()
@@ -647,6 +649,10 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
+        if gcfg.residuals:
+            final = isam.calculateEstimate()
+            result.residuals["gtsam_online"] = graph_residuals(
+                model_factors, final, gtsam.Marginals(isam.getFactorsUnsafe(), final), builder)
     if lag is not None:
         result.trajectories["gtsam_fixed_lag"] = PoseData(builder.t.copy(), lag_poses)
         result.counts["gtsam_fixed_lag"] = counts
@@ -668,12 +674,26 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             t1 = time.process_time()
             result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
             result.timing["gtsam_marginals"] = time.process_time() - t1
+        if gcfg.residuals:
+            result.residuals["gtsam"] = graph_residuals(model_factors, solution, gtsam.Marginals(lin, solution), builder)
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
         result.timing["gtsam_solve"] = t_solve
         logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size() + len(model_factors), iters)
     result.notes.extend(iv.notes)
     return result
+
+
+def graph_residuals(factors: list[ModelFactor], values: gtsam.Values, marginals, builder: GraphBuilder,
+                    stride: int = 5) -> dict:
+    """Each sensor's NIS at a solution (:func:`fusion_vo.backends.residuals.sensor_nis`), every ``stride``-th node."""
+    from fusion_vo.backends.residuals import sensor_nis
+
+    def node_of(key: int):
+        n = int(gtsam.Symbol(key).index()) - builder.offset
+        return n, float(builder.t[n])
+
+    return sensor_nis(factors, values, marginals, node_of, stride)
 
 
 def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
