@@ -113,16 +113,16 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     # fuse the pieces between the pauses on their own and chain them
     pieces = split(streams, cut)
     results: list[FusionResult | None] = []
-    placed: list[bool] = []  # by the piece's own GPS fixes
+    placed: list[bool] = []  # by the piece's own absolute measurements (GPS fixes)
     origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
     for piece in pieces:
-        gps = piece.gps is not None and len(piece.gps) > 0
-        placed.append(gps)
+        absolute = any(s.world_frame is not None and s.available(s.data(piece)) for s in registry.sensors())
+        placed.append(absolute)
         if not spans_time(piece):
             results.append(None)
             continue
         first = not any(r is not None for r in results)
-        results.append(_fuse_piece(piece, names, config if first or gps else origin, delay))
+        results.append(_fuse_piece(piece, names, config if first or absolute else origin, delay))
     used = [r for r in results if r is not None]
     if not used:
         raise InputError(f"no two samples of the sensors used are within fusion.max_gap ({config.max_gap:g} s) of "
@@ -161,10 +161,9 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     result = FusionResult()
     t0 = time.process_time()
     iv = build_intervals(streams, config)
-    if iv.gps_ok is not None:
-        from fusion_vo.backends.world import align_world
-
-        align_world(iv, config)
+    for sensor in registry.sensors():  # an absolute sensor (GPS) sets the world frame
+        if sensor.world_frame is not None and sensor.data(streams) is not None:
+            sensor.world_frame(iv, config)
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0

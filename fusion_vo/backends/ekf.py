@@ -67,10 +67,13 @@ Each sensor's block is gated before the update by its squared Mahalanobis distan
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
-A GPS fix is applied at its own node (every fix time is one, :mod:`fusion_vo.backends.timeline`)
-with the one measurement model of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check
-<fusion_vo.sensors.gps.GpsModel.check>`: residual, Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ``
-and the Huber/Cauchy weight); rejected fixes (a multipath jump) change nothing and are counted. The
+Each sensor's part (its measurement table, its blocks and their order) is registered by its own module
+(:mod:`fusion_vo.sensors.registry`): :func:`interval_measurements` and :func:`step_blocks` iterate the
+registered sensors. A sensor applied at its nodes on its own after each step's update registers an
+``ekf_run``: a GPS fix is applied at its own node (every fix time is one) with the one measurement model
+of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check <fusion_vo.sensors.gps.GpsModel.check>`: residual,
+Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ`` and the Huber/Cauchy weight) through
+:meth:`PlanarEkf.update_pose`; rejected fixes (a multipath jump) change nothing and are counted. The
 state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
 the fixes, with that alignment's uncertainty.
 
@@ -93,8 +96,6 @@ from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.gps import GpsModel
-from fusion_vo.sensors.gps import predict as gps_predict
 from fusion_vo.sensors.model import Gate, MeasurementModel
 
 logger = logging.getLogger(__name__)
@@ -230,28 +231,15 @@ class PlanarEkf:
             return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
         return model.name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
 
-    # ------------------------------------------------------------------ GPS
-    def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-        """Apply one fix through ``model`` (gate, robust weight); returns whether it was accepted."""
-        chk = model.check(self.x[:3], fix, covariance, self.kf.P[:3, :3], t)
-        if not chk.accepted:
-            return False
-        H = np.zeros((2, DIM))
-        H[:, :3] = chk.H
-        y = chk.residual.reshape(2, 1)
-        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=chk.R)
+    # ------------------------------------------------------------------ a measurement of the pose alone
+    def update_pose(self, y, H_pose, R) -> None:
+        """Update with the innovation ``y`` (m,) of a measurement whose Jacobian ``H_pose`` (m, 3) is on the pose
+        ``(x, y, ψ)`` alone and whose noise is ``R`` (a sensor applied at a node on its own, e.g. a GPS fix)."""
+        y = np.asarray(y, dtype=np.float64).reshape(-1, 1)
+        H = np.zeros((len(y), DIM))
+        H[:, :3] = H_pose
+        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=R)
         self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
-        return True
-
-    def gps_reacquire(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-        """Apply a fix that failed the gate after widening the position covariance by the squared
-        innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
-        model.n_rejected -= 1
-        if model.rejected_t:
-            model.rejected_t.pop()
-        r = np.asarray(fix, dtype=np.float64)[:2] - gps_predict(self.x[:3], model.lever_arm)
-        self.kf.P[:2, :2] += np.eye(2) * float(r @ r)
-        return self.gps_update(model, fix, covariance, t)
 
     # ------------------------------------------------------------------ update
     def update(self, blocks) -> None:

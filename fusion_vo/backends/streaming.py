@@ -725,7 +725,7 @@ class StreamingFusion:
 
     def _apply_gps(self, fix: GpsFix) -> None:
         from fusion_vo.backends.ekf import YAW
-        from fusion_vo.sensors.gps import GpsReacquire
+        from fusion_vo.sensors.gps import GpsReacquire, ekf_reacquire, ekf_update
         from fusion_vo.backends.world import prior_from_alignment
         from fusion_vo.sensors.gps import align_to_fixes
 
@@ -762,9 +762,9 @@ class StreamingFusion:
             self._gps_reacquire = GpsReacquire(self.config.gps_reacquire)
             self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
-        accepted = ekf.gps_update(model, fix.enu, fix.covariance, fix.t)
+        accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
-            accepted = ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
+            accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
         elif accepted:
             self._gps_reacquire.due(fix.t, True)
         count = self._step_counts.setdefault("gps", SensorCount())

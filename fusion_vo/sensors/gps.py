@@ -441,6 +441,26 @@ def add_intervals(iv, streams, config, counts) -> None:
         iv.gps_cov[k] = gps.covariance[i]
 
 
+def ekf_update(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+    """Apply one fix to the EKF through ``model`` (gate, robust weight); returns whether it was accepted."""
+    chk = model.check(ekf.x[:3], fix, covariance, ekf.P[:3, :3], t)
+    if not chk.accepted:
+        return False
+    ekf.update_pose(chk.residual, chk.H, chk.R)
+    return True
+
+
+def ekf_reacquire(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+    """Apply a fix that failed the gate after widening the EKF's position covariance by the squared
+    innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
+    model.n_rejected -= 1
+    if model.rejected_t:
+        model.rejected_t.pop()
+    r = np.asarray(fix, dtype=np.float64)[:2] - predict(ekf.x[:3], model.lever_arm)
+    ekf.P[:2, :2] += np.eye(2) * float(r @ r)
+    return ekf_update(ekf, model, fix, covariance, t)
+
+
 class GpsReacquire:
     """Fixes through the gate, and after ``after`` seconds of rejections one applied anyway
     (``FusionConfig.gps_reacquire``); ``times`` holds when that happened."""
@@ -452,7 +472,7 @@ class GpsReacquire:
 
     def __call__(self, ekf, model: GpsModel, iv, k: int) -> bool:
         t = float(iv.t[k])
-        if ekf.gps_update(model, iv.gps_enu[k], iv.gps_cov[k], t):
+        if ekf_update(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t):
             self.last_ok = t
             return True
         if self.last_ok is None:
@@ -461,7 +481,7 @@ class GpsReacquire:
             return False
         self.times.append(t)
         self.last_ok = t
-        return ekf.gps_reacquire(model, iv.gps_enu[k], iv.gps_cov[k], t)
+        return ekf_reacquire(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t)
 
     def due(self, t: float, accepted: bool) -> bool:
         """For a backend that gates itself: whether a rejected fix at ``t`` is to be applied anyway."""
@@ -570,6 +590,14 @@ def _graph_run(builder):
     return GraphFixes(builder) if iv.gps_ok is not None and iv.gps is not None else None
 
 
+def _world_frame(iv, config) -> None:
+    """ENU at the datum, the first heading estimated from the fixes (:func:`fusion_vo.backends.world.align_world`)."""
+    if iv.gps_ok is not None:
+        from fusion_vo.backends.world import align_world
+
+        align_world(iv, config)
+
+
 def _keyframes(iv):
     """A fix's node is always a keyframe."""
     return np.flatnonzero(iv.gps_ok) if iv.gps_ok is not None else None
@@ -578,6 +606,6 @@ def _keyframes(iv):
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
-    default=False, config=("gps", GpsNoise), node_times=node_times, intervals=Step(50, add_intervals),
+    default=False, config=("gps", GpsNoise), world_frame=_world_frame, node_times=node_times, intervals=Step(50, add_intervals),
     ekf_run=_ekf_run, graph_run=_graph_run, graph_keyframes=_keyframes,
 ))

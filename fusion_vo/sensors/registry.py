@@ -80,6 +80,10 @@ class Sensor:
         ``(section, dataclass)``: its configuration section. A section that is not a field of
         :class:`~fusion_vo.backends.config.FusionConfig` is read from the configuration's ``section:`` key
         into ``FusionConfig.sensors[section]`` through the same schema (unknown keys are errors).
+    world_frame : callable or None
+        ``world_frame(iv, config)``: for an absolute sensor, the world frame (``Intervals.initial_pose`` and
+        ``initial_sigma``) set from its measurements before the backends run (GPS: ENU at the datum); a piece
+        of a recording with such data is placed by it (:mod:`fusion_vo.backends.pauses`).
     node_times : callable or None
         ``node_times(data, nodes, config) -> nodes``: node times the sensor needs besides the grid's.
     intervals : Step or None
@@ -126,6 +130,7 @@ class Sensor:
     pick: Callable | None = None
     also_available_as: tuple = ()
     config: tuple | None = None
+    world_frame: Callable | None = None
     node_times: Callable | None = None
     intervals: Step | None = None
     ekf_measurements: Callable | None = None
