@@ -17,7 +17,9 @@ frame (long chains of nearly equal variables that every update nudges all the wa
 Factors (``δ = X_i⁻¹ X_j = (d_x, d_y, d_ψ)``, the relative pose). Every sensor's factor is its measurement
 model of :mod:`fusion_vo.sensors` (the same prediction, Jacobians and noise the EKF uses), turned into
 GTSAM factors by :mod:`fusion_vo.backends.factors`; where GTSAM has a native factor that is the model,
-that factor is used::
+that factor is used. Each sensor's factors are built by its own module, registered with
+:mod:`fusion_vo.sensors.registry` (``graph_factors``, ``graph_unary``, ``graph_run``), and
+:class:`GraphBuilder` runs the registered steps in their order::
 
     prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²),  O_0 ~ N(0, σ_ψ²)
     visual     sensors.visual  e = (S_c d_x, S_c d_y, d_ψ) - m        Σ = frontend covariance
@@ -159,7 +161,7 @@ class NodeFactors:
     guess: np.ndarray | None = None
 
 
-@dataclass
+@dataclass(slots=True)
 class NodeContext:
     """What a sensor's graph step (:mod:`fusion_vo.sensors.registry`) needs to know about the node it adds to.
 
@@ -186,6 +188,10 @@ class NodeContext:
 
 class GraphBuilder:
     """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
+
+    #: the variables' keys, for the sensors' graph steps (pose, gyro bias, AHRS offset, visual scale, wheel base
+    #: and radius factors of a segment; module docstring)
+    X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
 
     def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
                  calibrate: tuple[bool, bool] | None = None):
@@ -325,8 +331,9 @@ class GraphBuilder:
             self._new_segment(nf, c, est, int(self.segment[n - 1]))
         steps = registry.ordered("graph_factors")
         for _, step in steps:
-            if step.order < GUESS_ORDER:
-                step.run(self, nf, node)
+            if step.order >= GUESS_ORDER:
+                break
+            step.run(self, nf, node)
         last = est.get("last_increment", np.zeros(3))
         translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
@@ -339,10 +346,10 @@ class GraphBuilder:
             nf.sensors.append("motion_model")
         nf.values[node.xj] = previous_pose.compose(gtsam.Pose2(*guess))
         nf.guess = guess
-        for _, step in steps:
+        for _, step in steps:  # (sorted by order)
             if step.order >= GUESS_ORDER:
                 step.run(self, nf, node)
-        self._unary(nf, n)
+        self._unary(nf, n, node)
         return nf
 
     def wheel_increment(self, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
@@ -391,11 +398,13 @@ class GraphBuilder:
         keys += [O(c)] if self.ahrs_offset_on else []
         return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
 
-    def _unary(self, nf: NodeFactors, n: int) -> None:
-        """The registered sensors' factors at node ``n`` alone (``graph_unary``, e.g. an absolute heading)."""
-        g = int(self.grid[n])
-        node = NodeContext(n=n, g0=g, g1=g, dt=0.0, segment=int(self.segment[n]), xi=X(self.offset + n),
-                           xj=X(self.offset + n), estimate={})
+    def _unary(self, nf: NodeFactors, n: int, node: NodeContext | None = None) -> None:
+        """The registered sensors' factors at node ``n`` alone (``graph_unary``, e.g. an absolute heading);
+        ``node`` is the context of the interval ending there (its ``g1``, ``xj`` and ``segment`` are the node's)."""
+        if node is None:
+            g = int(self.grid[n])
+            node = NodeContext(n=n, g0=g, g1=g, dt=0.0, segment=int(self.segment[n]), xi=X(self.offset + n),
+                               xj=X(self.offset + n), estimate={})
         for _, step in registry.ordered("graph_unary"):
             step.run(self, nf, node)
 

@@ -16,6 +16,10 @@ on a node, and the nodes grow with the samples, not with the seconds). Every mea
   that frame's node), so both backends apply the fix to the pose at its own time. A camera increment
   that a fix node splits spans two intervals (the backends already handle increments spanning several).
 
+Each sensor's part of this (its node times, how its samples go onto the grid) is registered by its own
+module (:mod:`fusion_vo.sensors.registry`); :func:`node_times` and :func:`build_intervals` run the
+registered steps in their order.
+
 An interval is only given a wheel or gyro measurement when the stream covers it without a gap longer
 than ``max_gap`` and without a gated sample; otherwise the sensor is counted as missing there and the
 other sensors carry the estimate. Streams whose timestamps are not increasing are put in order (counted

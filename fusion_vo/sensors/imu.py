@@ -380,31 +380,27 @@ def graph_guess(builder, nf, node) -> None:
 
 def graph_gyro(builder, nf, node) -> None:
     """``d_ψ + B_c Δt - Θ`` with ``σ² = σ_g² Δt`` (linear, not robust)."""
-    from fusion_vo.backends.graph import B
-
     angle = node.scratch.get("gyro_angle")
     if angle is None:
         return
     var = GYRO.variance(builder.config.imu.gyro_noise_density, node.dt)
     nf.factors.append(builder.model_factor(GYRO, [angle], [[var]], {"motion": (node.xi, node.xj),
-                                                                     "gyro_bias": (B(node.segment),)},
+                                                                     "gyro_bias": (builder.B(node.segment),)},
                                            params={"dt": node.dt}, robust=False))
 
 
 def graph_ahrs(builder, nf, node) -> None:
     """The AHRS heading at the node: with its offset variable when the offset walks, else GTSAM's
     ``PriorFactorPose2`` on the heading (the model with the offset fixed at 0)."""
-    import gtsam
-
-    from fusion_vo.backends.graph import O
-
     iv, cfg = builder.iv, builder.config
     g = node.g1
     if not iv.ahrs_ok[g]:
         return
+    import gtsam
+
     if builder.ahrs_offset_on:
         nf.factors.append(builder.model_factor(AHRS, [float(iv.ahrs_yaw[g])], [[cfg.imu.ahrs_yaw_sigma**2]],
-                                               {"heading": (node.xj,), "ahrs_offset": (O(node.segment),)}))
+                                               {"heading": (node.xj,), "ahrs_offset": (builder.O(node.segment),)}))
     else:
         # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
         # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)

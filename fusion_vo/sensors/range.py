@@ -144,16 +144,14 @@ def ekf_blocks(ekf, meas: dict, k: int) -> list:
 
 def graph_unary(builder, nf, node) -> None:
     """The reading solved for the visual scale of the node's segment (:meth:`RangeModel.scale_prior`)."""
-    import gtsam
-
-    from fusion_vo.backends.graph import S
-
     iv = builder.iv
     g = node.g1
     if builder.kv_on and iv.range_ok[g] and iv.camera_height:
+        import gtsam
+
         scale, sig = RANGE.scale_prior(iv.range_height[g], builder.config.range.sigma, float(iv.camera_height))
         nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
-        nf.factors.append(gtsam.PriorFactorDouble(S(node.segment), scale, nm))
+        nf.factors.append(gtsam.PriorFactorDouble(builder.S(node.segment), scale, nm))
         nf.sensors.append("range")
 
 

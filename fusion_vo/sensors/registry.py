@@ -172,6 +172,7 @@ class Sensor:
 
 
 _REGISTRY: dict[str, Sensor] = {}
+_ORDERED: dict = {}  # attribute -> the sorted steps (cleared when a sensor is added or removed)
 _loaded = False
 
 
@@ -183,12 +184,14 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
     if sensor.name in _REGISTRY and not replace:
         raise ValueError(f"sensor '{sensor.name}' is already registered")
     _REGISTRY[sensor.name] = sensor
+    _ORDERED.clear()
     return sensor
 
 
 def unregister(name: str) -> None:
     """Remove a sensor registered with :func:`register` (no error when it is not)."""
     _REGISTRY.pop(name, None)
+    _ORDERED.clear()
 
 
 @contextmanager
@@ -238,6 +241,8 @@ def get(name: str) -> Sensor:
 def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:
     """``(sensor, step)`` of every registered step ``attribute`` (a :class:`Step` or a tuple of them), sorted by
     order; ``used`` (names) keeps only those sensors."""
+    if used is None and attribute in _ORDERED:  # the backends ask for the same steps at every node
+        return _ORDERED[attribute]
     steps = []
     for s in sensors():
         if used is not None and s.name not in used:
@@ -245,4 +250,7 @@ def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:
         value = getattr(s, attribute)
         for step in (value if isinstance(value, tuple) else (value,) if value is not None else ()):
             steps.append((s, step))
-    return sorted(steps, key=lambda item: item[1].order)
+    steps.sort(key=lambda item: item[1].order)
+    if used is None:
+        _ORDERED[attribute] = steps
+    return steps

@@ -122,14 +122,12 @@ def graph_factors(builder, nf, node) -> None:
     when it is estimated, else GTSAM's ``BetweenFactorPose2``."""
     import gtsam
 
-    from fusion_vo.backends.graph import S, X
-
     est = node.estimate
     for start, d, cov in builder.visual_spans.get(node.n, []):
-        xs = X(builder.offset + start)
+        xs = builder.X(builder.offset + start)
         if builder.kv_on:
             nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, node.xj),
-                                                                     "visual_scale": (S(node.segment),)}))
+                                                                     "visual_scale": (builder.S(node.segment),)}))
         else:
             nf.factors.append(gtsam.BetweenFactorPose2(xs, node.xj, gtsam.Pose2(*d), builder.noise(cov)))
         nf.sensors.append("camera")

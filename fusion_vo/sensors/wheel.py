@@ -485,8 +485,6 @@ def graph_translation(builder, nf, node) -> None:
     factor of its own (:func:`graph_heading`); otherwise GTSAM's ``BetweenFactorPose2`` with the whole arc."""
     import gtsam
 
-    from fusion_vo.backends.graph import R
-
     iv, cfg = builder.iv, builder.config
     g0, g1, xi, xj, est = node.g0, node.g1, node.xi, node.xj, node.estimate
     if not (iv.uses("wheel") and iv.wheel_ok[g0:g1].all()):
@@ -510,7 +508,7 @@ def graph_translation(builder, nf, node) -> None:
         cov_xy[2, :] = cov_xy[:, 2] = 0.0
         cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
         if builder.kr_on:  # distance scaled by the wheels' radius factor
-            nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (R(node.segment),)},
+            nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
                                                    fixed={"wheel_base_factor": 1.0}))
         else:
             nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov_xy)))
@@ -535,13 +533,11 @@ def graph_standstill(builder, nf, node) -> None:
 
 def graph_heading(builder, nf, node) -> None:
     """The wheels' heading change through the wheel-base factor, ``W d_ψ - m_ψ``."""
-    from fusion_vo.backends.graph import W
-
     wheel_heading = node.scratch.get("wheel_heading")
     if wheel_heading is None:
         return
     nf.factors.append(builder.model_factor(WHEEL, wheel_heading[0], [[wheel_heading[1] ** 2]],
-                                           {"motion": (node.xi, node.xj), "wheel_base_factor": (W(node.segment),)},
+                                           {"motion": (node.xi, node.xj), "wheel_base_factor": (builder.W(node.segment),)},
                                            fixed={"wheel_scale": 1.0}, rows=(2,)))
 
 

@@ -175,3 +175,12 @@ def test_each_built_in_sensor_lives_in_its_own_module():
     gps = registry.get("gps")
     assert gps.intervals is not None and gps.ekf_run is not None and gps.graph_run is not None
     assert gps.node_times is not None and not gps.by_default({})
+
+
+def test_the_built_in_sensors_configuration_sections_are_the_fusion_configs():
+    config = FusionConfig()
+    for sensor in registry.sensors():
+        if sensor.config is not None:
+            name, cls = sensor.config
+            assert isinstance(config.section(name), cls), sensor.name
+    assert {s.config[0] for s in registry.sensors() if s.config} == {"wheel", "odom", "imu", "range", "gps"}
