@@ -57,7 +57,9 @@ class Sensor:
         What a recording lacks when the sensor is asked for but has no data (``"gps0/ (usable fixes)"``).
     field : str or None
         Attribute of :class:`~fusion_vo.backends.timeline.SensorStreams` holding its data; None: the data is
-        ``SensorStreams.extra[name]`` (a sensor registered outside the library).
+        ``SensorStreams.extra[name]`` (a sensor registered outside the library). The data is a dataclass with
+        sample times ``t`` and per-sample arrays (the camera's: a list of increments), so that the node grid
+        covers it and a pause in every stream cuts it (:mod:`fusion_vo.backends.pauses`).
     min_samples : int
         Samples (``len(data)``) it needs to be available (default 1).
     folder : str or None
