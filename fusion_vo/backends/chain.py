@@ -154,6 +154,7 @@ class System:
     def __init__(self, lay: Layout, flat: np.ndarray, g: np.ndarray):
         K, M = lay.n_blocks, lay.size
         self.lay = lay
+        self.point = None  # the values it was linearised at (ChainProblem.linearize)
         self.D = flat[:K * M * M].reshape(K, M, M)
         self.E = flat[K * M * M:].reshape(max(K - 1, 0), M, M)
         self.g = np.zeros(K * M)
@@ -351,7 +352,9 @@ class ChainProblem:
             gvals.append(J.T @ rhs)
         flat = np.bincount(np.concatenate(slots), weights=np.concatenate(weights), minlength=self._flat_size)
         g = np.bincount(np.concatenate(gcols), weights=np.concatenate(gvals), minlength=self.lay.n)
-        return System(self.lay, flat, g)
+        system = System(self.lay, flat, g)
+        system.point = values
+        return system
 
 
 def _ramp(dims: np.ndarray) -> np.ndarray:
