@@ -318,3 +318,30 @@ def test_exposure_change_between_frames(kind, gain, offset):
     # measured with normalisation: < 0.01 px, < 0.0025 deg (without: up to 0.05 px, 0.03 deg)
     assert centre_error(m.matrix, truth) < 0.03
     assert abs(math.degrees(m.params[2]) - 1.5) < 0.005
+
+
+def test_feature_prepare_with_orb_is_safe_in_several_threads_at_once():
+    """prepare() runs in a pool of workers: with ORB descriptors each thread uses its own ORB object,
+    and frames prepared four at a time equal those prepared one after the other."""
+    from concurrent.futures import ThreadPoolExecutor
+    import threading
+
+    fe = make_frontend("features", {"descriptor": "orb"})
+    motion = similarity_about(*CENTRE, 3.0, 0.8, 1.0)
+    frames = [f for f, _ in sequence([motion] * 7)]
+    serial = [fe.prepare(f).described for f in frames]
+    barrier = threading.Barrier(4)
+
+    def work(frame):
+        barrier.wait(timeout=10)  # four threads inside prepare() together
+        return fe.prepare(frame).described, id(fe._thread_orb())
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        out = list(pool.map(work, frames[:4] * 2))
+    assert len({orb for _, orb in out}) == 4
+    assert id(fe._thread_orb()) not in {orb for _, orb in out}
+    for k, (got, _) in enumerate(out):
+        want = serial[k % 4]
+        assert len(got.desc) >= 20
+        np.testing.assert_array_equal(got.pts, want.pts)
+        np.testing.assert_array_equal(got.desc, want.desc)
