@@ -64,3 +64,30 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
                   "klt, 1 thread |", "klt, 2 threads |"):
         assert f"| {label}" in table
+
+
+def test_a_variant_row_runs_the_frontend_with_its_options(short, monkeypatch):
+    """``bench_frontends.py --variant 'klt:{...}'``: the row's runs get those options (and bad ones are
+    one-line usage errors)."""
+    import sys
+    from pathlib import Path
+
+    import fusion_vo.benchmark as benchmark
+
+    seen = []
+    real = benchmark.run_visual_odometry
+    monkeypatch.setattr(benchmark, "run_visual_odometry",
+                        lambda rec, config, **kw: seen.append(config.frontend_options) or real(rec, config, **kw))
+    lines = []
+    rows = run_benchmark(short, ["klt", 'klt:{"fb_skip_ratio": 0.9}'], None, [1], repeats=1, max_frames=20,
+                         stages=False, out=lines.append)
+    assert [r.name for r in rows] == ["klt", 'klt:{"fb_skip_ratio": 0.9}'] and all(r.failed == 0 for r in rows)
+    assert seen == [{}, {"fb_skip_ratio": 0.9}]
+    monkeypatch.syspath_prepend(str(Path(BASELINE_SCRIPT).parent))
+    from bench_frontends import main as bench_main
+
+    for bad in ('klt:{"fb_skip_ratio": 2}', "klt:[1", 'bogus:{}'):
+        monkeypatch.setattr(sys, "argv", ["bench_frontends.py", "--variant", bad])
+        with pytest.raises(SystemExit) as exc:
+            bench_main()
+        assert exc.value.code == 2
