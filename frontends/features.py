@@ -292,8 +292,9 @@ class FeatureFrontend:
         depend on earlier frames).
 
         Thread-safe: it may run in several threads at once while :meth:`process` runs (it reads only
-        the configuration and the point map, and every thread gets its own ORB object). A frame that is not a 2-D ``uint8``/``uint16``
-        array, or that OpenCV refuses, is returned as it is (the checks of :meth:`process` report it).
+        the configuration and the point map, and every thread gets its own ORB object). A frame that
+        is not a 2-D ``uint8``/``uint16`` array, or that OpenCV refuses, is returned as it is (the
+        checks of :meth:`process` report it).
         """
         if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
                 or min(image.shape) < 32:
