@@ -21,8 +21,10 @@ sources above it, the one whose removal leaves the others most consistent (their
 their own mean within its quantile) is dropped in that window, so one liar cannot condemn two honest
 streams. With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
 yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
-judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for the whole recording:
-its offset is no longer known.
+judged. An absolute heading (the AHRS) is dropped per span too, but after a span in which it
+disagreed it is trusted again only where its absolute heading still agrees with the heading carried
+from where it was last trusted (:func:`_readmit_absolute`): an offset it picked up meanwhile does not
+show in its heading changes.
 
 The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
 (:class:`~fusion_vo.backends.streaming.StreamingFusion`) runs it causally over a sliding window
@@ -213,10 +215,13 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
                 bad[s][a:b] = True
                 peak[s][a:b] = np.maximum(peak[s][a:b], nis)
                 against[s][a:b] = ", ".join(others)
+    if "ahrs" in bad and bad["ahrs"].any():
+        _readmit_absolute(bad["ahrs"], peak["ahrs"], against["ahrs"], sources, T, cfg, release)
     episodes: list[Episode] = []
     for s in names:
         checked = np.count_nonzero(sources[s][0])
-        fraction = 0.0 if s == "ahrs" else cfg.monitor_whole_fraction
+        # the AHRS's quiet runs after a drop are judged on its absolute heading (_readmit_absolute) instead
+        fraction = 1.0 if s == "ahrs" else cfg.monitor_whole_fraction
         if checked and np.count_nonzero(bad[s]) > fraction * checked:
             # a stream that contradicts the others most of the time is not trusted in its quiet windows either
             who = next(x for x in against[s] if x)
@@ -255,6 +260,65 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes
+
+
+def _readmit_absolute(bad: np.ndarray, peak: np.ndarray, against: np.ndarray, sources: dict, T: np.ndarray,
+                      cfg: FusionConfig, release: float) -> None:
+    """After a span in which the AHRS heading was dropped, keep it again only where its *absolute*
+    heading still agrees (in place on the AHRS's ``bad``, ``peak`` and ``against`` per interval).
+
+    The windowed check compares heading *changes*: an AHRS whose offset moved during a dropped span
+    (a magnetic disturbance, a heading-dependent error) agrees again in changes afterwards while its
+    heading stays wrong by the offset it picked up. Each later run of intervals the windowed check
+    kept is compared, through its mean offset against the relative heading (the bias-corrected gyro
+    where it is usable, else the wheels', else the camera's, summed since the AHRS was last trusted),
+    with the offset at the end of the last trusted run (at first, the AHRS's first sample, which sets
+    the heading offset); the variance is the AHRS's noise and offset
+    walk plus the relative heading's noise and ``monitor_bias_sigma`` over the gap. A run is kept only
+    below the 90 % quantile (``release``, as a dropped component's comeback elsewhere), and becomes
+    the new anchor; otherwise it is dropped too (measured on robot_localization's Husky log: the AHRS
+    departs from the gyro and from the GPS course by 20-40 degrees from 190 s on, and its heading
+    *changes* agree again in parts of that span).
+    """
+    ok_a, ang_a, _ = sources["ahrs"]
+    K = len(bad)
+    ref = np.zeros(K)
+    ref_var = np.full(K, np.inf)
+    for name in ("camera", "wheel", "gyro"):  # later ones take precedence
+        if name in sources:
+            ok, ang, var = sources[name]
+            ref = np.where(ok, ang, ref)
+            ref_var = np.where(ok, var, ref_var)
+    if not np.isfinite(ref_var[ok_a]).any():
+        return
+    # a node's offset: the AHRS heading minus the relative heading summed from the start
+    rel = np.concatenate([[0.0], np.cumsum(np.where(ok_a, ang_a, 0.0) - ref)])
+    rel_var = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(ref_var), ref_var, 0.0))])
+    runs = _runs(ok_a & ~bad)
+    if not runs:
+        return
+    # the heading offset is set from the AHRS's first samples: its offset is known there, zero
+    start = int(np.argmax(ok_a))
+    anchor = (start, start)
+    for a, b in runs:
+        if a == start:
+            anchor = (a, b)
+            continue
+        if not np.isfinite(ref_var[anchor[1]:a]).all() or not ok_a[anchor[1]:a].all():
+            # the relative heading or the AHRS has a hole in the gap: its offset cannot be carried over
+            bad[a:b] = True
+            continue
+        gap = float(T[a] - T[anchor[1]])
+        diff = float(np.mean(rel[a:b + 1]) - rel[anchor[1]])
+        var = (2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * gap
+               + float(rel_var[a] - rel_var[anchor[1]]) + (cfg.monitor_bias_sigma * gap) ** 2)
+        nis = diff**2 / var
+        if nis <= release:
+            anchor = (a, b)
+            continue
+        bad[a:b] = True
+        peak[a:b] = np.maximum(peak[a:b], nis)
+        against[a:b] = ", ".join(n for n in ("gyro", "wheel", "camera") if n in sources) + " (absolute heading)"
 
 
 def drop_visual_increments(iv, keep: np.ndarray) -> None:
