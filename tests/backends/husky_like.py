@@ -3,8 +3,8 @@
 The robot drives, stops for a long while, and drives again. Its own odometry reports the yaw rate
 ``yaw_scale`` times the true one (skid steering), the gyro has a constant bias, and the AHRS heading
 (when asked for) strays from the truth by up to ``ahrs_drift`` [rad] in the middle of the recording;
-with ``ahrs_step = (t0, t1, offset)`` its offset also moves from 0 at ``t0`` to ``offset`` at ``t1`` and
-stays there (a magnetic disturbance that does not go away).
+with ``ahrs_knots = ((t, offset), ...)`` its offset also follows these knots, linear in between and
+constant beyond them (a magnetic disturbance that stays, or goes away).
 With ``scale_scatter`` the reported turn rate's scale also wanders, as the effective track width of a
 skid-steered base does from turn to turn: ``yaw_scale (1 + scale_scatter g(t))`` with ``g`` a unit
 first-order Gauss–Markov process of correlation time ``scatter_time`` [s]. With ``corners`` the
@@ -17,7 +17,7 @@ from fusion_vo.measurements import ImuData, PoseData, TwistData
 
 
 def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004, ahrs_drift=None, seed=0,
-               scale_scatter=0.0, scatter_time=5.0, corners=False, gyro_noise=0.003, ahrs_step=None):
+               scale_scatter=0.0, scatter_time=5.0, corners=False, gyro_noise=0.003, ahrs_knots=None):
     """``(odom, imu, truth)``: twist at 10 Hz, IMU at 30 Hz, truth at 100 Hz."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 0.01)
@@ -51,8 +51,9 @@ def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004
     orientation = None
     if ahrs_drift is not None:
         heading = np.interp(ti, t, yaw) + ahrs_drift * np.sin(np.pi * ti / duration) ** 2 + 0.01 * rng.standard_normal(len(ti))
-        if ahrs_step is not None:  # (start, end, offset): the heading's offset moves to ``offset`` and stays there
-            heading += np.interp(ti, ahrs_step[:2], [0.0, ahrs_step[2]])
+        if ahrs_knots is not None:  # ((t, offset), ...): the heading's offset, linear between the knots
+            knots = np.asarray(ahrs_knots, dtype=float)
+            heading += np.interp(ti, knots[:, 0], knots[:, 1])
         orientation = np.stack([np.cos(heading / 2), 0 * ti, 0 * ti, np.sin(heading / 2)], axis=1)
     imu = ImuData(ti, gyro, accel, orientation, noise={"gyroscope_noise_density": gyro_noise})
     return odom, imu, truth
