@@ -24,6 +24,7 @@ failures the current frame, if textured, becomes the new reference (restart).
 from __future__ import annotations
 
 import dataclasses
+import threading
 from dataclasses import dataclass, field
 
 import cv2
@@ -267,9 +268,8 @@ class FeatureFrontend:
         self._fine = cfg.robust_options(cfg.refine_threshold)
         self._lk = LkSettings(window=cfg.window, fb_threshold=cfg.fb_threshold, border=2)
         self._rng = np.random.default_rng(cfg.seed)
-        self._orb = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
-        # prepare() runs in another thread: it gets its own ORB object
-        self._orb_ahead = cv2.ORB_create(nfeatures=cfg.max_corners, edgeThreshold=16, patchSize=31) if cfg.descriptor == "orb" else None
+        # an ORB object per thread: prepare() may run in several threads at once (cv2.ORB is not thread-safe)
+        self._orb_local = threading.local()
         self._shape: tuple[int, int] | None = None
         self._dense = DenseFallback(self.point_map, DirectConfig(central_region=cfg.central_region)) \
             if cfg.dense_fallback else None
@@ -291,21 +291,30 @@ class FeatureFrontend:
         """Corners and descriptors of a frame, for a thread ahead of :meth:`process` (they do not
         depend on earlier frames).
 
-        Safe to run in one other thread while :meth:`process` runs (it reads only the configuration
-        and the point map, and has its own ORB object). A frame that is not a 2-D ``uint8``/``uint16``
-        array, or that OpenCV refuses, is returned as it is (the checks of :meth:`process` report it).
+        Thread-safe: it may run in several threads at once while :meth:`process` runs (it reads only
+        the configuration and the point map, and every thread gets its own ORB object). A frame that
+        is not a 2-D ``uint8``/``uint16`` array, or that OpenCV refuses, is returned as it is (the
+        checks of :meth:`process` report it).
         """
         if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
                 or min(image.shape) < 32:
             return image
         grey = np.ascontiguousarray((image // 257).astype(np.uint8) if image.dtype == np.uint16 else image)
         try:
-            return PreparedFrame(image, texture_measure(grey), self._describe(grey, float("nan"), self._orb_ahead))
+            return PreparedFrame(image, texture_measure(grey), self._describe(grey, float("nan")))
         except cv2.error:
             return image
 
     # -------------------------------------------------------------- pipeline
-    def _describe(self, img: np.ndarray, t: float, orb=None) -> _Frame:
+    def _thread_orb(self) -> cv2.ORB:
+        """The calling thread's ORB object (made on first use)."""
+        orb = getattr(self._orb_local, "orb", None)
+        if orb is None:
+            orb = cv2.ORB_create(nfeatures=self.config.max_corners, edgeThreshold=16, patchSize=31)
+            self._orb_local.orb = orb
+        return orb
+
+    def _describe(self, img: np.ndarray, t: float) -> _Frame:
         pts = detect_corners(img, self._detector)
         if self.config.region < 1.0:
             h, w = img.shape
@@ -313,7 +322,7 @@ class FeatureFrontend:
             centre = 0.5 * np.array([w - 1, h - 1], np.float32)
             pts = pts[np.all(np.abs(pts - centre) <= half, axis=1)]
         if self.config.descriptor == "orb":
-            desc, idx = orb_descriptors(img, pts, orb if orb is not None else self._orb)
+            desc, idx = orb_descriptors(img, pts, self._thread_orb())
         else:
             desc, idx = patch_descriptors(img, pts, self.config.patch_radius)
         pts = pts[idx]

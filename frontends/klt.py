@@ -43,7 +43,8 @@ from frontends.direct import DenseFallback, DirectConfig
 from frontends.frame_check import check_frame, texture_measure
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, judge_fit
-from frontends.tracking import LkSettings, exposure_correction, fit_affine, reduce_for_exposure, track_points
+from frontends.tracking import (LkSettings, check_backward, exposure_correction, fit_affine, reduce_for_exposure,
+                                track_forward)
 
 
 @dataclass
@@ -78,6 +79,12 @@ class KltConfig(ConfigMixin):
         Maximum forward-backward error [px].
     forward_backward : bool
         Whether to run the forward-backward check (it doubles the tracking time).
+    fb_skip_ratio : float or None
+        Run the forward-backward check only when it is needed: a similarity is first fitted on the
+        forward tracks, and when at least this fraction of them are its inliers (and the fit is
+        accepted) the check is skipped; otherwise the points are checked backward and the fit is made
+        again on the survivors. ``None`` (the default): always check. Faster, less accurate on some
+        recordings (``README.md``, Speed).
     warp_tolerance : float
         When the guessed motion's linear part differs from the identity by more than this (largest
         element; 0.015 is about 0.86 deg or 1.5 % scale), the reference is warped by it before
@@ -175,6 +182,7 @@ class KltConfig(ConfigMixin):
     min_eigen: float = 1e-3
     fb_threshold: float = 0.5
     forward_backward: bool = True
+    fb_skip_ratio: float | None = None
     warp_tolerance: float = 0.015
     refine_tolerance: float = 0.015
     exposure_tolerance: float = 0.01
@@ -211,6 +219,8 @@ class KltConfig(ConfigMixin):
             raise ValueError("need min_inliers <= replenish_below <= max_tracks")
         if self.pyramid_levels < 0 or self.retry_pyramid_levels < 0:
             raise ValueError("pyramid levels must be non-negative")
+        if self.fb_skip_ratio is not None and not 0.0 < self.fb_skip_ratio <= 1.0:
+            raise ValueError("fb_skip_ratio must lie in (0, 1] or be None")
         if not 0.0 <= self.min_inlier_ratio <= 1.0:
             raise ValueError("min_inlier_ratio must lie in [0, 1]")
         if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
@@ -479,7 +489,16 @@ class KltFrontend:
     def _track(self, img, p0, src, affine, levels, exposure=(1.0, 0.0)):
         """Tracking from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
         cfg = self.config
-        tr = track_points(self._ref_img, img, p0, affine, levels, self._lk, exposure=exposure)
+        forward = track_forward(self._ref_img, img, p0, affine, levels, self._lk, exposure=exposure)
+        tr = forward.result
+        if cfg.forward_backward and cfg.fb_skip_ratio is not None and len(tr.index) >= cfg.min_inliers:
+            # the backward check only when the forward tracks do not agree on one motion
+            fit = estimate_similarity(src[tr.index], self.point_map.to_rectified(tr.points), self._options, self._rng)
+            if fit.status == "ok" and fit.n_inliers >= cfg.fb_skip_ratio * len(tr.index) and \
+                    judge_fit(fit, tr.n_tracked, cfg.min_inlier_ratio, cfg.max_abs_log_scale)[0] is MotionStatus.OK:
+                return fit, tr.points, tr.n_tracked, tr.index
+        if cfg.forward_backward:
+            tr = check_backward(forward, self._lk)
         if len(tr.index) < cfg.min_inliers:
             why = "too few points tracked" if tr.n_tracked < cfg.min_inliers else "too few points pass the forward-backward check"
             return _Attempt("", None, MotionStatus.TOO_FEW_FEATURES, why, tr.n_tracked)

@@ -149,7 +149,7 @@ def _complex(pts: np.ndarray) -> np.ndarray:
 
 def fit_least_squares(z: np.ndarray, w: np.ndarray) -> tuple[complex, complex]:
     """Closed-form least-squares similarity ``w ~ a z + b`` of complex point arrays."""
-    zm, wm = z.mean(), w.mean()
+    zm, wm = z.sum() / len(z), w.sum() / len(w)  # np.mean's arithmetic without its call overhead
     dz = z - zm
     den = float(np.vdot(dz, dz).real)
     if den <= 0.0:
@@ -319,12 +319,11 @@ def estimate_similarity(
         fit.status = "too_few"
         return fit
     zi = z[mask]
-    dz = zi - zi.mean()
-    cov_pts = np.array(
-        [[np.mean(dz.real**2), np.mean(dz.real * dz.imag)], [0.0, np.mean(dz.imag**2)]]
-    )
-    cov_pts[1, 0] = cov_pts[0, 1]
-    if math.sqrt(max(float(np.linalg.eigvalsh(cov_pts)[0]), 0.0)) < opts.min_spread:
+    dz = zi - zi.sum() / k
+    # the smaller eigenvalue of the inliers' 2x2 covariance, in closed form: their spread along the weakest axis
+    cxx, cyy, cxy = float((dz.real**2).sum() / k), float((dz.imag**2).sum() / k), float((dz.real * dz.imag).sum() / k)
+    weakest = 0.5 * (cxx + cyy) - math.hypot(0.5 * (cxx - cyy), cxy)
+    if math.sqrt(max(weakest, 0.0)) < opts.min_spread:
         fit.status = "degenerate"
         return fit
 

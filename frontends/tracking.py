@@ -24,6 +24,7 @@ reference can be corrected by it before tracking again.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
@@ -68,7 +69,7 @@ class TrackResult:
 def fit_affine(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
     """Least-squares 2x3 affine map taking ``src`` onto ``dst`` (``N x 2`` each, ``N >= 3``)."""
     # normal equations on centred coordinates (well conditioned for pixel coordinates)
-    sm, dm = src.mean(axis=0), dst.mean(axis=0)
+    sm, dm = src.sum(axis=0) / len(src), dst.sum(axis=0) / len(dst)  # np.mean's arithmetic, less overhead
     s, d = src - sm, dst - dm
     lin = np.linalg.solve(s.T @ s, s.T @ d).T
     return np.hstack([lin, (dm - lin @ sm)[:, None]])
@@ -81,6 +82,88 @@ def exposure_differs(exposure: tuple[float, float], tolerance: float) -> bool:
 
 def _inside(p: np.ndarray, w: int, h: int, b: int) -> np.ndarray:
     return (p[:, 0] >= b) & (p[:, 0] <= w - 1 - b) & (p[:, 1] >= b) & (p[:, 1] <= h - 1 - b)
+
+
+@dataclass
+class ForwardTracks:
+    """What :func:`track_forward` found, kept for :func:`check_backward`.
+
+    Attributes
+    ----------
+    result : TrackResult
+        The points tracked inside the image (``n_tracked`` of them, no backward check).
+    ref : ndarray
+        The reference as tracked from (warped and exposure-corrected).
+    img : ndarray
+        The current frame.
+    q0, guess : ndarray, shape (n_tracked, 2)
+        The kept points' positions in ``ref`` and their initial guesses in ``img`` (float32).
+    levels : int
+        Pyramid levels of the forward pass.
+    """
+
+    result: TrackResult
+    ref: np.ndarray
+    img: np.ndarray
+    q0: np.ndarray
+    guess: np.ndarray
+    levels: int
+
+
+def _lk_arguments(settings: LkSettings) -> dict:
+    return dict(winSize=(settings.window, settings.window),
+                criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, settings.iterations, settings.epsilon),
+                flags=cv2.OPTFLOW_USE_INITIAL_FLOW, minEigThreshold=settings.min_eigen)
+
+
+def track_forward(
+    ref_img: np.ndarray,
+    img: np.ndarray,
+    p0: np.ndarray,
+    affine: np.ndarray,
+    levels: int,
+    settings: LkSettings,
+    start: np.ndarray | None = None,
+    exposure: tuple[float, float] = (1.0, 0.0),
+) -> ForwardTracks:
+    """The forward pass of :func:`track_points` (same parameters), without the backward check."""
+    h, w = img.shape
+    s = settings
+    p0 = np.asarray(p0, dtype=np.float64)
+    moved = np.ascontiguousarray(p0 @ affine[:, :2].T + affine[:, 2], dtype=np.float32)
+    if np.abs(affine[:, :2] - np.eye(2)).max() > s.warp_tolerance:
+        # the reference as it would look after the motion: its patches keep their shape
+        ref = cv2.warpAffine(ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        q0 = moved
+    else:  # a translation does not deform patches: track from the reference itself
+        ref = ref_img
+        q0 = np.ascontiguousarray(p0, dtype=np.float32)
+    if exposure != (1.0, 0.0):
+        ref = cv2.convertScaleAbs(ref, alpha=exposure[0], beta=exposure[1])
+    guess = moved if start is None else np.ascontiguousarray(start, dtype=np.float32)
+    q1, st1, _ = cv2.calcOpticalFlowPyrLK(ref, img, q0, guess.copy(), maxLevel=levels, **_lk_arguments(s))
+    idx = np.flatnonzero(st1.ravel().astype(bool) & _inside(q1, w, h, s.border))
+    q1k = q1[idx]
+    return ForwardTracks(TrackResult(q1k.astype(np.float64), idx, len(idx)), ref, img, q0[idx], guess[idx], levels)
+
+
+def check_backward(forward: ForwardTracks, settings: LkSettings) -> TrackResult:
+    """The forward tracks that return within ``fb_threshold`` when tracked back (see :func:`track_points`)."""
+    s = settings
+    tr = forward.result
+    if len(tr.index) == 0:
+        return tr
+    q0k, gk = forward.q0, forward.guess
+    q1k = np.ascontiguousarray(tr.points, dtype=np.float32)
+    # backward from where the points landed, started from the same guess (symmetric check)
+    back = np.ascontiguousarray(q1k - (gk - q0k), dtype=np.float32)
+    # a start within a few pixels of the answer needs no pyramid (nor the time to build one)
+    back_levels = 0 if np.abs(q1k - gk).max() <= s.fb_direct_reach else forward.levels
+    q0b, st2, _ = cv2.calcOpticalFlowPyrLK(forward.img, forward.ref, q1k, back, maxLevel=back_levels,
+                                           **_lk_arguments(s))
+    d = q0b - q0k
+    good = st2.ravel().astype(bool) & (d[:, 0] ** 2 + d[:, 1] ** 2 < s.fb_threshold**2)
+    return TrackResult(tr.points[good], tr.index[good], tr.n_tracked)
 
 
 def track_points(
@@ -111,46 +194,30 @@ def track_points(
     exposure : (gain, offset)
         Brightness change from the reference to the current frame (see :func:`exposure_change`);
         the reference is corrected by it before tracking.
+
+    The forward pass is :func:`track_forward`; with ``settings.forward_backward`` the points are then
+    checked by :func:`check_backward`.
     """
-    h, w = img.shape
-    s = settings
-    win = (s.window, s.window)
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, s.iterations, s.epsilon)
-    flags = cv2.OPTFLOW_USE_INITIAL_FLOW
-    p0 = np.asarray(p0, dtype=np.float64)
-    moved = np.ascontiguousarray(p0 @ affine[:, :2].T + affine[:, 2], dtype=np.float32)
-    if np.abs(affine[:, :2] - np.eye(2)).max() > s.warp_tolerance:
-        # the reference as it would look after the motion: its patches keep their shape
-        ref = cv2.warpAffine(ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        q0 = moved
-    else:  # a translation does not deform patches: track from the reference itself
-        ref = ref_img
-        q0 = np.ascontiguousarray(p0, dtype=np.float32)
-    if exposure != (1.0, 0.0):
-        ref = cv2.convertScaleAbs(ref, alpha=exposure[0], beta=exposure[1])
-    guess = moved if start is None else np.ascontiguousarray(start, dtype=np.float32)
-    q1, st1, _ = cv2.calcOpticalFlowPyrLK(
-        ref, img, q0, guess.copy(), winSize=win, maxLevel=levels,
-        criteria=criteria, flags=flags, minEigThreshold=s.min_eigen,
-    )
-    idx = np.flatnonzero(st1.ravel().astype(bool) & _inside(q1, w, h, s.border))
-    if not s.forward_backward or len(idx) == 0:
-        return TrackResult(q1[idx].astype(np.float64), idx, len(idx))
-    q0k, q1k, gk = q0[idx], q1[idx], guess[idx]
-    # backward from where the points landed, started from the same guess (symmetric check)
-    back = np.ascontiguousarray(q1k - (gk - q0k), dtype=np.float32)
-    # a start within a few pixels of the answer needs no pyramid (nor the time to build one)
-    back_levels = 0 if np.abs(q1k - gk).max() <= s.fb_direct_reach else levels
-    q0b, st2, _ = cv2.calcOpticalFlowPyrLK(
-        img, ref, q1k, back, winSize=win, maxLevel=back_levels,
-        criteria=criteria, flags=flags, minEigThreshold=s.min_eigen,
-    )
-    d = q0b - q0k
-    good = st2.ravel().astype(bool) & (d[:, 0] ** 2 + d[:, 1] ** 2 < s.fb_threshold**2)
-    return TrackResult(q1k[good].astype(np.float64), idx[good], len(idx))
+    forward = track_forward(ref_img, img, p0, affine, levels, settings, start, exposure)
+    return check_backward(forward, settings) if settings.forward_backward else forward.result
 
 
 EXPOSURE_FACTOR = 8  # reduction of the images compared by exposure_change
+
+
+# reduced pixel (i, j) covers the full-resolution pixels centred on f * (j, i) + (f - 1) / 2
+_TO_FULL = np.array([[EXPOSURE_FACTOR, 0.0, (EXPOSURE_FACTOR - 1) / 2.0],
+                     [0.0, EXPOSURE_FACTOR, (EXPOSURE_FACTOR - 1) / 2.0], [0.0, 0.0, 1.0]])
+_FROM_FULL = np.linalg.inv(_TO_FULL)
+
+
+@functools.lru_cache(maxsize=4)
+def _pixel_axes(size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Column (1 x w) and row (h x 1) pixel coordinates of an image of ``size = (w, h)`` (float32, read-only)."""
+    xs = np.arange(size[0], dtype=np.float32)[None, :]
+    ys = np.arange(size[1], dtype=np.float32)[:, None]
+    xs.flags.writeable = ys.flags.writeable = False
+    return xs, ys
 
 
 def reduce_for_exposure(image: np.ndarray) -> np.ndarray:
@@ -168,16 +235,11 @@ def exposure_change(ref_small: np.ndarray, cur_small: np.ndarray, affine: np.nda
     the sums over the pixels seen in both (unclipped). Area averaging makes the ratio insensitive to
     sub-pixel misalignment (about 0.05 % of noise); a sensor's exposure change is a gain.
     """
-    f = EXPOSURE_FACTOR
     size = (cur_small.shape[1], cur_small.shape[0])
     inv = np.linalg.inv(np.vstack([affine, [0.0, 0.0, 1.0]]))
-    # reduced pixel (i, j) covers the full-resolution pixels centred on f * (j, i) + (f - 1) / 2
-    off = (f - 1) / 2.0
-    to_full = np.array([[f, 0.0, off], [0.0, f, off], [0.0, 0.0, 1.0]])
-    m = (np.linalg.inv(to_full) @ inv @ to_full)[:2].astype(np.float32)
+    m = (_FROM_FULL @ inv @ _TO_FULL)[:2].astype(np.float32)
     mapped = cv2.warpAffine(ref_small, m, size, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
-    xs = np.arange(size[0], dtype=np.float32)[None, :]
-    ys = np.arange(size[1], dtype=np.float32)[:, None]
+    xs, ys = _pixel_axes(size)
     sx = m[0, 0] * xs + m[0, 1] * ys + m[0, 2]
     sy = m[1, 0] * xs + m[1, 1] * ys + m[1, 2]
     inside = (sx >= 1) & (sx <= size[0] - 2) & (sy >= 1) & (sy <= size[1] - 2)

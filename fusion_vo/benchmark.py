@@ -23,6 +23,7 @@ means the last quarter is no larger than the first.
 from __future__ import annotations
 
 import importlib.util
+import json
 import logging
 import os
 import resource
@@ -185,10 +186,18 @@ def current_rss_mb() -> float:
         return _rss_mb()
 
 
+def split_spec(spec: str) -> tuple[str, dict]:
+    """A frontend as the benchmark names it, ``"klt"`` or ``'klt:{"fb_skip_ratio": 0.9}'`` (a frontend and
+    its options as JSON), as ``(frontend, options)``."""
+    name, _, options = spec.partition(":")
+    return name, (json.loads(options) if options else {})
+
+
 def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, int, list, float, float]:
     """Frames per second of visual odometry over a recording (wall clock, decoding included), failures,
     the resident memory after each quarter of the frames [MB], the CPU time per frame [ms] and that of
-    the calling thread (the tracker) alone [ms]."""
+    the calling thread (the tracker) alone [ms]. ``frontend`` may carry options (:func:`split_spec`)."""
+    frontend, options = split_spec(frontend)
     rec = Recording(sequence)
     n = len(rec)
     quarter = max(n // 4, 1)
@@ -199,7 +208,8 @@ def time_run(sequence: str | Path, frontend: str, threads: int) -> tuple[float, 
             rss.append(round(current_rss_mb(), 1))
 
     cpu, own = time.process_time(), time.thread_time()
-    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads), progress=progress)
+    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=threads, frontend_options=options),
+                                 progress=progress)
     cpu, own = time.process_time() - cpu, time.thread_time() - own
     return (n / result.elapsed_s, sum(result.failures.values()) + len(result.skipped), rss, 1000 * cpu / n,
             1000 * own / n)
@@ -355,5 +365,8 @@ def run_benchmark(sequence: str | Path, frontends: list[str], baseline: Baseline
             out("")
             out("where the time goes, one thread, CPU time per frame:")
             for fe in frontends:
-                out(format_timing(time_frontend(seq, fe)))
+                name, options = split_spec(fe)
+                timing = time_frontend(seq, name, options=options)
+                timing.frontend = fe
+                out(format_timing(timing))
     return rows

@@ -64,3 +64,68 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
                   "klt, 1 thread |", "klt, 2 threads |"):
         assert f"| {label}" in table
+
+
+def test_a_variant_row_runs_the_frontend_with_its_options(short, monkeypatch):
+    """``bench_frontends.py --variant 'klt:{...}'``: the row's runs get those options (and bad ones are
+    one-line usage errors)."""
+    import sys
+    from pathlib import Path
+
+    import fusion_vo.benchmark as benchmark
+
+    seen = []
+    real = benchmark.run_visual_odometry
+    monkeypatch.setattr(benchmark, "run_visual_odometry",
+                        lambda rec, config, **kw: seen.append(config.frontend_options) or real(rec, config, **kw))
+    lines = []
+    rows = run_benchmark(short, ["klt", 'klt:{"fb_skip_ratio": 0.9}'], None, [1], repeats=1, max_frames=20,
+                         stages=False, out=lines.append)
+    assert [r.name for r in rows] == ["klt", 'klt:{"fb_skip_ratio": 0.9}'] and all(r.failed == 0 for r in rows)
+    assert seen == [{}, {"fb_skip_ratio": 0.9}]
+    monkeypatch.syspath_prepend(str(Path(BASELINE_SCRIPT).parent))
+    from bench_frontends import main as bench_main
+
+    for bad in ('klt:{"fb_skip_ratio": 2}', "klt:[1", 'bogus:{}'):
+        monkeypatch.setattr(sys, "argv", ["bench_frontends.py", "--variant", bad])
+        with pytest.raises(SystemExit) as exc:
+            bench_main()
+        assert exc.value.code == 2
+
+
+def test_klt_profile_times_every_stage(short, monkeypatch, capsys):
+    """``benchmarks/profile_klt.py``: every stage is reached (one forward pass and one fit per measured
+    frame), and the stages and the rest add up to the calling thread's total."""
+    import sys
+    from pathlib import Path
+
+    import frontends.direct as direct
+    import frontends.klt as klt
+    import frontends.tracking as tracking
+    import fusion_vo.odometry as odometry
+    import fusion_vo.recording.reader as reader
+
+    monkeypatch.syspath_prepend(str(Path(BASELINE_SCRIPT).parent))
+    import profile_klt
+
+    # the profile wraps these in place: put them back afterwards
+    for owner, name in [(tracking, "cv2"), (klt, "track_forward"), (klt, "check_backward"),
+                        (klt, "estimate_similarity"), (klt, "exposure_correction"), (klt.KltFrontend, "_detect"),
+                        (direct.DenseFallback, "verify"), (odometry.VisualOdometry, "finish"),
+                        (reader, "read_image")]:
+        monkeypatch.setattr(owner, name, getattr(owner, name))
+
+    monkeypatch.setattr(sys, "argv", ["profile_klt.py", "--sequence", str(short), "--frames", "25"])
+    assert profile_klt.main() == 0
+    rows = {}
+    for line in capsys.readouterr().out.splitlines():
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        if len(cells) == 5 and cells[1][:1].isdigit():
+            rows[cells[0]] = cells
+    assert int(rows["decode"][3]) == 25
+    assert int(rows["forward LK"][3]) == int(rows["similarity"][3]) >= 24
+    assert int(rows["LK"][3]) >= 2 * 24  # forward and backward passes
+    top = ["decode", "forward LK", "backward check", "similarity", "exposure", "new corners", "dense check",
+           "derotation, geometry"]
+    parts = sum(float(rows[k][1]) for k in top) + float(rows[next(k for k in rows if k.startswith("everything"))][1])
+    assert parts == pytest.approx(float(rows["all"][1]), abs=0.01)

@@ -318,3 +318,60 @@ def test_exposure_change_between_frames(kind, gain, offset):
     # measured with normalisation: < 0.01 px, < 0.0025 deg (without: up to 0.05 px, 0.03 deg)
     assert centre_error(m.matrix, truth) < 0.03
     assert abs(math.degrees(m.params[2]) - 1.5) < 0.005
+
+
+def test_feature_prepare_with_orb_is_safe_in_several_threads_at_once():
+    """prepare() runs in a pool of workers: with ORB descriptors each thread uses its own ORB object,
+    and frames prepared four at a time equal those prepared one after the other."""
+    from concurrent.futures import ThreadPoolExecutor
+    import threading
+
+    fe = make_frontend("features", {"descriptor": "orb"})
+    motion = similarity_about(*CENTRE, 3.0, 0.8, 1.0)
+    frames = [f for f, _ in sequence([motion] * 7)]
+    serial = [fe.prepare(f).described for f in frames]
+    barrier = threading.Barrier(4)
+
+    def work(frame):
+        barrier.wait(timeout=10)  # four threads inside prepare() together
+        return fe.prepare(frame).described, id(fe._thread_orb())
+
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        out = list(pool.map(work, frames[:4] * 2))
+    assert len({orb for _, orb in out}) == 4
+    assert id(fe._thread_orb()) not in {orb for _, orb in out}
+    for k, (got, _) in enumerate(out):
+        want = serial[k % 4]
+        assert len(got.desc) >= 20
+        np.testing.assert_array_equal(got.pts, want.pts)
+        np.testing.assert_array_equal(got.desc, want.desc)
+
+
+def test_klt_forward_backward_check_only_when_the_forward_tracks_disagree(monkeypatch):
+    """With ``fb_skip_ratio`` the backward pass is skipped when the forward tracks agree on one motion,
+    and runs (dropping the points that do not come back) when a part of the frame moves on its own."""
+    import frontends.klt as klt
+
+    calls = []
+    check = klt.check_backward
+    monkeypatch.setattr(klt, "check_backward", lambda forward, lk: calls.append(1) or check(forward, lk))
+    truth = similarity_about(*CENTRE, 6.0, -4.0, 1.5)
+    f0, f1 = pair(truth)
+    fast = measure("klt", [f0, f1], {"fb_skip_ratio": 0.9})[1]
+    assert fast.ok and not calls
+    assert centre_error(fast.matrix, truth) < 0.1
+    assert abs(math.degrees(fast.params[2]) - 1.5) < 0.01
+    full = measure("klt", [f0, f1])[1]
+    assert full.ok and calls  # the default always checks
+    # the left half of the second frame slides 9 px more: a third or more of the tracks disagree
+    g1 = f1.copy()
+    g1[:, : WIDTH // 2] = np.roll(f1, 9, axis=0)[:, : WIDTH // 2]
+    calls.clear()
+    measure("klt", [f0, g1], {"fb_skip_ratio": 0.9, "dense_fallback": False})
+    assert calls
+
+
+@pytest.mark.parametrize("ratio", [0.0, -0.5, 1.5])
+def test_klt_fb_skip_ratio_is_checked(ratio):
+    with pytest.raises(ValueError, match="fb_skip_ratio"):
+        KltConfig(fb_skip_ratio=ratio)
