@@ -51,6 +51,7 @@ from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro
 from fusion_vo.sensors.sync import rate_delay  # noqa: E402
 
 BINS = 50.0  # [s] error-over-time bins
+COURSE_BIN = 25.0  # [s] heading-against-GPS-course bins
 
 
 def runs(mask: np.ndarray) -> list[tuple[int, int]]:
@@ -70,6 +71,29 @@ def dead_reckoning(odom, gyro, bias: float, delay: float, speed_scale: float = 1
     x = np.concatenate([[0.0], np.cumsum(dist * np.cos(mid))])
     y = np.concatenate([[0.0], np.cumsum(dist * np.sin(mid))])
     return PoseData(t, np.stack([x, y, yaw], axis=1))
+
+
+def gps_course(t_gps: np.ndarray, enu: np.ndarray, half: int = 4, min_speed: float = 0.5):
+    """Times and heading [rad] of the GPS track where it moves faster than ``min_speed`` [m/s].
+
+    The fixes are averaged over 5 (2 s at 2.5 Hz), then differenced over ``2 half`` fixes (3.2 s): with
+    the fixes' ~0.9 m scatter, one bin of the course is good to a few degrees, not to one.
+    """
+    e = np.convolve(enu[:, 0], np.ones(5) / 5.0, mode="same")
+    n = np.convolve(enu[:, 1], np.ones(5) / 5.0, mode="same")
+    de, dn = e[2 * half:] - e[:-2 * half], n[2 * half:] - n[:-2 * half]
+    t = t_gps[half:-half]
+    speed = np.hypot(de, dn) / (t_gps[2 * half:] - t_gps[:-2 * half])
+    keep = (speed > min_speed) & (np.arange(len(t)) >= 2) & (np.arange(len(t)) < len(t) - 2)
+    return t[keep], np.arctan2(dn, de)[keep]
+
+
+def heading_departure(t: np.ndarray, angle: np.ndarray, course_t: np.ndarray, course: np.ndarray) -> np.ndarray:
+    """GPS course minus a heading source at the course's times [rad], with the source's constant offset
+    (its unknown north) taken as the circular mean over the first 60 s."""
+    dev = np.angle(np.exp(1j * (course - np.interp(course_t, t, angle))))
+    first = course_t - course_t[0] < 60.0
+    return np.angle(np.exp(1j * (dev - np.angle(np.mean(np.exp(1j * dev[first]))))))
 
 
 def rms(err: np.ndarray) -> float:
@@ -177,6 +201,24 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  AHRS heading minus the gyro's integral: largest {np.degrees(np.abs(dev).max()):.0f} deg "
               f"(at {ht[np.argmax(np.abs(dev))] - t0:.0f} s)")
 
+    print("3b. which heading is right where: each source against the GPS course (speed > 0.5 m/s)")
+    course_t, course = gps_course(t_gps, enu)
+    sources = {"gyro (standstill bias)": (gyro.t, cumulative_angle(gyro) - bias0 * (gyro.t - gyro.t[0])),
+               "wheels (twist yaw rate)": (odom.t - delay, np.concatenate([[0.0], np.cumsum(np.diff(odom.t) * odom.wz[:-1])]))}
+    if heading is not None:
+        sources["AHRS"] = (ht, yaw)
+    departures = {name: heading_departure(tt, ang, course_t, course) for name, (tt, ang) in sources.items()}
+    edges = np.arange(0.0, course_t[-1] - t0 + COURSE_BIN, COURSE_BIN)
+    print(f"  median of (GPS course - source) per {COURSE_BIN:.0f} s [deg], each source's offset set on the first 60 s")
+    print(f"  {'source':26s} " + " ".join(f"{int(e):>4d}" for e in edges[:-1]) + "   |dev| <= 10 deg before / after 190 s")
+    for name, dev in departures.items():
+        tt = course_t - t0
+        med = [np.degrees(np.median(dev[(tt >= a) & (tt < b)])) if np.any((tt >= a) & (tt < b)) else np.nan
+               for a, b in zip(edges[:-1], edges[1:])]
+        early, late = tt < 190.0, tt >= 190.0
+        share = [100.0 * np.mean(np.abs(np.degrees(dev[m])) <= 10.0) for m in (early, late)]
+        print(f"  {name:26s} " + " ".join(f"{v:4.0f}" for v in med) + f"   {share[0]:3.0f} % / {share[1]:3.0f} %")
+
     print("4. dead-reckoning baselines (odometry speed, gyro heading), RMS against GPS [m]")
     biases = np.linspace(-0.0008, 0.0004, 25)
     scan = [rms(gps_errors(dead_reckoning(odom, gyro, b, delay), t_gps, enu)) for b in biases]
@@ -207,19 +249,23 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {'(filter sigma)':26s} " + " ".join(f"{sf[i]:16.4f}" for i in idx))
     print("  (filtered/smoothed; the standstill median is " f"{bias0:+.5f})")
 
-    print("6. error against GPS over time [m], mean per 50 s bin (default configuration, gyro only)")
-    result = fuse(base, "all", FusionConfig())
+    print("6. error against GPS over time [m], mean per 50 s bin (default configuration)")
     tracks = {"dead reckoning (standstill bias)": dead_reckoning(odom, gyro, bias0, delay)}
-    tracks.update({k: result.trajectories[k] for k in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")})
+    for label, streams in (("gyro + AHRS", SensorStreams(odom=odom, imu=imu)), ("gyro only", base)):
+        result = fuse(streams, "all", FusionConfig())
+        tracks.update({f"{label}: {k}": result.trajectories[k] for k in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")})
+        for note in result.notes:
+            if "inconsistent" in note:
+                print(f"  {label}: {note}")
     edges = np.arange(0.0, t_gps[-1] - t_gps[0] + BINS, BINS)
-    print(f"  {'track':34s} {'RMS':>5s} " + " ".join(f"{int(e):>5d}" for e in edges[:-1]))
+    print(f"  {'track':38s} {'RMS':>5s} " + " ".join(f"{int(e):>5d}" for e in edges[:-1]))
     for name, trk in tracks.items():
         inside = (t_gps >= trk.t[0]) & (t_gps <= trk.t[-1])
         err = gps_errors(trk, t_gps, enu)
         tt = t_gps[inside][: len(err)] - t_gps[0]
         bins = [float(np.mean(err[(tt >= a) & (tt < b)])) if np.any((tt >= a) & (tt < b)) else np.nan
                 for a, b in zip(edges[:-1], edges[1:])]
-        print(f"  {name:34s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
+        print(f"  {name:38s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
     return 0
 
 

@@ -17,9 +17,11 @@ parking lot: IMU at 30 Hz, wheel odometry at 10 Hz, GPS at 2.5 Hz). The script
 The GPS fixes themselves have about 0.9 m standard deviation (the bag's covariance), so errors of a
 metre or two are at the level of the reference. The AHRS heading of this IMU (a Microstrain 3DM-GX2
 that robot_localization calls "slightly broken") strays from the gyro's by up to about 35 degrees in
-the second half of the drive (a heading-dependent, hard-iron-like error); the backends' consistency
-monitor finds it contradicting the gyro and the wheels and drops it for the whole log (it prints a
-note), so both variants fuse the wheels with the gyro. The Husky is skid-steered: its odometry reports about
+the second half of the drive (a heading-dependent, hard-iron-like error; against the GPS course the
+gyro is the right one); the backends' consistency monitor finds it contradicting the gyro and the
+wheels from 180 s on and drops it there (it prints a note), keeping its first three minutes, whose
+absolute heading pins the gyro's bias before the only standstill. The "gyro only" variant shows what
+the tracks are without it. The Husky is skid-steered: its odometry reports about
 four fifths of the turn rate the gyro measures, with an error that persists over a turn (the
 backends model it as correlated, not white), and it is stamped about 0.39 s after the gyro, which
 batch fusion estimates from the two yaw rates and corrects (it prints a note).

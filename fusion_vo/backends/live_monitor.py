@@ -5,7 +5,8 @@ stack cannot wait for the end: :class:`LiveHeadingMonitor` keeps the node interv
 ``15 * monitor_window`` seconds (the longest window the check uses), runs the same check on them every
 ``monitor_window / 2`` seconds of data, and a component the check drops in the newest interval is
 dropped from the intervals that follow until a later check no longer drops it there. The AHRS heading,
-once dropped, stays dropped (its offset is no longer known), as in the batch check. Each span in which
+once dropped, stays dropped (its offset is no longer known; the batch check, which sees the whole
+recording, may trust it again where its absolute heading agrees). Each span in which
 a component was dropped becomes an :class:`~fusion_vo.backends.monitor.Episode`.
 
 Decisions only use data up to the interval they are applied to, so they can differ from the batch

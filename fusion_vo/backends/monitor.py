@@ -21,8 +21,10 @@ sources above it, the one whose removal leaves the others most consistent (their
 their own mean within its quantile) is dropped in that window, so one liar cannot condemn two honest
 streams. With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
 yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
-judged. An absolute heading (the AHRS) caught drifting anywhere is dropped for the whole recording:
-its offset is no longer known.
+judged. An absolute heading (the AHRS) is dropped per span too, but after a span in which it
+disagreed it is trusted again only where its absolute heading still agrees with the heading carried
+from where it was last trusted (:func:`_readmit_absolute`): an offset it picked up meanwhile does not
+show in its heading changes.
 
 The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
 (:class:`~fusion_vo.backends.streaming.StreamingFusion`) runs it causally over a sliding window
@@ -231,10 +233,13 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
                 bad[s][a:b] = True
                 peak[s][a:b] = np.maximum(peak[s][a:b], nis)
                 against[s][a:b] = ", ".join(others)
+    if "ahrs" in bad and bad["ahrs"].any():
+        _readmit_absolute(iv, bad, peak["ahrs"], against["ahrs"], sources, cfg, release)
     episodes: list[Episode] = []
     for s in names:
         checked = np.count_nonzero(sources[s][0])
-        fraction = 0.0 if s == "ahrs" else cfg.monitor_whole_fraction
+        # the AHRS's quiet runs after a drop are judged on its absolute heading (_readmit_absolute) instead
+        fraction = 1.0 if s == "ahrs" else cfg.monitor_whole_fraction
         if checked and np.count_nonzero(bad[s]) > fraction * checked:
             # a stream that contradicts the others most of the time is not trusted in its quiet windows either
             who = next(x for x in against[s] if x)
@@ -273,6 +278,69 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes
+
+
+def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sources: dict, cfg: FusionConfig,
+                      release: float) -> None:
+    """After a span in which the AHRS heading was dropped, keep it again only where its *absolute*
+    heading still agrees (in place on ``bad["ahrs"]`` and the AHRS's ``peak`` and ``against`` per interval).
+
+    The windowed check compares heading *changes*: an AHRS whose offset moved during a dropped span
+    (a magnetic disturbance, a heading-dependent error) agrees again in changes afterwards while its
+    heading stays wrong by the offset it picked up. Each later run of intervals the windowed check
+    kept is compared, through its mean offset against the relative heading (the bias-corrected gyro
+    where it is usable and not dropped, else the wheels', else the camera's, summed since the AHRS was
+    last trusted; a dropout of the AHRS itself does not matter, its heading is absolute),
+    with the offset at the end of the last trusted run (at first, the AHRS's first sample, which sets
+    the heading offset); the variance is the AHRS's noise and offset
+    walk plus the relative heading's noise and ``monitor_bias_sigma`` over the gap. A run is kept only
+    below the 90 % quantile (``release``, as a dropped component's comeback elsewhere), and becomes
+    the new anchor; otherwise it is dropped too (measured on robot_localization's Husky log: the AHRS
+    departs from the gyro and from the GPS course by 20-40 degrees from 190 s on, and its heading
+    *changes* agree again in parts of that span).
+    """
+    T = iv.t
+    bad_a = bad["ahrs"]
+    ok_a = sources["ahrs"][0]
+    K = len(bad_a)
+    ref = np.zeros(K)
+    ref_var = np.full(K, np.inf)
+    for name in ("camera", "wheel", "gyro"):  # later ones take precedence; a span dropped from one is not used
+        if name in sources:
+            ok, ang, var = sources[name]
+            use = ok & ~bad[name]
+            ref = np.where(use, ang, ref)
+            ref_var = np.where(use, var, ref_var)
+    # a node's offset: the AHRS heading (absolute: the recording's heading offset removed) minus the
+    # relative heading summed from the start; an AHRS dropout does not break it
+    rel = np.concatenate([[0.0], np.cumsum(ref)])
+    rel_var = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(ref_var), ref_var, 0.0))])
+    offset = iv.ahrs_yaw - rel
+    runs = _runs(ok_a & ~bad_a)
+    if not runs:
+        return
+    # the heading offset is set from the AHRS's first samples: its offset is known there
+    start = int(np.argmax(iv.ahrs_ok))
+    anchor = (start, start)
+    for a, b in runs:
+        if a == start:
+            anchor = (a, b)
+            continue
+        if not np.isfinite(ref_var[anchor[1]:a]).all():
+            # no relative heading over part of the gap: the offset cannot be carried over
+            bad_a[a:b] = True
+            continue
+        gap = float(T[a] - T[anchor[1]])
+        diff = float(np.mean(np.angle(np.exp(1j * (offset[a:b + 1] - offset[anchor[1]])))))
+        var = (2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * gap
+               + float(rel_var[a] - rel_var[anchor[1]]) + (cfg.monitor_bias_sigma * gap) ** 2)
+        nis = diff**2 / var
+        if nis <= release:
+            anchor = (a, b)
+            continue
+        bad_a[a:b] = True
+        peak[a:b] = np.maximum(peak[a:b], nis)
+        against[a:b] = ", ".join(n for n in ("gyro", "wheel", "camera") if n in sources) + " (absolute heading)"
 
 
 def drop_visual_increments(iv, keep: np.ndarray) -> None:

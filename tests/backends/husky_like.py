@@ -2,7 +2,9 @@
 
 The robot drives, stops for a long while, and drives again. Its own odometry reports the yaw rate
 ``yaw_scale`` times the true one (skid steering), the gyro has a constant bias, and the AHRS heading
-(when asked for) strays from the truth by up to ``ahrs_drift`` [rad] in the middle of the recording.
+(when asked for) strays from the truth by up to ``ahrs_drift`` [rad] in the middle of the recording;
+with ``ahrs_knots = ((t, offset), ...)`` its offset also follows these knots, linear in between and
+constant beyond them (a magnetic disturbance that stays, or goes away).
 With ``scale_scatter`` the reported turn rate's scale also wanders, as the effective track width of a
 skid-steered base does from turn to turn: ``yaw_scale (1 + scale_scatter g(t))`` with ``g`` a unit
 first-order Gauss–Markov process of correlation time ``scatter_time`` [s]. With ``corners`` the
@@ -15,7 +17,7 @@ from fusion_vo.measurements import ImuData, PoseData, TwistData
 
 
 def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004, ahrs_drift=None, seed=0,
-               scale_scatter=0.0, scatter_time=5.0, corners=False, gyro_noise=0.003):
+               scale_scatter=0.0, scatter_time=5.0, corners=False, gyro_noise=0.003, ahrs_knots=None):
     """``(odom, imu, truth)``: twist at 10 Hz, IMU at 30 Hz, truth at 100 Hz."""
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, duration, 0.01)
@@ -49,6 +51,9 @@ def husky_like(duration=90.0, stop=(30.0, 60.0), yaw_scale=0.75, gyro_bias=0.004
     orientation = None
     if ahrs_drift is not None:
         heading = np.interp(ti, t, yaw) + ahrs_drift * np.sin(np.pi * ti / duration) ** 2 + 0.01 * rng.standard_normal(len(ti))
+        if ahrs_knots is not None:  # ((t, offset), ...): the heading's offset, linear between the knots
+            knots = np.asarray(ahrs_knots, dtype=float)
+            heading += np.interp(ti, knots[:, 0], knots[:, 1])
         orientation = np.stack([np.cos(heading / 2), 0 * ti, 0 * ti, np.sin(heading / 2)], axis=1)
     imu = ImuData(ti, gyro, accel, orientation, noise={"gyroscope_noise_density": gyro_noise})
     return odom, imu, truth

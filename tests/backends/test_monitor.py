@@ -58,6 +58,38 @@ def test_gyro_bias_step_is_dropped_from_the_step_on():
         assert end < 0.5 and rms < 0.3, (name, end, rms)
 
 
+def test_ahrs_is_kept_before_its_offset_moves_and_not_trusted_again_after():
+    """An AHRS whose heading offset moves by 0.5 rad between 60 and 65 s and stays there (its heading
+    *changes* agree again afterwards): it is dropped from the move to the end, not before, so its good
+    first minute pins the gyro's bias ahead of the stop at 90 s."""
+    odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
+                                  ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5)))
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    eps = _episodes(result, "AHRS heading")
+    assert len(eps) == 1 and 54.0 <= eps[0]["start"] <= 61.0 and eps[0]["end"] >= truth.t[-1] - 1.0, eps
+    # without its first minute (the AHRS dropped for the whole recording) the gyro's bias is found only at the stop
+    gyro_only = fuse(SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=None)), "all", FusionConfig())
+    for name in FUSED:
+        _, rms = position_errors(result.trajectories[name], truth)
+        _, rms_gyro = position_errors(gyro_only.trajectories[name], truth)
+        assert rms < 0.35 and rms < 0.6 * rms_gyro, (name, rms, rms_gyro)
+
+
+def test_ahrs_is_trusted_again_once_its_heading_is_right_again():
+    """The same AHRS offset of 0.5 rad from 60-65 s, gone again from 80-85 s (and an AHRS dropout at
+    100-102 s): the AHRS is dropped only while it is off, the dropout does not end its use."""
+    odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
+                                  ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5), (80.0, 0.5), (85.0, 0.0)))
+    orientation = imu.orientation.copy()
+    orientation[(imu.t >= 100.0) & (imu.t < 102.0)] = np.nan
+    imu = dataclasses.replace(imu, orientation=orientation)
+    result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
+    eps = _episodes(result, "AHRS heading")
+    assert eps and 54.0 <= eps[0]["start"] <= 61.0 and 84.0 <= eps[-1]["end"] <= 95.0, eps
+    _, rms = position_errors(result.trajectories["ekf"], truth)
+    assert rms < 0.35, rms
+
+
 def test_monitor_options_are_checked():
     for bad in ({"monitor_window": 0.0}, {"monitor_probability": 1.0}, {"monitor_bias_sigma": -1.0}):
         try:

@@ -7,7 +7,8 @@ odometry's yaw rate there is about seven times the gyro's: the monitor must drop
 
 Husky (test1.bag, 395 s, 359 m): wheel odometry and IMU fused (the GPS is not), scored against the GPS
 fixes after SE(2) alignment. Raw odometry is 6.9 m RMS, dead reckoning with the gyro whose bias is
-taken from the whole log's standstills 2.7 m.
+taken from the whole log's standstills 2.7 m; the fused tracks 2.5 m (the IMU's AHRS heading kept
+where it agrees with the gyro and the wheels, its first three minutes).
 """
 
 import json
@@ -94,7 +95,12 @@ def test_husky_against_gps(tmp_path):
         err = gps_errors(PoseData(t, np.column_stack([xy, yaw])), t_gps, enu)
         rms[name] = float(np.sqrt(np.mean(err**2)))
     assert rms["wheel"] > 6.0, rms
-    assert rms["gtsam"] < 3.0 and rms["ekf_smoothed"] < 3.7, rms
-    assert rms["ekf"] < rms["wheel"] and rms["gtsam_online"] < rms["wheel"], rms
+    # the filters meet their 3.5 m target; the smoothers are short of their 2.5 m one (2.52 m measured)
+    assert rms["ekf"] < 3.5 and rms["gtsam_online"] < 3.5, rms
+    assert rms["gtsam"] < 2.7 and rms["ekf_smoothed"] < 2.7, rms
     summary = json.loads((out / "summary.json").read_text())
-    assert [e["component"] for e in summary["fusion"]["inconsistent"]] == ["AHRS heading"]
+    episodes = summary["fusion"]["inconsistent"]
+    assert [e["component"] for e in episodes] == ["AHRS heading"], episodes
+    # the AHRS departs from the gyro and the GPS course from about 190 s on; its first three minutes are kept
+    t0 = float(t_gps[0])
+    assert 150.0 < episodes[0]["start"] - t0 < 195.0 and episodes[0]["end"] - t0 > 390.0, episodes
