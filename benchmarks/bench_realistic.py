@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import baseline_opencv  # noqa: E402
 
 from frontends.base import FrameMotion, MotionStatus  # noqa: E402
+from fusion_vo.errors import InputError  # noqa: E402
 from fusion_vo.geometry import se2  # noqa: E402
 from fusion_vo.geometry.ground import GroundGeometry  # noqa: E402
 from fusion_vo.measurements import PoseData  # noqa: E402
@@ -232,7 +233,11 @@ def main(argv: list[str] | None = None) -> int:
         if args.fusion:
             import fusion_vs_best
 
-            r = fusion_vs_best.compare(seq, root / f"run_{name}")
+            try:
+                r = fusion_vs_best.compare(seq, root / f"run_{name}")
+            except InputError as exc:  # print it and go on with the next recording
+                print(f"  fused (KLT, default configuration): failed: {exc}", flush=True)
+                continue
             print("  fused (KLT, default configuration), ATE mm: "
                   + ", ".join(f"{k} {v:.2f}" for k, v in r["ate"].items()), flush=True)
     return 0

@@ -60,6 +60,9 @@ class DirectConfig(ConfigMixin):
         Finest pyramid level used (0: full resolution of the rectified image; 1: half).
     iterations : int
         Gauss-Newton iterations per level (fewer when the update falls below ``epsilon``).
+    finest_iterations : int or None
+        Gauss-Newton iterations on the finest level (``None``: ``iterations``); the coarser levels
+        leave it a fraction of a pixel to correct.
     epsilon : float
         Convergence threshold on the largest point displacement of an update [px of the level].
     huber : float
@@ -100,6 +103,7 @@ class DirectConfig(ConfigMixin):
     min_level_size: int = 24
     finest_level: int = 0
     iterations: int = 30
+    finest_iterations: int | None = None
     epsilon: float = 0.005
     huber: float = 1.0
     smoothing: float = 1.0
@@ -119,8 +123,9 @@ class DirectConfig(ConfigMixin):
     def __post_init__(self) -> None:
         if self.min_level_size < 8:
             raise ValueError("min_level_size must be at least 8")
-        if self.finest_level < 0 or self.iterations < 1:
-            raise ValueError("finest_level must be >= 0 and iterations >= 1")
+        if self.finest_level < 0 or self.iterations < 1 or (self.finest_iterations is not None
+                                                             and self.finest_iterations < 1):
+            raise ValueError("finest_level must be >= 0 and iterations and finest_iterations >= 1")
         if not 0.0 < self.min_overlap <= 1.0:
             raise ValueError("min_overlap must lie in (0, 1]")
         if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
@@ -225,19 +230,25 @@ class _Level:
             h, w = img.shape
             gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
             gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-            inner = np.zeros((h, w), bool)
             bx = max(border, int(round(0.5 * (1.0 - region) * w)))
             by = max(border, int(round(0.5 * (1.0 - region) * h)))
-            inner[by : h - by, bx : w - bx] = True
-            idx = np.flatnonzero(inner)
-            if len(idx) > max_pixels:
-                mag = (gx * gx + gy * gy).ravel()[idx]
+            sw, sh = max(w - 2 * bx, 0), max(h - 2 * by, 0)
+            n_inner = sw * sh
+            if n_inner > max_pixels:
+                # the inner pixels in row-major order, as flat indices of the sub-image
+                sgx, sgy = gx[by : h - by, bx : w - bx], gy[by : h - by, bx : w - bx]
+                mag = cv2.add(cv2.multiply(sgx, sgx), cv2.multiply(sgy, sgy)).ravel()
                 # the gradient threshold that keeps about max_pixels, from a sample of at most 16384 pixels
-                step = max(1, len(idx) // 16384)
+                step = max(1, n_inner // 16384)
                 sample = mag[::step]
-                keep = len(sample) - max(1, (max_pixels * len(sample)) // len(idx))
+                keep = len(sample) - max(1, (max_pixels * len(sample)) // n_inner)
                 limit = np.partition(sample, keep)[keep]
-                idx = idx[mag >= limit][:max_pixels] if step == 1 else idx[mag >= limit]
+                sub = np.flatnonzero(mag >= limit)
+                if step == 1:
+                    sub = sub[:max_pixels]
+            else:
+                sub = np.arange(n_inner)
+            idx = (sub // max(sw, 1) + by) * w + (sub % max(sw, 1) + bx)
             gxf, gyf = gx.ravel()[idx], gy.ravel()[idx]
             xf = (idx % w).astype(np.float32) - np.float32(self.centre[0])
             yf = (idx // w).astype(np.float32) - np.float32(self.centre[1])
@@ -429,7 +440,8 @@ class DirectAligner:
         valid_frac = 0.0
         reach = math.hypot(w, h) / 2
         huber = np.float32(cfg.huber)
-        for _ in range(cfg.iterations):
+        iterations = cfg.iterations if not final or cfg.finest_iterations is None else cfg.finest_iterations
+        for _ in range(iterations):
             # warp the current frame back: sample I1 at W(x) for every reference pixel x (float32 throughout:
             # the sums of the 4 x 4 normal equations lose nothing that matters at these pixel counts)
             i1 = _sample(cur.image, m, xy, centre)
@@ -501,17 +513,24 @@ def _correlation_inflation(values: np.ndarray, idx: np.ndarray, shape: tuple[int
 
     The residual image's autocorrelation is modelled as Gaussian, ``C(d) = ρ^(d²)`` along each axis
     (smoothing and interpolation make it so), with ``ρ`` its measured lag-one correlation; ``κ`` is the
-    number of pixels that carry the information of one independent sample.
+    number of pixels that carry the information of one independent sample. ``values`` (NaN: not used)
+    belong to the pixels of flat indices ``idx`` (increasing) of an image of ``shape``; the lag-one pairs
+    are found among them by a sorted search rather than on the whole image.
     """
-    img = np.full(shape[0] * shape[1], np.nan, np.float32)
-    img[idx] = values
-    img = img.reshape(shape)
+    h, w = shape
+    idx = np.asarray(idx)
     kappa = 1.0
-    for a, b in ((img[:, 1:], img[:, :-1]), (img[1:, :], img[:-1, :])):
-        ok = np.isfinite(a) & np.isfinite(b)
+    for lag in (1, w):  # right neighbour, lower neighbour
+        j = np.searchsorted(idx, idx + lag)
+        j = np.minimum(j, len(idx) - 1)
+        pair = idx[j] == idx + lag
+        if lag == 1:
+            pair &= (idx % w) != w - 1  # not across a row end
+        x, y = values[pair], values[j[pair]]
+        ok = np.isfinite(x) & np.isfinite(y)
         if np.count_nonzero(ok) < 16:
             continue
-        x, y = a[ok].astype(np.float64), b[ok].astype(np.float64)
+        x, y = x[ok].astype(np.float64), y[ok].astype(np.float64)
         rho = float(np.dot(x, y) / max(math.sqrt(float(np.dot(x, x)) * float(np.dot(y, y))), 1e-12))
         rho = min(max(rho, 0.0), 0.98)
         d = np.arange(1, 64, dtype=np.float64)
