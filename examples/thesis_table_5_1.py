@@ -28,7 +28,7 @@ interval. With ``e_k = |v_k - u_k|`` (Euclidean norm):
 
 Run::
 
-    python examples/thesis_table_5_1.py [--out DIR] [--seed N] [--quick] [--realistic]
+    python examples/thesis_table_5_1.py [--out DIR] [--seed N] [--quick] [--realistic] [--textures gravel,grass]
 
 ``--quick`` uses the gravel floor only and a circle of 0.1 m radius. ``--realistic`` renders through the
 independent camera (``examples/common.py``: a barrel lens the estimator only approximates, defocus, motion
@@ -81,8 +81,12 @@ def velocity_errors(vo: OdometryResult, gt: PoseData) -> dict:
 
 def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
+    parser.add_argument("--textures", default=",".join(TEXTURES), help="comma-separated floor photographs")
     args = parser.parse_args(argv)
-    textures = TEXTURES[:1] if args.quick else TEXTURES
+    textures = [t for t in args.textures.split(",") if t]
+    if not textures or any(t not in TEXTURES for t in textures):
+        parser.error(f"--textures takes some of {', '.join(TEXTURES)}")
+    textures = textures[:1] if args.quick else textures
     circle = QUICK_CIRCLE if args.quick else {}
     rows = []
     with output_dir(args.out) as out:
