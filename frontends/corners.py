@@ -216,5 +216,6 @@ def scale_detector(settings: DetectorSettings, image: np.ndarray) -> DetectorSet
                        max_corners=int(round(settings.max_corners * area)))
     if settings.method == "fast":
         ratio = min(1.0, max(0.25, image_contrast(image) / REFERENCE_CONTRAST))
-        changes["fast_threshold"] = max(5, min(int(settings.fast_threshold), int(round(settings.fast_threshold * ratio))))
+        threshold = int(round(settings.fast_threshold * ratio))
+        changes["fast_threshold"] = max(5, min(int(settings.fast_threshold), threshold))
     return dataclasses.replace(settings, **changes) if changes else settings

@@ -311,7 +311,8 @@ class FeatureFrontend:
 
     # -------------------------------------------------------------- pipeline
     def _describe(self, img: np.ndarray, t: float, orb=None) -> _Frame:
-        pts = detect_corners(img, scale_detector(self._detector, img) if self.config.adaptive_detector else self._detector)
+        settings = scale_detector(self._detector, img) if self.config.adaptive_detector else self._detector
+        pts = detect_corners(img, settings)
         if self.config.region < 1.0:
             h, w = img.shape
             half = 0.5 * self.config.region * np.array([w, h], np.float32)
