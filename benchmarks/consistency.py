@@ -24,8 +24,12 @@ covariance of every sensor is dominated by the constant-twist model's process no
 stated noise is ten times too small would not show; against the other sensors it does. For a
 consistent sensor model the NIS is chi-square with the block's size as degrees of freedom (camera and
 wheels 3, gyro 1) and its seed-average at one time lies in ``[χ²ₘₙ(0.025), χ²ₘₙ(0.975)] / N``. Above the
-band the sensor's stated noise is too small for what it measures; below, too large. The factor graph
-has no innovations (it weighs every factor at the solution), so the NIS is the filter's.
+band the sensor's stated noise is too small for what it measures; below, too large.
+
+The factor graph has no innovations; its NIS is each sensor's residual at the solution normalised by the
+residual's own covariance, ``rᵀ (R - H P Hᵀ)⁻¹ r`` (:mod:`fusion_vo.backends.residuals`; the same
+leave-one-out statistic, against every other measurement of the drive), for GTSAM batch at its solution
+and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, which changes no estimate).
 
 Usage::
 
@@ -133,35 +137,51 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     return {k: (m, np.array(v)) for k, (m, v) in out.items()}
 
 
+#: the backends whose per-sensor NIS is printed
+NIS_BACKENDS = ("ekf", "gtsam", "gtsam_online")
+
+
+def with_residuals(config: FusionConfig | None) -> FusionConfig:
+    """``config`` with the factor graph's per-sensor residuals on (no estimate changes)."""
+    config = config or FusionConfig()
+    return dataclasses.replace(config, graph=dataclasses.replace(config.graph, residuals=True))
+
+
 def run(seeds: int, duration: float, sensors=("camera", "wheel", "imu"), config: FusionConfig | None = None,
         nis: dict | None = None) -> dict[str, np.ndarray]:
     """Per backend, the NEES of every seed on a common time grid: (seeds, T).
 
-    ``nis``, when given, is filled with the EKF's per-sensor NIS on the same grid: sensor ->
-    ``(dof, (seeds, T) array)`` (the block tested at or just before each grid time).
+    ``nis``, when given, is filled with each backend's per-sensor NIS on the same grid: backend (``ekf``,
+    ``gtsam``, ``gtsam_online``) -> sensor -> ``(dof, (seeds, T) array)`` (the measurement tested at or just
+    before each grid time).
     """
     grid = np.arange(1.0, duration - 0.5, 0.25)
     out: dict[str, list] = {name: [] for name in FUSED}
-    per_sensor: dict[str, tuple[int, list]] = {}
+    per_sensor: dict[tuple[str, str], tuple[int, list]] = {}
     for seed in range(seeds):
         s = synthetic_streams(drawn_options(duration, seed), seed=seed)
         wheel = dataclasses.replace(s.wheel, config=dataclasses.replace(s.wheel.config, radius_sigma=RADIUS_SIGMA))
         streams = SensorStreams(visual=s.visual, wheel=wheel, imu=s.imu, camera_height=s.camera_height,
                                 camera_height_sigma=HEIGHT_SIGMA)
-        result = fuse(streams.select(list(sensors)), "all", config or FusionConfig())
+        result = fuse(streams.select(list(sensors)), "all", config if nis is None else with_residuals(config))
         for name in FUSED:
             track = result.trajectories[name]
             nees = nees_track(track, result.covariances[name], s.truth)
             out[name].append(np.interp(grid + track.t[0], track.t, nees))
         if nis is None:
             continue
-        for sensor, (dof, rows) in ekf_nis(streams.select(list(sensors)), config or FusionConfig()).items():
-            if len(rows) < 2:
-                continue
-            at = np.clip(np.searchsorted(rows[:, 0], grid + track.t[0], side="right") - 1, 0, len(rows) - 1)
-            per_sensor.setdefault(sensor, (dof, []))[1].append(rows[at, 1])
+        found = {"ekf": ekf_nis(streams.select(list(sensors)), config or FusionConfig())}
+        found.update(result.residuals)
+        for backend, table in found.items():
+            for sensor, (dof, rows) in table.items():
+                if len(rows) < 2:
+                    continue
+                at = np.clip(np.searchsorted(rows[:, 0], grid + track.t[0], side="right") - 1, 0, len(rows) - 1)
+                per_sensor.setdefault((backend, sensor), (dof, []))[1].append(rows[at, 1])
     if nis is not None:
-        nis.update({k: (m, np.array(v)) for k, (m, v) in per_sensor.items() if len(v) == seeds})
+        for (backend, sensor), (m, v) in per_sensor.items():
+            if len(v) == seeds:
+                nis.setdefault(backend, {})[sensor] = (m, np.array(v))
     return {k: np.array(v) for k, v in out.items()}
 
 
@@ -191,17 +211,23 @@ def main(argv=None) -> int:
         inside = float(np.mean((avg >= lo) & (avg <= hi)))
         verdict = "consistent" if lo <= mean <= hi else ("overconfident" if mean > hi else "pessimistic")
         print(f"  {name:14s} {mean:10.2f} {float(np.nanmedian(avg)):8.2f} {100 * inside:7.0f} %  {verdict}")
-    print("NIS per sensor (EKF blocks against the prediction updated with the other sensors), seed-average "
-          "against its 95 % band")
-    print(f"  {'sensor':14s} {'dof':>4s} {'mean NIS':>9s} {'median':>8s} {'in band':>8s}  {'band':>14s}  verdict")
-    for sensor, (dof, v) in nis.items():
-        avg = np.nanmean(v, axis=0)
-        mean = float(np.nanmean(avg))
-        s_lo, s_hi = band(dof, n)
-        inside = float(np.mean((avg >= s_lo) & (avg <= s_hi)))
-        verdict = "consistent" if s_lo <= mean <= s_hi else ("overconfident" if mean > s_hi else "pessimistic")
-        print(f"  {sensor:14s} {dof:4d} {mean:9.2f} {float(np.nanmedian(avg)):8.2f} {100 * inside:7.0f} %  "
-              f"[{s_lo:5.2f}, {s_hi:5.2f}]  {verdict}")
+    print("NIS per sensor, seed-average against its 95 % band (EKF: each block against the prediction updated "
+          "with the other sensors; GTSAM batch and iSAM2: each sensor's residual at the solution, rᵀ(R - HPHᵀ)⁻¹r)")
+    print(f"  {'sensor':14s} {'backend':14s} {'dof':>4s} {'mean NIS':>9s} {'median':>8s} {'in band':>8s}  "
+          f"{'band':>14s}  verdict")
+    sensors = sorted({sensor for table in nis.values() for sensor in table})
+    for sensor in sensors:
+        for backend in NIS_BACKENDS:
+            if sensor not in nis.get(backend, {}):
+                continue
+            dof, v = nis[backend][sensor]
+            avg = np.nanmean(v, axis=0)
+            mean = float(np.nanmean(avg))
+            s_lo, s_hi = band(dof, n)
+            inside = float(np.mean((avg >= s_lo) & (avg <= s_hi)))
+            verdict = "consistent" if s_lo <= mean <= s_hi else ("overconfident" if mean > s_hi else "pessimistic")
+            print(f"  {sensor:14s} {backend:14s} {dof:4d} {mean:9.2f} {float(np.nanmedian(avg)):8.2f} "
+                  f"{100 * inside:7.0f} %  [{s_lo:5.2f}, {s_hi:5.2f}]  {verdict}")
     return 0
 
 

@@ -53,7 +53,7 @@ def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
     from fusion_vo.odometry import OdometryConfig
 
     return {"odometry": (OdometryConfig, _ODOMETRY_EXCLUDE), "klt": (KltConfig, ()),
-            "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ())}
+            "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ("sensors",))}
 
 
 @dataclass
@@ -108,7 +108,7 @@ class RunConfig:
         from fusion_vo import schema
         from fusion_vo.backends.config import FusionConfig
 
-        return schema.build(FusionConfig, self.fusion, path, ("fusion",))
+        return FusionConfig.from_dict(self.fusion, path, ("fusion",))
 
     def validate(self, path: Path | None = None) -> None:
         """Check every section against the schema; raise :class:`InputError` naming the key path."""

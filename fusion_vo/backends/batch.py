@@ -29,8 +29,9 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import run_ekf
 from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
+from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.errors import InputError
+from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.imu import gyro_yaw
 from fusion_vo.sensors.sync import rate_delay
@@ -112,16 +113,16 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     # fuse the pieces between the pauses on their own and chain them
     pieces = split(streams, cut)
     results: list[FusionResult | None] = []
-    placed: list[bool] = []  # by the piece's own GPS fixes
+    placed: list[bool] = []  # by the piece's own absolute measurements (GPS fixes)
     origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
     for piece in pieces:
-        gps = piece.gps is not None and len(piece.gps) > 0
-        placed.append(gps)
+        absolute = any(s.world_frame is not None and s.available(s.data(piece)) for s in registry.sensors())
+        placed.append(absolute)
         if not spans_time(piece):
             results.append(None)
             continue
         first = not any(r is not None for r in results)
-        results.append(_fuse_piece(piece, names, config if first or gps else origin, delay))
+        results.append(_fuse_piece(piece, names, config if first or absolute else origin, delay))
     used = [r for r in results if r is not None]
     if not used:
         raise InputError(f"no two samples of the sensors used are within fusion.max_gap ({config.max_gap:g} s) of "
@@ -160,10 +161,9 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     result = FusionResult()
     t0 = time.process_time()
     iv = build_intervals(streams, config)
-    if iv.gps_ok is not None:
-        from fusion_vo.backends.world import align_world
-
-        align_world(iv, config)
+    for sensor in registry.sensors():  # an absolute sensor (GPS) sets the world frame
+        if sensor.world_frame is not None and sensor.data(streams) is not None:
+            sensor.world_frame(iv, config)
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
@@ -237,39 +237,37 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
     """Read the streams of ``sensors`` from ``recording`` (only those) into :class:`SensorStreams`."""
     config = config or FusionConfig()
     increments = getattr(visual, "increments", visual)
-    present = {
-        "camera": increments is not None and len(increments) > 0,
-        "wheel": recording.has_wheel(),
-        "odom": recording.has_odom(),
-        "imu": recording.has_imu(),
-        "range": recording.has_range(),
-        "gps": recording.has_gps() if hasattr(recording, "has_gps") else False,
-    }
+    known = registry.sensors()
+    # the camera's data is the frontend's output; every other sensor's is read from its folder
+    present = {s.name: s.present(recording) for s in known if s.name != "camera"}
+    present["camera"] = increments is not None and len(increments) > 0
     if sensors is None:
-        sensors = [s for s in SENSORS if present[s] and s != "gps" and not (s == "odom" and present["wheel"])]
+        sensors = [s.name for s in known if present[s.name] and s.by_default(present)]
     sensors = list(sensors)
+    names = [s.name for s in known]
     for s in sensors:
-        if s not in SENSORS:
-            raise InputError(f"unknown sensor '{s}' (use {', '.join(SENSORS)})")
+        if s not in names:
+            raise InputError(f"unknown sensor '{s}' (use {', '.join(names)})")
     if "camera" in sensors and not present["camera"]:
         raise InputError("sensor 'camera' was asked for but there are no visual increments (no cam0/ frames?)",
                          getattr(recording, "path", None))
-    ticks = "wheel" in sensors and present["wheel"]
-    twist = ("wheel" in sensors or "odom" in sensors) and present["odom"] and not ticks
     height = config.camera_height
     if height is None and recording.has_camera():
         height = float(recording.camera.T_BS[2, 3])
     streams = SensorStreams(
         visual=list(increments) if "camera" in sensors else None,
-        wheel=recording.wheel() if ticks else None,
-        odom=recording.odom() if twist else None,
-        imu=recording.imu() if "imu" in sensors and present["imu"] else None,
-        range=recording.range() if "range" in sensors and present["range"] else None,
         camera_height=height,
         camera_height_sigma=_height_sigma(recording) if "camera" in sensors else None,
         range_in_visual=bool(getattr(visual, "range_scaled", False)),
-        gps=recording.gps() if "gps" in sensors and present["gps"] else None,
     )
+    for s in known:
+        if s.name == "camera" or s.read is None or not s.is_wanted(sensors, present):
+            continue
+        data = s.read(recording)
+        if s.field is not None:
+            setattr(streams, s.field, data)
+        else:
+            streams.extra[s.name] = data
     return streams.select(sensors)
 
 

@@ -74,6 +74,9 @@ class GraphConfig:
         Compute marginal pose covariances of the batch solution (default True).
     calibration_interval : float
         Length [s] of the segments that share one gyro-bias and calibration variable (default 1).
+    residuals : bool
+        Compute each sensor's NIS at the batch and iSAM2 solutions (``FusionResult.residuals``,
+        :mod:`fusion_vo.backends.residuals`; a consistency check, costs joint marginals; default False).
     """
 
     robust: str = "huber"
@@ -86,6 +89,7 @@ class GraphConfig:
     relative_tolerance: float = 1e-3
     marginals: bool = True
     calibration_interval: float = 1.0
+    residuals: bool = False
 
 
 @dataclass
@@ -161,6 +165,10 @@ class FusionConfig:
         of PX4's EKF2 after GPS rejection). A multipath jump lasting longer is then followed.
     ekf, graph : EkfConfig, GraphConfig
         Backend options.
+    sensors : dict
+        Configuration sections of sensors registered outside the library (:mod:`fusion_vo.sensors.registry`,
+        ``Sensor.config``): section name -> its dataclass, read from the configuration's ``section:`` key
+        through the same schema (default: the dataclass's defaults); see :meth:`section`.
     """
 
     step_hz: float = 20.0
@@ -191,6 +199,7 @@ class FusionConfig:
     gps_reacquire: float = 5.0
     ekf: EkfConfig = field(default_factory=EkfConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
+    sensors: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.validate()
@@ -232,8 +241,36 @@ class FusionConfig:
         naming ``path`` and the key path (``prefix`` is the mapping's own path, e.g. ``("fusion",)``).
         """
         from fusion_vo import schema
+        from fusion_vo.sensors import registry
 
-        return schema.build(cls, data or {}, path, prefix)
+        data = dict(data or {})
+        own = {f.name for f in dataclasses.fields(cls)}
+        sections = {}
+        for sensor in registry.sensors():
+            if sensor.config is not None and sensor.config[0] not in own:
+                name, section_cls = sensor.config
+                sections[name] = schema.build(section_cls, data.pop(name, None) or {}, path, prefix + (name,))
+        config = schema.build(cls, data, path, prefix, exclude=("sensors",))
+        if sections:
+            config.sensors = sections
+            config.validate()
+        return config
+
+    def section(self, name: str):
+        """The configuration section ``name``: a field (``imu``, ``gps`` ...) or a registered sensor's section
+        (:attr:`sensors`, its defaults when not configured)."""
+        if name in {f.name for f in dataclasses.fields(self)}:
+            return getattr(self, name)
+        if name not in self.sensors:
+            from fusion_vo.sensors import registry
+
+            for sensor in registry.sensors():
+                if sensor.config is not None and sensor.config[0] == name:
+                    self.sensors[name] = sensor.config[1]()
+                    break
+            else:
+                raise KeyError(name)
+        return self.sensors[name]
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -249,5 +286,9 @@ def _numbers(obj, prefix: str = ""):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
             yield from _numbers(value, f"{prefix}{f.name}.")
+        elif isinstance(value, dict):  # the registered sensors' sections
+            for name, section in value.items():
+                if dataclasses.is_dataclass(section):
+                    yield from _numbers(section, f"{prefix}{name}.")
         elif isinstance(value, float) and f.name not in ("initial_pose", "camera_height"):
             yield f"{prefix}{f.name}", value

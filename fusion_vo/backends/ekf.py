@@ -67,10 +67,13 @@ Each sensor's block is gated before the update by its squared Mahalanobis distan
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
-A GPS fix is applied at its own node (every fix time is one, :mod:`fusion_vo.backends.timeline`)
-with the one measurement model of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check
-<fusion_vo.sensors.gps.GpsModel.check>`: residual, Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ``
-and the Huber/Cauchy weight); rejected fixes (a multipath jump) change nothing and are counted. The
+Each sensor's part (its measurement table, its blocks and their order) is registered by its own module
+(:mod:`fusion_vo.sensors.registry`): :func:`interval_measurements` and :func:`step_blocks` iterate the
+registered sensors. A sensor applied at its nodes on its own after each step's update registers an
+``ekf_run``: a GPS fix is applied at its own node (every fix time is one) with the one measurement model
+of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check <fusion_vo.sensors.gps.GpsModel.check>`: residual,
+Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ`` and the Huber/Cauchy weight) through
+:meth:`PlanarEkf.update_pose`; rejected fixes (a multipath jump) change nothing and are counted. The
 state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
 the fixes, with that alignment's uncertainty.
 
@@ -92,13 +95,8 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.sensors.gps import GpsModel
-from fusion_vo.sensors.gps import predict as gps_predict
-from fusion_vo.sensors.imu import AHRS, GYRO
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import Gate, MeasurementModel
-from fusion_vo.sensors.range import RANGE
-from fusion_vo.sensors.visual import VISUAL
-from fusion_vo.sensors.wheel import STANDSTILL, WHEEL, arc_twist, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -110,8 +108,6 @@ STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gy
                  "visual_scale": slice(KV, KV + 1), "wheel_scale": slice(KR, KR + 1),
                  "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12
-_DROPPED_VAR = 1e8  # variance of a measurement row the consistency monitor dropped
-OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
 
 
@@ -235,28 +231,15 @@ class PlanarEkf:
             return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
         return model.name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
 
-    # ------------------------------------------------------------------ GPS
-    def gps_update(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-        """Apply one fix through ``model`` (gate, robust weight); returns whether it was accepted."""
-        chk = model.check(self.x[:3], fix, covariance, self.kf.P[:3, :3], t)
-        if not chk.accepted:
-            return False
-        H = np.zeros((2, DIM))
-        H[:, :3] = chk.H
-        y = chk.residual.reshape(2, 1)
-        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=chk.R)
+    # ------------------------------------------------------------------ a measurement of the pose alone
+    def update_pose(self, y, H_pose, R) -> None:
+        """Update with the innovation ``y`` (m,) of a measurement whose Jacobian ``H_pose`` (m, 3) is on the pose
+        ``(x, y, ψ)`` alone and whose noise is ``R`` (a sensor applied at a node on its own, e.g. a GPS fix)."""
+        y = np.asarray(y, dtype=np.float64).reshape(-1, 1)
+        H = np.zeros((len(y), DIM))
+        H[:, :3] = H_pose
+        self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=R)
         self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
-        return True
-
-    def gps_reacquire(self, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-        """Apply a fix that failed the gate after widening the position covariance by the squared
-        innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
-        model.n_rejected -= 1
-        if model.rejected_t:
-            model.rejected_t.pop()
-        r = np.asarray(fix, dtype=np.float64)[:2] - gps_predict(self.x[:3], model.lever_arm)
-        self.kf.P[:2, :2] += np.eye(2) * float(r @ r)
-        return self.gps_update(model, fix, covariance, t)
 
     # ------------------------------------------------------------------ update
     def update(self, blocks) -> None:
@@ -297,78 +280,21 @@ class PlanarEkf:
 
 # --------------------------------------------------------------------------- batch run over intervals
 def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
-    """Twist-space measurements per node interval, vectorised (see the module docstring)."""
-    K = iv.n_steps
-    dt = iv.dt
+    """Twist-space measurements per node interval, vectorised (see the module docstring): every registered
+    sensor's ``ekf_measurements`` (:mod:`fusion_vo.sensors.registry`), merged into one table."""
     out: dict = {}
-    if len(iv.vis_i0):
-        vis_u = np.zeros((K, 3))
-        vis_R = np.zeros((K, 3, 3))
-        vis_ok = np.zeros(K, bool)
-        span = iv.t[iv.vis_i1] - iv.t[iv.vis_i0]
-        n = iv.vis_i1 - iv.vis_i0
-        for m in np.argsort(n, kind="stable"):  # single-interval increments first
-            steps = np.arange(iv.vis_i0[m], iv.vis_i1[m])
-            free = steps[~vis_ok[steps]]
-            if len(free) == 0:
-                continue
-            vis_u[free] = se2.log(iv.vis_delta[m]) / span[m]
-            vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
-            vis_ok[free] = True
-        out["visual"] = (vis_ok, vis_u, vis_R)
-    if iv.uses("wheel"):
-        u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0],
-                         gyro_turn(iv))
-        u[:, 0] *= iv.cx
-        if iv.wheel_yaw_ok is not None and not iv.wheel_yaw_ok.all():
-            # yaw component dropped by the consistency monitor: the speed rows stay
-            drop = ~iv.wheel_yaw_ok
-            R = R.copy()
-            R[drop, 2, :] = R[drop, :, 2] = 0.0
-            R[drop, 2, 2] = _DROPPED_VAR
-        if iv.wheel_speed_ok is not None and not iv.wheel_speed_ok.all():
-            # speed dropped by the monitor (disagrees with the camera's): the yaw row stays
-            drop = ~iv.wheel_speed_ok
-            R = R.copy()
-            R[drop, :2, :] = R[drop, :, :2] = 0.0
-            R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
-        out["wheel"] = (iv.wheel_ok, u, R)
-        noise = config.wheel_model(iv.twist)[0]
-        still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
-        if still.any():
-            out["standstill"] = (still, noise.standstill_yaw_rate**2)
-    if iv.uses("gyro"):
-        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / dt, config.imu.gyro_noise_density**2 / dt)
-    if iv.ahrs_ok.any():
-        out["ahrs"] = (iv.ahrs_ok, iv.ahrs_yaw, config.imu.ahrs_yaw_sigma**2)
-    if iv.range_ok.any():
-        out["range"] = (iv.range_ok, iv.range_height, config.range.sigma**2)
+    for sensor in registry.sensors():
+        if sensor.ekf_measurements is not None:
+            out.update(sensor.ekf_measurements(iv, config))
     return out
 
 
-def gyro_turn(iv: Intervals) -> np.ndarray | None:
-    """The gyro's heading change per interval (NaN where it has none), or None without a gyro: the
-    independent measure of the turn that scales the wheels' skid variance (:func:`~fusion_vo.sensors.wheel.skid_variance`)."""
-    if not iv.uses("gyro"):
-        return None
-    return np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
-
-
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
-    """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`."""
+    """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`:
+    every registered sensor's ``ekf_blocks``, in their order."""
     blocks = []
-    for name, model in (("visual", VISUAL), ("wheel", WHEEL), ("gyro", GYRO)):
-        m = meas.get(name)
-        if m is not None and m[0][k]:
-            blocks.append(ekf.block(model, m[1][k], m[2][k]))
-    still = meas.get("standstill")
-    if still is not None and still[0][k]:
-        blocks.append(ekf.block(STANDSTILL, 0.0, still[1]))
-    ahr, rng = meas.get("ahrs"), meas.get("range")
-    if ahr is not None and ahr[0][k + 1]:
-        blocks.append(ekf.block(AHRS, ahr[1][k + 1], ahr[2]))
-    if rng is not None and rng[0][k + 1]:
-        blocks.append(ekf.block(RANGE, rng[1][k + 1], rng[2], camera_height=ekf.camera_height))
+    for _, step in registry.ordered("ekf_blocks"):
+        blocks.extend(step.run(ekf, meas, k))
     return blocks
 
 
@@ -379,7 +305,6 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
                     iv.initial_pose, iv.initial_sigma)
     meas = interval_measurements(iv, config)
-    gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
     K = iv.n_steps
     dt = iv.dt
     xs = np.zeros((K + 1, DIM))
@@ -387,40 +312,31 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     x_prior = np.zeros((K + 1, DIM))
     P_prior = np.zeros((K + 1, DIM, DIM))
     Fs = np.zeros((K + 1, DIM, DIM))
-    ahr = meas.get("ahrs")
-    if ahr is not None and ahr[0][0]:
-        ekf.update([ekf.block(AHRS, ahr[1][0], ahr[2])])
-    reacquire = GpsReacquire(config.gps_reacquire)
-    result_notes: list[str] = []
-    last_fix = None
-    if gps is not None and iv.gps_ok[0]:
-        reacquire(ekf, gps, iv, 0)
-        last_fix = float(iv.t[0])
+    for sensor in registry.sensors():
+        if sensor.ekf_start is not None:
+            blocks = sensor.ekf_start(ekf, meas)
+            if blocks:
+                ekf.update(blocks)
+    # sensors applied at the nodes on their own, after each step's update (GPS fixes)
+    at_nodes = [run for run in (s.ekf_run(iv, config) for s in registry.sensors() if s.ekf_run is not None)
+                if run is not None]
+    for run in at_nodes:
+        run.node(ekf, 0)
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
         Fs[k + 1] = ekf.predict(dt[k])
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
         ekf.update(step_blocks(ekf, meas, k))
-        if gps is not None and iv.gps_ok[k + 1]:
-            if last_fix is not None and iv.t[k + 1] - last_fix >= OUTAGE_NOTE_S:
-                # the first fix after an outage measures how far the estimate drifted without GPS
-                drift = float(np.linalg.norm(iv.gps_enu[k + 1] - gps_predict(ekf.x[:3], gps.lever_arm)))
-                sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
-                result_notes.append(f"ekf: gps outage from {last_fix - iv.t[0]:.2f} to {iv.t[k + 1] - iv.t[0]:.2f} s in: "
-                                    f"drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
-            last_fix = float(iv.t[k + 1])
-            reacquire(ekf, gps, iv, k + 1)
+        for run in at_nodes:
+            run.node(ekf, k + 1)
         xs[k + 1], Ps[k + 1] = ekf.x, ekf.P
-    if gps is not None:
-        ekf.counts["gps"] = SensorCount(used=gps.n_used, gated=gps.n_rejected)
     result = FusionResult()
+    for run in at_nodes:
+        run.finish(ekf, result)
     result.trajectories["ekf"] = PoseData(iv.t.copy(), xs[:, :3].copy())
     result.covariances["ekf"] = Ps[:, :3, :3].copy()
     counts = _merge_counts(iv.counts, ekf.counts)
     result.counts["ekf"] = counts
-    if gps is not None:
-        result.notes.append(gps_note("ekf", gps, iv, reacquire.times))
-        result.notes.extend(result_notes)
     result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:
@@ -433,55 +349,6 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
         result.timing["ekf_smoothed"] = time.process_time() - t1
     result.notes.extend(iv.notes)
     return result
-
-
-class GpsReacquire:
-    """Fixes through the gate, and after ``after`` seconds of rejections one applied anyway
-    (``FusionConfig.gps_reacquire``); ``times`` holds when that happened."""
-
-    def __init__(self, after: float):
-        self.after = after
-        self.last_ok: float | None = None
-        self.times: list[float] = []
-
-    def __call__(self, ekf: "PlanarEkf", model: GpsModel, iv: Intervals, k: int) -> bool:
-        t = float(iv.t[k])
-        if ekf.gps_update(model, iv.gps_enu[k], iv.gps_cov[k], t):
-            self.last_ok = t
-            return True
-        if self.last_ok is None:
-            self.last_ok = t
-        if t - self.last_ok < self.after:
-            return False
-        self.times.append(t)
-        self.last_ok = t
-        return ekf.gps_reacquire(model, iv.gps_enu[k], iv.gps_cov[k], t)
-
-    def due(self, t: float, accepted: bool) -> bool:
-        """For a backend that gates itself: whether a rejected fix at ``t`` is to be applied anyway."""
-        if accepted or self.last_ok is None:
-            self.last_ok = t
-            return False
-        if t - self.last_ok < self.after:
-            return False
-        self.times.append(t)
-        self.last_ok = t
-        return True
-
-
-def gps_note(backend: str, model: GpsModel, iv: Intervals, reacquired: list | None = None) -> str:
-    """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the fixes skipped on reading."""
-    text = f"{backend}: gps {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
-    if model.rejected_t:
-        when = sorted(model.rejected_t)
-        text += f" (t={when[0]:.2f} to {when[-1]:.2f}, {when[0] - iv.t[0]:.2f} to {when[-1] - iv.t[0]:.2f} s in)"
-    if reacquired:
-        text += (f"; {len(reacquired)} times a fix was applied anyway after rejections for gps_reacquire seconds "
-                 f"(the estimate re-acquired the fixes; first at {reacquired[0] - iv.t[0]:.2f} s in)")
-    skipped = sum((iv.gps.skipped or {}).values()) if iv.gps is not None else 0
-    if skipped:
-        text += f"; {skipped} skipped on reading ({', '.join(f'{n} {k}' for k, n in iv.gps.skipped.items() if n)})"
-    return text
 
 
 def calibration_observable(iv: Intervals) -> tuple[bool, bool]:

@@ -17,7 +17,9 @@ frame (long chains of nearly equal variables that every update nudges all the wa
 Factors (``δ = X_i⁻¹ X_j = (d_x, d_y, d_ψ)``, the relative pose). Every sensor's factor is its measurement
 model of :mod:`fusion_vo.sensors` (the same prediction, Jacobians and noise the EKF uses), turned into
 GTSAM factors by :mod:`fusion_vo.backends.factors`; where GTSAM has a native factor that is the model,
-that factor is used::
+that factor is used. Each sensor's factors are built by its own module, registered with
+:mod:`fusion_vo.sensors.registry` (``graph_factors``, ``graph_unary``, ``graph_run``), and
+:class:`GraphBuilder` runs the registered steps in their order::
 
     prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²),  O_0 ~ N(0, σ_ψ²)
     visual     sensors.visual  e = (S_c d_x, S_c d_y, d_ψ) - m        Σ = frontend covariance
@@ -105,17 +107,14 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import GpsReacquire, calibration_observable, gps_note, gyro_turn
+from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
-from fusion_vo.sensors.gps import GpsModel
-from fusion_vo.sensors.imu import AHRS, GYRO
-from fusion_vo.sensors.range import RANGE
-from fusion_vo.sensors.visual import VISUAL
-from fusion_vo.sensors.wheel import STANDSTILL, WHEEL, arc_covariance, arc_increment, standstill
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn
 
 logger = logging.getLogger(__name__)
 
@@ -144,8 +143,9 @@ def R(k: int) -> int:
     return gtsam.symbol("r", k)
 
 
-_FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
-_FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose speed the monitor dropped
+#: graph steps of the sensors ordered before this set the initial guess of a node; the builder then adds the
+#: motion model where none measured the translation (:meth:`GraphBuilder.node`)
+GUESS_ORDER = 40.0
 
 
 # --------------------------------------------------------------------------- graph construction
@@ -161,8 +161,37 @@ class NodeFactors:
     guess: np.ndarray | None = None
 
 
+@dataclass(slots=True)
+class NodeContext:
+    """What a sensor's graph step (:mod:`fusion_vo.sensors.registry`) needs to know about the node it adds to.
+
+    ``n`` is the local node, ``g0, g1`` the interval-grid indices of the previous node and this one (equal at
+    a unary step), ``dt`` the time between them, ``segment`` the calibration segment of node ``n`` (the
+    variables ``B``, ``S``, ``W``, ``R``, ``O`` of it), ``xi, xj`` the pose keys of the previous node and this
+    one, ``estimate`` the running estimates for initial guesses. Steps before :data:`GUESS_ORDER` set
+    ``translation`` (2,) and ``heading`` (the interval's motion, for the initial guess) when they measure them;
+    ``scratch`` passes anything else between one sensor's steps.
+    """
+
+    n: int
+    g0: int
+    g1: int
+    dt: float
+    segment: int
+    xi: int
+    xj: int
+    estimate: dict
+    translation: np.ndarray | None = None
+    heading: float | None = None
+    scratch: dict = field(default_factory=dict)
+
+
 class GraphBuilder:
     """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
+
+    #: the variables' keys, for the sensors' graph steps (pose, gyro bias, AHRS offset, visual scale, wheel base
+    #: and radius factors of a segment; module docstring)
+    X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
 
     def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
                  calibrate: tuple[bool, bool] | None = None):
@@ -181,8 +210,12 @@ class GraphBuilder:
         nodes = np.arange(0, len(iv.t), every)
         if nodes[-1] != len(iv.t) - 1:
             nodes = np.append(nodes, len(iv.t) - 1)
-        if iv.gps_ok is not None and every > 1:  # a fix's node is always a keyframe
-            nodes = np.union1d(nodes, np.flatnonzero(iv.gps_ok))
+        if every > 1:  # the nodes a sensor needs as keyframes (a GPS fix's)
+            for sensor in registry.sensors():
+                if sensor.graph_keyframes is not None:
+                    keep = sensor.graph_keyframes(iv)
+                    if keep is not None and len(keep):
+                        nodes = np.union1d(nodes, keep)
         self.grid = nodes  # node index -> interval-grid index
         self.t = iv.t[nodes]
         # bias and calibration variables: one per segment of `calibration_interval` seconds
@@ -194,7 +227,7 @@ class GraphBuilder:
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
         for c in self.counts.values():
             c.used = 0
-        self._visual_by_end = self._visual_spans()
+        self.visual_spans = self._visual_spans()
         if iv.uses("wheel"):  # per-interval arc increments, vectorised
             self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
             self._wheel_inc[:, 0] *= iv.cx
@@ -203,7 +236,6 @@ class GraphBuilder:
             self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
                                              np.diff(iv.t), self._turn)
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
-        self.reacquire = GpsReacquire(config.gps_reacquire)
 
     # ------------------------------------------------------------------ helpers
     def model_factor(self, model, z, cov, keys: dict, fixed: dict | None = None, params: dict | None = None,
@@ -247,28 +279,6 @@ class GraphBuilder:
             return np.asarray(self.iv.initial_pose, dtype=np.float64)
         return np.asarray(self.config.initial_pose, dtype=np.float64)
 
-    def gps_factor(self, nf: NodeFactors, n: int, model: GpsModel, pose_cov: np.ndarray | None) -> None:
-        """Gate the fix at node ``n`` against its predicted pose; add the robust factor when accepted."""
-        iv = self.iv
-        g = int(self.grid[n])
-        if iv.gps_ok is None or not iv.gps_ok[g]:
-            return
-        key = X(self.offset + n)
-        guess = nf.values[key]
-        chk = model.check(np.array([guess.x(), guess.y(), guess.theta()]), iv.gps_enu[g], iv.gps_cov[g], pose_cov,
-                          float(iv.t[g]))
-        if not chk.accepted and self.reacquire.due(float(iv.t[g]), False):
-            model.n_rejected -= 1  # applied after all: a use, not a rejection
-            model.rejected_t.pop()
-            model.n_used += 1
-        elif chk.accepted:
-            self.reacquire.due(float(iv.t[g]), True)
-        else:
-            self.counts.setdefault("gps", SensorCount()).gated += 1
-            return
-        nf.factors.append(model.factor(key, iv.gps_enu[g], iv.gps_cov[g]))
-        nf.sensors.append("gps")
-
     # ------------------------------------------------------------------ per node
     def first_node(self, estimate: dict | None = None) -> NodeFactors:
         """Priors on the first pose, bias and calibration (``estimate`` gives initial values)."""
@@ -303,94 +313,46 @@ class GraphBuilder:
 
         ``estimate`` holds the running bias and calibration estimates (``gyro_bias``, ``visual_scale``,
         ``wheel_base_factor``) and the previous increment, used only for initial guesses.
+
+        Every registered sensor's ``graph_factors`` steps (:mod:`fusion_vo.sensors.registry`) add their
+        factors in their order; those before :data:`GUESS_ORDER` may set the interval's translation and
+        heading change for the initial guess (``NodeContext.translation``, ``heading``). Where none measured
+        the translation a weak constant-twist factor keeps it determined. Then the unary steps
+        (``graph_unary``) of the node.
         """
         iv, cfg = self.iv, self.config
         est = estimate or {}
         g0, g1 = int(self.grid[n - 1]), int(self.grid[n])
-        dt = float(iv.t[g1] - iv.t[g0])
         c = int(self.segment[n])
-        xi, xj = X(self.offset + n - 1), X(self.offset + n)
+        node = NodeContext(n=n, g0=g0, g1=g1, dt=float(iv.t[g1] - iv.t[g0]), segment=c,
+                           xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est)
         nf = NodeFactors(n, float(self.t[n]))
         if c != self.segment[n - 1]:
             self._new_segment(nf, c, est, int(self.segment[n - 1]))
-        translation = heading = None
-        wheel_heading = None
-        still = False
-        wheel_noise = cfg.wheel_model(iv.twist)[0]
-        # wheel: travel summed over the node interval, arc model
-        if iv.uses("wheel") and iv.wheel_ok[g0:g1].all():
-            still = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]), wheel_noise).all())
-            m, cov = self._wheel_increment(g0, g1)
-            yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
-            speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())
-            if not speed_ok:  # speed dropped by the consistency monitor: a free translation
-                cov = cov.copy()
-                cov[:2, :] = cov[:, :2] = 0.0
-                cov[0, 0] = cov[1, 1] = _FREE_TRANSLATION_SIGMA**2
-            if not yaw_ok or self.kb_on:
-                # translation from the arc; the heading change goes through the wheel-base factor, or
-                # not at all where the consistency monitor dropped the wheels' yaw component
-                if not yaw_ok:
-                    m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
-                cov_xy = cov.copy()
-                cov_xy[2, :] = cov_xy[:, 2] = 0.0
-                cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-                if self.kr_on:  # distance scaled by the wheels' radius factor
-                    nf.factors.append(self.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (R(c),)},
-                                                        fixed={"wheel_base_factor": 1.0}))
-                else:
-                    nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov_xy)))
-                if yaw_ok:
-                    wheel_heading = (m, float(np.sqrt(cov[2, 2])))
-            else:
-                nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), self.noise(cov)))
-            nf.sensors.append("wheel")
-            translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
-            translation = translation if speed_ok else None
-        # visual increments ending here
-        for start, d, cov in self._visual_by_end.get(n, []):
-            xs = X(self.offset + start)
-            if self.kv_on:
-                nf.factors.append(self.model_factor(VISUAL, d, cov, {"motion": (xs, xj), "visual_scale": (S(c),)}))
-            else:
-                nf.factors.append(gtsam.BetweenFactorPose2(xs, xj, gtsam.Pose2(*d), self.noise(cov)))
-            nf.sensors.append("camera")
-            if start == n - 1:
-                translation = d[:2] / est.get("visual_scale", 1.0) if translation is None else translation
-                heading = d[2] if heading is None else heading
-        # gyro: integrated angle, the most reliable heading change
-        angle = None
-        if iv.uses("gyro") and iv.gyro_ok[g0:g1].all():
-            angle = float(iv.gyro_angle[g0:g1].sum())
-            heading = angle - est.get("gyro_bias", 0.0) * dt
-            nf.sensors.append("gyro")
+        steps = registry.ordered("graph_factors")
+        for _, step in steps:
+            if step.order >= GUESS_ORDER:
+                break
+            step.run(self, nf, node)
         last = est.get("last_increment", np.zeros(3))
+        translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
         if translation is None:
             # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
             e = cfg.ekf
-            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
+            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(node.dt, 1e-3) * 4.0 + 1e-3
             nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
-            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), nm))
+            nf.factors.append(gtsam.BetweenFactorPose2(node.xi, node.xj, gtsam.Pose2(*guess), nm))
             nf.sensors.append("motion_model")
-        nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
+        nf.values[node.xj] = previous_pose.compose(gtsam.Pose2(*guess))
         nf.guess = guess
-        if angle is not None:
-            var = GYRO.variance(cfg.imu.gyro_noise_density, dt)
-            nf.factors.append(self.model_factor(GYRO, [angle], [[var]], {"motion": (xi, xj), "gyro_bias": (B(c),)},
-                                                params={"dt": dt}, robust=False))
-        if still:
-            sigma = wheel_noise.standstill_yaw_rate * max(dt, 1e-3)
-            nf.factors.append(self.model_factor(STANDSTILL, [0.0], [[sigma**2]], {"motion": (xi, xj)}, robust=False))
-            nf.sensors.append("standstill")
-        if wheel_heading is not None:
-            nf.factors.append(self.model_factor(WHEEL, wheel_heading[0], [[wheel_heading[1] ** 2]],
-                                                {"motion": (xi, xj), "wheel_base_factor": (W(c),)},
-                                                fixed={"wheel_scale": 1.0}, rows=(2,)))
-        self._unary(nf, n)
+        for _, step in steps:  # (sorted by order)
+            if step.order >= GUESS_ORDER:
+                step.run(self, nf, node)
+        self._unary(nf, n, node)
         return nf
 
-    def _wheel_increment(self, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
+    def wheel_increment(self, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
         """Arc-model increment and covariance of the wheel travel between grid indices ``g0`` and ``g1``."""
         iv = self.iv
         if g1 == g0 + 1:
@@ -402,6 +364,10 @@ class GraphBuilder:
         turn = None if self._turn is None else self._turn[g0:g1].sum()
         return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
                                  turn)[0]
+
+    def key(self, n: int) -> int:
+        """The pose variable of local node ``n``."""
+        return X(self.offset + n)
 
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:
         """Bias and calibration variables of segment ``c``, tied to the ``previous`` segment (``c-1``, or an
@@ -432,25 +398,15 @@ class GraphBuilder:
         keys += [O(c)] if self.ahrs_offset_on else []
         return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
 
-    def _unary(self, nf: NodeFactors, n: int) -> None:
-        iv, cfg = self.iv, self.config
-        g = int(self.grid[n])
-        if iv.ahrs_ok[g] and self.ahrs_offset_on:
-            nf.factors.append(self.model_factor(AHRS, [float(iv.ahrs_yaw[g])], [[cfg.imu.ahrs_yaw_sigma**2]],
-                                                {"heading": (X(self.offset + n),), "ahrs_offset": (O(int(self.segment[n])),)}))
-            nf.sensors.append("ahrs")
-        elif iv.ahrs_ok[g]:
-            # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
-            # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)
-            nm = self.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]))
-            heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
-            nf.factors.append(gtsam.PriorFactorPose2(X(self.offset + n), heading, nm))
-            nf.sensors.append("ahrs")
-        if self.kv_on and iv.range_ok[g] and iv.camera_height:
-            scale, sig = RANGE.scale_prior(iv.range_height[g], cfg.range.sigma, float(iv.camera_height))
-            nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
-            nf.factors.append(gtsam.PriorFactorDouble(S(int(self.segment[n])), scale, nm))
-            nf.sensors.append("range")
+    def _unary(self, nf: NodeFactors, n: int, node: NodeContext | None = None) -> None:
+        """The registered sensors' factors at node ``n`` alone (``graph_unary``, e.g. an absolute heading);
+        ``node`` is the context of the interval ending there (its ``g1``, ``xj`` and ``segment`` are the node's)."""
+        if node is None:
+            g = int(self.grid[n])
+            node = NodeContext(n=n, g0=g, g1=g, dt=0.0, segment=int(self.segment[n]), xi=X(self.offset + n),
+                               xj=X(self.offset + n), estimate={})
+        for _, step in registry.ordered("graph_unary"):
+            step.run(self, nf, node)
 
     def count(self, nf: NodeFactors) -> None:
         for s in nf.sensors:
@@ -640,18 +596,21 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     t_build = time.process_time()
     estimate: dict = dict(builder.initial_estimate)
     prev_pose = gtsam.Pose2(*builder.initial_pose())
-    gps = GpsModel(iv.gps.lever_arm, config.gps) if iv.gps_ok is not None and iv.gps is not None else None
+    # sensors whose factors are gated against the online estimate (GPS fixes)
+    at_nodes = [run for run in (s.graph_run(builder) for s in registry.sensors() if s.graph_run is not None)
+                if run is not None]
     maker = ValuesMaker()
     for n in range(n_nodes):
         nf = builder.first_node(estimate) if n == 0 else builder.node(n, prev_pose, estimate)
-        if gps is not None:
+        if at_nodes:
             if n == 0:
                 pose_cov = None if iv.initial_sigma is None else np.diag(np.square(iv.initial_sigma))
             elif isam is not None:
                 pose_cov = world_covariances(online_poses[n - 1:n, 2], online_cov[n - 1:n])[0]
             else:
                 pose_cov = None
-            builder.gps_factor(nf, n, gps, pose_cov)
+            for run in at_nodes:
+                run.add(nf, n, pose_cov)
         builder.count(nf)
         new_values = maker.make(nf.values)
         if gcfg.batch:
@@ -661,6 +620,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 else:
                     graph.add(f)
             values.insert(new_values)
+        elif gcfg.residuals:
+            model_factors.extend(f for f in nf.factors if isinstance(f, ModelFactor))
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
         t0 = time.process_time()
@@ -688,8 +649,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             lag_poses[n] = (p.x(), p.y(), p.theta())
     t_graph = time.process_time() - t_build - t_online
     counts = builder.counts
-    if gps is not None:
-        result.notes.append(gps_note("gtsam", gps, iv, builder.reacquire.times))
+    for run in at_nodes:
+        run.finish(result)
     if isam is not None:
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
         result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
@@ -697,6 +658,10 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.calibration["gtsam_online"] = _calibration(isam.calculateEstimate(), builder)
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
+        if gcfg.residuals:
+            final = isam.calculateEstimate()
+            result.residuals["gtsam_online"] = graph_residuals(
+                model_factors, final, gtsam.Marginals(isam.getFactorsUnsafe(), final), builder)
     if lag is not None:
         result.trajectories["gtsam_fixed_lag"] = PoseData(builder.t.copy(), lag_poses)
         result.counts["gtsam_fixed_lag"] = counts
@@ -718,12 +683,26 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             t1 = time.process_time()
             result.covariances["gtsam"] = world_covariances(poses[:, 2], pose_marginals(lin, solution, n_nodes))
             result.timing["gtsam_marginals"] = time.process_time() - t1
+        if gcfg.residuals:
+            result.residuals["gtsam"] = graph_residuals(model_factors, solution, gtsam.Marginals(lin, solution), builder)
         result.timing["gtsam"] = time.process_time() - t0 + t_graph
         result.timing["gtsam_build"] = t_graph
         result.timing["gtsam_solve"] = t_solve
         logger.info("gtsam: %d nodes, %d factors, %d LM iterations", n_nodes, graph.size() + len(model_factors), iters)
     result.notes.extend(iv.notes)
     return result
+
+
+def graph_residuals(factors: list[ModelFactor], values: gtsam.Values, marginals, builder: GraphBuilder,
+                    stride: int = 5) -> dict:
+    """Each sensor's NIS at a solution (:func:`fusion_vo.backends.residuals.sensor_nis`), every ``stride``-th node."""
+    from fusion_vo.backends.residuals import sensor_nis
+
+    def node_of(key: int):
+        n = int(gtsam.Symbol(key).index()) - builder.offset
+        return n, float(builder.t[n])
+
+    return sensor_nis(factors, values, marginals, node_of, stride)
 
 
 def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):

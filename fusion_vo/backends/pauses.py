@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.backends.timeline import SensorStreams
+from fusion_vo.sensors import registry
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, VisualIncrement
 
@@ -41,7 +42,6 @@ logger = logging.getLogger(__name__)
 
 #: array fields of the stream dataclasses that are not per-sample
 _NOT_PER_SAMPLE = ("T_BS", "lever_arm")
-_ARRAY_STREAMS = ("wheel", "odom", "imu", "range", "gps")
 
 
 @dataclass
@@ -72,9 +72,8 @@ def sample_times(streams: SensorStreams) -> np.ndarray:
     parts = []
     if streams.visual:
         parts.append(np.array([v for inc in streams.visual for v in (inc.t0, inc.t1)], dtype=np.float64))
-    for name in _ARRAY_STREAMS:
-        data = getattr(streams, name)
-        if data is not None and len(data.t):
+    for _, data in streams.sampled():
+        if len(data.t):
             parts.append(np.asarray(data.t, dtype=np.float64))
     if not parts:
         return np.zeros(0)
@@ -127,8 +126,14 @@ def split(streams: SensorStreams, pauses: list[Pause]) -> list[SensorStreams]:
         visual = None
         if streams.visual is not None:
             visual = [inc for inc in streams.visual if lo <= inc.t0 and inc.t1 <= hi]
-        changes = {name: _slice(getattr(streams, name), lo, hi) for name in _ARRAY_STREAMS}
-        pieces.append(dataclasses.replace(streams, visual=visual, **changes))
+        piece = dataclasses.replace(streams, visual=visual, extra=dict(streams.extra))
+        for name, data in streams.sampled():
+            part = _slice(data, lo, hi)
+            if name in streams.extra:
+                piece.extra[name] = part
+            else:
+                setattr(piece, registry.get(name).field, part)
+        pieces.append(piece)
     return pieces
 
 

@@ -67,6 +67,9 @@ class FusionResult:
         Pauses in every stream at which the estimate was split (``start``, ``end``, ``seconds`` on the
         recording clock, and ``joined``: ``camera``, ``held`` or ``gps``); see
         :mod:`fusion_vo.backends.pauses`.
+    residuals : dict
+        Backend -> sensor -> ``(dof, rows)``: the factor graph's per-sensor NIS at its solution, rows
+        ``(t, NIS)`` (only with ``GraphConfig.residuals``; :mod:`fusion_vo.backends.residuals`).
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -77,6 +80,7 @@ class FusionResult:
     timing: dict[str, float] = field(default_factory=dict)
     inconsistent: list[dict] = field(default_factory=list)
     pauses: list[dict] = field(default_factory=list)
+    residuals: dict = field(default_factory=dict)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -91,6 +95,7 @@ class FusionResult:
         self.calibration.update(other.calibration)
         self.notes.extend(n for n in other.notes if n not in self.notes)
         self.timing.update(other.timing)
+        self.residuals.update(other.residuals)
         return self
 
     def summary(self) -> dict:

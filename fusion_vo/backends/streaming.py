@@ -99,7 +99,8 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import SENSORS, SensorStreams, build_intervals
+from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.sensors import registry
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
@@ -201,9 +202,9 @@ class StreamingFusion:
             self.config = dataclasses.replace(self.config, imu=self.config.imu.with_sensor_keys(imu_noise))
         self.backend = backend
         self.sensors = list(sensors)
-        bad = [s for s in self.sensors if s not in SENSORS]
+        bad = [s for s in self.sensors if s not in registry.names()]
         if bad:
-            raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(SENSORS)})")
+            raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(registry.names())})")
         if "wheel" in self.sensors and wheel_config is None:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
         if "gps" in self.sensors and backend != "ekf":
@@ -723,7 +724,8 @@ class StreamingFusion:
         self._record(ekf.x[:3], ekf.P[:3, :3])
 
     def _apply_gps(self, fix: GpsFix) -> None:
-        from fusion_vo.backends.ekf import YAW, GpsReacquire
+        from fusion_vo.backends.ekf import YAW
+        from fusion_vo.sensors.gps import GpsReacquire, ekf_reacquire, ekf_update
         from fusion_vo.backends.world import prior_from_alignment
         from fusion_vo.sensors.gps import align_to_fixes
 
@@ -760,9 +762,9 @@ class StreamingFusion:
             self._gps_reacquire = GpsReacquire(self.config.gps_reacquire)
             self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
-        accepted = ekf.gps_update(model, fix.enu, fix.covariance, fix.t)
+        accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
-            accepted = ekf.gps_reacquire(model, fix.enu, fix.covariance, fix.t)
+            accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
         elif accepted:
             self._gps_reacquire.due(fix.t, True)
         count = self._step_counts.setdefault("gps", SensorCount())

@@ -16,6 +16,10 @@ on a node, and the nodes grow with the samples, not with the seconds). Every mea
   that frame's node), so both backends apply the fix to the pose at its own time. A camera increment
   that a fix node splits spans two intervals (the backends already handle increments spanning several).
 
+Each sensor's part of this (its node times, how its samples go onto the grid) is registered by its own
+module (:mod:`fusion_vo.sensors.registry`); :func:`node_times` and :func:`build_intervals` run the
+registered steps in their order.
+
 An interval is only given a wheel or gyro measurement when the stream covers it without a gap longer
 than ``max_gap`` and without a gated sample; otherwise the sensor is counted as missing there and the
 other sensors carry the estimate. Streams whose timestamps are not increasing are put in order (counted
@@ -32,17 +36,20 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.errors import InputError
-from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
-from fusion_vo.sensors.imu import ahrs_heading, cumulative_angle, gyro_yaw
-from fusion_vo.sensors.range import camera_height
-from fusion_vo.sensors.wheel import WheelTravel, ticks_to_travel, twist_to_travel
+from fusion_vo.sensors import registry
 
 logger = logging.getLogger(__name__)
 
-SENSORS = ("camera", "wheel", "odom", "imu", "range", "gps")
-#: a fix closer than this to an existing node [s] is applied at that node
-GPS_SNAP = 1e-3
+
+def __getattr__(name: str):
+    if name == "SENSORS":  # the registered sensor names (:mod:`fusion_vo.sensors.registry`)
+        return registry.names()
+    if name == "GPS_SNAP":
+        from fusion_vo.sensors.gps import GPS_SNAP
+
+        return GPS_SNAP
+    raise AttributeError(name)
 
 
 @dataclass
@@ -65,18 +72,24 @@ class SensorStreams:
     camera_height_sigma: float | None = None
     range_in_visual: bool = False
     gps: GpsData | None = None
+    extra: dict = field(default_factory=dict)
+
+    def data(self, sensor: str):
+        """The data of the registered sensor ``sensor`` (None when absent)."""
+        return registry.get(sensor).data(self)
+
+    def sampled(self) -> list[tuple[str, object]]:
+        """``(name, data)`` of every stream with per-sample times ``t`` (all but the camera's increments)."""
+        out = []
+        for s in registry.sensors():
+            data = s.data(self)
+            if s.name != "camera" and data is not None:
+                out.append((s.name, data))
+        return out
 
     def available(self) -> list[str]:
         """Sensor names with data."""
-        have = {
-            "camera": self.visual is not None and len(self.visual) > 0,
-            "wheel": self.wheel is not None and len(self.wheel) > 1,
-            "odom": self.odom is not None and len(self.odom) > 1,
-            "imu": self.imu is not None and len(self.imu) > 1,
-            "range": self.range is not None and len(self.range) > 0,
-            "gps": self.gps is not None and len(self.gps) > 0,
-        }
-        return [s for s in SENSORS if have[s]]
+        return [s.name for s in registry.sensors() if s.available(s.data(self))]
 
     def select(self, sensors) -> "SensorStreams":
         """Only the named sensors; a sensor that is asked for but absent is an :class:`InputError`.
@@ -85,32 +98,29 @@ class SensorStreams:
         twist explicitly (the two are the same sensor to the backends, ticks preferred).
         """
         sensors = list(sensors)
-        unknown = [s for s in sensors if s not in SENSORS]
+        known = registry.names()
+        unknown = [s for s in sensors if s not in known]
         if unknown:
-            raise InputError(f"unknown sensor '{unknown[0]}' (use {', '.join(SENSORS)})")
+            raise InputError(f"unknown sensor '{unknown[0]}' (use {', '.join(known)})")
         available = self.available()
-        if "odom" in available and "wheel" not in available:
-            available.append("wheel")
+        for s in registry.sensors():
+            if s.name in available:
+                available += [a for a in s.also_available_as if a not in available]
         missing = [s for s in sensors if s not in available]
         if missing:
-            where = {"camera": "cam0/ frames or visual increments", "wheel": "wheel0/ or odom0/", "odom": "odom0/",
-                     "imu": "imu0/", "range": "range0/", "gps": "gps0/ (usable fixes)"}
-            raise InputError(f"sensor '{missing[0]}' was asked for but the recording has no {where[missing[0]]} data")
+            raise InputError(f"sensor '{missing[0]}' was asked for but the recording has no "
+                             f"{registry.get(missing[0]).where} data")
         if not sensors:
             raise InputError("no sensors selected")
-        use_ticks = "wheel" in sensors and self.wheel is not None and len(self.wheel) > 1
-        use_twist = not use_ticks and ("odom" in sensors or "wheel" in sensors)
-        return SensorStreams(
-            visual=self.visual if "camera" in sensors else None,
-            wheel=self.wheel if use_ticks else None,
-            odom=self.odom if use_twist else None,
-            imu=self.imu if "imu" in sensors else None,
-            range=self.range if "range" in sensors else None,
-            camera_height=self.camera_height,
-            camera_height_sigma=self.camera_height_sigma,
-            range_in_visual=self.range_in_visual,
-            gps=self.gps if "gps" in sensors else None,
-        )
+        out = SensorStreams(camera_height=self.camera_height, camera_height_sigma=self.camera_height_sigma,
+                            range_in_visual=self.range_in_visual)
+        for s in registry.sensors():
+            data = s.pick(self, sensors) if s.pick is not None else (s.data(self) if s.name in sensors else None)
+            if s.field is not None:
+                setattr(out, s.field, data)
+            elif data is not None:
+                out.extra[s.name] = data
+        return out
 
 
 @dataclass
@@ -170,6 +180,9 @@ class Intervals:
         Start pose and its standard deviations ``(x, y, yaw)`` when the world frame was aligned to the
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
         ``initial_pose``, taken as exact.
+    extra : dict
+        Sensor name -> its measurements on the grid, for sensors registered outside the library
+        (:mod:`fusion_vo.sensors.registry`; the built-in ones have the fields above).
     """
 
     t: np.ndarray
@@ -205,6 +218,7 @@ class Intervals:
     gps: GpsData | None = None
     initial_pose: np.ndarray | None = None
     initial_sigma: np.ndarray | None = None
+    extra: dict = field(default_factory=dict)
 
     @property
     def n_steps(self) -> int:
@@ -233,7 +247,7 @@ def time_order(t: np.ndarray) -> tuple[np.ndarray, int, int]:
     return order[keep], n_reordered, int(np.count_nonzero(~keep))
 
 
-def _ordered_fields(obj, names, count: SensorCount):
+def ordered_fields(obj, names, count: SensorCount):
     """Copy of the dataclass ``obj`` with array fields ``names`` in time order (counts updated)."""
     idx, n_re, n_dup = time_order(obj.t)
     count.reordered += n_re
@@ -258,8 +272,8 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         if len(cam):
             starts.append(cam[0])
             ends.append(cam[-1])
-    for data in (streams.wheel, streams.odom, streams.imu, streams.range, streams.gps):
-        if data is not None and len(data.t):
+    for _, data in streams.sampled():
+        if len(data.t):
             tt = np.asarray(data.t, dtype=np.float64)
             tt = tt[np.isfinite(tt)]
             if len(tt):
@@ -290,12 +304,10 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         else:
             fill = fill[:0]
         nodes = np.unique(np.concatenate([nodes, fill]))
-    if streams.gps is not None and len(streams.gps.t):
-        fixes = np.asarray(streams.gps.t, dtype=np.float64)
-        fixes = fixes[np.isfinite(fixes)]
-        j = np.clip(np.searchsorted(nodes, fixes), 1, len(nodes) - 1)
-        near = np.minimum(np.abs(nodes[j] - fixes), np.abs(nodes[j - 1] - fixes)) <= GPS_SNAP
-        nodes = np.unique(np.concatenate([nodes, fixes[~near]]))
+    for s in registry.sensors():
+        data = s.data(streams)
+        if s.node_times is not None and data is not None:
+            nodes = s.node_times(data, nodes, config)
     if len(nodes) < 2:
         raise InputError("the measurements span no time (need at least two distinct timestamps)")
     return nodes
@@ -328,19 +340,9 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         wc = streams.wheel.config
         iv.wheel_scale_sigma = float(2.0 * wc.radius_sigma / (wc.wheel_radius_left + wc.wheel_radius_right))
     iv.heading_offset = heading_offset
-    if streams.imu is not None:
-        _add_imu(iv, streams.imu, config, counts)
-    if streams.wheel is not None or streams.odom is not None:
-        _add_wheel(iv, streams, config, counts)
-    if streams.visual is not None:
-        _add_visual(iv, streams.visual, counts, notes)
-    if streams.range is not None and streams.visual is not None and streams.range_in_visual:
-        notes.append("range finder: already in the visual increments (their per-frame height), "
-                     "not used again as a height measurement")
-    elif streams.range is not None:
-        _add_range(iv, streams.range, config, counts)
-    if streams.gps is not None:
-        _add_gps(iv, streams.gps, counts)
+    for sensor, step in registry.ordered("intervals"):  # each sensor's samples onto the grid (its own module)
+        if sensor.data(streams) is not None:
+            step.run(iv, streams, config, counts)
     iv.wheel_yaw_ok = np.ones(K, bool)
     iv.wheel_speed_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
@@ -352,12 +354,12 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         notes.extend(ep.note(T[0]) for ep in iv.episodes)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
-            for a, b in _uncovered_runs(T, ok, 0.5):
-                notes.append(f"{name} unavailable from {_when(a, T)} to {_when(b, T)}")
+            for a, b in uncovered_runs(T, ok, 0.5):
+                notes.append(f"{name} unavailable from {when(a, T)} to {when(b, T)}")
     return iv
 
 
-def _coverage(ts: np.ndarray, bad_sample_interval: np.ndarray, T: np.ndarray, max_gap: float) -> np.ndarray:
+def coverage(ts: np.ndarray, bad_sample_interval: np.ndarray, T: np.ndarray, max_gap: float) -> np.ndarray:
     """True for node intervals covered by samples ``ts`` without gaps > max_gap or bad sample intervals."""
     if len(ts) < 2:
         return np.zeros(len(T) - 1, bool)
@@ -370,165 +372,12 @@ def _coverage(ts: np.ndarray, bad_sample_interval: np.ndarray, T: np.ndarray, ma
     return inside & (n_bad == 0)
 
 
-def _add_wheel(iv: Intervals, streams: SensorStreams, config: FusionConfig, counts) -> None:
-    count = counts.setdefault("wheel", SensorCount())
-    if streams.wheel is not None:
-        data = _ordered_fields(streams.wheel, ("left", "right"), count)
-        travel: WheelTravel = ticks_to_travel(data, config.wheel)
-    else:
-        data = _ordered_fields(streams.odom, ("vx", "vy", "wz"), count)
-        travel = twist_to_travel(data, max_speed=config.odom.max_speed)
-        iv.twist = True
-    count.gated += travel.n_gated
-    T = iv.t
-    ok = _coverage(travel.t, ~travel.valid, T, config.max_gap)
-    left = np.interp(T, travel.t, travel.left)
-    right = np.interp(T, travel.t, travel.right)
-    iv.wheel_ok, iv.wheel_dl, iv.wheel_dr = ok, np.diff(left), np.diff(right)
-    iv.wheel_base = travel.wheel_base
-    count.used += int(ok.sum())
-    count.missing += int((~ok).sum())
-
-
-def _add_imu(iv: Intervals, imu: ImuData, config: FusionConfig, counts) -> None:
-    count = counts.setdefault("gyro", SensorCount())
-    imu = _ordered_fields(imu, ("gyro", "accel", "orientation"), count)
-    gyro = gyro_yaw(imu, config.imu.with_sensor_keys(imu.noise))
-    count.gated += gyro.n_gated
-    T = iv.t
-    ok = _coverage(gyro.t, np.zeros(max(len(gyro.t) - 1, 0), bool), T, config.max_gap)
-    theta = np.interp(T, gyro.t, cumulative_angle(gyro)) if len(gyro.t) else np.zeros(len(T))
-    iv.gyro_ok, iv.gyro_angle = ok, np.diff(theta)
-    count.used += int(ok.sum())
-    count.missing += int((~ok).sum())
-    heading = ahrs_heading(imu)
-    if heading is None:
-        return
-    acount = counts.setdefault("ahrs", SensorCount())
-    acount.gated += int((~heading.valid).sum())
-    ht = heading.t[heading.valid]
-    if len(ht) < 2:
-        return
-    yaw = np.unwrap(heading.yaw[heading.valid])
-    near = np.abs(ht[np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)] - T) <= config.max_gap
-    ok_n = (T >= ht[0]) & (T <= ht[-1]) & near
-    if not ok_n.any():
-        return
-    yaw_t = np.interp(T, ht, yaw)
-    if iv.heading_offset is None:
-        # AHRS north vs. the estimate's initial heading, averaged over the samples of the first
-        # quarter second with the gyro carrying the heading (one noisy sample would bias all headings)
-        first = int(np.argmax(ok_n))
-        window = (ht >= T[first] - 1e-9) & (ht <= T[first] + 0.25)
-        gyro_heading = np.zeros(int(window.sum()))
-        if len(gyro.t):
-            angle = cumulative_angle(gyro)
-            gyro_heading = np.interp(ht[window], gyro.t, angle) - np.interp(T[first], gyro.t, angle)
-        diffs = se2.wrap_angle(yaw[window] - yaw_t[first] - gyro_heading)
-        mean = float(np.mean(diffs)) if len(diffs) else 0.0
-        iv.heading_offset = float(yaw_t[first] + mean - float(config.initial_pose[2]))
-    offset = iv.heading_offset
-    iv.ahrs_ok = ok_n
-    iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
-    acount.used += int(ok_n.sum())
-    mid = 0.5 * (T[:-1] + T[1:])
-    iv.cx = np.interp(mid, ht, heading.cx[heading.valid])
-    iv.cy = np.interp(mid, ht, heading.cy[heading.valid])
-
-
-def _add_range(iv: Intervals, rng: RangeData, config: FusionConfig, counts) -> None:
-    count = counts.setdefault("range", SensorCount())
-    if iv.camera_height is None:
-        raise InputError("the range finder needs the configured camera height (camera T_BS or camera_height)")
-    rng = _ordered_fields(rng, ("distance",), count)
-    h = camera_height(rng, config.range)
-    count.gated += h.n_gated
-    ht, hv = h.t[h.valid], h.height[h.valid]
-    if len(ht) == 0:
-        return
-    T = iv.t
-    j = np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)
-    jm = np.clip(j - 1, 0, len(ht) - 1)
-    nearest = np.minimum(np.abs(ht[j] - T), np.abs(ht[jm] - T))
-    ok = nearest <= config.max_gap
-    iv.range_ok = ok
-    iv.range_height = np.where(ok, np.interp(T, ht, hv), np.nan)
-    count.used += int(ok.sum())
-
-
-def _add_gps(iv: Intervals, gps: GpsData, counts) -> None:
-    """Each fix at the node of its time (:data:`GPS_SNAP`); fixes outside the node span are counted missing."""
-    count = counts.setdefault("gps", SensorCount())
-    T = iv.t
-    iv.gps = gps
-    iv.gps_ok = np.zeros(len(T), bool)
-    iv.gps_enu = np.zeros((len(T), 2))
-    iv.gps_cov = np.tile(np.eye(2), (len(T), 1, 1))
-    idx, n_re, n_dup = time_order(gps.t)
-    count.reordered += n_re
-    count.gated += n_dup
-    for i in idx:
-        k = int(np.clip(np.searchsorted(T, gps.t[i]), 0, len(T) - 1))
-        k = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - gps.t[i]))
-        if abs(T[k] - gps.t[i]) > GPS_SNAP or iv.gps_ok[k]:
-            count.missing += 1
-            continue
-        iv.gps_ok[k] = True
-        iv.gps_enu[k] = gps.enu[i, :2]
-        iv.gps_cov[k] = gps.covariance[i]
-
-
-def _add_visual(iv: Intervals, visual: list[VisualIncrement], counts, notes) -> None:
-    count = counts.setdefault("camera", SensorCount())
-    T = iv.t
-    rows = []
-    last_t1 = -np.inf
-    for inc in visual:
-        if inc.t1 < last_t1:
-            count.reordered += 1
-        last_t1 = max(last_t1, inc.t1)
-        if not inc.ok:
-            count.missing += 1
-            continue
-        delta = np.asarray(inc.delta, dtype=np.float64).reshape(3)
-        cov = np.asarray(inc.covariance, dtype=np.float64).reshape(3, 3)
-        if not (np.all(np.isfinite(delta)) and np.all(np.isfinite(cov)) and inc.t1 > inc.t0):
-            count.gated += 1
-            continue
-        if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-            count.gated += 1
-            continue
-        i0 = _node_index(T, inc.t0)
-        i1 = _node_index(T, inc.t1)
-        if i0 is None or i1 is None or i1 <= i0:
-            count.gated += 1
-            continue
-        rows.append((inc.t1, i0, i1, delta, cov))
-    rows.sort(key=lambda r: r[0])
-    if rows:
-        iv.vis_i0 = np.array([r[1] for r in rows])
-        iv.vis_i1 = np.array([r[2] for r in rows])
-        iv.vis_delta = np.array([r[3] for r in rows])
-        iv.vis_cov = np.array([r[4] for r in rows])
-        # slope: mean projection factors over the spanned intervals
-        cx = np.array([iv.cx[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
-        cy = np.array([iv.cy[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
-        iv.vis_delta[:, 0] *= cx
-        iv.vis_delta[:, 1] *= cy
-    count.used += len(rows)
-    covered = np.zeros(len(T) - 1, bool)
-    for a, b in zip(iv.vis_i0, iv.vis_i1):
-        covered[a:b] = True
-    for a, b in _uncovered_runs(T, covered, 0.2):
-        notes.append(f"camera lost from {_when(a, T)} to {_when(b, T)}; the other sensors carried the estimate")
-
-
-def _when(t: float, T: np.ndarray) -> str:
+def when(t: float, T: np.ndarray) -> str:
     """``t=...`` on the recording clock with the time since the first node."""
     return f"t={t:.2f} ({t - T[0]:.2f} s in)"
 
 
-def _node_index(T: np.ndarray, t: float) -> int | None:
+def node_index(T: np.ndarray, t: float) -> int | None:
     i = int(np.clip(np.searchsorted(T, t), 0, len(T) - 1))
     for j in (i - 1, i):
         if 0 <= j < len(T) and abs(T[j] - t) < 1e-6:
@@ -536,7 +385,7 @@ def _node_index(T: np.ndarray, t: float) -> int | None:
     return None
 
 
-def _uncovered_runs(T: np.ndarray, covered: np.ndarray, min_length: float) -> list[tuple[float, float]]:
+def uncovered_runs(T: np.ndarray, covered: np.ndarray, min_length: float) -> list[tuple[float, float]]:
     """Time spans ``(start, end)`` of consecutive uncovered node intervals at least ``min_length`` long."""
     runs = []
     k = 0

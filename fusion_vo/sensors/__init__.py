@@ -1,7 +1,9 @@
 """Sensor models: wheel encoders and odometry twist, IMU (gyro, AHRS), downward range finder, GPS.
 
 Each module turns a recorded stream (arrays from :mod:`fusion_vo.measurements`) into gated samples with
-a documented noise model; the backends integrate them between their nodes.
+a documented noise model; the backends integrate them between their nodes. Each module also registers its sensor with
+:mod:`fusion_vo.sensors.registry` (reader, configuration section, timeline, EKF and graph parts), which
+is how the rest of the library finds it.
 """
 
 from fusion_vo.sensors.gps import GpsModel, GpsNoise, align_to_fixes

@@ -55,8 +55,13 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
+from fusion_vo.sensors.registry import Sensor, Step, register
 
 log = logging.getLogger(__name__)
+
+#: a fix closer than this to an existing node [s] is applied at that node
+GPS_SNAP = 1e-3
+OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reported with its drift
 
 #: 99.9 % point of the chi-square distribution with 2 degrees of freedom
 CHI2_2DOF_999 = 13.815510557964274
@@ -395,3 +400,212 @@ def align_to_fixes(t: np.ndarray, xyyaw: np.ndarray, gps: GpsData, t_end: float 
     rms = math.sqrt(float(np.mean(np.sum((fitted[inlier] - z[inlier]) ** 2, axis=1))))
     return Alignment(float(yaw), offset, rms, len(idx), 1.0 / math.sqrt(float(np.sum(w * moment))),
                      int(np.count_nonzero(~inlier)))
+
+
+# ---------------------------------------------------------------------- registration
+def node_times(gps: GpsData, nodes: np.ndarray, config) -> np.ndarray:
+    """Every fix time is a node, unless one is within :data:`GPS_SNAP` of it."""
+    if not len(gps.t):
+        return nodes
+    fixes = np.asarray(gps.t, dtype=np.float64)
+    fixes = fixes[np.isfinite(fixes)]
+    j = np.clip(np.searchsorted(nodes, fixes), 1, len(nodes) - 1)
+    near = np.minimum(np.abs(nodes[j] - fixes), np.abs(nodes[j - 1] - fixes)) <= GPS_SNAP
+    return np.unique(np.concatenate([nodes, fixes[~near]]))
+
+
+def add_intervals(iv, streams, config, counts) -> None:
+    """Each fix at the node of its time (:data:`GPS_SNAP`); fixes outside the node span are counted missing
+    (``Intervals.gps_ok, gps_enu, gps_cov, gps``)."""
+    from fusion_vo.backends.result import SensorCount
+    from fusion_vo.backends.timeline import time_order
+
+    gps = streams.gps
+    count = counts.setdefault("gps", SensorCount())
+    T = iv.t
+    iv.gps = gps
+    iv.gps_ok = np.zeros(len(T), bool)
+    iv.gps_enu = np.zeros((len(T), 2))
+    iv.gps_cov = np.tile(np.eye(2), (len(T), 1, 1))
+    idx, n_re, n_dup = time_order(gps.t)
+    count.reordered += n_re
+    count.gated += n_dup
+    for i in idx:
+        k = int(np.clip(np.searchsorted(T, gps.t[i]), 0, len(T) - 1))
+        k = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - gps.t[i]))
+        if abs(T[k] - gps.t[i]) > GPS_SNAP or iv.gps_ok[k]:
+            count.missing += 1
+            continue
+        iv.gps_ok[k] = True
+        iv.gps_enu[k] = gps.enu[i, :2]
+        iv.gps_cov[k] = gps.covariance[i]
+
+
+def ekf_update(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+    """Apply one fix to the EKF through ``model`` (gate, robust weight); returns whether it was accepted."""
+    chk = model.check(ekf.x[:3], fix, covariance, ekf.P[:3, :3], t)
+    if not chk.accepted:
+        return False
+    ekf.update_pose(chk.residual, chk.H, chk.R)
+    return True
+
+
+def ekf_reacquire(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
+    """Apply a fix that failed the gate after widening the EKF's position covariance by the squared
+    innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
+    model.n_rejected -= 1
+    if model.rejected_t:
+        model.rejected_t.pop()
+    r = np.asarray(fix, dtype=np.float64)[:2] - predict(ekf.x[:3], model.lever_arm)
+    ekf.P[:2, :2] += np.eye(2) * float(r @ r)
+    return ekf_update(ekf, model, fix, covariance, t)
+
+
+class GpsReacquire:
+    """Fixes through the gate, and after ``after`` seconds of rejections one applied anyway
+    (``FusionConfig.gps_reacquire``); ``times`` holds when that happened."""
+
+    def __init__(self, after: float):
+        self.after = after
+        self.last_ok: float | None = None
+        self.times: list[float] = []
+
+    def __call__(self, ekf, model: GpsModel, iv, k: int) -> bool:
+        t = float(iv.t[k])
+        if ekf_update(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t):
+            self.last_ok = t
+            return True
+        if self.last_ok is None:
+            self.last_ok = t
+        if t - self.last_ok < self.after:
+            return False
+        self.times.append(t)
+        self.last_ok = t
+        return ekf_reacquire(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t)
+
+    def due(self, t: float, accepted: bool) -> bool:
+        """For a backend that gates itself: whether a rejected fix at ``t`` is to be applied anyway."""
+        if accepted or self.last_ok is None:
+            self.last_ok = t
+            return False
+        if t - self.last_ok < self.after:
+            return False
+        self.times.append(t)
+        self.last_ok = t
+        return True
+
+
+def gps_note(backend: str, model: GpsModel, iv, reacquired: list | None = None) -> str:
+    """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the fixes skipped on reading."""
+    text = f"{backend}: gps {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
+    if model.rejected_t:
+        when = sorted(model.rejected_t)
+        text += f" (t={when[0]:.2f} to {when[-1]:.2f}, {when[0] - iv.t[0]:.2f} to {when[-1] - iv.t[0]:.2f} s in)"
+    if reacquired:
+        text += (f"; {len(reacquired)} times a fix was applied anyway after rejections for gps_reacquire seconds "
+                 f"(the estimate re-acquired the fixes; first at {reacquired[0] - iv.t[0]:.2f} s in)")
+    skipped = sum((iv.gps.skipped or {}).values()) if iv.gps is not None else 0
+    if skipped:
+        text += f"; {skipped} skipped on reading ({', '.join(f'{n} {k}' for k, n in iv.gps.skipped.items() if n)})"
+    return text
+
+
+class EkfFixes:
+    """The fixes applied by the EKF at their nodes after each step's update (gate, robust weight, re-acquisition
+    after ``gps_reacquire`` seconds of rejections); an outage of :data:`OUTAGE_NOTE_S` or more is reported with the
+    drift the first fix after it measures."""
+
+    def __init__(self, iv, config):
+        self.iv = iv
+        self.model = GpsModel(iv.gps.lever_arm, config.gps)
+        self.reacquire = GpsReacquire(config.gps_reacquire)
+        self.notes: list[str] = []
+        self.last_fix: float | None = None
+
+    def node(self, ekf, k: int) -> None:
+        iv = self.iv
+        if not iv.gps_ok[k]:
+            return
+        if k > 0 and self.last_fix is not None and iv.t[k] - self.last_fix >= OUTAGE_NOTE_S:
+            # the first fix after an outage measures how far the estimate drifted without GPS
+            drift = float(np.linalg.norm(iv.gps_enu[k] - predict(ekf.x[:3], self.model.lever_arm)))
+            sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
+            self.notes.append(f"ekf: gps outage from {self.last_fix - iv.t[0]:.2f} to {iv.t[k] - iv.t[0]:.2f} s in: "
+                              f"drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
+        self.last_fix = float(iv.t[k])
+        self.reacquire(ekf, self.model, iv, k)
+
+    def finish(self, ekf, result) -> None:
+        from fusion_vo.backends.result import SensorCount
+
+        ekf.counts["gps"] = SensorCount(used=self.model.n_used, gated=self.model.n_rejected)
+        result.notes.append(gps_note("ekf", self.model, self.iv, self.reacquire.times))
+        result.notes.extend(self.notes)
+
+
+def _ekf_run(iv, config):
+    return EkfFixes(iv, config) if iv.gps_ok is not None and iv.gps is not None else None
+
+
+class GraphFixes:
+    """The fixes in the factor graph: each gated against its node's predicted pose (and the online marginal
+    covariance of the previous node when iSAM2 runs) and added as :func:`gps_factor` inside the robust kernel."""
+
+    def __init__(self, builder):
+        self.builder = builder
+        self.iv = builder.iv
+        self.model = GpsModel(self.iv.gps.lever_arm, builder.config.gps)
+        self.reacquire = GpsReacquire(builder.config.gps_reacquire)
+
+    def add(self, nf, n: int, pose_cov) -> None:
+        """Gate the fix at node ``n`` against its predicted pose; add the robust factor when accepted."""
+        from fusion_vo.backends.result import SensorCount
+
+        iv, model, builder = self.iv, self.model, self.builder
+        g = int(builder.grid[n])
+        if not iv.gps_ok[g]:
+            return
+        key = builder.key(n)
+        guess = nf.values[key]
+        chk = model.check(np.array([guess.x(), guess.y(), guess.theta()]), iv.gps_enu[g], iv.gps_cov[g], pose_cov,
+                          float(iv.t[g]))
+        if not chk.accepted and self.reacquire.due(float(iv.t[g]), False):
+            model.n_rejected -= 1  # applied after all: a use, not a rejection
+            model.rejected_t.pop()
+            model.n_used += 1
+        elif chk.accepted:
+            self.reacquire.due(float(iv.t[g]), True)
+        else:
+            builder.counts.setdefault("gps", SensorCount()).gated += 1
+            return
+        nf.factors.append(model.factor(key, iv.gps_enu[g], iv.gps_cov[g]))
+        nf.sensors.append("gps")
+
+    def finish(self, result) -> None:
+        result.notes.append(gps_note("gtsam", self.model, self.iv, self.reacquire.times))
+
+
+def _graph_run(builder):
+    iv = builder.iv
+    return GraphFixes(builder) if iv.gps_ok is not None and iv.gps is not None else None
+
+
+def _world_frame(iv, config) -> None:
+    """ENU at the datum, the first heading estimated from the fixes (:func:`fusion_vo.backends.world.align_world`)."""
+    if iv.gps_ok is not None:
+        from fusion_vo.backends.world import align_world
+
+        align_world(iv, config)
+
+
+def _keyframes(iv):
+    """A fix's node is always a keyframe."""
+    return np.flatnonzero(iv.gps_ok) if iv.gps_ok is not None else None
+
+
+register(Sensor(
+    name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
+    has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
+    default=False, config=("gps", GpsNoise), world_frame=_world_frame, node_times=node_times, intervals=Step(50, add_intervals),
+    ekf_run=_ekf_run, graph_run=_graph_run, graph_keyframes=_keyframes,
+))

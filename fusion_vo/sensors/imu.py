@@ -35,8 +35,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.registry import Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -284,3 +286,134 @@ class AhrsModel(MeasurementModel):
 
 GYRO = GyroModel()
 AHRS = AhrsModel()
+
+
+# --------------------------------------------------------------------------- registration
+def add_intervals(iv, streams, config, counts) -> None:
+    """The gyro's integrated angle per node interval (``Intervals.gyro_ok, gyro_angle``) and, with an AHRS
+    orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw,
+    heading_offset``) and the slope factors ``cx, cy``."""
+    from fusion_vo.backends.result import SensorCount
+    from fusion_vo.backends.timeline import coverage, ordered_fields
+
+    imu = streams.imu
+    count = counts.setdefault("gyro", SensorCount())
+    imu = ordered_fields(imu, ("gyro", "accel", "orientation"), count)
+    gyro = gyro_yaw(imu, config.imu.with_sensor_keys(imu.noise))
+    count.gated += gyro.n_gated
+    T = iv.t
+    ok = coverage(gyro.t, np.zeros(max(len(gyro.t) - 1, 0), bool), T, config.max_gap)
+    theta = np.interp(T, gyro.t, cumulative_angle(gyro)) if len(gyro.t) else np.zeros(len(T))
+    iv.gyro_ok, iv.gyro_angle = ok, np.diff(theta)
+    count.used += int(ok.sum())
+    count.missing += int((~ok).sum())
+    heading = ahrs_heading(imu)
+    if heading is None:
+        return
+    acount = counts.setdefault("ahrs", SensorCount())
+    acount.gated += int((~heading.valid).sum())
+    ht = heading.t[heading.valid]
+    if len(ht) < 2:
+        return
+    yaw = np.unwrap(heading.yaw[heading.valid])
+    near = np.abs(ht[np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)] - T) <= config.max_gap
+    ok_n = (T >= ht[0]) & (T <= ht[-1]) & near
+    if not ok_n.any():
+        return
+    yaw_t = np.interp(T, ht, yaw)
+    if iv.heading_offset is None:
+        # AHRS north vs. the estimate's initial heading, averaged over the samples of the first
+        # quarter second with the gyro carrying the heading (one noisy sample would bias all headings)
+        first = int(np.argmax(ok_n))
+        window = (ht >= T[first] - 1e-9) & (ht <= T[first] + 0.25)
+        gyro_heading = np.zeros(int(window.sum()))
+        if len(gyro.t):
+            angle = cumulative_angle(gyro)
+            gyro_heading = np.interp(ht[window], gyro.t, angle) - np.interp(T[first], gyro.t, angle)
+        diffs = se2.wrap_angle(yaw[window] - yaw_t[first] - gyro_heading)
+        mean = float(np.mean(diffs)) if len(diffs) else 0.0
+        iv.heading_offset = float(yaw_t[first] + mean - float(config.initial_pose[2]))
+    offset = iv.heading_offset
+    iv.ahrs_ok = ok_n
+    iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
+    acount.used += int(ok_n.sum())
+    mid = 0.5 * (T[:-1] + T[1:])
+    iv.cx = np.interp(mid, ht, heading.cx[heading.valid])
+    iv.cy = np.interp(mid, ht, heading.cy[heading.valid])
+
+
+def ekf_measurements(iv, config) -> dict:
+    """``gyro`` -> (ok, mean rate, σ_g²/Δt) per interval; ``ahrs`` -> (ok, heading, σ_ψ²) at the nodes."""
+    out = {}
+    if iv.uses("gyro"):
+        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / iv.dt, config.imu.gyro_noise_density**2 / iv.dt)
+    if iv.ahrs_ok.any():
+        out["ahrs"] = (iv.ahrs_ok, iv.ahrs_yaw, config.imu.ahrs_yaw_sigma**2)
+    return out
+
+
+def ekf_gyro(ekf, meas: dict, k: int) -> list:
+    m = meas.get("gyro")
+    return [ekf.block(GYRO, m[1][k], m[2][k])] if m is not None and m[0][k] else []
+
+
+def ekf_ahrs(ekf, meas: dict, k: int) -> list:
+    """The AHRS heading at the node ending interval ``k``."""
+    m = meas.get("ahrs")
+    return [ekf.block(AHRS, m[1][k + 1], m[2])] if m is not None and m[0][k + 1] else []
+
+
+def ekf_ahrs_start(ekf, meas: dict) -> list:
+    m = meas.get("ahrs")
+    return [ekf.block(AHRS, m[1][0], m[2])] if m is not None and m[0][0] else []
+
+
+def graph_guess(builder, nf, node) -> None:
+    """The gyro's integrated angle over the interval: the most reliable heading change for the guess."""
+    iv = builder.iv
+    if iv.uses("gyro") and iv.gyro_ok[node.g0:node.g1].all():
+        angle = float(iv.gyro_angle[node.g0:node.g1].sum())
+        node.scratch["gyro_angle"] = angle
+        node.heading = angle - node.estimate.get("gyro_bias", 0.0) * node.dt
+        nf.sensors.append("gyro")
+
+
+def graph_gyro(builder, nf, node) -> None:
+    """``d_ψ + B_c Δt - Θ`` with ``σ² = σ_g² Δt`` (linear, not robust)."""
+    angle = node.scratch.get("gyro_angle")
+    if angle is None:
+        return
+    var = GYRO.variance(builder.config.imu.gyro_noise_density, node.dt)
+    nf.factors.append(builder.model_factor(GYRO, [angle], [[var]], {"motion": (node.xi, node.xj),
+                                                                     "gyro_bias": (builder.B(node.segment),)},
+                                           params={"dt": node.dt}, robust=False))
+
+
+def graph_ahrs(builder, nf, node) -> None:
+    """The AHRS heading at the node: with its offset variable when the offset walks, else GTSAM's
+    ``PriorFactorPose2`` on the heading (the model with the offset fixed at 0)."""
+    iv, cfg = builder.iv, builder.config
+    g = node.g1
+    if not iv.ahrs_ok[g]:
+        return
+    import gtsam
+
+    if builder.ahrs_offset_on:
+        nf.factors.append(builder.model_factor(AHRS, [float(iv.ahrs_yaw[g])], [[cfg.imu.ahrs_yaw_sigma**2]],
+                                               {"heading": (node.xj,), "ahrs_offset": (builder.O(node.segment),)}))
+    else:
+        # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
+        # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)
+        nm = builder.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]))
+        heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
+        nf.factors.append(gtsam.PriorFactorPose2(node.xj, heading, nm))
+    nf.sensors.append("ahrs")
+
+
+register(Sensor(
+    name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
+    read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
+    intervals=Step(10, add_intervals), ekf_measurements=ekf_measurements,
+    ekf_blocks=(Step(30, ekf_gyro), Step(50, ekf_ahrs)), ekf_start=ekf_ahrs_start,
+    graph_factors=(Step(30, graph_guess), Step(50, graph_gyro)), graph_unary=(Step(80, graph_ahrs),),
+))

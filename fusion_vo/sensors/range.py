@@ -17,9 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion_vo.errors import InputError
 from fusion_vo.measurements import RangeData
 from fusion_vo.sensors.imu import running_median
 from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.registry import Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -95,3 +97,66 @@ class RangeModel(MeasurementModel):
 
 
 RANGE = RangeModel()
+
+
+# --------------------------------------------------------------------------- registration
+def add_intervals(iv, streams, config, counts) -> None:
+    """Camera heights at the nodes (``Intervals.range_ok, range_height``), within ``max_gap`` of a reading;
+    nothing when the visual increments were already scaled with them (used once)."""
+    from fusion_vo.backends.result import SensorCount
+    from fusion_vo.backends.timeline import ordered_fields
+
+    if streams.visual is not None and streams.range_in_visual:
+        iv.notes.append("range finder: already in the visual increments (their per-frame height), "
+                        "not used again as a height measurement")
+        return
+    rng = streams.range
+    count = counts.setdefault("range", SensorCount())
+    if iv.camera_height is None:
+        raise InputError("the range finder needs the configured camera height (camera T_BS or camera_height)")
+    rng = ordered_fields(rng, ("distance",), count)
+    h = camera_height(rng, config.range)
+    count.gated += h.n_gated
+    ht, hv = h.t[h.valid], h.height[h.valid]
+    if len(ht) == 0:
+        return
+    T = iv.t
+    j = np.clip(np.searchsorted(ht, T), 0, len(ht) - 1)
+    jm = np.clip(j - 1, 0, len(ht) - 1)
+    nearest = np.minimum(np.abs(ht[j] - T), np.abs(ht[jm] - T))
+    ok = nearest <= config.max_gap
+    iv.range_ok = ok
+    iv.range_height = np.where(ok, np.interp(T, ht, hv), np.nan)
+    count.used += int(ok.sum())
+
+
+def ekf_measurements(iv, config) -> dict:
+    """``range`` -> (ok, height, σ_r²) at the nodes."""
+    return {"range": (iv.range_ok, iv.range_height, config.range.sigma**2)} if iv.range_ok.any() else {}
+
+
+def ekf_blocks(ekf, meas: dict, k: int) -> list:
+    m = meas.get("range")
+    if m is None or not m[0][k + 1]:
+        return []
+    return [ekf.block(RANGE, m[1][k + 1], m[2], camera_height=ekf.camera_height)]
+
+
+def graph_unary(builder, nf, node) -> None:
+    """The reading solved for the visual scale of the node's segment (:meth:`RangeModel.scale_prior`)."""
+    iv = builder.iv
+    g = node.g1
+    if builder.kv_on and iv.range_ok[g] and iv.camera_height:
+        import gtsam
+
+        scale, sig = RANGE.scale_prior(iv.range_height[g], builder.config.range.sigma, float(iv.camera_height))
+        nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
+        nf.factors.append(gtsam.PriorFactorDouble(builder.S(node.segment), scale, nm))
+        nf.sensors.append("range")
+
+
+register(Sensor(
+    name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
+    has=lambda recording: recording.has_range(), config=("range", RangeNoise), intervals=Step(40, add_intervals),
+    ekf_measurements=ekf_measurements, ekf_blocks=(Step(60, ekf_blocks),), graph_unary=(Step(90, graph_unary),),
+))

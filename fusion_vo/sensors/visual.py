@@ -15,7 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
+from fusion_vo.sensors.registry import Sensor, Step, register
 
 
 @dataclass(frozen=True)
@@ -34,3 +36,110 @@ class VisualModel(MeasurementModel):
 
 
 VISUAL = VisualModel()
+
+
+# --------------------------------------------------------------------------- registration
+def add_intervals(iv, streams, config, counts) -> None:
+    """The usable increments onto the node grid (``Intervals.vis_*``), projected to the horizontal; camera
+    outages become notes."""
+    from fusion_vo.backends.result import SensorCount
+    from fusion_vo.backends.timeline import node_index, uncovered_runs, when
+
+    visual, notes = streams.visual, iv.notes
+    count = counts.setdefault("camera", SensorCount())
+    T = iv.t
+    rows = []
+    last_t1 = -np.inf
+    for inc in visual:
+        if inc.t1 < last_t1:
+            count.reordered += 1
+        last_t1 = max(last_t1, inc.t1)
+        if not inc.ok:
+            count.missing += 1
+            continue
+        delta = np.asarray(inc.delta, dtype=np.float64).reshape(3)
+        cov = np.asarray(inc.covariance, dtype=np.float64).reshape(3, 3)
+        if not (np.all(np.isfinite(delta)) and np.all(np.isfinite(cov)) and inc.t1 > inc.t0):
+            count.gated += 1
+            continue
+        if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
+            count.gated += 1
+            continue
+        i0 = node_index(T, inc.t0)
+        i1 = node_index(T, inc.t1)
+        if i0 is None or i1 is None or i1 <= i0:
+            count.gated += 1
+            continue
+        rows.append((inc.t1, i0, i1, delta, cov))
+    rows.sort(key=lambda r: r[0])
+    if rows:
+        iv.vis_i0 = np.array([r[1] for r in rows])
+        iv.vis_i1 = np.array([r[2] for r in rows])
+        iv.vis_delta = np.array([r[3] for r in rows])
+        iv.vis_cov = np.array([r[4] for r in rows])
+        # slope: mean projection factors over the spanned intervals
+        cx = np.array([iv.cx[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
+        cy = np.array([iv.cy[a:b].mean() for a, b in zip(iv.vis_i0, iv.vis_i1)])
+        iv.vis_delta[:, 0] *= cx
+        iv.vis_delta[:, 1] *= cy
+    count.used += len(rows)
+    covered = np.zeros(len(T) - 1, bool)
+    for a, b in zip(iv.vis_i0, iv.vis_i1):
+        covered[a:b] = True
+    for a, b in uncovered_runs(T, covered, 0.2):
+        notes.append(f"camera lost from {when(a, T)} to {when(b, T)}; the other sensors carried the estimate")
+
+
+def ekf_measurements(iv, config) -> dict:
+    """The increments as twists per node interval: ``visual`` -> (ok, u, R) (EKF module docstring); an increment
+    spanning ``n`` intervals is applied as its mean twist to each with covariance ``n R``."""
+    if not len(iv.vis_i0):
+        return {}
+    K = iv.n_steps
+    vis_u = np.zeros((K, 3))
+    vis_R = np.zeros((K, 3, 3))
+    vis_ok = np.zeros(K, bool)
+    span = iv.t[iv.vis_i1] - iv.t[iv.vis_i0]
+    n = iv.vis_i1 - iv.vis_i0
+    for m in np.argsort(n, kind="stable"):  # single-interval increments first
+        steps = np.arange(iv.vis_i0[m], iv.vis_i1[m])
+        free = steps[~vis_ok[steps]]
+        if len(free) == 0:
+            continue
+        vis_u[free] = se2.log(iv.vis_delta[m]) / span[m]
+        vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
+        vis_ok[free] = True
+    return {"visual": (vis_ok, vis_u, vis_R)}
+
+
+def ekf_blocks(ekf, meas: dict, k: int) -> list:
+    m = meas.get("visual")
+    return [ekf.block(VISUAL, m[1][k], m[2][k])] if m is not None and m[0][k] else []
+
+
+def graph_factors(builder, nf, node) -> None:
+    """The increments ending at this node (re-expressed between keyframes): the model with the visual scale
+    when it is estimated, else GTSAM's ``BetweenFactorPose2``."""
+    import gtsam
+
+    est = node.estimate
+    for start, d, cov in builder.visual_spans.get(node.n, []):
+        xs = builder.X(builder.offset + start)
+        if builder.kv_on:
+            nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, node.xj),
+                                                                     "visual_scale": (builder.S(node.segment),)}))
+        else:
+            nf.factors.append(gtsam.BetweenFactorPose2(xs, node.xj, gtsam.Pose2(*d), builder.noise(cov)))
+        nf.sensors.append("camera")
+        if start == node.n - 1:
+            if node.translation is None:
+                node.translation = d[:2] / est.get("visual_scale", 1.0)
+            if node.heading is None:
+                node.heading = d[2]
+
+
+register(Sensor(
+    name="camera", where="cam0/ frames or visual increments", field="visual",
+    intervals=Step(30, add_intervals), ekf_measurements=ekf_measurements, ekf_blocks=(Step(10, ekf_blocks),),
+    graph_factors=(Step(20, graph_factors),),
+))

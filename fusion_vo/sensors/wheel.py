@@ -83,6 +83,7 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
+from fusion_vo.sensors.registry import Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -394,8 +395,184 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
     return np.stack([x, y, se2.wrap_angle(yaw)], axis=1)
 
 
+
+# --------------------------------------------------------------------------- registration
+_DROPPED_VAR = 1e8  # EKF variance of a measurement row the consistency monitor dropped
+_FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
+_FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose speed the monitor dropped
+
+
+def add_intervals(iv, streams, config, counts) -> None:
+    """Wheel travel (encoder ticks, else the odometry twist) interpolated at the node times:
+    ``Intervals.wheel_ok, wheel_dl, wheel_dr, wheel_base, twist``."""
+    from fusion_vo.backends.result import SensorCount
+    from fusion_vo.backends.timeline import coverage, ordered_fields
+
+    count = counts.setdefault("wheel", SensorCount())
+    if streams.wheel is not None:
+        data = ordered_fields(streams.wheel, ("left", "right"), count)
+        travel: WheelTravel = ticks_to_travel(data, config.wheel)
+    else:
+        data = ordered_fields(streams.odom, ("vx", "vy", "wz"), count)
+        travel = twist_to_travel(data, max_speed=config.odom.max_speed)
+        iv.twist = True
+    count.gated += travel.n_gated
+    T = iv.t
+    ok = coverage(travel.t, ~travel.valid, T, config.max_gap)
+    left = np.interp(T, travel.t, travel.left)
+    right = np.interp(T, travel.t, travel.right)
+    iv.wheel_ok, iv.wheel_dl, iv.wheel_dr = ok, np.diff(left), np.diff(right)
+    iv.wheel_base = travel.wheel_base
+    count.used += int(ok.sum())
+    count.missing += int((~ok).sum())
+
+
+def _add_twist_intervals(iv, streams, config, counts) -> None:
+    if streams.wheel is None:  # ticks, when both are there, are the wheel's
+        add_intervals(iv, streams, config, counts)
+
+
+def gyro_turn(iv) -> np.ndarray | None:
+    """The gyro's heading change per interval (NaN where it has none), or None without a gyro: the
+    independent measure of the turn that scales the wheels' skid variance (:func:`skid_variance`)."""
+    if not iv.uses("gyro"):
+        return None
+    return np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
+
+
+def ekf_measurements(iv, config) -> dict:
+    """``wheel`` -> (ok, u, R): the arc as a twist per interval (components the consistency monitor dropped
+    get a vague variance), and ``standstill`` -> (ok, σ²) where both wheels are at rest."""
+    if not iv.uses("wheel"):
+        return {}
+    out = {}
+    dt = iv.dt
+    u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0], gyro_turn(iv))
+    u[:, 0] *= iv.cx
+    if iv.wheel_yaw_ok is not None and not iv.wheel_yaw_ok.all():
+        # yaw component dropped by the consistency monitor: the speed rows stay
+        drop = ~iv.wheel_yaw_ok
+        R = R.copy()
+        R[drop, 2, :] = R[drop, :, 2] = 0.0
+        R[drop, 2, 2] = _DROPPED_VAR
+    if iv.wheel_speed_ok is not None and not iv.wheel_speed_ok.all():
+        # speed dropped by the monitor (disagrees with the camera's): the yaw row stays
+        drop = ~iv.wheel_speed_ok
+        R = R.copy()
+        R[drop, :2, :] = R[drop, :, :2] = 0.0
+        R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
+    out["wheel"] = (iv.wheel_ok, u, R)
+    noise = config.wheel_model(iv.twist)[0]
+    still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+    if still.any():
+        out["standstill"] = (still, noise.standstill_yaw_rate**2)
+    return out
+
+
+def ekf_wheel(ekf, meas: dict, k: int) -> list:
+    m = meas.get("wheel")
+    return [ekf.block(WHEEL, m[1][k], m[2][k])] if m is not None and m[0][k] else []
+
+
+def ekf_standstill(ekf, meas: dict, k: int) -> list:
+    m = meas.get("standstill")
+    return [ekf.block(STANDSTILL, 0.0, m[1])] if m is not None and m[0][k] else []
+
+
+def graph_translation(builder, nf, node) -> None:
+    """The arc increment over the node interval: with the wheel-base factor estimated (or the yaw dropped) its
+    translation (scaled by the radius factor when estimated) with a free heading, the heading change then a
+    factor of its own (:func:`graph_heading`); otherwise GTSAM's ``BetweenFactorPose2`` with the whole arc."""
+    import gtsam
+
+    iv, cfg = builder.iv, builder.config
+    g0, g1, xi, xj, est = node.g0, node.g1, node.xi, node.xj, node.estimate
+    if not (iv.uses("wheel") and iv.wheel_ok[g0:g1].all()):
+        return
+    wheel_noise = cfg.wheel_model(iv.twist)[0]
+    node.scratch["still"] = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]),
+                                            wheel_noise).all())
+    m, cov = builder.wheel_increment(g0, g1)
+    yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
+    speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())
+    if not speed_ok:  # speed dropped by the consistency monitor: a free translation
+        cov = cov.copy()
+        cov[:2, :] = cov[:, :2] = 0.0
+        cov[0, 0] = cov[1, 1] = _FREE_TRANSLATION_SIGMA**2
+    if not yaw_ok or builder.kb_on:
+        # translation from the arc; the heading change goes through the wheel-base factor, or
+        # not at all where the consistency monitor dropped the wheels' yaw component
+        if not yaw_ok:
+            m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
+        cov_xy = cov.copy()
+        cov_xy[2, :] = cov_xy[:, 2] = 0.0
+        cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
+        if builder.kr_on:  # distance scaled by the wheels' radius factor
+            nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
+                                                   fixed={"wheel_base_factor": 1.0}))
+        else:
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov_xy)))
+        if yaw_ok:
+            node.scratch["wheel_heading"] = (m, float(np.sqrt(cov[2, 2])))
+    else:
+        nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov)))
+    nf.sensors.append("wheel")
+    translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
+    node.translation = translation if speed_ok else None
+    node.heading = heading
+
+
+def graph_standstill(builder, nf, node) -> None:
+    """Both wheels at rest over the interval: the heading change is zero (``σ_still Δt``)."""
+    if not node.scratch.get("still"):
+        return
+    sigma = builder.config.wheel_model(builder.iv.twist)[0].standstill_yaw_rate * max(node.dt, 1e-3)
+    nf.factors.append(builder.model_factor(STANDSTILL, [0.0], [[sigma**2]], {"motion": (node.xi, node.xj)}, robust=False))
+    nf.sensors.append("standstill")
+
+
+def graph_heading(builder, nf, node) -> None:
+    """The wheels' heading change through the wheel-base factor, ``W d_ψ - m_ψ``."""
+    wheel_heading = node.scratch.get("wheel_heading")
+    if wheel_heading is None:
+        return
+    nf.factors.append(builder.model_factor(WHEEL, wheel_heading[0], [[wheel_heading[1] ** 2]],
+                                           {"motion": (node.xi, node.xj), "wheel_base_factor": (builder.W(node.segment),)},
+                                           fixed={"wheel_scale": 1.0}, rows=(2,)))
+
+
+def _pick_ticks(streams, selected):
+    """Encoder ticks when ``wheel`` is selected and recorded."""
+    use = "wheel" in selected and streams.wheel is not None and len(streams.wheel) > 1
+    return streams.wheel if use else None
+
+
+def _pick_twist(streams, selected):
+    """The odometry twist for ``odom``, or for ``wheel`` when there are no encoder ticks."""
+    if _pick_ticks(streams, selected) is None and ("odom" in selected or "wheel" in selected):
+        return streams.odom
+    return None
+
+
+register(Sensor(
+    name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
+    read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
+    pick=_pick_ticks, config=("wheel", WheelNoise),
+    intervals=Step(20, add_intervals), ekf_measurements=ekf_measurements,
+    ekf_blocks=(Step(20, ekf_wheel), Step(40, ekf_standstill)),
+    graph_factors=(Step(10, graph_translation), Step(60, graph_standstill), Step(70, graph_heading)),
+))
+register(Sensor(
+    name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",
+    read=lambda recording: recording.odom(), has=lambda recording: recording.has_odom(),
+    wanted=lambda selected, present: (("wheel" in selected or "odom" in selected) and present.get("odom", False)
+                                      and not ("wheel" in selected and present.get("wheel", False))),
+    default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
+    config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals),
+))
+
 __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
-    "WheelModel", "StandstillModel", "WHEEL", "STANDSTILL",
+    "WheelModel", "StandstillModel", "WHEEL", "STANDSTILL", "gyro_turn",
 ]

@@ -1,0 +1,258 @@
+"""The sensors the backends know, each registered by its own module.
+
+A :class:`Sensor` gathers everything about one sensor that the rest of the library needs: where its data
+lives in a recording and how it is read, its field of :class:`~fusion_vo.backends.timeline.SensorStreams`,
+its configuration section, how its samples become measurements on the node grid
+(:func:`~fusion_vo.backends.timeline.build_intervals`), and its contributions to the EKF
+(:func:`~fusion_vo.backends.ekf.step_blocks`) and to the factor graph
+(:class:`~fusion_vo.backends.graph.GraphBuilder`). The timeline, both backends, ``SensorStreams`` and
+the recording reader iterate :func:`sensors` instead of naming sensors, so adding a sensor is one module
+plus one :func:`register` call (README, "Adding a sensor")::
+
+    register(Sensor(name="compass", where="compass0/", ...))
+
+The built-in sensors register themselves in :mod:`~fusion_vo.sensors.visual` (``camera``),
+:mod:`~fusion_vo.sensors.wheel` (``wheel``, ``odom``), :mod:`~fusion_vo.sensors.imu` (``imu``),
+:mod:`~fusion_vo.sensors.range` (``range``) and :mod:`~fusion_vo.sensors.gps` (``gps``), in that order.
+
+Hooks with an ``order`` run sorted by it across all sensors (stable, so equal orders keep the
+registration order): a sensor's measurements may need another's (the camera's slope projection needs the
+IMU's), and the EKF's stacked update and the graph's factor lists keep one fixed order. The built-in
+sensors use multiples of 10; a new one picks any number (the default 100 runs after them).
+
+What a sensor cannot add through its registration: a new state variable. The EKF's state and the graph's
+calibration variables (pose, twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset)
+are fixed; a new sensor's model uses those (:data:`fusion_vo.sensors.model.ARGUMENT_SIZES`).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Callable
+
+#: the built-in sensor modules, imported (and so registered) on first use of the registry
+BUILTIN_MODULES = ("fusion_vo.sensors.visual", "fusion_vo.sensors.wheel", "fusion_vo.sensors.imu",
+                   "fusion_vo.sensors.range", "fusion_vo.sensors.gps")
+DEFAULT_ORDER = 100.0
+
+
+@dataclass(frozen=True)
+class Step:
+    """One contribution of a sensor to a stage, run in ``order`` among all sensors' contributions."""
+
+    order: float
+    run: Callable
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A sensor as the library sees it (module docstring).
+
+    Attributes
+    ----------
+    name : str
+        The name of ``--sensors`` and of ``SensorStreams.select``.
+    where : str
+        What a recording lacks when the sensor is asked for but has no data (``"gps0/ (usable fixes)"``).
+    field : str or None
+        Attribute of :class:`~fusion_vo.backends.timeline.SensorStreams` holding its data; None: the data is
+        ``SensorStreams.extra[name]`` (a sensor registered outside the library). The data is a dataclass with
+        sample times ``t`` and per-sample arrays (the camera's: a list of increments), so that the node grid
+        covers it and a pause in every stream cuts it (:mod:`fusion_vo.backends.pauses`).
+    min_samples : int
+        Samples (``len(data)``) it needs to be available (default 1).
+    folder : str or None
+        Its folder in a recording (``"gps0"``); None: not read from a recording.
+    read : callable or None
+        ``read(recording) -> data``: the reader of that folder.
+    has : callable or None
+        ``has(recording) -> bool``: whether the recording has the sensor (default: its folder exists).
+    wanted : callable or None
+        ``wanted(selected, present) -> bool``: whether to read it for the sensor names ``selected`` given what
+        the recording has (``present``: name -> bool); default: when its own name is selected.
+    default : callable or bool
+        Used when no sensors are named: a bool, or ``default(present) -> bool`` (default True).
+    pick : callable or None
+        ``pick(streams, selected) -> data or None``: its data for :meth:`SensorStreams.select`; default: its
+        data when its name is selected.
+    also_available_as : tuple of str
+        Names this sensor's data also answers to in ``select`` (odometry twist data for ``wheel``).
+    config : tuple (str, type) or None
+        ``(section, dataclass)``: its configuration section. A section that is not a field of
+        :class:`~fusion_vo.backends.config.FusionConfig` is read from the configuration's ``section:`` key
+        into ``FusionConfig.sensors[section]`` through the same schema (unknown keys are errors).
+    world_frame : callable or None
+        ``world_frame(iv, config)``: for an absolute sensor, the world frame (``Intervals.initial_pose`` and
+        ``initial_sigma``) set from its measurements before the backends run (GPS: ENU at the datum); a piece
+        of a recording with such data is placed by it (:mod:`fusion_vo.backends.pauses`).
+    node_times : callable or None
+        ``node_times(data, nodes, config) -> nodes``: node times the sensor needs besides the grid's.
+    intervals : Step or None
+        ``run(iv, streams, config, counts)``: its samples onto the node grid, into its fields of
+        :class:`~fusion_vo.backends.timeline.Intervals` (``iv.extra[name]`` for a sensor registered outside
+        the library), updating ``counts[name]`` (:class:`~fusion_vo.backends.result.SensorCount`).
+    ekf_measurements : callable or None
+        ``ekf_measurements(iv, config) -> dict``: its per-interval measurements, vectorised, merged into the
+        EKF's measurement table (:func:`~fusion_vo.backends.ekf.interval_measurements`).
+    ekf_blocks : tuple of Step
+        ``run(ekf, meas, k) -> list``: the EKF update blocks (:meth:`~fusion_vo.backends.ekf.PlanarEkf.block`)
+        of interval ``k`` (ending at node ``k + 1``).
+    ekf_start : callable or None
+        ``ekf_start(ekf, meas) -> list``: blocks applied at the first node.
+    ekf_run : callable or None
+        ``ekf_run(iv, config) -> object or None`` for a sensor applied at nodes on its own after each step's
+        update (GPS): the object's ``node(ekf, k)`` runs at node ``k`` (0 included) and ``finish(ekf, result)``
+        once at the end.
+    graph_factors : tuple of Step
+        ``run(builder, nf, node)``: its factors over the interval ending at a graph node
+        (:class:`~fusion_vo.backends.graph.GraphBuilder` ``builder``, :class:`~fusion_vo.backends.graph.NodeFactors`
+        ``nf``, :class:`~fusion_vo.backends.graph.NodeContext` ``node``); steps ordered before
+        :data:`~fusion_vo.backends.graph.GUESS_ORDER` give the node's initial guess.
+    graph_unary : tuple of Step
+        ``run(builder, nf, node)``: its factors on one node alone (every node, the first included), after the
+        interval factors.
+    graph_keyframes : callable or None
+        ``graph_keyframes(iv) -> indices``: grid nodes that must stay pose variables when the graph keeps only
+        every ``keyframe_every``-th (a GPS fix's node).
+    graph_run : callable or None
+        ``graph_run(builder) -> object or None`` for a sensor whose factors depend on the online estimate (GPS):
+        ``add(nf, n, pose_covariance)`` at every node, ``finish(result)`` at the end.
+    """
+
+    name: str
+    where: str = ""
+    field: str | None = None
+    min_samples: int = 1
+    folder: str | None = None
+    read: Callable | None = None
+    has: Callable | None = None
+    wanted: Callable | None = None
+    default: Any = True
+    pick: Callable | None = None
+    also_available_as: tuple = ()
+    config: tuple | None = None
+    world_frame: Callable | None = None
+    node_times: Callable | None = None
+    intervals: Step | None = None
+    ekf_measurements: Callable | None = None
+    ekf_blocks: tuple = ()
+    ekf_start: Callable | None = None
+    ekf_run: Callable | None = None
+    graph_factors: tuple = ()
+    graph_unary: tuple = ()
+    graph_keyframes: Callable | None = None
+    graph_run: Callable | None = None
+
+    def data(self, streams) -> Any:
+        """Its data in ``streams`` (a :class:`~fusion_vo.backends.timeline.SensorStreams`), or None."""
+        if self.field is not None:
+            return getattr(streams, self.field)
+        return streams.extra.get(self.name)
+
+    def available(self, data) -> bool:
+        """Whether ``data`` has enough samples to be used."""
+        return data is not None and len(data) >= self.min_samples
+
+    def present(self, recording) -> bool:
+        """Whether ``recording`` has this sensor's folder."""
+        if self.has is not None:
+            return bool(self.has(recording))
+        if self.folder is None or not hasattr(recording, "path"):
+            return False
+        return (recording.path / self.folder).exists()
+
+    def is_wanted(self, selected, present: dict) -> bool:
+        if self.wanted is not None:
+            return bool(self.wanted(selected, present))
+        return self.name in selected and present.get(self.name, False)
+
+    def by_default(self, present: dict) -> bool:
+        if callable(self.default):
+            return bool(self.default(present))
+        return bool(self.default)
+
+
+_REGISTRY: dict[str, Sensor] = {}
+_ORDERED: dict = {}  # attribute -> the sorted steps (cleared when a sensor is added or removed)
+_loaded = False
+
+
+def register(sensor: Sensor, replace: bool = False) -> Sensor:
+    """Add ``sensor`` to the registry (after those registered before it); returns it.
+
+    A second sensor of the same name is an error unless ``replace``.
+    """
+    if sensor.name in _REGISTRY and not replace:
+        raise ValueError(f"sensor '{sensor.name}' is already registered")
+    _REGISTRY[sensor.name] = sensor
+    _ORDERED.clear()
+    return sensor
+
+
+def unregister(name: str) -> None:
+    """Remove a sensor registered with :func:`register` (no error when it is not)."""
+    _REGISTRY.pop(name, None)
+    _ORDERED.clear()
+
+
+@contextmanager
+def registered(sensor: Sensor):
+    """``with registered(Sensor(...)):`` the sensor is known inside the block only."""
+    _load_builtins()
+    register(sensor)
+    try:
+        yield sensor
+    finally:
+        unregister(sensor.name)
+
+
+def _load_builtins() -> None:
+    global _loaded
+    if _loaded:
+        return
+    _loaded = True
+    import importlib
+
+    for module in BUILTIN_MODULES:
+        importlib.import_module(module)
+
+
+#: the built-in sensors' order (whichever module is imported first)
+BUILTIN_ORDER = ("camera", "wheel", "odom", "imu", "range", "gps")
+
+
+def sensors() -> list[Sensor]:
+    """Every registered sensor: the built-in ones in :data:`BUILTIN_ORDER`, then the others in registration order."""
+    _load_builtins()
+    rank = {name: i for i, name in enumerate(BUILTIN_ORDER)}
+    return sorted(_REGISTRY.values(), key=lambda s: rank.get(s.name, len(rank)))
+
+
+def names() -> tuple[str, ...]:
+    """The registered sensor names."""
+    return tuple(s.name for s in sensors())
+
+
+def get(name: str) -> Sensor:
+    """The sensor called ``name`` (KeyError when none is)."""
+    _load_builtins()
+    return _REGISTRY[name]
+
+
+def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:
+    """``(sensor, step)`` of every registered step ``attribute`` (a :class:`Step` or a tuple of them), sorted by
+    order; ``used`` (names) keeps only those sensors."""
+    if used is None and attribute in _ORDERED:  # the backends ask for the same steps at every node
+        return _ORDERED[attribute]
+    steps = []
+    for s in sensors():
+        if used is not None and s.name not in used:
+            continue
+        value = getattr(s, attribute)
+        for step in (value if isinstance(value, tuple) else (value,) if value is not None else ()):
+            steps.append((s, step))
+    steps.sort(key=lambda item: item[1].order)
+    if used is None:
+        _ORDERED[attribute] = steps
+    return steps
