@@ -47,7 +47,6 @@ from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.calibration.lens_from_motion import lens_from_motion
 from fusion_vo.geometry.camera import uncalibrated_camera
 from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
@@ -446,6 +445,8 @@ def run_visual_odometry(
         cam = uncalibrated_camera(recording.path / "cam0" / "sensor.yaml", config.focal_length)
         recording.camera = cam  # the frames are read with this model's image size
         if config.lens_from_motion:
+            from fusion_vo.calibration.lens_from_motion import lens_from_motion  # scipy only when needed
+
             cam, _ = lens_from_motion(recording, cam)
         recording.camera = cam  # every later reader of this recording sees the same model
     else:

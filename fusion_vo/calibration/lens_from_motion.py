@@ -27,7 +27,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy.optimize import minimize_scalar
 
 from fusion_vo.geometry.camera import CameraModel
 
@@ -146,6 +145,8 @@ def estimate_division(cam: CameraModel, tracks: list[tuple[np.ndarray, np.ndarra
             e = np.minimum(pair_errors(model, p0, p1), TRUNCATE_PX)
             total += float(np.sum(e * e))
         return total / points
+
+    from scipy.optimize import minimize_scalar  # only uncalibrated runs need scipy here
 
     grid = np.linspace(lo, hi, 31)
     costs = [cost(float(g)) for g in grid]
