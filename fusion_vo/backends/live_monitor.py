@@ -14,13 +14,14 @@ check's (which also sees what comes after): a lie is used until the check has se
 
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import logging
 
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.monitor import Episode, check_heading_sources
+from fusion_vo.backends.monitor import Episode, check_heading_sources, visual_heading_rows
 from fusion_vo.backends.timeline import Intervals
 
 logger = logging.getLogger(__name__)
@@ -62,9 +63,9 @@ class LiveHeadingMonitor:
         self._open: dict[str, list] = {}  # component -> [start, max NIS, against]
         self._next_check = -np.inf
         self._t: list[float] = []  # node times: _t[0] starts the first kept interval
-        self._node: dict[str, list] = {}  # per-node fields, one entry per node time
-        self._interval: dict[str, list] = {}  # per-interval fields
-        self._vis: list[tuple] = []  # (interval position, delta, covariance)
+        self._node: dict[str, _Column] = {}  # per-node fields, one row per node time
+        self._interval: dict[str, _Column] = {}  # per-interval fields
+        self._vis = {"pos": _Column(0), "delta": _Column(np.zeros(3)), "cov": _Column(np.zeros((3, 3)))}
         self._uses: set[str] = set()
         self._last: Intervals | None = None
         self._dropped_before = 0  # intervals trimmed from the front
@@ -79,15 +80,21 @@ class LiveHeadingMonitor:
         if not self._t:
             self._t = [float(iv.t[0])]
             for name, v in fields[0].items():
-                self._node[name] = [v[0]]
+                self._node[name] = _Column(v[0], 1)
         self._t.append(float(iv.t[1]))
         for name, v in fields[0].items():
-            self._node.setdefault(name, [v[0]] * (len(self._t) - 1)).append(v[1])
+            if name not in self._node:
+                self._node[name] = _Column(v[0], len(self._t) - 1)
+            self._node[name].append(v[1])
         for name, v in fields[1].items():
-            self._interval.setdefault(name, []).append(v[0])
+            if name not in self._interval:
+                self._interval[name] = _Column(v[0])
+            self._interval[name].append(v[0])
         pos = len(self._t) - 2
         for d, c in zip(iv.vis_delta, iv.vis_cov):
-            self._vis.append((pos, np.asarray(d), np.asarray(c)))
+            self._vis["pos"].append(pos)
+            self._vis["delta"].append(d)
+            self._vis["cov"].append(c)
         self._uses |= set(iv.counts)
         self._last = iv
         self._trim()
@@ -100,25 +107,33 @@ class LiveHeadingMonitor:
         nodes, intervals = _split(iv)
         for name, v in nodes.items():
             if name in self._node:
-                self._node[name][pos + 1] = v[1]
+                self._node[name].set(pos + 1, v[1])
         for name, v in intervals.items():
             if name in self._interval:
-                self._interval[name][pos] = v[0]
-        self._vis = [r for r in self._vis if r[0] != pos]
-        self._vis += [(pos, np.asarray(d), np.asarray(c)) for d, c in zip(iv.vis_delta, iv.vis_cov)]
-        self._vis.sort(key=lambda r: r[0])
+                self._interval[name].set(pos, v[0])
+        rows = self._vis["pos"].array()
+        keep = rows != pos
+        new = {"pos": np.full(len(iv.vis_delta), pos), "delta": np.asarray(iv.vis_delta).reshape(-1, 3),
+               "cov": np.asarray(iv.vis_cov).reshape(-1, 3, 3)}
+        merged = {k: np.concatenate([c.array()[keep], new[k]]) for k, c in self._vis.items()}
+        order = np.argsort(merged["pos"], kind="stable")
+        for k, c in self._vis.items():
+            c.replace(merged[k][order])
         self._uses |= set(iv.counts)
 
     def _trim(self) -> None:
-        cut = int(np.searchsorted(self._t, self._t[-1] - self.span)) - 1
+        cut = bisect.bisect_left(self._t, self._t[-1] - self.span) - 1
         if cut < 64:  # trim in batches
             return
         del self._t[:cut]
-        for lst in self._node.values():
-            del lst[:cut]
-        for lst in self._interval.values():
-            del lst[:cut]
-        self._vis = [(p - cut, d, c) for p, d, c in self._vis if p >= cut]
+        for col in self._node.values():
+            col.drop_front(cut)
+        for col in self._interval.values():
+            col.drop_front(cut)
+        first = int(np.searchsorted(self._vis["pos"].array(), cut))  # rows are in position order
+        for col in self._vis.values():
+            col.drop_front(first)
+        self._vis["pos"].shift(-cut)
         self._dropped_before += cut
 
     def _merged(self) -> Intervals:
@@ -126,25 +141,34 @@ class LiveHeadingMonitor:
         kw = {}
         for f in dataclasses.fields(Intervals):
             if f.name in self._node:
-                kw[f.name] = np.array(self._node[f.name])
+                kw[f.name] = self._node[f.name].array()
             elif f.name in self._interval:
-                kw[f.name] = np.array(self._interval[f.name])
+                kw[f.name] = self._interval[f.name].array()
             elif not f.name.startswith("vis_") and not isinstance(getattr(last, f.name), np.ndarray):
                 kw[f.name] = getattr(last, f.name)
         kw["t"] = np.array(self._t)
         kw["counts"] = {name: None for name in self._uses}
         kw["notes"], kw["episodes"] = [], []
-        kw["vis_i0"] = np.array([p for p, _, _ in self._vis], dtype=int)
+        kw["vis_i0"] = self._vis["pos"].array().astype(int)
         kw["vis_i1"] = kw["vis_i0"] + 1
-        kw["vis_delta"] = np.array([d for _, d, _ in self._vis]).reshape(-1, 3)
-        kw["vis_cov"] = np.array([c for _, _, c in self._vis]).reshape(-1, 3, 3)
+        kw["vis_delta"] = self._vis["delta"].array()
+        kw["vis_cov"] = self._vis["cov"].array()
         kw["wheel_yaw_ok"] = np.ones(len(self._t) - 1, bool)
         return Intervals(**kw)
 
+    @property
+    def n_intervals(self) -> int:
+        """Intervals added so far (those trimmed from the front included)."""
+        return self._dropped_before + max(len(self._t) - 1, 0)
+
     # ------------------------------------------------------------------ decisions
+    def due(self) -> bool:
+        """Whether :meth:`check` would run the check now."""
+        return self.enabled and len(self._t) >= 3 and self._t[-1] >= self._next_check
+
     def check(self) -> None:
         """Run the check on the kept intervals when due; update the dropped components."""
-        if not self.enabled or len(self._t) < 3 or self._t[-1] < self._next_check:
+        if not self.due():
             return
         self._next_check = self._t[-1] + self.every
         iv = self._merged()
@@ -217,11 +241,13 @@ class LiveHeadingMonitor:
         if keep < 0 or keep >= len(self._t) - 1 or not self._t:
             return
         del self._t[keep + 1:]
-        for lst in self._node.values():
-            del lst[keep + 1:]
-        for lst in self._interval.values():
-            del lst[keep:]
-        self._vis = [v for v in self._vis if v[0] < keep]
+        for col in self._node.values():
+            col.keep(keep + 1)
+        for col in self._interval.values():
+            col.keep(keep)
+        n_vis = int(np.searchsorted(self._vis["pos"].array(), keep))  # rows are in position order
+        for col in self._vis.values():
+            col.keep(n_vis)
 
 
 def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]:
@@ -248,11 +274,7 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     if np.count_nonzero(ok) >= 10:
         refs.append((ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
     if len(iv.vis_i0):  # the camera's heading increments (independent of every calibration)
-        ok = np.zeros(len(dt), bool)
-        angle = np.zeros(len(dt))
-        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
-            ok[a:b] = True
-            angle[a:b] = delta[2] / (b - a)
+        ok, angle, _ = visual_heading_rows(iv)
         ok &= iv.gyro_ok
         if np.count_nonzero(ok) >= 10:
             refs.append((ok, angle))
@@ -263,6 +285,46 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     for ok, angle in refs:
         return float(np.sum(iv.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
     return None, False
+
+
+class _Column:
+    """A growing array of rows of one shape and type (amortised appends, views of the rows kept)."""
+
+    def __init__(self, like, repeat: int = 0):
+        like = np.asarray(like)
+        self._data = np.empty((max(64, 2 * repeat),) + like.shape, dtype=like.dtype)
+        self._data[:repeat] = like
+        self.n = repeat
+
+    def append(self, value) -> None:
+        if self.n == len(self._data):
+            self._data = np.concatenate([self._data, np.empty_like(self._data)])
+        self._data[self.n] = value
+        self.n += 1
+
+    def set(self, i: int, value) -> None:
+        self._data[i] = value
+
+    def keep(self, n: int) -> None:
+        """Keep the first ``n`` rows."""
+        self.n = min(self.n, max(n, 0))
+
+    def drop_front(self, k: int) -> None:
+        """Forget the first ``k`` rows."""
+        k = min(k, self.n)
+        self._data[:self.n - k] = self._data[k:self.n].copy()
+        self.n -= k
+
+    def shift(self, delta) -> None:
+        self._data[:self.n] += delta
+
+    def replace(self, rows: np.ndarray) -> None:
+        self._data = np.concatenate([rows, np.empty((64,) + rows.shape[1:], dtype=rows.dtype)])
+        self.n = len(rows)
+
+    def array(self) -> np.ndarray:
+        """The rows (a copy)."""
+        return self._data[:self.n].copy()
 
 
 def _split(iv: Intervals) -> tuple[dict, dict]:

@@ -60,6 +60,7 @@ is one estimate; its translation is expressed in its wrong heading). Each drop b
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -95,6 +96,34 @@ class Episode:
                 f"NIS up to {self.max_nis:.0f}{self.detail}: dropped there")
 
 
+@functools.lru_cache(maxsize=64)
+def _chi2_ppf(probability: float, dof: int) -> float:
+    """Chi-square quantile (cached: the check asks for the same few many times)."""
+    return float(chi2.ppf(probability, dof))
+
+
+def visual_heading_rows(iv, with_variance: bool = False):
+    """The visual increments' heading spread over the node intervals they span: ``(ok, angle, variance)``
+    per interval (``variance`` None unless asked). An increment over ``n`` intervals gives each ``1/n``
+    of its heading change and of its variance; where increments overlap, the later one wins."""
+    K = len(iv.t) - 1
+    ok = np.zeros(K, bool)
+    ang = np.zeros(K)
+    var = np.zeros(K) if with_variance else None
+    i0 = np.asarray(iv.vis_i0, dtype=np.int64)
+    n = np.asarray(iv.vis_i1, dtype=np.int64) - i0
+    if not len(i0):
+        return ok, ang, var
+    rows = np.repeat(np.arange(len(i0)), n)
+    idx = i0[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n))
+    ok[idx] = True
+    delta = np.asarray(iv.vis_delta).reshape(-1, 3)
+    ang[idx] = (delta[:, 2] / n)[rows]
+    if with_variance:
+        var[idx] = (np.asarray(iv.vis_cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
+    return ok, ang, var
+
+
 def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
     """Consecutive runs of node intervals ``[a, b)`` about ``length`` seconds long."""
     K = len(T) - 1
@@ -122,11 +151,7 @@ def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None) -> fl
     if iv.ahrs_ok.any():
         refs.append((iv.ahrs_ok[:-1] & iv.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
     if len(iv.vis_i0):
-        ok = np.zeros(len(dt), bool)
-        ang = np.zeros(len(dt))
-        for a, b, delta in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta):
-            ok[a:b] = True
-            ang[a:b] = delta[2] / (b - a)
+        ok, ang, _ = visual_heading_rows(iv)
         refs.append((ok, ang))
     if wheel_yaw is not None:
         refs.append((iv.wheel_ok.copy(), wheel_yaw))
@@ -148,8 +173,8 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     if not cfg.monitor or iv.n_steps < 2:
         return []
     T, dt = iv.t, iv.dt
-    threshold = float(chi2.ppf(cfg.monitor_probability, 1))
-    release = float(chi2.ppf(0.9, 1))
+    threshold = _chi2_ppf(cfg.monitor_probability, 1)
+    release = _chi2_ppf(0.9, 1)
     sources: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # name -> (ok, angle, var) per interval
     wheel_yaw = still = None
     wheel_rel = 0.0
@@ -178,14 +203,7 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
         d = np.angle(np.exp(1j * (iv.ahrs_yaw[1:] - iv.ahrs_yaw[:-1])))
         sources["ahrs"] = (ok, d, np.zeros(len(dt)))
     if len(iv.vis_i0):
-        ok = np.zeros(len(dt), bool)
-        ang = np.zeros(len(dt))
-        var = np.zeros(len(dt))
-        for a, b, delta, cov in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov):
-            n = b - a
-            ok[a:b] = True
-            ang[a:b] = delta[2] / n
-            var[a:b] = cov[2, 2] / n
+        ok, ang, var = visual_heading_rows(iv, with_variance=True)
         sources["camera"] = (ok, ang, var)
     if len(sources) < 2:
         return []
@@ -309,11 +327,11 @@ def _find_liar(theta: dict, var: dict, threshold: float, probability: float):
         if nis is None or nis <= threshold:
             continue
         others = [o for o in present if o != s]
-        w = np.array([1.0 / max(var[o], 1e-12) for o in others])
-        vals = np.array([theta[o] for o in others])
-        mean = float(np.sum(w * vals) / w.sum())
-        rest = float(np.sum(w * (vals - mean) ** 2))
-        if rest <= chi2.ppf(probability, len(others) - 1) and rest < best[3]:
+        w = [1.0 / max(var[o], 1e-12) for o in others]
+        w_sum = sum(w)
+        mean = sum(wi * theta[o] for wi, o in zip(w, others)) / w_sum
+        rest = sum(wi * (theta[o] - mean) ** 2 for wi, o in zip(w, others))
+        if rest <= _chi2_ppf(probability, len(others) - 1) and rest < best[3]:
             best = (s, nis, others, rest)
     return best[:3]
 
@@ -322,10 +340,13 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
     """NIS of source ``s`` against the inverse-variance mean of the others in one window (None: absent)."""
     if s not in theta or len(theta) < 2:
         return None
-    others = [o for o in theta if o != s]
-    w = np.array([1.0 / max(var[o], 1e-12) for o in others])
-    mean = float(np.sum(w * [theta[o] for o in others]) / w.sum())
-    return (theta[s] - mean) ** 2 / (var[s] + 1.0 / w.sum())
+    w_sum = weighted = 0.0
+    for o, value in theta.items():  # plain floats: a handful of sources per window
+        if o != s:
+            w = 1.0 / max(var[o], 1e-12)
+            w_sum += w
+            weighted += w * value
+    return (theta[s] - weighted / w_sum) ** 2 / (var[s] + 1.0 / w_sum)
 
 
 def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
@@ -364,8 +385,8 @@ def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
     if not ratios:
         return []
     rho = float(np.median(ratios))
-    threshold = float(chi2.ppf(cfg.monitor_probability, 1))
-    release = float(chi2.ppf(0.9, 1))
+    threshold = _chi2_ppf(cfg.monitor_probability, 1)
+    release = _chi2_ppf(0.9, 1)
     def window_nis(a: int, b: int) -> float | None:
         w = sums(a, b)
         if w is None:

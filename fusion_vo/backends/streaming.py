@@ -50,11 +50,12 @@ node consumed. A measurement older than the last processed node but within the h
 * iSAM2 rebuilds the node intervals the measurement changes (its own interval and those whose
   interpolation, gating or spike median its neighbours feed) and swaps their factors for the new ones
   in one update (``removeFactorIndices``), when the next node is due; the custom factors are linearised
-  at the current estimate, twice. The node times stay those already processed, so a late visual
-  increment is applied only if its ``t0`` and ``t1`` are consecutive nodes (a camera later than the
-  reorder window finds fill-in nodes in its place: set the window to the camera's latency), and the
-  online poses of the rebuilt nodes become iSAM2's estimates after the swap (:meth:`smoothed` gives the
-  whole current estimate).
+  at the current estimate, twice. The node times stay those already processed: a camera later than the
+  reorder window finds fill-in nodes where its frames would have been, so its increment is re-timed onto
+  the nearest two nodes (the wheels' and the gyro's motion over the slivers between each frame and its
+  node composed onto it, the covariance grown accordingly); it is counted late only if those nodes are
+  not consecutive or already carry an increment. The online poses of the rebuilt nodes become iSAM2's
+  estimates after the swap (:meth:`smoothed` gives the whole current estimate).
 
 Measurements older than the history are counted as ``late`` and reported by :meth:`finish`.
 
@@ -73,12 +74,19 @@ effects of every call that returned before it started. Samples of one stream mus
 by one thread at a time in (roughly) time order, as any stream would be; arrival order across threads
 is what the reorder window and the history absorb.
 
-With ``background=True`` (iSAM2) the updates run on one worker thread that owns iSAM2; the caller's
-thread builds the factors and returns. A node's pose is the initial guess (the last estimate composed
-with the interval's odometry) until its update is done; each later call takes the finished results in,
-and :meth:`finish` and :meth:`smoothed` wait for all of them. The factors are linearised around the
-newest finished estimate, so the track depends on how far the worker has got: it agrees with the
-caller-thread run to millimetres, not bit for bit.
+With ``background=True`` (iSAM2) one worker thread owns iSAM2: the caller's thread builds the node's
+interval and hands it over; the worker builds the factors, linearises them and updates iSAM2, node after
+node and rebuild after rebuild in the order they were handed over, from its own state. The results are
+therefore those of the caller-thread run whatever the worker's timing. Until a node's update is done
+its pose is the last one predicted at constant twist; each later call takes the finished results in,
+and :meth:`finish` and :meth:`smoothed` wait for all of them (so does a call that would retire a node
+from the history before its result came: a worker that far behind slows the caller down).
+
+Latency
+-------
+An ``add_*`` call does at most ``steps_per_call`` units of work (see :meth:`StreamingFusion._process`):
+a node's interval, the heading monitor's check, (iSAM2:) its factors, their linearisation, and the
+backend's update are separate units, run in the same order as at once, so no call pays for all of them.
 """
 
 from __future__ import annotations
@@ -129,6 +137,22 @@ class Estimate:
 
 
 @dataclass
+class _Started:
+    """A node whose processing is under way across calls (see ``StreamingFusion._process``)."""
+
+    t0: float
+    t1: float
+    iv: object  # Intervals
+    step: dict  # sensor -> SensorCount of the node's step
+    consumed: list  # visual increments taken from the buffer
+    monitor: MonitorState  # the heading monitor before the node was added to it
+    reach: dict  # stream -> time of the last sample the interval read
+    dropped: frozenset | None = None  # the monitor's decisions, once applied to ``iv``
+    factors: list | None = None  # iSAM2: [builder, node factors, linearised factors] (background: None)
+    stage: int = 0  # iSAM2: 1 once the factors are built, 2 once linearised
+
+
+@dataclass
 class _NodeRecord:
     """What processing one node changed, kept while the node is within the history (EKF rewind)."""
 
@@ -169,9 +193,11 @@ class StreamingFusion:
         Largest prediction [s] :meth:`current_estimate` makes beyond the newest measurement, and how far
         ahead of the newest measurement a new one may be before it is rejected (default 1).
     steps_per_call : int or None
-        Most nodes one ``add_*`` call processes (default 1); the rest is caught up by the next calls,
-        which bounds the latency of a call when a late measurement makes the EKF re-filter several
-        nodes. None processes everything due at once. :meth:`finish` always processes everything.
+        Most units of work one ``add_*`` call does (default 1): a node is two units (its interval from
+        the buffers; the backend's update), three when the heading monitor's check is due at it. The
+        rest is caught up by the next calls, which bounds the latency of a call when a late measurement
+        makes the EKF re-filter several nodes. None processes everything due at once. :meth:`finish`
+        always processes everything.
     background : bool
         iSAM2 only: run its updates (and the linearisation, relinearisation and marginal covariance that
         come with them) on a worker thread, off the caller's; GTSAM releases the GIL while it works. A node's
@@ -242,6 +268,7 @@ class StreamingFusion:
         self._frame = "start"
         self._gps_reacquire = None
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
+        self._pending: _Started | None = None  # a node started but not yet applied (_begin_step)
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
 
     # ------------------------------------------------------------------ input
@@ -252,12 +279,21 @@ class StreamingFusion:
             values = [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
             if not self._valid("camera", inc.t1, values):
                 return
+            self._touch("visual", inc.t1)
             if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
                 return
             if not inc.ok:
                 self._count("camera").missing += 1
                 self._advance(inc.t1)
                 return
+            if self.backend == "gtsam" and self._t_nodes and inc.t0 < self._t_nodes[-1] - 1e-9:
+                attached = self._on_nodes(inc)
+                if attached is None:
+                    self._count("camera").late += 1
+                    logger.warning("camera increment ending at t=%.3f could not be attached to the nodes; "
+                                   "not applied", inc.t1)
+                    return
+                inc = attached
             self._insert_visual(inc)
             self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
             self._advance(inc.t1)
@@ -290,6 +326,7 @@ class StreamingFusion:
             self._check("gps")
             if not self._valid("gps", fix.t, [fix.enu, fix.covariance]):
                 return
+            self._touch("gps", fix.t)
             if self._late("gps", fix.t):
                 return
             enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
@@ -445,6 +482,7 @@ class StreamingFusion:
         t = float(t)
         if stream == "wheel":
             payload = (int(payload[0]), int(payload[1]))
+        self._touch(stream, t)
         if self._late(sensor, t):
             return
         buf = self._buffers[stream]
@@ -456,6 +494,65 @@ class StreamingFusion:
             # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
             self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
+
+    def _on_nodes(self, inc: VisualIncrement) -> VisualIncrement | None:
+        """iSAM2: a late increment moved onto the processed nodes nearest its frames (None: it cannot be).
+
+        iSAM2's nodes stay where they were processed (fill-in nodes when the camera was late), so the
+        increment is re-timed: the wheels' (and gyro's) motion over the slivers between each frame and its
+        nearest node is composed onto it, ``B(n_a)->B(t0)  (+)  delta  (+)  B(t1)->B(n_b)``, and its covariance
+        grows by 2 % of each sliver's motion (plus 0.1 mm / 0.1 mrad). Both nodes must be consecutive and
+        within the history, the slivers shorter than a node step, and no other increment on that interval.
+        """
+        T = self._t_nodes
+        a = min(range(max(bisect.bisect_left(T, inc.t0) - 1, 0), min(bisect.bisect_left(T, inc.t0) + 1, len(T))),
+                key=lambda k: abs(T[k] - inc.t0))
+        if inc.t1 > T[-1] + 1e-9:
+            b, t_b = None, inc.t1  # ends after the last node: the next node is its frame, only t0 moves
+            if a != len(T) - 1:
+                return None
+        else:
+            k = bisect.bisect_left(T, inc.t1)
+            b = min(range(max(k - 1, 0), min(k + 1, len(T))), key=lambda j: abs(T[j] - inc.t1))
+            t_b = T[b]
+            if b != a + 1:
+                return None
+        if abs(T[a] - inc.t0) < 1e-9 and abs(t_b - inc.t1) < 1e-9:
+            return inc
+        step = 1.0 / self.config.step_hz
+        if max(abs(T[a] - inc.t0), abs(t_b - inc.t1)) > step or self._records[a] is None:
+            return None
+        if b is not None and (self._records[b] is None or any(abs(v.t0 - T[a]) < 1e-9 for v in self._records[b].visual)
+                              or any(abs(v.t1 - t_b) < 1e-9 for v in self._visual)):
+            return None
+        head = self._sliver(T[a], inc.t0)
+        tail = self._sliver(inc.t1, t_b)
+        if head is None or tail is None:
+            return None
+        from fusion_vo.geometry import se2
+
+        delta = se2.compose(se2.compose(head[0], np.asarray(inc.delta, dtype=np.float64)), tail[0])
+        cov = np.asarray(inc.covariance, dtype=np.float64) + np.diag(head[1] + tail[1])
+        return dataclasses.replace(inc, t0=float(T[a]), t1=float(t_b), delta=delta, covariance=cov)
+
+    def _sliver(self, x: float, y: float):
+        """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
+        (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
+        from fusion_vo.geometry import se2
+        from fusion_vo.sensors.wheel import arc_increment
+
+        lo, hi = min(x, y), max(x, y)
+        if hi - lo < 1e-9:
+            return np.zeros(3), np.zeros(3)
+        iv = build_intervals(self._streams_between(lo, hi, self._heading_offset), self.config, np.array([lo, hi]),
+                             self._heading_offset)
+        if not iv.uses("wheel") or not iv.wheel_ok[0]:
+            return None
+        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[0]
+        if iv.uses("gyro") and iv.gyro_ok[0]:
+            inc[2] = iv.gyro_angle[0]
+        var = (0.02 * np.abs(inc)) ** 2 + np.array([1e-4, 1e-4, 1e-4]) ** 2
+        return (inc if y >= x else se2.inverse(inc)), var
 
     def _insert_visual(self, inc: VisualIncrement) -> None:
         if self._visual and inc.t1 < self._visual[-1].t1:
@@ -484,6 +581,7 @@ class StreamingFusion:
 
     def _rewind(self, i: int) -> None:
         """Restore the filter to node ``i`` and forget the nodes after it (their inputs stay buffered)."""
+        self._drop_pending()
         rec = self._records[i]
         for later in self._records[i + 1:]:
             for v in later.visual:
@@ -529,9 +627,20 @@ class StreamingFusion:
         return min(times) if times else None  # a fix alone does not start the track
 
     def _process(self, until: float, budget: int | None = None) -> None:
-        """Process the nodes up to ``until``, at most ``budget`` of them (None: all)."""
-        if self._dirty and (budget is None or self._next_node(self._t_nodes[-1], until) is not None):
+        """Process the nodes up to ``until``, at most ``budget`` units of work (None: all).
+
+        A node is two units (iSAM2: four), one more when the heading monitor's check is due at it:
+        building its interval from the buffers; the check; (iSAM2: the monitor's decisions and the node's
+        factors; their linearisation;) the backend's update. With iSAM2 in the background the worker
+        builds and linearises the factors, but the units are the same, so late data is swapped in at the
+        same points as on the caller's thread and the results agree. The operations and
+        their order are those of processing the node at once; only the call that runs each differs, so
+        no call pays for all of them.
+        """
+        if self._dirty and (budget is None or self._pending is not None
+                            or self._next_node(self._t_nodes[-1], until) is not None):
             # late data is swapped in when the next node is due (several late samples, one update)
+            self._drop_pending()
             dirty, self._dirty = sorted(self._dirty), set()
             self._replace(dirty)
         if not self._t_nodes:
@@ -541,29 +650,47 @@ class StreamingFusion:
             self._first_node(start)
         done = 0
         while budget is None or done < budget:
-            t0 = self._t_nodes[-1]
-            t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
-            if t1 is None:
-                return
-            self._step(t0, t1)
             done += 1
+            started = self._pending
+            if started is None:
+                t0 = self._t_nodes[-1]
+                t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
+                if t1 is None:
+                    return
+                self._begin_step(t0, t1)
+            elif self._monitor.due():
+                self._monitor.check()
+            elif self._graph is not None and started.stage == 0:
+                self._decide(started)
+                started.factors = self._graph.prepare(started.iv)
+                started.stage = 1
+            elif self._graph is not None and started.stage == 1:
+                self._graph.freeze(started.factors)
+                started.stage = 2
+            else:
+                self._end_step()
 
     def _last_time(self) -> float:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
         return max(times) if times else -np.inf
 
-    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None) -> SensorStreams:
-        """The buffered samples an interval needs: those inside it, the ones bracketing it, and the
-        neighbours the spike check's running median reads around those (the same values as in batch
-        use); until the AHRS offset is known, the IMU's first quarter second after ``t0`` too."""
+    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None,
+                         reach: dict | None = None) -> SensorStreams:
+        """The buffered samples an interval needs: those inside it, the ones bracketing it, and (IMU,
+        range finder) the neighbours the spike check's running median reads around those (the same values
+        as in batch use); until the AHRS offset is known (samples with an orientation), the IMU's first quarter second after
+        ``t0`` too."""
         extra = int(self.config.imu.spike_window) + 1
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
-            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - extra, 0)
-            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + extra
-            if name == "imu" and heading_offset is None:
+            more = extra if name in ("imu", "range") else 0  # the streams with a spike check
+            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
+            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
+            if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
                 hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
+            if reach is not None:  # the time of the last sample read (any new one, if all were read)
+                reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
             if len(rows) < (1 if name == "range" else 2):
                 continue
             t = np.array([r[0] for r in rows])
@@ -583,13 +710,15 @@ class StreamingFusion:
         return streams
 
     def _interval(self, t0: float, t1: float, heading_offset: float | None):
-        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments)``.
+        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
+        time of the last sample read per stream)``.
 
         Consumes the buffered visual increments ending at or before ``t1``; those that do not span
         exactly this interval cannot be applied and are counted as late.
         """
         step: dict[str, SensorCount] = {}
-        streams = self._streams_between(t0, t1, heading_offset)
+        reach: dict[str, float] = {}
+        streams = self._streams_between(t0, t1, heading_offset, reach)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
         usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
         for v in consumed:
@@ -603,31 +732,70 @@ class StreamingFusion:
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
             own.missing += c.missing
-        return iv, step, consumed
+        return iv, step, consumed, reach
 
-    def _step(self, t0: float, t1: float) -> None:
-        iv, step, consumed = self._interval(t0, t1, self._heading_offset)
+    def _begin_step(self, t0: float, t1: float) -> None:
+        """First unit of a node: its interval from the buffers, handed to the heading monitor."""
+        iv, step, consumed, reach = self._interval(t0, t1, self._heading_offset)
+        monitor = self._monitor.state()
+        self._monitor.add(iv)
+        self._pending = _Started(t0, t1, iv, step, consumed, monitor, reach)
+
+    def _decide(self, started: _Started) -> None:
+        """The monitor's current decisions, applied to the started node's interval."""
+        if started.dropped is None:
+            started.dropped = frozenset(self._monitor.dropped)
+            self._monitor.apply(started.iv)
+
+    def _end_step(self) -> None:
+        """Last unit: the monitor's decisions (after its check, if due), the backend's update, the record."""
+        started = self._pending
+        self._pending = None
+        self._monitor.check()  # (a no-op when it ran as a unit of its own)
+        self._decide(started)
+        iv, step = started.iv, started.step
         self._step_counts = step
         self._step_fixes = []
         if iv.heading_offset is not None:
             self._heading_offset = iv.heading_offset
-        self._monitor.add(iv)
-        self._monitor.check()
-        dropped = frozenset(self._monitor.dropped)
-        self._monitor.apply(iv)
         if self.backend == "ekf":
             self._ekf_step(iv)
             state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
         else:
-            self._graph_step(iv)
+            self._graph_step(iv, started.factors)
             state = None
-        self._t_nodes.append(t1)
+        t0 = self._t_nodes[-1]
+        self._t_nodes.append(started.t1)
         keep = state is not None
-        self._records.append(_NodeRecord(state, self._heading_offset, step, consumed,
-                                         monitor=self._monitor.state() if keep else None, dropped=dropped,
+        self._records.append(_NodeRecord(state, self._heading_offset, step, started.consumed,
+                                         monitor=self._monitor.state() if keep else None, dropped=started.dropped,
                                          fixes=self._step_fixes, gps=self._gps_state() if keep else None))
         self._retire()
         self._prune(t0)
+
+    def _touch(self, stream: str, t: float) -> None:
+        """A measurement of ``stream`` at ``t`` arrived: a started node it would change is started again
+        (a sample among those its interval read, a frame that could be its node, a fix up to it)."""
+        started = self._pending
+        if started is None:
+            return
+        if stream == "visual":
+            changes = t <= max(started.t1, started.t0 + 1.5 / self.config.step_hz) + 1e-9
+        elif stream == "gps":
+            changes = t <= started.t1 + 1e-3
+        else:
+            changes = t <= started.reach.get(stream, np.inf)
+        if changes:
+            self._drop_pending()
+
+    def _drop_pending(self) -> None:
+        """Undo the started node (its increments go back to the buffer, the monitor to its state before)."""
+        started, self._pending = self._pending, None
+        if started is None:
+            return
+        for v in started.consumed:
+            bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        self._monitor.restore(started.monitor)
 
     def _replace(self, nodes: list[int]) -> None:
         """iSAM2: rebuild the intervals ending at ``nodes`` from the buffers (late data now in them) and
@@ -640,20 +808,18 @@ class StreamingFusion:
             for v in rec.visual:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
             prev = self._records[j - 1]
-            iv, step, consumed = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            iv, step, consumed, _ = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
             rec.counts, rec.visual = step, consumed
             self._monitor.update(j - 1, iv)
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
-            batches.append((j, iv, self._poses[j - 1]))
+            batches.append((j, iv))
         if not batches:
             return
         self._heading_offset = self._records[-1].heading_offset
-        sensors, results = self._graph.replace(batches)
-        for j, used in sensors:
-            self._count_used(j, used)
-        for j, pose, cov, _ in results:
+        for j, pose, cov, used in self._graph.replace(batches):
             self._poses[j], self._covs[j] = pose, cov
+            self._count_used(j, used)
         self.rewinds += 1
 
     def _retire(self) -> None:
@@ -664,6 +830,9 @@ class StreamingFusion:
                 continue
             if self._records[j] is None:
                 break
+            if self._graph is not None and self._graph.has_jobs():
+                # a worker more than the history behind: wait for it (its results set the node's counts)
+                self._collect(wait=True)
             rec = self._records[j]
             _merge_into(self._retired_counts, rec.counts)
             self._records[j] = None
@@ -803,11 +972,12 @@ class StreamingFusion:
         m.n_used, m.n_rejected = model[0], model[1]
         del m.rejected_t[model[2]:]
 
-    def _graph_step(self, iv) -> None:
-        pose, cov, sensors = self._graph.step(iv)
-        if cov is None:  # background update under way: the guess, with the last covariance
-            cov = self._covs[-1]
-        for s in sensors:
+    def _graph_step(self, iv, prepared=None) -> None:
+        pose, cov, sensors = self._graph.step(iv, prepared)
+        if pose is None:  # background update under way: the last pose predicted meanwhile
+            pose, cov = _extrapolate(self._t_nodes, self._poses, self._covs, float(iv.t[-1]) - self._t_nodes[-1],
+                                     self.config)
+        for s in sensors or ():
             self._step_counts.setdefault(s, SensorCount()).used += 1
         self._record(pose, cov)
 
@@ -907,7 +1077,14 @@ def _extrapolate(t_nodes, poses, covs, dt: float, config: FusionConfig) -> tuple
 
 
 class _OnlineGraph:
-    """iSAM2 fed one node interval at a time through :class:`~fusion_vo.backends.graph.GraphBuilder`."""
+    """iSAM2 fed one node interval at a time through :class:`~fusion_vo.backends.graph.GraphBuilder`.
+
+    On the caller's thread a node is built in three calls: :meth:`prepare` (its factors),
+    :meth:`freeze` (their linearisation at the current estimate), :meth:`step` (the iSAM2 update). With
+    ``background`` one worker thread owns iSAM2 and runs all three, and the rebuilds of :meth:`replace`,
+    in the order they were submitted, from the same state: the estimates are those of the caller-thread
+    run, whatever the worker's timing.
+    """
 
     def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False):
         import gtsam
@@ -922,58 +1099,23 @@ class _OnlineGraph:
         # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
         # a conditioning that Cholesky can report as indeterminate
         self.isam = gtsam.ISAM2(graph.isam_params(True))
-        self.n = 0
-        self.estimate: dict = {}
-        self.prev_pose = gtsam.Pose2(*config.initial_pose)
+        self.n = 0  # nodes submitted
+        self.estimate: dict = {}  # running bias / calibration estimates (guesses of the next node)
+        self.prev_pose = gtsam.Pose2(*config.initial_pose)  # iSAM2's estimate of the newest node
+        self.online: dict[int, np.ndarray] = {}  # node -> its pose as last computed (seeds rebuilds)
+        self.last = 0  # newest node in iSAM2 (behind ``n`` while background jobs wait)
+        self._forget_below = 0  # nodes before this left the history
         # background: one worker thread owns iSAM2 (it is not thread-safe); jobs run in order
         self._pool = ThreadPoolExecutor(1, thread_name_prefix="isam2") if background else None
         self._jobs: deque = deque()
-
-    def _update(self, n: int, nf, prev_pose=None):
-        """Freeze ``nf``'s custom factors at the current estimate and add node ``n`` to iSAM2."""
-        g = self.gtsam.NonlinearFactorGraph()
-        if prev_pose is None:  # background: the previous node's estimate, now that its update is done
-            prev_pose = nf.values.get(self.graph.X(n - 1)) or self.isam.calculateEstimatePose2(self.graph.X(n - 1))
-            if nf.guess is not None:  # the guess composed on that estimate rather than on the caller's guess
-                nf.values[self.graph.X(n)] = prev_pose.compose(self.gtsam.Pose2(*nf.guess))
-        lookup = self.graph.current_value_lookup(nf.values, self.isam, prev_pose, n - 1)
-        for f in self.graph.freeze_custom_factors(nf.factors, lookup):
-            g.add(f)
-        values = self.gtsam.Values()
-        self.graph.insert_values(values, nf.values)
-        result = self.isam.update(g, values)
-        self.factors[n] = list(result.getNewFactorsIndices())
-        return self._pose_cov(n)
-
-    def _background_step(self, n: int, nf, builder):
-        pose, cov = self._update(n, nf)
-        estimate = dict(self.estimate)
-        self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
-        self.estimate = estimate  # swapped whole: the caller's thread reads it for guesses
-        return [(n, pose, cov, None)]
-
-    def collect(self, wait: bool = False) -> list:
-        """Results ``(n, pose, covariance, sensors)`` of the finished background jobs, in order."""
-        out = []
-        while self._jobs and (wait or self._jobs[0].done()):
-            out += self._jobs.popleft().result()
-        if out and out[-1][0] == self.n:  # re-anchor the guesses on the newest estimate
-            p = out[-1][1]
-            self.prev_pose = self.gtsam.Pose2(float(p[0]), float(p[1]), float(p[2]))
-        return out
-
-    def _pose_cov(self, n: int):
-        key = self.graph.X(n)
-        pose = self.isam.calculateEstimatePose2(key)
-        cov = self.graph.world_covariances(np.array([pose.theta()]), self.isam.marginalCovariance(key)[None])[0]
-        return np.array([pose.x(), pose.y(), pose.theta()]), cov
 
     def start(self):
         cfg = self.config
         # the first node's own factors come with the first interval (which knows the sensors)
         self._pending_first = True
         self.factors: dict[int, list[int]] = {}  # node -> indices of its factors in iSAM2
-        return np.asarray(cfg.initial_pose, dtype=np.float64), np.diag([1e-8, 1e-8, 1e-8])
+        self.online[0] = np.asarray(cfg.initial_pose, dtype=np.float64)
+        return self.online[0].copy(), np.diag([1e-8, 1e-8, 1e-8])
 
     def _node_factors(self, n: int, iv, first: bool, previous_pose):
         builder = self.graph.GraphBuilder(iv, self.config, offset=n - 1, t_origin=self.t_origin,
@@ -987,44 +1129,99 @@ class _OnlineGraph:
             nf = head
         return builder, nf
 
-    def step(self, iv):
-        """Add the node ending ``iv``: ``(pose, covariance, sensors)``; in the background, the pose is
-        the initial guess and the covariance None (the estimate comes through :meth:`collect`)."""
+    # ------------------------------------------------------------------ one node
+    def prepare(self, iv) -> list | None:
+        """The factors of the next node (ending ``iv``); changes nothing (background: None, the worker
+        builds them)."""
+        if self._pool is not None:
+            return None
         builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
-        self._pending_first = False
+        return [builder, nf, None]
+
+    def freeze(self, prepared: list) -> None:
+        """Linearise the prepared node's custom factors at the current estimate (background: the worker does)."""
+        if prepared is None:
+            return
+        n, nf = self.n + 1, prepared[1]
+        lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, n - 1)
+        prepared[2] = self.graph.freeze_custom_factors(nf.factors, lookup)
+
+    def step(self, iv, prepared: list | None = None):
+        """Add the node ending ``iv`` (its factors from :meth:`prepare` / :meth:`freeze` when given):
+        ``(pose, covariance, sensors)``. In the background only the interval is handed over: pose,
+        covariance and sensors are None and come through :meth:`collect`."""
         self.n += 1
         if self._pool is not None:
-            self._jobs.append(self._pool.submit(self._background_step, self.n, nf, builder))
-            guess = nf.values[self.graph.X(self.n)]
-            self.prev_pose = guess
-            return np.array([guess.x(), guess.y(), guess.theta()]), None, nf.sensors
-        pose, cov = self._update(self.n, nf, self.prev_pose)
-        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
-        self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
-        return pose, cov, nf.sensors
+            self._jobs.append(self._pool.submit(self._add_node, self.n, iv, None))
+            return None, None, None
+        return self._add_node(self.n, iv, prepared)[0][1:]
 
+    def _add_node(self, n: int, iv, prepared: list | None):
+        if prepared is None:
+            prepared = self._node_factors(n, iv, self._pending_first, self.prev_pose) + (None,)
+        builder, nf, frozen = prepared
+        if frozen is None:
+            lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, n - 1)
+            frozen = self.graph.freeze_custom_factors(nf.factors, lookup)
+        self._pending_first = False
+        g = self.gtsam.NonlinearFactorGraph()
+        for f in frozen:
+            g.add(f)
+        values = self.gtsam.Values()
+        self.graph.insert_values(values, nf.values)
+        result = self.isam.update(g, values)
+        self.factors[n] = list(result.getNewFactorsIndices())
+        self.last = n
+        for old in [k for k in self.factors if k < self._forget_below]:
+            del self.factors[old]
+        pose, cov = self._pose_cov(n)
+        self.prev_pose = self.gtsam.Pose2(*map(float, pose))
+        self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
+        self._remember(n, pose)
+        return [(n, pose, cov, nf.sensors)]
+
+    def _remember(self, n: int, pose: np.ndarray) -> None:
+        self.online[n] = pose
+        self.online.pop(n - 4096, None)  # far older than any history
+
+    def has_jobs(self) -> bool:
+        """Whether background results are still to be collected."""
+        return bool(self._jobs)
+
+    def collect(self, wait: bool = False) -> list:
+        """Results ``(n, pose, covariance, sensors)`` of the finished background jobs, in order."""
+        out = []
+        while self._jobs and (wait or self._jobs[0].done()):
+            out += self._jobs.popleft().result()
+        return out
+
+    def _pose_cov(self, n: int):
+        key = self.graph.X(n)
+        pose = self.isam.calculateEstimatePose2(key)
+        cov = self.graph.world_covariances(np.array([pose.theta()]), self.isam.marginalCovariance(key)[None])[0]
+        return np.array([pose.x(), pose.y(), pose.theta()]), cov
+
+    # ------------------------------------------------------------------ late data
     def replace(self, batches, passes: int = 2):
         """Swap the factors of nodes ``n`` for those of their rebuilt intervals.
 
-        ``batches`` holds ``(n, Intervals, pose of node n-1)`` in node order (nodes that exist already;
-        the pose only seeds guesses). The factors are built now; the swap runs now or as a background
-        job (its results then come through :meth:`collect`). Returns the sensors of each node's new
-        factors and the results ``(n, pose, covariance, None)`` of a swap that ran.
+        ``batches`` holds ``(n, Intervals)`` in node order (nodes that exist already). The factors are
+        built (seeded by node ``n-1``'s pose as last computed) and swapped now, or in a background job.
+        Returns the results ``(n, pose, covariance, sensors)`` of a swap that ran (background: none yet).
         """
-        built = []
-        for n, iv, previous in batches:
-            builder, nf = self._node_factors(n, iv, n == 1, self.gtsam.Pose2(*map(float, previous)))
-            built.append((n, nf, builder))
-        sensors = [(n, nf.sensors) for n, nf, _ in built]
         if self._pool is None:
-            return sensors, self._swap(built, passes)
-        self._jobs.append(self._pool.submit(self._swap, built, passes))
-        return sensors, []
+            return self._swap(batches, passes)
+        self._jobs.append(self._pool.submit(self._swap, batches, passes))
+        return []
 
-    def _swap(self, built, passes: int):
+    def _swap(self, batches, passes: int):
         """The custom factors are linearised at the current estimate and swapped in one iSAM2 update;
         ``passes`` > 1 linearises them again at the estimate that update gave (the late data may have
         moved it) and swaps again."""
+        built = []
+        for n, iv in batches:
+            builder, nf = self._node_factors(n, iv, n == 1, self.gtsam.Pose2(*map(float, self.online[n - 1])))
+            built.append((n, nf, builder))
         builder, nf = built[-1][2], built[-1][1]
         new_keys: set = set()
         for p in range(passes):
@@ -1045,13 +1242,14 @@ class _OnlineGraph:
             index = list(self.isam.update(g, values, remove).getNewFactorsIndices())
             for (n, _, _), size in zip(built, sizes):
                 self.factors[n], index = index[:size], index[size:]
-        out = [(n, *self._pose_cov(n), None) for n, _, _ in built]
-        if self._pool is None:
-            self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.n))
-        if built[-1][0] == self.n:
-            estimate = dict(self.estimate)
-            self.graph.track_estimate(estimate, self.isam, builder, 1, nf)
-            self.estimate = estimate
+        out = []
+        for n, nf, _ in built:
+            pose, cov = self._pose_cov(n)
+            self._remember(n, pose)
+            out.append((n, pose, cov, nf.sensors))
+        self.prev_pose = self.isam.calculateEstimatePose2(self.graph.X(self.last))
+        if built[-1][0] == self.last:
+            self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)
         return out
 
     def poses(self) -> np.ndarray:
@@ -1063,4 +1261,6 @@ class _OnlineGraph:
 
     def forget(self, n: int) -> None:
         """Node ``n`` left the history: its factors are no longer replaced."""
-        self.factors.pop(n, None)
+        self._forget_below = max(self._forget_below, n + 1)  # (the thread that owns iSAM2 drops them)
+        if self._pool is None:
+            self.factors.pop(n, None)
