@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -77,6 +78,7 @@ def main(argv: list[str] | None = None) -> int:
     results: dict[str, list[float]] = {"plain OpenCV script": []}
     measured: dict[str, int] = {}
     cv2.setNumThreads(1)
+    load_before = os.getloadavg()
     with threadpool_limits(limits=1):
         for _ in range(args.repeats):
             results["plain OpenCV script"].append(len(frames) / time_plain(frames))
@@ -87,7 +89,8 @@ def main(argv: list[str] | None = None) -> int:
                 measured[label] = ok
     plain = float(np.median(results["plain OpenCV script"]))
     print(f"{Path(args.seq).name}: {len(frames)} frames {frames[0].shape[1]}x{frames[0].shape[0]}, "
-          f"{args.repeats} interleaved repeats, one thread, frames per CPU-second (median, range)")
+          f"{args.repeats} interleaved repeats, one thread, frames per CPU-second (median, range); load average "
+          f"{load_before[0]:.1f} before, {os.getloadavg()[0]:.1f} after")
     for label, values in results.items():
         med = float(np.median(values))
         pairs = f", {measured[label]}/{len(frames) - 1} measured" if label in measured else ""

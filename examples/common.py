@@ -46,6 +46,26 @@ LIGHTING = {
 #: noise and auto-exposure, over the same floor photograph
 REALISTIC = {"lens": "polynomial", "checker_size": 0.0, "defocus": 1.0}
 
+#: the lighting variants through the independent camera: "dark" is a quarter of the brightness with three
+#: times the read noise and no auto-exposure to undo it; the independent renderer has no specular
+#: highlight, so "spotlights" has no counterpart (None)
+REALISTIC_LIGHTING = {
+    "good light": {},
+    "spotlights": None,
+    "dark": {"brightness": 42.5, "auto_exposure": 0.0, "read_noise": 4.5},
+}
+
+
+def realistic_options(light: str, texture: str = "gravel") -> dict | None:
+    """Simulator options of ``--realistic`` for a lighting variant and floor photograph (None: no counterpart).
+
+    As the realistic standard recordings, the frames are exposed for 4 ms with motion blur.
+    """
+    lighting = REALISTIC_LIGHTING[light]
+    if lighting is None:
+        return None
+    return {"realistic": {**REALISTIC, "texture": texture, **lighting}, "exposure_time": 0.004, "blur_samples": 3}
+
 
 def example_parser(description: str) -> argparse.ArgumentParser:
     """An argument parser with the options every example shares (``--out``, ``--quick``, ``--seed``,

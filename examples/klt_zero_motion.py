@@ -19,7 +19,10 @@ times the noise). For each, the script
 
 Run::
 
-    python examples/klt_zero_motion.py [--out DIR] [--seed N] [--quick]
+    python examples/klt_zero_motion.py [--out DIR] [--seed N] [--quick] [--realistic]
+
+``--realistic`` renders through the independent camera (``examples/common.py``); its renderer has no
+specular highlight, so the spotlight rows are left out.
 
 The plot is written to ``DIR/klt_zero_motion.png`` (``--out`` defaults to a temporary folder, so pass
 it to keep the plot).
@@ -38,7 +41,8 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from common import FRONTENDS, LIGHTING, example_parser, fmt, format_table, generate, output_dir  # noqa: E402
+from common import (FRONTENDS, LIGHTING, example_parser, fmt, format_table, generate, output_dir,  # noqa: E402
+                    realistic_options)
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
 
@@ -133,6 +137,10 @@ def main(argv=None) -> int:
         corner_rows, motion_rows = [], []
         png = out / "klt_zero_motion.png"
         for light, lighting in LIGHTING.items():
+            if args.realistic:
+                lighting = realistic_options(light)
+                if lighting is None:
+                    continue
             seq = generate("standstill", out / f"standstill-{light.replace(' ', '-')}", args.seed,
                            **options, **lighting)
             rec = Recording(seq)

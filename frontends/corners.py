@@ -19,11 +19,14 @@ the settings of the reference size (640 x 360, where they are used unchanged):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+from frontends.detectors import DetectorSettings
 
 #: the image size the frontends' pixel settings were chosen for
 REFERENCE_SIZE = (360, 640)
@@ -172,3 +175,47 @@ def spread_corners(image: np.ndarray, mask: np.ndarray, wanted: int, quality: fl
         return chosen
     keep = max(min(len(chosen), wanted - len(extra)), 0)
     return np.vstack([chosen[:keep], np.array(extra, np.float32)])
+
+
+#: spread of grey levels (95th minus 5th percentile) of the frames the FAST threshold was chosen on
+REFERENCE_CONTRAST = 120.0
+
+
+def _odd(x: float, least: int = 3) -> int:
+    return max(least, 2 * int(round((x - 1.0) / 2.0)) + 1)
+
+
+def image_contrast(image: np.ndarray) -> float:
+    """95th minus 5th percentile of the grey levels of ``image`` (every fourth pixel each way)."""
+    sample = image[::4, ::4]
+    lo, hi = np.percentile(sample, (5.0, 95.0))
+    return float(hi - lo)
+
+
+def scale_detector(settings: DetectorSettings, image: np.ndarray) -> DetectorSettings:
+    """The feature frontend's detector settings, chosen for 640 x 360, scaled to ``image``.
+
+    As :func:`plan_corners` does for KLT: the detection level, non-maximum-suppression neighbourhood
+    and structure-tensor block follow the image diagonal (a 320 x 240 frame is searched at full
+    resolution with about the same spacing in full-resolution pixels as a 640 x 360 frame at half
+    resolution), and the number of corners the image area (never fewer than at the reference size).
+    Harris and Shi-Tomasi thresholds are relative to the strongest response already; FAST's absolute
+    intensity threshold is lowered in proportion to the image's contrast when it is below
+    :data:`REFERENCE_CONTRAST` (never below a quarter, nor 5 grey levels). At 640 x 360 with good
+    contrast the settings come back unchanged.
+    """
+    h, w = image.shape[:2]
+    scale = math.hypot(h, w) / math.hypot(*REFERENCE_SIZE)
+    area = max(1.0, (h * w) / float(REFERENCE_SIZE[0] * REFERENCE_SIZE[1]))
+    changes: dict = {}
+    if abs(scale - 1.0) > 0.02:
+        level = int(np.clip(settings.level + round(math.log2(scale)), 0, settings.level + 2))
+        factor = scale * (1 << settings.level) / (1 << level)  # old detection px -> new detection px
+        changes.update(level=level, block_size=_odd(settings.block_size * factor),
+                       neighbourhood=tuple(_odd(v * factor, 1) for v in settings.neighbourhood),
+                       max_corners=int(round(settings.max_corners * area)))
+    if settings.method == "fast":
+        ratio = min(1.0, max(0.25, image_contrast(image) / REFERENCE_CONTRAST))
+        threshold = int(round(settings.fast_threshold * ratio))
+        changes["fast_threshold"] = max(5, min(int(settings.fast_threshold), threshold))
+    return dataclasses.replace(settings, **changes) if changes else settings

@@ -30,7 +30,7 @@ def patch_descriptors(image: np.ndarray, pts: np.ndarray, radius: int) -> tuple[
     off = np.arange(-radius, radius + 1)
     rows = xy[idx, 1][:, None, None] + off[None, :, None]
     cols = xy[idx, 0][:, None, None] + off[None, None, :]
-    patches = image[rows, cols].reshape(len(idx), -1).astype(np.float32)
+    patches = image[rows, cols].reshape(len(idx), len(off) ** 2).astype(np.float32)  # also with no point
     patches -= patches.mean(axis=1, keepdims=True)
     norm = np.linalg.norm(patches, axis=1)
     ok = norm > 1e-3

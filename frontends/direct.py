@@ -60,6 +60,9 @@ class DirectConfig(ConfigMixin):
         Finest pyramid level used (0: full resolution of the rectified image; 1: half).
     iterations : int
         Gauss-Newton iterations per level (fewer when the update falls below ``epsilon``).
+    finest_iterations : int or None
+        Gauss-Newton iterations on the finest level (``None``: ``iterations``); the coarser levels
+        leave it a fraction of a pixel to correct.
     epsilon : float
         Convergence threshold on the largest point displacement of an update [px of the level].
     huber : float
@@ -95,11 +98,16 @@ class DirectConfig(ConfigMixin):
         (``None``: all, or the central half when the run is ``--uncalibrated``: the distortion the
         missing lens model leaves out grows with the distance from the centre, so the centre moves most
         nearly by one similarity).
+    grid_limit : bool
+        Sample the rectified image with a pitch that keeps its pixel count at most the raw frame's
+        (a wide-angle lens's rectified image is otherwise larger than the frame: 1.3 times for the barrel
+        lens of the realistic recordings, 2 times for their fisheye).
     """
 
     min_level_size: int = 24
     finest_level: int = 0
     iterations: int = 30
+    finest_iterations: int | None = None
     epsilon: float = 0.005
     huber: float = 1.0
     smoothing: float = 1.0
@@ -115,12 +123,14 @@ class DirectConfig(ConfigMixin):
     max_pixels: int = 12000
     max_clipped: float = 0.5
     central_region: float | None = None
+    grid_limit: bool = False
 
     def __post_init__(self) -> None:
         if self.min_level_size < 8:
             raise ValueError("min_level_size must be at least 8")
-        if self.finest_level < 0 or self.iterations < 1:
-            raise ValueError("finest_level must be >= 0 and iterations >= 1")
+        if self.finest_level < 0 or self.iterations < 1 or (self.finest_iterations is not None
+                                                             and self.finest_iterations < 1):
+            raise ValueError("finest_level must be >= 0 and iterations and finest_iterations >= 1")
         if not 0.0 < self.min_overlap <= 1.0:
             raise ValueError("min_overlap must lie in (0, 1]")
         if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
@@ -168,9 +178,10 @@ def _mat3(m: np.ndarray) -> np.ndarray:
 class _Rectifier:
     """Resamples raw frames onto a regular grid of rectified coordinates (``rect = grid + origin``)."""
 
-    def __init__(self, point_map: PointMap, shape: tuple[int, int]):
+    def __init__(self, point_map: PointMap, shape: tuple[int, int], limit: bool = False):
         h, w = shape
         self.origin = np.zeros(2)
+        self.pitch = 1.0  # rectified units per grid pixel
         self.maps: tuple[np.ndarray, np.ndarray] | None = None
         self.shape = shape
         if isinstance(point_map, IdentityMap) or getattr(point_map, "trivial", False):
@@ -186,9 +197,12 @@ class _Rectifier:
         y0, y1 = float(np.max(top[:, 1])), float(np.min(bottom[:, 1]))
         if not (x1 - x0 > 16 and y1 - y0 > 16):
             raise ValueError("the point map leaves no usable rectified area")
-        gw, gh = int(x1 - x0), int(y1 - y0)
+        if limit:
+            self.pitch = max(1.0, math.sqrt((x1 - x0) * (y1 - y0) / float(w * h)))
+        gw, gh = int((x1 - x0) / self.pitch), int((y1 - y0) / self.pitch)
         self.origin = np.array([x0, y0])
-        gx, gy = np.meshgrid(np.arange(gw, dtype=np.float64) + x0, np.arange(gh, dtype=np.float64) + y0)
+        gx, gy = np.meshgrid(np.arange(gw, dtype=np.float64) * self.pitch + x0,
+                             np.arange(gh, dtype=np.float64) * self.pitch + y0)
         raw = point_map.to_image(np.column_stack([gx.ravel(), gy.ravel()])).reshape(gh, gw, 2).astype(np.float32)
         self.maps = cv2.convertMaps(raw[..., 0], raw[..., 1], cv2.CV_16SC2)
         self.shape = (gh, gw)
@@ -203,7 +217,7 @@ class _Level:
     """One pyramid level of a normalised image, with its steepest-descent images when a reference."""
 
     def __init__(self, image: np.ndarray, scale: float, smoothing: float):
-        img = image.astype(np.float32)
+        img = image.astype(np.float32, copy=False)
         if smoothing > 0:
             img = cv2.GaussianBlur(img, (0, 0), smoothing)
         self.scale = scale
@@ -225,19 +239,25 @@ class _Level:
             h, w = img.shape
             gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
             gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-            inner = np.zeros((h, w), bool)
             bx = max(border, int(round(0.5 * (1.0 - region) * w)))
             by = max(border, int(round(0.5 * (1.0 - region) * h)))
-            inner[by : h - by, bx : w - bx] = True
-            idx = np.flatnonzero(inner)
-            if len(idx) > max_pixels:
-                mag = (gx * gx + gy * gy).ravel()[idx]
+            sw, sh = max(w - 2 * bx, 0), max(h - 2 * by, 0)
+            n_inner = sw * sh
+            if n_inner > max_pixels:
+                # the inner pixels in row-major order, as flat indices of the sub-image
+                sgx, sgy = gx[by : h - by, bx : w - bx], gy[by : h - by, bx : w - bx]
+                mag = cv2.add(cv2.multiply(sgx, sgx), cv2.multiply(sgy, sgy)).ravel()
                 # the gradient threshold that keeps about max_pixels, from a sample of at most 16384 pixels
-                step = max(1, len(idx) // 16384)
+                step = max(1, n_inner // 16384)
                 sample = mag[::step]
-                keep = len(sample) - max(1, (max_pixels * len(sample)) // len(idx))
+                keep = len(sample) - max(1, (max_pixels * len(sample)) // n_inner)
                 limit = np.partition(sample, keep)[keep]
-                idx = idx[mag >= limit][:max_pixels] if step == 1 else idx[mag >= limit]
+                sub = np.flatnonzero(mag >= limit)
+                if step == 1:
+                    sub = sub[:max_pixels]
+            else:
+                sub = np.arange(n_inner)
+            idx = (sub // max(sw, 1) + by) * w + (sub % max(sw, 1) + bx)
             gxf, gyf = gx.ravel()[idx], gy.ravel()[idx]
             xf = (idx % w).astype(np.float32) - np.float32(self.centre[0])
             yf = (idx // w).astype(np.float32) - np.float32(self.centre[1])
@@ -266,10 +286,12 @@ def _normalise(image: np.ndarray) -> np.ndarray:
     """
     img = image.astype(np.float32)
     k = max(3, (min(img.shape) // 16) | 1)
-    low = cv2.blur(cv2.blur(img, (k, k), borderType=cv2.BORDER_REFLECT), (k, k), borderType=cv2.BORDER_REFLECT)
-    img = img - low
+    low = cv2.blur(img, (k, k), borderType=cv2.BORDER_REFLECT)
+    cv2.blur(low, (k, k), dst=low, borderType=cv2.BORDER_REFLECT)
+    cv2.subtract(img, low, dst=img)  # in place: no temporary frames
     mean, std = cv2.meanStdDev(img)
-    return (img - float(mean[0, 0])) / max(float(std[0, 0]), 1e-3)
+    gain = 1.0 / max(float(std[0, 0]), 1e-3)
+    return cv2.addWeighted(img, gain, img, 0.0, -float(mean[0, 0]) * gain, dtype=cv2.CV_32F)
 
 
 class DirectAligner:
@@ -291,7 +313,7 @@ class DirectAligner:
     def prepare(self, image: np.ndarray) -> list[_Level]:
         """The rectified, normalised pyramid of a raw ``uint8`` frame (finest level first)."""
         if self._rectifier is None or self._rectifier_raw_shape != image.shape:
-            self._rectifier = _Rectifier(self.point_map, image.shape)
+            self._rectifier = _Rectifier(self.point_map, image.shape, self.config.grid_limit)
             self._rectifier_raw_shape = image.shape
         cfg = self.config
         img = _normalise(self._rectifier(image))
@@ -313,18 +335,21 @@ class DirectAligner:
     # ---------------------------------------------------------------- conversions
     def _to_rectified(self, m_level: np.ndarray, level: _Level) -> np.ndarray:
         """A similarity on centred level coordinates as one on rectified coordinates."""
-        s = level.scale
-        # rect = (x_level + centre) / s + origin - offset, with the pyrDown pixel-centre convention
-        a = np.array([[1.0 / s, 0.0, level.centre[0] / s + self._offset(s)], [0.0, 1.0 / s, level.centre[1] / s + self._offset(s)],
-                      [0.0, 0.0, 1.0]])
-        a[:2, 2] += self._rectifier.origin
+        a = self._level_to_rect(level)
         return (a @ _mat3(m_level) @ np.linalg.inv(a))[:2]
 
-    def _to_level(self, m_rect: np.ndarray, level: _Level) -> np.ndarray:
+    def _level_to_rect(self, level: _Level) -> np.ndarray:
+        """The 3 x 3 map from centred level coordinates to rectified coordinates."""
         s = level.scale
-        a = np.array([[1.0 / s, 0.0, level.centre[0] / s + self._offset(s)], [0.0, 1.0 / s, level.centre[1] / s + self._offset(s)],
-                      [0.0, 0.0, 1.0]])
+        p = self._rectifier.pitch
+        # rect = pitch * ((x_level + centre) / s + offset) + origin, with the pyrDown pixel-centre convention
+        a = np.array([[p / s, 0.0, p * (level.centre[0] / s + self._offset(s))],
+                      [0.0, p / s, p * (level.centre[1] / s + self._offset(s))], [0.0, 0.0, 1.0]])
         a[:2, 2] += self._rectifier.origin
+        return a
+
+    def _to_level(self, m_rect: np.ndarray, level: _Level) -> np.ndarray:
+        a = self._level_to_rect(level)
         return (np.linalg.inv(a) @ _mat3(m_rect) @ a)[:2]
 
     @staticmethod
@@ -429,7 +454,8 @@ class DirectAligner:
         valid_frac = 0.0
         reach = math.hypot(w, h) / 2
         huber = np.float32(cfg.huber)
-        for _ in range(cfg.iterations):
+        iterations = cfg.iterations if not final or cfg.finest_iterations is None else cfg.finest_iterations
+        for _ in range(iterations):
             # warp the current frame back: sample I1 at W(x) for every reference pixel x (float32 throughout:
             # the sums of the 4 x 4 normal equations lose nothing that matters at these pixel counts)
             i1 = _sample(cur.image, m, xy, centre)
@@ -501,17 +527,24 @@ def _correlation_inflation(values: np.ndarray, idx: np.ndarray, shape: tuple[int
 
     The residual image's autocorrelation is modelled as Gaussian, ``C(d) = ρ^(d²)`` along each axis
     (smoothing and interpolation make it so), with ``ρ`` its measured lag-one correlation; ``κ`` is the
-    number of pixels that carry the information of one independent sample.
+    number of pixels that carry the information of one independent sample. ``values`` (NaN: not used)
+    belong to the pixels of flat indices ``idx`` (increasing) of an image of ``shape``; the lag-one pairs
+    are found among them by a sorted search rather than on the whole image.
     """
-    img = np.full(shape[0] * shape[1], np.nan, np.float32)
-    img[idx] = values
-    img = img.reshape(shape)
+    h, w = shape
+    idx = np.asarray(idx)
     kappa = 1.0
-    for a, b in ((img[:, 1:], img[:, :-1]), (img[1:, :], img[:-1, :])):
-        ok = np.isfinite(a) & np.isfinite(b)
+    for lag in (1, w):  # right neighbour, lower neighbour
+        j = np.searchsorted(idx, idx + lag)
+        j = np.minimum(j, len(idx) - 1)
+        pair = idx[j] == idx + lag
+        if lag == 1:
+            pair &= (idx % w) != w - 1  # not across a row end
+        x, y = values[pair], values[j[pair]]
+        ok = np.isfinite(x) & np.isfinite(y)
         if np.count_nonzero(ok) < 16:
             continue
-        x, y = a[ok].astype(np.float64), b[ok].astype(np.float64)
+        x, y = x[ok].astype(np.float64), y[ok].astype(np.float64)
         rho = float(np.dot(x, y) / max(math.sqrt(float(np.dot(x, x)) * float(np.dot(y, y))), 1e-12))
         rho = min(max(rho, 0.0), 0.98)
         d = np.arange(1, 64, dtype=np.float64)

@@ -34,6 +34,7 @@ from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
 from frontends.config import ConfigMixin
 from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
 from frontends.direct import DenseFallback, DirectConfig
+from frontends.corners import scale_detector
 from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
 from frontends.frame_check import check_frame, texture_measure
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
@@ -133,6 +134,9 @@ class FeatureConfig(ConfigMixin):
         pixels the dense fallback uses (``None``: all, or the central half when the run is
         ``--uncalibrated``: the distortion of a lens without a model grows with the distance from the
         centre).
+    adaptive_detector : bool
+        Scale the detector settings, given for 640 x 360, to the frame's size and (FAST) contrast
+        (:func:`frontends.corners.scale_detector`).
     """
 
     detector: str = "shi_tomasi"
@@ -173,6 +177,7 @@ class FeatureConfig(ConfigMixin):
     verify_below: int = 30
     verify_tolerance: float = 1.0
     central_region: float | None = None
+    adaptive_detector: bool = True
 
     def __post_init__(self) -> None:
         self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
@@ -315,7 +320,8 @@ class FeatureFrontend:
         return orb
 
     def _describe(self, img: np.ndarray, t: float) -> _Frame:
-        pts = detect_corners(img, self._detector)
+        settings = scale_detector(self._detector, img) if self.config.adaptive_detector else self._detector
+        pts = detect_corners(img, settings)
         if self.config.region < 1.0:
             h, w = img.shape
             half = 0.5 * self.config.region * np.array([w, h], np.float32)

@@ -85,12 +85,17 @@ class OdometryConfig:
     uncalibrated : bool
         Run without the intrinsics of ``cam0/sensor.yaml``: a pinhole without distortion, principal
         point at the image centre, focal length ``focal_length`` (or the file's, or a 60 degree
-        horizontal field of view). The frontends then use only the central half of the width and height
-        (``UNCALIBRATED_CENTRAL_REGION``, unless ``frontend_options`` sets ``central_region``), where
-        the lens distortion left out is smallest. Without it, a ``sensor.yaml`` without intrinsics is
-        an error.
+        horizontal field of view). With ``lens_from_motion`` the lens distortion is then estimated from
+        the frames themselves (:mod:`fusion_vo.calibration.lens_from_motion`); when the frames do not
+        allow it, or without ``lens_from_motion``, the frontends use only the central half of the width
+        and height (``UNCALIBRATED_CENTRAL_REGION``, unless ``frontend_options`` sets
+        ``central_region``), where the distortion left out is smallest. Without ``uncalibrated``, a
+        ``sensor.yaml`` without intrinsics is an error.
     focal_length : float or None
         Approximate focal length [px] for ``uncalibrated``.
+    lens_from_motion : bool
+        With ``uncalibrated``: estimate a one-parameter (division-model) lens distortion from tracks in
+        40 frame pairs spread over the recording before the run (default true).
     max_bridge : float
         Longest gap [s] between the last measured frame and a restart of the frontend that the visual
         track bridges at constant velocity (default 1); across a longer gap it holds its last pose.
@@ -111,6 +116,7 @@ class OdometryConfig:
     gyro_derotation: bool = True
     uncalibrated: bool = False
     focal_length: float | None = None
+    lens_from_motion: bool = True
     max_bridge: float = 1.0
     threads: int | None = None
 
@@ -437,6 +443,11 @@ def run_visual_odometry(
     config = config or OdometryConfig()
     if config.uncalibrated:
         cam = uncalibrated_camera(recording.path / "cam0" / "sensor.yaml", config.focal_length)
+        recording.camera = cam  # the frames are read with this model's image size
+        if config.lens_from_motion:
+            from fusion_vo.calibration.lens_from_motion import lens_from_motion  # scipy only when needed
+
+            cam, _ = lens_from_motion(recording, cam)
         recording.camera = cam  # every later reader of this recording sees the same model
     else:
         cam = recording.camera
@@ -447,7 +458,7 @@ def run_visual_odometry(
         raise InputError(str(exc), recording.path / "cam0" / "sensor.yaml") from None
     try:
         options = dict(config.frontend_options)
-        if config.uncalibrated and options.get("central_region") is None:
+        if config.uncalibrated and not cam.has_distortion and options.get("central_region") is None:
             options["central_region"] = UNCALIBRATED_CENTRAL_REGION
         frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:

@@ -29,7 +29,8 @@ def register(sub) -> None:
                         "available); the results do not depend on it")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
     p.add_argument("--uncalibrated", action="store_true",
-                   help="the camera has no calibration: ignore missing intrinsics (pinhole, no distortion)")
+                   help="the camera has no calibration: ignore the intrinsics' distortion (pinhole of the given or "
+                        "stated focal length, lens distortion estimated from the frames)")
     p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
     p.add_argument("--print-config", action="store_true",
                    help="print the configuration (every option, its default and description; with --config, the "

@@ -9,6 +9,10 @@ Distortion models (as in ``cam0/sensor.yaml``):
 
 ``radial-tangential``  OpenCV's ``(k1, k2, p1, p2[, k3])``;
 ``equidistant``        OpenCV's fisheye model ``(k1, k2, k3, k4)``;
+``division``           the one-parameter division model ``(lambda,)``: a distorted normalised point
+                       ``x_d`` comes from ``x_d / (1 + lambda |x_d|^2)`` (barrel: ``lambda < 0``); what
+                       ``--uncalibrated`` estimates from the frames themselves
+                       (:mod:`fusion_vo.calibration.lens_from_motion`);
 ``none``               no distortion.
 
 ``T_BS`` maps camera coordinates to body coordinates: ``X_B = R_BS X_S + t_BS``.
@@ -25,7 +29,7 @@ import yaml
 
 from fusion_vo.errors import InputError, check_file
 
-DISTORTION_MODELS = ("radial-tangential", "equidistant", "none")
+DISTORTION_MODELS = ("radial-tangential", "equidistant", "division", "none")
 
 #: camera looking straight down with image-up pointing forward (x_S = -y_B, y_S = -x_B, z_S = -z_B)
 R_BS_DOWN_FORWARD = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
@@ -96,6 +100,11 @@ class CameraModel:
             return out
         if self.distortion_model == "equidistant":
             out = cv2.fisheye.undistortPoints(pts, self.K, self.distortion[:4])
+        elif self.distortion_model == "division":
+            xd = (pts.reshape(-1, 2) - [self.cu, self.cv]) / [self.fu, self.fv]
+            denom = 1.0 + self.distortion[0] * np.sum(xd * xd, axis=1, keepdims=True)
+            # beyond the model's horizon (1 + lambda r^2 <= 0) the ray is undefined
+            return np.where(denom > 1e-6, xd / np.maximum(denom, 1e-6), np.nan)
         else:
             out = cv2.undistortPoints(
                 pts, self.K, self.distortion, None, None, None,
@@ -111,6 +120,11 @@ class CameraModel:
         if self.distortion_model == "equidistant":
             out = cv2.fisheye.distortPoints(xy.reshape(-1, 1, 2), self.K, self.distortion[:4])
             return out.reshape(-1, 2)
+        if self.distortion_model == "division":
+            # r_d solves lambda r_u r_d^2 - r_d + r_u = 0; the root that tends to r_u as lambda -> 0
+            disc = 1.0 - 4.0 * self.distortion[0] * np.sum(xy * xy, axis=1, keepdims=True)
+            xd = 2.0 * xy / (1.0 + np.sqrt(np.where(disc >= 0, disc, np.nan)))
+            return xd * [self.fu, self.fv] + [self.cu, self.cv]
         return self._distort_radtan(xy)
 
     def _distort_radtan(self, xy: np.ndarray) -> np.ndarray:
@@ -197,7 +211,7 @@ class CameraModel:
         if dmodel not in DISTORTION_MODELS:
             raise InputError(f"unknown distortion_model '{dmodel}' (use one of {', '.join(DISTORTION_MODELS)})", path)
         coeffs = np.asarray(data.get("distortion_coefficients", [0.0] * 4), dtype=np.float64)
-        expected = {"radial-tangential": (4, 5), "equidistant": (4,), "none": (0, 4, 5)}[dmodel]
+        expected = {"radial-tangential": (4, 5), "equidistant": (4,), "division": (1,), "none": (0, 4, 5)}[dmodel]
         if len(coeffs) not in expected:
             raise InputError(f"distortion_coefficients: {dmodel} needs {' or '.join(map(str, expected))} numbers", path)
         T = parse_matrix(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()

@@ -50,3 +50,30 @@ def test_alignment_from_a_coarser_finest_level(finest):
     corners = np.array([[0.0, 0.0], [WIDTH, 0.0], [0.0, HEIGHT], [WIDTH, HEIGHT]])
     err = np.abs(corners @ (m.matrix - truth)[:, :2].T + (m.matrix - truth)[:, 2]).max()
     assert err < (0.03 if finest == 0 else 0.06), err
+
+
+def test_grid_limit_keeps_the_rectified_image_no_larger_than_the_frame():
+    """Through a barrel lens the rectified image is larger than the frame; ``grid_limit`` samples it more
+    coarsely (fewer pixels to align) and still measures the similarity in rectified pixels."""
+    import math
+
+    from frontend_frames import as3, start_map
+    from test_frontends import CENTRE, _Radial, _render_distorted, centre_error
+
+    pm = _Radial()
+    truth = similarity_about(*CENTRE, 20.0, 35.0, 2.0)
+    a0 = start_map()
+    frames = [_render_distorted(a0, pm), _render_distorted((as3(truth) @ as3(a0))[:2], pm)]
+    shapes = []
+    for limit in (False, True):
+        fe = make_frontend("direct", {"grid_limit": limit}, point_map=pm)
+        fe.process(frames[0], 0.0)
+        m = fe.process(frames[1], 0.05)
+        assert m.ok
+        assert centre_error(m.matrix, truth) < 0.1
+        assert abs(m.params[3]) < 3e-4 and abs(math.degrees(m.params[2]) - 2.0) < 0.01
+        rect = fe.aligner._rectifier
+        shapes.append(rect.shape)
+        assert (rect.pitch > 1.0) == limit
+    (h0, w0), (h1, w1) = shapes
+    assert h0 * w0 > HEIGHT * WIDTH >= h1 * w1
