@@ -1098,7 +1098,7 @@ class _OnlineGraph:
         self.calibrate = calibrate
         # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
         # a conditioning that Cholesky can report as indeterminate
-        self.isam = gtsam.ISAM2(graph.isam_params(True))
+        self.isam = gtsam.ISAM2(graph.isam_params())
         self.n = 0  # nodes submitted
         self.estimate: dict = {}  # running bias / calibration estimates (guesses of the next node)
         self.prev_pose = gtsam.Pose2(*config.initial_pose)  # iSAM2's estimate of the newest node
