@@ -46,6 +46,7 @@ import numpy as np
 import scipy.sparse
 from scipy.linalg import lapack
 
+from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.factors import ModelFactors, pose_table, scalar_table
 
 logger = logging.getLogger(__name__)
@@ -370,32 +371,18 @@ def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterati
     """The Levenberg–Marquardt loop of :func:`fusion_vo.backends.graph.levenberg_marquardt` on the
     block-tridiagonal system. Returns ``(solution, iterations, system)``; ``system`` is the last
     linearisation, for :func:`pose_marginals`."""
+    def attempt(state, system, lam):
+        values, tables = state
+        try:
+            trial, trial_tables = problem.retract(values, tables, system.solve(system.factor(lam)))
+            return (trial, trial_tables), problem.error(trial, trial_tables)
+        except Indeterminate:
+            return None, math.inf
+
     tables = problem.tables(values)
-    error = problem.error(values, tables)
-    lam = 0.0
-    it = 0
-    system = None
-    for it in range(1, max_iterations + 1):
-        system = problem.linearize(values, tables)
-        while True:
-            try:
-                delta = system.solve(system.factor(lam))
-                trial, trial_tables = problem.retract(values, tables, delta)
-                trial_error = problem.error(trial, trial_tables)
-            except Indeterminate:
-                logger.debug("LM iteration %d: indeterminate system at lambda %.1e", it, lam)
-                trial_error = math.inf
-            if trial_error <= error:
-                break
-            lam = 1e-4 if lam == 0 else lam * 10.0
-            if lam > 1e8:
-                return values, it, system
-        decrease = error - trial_error
-        logger.debug("LM iteration %d: cost %.6g -> %.6g (lambda %.1e)", it, error, trial_error, lam)
-        values, tables, error = trial, trial_tables, trial_error
-        lam = 0.0 if lam <= 1e-3 else lam / 10.0
-        if decrease <= relative_tolerance * max(error, 1e-12):
-            break
+    (values, _), it, system = damped_gauss_newton(
+        (values, tables), problem.error(values, tables), lambda state: problem.linearize(*state), attempt,
+        max_iterations, relative_tolerance)
     return values, it, system
 
 

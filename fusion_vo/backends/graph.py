@@ -114,6 +114,7 @@ from threadpoolctl import threadpool_limits
 
 from fusion_vo.backends import chain
 from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
@@ -548,39 +549,23 @@ def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values,
                 lin.add(f)
         return lin
 
-    error = total_error(values)
-    lam = 0.0
-    it = 0
-    lin = None
-    for it in range(1, max_iterations + 1):
-        lin = linearize(values)
-        while True:
-            system = lin
-            if lam > 0:
-                system = lin.clone()
-                for key, dim in dims.items():
-                    system.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
-                                                    gtsam.noiseModel.Unit.Create(dim)))
-            try:
-                trial = values.retract(system.optimize())
-                trial_error = total_error(trial)
-            except RuntimeError as exc:  # a (nearly) singular Gauss-Newton system: damp it, as GTSAM's LM does
-                if "Indeterminate" not in str(exc):
-                    raise
-                logger.debug("LM iteration %d: indeterminate system at lambda %.1e", it, lam)
-                trial_error = math.inf
-            if trial_error <= error:
-                break
-            lam = 1e-4 if lam == 0 else lam * 10.0
-            if lam > 1e8:
-                return values, it, lin
-        decrease = error - trial_error
-        logger.debug("LM iteration %d: cost %.6g -> %.6g (lambda %.1e)", it, error, trial_error, lam)
-        values, error = trial, trial_error
-        lam = 0.0 if lam <= 1e-3 else lam / 10.0
-        if decrease <= relative_tolerance * max(error, 1e-12):
-            break
-    return values, it, lin
+    def attempt(v: gtsam.Values, lin: gtsam.GaussianFactorGraph, lam: float):
+        system = lin
+        if lam > 0:
+            system = lin.clone()
+            for key, dim in dims.items():
+                system.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
+                                                gtsam.noiseModel.Unit.Create(dim)))
+        try:
+            trial = v.retract(system.optimize())
+            return trial, total_error(trial)
+        except RuntimeError as exc:  # a (nearly) singular Gauss-Newton system: damp it, as GTSAM's LM does
+            if "Indeterminate" not in str(exc):
+                raise
+            return None, math.inf
+
+    return damped_gauss_newton(values, total_error(values), linearize, attempt, max_iterations,
+                               relative_tolerance)
 
 
 def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = None) -> FusionResult:
