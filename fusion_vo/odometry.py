@@ -237,17 +237,22 @@ class VisualOdometry:
         """Latest ``(x, y, yaw)`` of the visual track (``None`` before the first frame)."""
         return self.poses[-1] if self.poses else None
 
-    def process(self, image, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
+    def process(self, image, t: float, height: float | None = None,
+                height_sigma: float = 0.0) -> tuple[FrameMotion, VisualIncrement | None]:
         """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame).
 
-        ``image`` is the frame, or what the frontend's ``prepare`` made of it.
+        ``image`` is the frame, or what the frontend's ``prepare`` made of it; ``height`` a measured camera
+        height [m] (a range finder's) with its standard deviation ``height_sigma``.
         """
         motion = self.frontend.process(image, t)
-        return motion, self.finish(motion, height)
+        return motion, self.finish(motion, height, height_sigma)
 
-    def finish(self, motion: FrameMotion, height: float | None = None) -> VisualIncrement | None:
+    def finish(self, motion: FrameMotion, height: float | None = None,
+               height_sigma: float = 0.0) -> VisualIncrement | None:
         """The second half of :meth:`process`: the body increment of the frontend's ``motion`` (``None``
         for a first frame), derotated and through the ground geometry, appended to the track.
+        The height's uncertainty goes into the increment's covariance
+        (:meth:`~fusion_vo.geometry.ground.GroundGeometry.body_increment`).
 
         Nothing in it feeds back into the frontend, so a run does it in another thread while the frontend
         measures the next frame (:func:`run_visual_odometry`); it must see the motions in frame order.
@@ -260,7 +265,7 @@ class VisualOdometry:
         if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
             motion.info["measured_matrix"] = motion.matrix
             motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
-        inc = self.geometry.increment(motion, height)
+        inc = self.geometry.increment(motion, height, height_sigma)
         if inc.ok:
             self._append(inc)
         return inc
@@ -412,12 +417,33 @@ def _shut_down(pool: ThreadPoolExecutor | None):
 
 def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
+    out = range_heights(recording, times)
+    return None if out is None else out[0]
+
+
+def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Camera height at ``times`` from the range finder (linear interpolation) and its standard deviation,
+    or ``None`` without a range finder.
+
+    The standard deviation of one reading is measured from the readings
+    (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction ``a`` of the way
+    between two readings has ``σ² ((1 - a)² + a²)``.
+    """
     if not recording.has_range():
         return None
     r: RangeData = recording.range()
     if len(r) == 0:
         return None
-    return np.interp(times, r.t, r.distance)
+    from fusion_vo.sensors.range import reading_sigma
+
+    times = np.asarray(times, dtype=np.float64)
+    heights = np.interp(times, r.t, r.distance)
+    sigma = reading_sigma(r) or 0.0
+    t = np.asarray(r.t, dtype=np.float64)
+    j = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
+    span = t[j] - t[j - 1] if len(t) > 1 else np.ones_like(times)
+    a = np.clip((times - t[j - 1]) / np.where(span > 0, span, 1.0), 0.0, 1.0) if len(t) > 1 else np.zeros_like(times)
+    return heights, sigma * np.sqrt((1.0 - a) ** 2 + a**2)
 
 
 def run_visual_odometry(
@@ -463,7 +489,8 @@ def run_visual_odometry(
         frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None
-    heights = heights_for(recording, recording.frame_times) if config.use_range else None
+    ranged = range_heights(recording, recording.frame_times) if config.use_range else None
+    heights, height_sigmas = (None, None) if ranged is None else ranged
     derotation = None
     if config.gyro_derotation and recording.has_imu():
         derotation = GyroDerotation(recording.imu(), geometry)
@@ -504,14 +531,15 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
+            h_sigma = 0.0 if height_sigmas is None else float(height_sigmas[frame.index])
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
             inliers.append(motion.n_inliers)
             if post is None:
-                collect(vo.finish(motion, h))
+                collect(vo.finish(motion, h, h_sigma))
             else:
-                pending.append(post.submit(vo.finish, motion, h))
+                pending.append(post.submit(vo.finish, motion, h, h_sigma))
                 while pending and (pending[0].done() or len(pending) > 2 * threads + 2):
                     collect(pending.popleft().result())
             if progress:
