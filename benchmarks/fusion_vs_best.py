@@ -72,7 +72,11 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
     with the recording's noise keys): the visual increments' NEES ``eᵀ Σ⁻¹ e`` and the mean of each
     component's ``e² / σ²``; the wheels' arc increments against the true ones scaled by the least-squares
     distance scale and wheel-base factor, with the arc model's covariance; the gyro's angle per interval
-    minus the least-squares bias against ``σ_g² Δt``. Consistent: 3, (1, 1, 1), 3, 1.
+    minus the least-squares bias against ``σ_g² Δt``. Consistent: 3, (1, 1, 1), 3, 1. For the camera's
+    and the gyro's heading errors also ``whiteness``: the variance of their sums over 64 consecutive node
+    intervals divided by 64 times the variance of one, which is 1 when the errors are independent from
+    interval to interval, as both backends assume (below 1: errors that cancel over time, so the summed
+    heading is better than the stated noise says; above: errors that persist).
     """
     from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
     from fusion_vo.backends.timeline import build_intervals
@@ -92,6 +96,12 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
     def between(i0, i1) -> np.ndarray:
         return np.array([se2.between(truth[a], truth[b]) for a, b in zip(i0, i1)]).reshape(-1, 3)
 
+    def whiteness(errors: np.ndarray, n: int = 16) -> float:
+        if len(errors) < 8 * n:
+            return float("nan")
+        e = np.nan_to_num(errors[: len(errors) // n * n])
+        return float(np.var(e.reshape(-1, n).sum(axis=1)) / (n * np.nanvar(errors)))
+
     def nees(e, cov) -> np.ndarray:
         return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
 
@@ -100,7 +110,11 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         e = iv.vis_delta - between(iv.vis_i0, iv.vis_i1)
         e[:, 2] = se2.wrap_angle(e[:, 2])
         z2 = np.mean(e**2 / np.einsum("nii->ni", iv.vis_cov), axis=0)
-        out["camera"] = f"NEES {np.mean(nees(e, iv.vis_cov)):.2f} (x, y, yaw: {z2[0]:.2f} {z2[1]:.2f} {z2[2]:.2f})"
+        single = iv.vis_i1 == iv.vis_i0 + 1
+        heading = np.full(iv.n_steps, np.nan)
+        heading[iv.vis_i0[single]] = e[single, 2]
+        out["camera"] = (f"NEES {np.mean(nees(e, iv.vis_cov)):.2f} (x, y, yaw: {z2[0]:.2f} {z2[1]:.2f} {z2[2]:.2f}), "
+                         f"heading whiteness {whiteness(heading):.2f}")
     steps = np.arange(iv.n_steps)
     if iv.uses("wheel") and iv.wheel_ok.any():
         ok = iv.wheel_ok
@@ -118,7 +132,8 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         r = (iv.gyro_angle - np.diff(truth[:, 2]))[ok]
         dt = iv.dt[ok]
         bias = float(np.sum(r) / np.sum(dt))
-        out["gyro"] = f"NIS {np.mean((r - bias * dt) ** 2 / (config.imu.gyro_noise_density**2 * dt)):.2f}"
+        out["gyro"] = (f"NIS {np.mean((r - bias * dt) ** 2 / (config.imu.gyro_noise_density**2 * dt)):.2f}, "
+                       f"whiteness {whiteness(r - bias * dt):.2f}")
     return out
 
 
