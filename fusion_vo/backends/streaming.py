@@ -1024,8 +1024,10 @@ class StreamingFusion:
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
     """The samples of ``streams`` as ``(arrival time, kind, message)`` in arrival order.
 
-    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``). Samples arrive at their own
-    time, the visual increments ``camera_delay`` seconds after their ``t1`` (frontend latency).
+    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``), or for a sensor registered outside the
+    library whose :class:`~fusion_vo.sensors.registry.Live` intake gives ``samples``, the sensor
+    (``add(kind, message)``). Samples arrive at their own time, the visual increments ``camera_delay`` seconds
+    after their ``t1`` (frontend latency).
     """
     msgs: list[tuple[float, int, str, object]] = []
     if streams.visual:
@@ -1042,6 +1044,10 @@ def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> 
         msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
     if streams.range is not None:
         msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    for name, data in streams.extra.items():
+        live = registry.get(name).live if name in registry.names() else None
+        if live is not None and live.samples is not None and data is not None:
+            msgs += [(float(t), 4, name, m) for t, m in live.samples(data)]
     msgs.sort(key=lambda m: (m[0], m[1]))
     return [(float(m[0]), m[2], m[3]) for m in msgs]
 
@@ -1052,6 +1058,8 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
                                           ("odom", streams.odom is not None), ("imu", streams.imu is not None),
                                           ("range", streams.range is not None)) if present]
+    sensors += [name for name, data in streams.extra.items()  # sensors registered outside the library
+                if data is not None and name in registry.names() and registry.get(name).live is not None]
     imu = streams.imu
     return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
                            imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,

@@ -106,6 +106,10 @@ class Live:
         ``neighbours(config) -> int``.
     counted_as : str or None
         The name its counts are reported under (default: the sensor's).
+    samples : callable or None
+        ``samples(data) -> iterable of (t, sample)``: its data as live samples, for replaying a recording
+        (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``) of a sensor
+        registered outside the library.
     """
 
     sample: Callable
@@ -113,6 +117,7 @@ class Live:
     min_rows: int = 2
     neighbours: Any = 0
     counted_as: str | None = None
+    samples: Callable | None = None
 
 
 @dataclass(frozen=True)

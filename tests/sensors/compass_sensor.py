@@ -161,7 +161,8 @@ OFFSET_COMPASS_SENSOR = dataclasses.replace(
     states=(State("compass_offset", initial=0.0, sigma=0.5),),
     ekf_blocks=(Step(100, _ekf_block(OFFSET_COMPASS)),), graph_unary=(Step(100, offset_compass_factor),),
     live=Live(sample=lambda m: (m.t, float(m.yaw)),
-              data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64))),
+              data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64)),
+              samples=lambda data: ((t, CompassSample(t, y)) for t, y in zip(data.t, data.yaw))),
 )
 
 

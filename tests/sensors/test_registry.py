@@ -93,12 +93,17 @@ def test_each_built_in_sensor_lives_in_its_own_module():
         for f in dataclasses.fields(sensor):
             value = getattr(sensor, f.name)
             for item in value if isinstance(value, tuple) else (value,):
+                if isinstance(item, registry.Live):  # the streaming intake's hooks
+                    hooks += [(f"live.{g.name}", getattr(item, g.name)) for g in dataclasses.fields(item)
+                              if inspect.isfunction(getattr(item, g.name))]
+                    continue
                 fn = item.run if isinstance(item, Step) else item
                 if inspect.isfunction(fn) or inspect.isclass(fn):
                     hooks.append((f.name, fn))
         assert len(hooks) >= 3, sensor.name
         for field_name, fn in hooks:
             assert fn.__module__ == home[sensor.name], (sensor.name, field_name, fn.__module__)
+    assert [s.name for s in registry.sensors()[:6] if s.live is not None] == ["wheel", "odom", "imu", "range"]
     gps = registry.get("gps")
     assert gps.intervals is not None and gps.ekf_run is not None and gps.graph_run is not None
     assert gps.node_times is not None and not gps.by_default({})
@@ -156,18 +161,16 @@ def test_a_state_is_checked_when_registered():
 
 # --------------------------------------------------------------------------- streaming
 def _stream(backend: str, s, compass: CompassData, extra_samples=()):
-    from compass_sensor import CompassSample
+    """Stream the wheels and the compass as a replay does: every message through ``add(kind, message)``."""
+    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 
-    from fusion_vo.backends.streaming import StreamingFusion
-    from fusion_vo.measurements import WheelTicks
-
-    fusion = StreamingFusion(backend, {"reorder_window": 0.1}, ["wheel", "compass"], wheel_config=s.wheel.config)
-    w = s.wheel
-    messages = [(t, 0, "wheel", WheelTicks(t, int(lt), int(rt))) for t, lt, rt in zip(w.t, w.left, w.right)]
-    messages += [(t, 1, "compass", CompassSample(t, y)) for t, y in zip(compass.t, compass.yaw)]
-    messages += list(extra_samples)
-    for _, _, name, sample in sorted(messages, key=lambda m: (m[0], m[1])):
-        fusion.add(name, sample)
+    streams = SensorStreams(wheel=s.wheel, extra={"compass": compass})
+    fusion = streaming_for(streams, backend, {"reorder_window": 0.1})
+    assert fusion.sensors == ["wheel", "compass"]
+    messages = [(t, 0, kind, m) for t, kind, m in time_ordered_messages(streams)] + list(extra_samples)
+    assert {kind for _, _, kind, _ in messages} == {"wheel", "compass"}
+    for _, _, kind, message in sorted(messages, key=lambda m: (m[0], m[1])):
+        fusion.add(kind, message)
     return fusion, fusion.finish()
 
 
