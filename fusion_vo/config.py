@@ -9,7 +9,8 @@ A configuration file has one section per stage; any key left out keeps its defau
     klt: {...}               # frontends.klt.KltConfig
     features: {...}          # frontends.features.FeatureConfig
     direct: {...}            # frontends.direct.DirectConfig
-    fusion: {...}            # fusion_vo.backends.FusionConfig (ekf, graph, sensor noise models)
+    fusion: {...}            # fusion_vo.backends.FusionConfig (ekf, graph, sensor noise models, and the
+                             # section of each sensor registered outside the library, e.g. compass: {sigma: 0.02})
     evaluate: true           # compute metrics and plots when the recording has ground truth
 
 The schema is derived from those dataclasses by :mod:`fusion_vo.schema` (pydantic), so an option is

@@ -251,6 +251,9 @@ class StreamingFusion:
         # ones always (odometry twists also arrive for a declared "wheel"), the others when declared
         self._buffers: dict[str, list] = {s.name: [] for s in registry.sensors() if s.live is not None and
                                           (s.name in registry.BUILTIN_ORDER or s.name in self.sensors)}
+        # each buffered stream's intake (registry.Live), its SensorStreams field and the name it is counted under
+        self._intake = {name: registry.get(name) for name in self._buffers}
+        self._counted = {name: s.live.counted_as or name for name, s in self._intake.items()}
         #: the sensors' own state variables (registry.State) in both backends
         self._states = registry.states(self.sensors)
         self._visual: list[VisualIncrement] = []
@@ -286,21 +289,23 @@ class StreamingFusion:
         non-finite one; an unknown or undeclared sensor is an :class:`InputError`.
         """
         with self._lock:
-            try:
-                spec = registry.get(sensor)
-            except KeyError:
-                raise InputError(f"unknown sensor '{sensor}' (use {', '.join(registry.names())})") from None
-            if sensor == "camera":  # the two intakes that make nodes
-                return self.add_visual(sample)
-            if sensor == "gps":
-                return self.add_gps(sample)
-            self._check(sensor)
-            if spec.live is None:
+            spec = self._intake.get(sensor)
+            if spec is None:  # not a buffered stream: the camera, GPS, or a mistake
+                try:
+                    spec = registry.get(sensor)
+                except KeyError:
+                    raise InputError(f"unknown sensor '{sensor}' (use {', '.join(registry.names())})") from None
+                if sensor == "camera":  # the two intakes that make nodes
+                    return self.add_visual(sample)
+                if sensor == "gps":
+                    return self.add_gps(sample)
+                self._check(sensor)
                 raise InputError(f"sensor '{sensor}' has no live intake (its registration has no registry.Live)")
             try:
                 t, payload = spec.live.sample(sample)
             except (AttributeError, TypeError, ValueError, IndexError) as exc:
-                self._count(spec.live.counted_as or sensor).gated += 1
+                self._check(sensor)
+                self._count(self._counted[sensor]).gated += 1
                 logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
                 return
             self._add(sensor, t, payload)
@@ -503,7 +508,7 @@ class StreamingFusion:
 
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
-        sensor = registry.get(stream).live.counted_as or stream  # the name its counts are reported under
+        sensor = self._counted[stream]  # the name its counts are reported under
         if not self._valid(sensor, t, [x for x in payload if x is not None] if isinstance(payload, tuple)
                            else payload):
             return
@@ -708,7 +713,7 @@ class StreamingFusion:
         ``t0`` too."""
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
-            live = registry.get(name).live
+            live = self._intake[name].live
             more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
             hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
@@ -720,7 +725,7 @@ class StreamingFusion:
             if len(rows) < live.min_rows:
                 continue
             data = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)  # the sensor's own module
-            field_name = registry.get(name).field
+            field_name = self._intake[name].field
             if field_name is not None:
                 setattr(streams, field_name, data)
             else:
