@@ -140,7 +140,9 @@ def run_model() -> type[BaseModel]:
 
     own = {f.name for f in dataclasses.fields(FusionConfig)}
     sections = tuple(s.config for s in registry.sensors() if s.config is not None and s.config[0] not in own)
-    return _run_model(registry.names(), sections)
+    registered = registry.names()  # the built-in names in their documented order, then the others
+    names = tuple(n for n in SENSORS if n in registered) + tuple(n for n in registered if n not in SENSORS)
+    return _run_model(names, sections)
 
 
 @functools.cache

@@ -255,7 +255,7 @@ def test_the_command_line_runs_a_sensor_an_installed_package_registers(compass_r
 
 
 @pytest.mark.parametrize("text, message", [
-    ("sensors: [wheel, magnet]\n", "sensors[1]: expected one of 'camera', 'wheel', 'odom', 'imu', 'range', 'gps' or "
+    ("sensors: [wheel, magnet]\n", "sensors[1]: expected one of 'camera', 'wheel', 'imu', 'odom', 'range', 'gps' or "
                                    "'compass', got 'magnet'"),
     ("fusion: {compass: {sigma: 0}}\n", "fusion: 'compass.sigma' must be positive, not 0.0"),
     ("fusion: {compass: {sigma: -0.1}}\n", "fusion: 'compass.sigma' must be positive, not -0.1"),
