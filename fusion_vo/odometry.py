@@ -490,8 +490,15 @@ def run_visual_odometry(
                              getattr(frontend, "prepare", None), threads)
     # with threads, the increments are computed in a thread of their own, one frame behind the frontend
     post = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-geometry") if threads > 1 else None
+    # and a frontend that can set up the next frame's tracking ahead (KLT: the reference warped by the
+    # predicted motion) does so in a thread of its own, told the next frame's timestamp
+    ahead = None
+    if threads > 1 and hasattr(frontend, "set_executor"):
+        ahead = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-ahead")
+        frontend.set_executor(ahead)
+    frame_times = recording.frame_times
     pending: deque = deque()
-    with opencv_threads(threads), closing(source), _shut_down(post):
+    with opencv_threads(threads), closing(source), _shut_down(post), _shut_down(ahead):
         for k, (frame, image) in enumerate(source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
@@ -504,6 +511,9 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
+            if ahead is not None:
+                following = frame.index + 1
+                frontend.expect(float(frame_times[following]) if 0 < following < len(frame_times) else None)
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
