@@ -296,6 +296,47 @@ def end_to_end_table(rows: list[EndToEnd]) -> str:
     return "\n".join(lines)
 
 
+#: end-to-end targets, times the plain script's frames per second: (one thread, all threads)
+TARGETS = {"klt": (3.0, 5.0), "features": (2.0, 2.0)}
+
+
+def wall_bound_ms(row: EndToEnd, repeat: int, cores: int) -> float:
+    """The shortest wall time per frame [ms] that a run's CPU time allows: the calling thread (the tracker)
+    cannot go faster than its own CPU time, nor the run than its total CPU time spread over
+    ``min(threads, cores)`` cores. An idle machine with no waiting between the threads would reach it."""
+    usable = max(min(row.threads or cores, cores), 1)
+    return max(row.thread_ms[repeat], row.cpu_ms[repeat] / usable)
+
+
+def bound_table(rows: list[EndToEnd], cores: int | None = None) -> str:
+    """A Markdown table: for each fusion-vo row of :func:`compare_end_to_end`, the lower bound on its wall
+    time per frame (:func:`wall_bound_ms`) and the highest ratio to the plain script it allows (the faster
+    script run's wall time per frame in the same repeat over that bound), beside the target (``TARGETS``).
+
+    The ratio is a ceiling: the measured ratio of an idle machine cannot exceed it, so a target above it
+    cannot be met without cutting CPU time.
+    """
+    cores = cores or available_cores()
+    bases = [row for row in rows if row.baseline]
+    lines = ["| run | CPU time per frame (all threads / calling thread) | shortest possible wall time per frame "
+             "| plain script wall time per frame | highest possible x plain script | target | within reach |",
+             "|---|---|---|---|---|---|---|"]
+    for row in rows:
+        if row.baseline or not row.cpu_ms:
+            continue
+        repeats = range(min(len(row.cpu_ms), *(len(b.fps) for b in bases)))
+        bound = [wall_bound_ms(row, r, cores) for r in repeats]
+        plain = [1000.0 / max(b.fps[r] for b in bases) for r in repeats]
+        ceiling = [p / b for p, b in zip(plain, bound)]
+        one, every = TARGETS.get(split_spec(row.name)[0], (float("nan"), float("nan")))
+        target = one if row.threads == 1 else every
+        reach = "yes" if statistics.median(ceiling) >= target else "no"
+        lines.append(f"| {row.label} | {_span(row.cpu_ms, '.2f')} / {_span(row.thread_ms, '.2f')} ms | "
+                     f"{_span(bound, '.2f')} ms | {_span(plain, '.2f')} ms | {_span(ceiling, '.2f')} | {target:g} | "
+                     f"{reach} |")
+    return "\n".join(lines)
+
+
 def first_frames(sequence: str | Path, n: int, out: str | Path) -> Path:
     """A recording of the first ``n`` frames of ``sequence`` (its camera only; frame files linked, not copied)."""
     sequence, out = Path(sequence), Path(out)
@@ -361,6 +402,13 @@ def run_benchmark(sequence: str | Path, frontends: list[str], baseline: Baseline
             "run of the same repeat:")
         out("")
         out(end_to_end_table(rows))
+        if baseline is not None:
+            out("")
+            out("what the CPU time allows: the shortest wall time per frame is the larger of the calling thread's "
+                "CPU time and the total CPU time over the cores used; the highest ratio is the plain script's "
+                "wall time per frame over it (median (range) over the repeats):")
+            out("")
+            out(bound_table(rows))
         if stages:
             out("")
             out("where the time goes, one thread, CPU time per frame:")

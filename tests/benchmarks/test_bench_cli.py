@@ -2,7 +2,8 @@
 
 import pytest
 
-from fusion_vo.benchmark import BASELINE_SCRIPT, first_frames, load_baseline, run_benchmark
+from fusion_vo.benchmark import (BASELINE_SCRIPT, EndToEnd, bound_table, first_frames, load_baseline, run_benchmark,
+                                 wall_bound_ms)
 from fusion_vo.cli.main import main
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import make_standard
@@ -64,6 +65,24 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
                   "klt, 1 thread |", "klt, 2 threads |"):
         assert f"| {label}" in table
+    assert "shortest possible wall time per frame" in table and "| klt, 2 threads | " in table.split("what the CPU")[1]
+
+
+def test_the_bound_is_the_calling_threads_cpu_or_the_total_over_the_cores():
+    plain = EndToEnd("plain OpenCV script", None, 100, fps=[125.0, 100.0], baseline=True)  # 8 and 10 ms
+    single = EndToEnd("plain OpenCV script", 1, 100, fps=[100.0, 125.0], baseline=True)
+    one = EndToEnd("klt", 1, 100, cpu_ms=[4.0, 5.0], thread_ms=[4.0, 5.0])
+    two = EndToEnd("klt", 2, 100, cpu_ms=[4.6, 3.0], thread_ms=[2.2, 2.0])  # total / 2 vs the tracker
+    features = EndToEnd('features:{"descriptor": "orb"}', 2, 100, cpu_ms=[3.0, 3.0], thread_ms=[1.0, 1.0])
+    assert [wall_bound_ms(two, r, cores=2) for r in (0, 1)] == [pytest.approx(2.3), pytest.approx(2.0)]
+    assert wall_bound_ms(two, 0, cores=1) == pytest.approx(4.6)  # two threads on one core
+    lines = bound_table([plain, single, one, two, features], cores=2).splitlines()
+    assert len(lines) == 5 and not any("plain OpenCV" in line for line in lines)
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
+    # ceilings: 8 / 4 = 2.0 and 8 / 5 = 1.6 (median 1.8) against 3; 8 / 2.3 and 8 / 2.0 against 5; 8 / 1.5
+    assert cells[0][2:] == ["4.50 (4.00-5.00) ms", "8.00 (8.00-8.00) ms", "1.80 (1.60-2.00)", "3", "no"]
+    assert cells[1][4:] == ["3.74 (3.48-4.00)", "5", "no"]
+    assert cells[2][4:] == ["5.33 (5.33-5.33)", "2", "yes"]
 
 
 def test_a_variant_row_runs_the_frontend_with_its_options(short, monkeypatch):
