@@ -195,6 +195,7 @@ def track_points(
     settings: LkSettings,
     start: np.ndarray | None = None,
     exposure: tuple[float, float] = (1.0, 0.0),
+    warped: np.ndarray | None | object = WARP_HERE,
 ) -> TrackResult:
     """Track reference points ``p0`` into ``img`` given the expected image-space motion ``affine``.
 
@@ -214,11 +215,14 @@ def track_points(
     exposure : (gain, offset)
         Brightness change from the reference to the current frame (see :func:`exposure_change`);
         the reference is corrected by it before tracking.
+    warped : ndarray or None, optional
+        :func:`warp_reference` of ``ref_img`` by ``affine`` with ``settings.warp_tolerance``, when it was
+        made elsewhere (another thread); by default it is made here.
 
     The forward pass is :func:`track_forward`; with ``settings.forward_backward`` the points are then
     checked by :func:`check_backward`.
     """
-    forward = track_forward(ref_img, img, p0, affine, levels, settings, start, exposure)
+    forward = track_forward(ref_img, img, p0, affine, levels, settings, start, exposure, warped)
     return check_backward(forward, settings) if settings.forward_backward else forward.result
 
 

@@ -490,8 +490,8 @@ def run_visual_odometry(
                              getattr(frontend, "prepare", None), threads)
     # with threads, the increments are computed in a thread of their own, one frame behind the frontend
     post = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-geometry") if threads > 1 else None
-    # and a frontend that can set up the next frame's tracking ahead (KLT: the reference warped by the
-    # predicted motion) does so in a thread of its own, told the next frame's timestamp
+    # and a frontend that can do part of its work in another thread (KLT: setting up the next frame's
+    # tracking, told the next frame's timestamp; features: warping the reference) does so in one more
     ahead = None
     if threads > 1 and hasattr(frontend, "set_executor"):
         ahead = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-ahead")
@@ -511,7 +511,7 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
-            if ahead is not None:
+            if ahead is not None and hasattr(frontend, "expect"):
                 following = frame.index + 1
                 frontend.expect(float(frame_times[following]) if 0 < following < len(frame_times) else None)
             motion = frontend.process(image, frame.t)

@@ -416,3 +416,30 @@ def test_klt_set_up_ahead_in_an_executor_gives_the_same_motions(monkeypatch):
     # yet) and the two with a wrong hint
     assert in_plain >= len(frames) - 2
     assert in_plain - in_ahead == len(frames) - 2 - len(wrong)
+
+
+def test_features_warp_in_an_executor_gives_the_same_motions(monkeypatch):
+    """With an executor, the feature frontend warps the reference for the refinement there, while it
+    measures the exposure change; the motions are the same bit for bit."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    import frontends.features as features
+    from frontends.features import FeatureFrontend
+
+    motions = [similarity_about(WIDTH / 2, HEIGHT / 2 + 600.0, 0.0, 0.0, 2.5)] * 12
+    frames = [f for f, _ in sequence(motions, "gravel", 1024 - WIDTH / 2, 424 - HEIGHT / 2)]
+    threads: list[str] = []
+    original = features.warp_reference
+    monkeypatch.setattr(features, "warp_reference", lambda *a: threads.append(
+        threading.current_thread().name) or original(*a))
+    plain, other = FeatureFrontend(), FeatureFrontend()
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp") as pool:
+        other.set_executor(pool)
+        for k, image in enumerate(frames):
+            a, b = plain.process(image, 0.05 * k), other.process(image, 0.05 * k)
+            assert a.status == b.status and a.n_inliers == b.n_inliers and (a.ok or k == 0)
+            if k:
+                np.testing.assert_array_equal(a.matrix, b.matrix)
+                np.testing.assert_array_equal(a.covariance, b.covariance)
+    assert len(threads) == len(frames) - 1 and all(name.startswith("warp") for name in threads)
