@@ -19,8 +19,10 @@ Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``thread
 thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
 per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
 calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
-derotation, ground geometry, the track) while the frontend measures the next frame. OpenCV releases the GIL while it decodes and filters, so they overlap on the
-cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
+derotation, ground geometry, the track) while the frontend measures the next frame; a frontend with a
+``set_executor`` method gets one more thread for work it can hand off (KLT: the next frame's reference
+warped by the predicted motion; features: the reference warped for the refinement). OpenCV releases the
+GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
 the calling thread, OpenCV single-threaded).

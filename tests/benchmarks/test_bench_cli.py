@@ -148,3 +148,31 @@ def test_klt_profile_times_every_stage(short, monkeypatch, capsys):
            "derotation, geometry"]
     parts = sum(float(rows[k][1]) for k in top) + float(rows[next(k for k in rows if k.startswith("everything"))][1])
     assert parts == pytest.approx(float(rows["all"][1]), abs=0.01)
+
+
+def test_handoff_benchmark_runs_both_ways_and_compares_them(short, monkeypatch, capsys):
+    """``benchmarks/bench_handoff.py``: each frontend with and without its hand-off thread, same results."""
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(BASELINE_SCRIPT).parent))
+    import bench_handoff
+
+    monkeypatch.setattr(sys, "argv", ["bench_handoff.py", "--sequence", str(short), "--frames", "12",
+                                      "--repeats", "1"])
+    assert bench_handoff.main() == 0
+    out = capsys.readouterr().out
+    for fe in ("klt", "features"):
+        for way in ("on", "off"):
+            assert f"| {fe} | {way} |" in out
+    assert out.count("identical bit for bit") == 4 and "DIFFERENT" not in out
+    # the comparison itself can tell results apart
+    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+
+    a = run_visual_odometry(Recording(short), OdometryConfig(threads=1), frames=Recording(short).frames(stop=8))
+    b = run_visual_odometry(Recording(short), OdometryConfig(threads=1), frames=Recording(short).frames(stop=8))
+    assert bench_handoff.same(a, b)
+    import dataclasses
+
+    b.increments[3] = dataclasses.replace(b.increments[3], delta=b.increments[3].delta + 1e-12)
+    assert not bench_handoff.same(a, b)
