@@ -69,8 +69,9 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
 
 
 def test_the_bound_is_the_calling_threads_cpu_or_the_total_over_the_cores():
-    plain = EndToEnd("plain OpenCV script", None, 100, fps=[125.0, 100.0], baseline=True)  # 8 and 10 ms
-    single = EndToEnd("plain OpenCV script", 1, 100, fps=[100.0, 125.0], baseline=True)
+    # the plain script's bounds: max(6, 9 / 2) = 6 beside 10 on one thread, then max(8, 16 / 2) = 8 beside 9
+    plain = EndToEnd("plain OpenCV script", None, 100, baseline=True, cpu_ms=[9.0, 16.0], thread_ms=[6.0, 8.0])
+    single = EndToEnd("plain OpenCV script", 1, 100, baseline=True, cpu_ms=[10.0, 9.0], thread_ms=[10.0, 9.0])
     one = EndToEnd("klt", 1, 100, cpu_ms=[4.0, 5.0], thread_ms=[4.0, 5.0])
     two = EndToEnd("klt", 2, 100, cpu_ms=[4.6, 3.0], thread_ms=[2.2, 2.0])  # total / 2 vs the tracker
     features = EndToEnd('features:{"descriptor": "orb"}', 2, 100, cpu_ms=[3.0, 3.0], thread_ms=[1.0, 1.0])
@@ -79,10 +80,10 @@ def test_the_bound_is_the_calling_threads_cpu_or_the_total_over_the_cores():
     lines = bound_table([plain, single, one, two, features], cores=2).splitlines()
     assert len(lines) == 5 and not any("plain OpenCV" in line for line in lines)
     cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
-    # ceilings: 8 / 4 = 2.0 and 8 / 5 = 1.6 (median 1.8) against 3; 8 / 2.3 and 8 / 2.0 against 5; 8 / 1.5
-    assert cells[0][2:] == ["4.50 (4.00-5.00) ms", "8.00 (8.00-8.00) ms", "1.80 (1.60-2.00)", "3", "no"]
-    assert cells[1][4:] == ["3.74 (3.48-4.00)", "5", "no"]
-    assert cells[2][4:] == ["5.33 (5.33-5.33)", "2", "yes"]
+    # ceilings: 6 / 4 = 1.5 and 8 / 5 = 1.6 against 3; 6 / 2.3 and 8 / 2.0 against 5; 6 / 1.5 and 8 / 1.5
+    assert cells[0][2:] == ["4.50 (4.00-5.00) ms", "7.00 (6.00-8.00) ms", "1.55 (1.50-1.60)", "3", "no"]
+    assert cells[1][4:] == ["3.30 (2.61-4.00)", "5", "no"]
+    assert cells[2][4:] == ["4.67 (4.00-5.33)", "2", "yes"]
 
 
 def test_a_variant_row_runs_the_frontend_with_its_options(short, monkeypatch):
