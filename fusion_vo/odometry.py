@@ -19,8 +19,10 @@ Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``thread
 thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
 per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
 calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
-derotation, ground geometry, the track) while the frontend measures the next frame. OpenCV releases the GIL while it decodes and filters, so they overlap on the
-cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
+derotation, ground geometry, the track) while the frontend measures the next frame; a frontend with a
+``set_executor`` method gets one more thread for work it can hand off (KLT: the next frame's reference
+warped by the predicted motion; features: the reference warped for the refinement). OpenCV releases the
+GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
 the calling thread, OpenCV single-threaded).
@@ -490,8 +492,15 @@ def run_visual_odometry(
                              getattr(frontend, "prepare", None), threads)
     # with threads, the increments are computed in a thread of their own, one frame behind the frontend
     post = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-geometry") if threads > 1 else None
+    # and a frontend that can do part of its work in another thread (KLT: setting up the next frame's
+    # tracking, told the next frame's timestamp; features: warping the reference) does so in one more
+    ahead = None
+    if threads > 1 and hasattr(frontend, "set_executor"):
+        ahead = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-ahead")
+        frontend.set_executor(ahead)
+    frame_times = recording.frame_times
     pending: deque = deque()
-    with opencv_threads(threads), closing(source), _shut_down(post):
+    with opencv_threads(threads), closing(source), _shut_down(post), _shut_down(ahead):
         for k, (frame, image) in enumerate(source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
@@ -504,6 +513,9 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
+            if ahead is not None and hasattr(frontend, "expect"):
+                following = frame.index + 1
+                frontend.expect(float(frame_times[following]) if 0 < following < len(frame_times) else None)
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
