@@ -16,18 +16,24 @@ reference (after the least-squares SE(2) alignment of each track to the fixes). 
    scaled (what a scale known from outside would give);
 5. the EKF's gyro-bias estimate over time (filtered and smoothed) against the standstill median, for
    the default configuration and two ablations (wheel yaw rate not used; a 0.002 rad/s bias prior);
-6. each track's error against GPS over time (50 s bins): dead reckoning, EKF, EKF+RTS, GTSAM batch, iSAM2.
+6. each track's error against GPS over time (50 s bins): dead reckoning, EKF, EKF+RTS, GTSAM batch, iSAM2;
+7. three candidate models for the last metres, measured: how the smoothers depend on the last second
+   the AHRS is kept (the monitor's span edge moved by hand, ``--edges``), a gyro scale factor (the
+   slope of the AHRS heading against the gyro's integral where the AHRS is kept, and the fused tracks
+   with the gyro scaled), and the accelerometer as a speed-scale observation (forward acceleration
+   integrated over the start, the stop and the restart against the odometry's speed change).
 
 Usage::
 
     python benchmarks/husky_diagnosis.py [BAG]
 
-Takes about a minute (GTSAM batch and iSAM2 over the whole log once).
+Takes a few minutes (GTSAM batch and iSAM2 over the whole log, once per variant of sections 5-7).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import sys
 import tempfile
@@ -266,7 +272,69 @@ def main(argv: list[str] | None = None) -> int:
         bins = [float(np.mean(err[(tt >= a) & (tt < b)])) if np.any((tt >= a) & (tt < b)) else np.nan
                 for a, b in zip(edges[:-1], edges[1:])]
         print(f"  {name:38s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
+    model_candidates(odom, imu, t_gps, enu, t0)
     return 0
+
+
+@contextlib.contextmanager
+def ahrs_kept_until(seconds: float | None):
+    """Diagnosis only: the whole-log monitor's decisions, with the AHRS kept up to ``seconds`` after the first node."""
+    from fusion_vo.backends import monitor
+
+    check = monitor.check_heading_sources
+
+    def patched(iv, config, gyro_bias=None):
+        before = iv.ahrs_ok.copy()
+        episodes = check(iv, config, gyro_bias)
+        if seconds is not None:
+            iv.ahrs_ok = iv.ahrs_ok | (before & (iv.t < iv.t[0] + seconds))
+        return episodes
+
+    monitor.check_heading_sources = patched
+    try:
+        yield
+    finally:
+        monitor.check_heading_sources = check
+
+
+def smoother_rms(streams: SensorStreams, t_gps, enu) -> str:
+    ekf, graph = fuse(streams, "ekf", FusionConfig()), fuse(streams, "gtsam", FusionConfig())
+    return (f"EKF+RTS {rms(gps_errors(ekf.trajectories['ekf_smoothed'], t_gps, enu)):.2f}, "
+            f"GTSAM batch {rms(gps_errors(graph.trajectories['gtsam'], t_gps, enu)):.2f} m")
+
+
+def model_candidates(odom, imu, t_gps, enu, t0: float) -> None:
+    print("7. candidate models for the last metres (GPS only as the reference)")
+    streams = SensorStreams(odom=odom, imu=imu)
+    print("  AHRS kept until [s] (the monitor drops it from 180.3 s):")
+    for edge in (None, 182.0, 183.0, 184.0, 185.0, 186.0, 188.0, 190.0):
+        with ahrs_kept_until(edge):
+            print(f"    {'monitor' if edge is None else f'{edge:.0f}':>8s}: {smoother_rms(streams, t_gps, enu)}")
+    gyro = gyro_yaw(imu, ImuNoise().with_sensor_keys(imu.noise))
+    angle = cumulative_angle(gyro)
+    ahrs = ahrs_heading(imu)
+    for lo, hi in ((0.0, 180.0), (60.0, 180.0)):
+        m = ahrs.valid & (ahrs.t >= t0 + lo) & (ahrs.t < t0 + hi)
+        g = np.interp(ahrs.t[m], gyro.t, angle)
+        design = np.column_stack([g, ahrs.t[m] - t0, np.ones(np.count_nonzero(m))])
+        coef = np.linalg.lstsq(design, np.unwrap(ahrs.yaw[m]), rcond=None)[0]
+        print(f"  AHRS heading = {coef[0]:.4f} x gyro angle + bias x t over {lo:.0f}-{hi:.0f} s "
+              "(a gyro scale factor the AHRS would teach)")
+    for scale in (0.99, 0.995, 1.005):
+        scaled = SensorStreams(odom=odom, imu=dataclasses.replace(imu, gyro=imu.gyro * scale))
+        print(f"    gyro x {scale}: {smoother_rms(scaled, t_gps, enu)}")
+    accel = (np.asarray(imu.accel) @ np.asarray(imu.T_BS)[:3, :3].T)[:, 0]
+    rest = (imu.t > t0 + 237.0) & (imu.t < t0 + 246.0)
+    drive = (imu.t > t0 + 20.0) & (imu.t < t0 + 30.0)
+    a0, sd = float(np.median(accel[rest])), float(np.std(accel[drive]))
+    print(f"  forward acceleration: {a0:+.3f} m/s² at rest (its offset, removed), scatter {sd:.2f} m/s² while driving")
+    for lo, hi in ((0.0, 4.0), (233.5, 237.0), (246.0, 250.0)):
+        m = (imu.t >= t0 + lo) & (imu.t <= t0 + hi)
+        dv_acc = float(np.trapezoid(accel[m] - a0, imu.t[m]))
+        dv_odom = float(np.interp(t0 + hi, odom.t, odom.vx) - np.interp(t0 + lo, odom.t, odom.vx))
+        white = sd * np.sqrt((hi - lo) * float(np.median(np.diff(imu.t))))
+        print(f"    {lo:5.1f}-{hi:5.1f} s: accelerometer {dv_acc:+.2f} m/s, odometry {dv_odom:+.2f} m/s, "
+              f"ratio {dv_acc / dv_odom:.2f} ± {white / abs(dv_odom):.2f} (white-noise part only)")
 
 
 if __name__ == "__main__":

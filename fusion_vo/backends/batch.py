@@ -13,8 +13,8 @@ Before the streams are merged, an odometry twist is put on the gyro's clock: its
 gyro is estimated from the two yaw rates over the whole recording
 (:func:`~fusion_vo.sensors.sync.rate_delay`) and, when it exceeds the twist's sample period (the
 resolution of a twist held between samples), its timestamps are moved back by it
-(``FusionConfig.sync_odometry``). Streaming use has no whole recording to align and takes the
-timestamps as they come.
+(``FusionConfig.sync_odometry``). Streaming use applies the same rule causally, to the samples seen
+so far (:class:`~fusion_vo.sensors.sync.TwistDelay`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.imu import gyro_yaw
-from fusion_vo.sensors.sync import rate_delay
+from fusion_vo.sensors.sync import odometry_delay
 from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
 
 logger = logging.getLogger(__name__)
@@ -195,10 +195,8 @@ def synchronise_odometry(streams: SensorStreams, config: FusionConfig) -> tuple[
     if not config.sync_odometry or odom is None or imu is None or len(odom) < 3 or len(imu) < 3:
         return streams, None
     gyro = gyro_yaw(imu, config.imu)
-    delay = rate_delay(odom.t, odom.wz, gyro.t, gyro.rate, max_delay=config.max_odom_delay)
-    period = float(np.median(np.diff(odom.t)))
-    if delay is None or abs(delay) < period:
-        # below the resolution of a twist held over its sample period
+    delay = odometry_delay(odom.t, odom.wz, gyro.t, gyro.rate, max_delay=config.max_odom_delay)
+    if delay is None:
         return streams, None
     logger.info("odometry twist delayed by %.3f s behind the gyro; corrected", delay)
     return dataclasses.replace(streams, odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay

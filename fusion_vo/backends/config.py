@@ -122,9 +122,11 @@ class FusionConfig:
         Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
         (default 0.3: the effective track width of a skid-steered base is known only roughly).
     sync_odometry : bool
-        Batch use: estimate the delay of an odometry twist behind the gyro from their yaw rates
-        (:func:`~fusion_vo.sensors.sync.rate_delay`) and move the twist's timestamps back by it
-        (default True; a controller's odometry is often stamped when published, late).
+        Estimate the delay of an odometry twist behind the gyro from their yaw rates
+        (:func:`~fusion_vo.sensors.sync.odometry_delay`) and move the twist's timestamps back by it
+        (default True; a controller's odometry is often stamped when published, late): over the whole
+        recording in batch use, over the samples seen so far in streaming use
+        (:class:`~fusion_vo.sensors.sync.TwistDelay`).
     max_odom_delay : float
         Largest delay [s] searched (default 1).
     monitor : bool

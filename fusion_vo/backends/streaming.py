@@ -109,6 +109,7 @@ from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.sync import TwistDelay
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
@@ -277,6 +278,9 @@ class StreamingFusion:
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
         self._pending: _Started | None = None  # a node started but not yet applied (_begin_step)
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
+        # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
+        self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
+                             if self.config.sync_odometry and "imu" in self.sensors else None)
 
     # ------------------------------------------------------------------ input
     def add(self, sensor: str, sample) -> None:
@@ -308,7 +312,33 @@ class StreamingFusion:
                 self._count(self._counted[sensor]).gated += 1
                 logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
                 return
-            self._add(sensor, t, payload)
+            self._add(sensor, self._synchronised(sensor, t, payload), payload)
+
+    def _synchronised(self, stream: str, t, payload):
+        """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
+        (:class:`~fusion_vo.sensors.sync.TwistDelay`, the rule of batch use); a gyro sample feeds that
+        estimate. Nodes are processed that much later (``_advance``), so the corrected twists are not late.
+        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged."""
+        tracker = self._twist_delay
+        if tracker is None or stream not in ("odom", "imu"):
+            return t
+        try:
+            t_f = float(t)
+            if stream == "imu":
+                rate = float(self.imu_T_BS[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
+                if np.isfinite(rate) and np.isfinite(t_f):
+                    tracker.gyro(t_f, rate)
+                return t
+            wz = float(payload[2])
+        except (TypeError, ValueError, IndexError):
+            return t
+        if not (np.isfinite(t_f) and np.isfinite(wz)):
+            return t
+        before = tracker.delay
+        t_f = tracker.twist(t_f, wz)
+        if tracker.delay != before:
+            self._shift_twists(before - tracker.delay)
+        return t_f
 
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame)."""
@@ -448,6 +478,15 @@ class StreamingFusion:
             episodes = self._monitor.all_episodes(self._t_nodes[-1])
             result.inconsistent = [ep.as_dict() for ep in episodes]
             result.notes.extend("live monitor: " + ep.note(self._t_nodes[0]) for ep in episodes)
+        if self._twist_delay is not None and self._twist_delay.history:
+            t_first = self._t_nodes[0] if self._t_nodes else 0.0
+            (t, d), *later = self._twist_delay.history
+            text = f"odometry twist {d * 1e3:.0f} ms behind the gyro: its timestamps corrected from t={t:.2f} " \
+                   f"({t - t_first:.1f} s in)"
+            if later:
+                ms = [x[1] * 1e3 for x in later]
+                text += f", re-estimated {len(ms)} times ({min(ms):.0f}-{max(ms):.0f} ms, last {ms[-1]:.0f} ms)"
+            result.notes.append(text)
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
@@ -593,7 +632,18 @@ class StreamingFusion:
     def _advance(self, t: float) -> None:
         self._collect()
         self._latest = max(self._latest, float(t))
-        self._process(self._latest - self.config.reorder_window, self.steps_per_call)
+        lag = self._twist_delay.lag() if self._twist_delay is not None else 0.0
+        self._process(self._latest - self.config.reorder_window - lag, self.steps_per_call)
+
+    def _shift_twists(self, dt: float) -> None:
+        """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
+        that land before the last processed node stay buffered for a rewind or rebuild, as late data)."""
+        buf = self._buffers.get("odom", [])
+        last = self._t_nodes[-1] if self._t_nodes else -np.inf
+        keep = [item for item in buf if item[0] <= last]
+        moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
+        if buf:
+            self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
 
     # ------------------------------------------------------------------ history (EKF rewind)
     def _rewind_index(self, t: float, back: int) -> int | None:

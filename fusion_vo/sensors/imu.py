@@ -126,9 +126,14 @@ def body_yaw_rate(data: ImuData) -> np.ndarray:
 
 def gyro_yaw(data: ImuData, noise: ImuNoise | None = None) -> GyroYaw:
     """Yaw rate in the body frame with spikes and non-finite samples gated (see the module docstring)."""
+    return gated_yaw_rate(data.t, body_yaw_rate(data), noise)
+
+
+def gated_yaw_rate(t, rate, noise: ImuNoise | None = None) -> GyroYaw:
+    """:func:`gyro_yaw` of body yaw rates already computed: ``t`` (N,), ``rate`` (N,) [rad/s]."""
     noise = noise or ImuNoise()
-    t = np.asarray(data.t, dtype=np.float64)
-    rate = body_yaw_rate(data)
+    t = np.asarray(t, dtype=np.float64)
+    rate = np.asarray(rate, dtype=np.float64)
     finite = np.isfinite(rate)
     med = running_median(np.where(finite, rate, 0.0), noise.spike_window, finite)
     gated = ~finite | (np.abs(rate - med) > noise.spike_threshold) | (np.abs(rate) > noise.max_rate)
@@ -220,7 +225,8 @@ def tilt_from_accel(accel: np.ndarray, T_BS: np.ndarray | None = None) -> tuple[
 
 
 __all__ = [
-    "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "running_median",
+    "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "gated_yaw_rate",
+    "running_median",
     "cumulative_angle", "quat_to_matrix", "ahrs_heading", "tilt_from_accel",
 ]
 

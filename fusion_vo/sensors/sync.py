@@ -15,11 +15,20 @@ The estimate is only returned when the peak correlation exceeds ``min_correlatio
 recording without turns has nothing to align, and a twist whose yaw rate has little to do with the
 gyro's (a skid-steered base's reported turn rate can be off by a large factor and shape) would
 give a delay that is only noise; moving its timestamps by it would shift every speed sample.
+
+:func:`odometry_delay` is the one rule both uses apply: the delay of an odometry twist behind the
+gyro, kept only when it exceeds the twist's sample period (the resolution of a twist held between
+samples). Batch use (:func:`fusion_vo.backends.batch.synchronise_odometry`) applies it to the whole
+recording; streaming use (:class:`fusion_vo.backends.streaming.StreamingFusion`) keeps a
+:class:`TwistDelay`, which applies it to the samples seen so far (the first ``min_span`` seconds, then
+again every ``refresh`` seconds over the last ``span`` seconds) and moves each later twist sample back
+by the current estimate.
 """
 
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -51,13 +60,16 @@ def rate_delay(t_a, rate_a, t_b, rate_b, max_delay: float = 1.0, step: float = 0
     grid = np.arange(lo, hi, step)
     a = np.interp(grid, t_a, rate_a)
     a = a - a.mean()
+    aa = float((a * a).sum())
     shifts = np.arange(-int(round(max_delay / step)), int(round(max_delay / step)) + 1)
     corr = np.empty(len(shifts))
     for i, s in enumerate(shifts):
         b = np.interp(grid - s * step, t_b, rate_b)
         b = b - b.mean()
-        denom = np.sqrt(np.dot(a, a) * np.dot(b, b))
-        corr[i] = np.dot(a, b) / denom if denom > 0 else 0.0
+        # elementwise sums, not np.dot: OpenBLAS threads its dot product on long vectors, which on a
+        # loaded machine cost 70 times the CPU time (measured: 4.8 s instead of 0.07 s for 110 s of data)
+        denom = np.sqrt(aa * float((b * b).sum()))
+        corr[i] = float((a * b).sum()) / denom if denom > 0 else 0.0
     best = int(np.argmax(corr))
     if corr[best] < min_correlation:
         logger.info("sync: no delay estimated (peak correlation %.2f)", corr[best])
@@ -78,4 +90,109 @@ def _finite(t, r) -> tuple[np.ndarray, np.ndarray]:
     return t[ok], r[ok]
 
 
-__all__ = ["rate_delay"]
+def odometry_delay(t_odom, wz, t_gyro, gyro_rate, max_delay: float = 1.0) -> float | None:
+    """Delay [s] of an odometry twist's yaw rate ``wz`` behind the gyro's body yaw rate, or None.
+
+    None when :func:`rate_delay` finds none, or when it is shorter than the twist's median sample
+    period (below the resolution of a twist held over its sample period).
+    """
+    t_odom = np.asarray(t_odom, dtype=np.float64)
+    if len(t_odom) < 3 or len(t_gyro) < 3:
+        return None
+    delay = rate_delay(t_odom, wz, t_gyro, gyro_rate, max_delay=max_delay)
+    period = float(np.median(np.diff(t_odom)))
+    if delay is None or abs(delay) < period:
+        return None
+    return delay
+
+
+@dataclass
+class TwistDelay:
+    """Causal :func:`odometry_delay`: the twist's delay behind the gyro from the samples seen so far.
+
+    Feed every twist sample (``twist``, which returns its time on the gyro's clock) and every gyro
+    yaw rate (``gyro``). Once both streams cover ``min_span`` seconds the delay is estimated, every
+    ``retry`` seconds of new data until two successive estimates agree within the twist's sample period
+    (a short window of gentle curves can give a spurious peak: on a generated drive, 0.45 s from its
+    first 15 s, none from 20 s on, for a twist on time), then again after every ``refresh`` seconds,
+    over the last ``span`` seconds (a bounded cost: about 20 ms of CPU for 120 s of
+    a 10 Hz twist and a 30 Hz gyro). Until the first estimate, and whenever an estimate finds no delay,
+    twist times are taken as they come. The sooner the better: a filter that fused a late twist's turns
+    and stops for a while keeps the gyro bias it learned from them (measured on a generated skid-steered
+    drive with a 0.4 s delay: corrected after 15 / 20 / 30 s, streaming EKF RMS 0.58 / 1.10 / 1.55 m,
+    1.83 m uncorrected, 0.13 m for the same drive on time). ``history`` lists
+    ``(time, delay)`` of every change, for the run's notes.
+
+    Parameters
+    ----------
+    max_delay : float
+        Largest delay searched [s] (``FusionConfig.max_odom_delay``).
+    noise : ImuNoise, optional
+        Spike gating of the gyro rates, as in batch use.
+    """
+
+    max_delay: float = 1.0
+    noise: object = None
+    min_span: float = 15.0
+    retry: float = 5.0
+    refresh: float = 30.0
+    span: float = 120.0
+    delay: float = 0.0
+    history: list = field(default_factory=list)
+    _odom: list = field(default_factory=list)
+    _gyro: list = field(default_factory=list)
+    _next: float | None = None
+    _candidate: float | None = None  # the last estimate before the first accepted one
+
+    def twist(self, t: float, wz: float) -> float:
+        """Record one twist sample; its time corrected by the current delay."""
+        self._odom.append((float(t), float(wz)))
+        self._update(float(t))
+        return float(t) - self.delay
+
+    def gyro(self, t: float, rate: float) -> None:
+        """Record one gyro body yaw rate [rad/s]."""
+        self._gyro.append((float(t), float(rate)))
+        if not self._odom and t - self._gyro[0][0] > 2.0 * self.span:  # no twist yet: keep the last span only
+            self._gyro = [s for s in self._gyro if s[0] >= t - self.span]
+
+    def lag(self) -> float:
+        """How long [s] after the other streams a twist sample arrives: the delay when positive, else 0."""
+        return max(self.delay, 0.0)
+
+    def _update(self, t: float) -> None:
+        if not self._gyro:
+            return
+        start = max(self._odom[0][0], self._gyro[0][0])
+        if self._next is None:
+            self._next = start + self.min_span
+        if t < self._next:
+            return
+        lo = t - self.span
+        self._odom = [s for s in self._odom if s[0] >= lo]
+        self._gyro = [s for s in self._gyro if s[0] >= lo]
+        from fusion_vo.sensors.imu import gated_yaw_rate
+
+        o = np.array(self._odom)
+        g = np.array(self._gyro)
+        order = np.argsort(g[:, 0], kind="stable")
+        gyro = gated_yaw_rate(g[order, 0], g[order, 1], self.noise)
+        order = np.argsort(o[:, 0], kind="stable")
+        found = odometry_delay(o[order, 0], o[order, 1], gyro.t, gyro.rate, self.max_delay)
+        if not self.history:  # not yet confirmed: two successive estimates must agree
+            period = float(np.median(np.diff(o[order, 0])))
+            confirmed = (found is not None and self._candidate is not None
+                         and abs(found - self._candidate) <= period)
+            self._candidate = found
+            if not confirmed:
+                self._next = t + self.retry
+                return
+        self._next = t + self.refresh
+        delay = 0.0 if found is None else found
+        if delay != self.delay:
+            logger.info("odometry twist %.3f s behind the gyro (from t=%.3f on)", delay, t)
+            self.history.append((t, delay))
+            self.delay = delay
+
+
+__all__ = ["rate_delay", "odometry_delay", "TwistDelay"]
