@@ -87,6 +87,8 @@ Latency
 An ``add_*`` call does at most ``steps_per_call`` units of work (see :meth:`StreamingFusion._process`):
 a node's interval, the heading monitor's check, (iSAM2:) its factors, their linearisation, and the
 backend's update are separate units, run in the same order as at once, so no call pays for all of them.
+The budget grows while the processed state is more than two node steps behind, so it keeps up with
+streams that bring fewer calls than units.
 """
 
 from __future__ import annotations
@@ -196,8 +198,10 @@ class StreamingFusion:
         Most units of work one ``add_*`` call does (default 1): a node is two units (its interval from
         the buffers; the backend's update), three when the heading monitor's check is due at it. The
         rest is caught up by the next calls, which bounds the latency of a call when a late measurement
-        makes the EKF re-filter several nodes. None processes everything due at once. :meth:`finish`
-        always processes everything.
+        makes the EKF re-filter several nodes. While the processed state is more than two node steps
+        behind what is due, the budget grows with the backlog, so samples that come in fewer calls than
+        there are units never leave it further and further behind. None processes everything due at
+        once. :meth:`finish` always processes everything.
     background : bool
         iSAM2 only: run its updates (and the linearisation, relinearisation and marginal covariance that
         come with them) on a worker thread, off the caller's; GTSAM releases the GIL while it works. A node's
@@ -633,7 +637,25 @@ class StreamingFusion:
         self._collect()
         self._latest = max(self._latest, float(t))
         lag = self._twist_delay.lag() if self._twist_delay is not None else 0.0
-        self._process(self._latest - self.config.reorder_window - lag, self.steps_per_call)
+        until = self._latest - self.config.reorder_window - lag
+        self._process(until, self._budget(until))
+
+    def _budget(self, until: float) -> int | None:
+        """Units of work for this call: ``steps_per_call``, more while the processed state is behind.
+
+        When the samples come in fewer calls than there are units to do (a 10 Hz odometry and a 30 Hz
+        IMU, 40 calls a second, against nodes at 20 Hz of two or three units each), a fixed budget falls
+        further behind with every second. Once the last node is more than two node steps behind what is
+        due, the budget grows with the backlog (one more ``steps_per_call`` for every two steps behind),
+        so the backlog stays bounded and the extra work per call stays small.
+        """
+        budget = self.steps_per_call
+        if budget is None or not self._t_nodes:
+            return budget
+        behind = (until - self._t_nodes[-1]) * self.config.step_hz
+        if behind > 2.0:
+            budget *= 1 + int(behind) // 2
+        return budget
 
     def _shift_twists(self, dt: float) -> None:
         """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
