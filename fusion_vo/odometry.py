@@ -259,7 +259,8 @@ class VisualOdometry:
             return None
         if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
             motion.info["measured_matrix"] = motion.matrix
-            motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
+            motion.matrix, motion.covariance = self.derotation.derotate(motion.matrix, motion.covariance,
+                                                                        motion.prev_timestamp, motion.timestamp)
         inc = self.geometry.increment(motion, height)
         if inc.ok:
             self._append(inc)
