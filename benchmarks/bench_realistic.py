@@ -28,7 +28,11 @@ model reprojects the true lens.
 
 ``--fusion`` also runs ``fusion-vo run --backend all`` (default configuration, KLT) on each recording
 through :func:`fusion_vs_best.compare` and prints the ATE [mm, after SE(2) alignment] of visual
-odometry, wheel dead reckoning and every fused track.
+odometry, wheel dead reckoning and every fused track, and the per-sensor consistency against the truth
+(:func:`fusion_vs_best.inputs_against_truth`: the KLT increments' RMS errors beside the standard
+deviations their covariances state and their mean NIS, 3 when the covariance is honest; the gyro's
+scatter about the true yaw rate beside the scatter its noise density states), then what the fusion's
+consistency monitor dropped (the run's notes).
 
 Recordings are generated into ``--data`` (default ``./realistic-data``) unless already there.
 """
@@ -71,6 +75,7 @@ class Row:
     heading_deg: float
     speed_rmse: float
     fps: float
+    vo: object = None
 
 
 def _gt_at(gt: PoseData, t: np.ndarray) -> np.ndarray:
@@ -115,15 +120,25 @@ class _Replay:
         return FrameMotion(t, prev, matrix=np.asarray(m, float), covariance=np.eye(4) * 1e-4, status=MotionStatus.OK)
 
 
-def run_baseline(rec: Recording) -> Row:
+def baseline_odometry(rec: Recording) -> tuple[VisualOdometry, list, list, float]:
+    """The plain script (``baseline_opencv.run``) on ``rec`` turned into body motion (module docstring):
+    its visual odometry, the body increments, the script's per-frame results and its run time [s]."""
     results, seconds = baseline_opencv.run(rec.path)
     cam = rec.camera
     plain = dataclasses.replace(cam, distortion_model="none", distortion=np.zeros(4))
     vo = VisualOdometry(_Replay(results), GroundGeometry(plain))
     times = rec.frame_times
     heights = heights_for(rec, times)
+    increments = []
     for k, t in enumerate(times):
-        vo.process(None, float(t), None if heights is None else float(heights[k]))
+        _, inc = vo.process(None, float(t), None if heights is None else float(heights[k]))
+        if inc is not None:
+            increments.append(inc)
+    return vo, increments, results, seconds
+
+
+def run_baseline(rec: Recording) -> Row:
+    vo, _, results, seconds = baseline_odometry(rec)
     measured = sum(m is not None for _, _, m in results)
     end, heading, speed = score(vo.track(), rec.groundtruth())
     return Row("plain OpenCV script", len(results), measured, Counter({"failed": len(results) - measured}),
@@ -137,7 +152,7 @@ def run_frontend(rec: Recording, frontend: str, odometry: dict, options: dict | 
     pairs = len(vo.status) - 1
     measured = sum(s == "ok" for s in vo.status)
     end, heading, speed = score(vo.track, rec.groundtruth())
-    return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds)
+    return Row(frontend, pairs, measured, vo.failures, end, heading, speed, len(vo.status) / seconds, vo)
 
 
 def calibrated_camera(rec: Recording, name: str, n_views: int, work: Path, radial_terms: int = 2,
@@ -265,6 +280,20 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             print("  fused (KLT, default configuration), ATE mm: "
                   + ", ".join(f"{k} {v:.2f}" for k, v in r["ate"].items()), flush=True)
+            klt = next((row.vo for row in rows if row.name == "klt"), None)
+            if klt is None:
+                klt = run_visual_odometry(Recording(seq))
+            c = fusion_vs_best.inputs_against_truth(Recording(seq), klt)
+            print(f"  consistency against the truth: camera RMS error x {1e3 * c['camera rms x [m]']:.3f} mm "
+                  f"(stated sigma, median {1e3 * c['camera median sigma x [m]']:.3f}), yaw "
+                  f"{1e3 * c['camera rms yaw [rad]']:.3f} mrad ({1e3 * c['camera median sigma yaw [rad]']:.3f}), "
+                  f"mean NIS {c['camera mean NIS (3 if honest)']:.1f} (3 if honest)"
+                  + (f"; gyro scatter {1e3 * c['gyro scatter about the truth [rad/s]']:.2f} mrad/s (stated "
+                     f"{1e3 * c['gyro scatter stated [rad/s]']:.2f})" if "gyro scatter stated [rad/s]" in c else ""))
+            summary = json.loads((root / f"run_{name}" / "summary.json").read_text())
+            for note in summary.get("notes", []):
+                if "inconsistent" in note or "unavailable" in note:
+                    print(f"  monitor: {note}")
     return 0
 
 

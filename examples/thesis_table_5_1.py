@@ -26,6 +26,10 @@ interval. With ``e_k = |v_k - u_k|`` (Euclidean norm):
 * ``yaw-rate err %``: ``100 * mean|w_k - w_true,k| / mean|w_true,k|`` for the yaw rate;
 * ``failed``: frames the frontend could not use (no estimate; they are left out of the errors).
 
+Beside the frontends, each recording is run through the plain OpenCV script of
+``benchmarks/baseline_opencv.py`` (the baseline of ``benchmarks/bench_realistic.py``, rows ``plain
+script``), scored the same way.
+
 Run::
 
     python examples/thesis_table_5_1.py [--out DIR] [--seed N] [--quick] [--realistic] [--textures gravel,grass]
@@ -37,7 +41,10 @@ blur, noise, auto-exposure); its renderer has no specular highlight, so the spot
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -79,6 +86,20 @@ def velocity_errors(vo: OdometryResult, gt: PoseData) -> dict:
     }
 
 
+def plain_script(rec: Recording) -> tuple[list, int]:
+    """The baseline: ``benchmarks/baseline_opencv.py`` (Shi-Tomasi corners, pyramidal LK, a RANSAC
+    similarity; no undistortion) on the same frames, its similarities turned into body increments through
+    the same ground geometry with a pinhole of the recording's focal length
+    (``bench_realistic.baseline_odometry``). Returns the increments and the frames it failed."""
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
+    from bench_realistic import baseline_odometry
+
+    _, increments, results, _ = baseline_odometry(rec)
+    return increments, sum(m is None for _, _, m in results)
+
+
 def main(argv=None) -> int:
     parser = example_parser(__doc__.split("\n\n")[0])
     parser.add_argument("--textures", default=",".join(TEXTURES), help="comma-separated floor photographs")
@@ -107,6 +128,10 @@ def main(argv=None) -> int:
                     rows.append([texture, light, frontend, str(vo.n_frames), str(sum(vo.failures.values())),
                                  fmt(errors["error_pct"], 3), fmt(errors["variance_pct"], 3),
                                  fmt(errors["yaw_error_pct"], 3)])
+                increments, failed = plain_script(rec)
+                errors = velocity_errors(SimpleNamespace(increments=increments), gt)
+                rows.append([texture, light, "plain script", str(len(rec)), str(failed), fmt(errors["error_pct"], 3),
+                             fmt(errors["variance_pct"], 3), fmt(errors["yaw_error_pct"], 3)])
                 print(f"{name}: {len(rec)} frames done ({time.perf_counter() - t_start:.0f} s)", flush=True)
         print()
         print(format_table("Table 5.1: velocity error by floor texture and lighting",

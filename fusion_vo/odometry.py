@@ -98,6 +98,11 @@ class OdometryConfig:
     lens_from_motion : bool
         With ``uncalibrated``: estimate a one-parameter (division-model) lens distortion from tracks in
         40 frame pairs spread over the recording before the run (default true).
+    check_lens : bool
+        Without ``uncalibrated``, when ``cam0/sensor.yaml`` states no lens distortion: check that against
+        the frames (about 1.5 s of CPU) and, where a lens explains their tracks clearly better, use that
+        lens with a warning naming the file (:func:`fusion_vo.calibration.lens_from_motion.check_stated_lens`;
+        default true).
     max_bridge : float
         Longest gap [s] between the last measured frame and a restart of the frontend that the visual
         track bridges at constant velocity (default 1); across a longer gap it holds its last pose.
@@ -119,6 +124,7 @@ class OdometryConfig:
     uncalibrated: bool = False
     focal_length: float | None = None
     lens_from_motion: bool = True
+    check_lens: bool = True
     max_bridge: float = 1.0
     threads: int | None = None
 
@@ -266,7 +272,8 @@ class VisualOdometry:
             return None
         if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
             motion.info["measured_matrix"] = motion.matrix
-            motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
+            motion.matrix, motion.covariance = self.derotation.derotate(motion.matrix, motion.covariance,
+                                                                        motion.prev_timestamp, motion.timestamp)
         inc = self.geometry.increment(motion, height, height_sigma)
         if inc.ok:
             self._append(inc)
@@ -479,6 +486,11 @@ def run_visual_odometry(
         recording.camera = cam  # every later reader of this recording sees the same model
     else:
         cam = recording.camera
+        if config.check_lens and not cam.has_distortion:
+            from fusion_vo.calibration.lens_from_motion import check_stated_lens  # scipy only when needed
+
+            cam, _ = check_stated_lens(recording, cam)
+            recording.camera = cam
     try:
         geometry = GroundGeometry(cam, height=config.height, min_sigma_xy=config.min_sigma_xy,
                                   min_sigma_yaw=config.min_sigma_yaw)

@@ -23,6 +23,24 @@ Gyro biases in roll and pitch would otherwise be read as a constant drift; a pla
 rotating in roll or pitch, so the mean roll and pitch rates of the whole recording are taken as the
 biases and removed.
 
+Where the correction is fitted
+----------------------------------
+A tilt moves the rays far off the axis by more than ``f ω Δt`` (``f (1 + x²/f²) ω Δt`` at ``x``), so the
+best similarity of ``H^{-1}`` depends on which points it is fitted to. The frontends fit their
+similarity robustly, which leaves out the far field where a tilt is least like a similarity; the
+correction is therefore fitted on the points within ``max_off_axis`` (the tangent of the angle off the
+virtual camera's axis, 1: 45 degrees). For an ordinary lens that is the whole image; for a fisheye it
+leaves out the rim, where the rectified image is stretched most. On ``real_fisheye_checker`` (3 degrees
+of rocking through an equisolid fisheye, 68 degrees off the axis at the rectified image's edge) fitting
+on the whole image over-corrected by about 20 % of the rotation's image motion: the visual increments'
+RMS errors against the truth were 0.27 / 0.35 mm (x / y) against 0.14 / 0.25 mm with 45 degrees.
+
+What is left is not known to better than a fraction of the rotation's image motion (where the frontend's
+points were, rolling shutter, the lens model), so :meth:`GyroDerotation.derotate` adds
+``(uncertainty · flow)²`` to the variance of the similarity's translation, ``flow`` being the rotation's
+image motion at the principal point. ``uncertainty = 0.2`` brings the mean NIS of the visual increments
+against the truth on ``real_fisheye_checker`` from 35 (the frontend's covariance alone) to about 7.
+
 Where the gyro has no sample for longer than ``max_gap`` (a pause in the recording), nothing is known
 of the rotation; the integral does not grow there (a rocking platform is level on average), rather than
 holding the rate of the last sample over the whole gap.
@@ -54,9 +72,16 @@ class GyroDerotation:
         Subtract the recording's mean roll and pitch rates (see the module description).
     max_gap : float
         Two gyro samples further apart than this [s] add no rotation (default 0.25).
+    max_off_axis : float
+        The correction is fitted on the image points whose rays are at most this far off the virtual
+        camera's axis (tangent of the angle; default 1, 45 degrees).
+    uncertainty : float
+        Standard deviation of what the correction leaves, as a fraction of the rotation's image motion
+        at the principal point (default 0.2; module description).
     """
 
-    def __init__(self, imu: ImuData, geometry: GroundGeometry, remove_bias: bool = True, max_gap: float = 0.25):
+    def __init__(self, imu: ImuData, geometry: GroundGeometry, remove_bias: bool = True, max_gap: float = 0.25,
+                 max_off_axis: float = 1.0, uncertainty: float = 0.2):
         w_B = np.asarray(imu.gyro, dtype=np.float64) @ np.asarray(imu.T_BS, dtype=np.float64)[:3, :3].T
         w_B = w_B.copy()
         w_B[:, 2] = 0.0  # yaw stays: it is the robot's own motion
@@ -75,8 +100,17 @@ class GyroDerotation:
         cam = geometry.camera
         w, h = cam.width, cam.height
         gx, gy = np.meshgrid(np.linspace(0, w - 1, 16), np.linspace(0, h - 1, 10))
-        self._grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
+        grid = rect.to_rectified(np.column_stack([gx.ravel(), gy.ravel()]))
+        near = np.linalg.norm((grid - self.c) / self.f, axis=1) <= max_off_axis
+        if np.count_nonzero(near) < 12:  # a lens wider than the whole grid's spacing: a grid on the disc
+            u, v = np.meshgrid(np.linspace(-1.0, 1.0, 9), np.linspace(-1.0, 1.0, 9))
+            disc = np.column_stack([u.ravel(), v.ravel()])
+            grid = disc[np.linalg.norm(disc, axis=1) <= 1.0] * (max_off_axis * self.f) + self.c
+        else:
+            grid = grid[near]
+        self._grid = grid
         self._lo, self._hi = self._grid.min(axis=0), self._grid.max(axis=0)
+        self.uncertainty = float(uncertainty)
         self._angles: dict[float, np.ndarray] = {}
 
     def _angle(self, t: float) -> np.ndarray:
@@ -127,6 +161,20 @@ class GyroDerotation:
         """The rotation-free similarity ``H^{-1} ∘ S`` of a measured 2x3 similarity over ``[t0, t1]``."""
         S = np.vstack([np.asarray(matrix, dtype=np.float64), [0.0, 0.0, 1.0]])
         return (self.correction(t0, t1, matrix) @ S)[:2]
+
+    def derotate(self, matrix: np.ndarray, covariance: np.ndarray, t0: float,
+                 t1: float) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`apply`, and the covariance of ``(tx, ty, angle, log s)`` with the correction's
+        uncertainty added to the translation (module description)."""
+        S = np.vstack([np.asarray(matrix, dtype=np.float64), [0.0, 0.0, 1.0]])
+        C = self.correction(t0, t1, matrix)
+        cov = np.array(covariance, dtype=np.float64)
+        if self.uncertainty > 0:
+            flow = C[:2, :2] @ self.c + C[:2, 2] - self.c
+            var = (self.uncertainty * float(math.hypot(*flow))) ** 2
+            cov[0, 0] += var
+            cov[1, 1] += var
+        return (C @ S)[:2], cov
 
     def flow_px(self, t0: float, t1: float) -> float:
         """Size of the rotation's image motion at the principal point [rectified px] (diagnostics)."""

@@ -59,13 +59,16 @@ def number(cell: str) -> float:
 def test_table_5_1(tmp_path):
     rows = table(run_example("thesis_table_5_1", tmp_path), "Table 5.1")
     assert {r["lighting"] for r in rows} == {"good light", "spotlights", "dark"}
-    assert {r["frontend"] for r in rows} == {"klt", "features"}
+    assert {r["frontend"] for r in rows} == {"klt", "features", "plain script"}
     for r in rows:
+        if r["frontend"] == "plain script":  # the baseline, scored the same way (it loses the fast quick circle)
+            assert number(r["error %"]) >= 0.0, r
+            continue
         frames, failed = int(r["frames"]), int(r["failed"])
         assert frames > 20 and failed <= frames // 4, r
         assert 0.0 <= number(r["error %"]) < 10.0, r
         assert number(r["variance %"]) >= 0.0, r
-    good = [number(r["error %"]) for r in rows if r["lighting"] == "good light"]
+    good = [number(r["error %"]) for r in rows if r["lighting"] == "good light" and r["frontend"] != "plain script"]
     assert max(good) < 3.0
 
 

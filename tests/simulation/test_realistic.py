@@ -196,3 +196,39 @@ def test_calibrating_the_fisheye_wins_back_its_lens(tmp_path):
     assert plain.max() > 100.0 and np.median(plain) > 15.0
     assert err.max() < 5.0 and np.median(err) < 2.5, (err.max(), np.median(err))
     assert abs(result.K[0, 0] - 170.0) < 0.04 * 170.0
+
+
+@pytest.fixture(scope="module")
+def focal_only(tmp_path_factory):
+    """A 0.25 m straight drive over gravel through the barrel lens; ``sensor.yaml`` states the focal length
+    only (no distortion)."""
+    return _short(tmp_path_factory.mktemp("real"), "focal", lens="polynomial", calibration="focal", checker_size=0.0,
+                  defocus=1.0, supersample=1)
+
+
+def test_a_lens_stated_without_distortion_is_checked_against_the_frames(focal_only, caplog):
+    """The barrel lens read as a pinhole makes the track short; the frames contradict the file, so the
+    run takes the lens they show (with a warning naming the file) unless told to keep the file's."""
+    gt = Recording(focal_only).groundtruth()
+    truth = float(np.linalg.norm(gt.xyyaw[-1, :2] - gt.xyyaw[0, :2]))
+    errors = {}
+    for check in (True, False):
+        recording = Recording(focal_only)
+        with caplog.at_level("WARNING"):
+            vo = run_visual_odometry(recording, OdometryConfig(check_lens=check))
+        travelled = float(np.linalg.norm(vo.track.xyyaw[-1, :2] - vo.track.xyyaw[0, :2]))
+        errors[check] = abs(travelled - truth) / truth
+        assert recording.camera.distortion_model == ("division" if check else "none")
+        if check:  # the true lens: lambda -0.335 estimated on the 20 s recording of this lens
+            assert -0.4 < recording.camera.distortion[0] < -0.25
+    assert "cam0/sensor.yaml states no lens distortion" in caplog.text
+    assert errors[True] < 0.015 < errors[False]  # measured: 0.57 % against 5.8 %
+
+
+def test_a_true_pinhole_keeps_its_stated_lens(tmp_path):
+    """Rendered through a pinhole without distortion, the frames agree with the file: nothing changes."""
+    seq = simulate(tmp_path / "pinhole", profile="straight", seed=5, length=0.25, distortion_model="none",
+                   distortion=[0.0, 0.0, 0.0, 0.0])
+    recording = Recording(seq)
+    run_visual_odometry(recording)
+    assert recording.camera.distortion_model == "none"
