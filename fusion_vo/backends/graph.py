@@ -122,7 +122,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -243,6 +243,7 @@ class GraphBuilder:
             self._turn = gyro_turn(iv)
             self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
                                              np.diff(iv.t), self._turn)
+            self._still = standstill(iv.wheel_dl, iv.wheel_dr, np.diff(iv.t), config.wheel_model(iv.twist)[0])
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -373,6 +374,11 @@ class GraphBuilder:
         return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
                                  turn)[0]
 
+    def wheels_at_rest(self, g0: int, g1: int) -> bool:
+        """Both wheels at rest in every interval from grid index ``g0`` to ``g1``
+        (:func:`~fusion_vo.sensors.wheel.standstill`, evaluated for all intervals at once)."""
+        return bool(self._still[g0:g1].all())
+
     def key(self, n: int) -> int:
         """The pose variable of local node ``n``."""
         return X(self.offset + n)
@@ -417,8 +423,12 @@ class GraphBuilder:
             step.run(self, nf, node)
 
     def count(self, nf: NodeFactors) -> None:
+        counts = self.counts
         for s in nf.sensors:
-            self.counts.setdefault(s, SensorCount()).used += 1
+            c = counts.get(s)
+            if c is None:
+                c = counts[s] = SensorCount()
+            c.used += 1
 
 
 def initial_calibration(iv: Intervals) -> dict:
@@ -619,7 +629,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             model_factors.extend(f for f in nf.factors if isinstance(f, ModelFactor))
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
-        t0 = time.process_time()
+        t0 = time.process_time() if incremental else 0.0
         new_graph = gtsam.NonlinearFactorGraph()
         if incremental:
             lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
