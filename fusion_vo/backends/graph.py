@@ -151,6 +151,9 @@ def R(k: int) -> int:
     return gtsam.symbol("r", k)
 
 
+_NO_INCREMENT = np.zeros(3)
+_NO_INCREMENT.flags.writeable = False
+
 #: graph steps of the sensors ordered before this set the initial guess of a node; the builder then adds the
 #: motion model where none measured the translation (:meth:`GraphBuilder.node`)
 GUESS_ORDER = 40.0
@@ -229,7 +232,10 @@ class GraphBuilder:
         # bias and calibration variables: one per segment of `calibration_interval` seconds
         origin = self.t[0] if t_origin is None else t_origin
         self.segment = np.floor((self.t - origin) / config.graph.calibration_interval + 1e-9).astype(int)
+        # the same as Python lists: indexed once per node, faster than numpy scalars
+        self._grid, self._segment, self._times = self.grid.tolist(), self.segment.tolist(), iv.t.tolist()
         self._robust = _robust_kernel(config)
+        self._kernel = (config.graph.robust, config.graph.robust_k) if self._robust is not None else None
         # the AHRS offset variables exist with the IMU (an AHRS may report in any interval of a stream)
         self.ahrs_offset_on = iv.uses("gyro") and config.imu.ahrs_offset_walk > 0
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
@@ -251,9 +257,8 @@ class GraphBuilder:
                      rows: tuple | None = None, robust: bool = True) -> ModelFactor:
         """A measurement of a sensor model (:mod:`fusion_vo.backends.factors`), in the robust kernel unless
         ``robust`` is False."""
-        kernel = (self.config.graph.robust, self.config.graph.robust_k) if robust and self._robust is not None else None
-        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys,
-                           np.asarray(cov, dtype=np.float64), fixed or {}, params or {}, rows, kernel)
+        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys, np.asarray(cov, dtype=np.float64),
+                           fixed or {}, params or {}, rows, self._kernel if robust else None)
 
     def noise(self, cov: np.ndarray, robust: bool = True):
         base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
@@ -329,21 +334,21 @@ class GraphBuilder:
         the translation a weak constant-twist factor keeps it determined. Then the unary steps
         (``graph_unary``) of the node.
         """
-        iv, cfg = self.iv, self.config
+        cfg = self.config
         est = estimate or {}
-        g0, g1 = int(self.grid[n - 1]), int(self.grid[n])
-        c = int(self.segment[n])
-        node = NodeContext(n=n, g0=g0, g1=g1, dt=float(iv.t[g1] - iv.t[g0]), segment=c,
+        g0, g1 = self._grid[n - 1], self._grid[n]
+        c, previous = self._segment[n], self._segment[n - 1]
+        node = NodeContext(n=n, g0=g0, g1=g1, dt=self._times[g1] - self._times[g0], segment=c,
                            xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est)
-        nf = NodeFactors(n, float(self.t[n]))
-        if c != self.segment[n - 1]:
-            self._new_segment(nf, c, est, int(self.segment[n - 1]))
+        nf = NodeFactors(n, self._times[g1])
+        if c != previous:
+            self._new_segment(nf, c, est, previous)
         steps = registry.ordered("graph_factors")
         for _, step in steps:
             if step.order >= GUESS_ORDER:
                 break
             step.run(self, nf, node)
-        last = est.get("last_increment", np.zeros(3))
+        last = est.get("last_increment", _NO_INCREMENT)
         translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
         if translation is None:
