@@ -29,21 +29,6 @@ import numpy as np
 
 SMALL = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
          "length": 0.05, "gt_rate": 50.0, "imu_rate": 100.0}
-STREAMS = ("cam0/data.csv", "imu0/data.csv", "wheel0/data.csv", "state_groundtruth_estimate0/data.csv")
-
-
-def pause(rec: Path, after_s: float, seconds: float) -> None:
-    """Shift every row later than ``after_s`` into the recording by ``seconds``."""
-    for name in STREAMS:
-        p = rec / name
-        lines = p.read_text().splitlines()
-        t0 = int(lines[1].split(",", 1)[0])
-        rows = [lines[0]]
-        for line in lines[1:]:
-            t, rest = line.split(",", 1)
-            t = int(t) + (int(seconds * 1e9) if int(t) - t0 >= after_s * 1e9 else 0)
-            rows.append(f"{t},{rest}")
-        p.write_text("\n".join(rows) + "\n")
 
 
 #: runs the command and reports its own CPU time and peak memory on stderr
@@ -90,6 +75,7 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=600.0, help="seconds a run may take (default 600)")
     args = parser.parse_args()
     from fusion_vo.simulation import simulate
+    from fusion_vo.simulation.pause import pause
 
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)

@@ -36,7 +36,7 @@ import shutil
 import signal
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from fusion_vo.errors import InputError
 
@@ -172,7 +172,52 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
                              f"give a new folder, or --force to replace it", target)
 
 
-class OutputFolder:
+class _LockedStaging:
+    """What :class:`OutputFolder` and :class:`StagedFiles` share: the folder's lock, a hidden staging folder
+    made under it, its removal when the block is left, and errors that name final paths, never the staging one.
+
+    A subclass sets ``_final`` (the path errors should name) and calls :meth:`_stage`.
+    """
+
+    path: Path | None = None  # where the new files are written
+    _final: Path
+    _holder: Path | None = None  # the hidden folder removed on leaving
+    _lock_fd: int | None = None
+    _lock_path: Path | None = None
+
+    def _stage(self, lock_target: Path, what: str, under_lock: Callable[[], None], holder_parent: Path,
+               inner: str | None) -> None:
+        """Lock ``lock_target``, run ``under_lock`` (checks and stale-staging removal), then make the hidden
+        folder ``holder_parent/.fusion-vo-staging-...`` and, when ``inner`` is given, a folder of that name
+        inside it: ``self.path``. Anything raised releases what was taken."""
+        self._lock_fd, self._lock_path = lock_folder(lock_target, what)
+        try:
+            under_lock()
+            self._holder = holder_parent / _random_name(STAGING_PREFIX)
+            os.mkdir(self._holder, 0o777)
+            self.path = self._holder if inner is None else self._holder / inner
+            if inner is not None:
+                os.mkdir(self.path, 0o777)
+        except BaseException:
+            self._cleanup()
+            raise
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._cleanup()
+        if self.path is not None:
+            _name_final_paths(exc, self.path, self._final)
+        return None
+
+    def _cleanup(self) -> None:
+        if self._holder is not None:
+            shutil.rmtree(self._holder, ignore_errors=True)
+            self._holder = None
+        if self._lock_fd is not None:
+            unlock_folder(self._lock_fd, self._lock_path)
+            self._lock_fd = None
+
+
+class OutputFolder(_LockedStaging):
     """Write a whole folder under a staging name and move it into place when complete.
 
     Use as a context manager::
@@ -205,35 +250,20 @@ class OutputFolder:
         self.inputs = list(inputs)
         self.what = what
         self.marker_text = marker_text
-        self.path: Path | None = None  # the staging folder, named like the target
-        self._holder: Path | None = None
-        self._lock_fd: int | None = None
-        self._lock_path: Path | None = None
+        self._final = self.target
         self.committed = False
 
     # ------------------------------------------------------------------ context
     def __enter__(self) -> "OutputFolder":
         check_replaceable(self.target, self.marker, self.force, self.inputs, self.what)
-        parent = self.target.parent
-        make_folder(parent)
-        self._lock()
-        try:
+        make_folder(self.target.parent)
+
+        def under_lock() -> None:
             check_replaceable(self.target, self.marker, self.force, self.inputs, self.what)  # again, under the lock
             self._remove_stale_staging()
-            self._holder = parent / _random_name(STAGING_PREFIX)
-            os.mkdir(self._holder, 0o777)
-            self.path = self._holder / self.target.name
-            os.mkdir(self.path, 0o777)
-        except BaseException:
-            self._cleanup()
-            raise
-        return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self._cleanup()
-        if self.path is not None:
-            _name_final_paths(exc, self.path, self.target)
-        return None
+        self._stage(self.target, self.what, under_lock, self.target.parent, self.target.name)
+        return self
 
     def public(self, path: str | Path) -> Path:
         """The final path of a path inside the staging folder (other paths are returned unchanged)."""
@@ -258,10 +288,6 @@ class OutputFolder:
         return self.target
 
     # ------------------------------------------------------------------ internals
-    def _lock(self) -> None:
-        """Take an exclusive lock on ``.NAME.lock`` beside the target; fail at once if another command has it."""
-        self._lock_fd, self._lock_path = lock_folder(self.target, self.what)
-
     def _remove_stale_staging(self) -> None:
         """Remove staging folders of this target left by a process that was killed (SIGKILL, power loss).
 
@@ -283,14 +309,6 @@ class OutputFolder:
             if names and all(n == self.target.name or n.startswith(".previous-") for n in names):
                 log.info("removing %s, left by an interrupted command", holder)
                 shutil.rmtree(holder, ignore_errors=True)
-
-    def _cleanup(self) -> None:
-        if self._holder is not None:
-            shutil.rmtree(self._holder, ignore_errors=True)
-            self._holder = None
-        if self._lock_fd is not None:
-            unlock_folder(self._lock_fd, self._lock_path)
-            self._lock_fd = None
 
 
 def _final_path(path: str | Path, staging: Path | None, final: Path) -> Path:
@@ -343,7 +361,7 @@ def unlock_folder(fd: int, lock_path: Path) -> None:
     os.close(fd)
 
 
-class StagedFiles:
+class StagedFiles(_LockedStaging):
     """New files for an existing folder (an evaluation added to a run folder), all or nothing.
 
     Use as a context manager::
@@ -364,28 +382,16 @@ class StagedFiles:
         self.folder = Path(folder)
         self.replaces = tuple(replaces)
         self.what = what
-        self.path: Path | None = None
-        self._lock_fd: int | None = None
-        self._lock_path: Path | None = None
+        self._final = self.folder
 
     def __enter__(self) -> "StagedFiles":
-        self._lock_fd, self._lock_path = lock_folder(self.folder, self.what)
-        try:
+        def under_lock() -> None:
             for stale in self.folder.glob(STAGING_PREFIX + "*"):  # left by a killed process (we hold the lock)
                 if stale.is_dir() and not stale.is_symlink():
                     shutil.rmtree(stale, ignore_errors=True)
-            self.path = self.folder / _random_name(STAGING_PREFIX)
-            os.mkdir(self.path, 0o777)
-        except BaseException:
-            self._cleanup()
-            raise
-        return self
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        self._cleanup()
-        if self.path is not None:
-            _name_final_paths(exc, self.path, self.folder)
-        return None
+        self._stage(self.folder, self.what, under_lock, self.folder, None)
+        return self
 
     def commit(self) -> list[Path]:
         """Move the new files into the folder; returns their final paths."""
@@ -398,10 +404,3 @@ class StagedFiles:
                 if old.name not in names and old.is_file():
                     old.unlink()
         return [self.folder / name for name in names]
-
-    def _cleanup(self) -> None:
-        if self.path is not None:
-            shutil.rmtree(self.path, ignore_errors=True)
-        if self._lock_fd is not None:
-            unlock_folder(self._lock_fd, self._lock_path)
-            self._lock_fd = None

@@ -10,25 +10,9 @@ import cv2
 import numpy as np
 
 from fault_tools import cli
+from fusion_vo.simulation.pause import pause
 
-STREAMS = ("cam0/data.csv", "imu0/data.csv", "wheel0/data.csv", "state_groundtruth_estimate0/data.csv")
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
-
-
-def pause(rec: Path, after_s: float, seconds: float, streams=STREAMS) -> None:
-    """Shift every row later than ``after_s`` into the recording by ``seconds``."""
-    for name in streams:
-        p = rec / name
-        lines = p.read_text().splitlines()
-        t0 = int(lines[1].split(",", 1)[0])
-        out = [lines[0]]
-        for line in lines[1:]:
-            t, rest = line.split(",", 1)
-            t = int(t)
-            if t - t0 >= after_s * 1e9:
-                t += int(seconds * 1e9)
-            out.append(f"{t},{rest}")
-        p.write_text("\n".join(out) + "\n")
 
 
 def travelled(tum: Path) -> float:
