@@ -99,6 +99,7 @@ def stage_split(seconds: float, repeat: int) -> list[tuple[str, float, float]]:
                 setattr(module, attribute, saved[(module, attribute)])
                 stages.wrap(module, attribute, names[attribute])
             fuse(streams, "gtsam", config)
+            stages.restore()
             runs.append(stages)
     finally:
         for (module, attribute), value in saved.items():

@@ -37,9 +37,16 @@ class Stages:
         self.wall: dict[str, float] = defaultdict(float)
         self.cpu: dict[str, float] = defaultdict(float)
         self._stack: list[list[float]] = []  # per open stage: time spent in the stages inside it
+        self.wrapped: list = []  # (module, attribute, original) to restore
+
+    def restore(self) -> None:
+        for module, attribute, inner in reversed(self.wrapped):
+            setattr(module, attribute, inner)
+        self.wrapped.clear()
 
     def wrap(self, module, attribute: str, stage: str) -> None:
         inner = getattr(module, attribute)
+        self.wrapped.append((module, attribute, inner))
 
         def timed(*args, **kwargs):
             self._stack.append([0.0, 0.0])
@@ -87,10 +94,13 @@ def in_process(seq: Path, evaluate: bool) -> tuple[Stages, dict, float, float]:
     stages.wrap(ev, "write_report", "evaluation: report")
     stages.wrap(pipeline, "_evaluate", "evaluation: the rest (imports, reading)")
     config = RunConfig(backend="all", evaluate=evaluate)
-    with _out_dir() as out:
-        w, c = time.perf_counter(), time.process_time()
-        summary = pipeline.run_pipeline(seq, out, config)
-        wall, cpu = time.perf_counter() - w, time.process_time() - c
+    try:
+        with _out_dir() as out:
+            w, c = time.perf_counter(), time.process_time()
+            summary = pipeline.run_pipeline(seq, out, config)
+            wall, cpu = time.perf_counter() - w, time.process_time() - c
+    finally:
+        stages.restore()
     return stages, dict(summary.backend_seconds), wall, cpu
 
 
@@ -125,6 +135,8 @@ def main() -> int:
     print(f"\n{'stage':40s} {'wall [s]':>9s} {'CPU [s]':>9s}   (median of {args.repeat} runs)")
     for name in names:
         print(f"{name:40s} {med(r[0].wall.get(name, 0.0) for r in runs):9.3f} {med(r[0].cpu.get(name, 0.0) for r in runs):9.3f}")
+    print(f"{'sum of the stages':40s} {med(sum(r[0].wall.values()) for r in runs):9.3f} "
+          f"{med(sum(r[0].cpu.values()) for r in runs):9.3f}")
     print(f"{'whole pipeline in process':40s} {med(r[2] for r in runs):9.3f} {med(r[3] for r in runs):9.3f}")
     print(f"{'whole command (fusion-vo run)':40s} {med(commands):9.3f}")
     print("\nfusion split (CPU seconds, the backends' own timing):")
