@@ -3,13 +3,14 @@
 A configuration file has one section per stage; any key left out keeps its default::
 
     frontend: klt            # or: features, direct
-    sensors: [camera, wheel, imu]   # default: those the recording has
+    sensors: [camera, wheel, imu]   # default: those the recording has; any registered sensor's name
     backend: all             # none | ekf | gtsam | all
     odometry: {height: null, use_range: true, min_sigma_xy: 2.0e-5, min_sigma_yaw: 2.0e-5}
     klt: {...}               # frontends.klt.KltConfig
     features: {...}          # frontends.features.FeatureConfig
     direct: {...}            # frontends.direct.DirectConfig
-    fusion: {...}            # fusion_vo.backends.FusionConfig (ekf, graph, sensor noise models)
+    fusion: {...}            # fusion_vo.backends.FusionConfig (ekf, graph, sensor noise models, and the
+                             # section of each sensor registered outside the library, e.g. compass: {sigma: 0.02})
     evaluate: true           # compute metrics and plots when the recording has ground truth
 
 The schema is derived from those dataclasses by :mod:`fusion_vo.schema` (pydantic), so an option is
@@ -36,6 +37,7 @@ if TYPE_CHECKING:  # the stages, pydantic and OpenCV are loaded when a configura
 
     from fusion_vo.odometry import OdometryConfig
 
+#: the built-in sensors; ``sensors`` and ``--sensors`` take any registered one (:mod:`fusion_vo.sensors.registry`)
 SENSORS = ("camera", "wheel", "imu", "odom", "range", "gps")
 BACKENDS = ("none", "ekf", "gtsam", "all")
 FRONTENDS = ("klt", "features", "direct")
@@ -65,7 +67,8 @@ class RunConfig:
     frontend : str
         Visual frontend: ``klt``, ``features`` or ``direct``.
     sensors : list of str or None
-        Sensors the backends may use (of camera, wheel, imu, odom, range, gps); the recording must have them. ``None``
+        Sensors the backends may use (of camera, wheel, imu, odom, range, gps, or any sensor registered with
+        ``fusion_vo.sensors.registry``); the recording must have them. ``None``
         (the default) uses the camera, wheels and IMU the recording has; GPS (``gps0/``) is fused only
         when listed, and the world frame is then East-North-Up at its datum.
     backend : str
@@ -128,9 +131,22 @@ def _split_sensors(value):
     return value
 
 
-@functools.cache
 def run_model() -> type[BaseModel]:
-    """The pydantic model of the whole run configuration (sections built from their dataclasses)."""
+    """The pydantic model of the whole run configuration (sections built from their dataclasses): the sensor
+    names are the registered ones, and the ``fusion`` section holds the registered sensors' sections
+    (:mod:`fusion_vo.sensors.registry`), so the model follows the registry."""
+    from fusion_vo.backends.config import FusionConfig
+    from fusion_vo.sensors import registry
+
+    own = {f.name for f in dataclasses.fields(FusionConfig)}
+    sections = tuple(s.config for s in registry.sensors() if s.config is not None and s.config[0] not in own)
+    registered = registry.names()  # the built-in names in their documented order, then the others
+    names = tuple(n for n in SENSORS if n in registered) + tuple(n for n in registered if n not in SENSORS)
+    return _run_model(names, sections)
+
+
+@functools.cache
+def _run_model(sensor_names: tuple[str, ...], sensor_sections: tuple) -> type[BaseModel]:
     from pydantic import ConfigDict, Field, create_model, field_validator
 
     from fusion_vo import schema
@@ -138,11 +154,17 @@ def run_model() -> type[BaseModel]:
     docs = schema.field_docs(RunConfig)
     fields: dict[str, Any] = {
         "frontend": (Literal[FRONTENDS], Field("klt", description=docs["frontend"])),
-        "sensors": (list[Literal[SENSORS]] | None, Field(None, description=docs["sensors"])),
+        "sensors": (list[Literal[sensor_names]] | None, Field(None, description=docs["sensors"])),
         "backend": (Literal[BACKENDS], Field("all", description=docs["backend"])),
     }
     for name, (cls, exclude) in _sections().items():
         section = schema.model_of(cls, exclude)
+        if name == "fusion" and sensor_sections:  # the registered sensors' sections, through the same schema
+            extra = {}
+            for key, section_cls in sensor_sections:
+                sub = schema.model_of(section_cls)
+                extra[key] = (sub, Field(default_factory=sub, description=sub.__doc__))
+            section = create_model("FusionConfig", __base__=section, **extra)
         fields[name] = (section, Field(default_factory=section, description=docs[name]))
     fields["evaluate"] = (bool, Field(True, description=docs["evaluate"]))
     validators = {"split_sensors": field_validator("sensors", mode="before")(_split_sensors)}
@@ -167,6 +189,11 @@ def validate_config(data: dict, path: Path | None = None) -> RunConfig:
     values = schema.validate(run_model(), data, path)
     sections = {}
     for name, (cls, exclude) in _sections().items():
+        if name == "fusion":  # with the registered sensors' sections (FusionConfig.sensors)
+            built = cls.from_dict(schema.plain(getattr(values, name)), path, (name,))
+            sections[name] = {k: v for k, v in schema.plain(built).items() if k not in exclude}
+            sections[name].update(schema.plain(built.sensors))
+            continue
         built = schema.to_dataclass(cls, getattr(values, name), path, (name,))  # the stage's own checks
         sections[name] = {k: v for k, v in schema.plain(built).items() if k not in exclude}
     return RunConfig(frontend=values.frontend, sensors=None if values.sensors is None else list(values.sensors),

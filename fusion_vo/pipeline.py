@@ -98,19 +98,30 @@ MAX_JUMP_S = 86400.0
 
 
 def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
-    """The sensors to use: as configured (each must be in the recording) or all that are present."""
-    present = {"camera": rec.has_camera(), "wheel": rec.has_wheel(), "imu": rec.has_imu(),
-               "odom": rec.has_odom(), "range": rec.has_range(), "gps": rec.has_gps()}
+    """The sensors to use: as configured (each must be in the recording) or all that are present.
+
+    Any registered sensor (:mod:`fusion_vo.sensors.registry`) may be named; by default the camera, wheels
+    (or odometry) and IMU are used, and a sensor registered outside the library when its folder is present
+    (and its ``default`` allows)."""
+    from fusion_vo.sensors import registry
+
+    known = registry.sensors()
+    present = {s.name: s.present(rec) for s in known}
+    present["camera"] = rec.has_camera()
     if config.sensors is None:
         chosen = [s for s in ("camera", "wheel", "imu") if present[s]]
         if not present["wheel"] and present["odom"]:
             chosen.append("odom")
         if not chosen:
             raise InputError("the recording has none of cam0/, wheel0/, imu0/, odom0/", rec.path)
-        return chosen
+        return chosen + [s.name for s in known if s.name not in registry.BUILTIN_ORDER and present[s.name]
+                         and s.by_default(present)]
     for s in config.sensors:
+        if s not in present:
+            raise InputError(f"unknown sensor '{s}' (use {', '.join(present)})", rec.path)
         if not present[s]:
-            raise InputError(f"the sensors to use include '{s}' but the recording has no {STREAM_FOLDERS[s]}/",
+            folder = STREAM_FOLDERS.get(s) or registry.get(s).folder or registry.get(s).where
+            raise InputError(f"the sensors to use include '{s}' but the recording has no {folder.rstrip('/')}/",
                              rec.path)
     return list(config.sensors)
 
@@ -204,6 +215,14 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         note("imu", rec.imu().t, "imu0")
     if rec.has_range() and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
         note("range", rec.range().t, "range0")
+    from fusion_vo.sensors import registry
+
+    for name in sensors:  # a sensor registered outside the library: read by its own reader, now
+        sensor = registry.get(name)
+        if name not in registry.BUILTIN_ORDER and sensor.read is not None:
+            data = sensor.read(rec)
+            t = np.asarray(getattr(data, "t", ()), dtype=np.float64)
+            note(name, t, sensor.folder or name)
 
     for name, path in files.items():  # a jump of more than a day inside one stream: another clock
         step = np.diff(times[name])
@@ -266,7 +285,9 @@ def _line_of(rec: Recording, name: str, row: int) -> int | None:
         return int(rec._frames_index()[2][row])
     from fusion_vo.recording.csvio import read_table
 
-    folder = STREAM_FOLDERS[name]
+    from fusion_vo.sensors import registry
+
+    folder = STREAM_FOLDERS.get(name) or registry.get(name).folder
     try:
         return int(read_table(rec.path / folder / "data.csv", (1, 64), "values").lines[row])
     except (InputError, IndexError):

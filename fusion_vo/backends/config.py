@@ -253,7 +253,11 @@ class FusionConfig:
         config = schema.build(cls, data, path, prefix, exclude=("sensors",))
         if sections:
             config.sensors = sections
-            config.validate()
+            try:  # their values, named like the built-in sections' (``fusion: 'compass.sigma' must be ...``)
+                config.validate()
+            except InputError as exc:
+                where = ".".join(prefix)
+                raise InputError(f"{where}: {exc.message}" if where else exc.message, path) from None
         return config
 
     def section(self, name: str):

@@ -9,6 +9,8 @@ the gyro bias, the visual scale ``k_v = h_configured / h_true`` and the wheel-ba
 ``k_b = b_true / b_configured`` (these two are frozen when self-calibration is off), the offset
 ``o_ψ`` of the AHRS heading from the true heading, and the wheels' distance scale
 ``k_r = r_configured / r_true`` (their common radius error; frozen with self-calibration off).
+A registered sensor's own state variables (:class:`fusion_vo.sensors.registry.State`: a compass offset,
+a second camera's scale) follow them while its data is used, each with its prior and random walk.
 
 Camera and wheels measure only the ratio ``k_v / k_r``; their common scale is set by the priors on
 ``k_v`` (``height_sigma`` of ``cam0/sensor.yaml``) and ``k_r`` (``radius_sigma`` of
@@ -126,12 +128,15 @@ class PlanarEkf:
         Priors of ``k_v`` and ``k_r`` (default: ``config.visual_scale_sigma``, ``config.wheel_scale_sigma``).
     twist : bool
         The wheels are an odometry twist (``config.odom`` noise and ``odom_base_sigma`` prior).
+    states : tuple of registry.State
+        State variables the sensors add (:class:`fusion_vo.sensors.registry.State`), appended to the state
+        vector after the built-in ones with their prior and random walk.
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
-                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None):
+                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None, states=()):
         # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
         from filterpy.kalman import ExtendedKalmanFilter
         from scipy.stats import chi2
@@ -141,12 +146,21 @@ class PlanarEkf:
         self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
         self.estimate_kb = calib if estimate_wheel_base is None else calib and estimate_wheel_base
         self.camera_height = camera_height
-        self.kf = ExtendedKalmanFilter(dim_x=DIM, dim_z=1)
-        x = np.zeros(DIM)
+        self.states = tuple(states)
+        self.dim = dim = DIM + len(self.states)
+        #: state columns of each measurement-model argument: the built-in ones and the sensors' states
+        self.columns = dict(STATE_COLUMNS)
+        for i, state in enumerate(self.states):
+            self.columns[state.name] = slice(DIM + i, DIM + i + 1)
+        self.kf = ExtendedKalmanFilter(dim_x=dim, dim_z=1)
+        x = np.zeros(dim)
         x[:3] = config.initial_pose if initial_pose is None else initial_pose
         x[KV] = x[KB] = x[KR] = 1.0
-        self.kf.x = x.reshape(DIM, 1)
-        var = np.zeros(DIM)
+        var = np.zeros(dim)
+        for i, state in enumerate(self.states):
+            x[DIM + i] = state.initial
+            var[DIM + i] = state.sigma**2
+        self.kf.x = x.reshape(dim, 1)
         var[:3] = 1e-10 if initial_sigma is None else np.square(initial_sigma)
         var[VX] = var[VY] = config.initial_velocity_sigma**2
         var[W] = 0.5**2
@@ -187,12 +201,12 @@ class PlanarEkf:
                         [b * dt, a * dt, dt * dt * (db * vx + da * vy)]])
         rot = np.array([[c, -s], [s, c]])
         d_pos_v = rot @ d_a
-        F = np.eye(DIM)
+        F = np.eye(self.dim)
         F[PX, YAW] = -s * ax - c * ay
         F[PY, YAW] = c * ax - s * ay
         F[0:2, VX:W + 1] = d_pos_v
         F[YAW, W] = dt
-        G = np.zeros((DIM, 3))
+        G = np.zeros((self.dim, 3))
         G[0:2] = d_pos_v
         G[YAW, 2] = dt
         G[VX:W + 1] = np.eye(3)
@@ -204,11 +218,13 @@ class PlanarEkf:
             Q[KV, KV] += cfg.ekf.scale_random_walk**2 * dt
         if self.estimate_kb:
             Q[KB, KB] += cfg.ekf.scale_random_walk**2 * dt
+        for i, state in enumerate(self.states):
+            Q[DIM + i, DIM + i] += state.random_walk**2 * dt
         x_new = x.copy()
         x_new[PX] += c * ax - s * ay
         x_new[PY] += s * ax + c * ay
         x_new[YAW] = se2.wrap_angle(x[YAW] + th)
-        self.kf.x = x_new.reshape(DIM, 1)
+        self.kf.x = x_new.reshape(self.dim, 1)
         self.kf.P = F @ self.kf.P @ F.T + Q
         self.kf.x_prior = self.kf.x.copy()
         self.kf.P_prior = self.kf.P.copy()
@@ -218,14 +234,15 @@ class PlanarEkf:
     def block(self, model: MeasurementModel, z, R, **params):
         """``(sensor, z, h, H, R, angle_row)`` of one measurement through ``model`` at the current state.
 
-        The model's arguments are read from the state (:data:`STATE_COLUMNS`) and its Jacobians become
+        The model's arguments are read from the state (:attr:`columns`) and its Jacobians become
         the columns of ``H``; ``params`` go to :meth:`~fusion_vo.sensors.model.MeasurementModel.evaluate`.
         """
         x = self.kf.x[:, 0]
-        h, jac = model.evaluate(**{name: x[STATE_COLUMNS[name]] for name in model.args}, **params)
-        H = np.zeros((model.dim, DIM))
+        columns = self.columns
+        h, jac = model.evaluate(**{name: x[columns[name]] for name in model.args}, **params)
+        H = np.zeros((model.dim, self.dim))
         for name, J in jac.items():
-            H[:, STATE_COLUMNS[name]] = J
+            H[:, columns[name]] = J
         angle = model.angle_rows[0] if model.angle_rows else None
         if model.dim == 1:
             return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
@@ -236,7 +253,7 @@ class PlanarEkf:
         """Update with the innovation ``y`` (m,) of a measurement whose Jacobian ``H_pose`` (m, 3) is on the pose
         ``(x, y, ψ)`` alone and whose noise is ``R`` (a sensor applied at a node on its own, e.g. a GPS fix)."""
         y = np.asarray(y, dtype=np.float64).reshape(-1, 1)
-        H = np.zeros((len(y), DIM))
+        H = np.zeros((len(y), self.dim))
         H[:, :3] = H_pose
         self.kf.update(y, HJacobian=lambda _x: H, Hx=lambda _x: np.zeros_like(y), R=R)
         self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
@@ -303,15 +320,16 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                    iv.initial_pose, iv.initial_sigma)
+                    iv.initial_pose, iv.initial_sigma, iv.states)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt
-    xs = np.zeros((K + 1, DIM))
-    Ps = np.zeros((K + 1, DIM, DIM))
-    x_prior = np.zeros((K + 1, DIM))
-    P_prior = np.zeros((K + 1, DIM, DIM))
-    Fs = np.zeros((K + 1, DIM, DIM))
+    n = ekf.dim
+    xs = np.zeros((K + 1, n))
+    Ps = np.zeros((K + 1, n, n))
+    x_prior = np.zeros((K + 1, n))
+    P_prior = np.zeros((K + 1, n, n))
+    Fs = np.zeros((K + 1, n, n))
     for sensor in registry.sensors():
         if sensor.ekf_start is not None:
             blocks = sensor.ekf_start(ekf, meas)
@@ -399,6 +417,9 @@ def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
     if config.self_calibration and kb_ok:
         out["wheel_base_factor"] = float(x[KB])
         out["wheel_base"] = float(iv.wheel_base * x[KB])
+    for i, state in enumerate(iv.states):  # the sensors' own states
+        out[state.name] = float(x[DIM + i])
+        out[f"{state.name}_sigma"] = float(np.sqrt(P[DIM + i, DIM + i]))
     return out
 
 

@@ -6,7 +6,9 @@ Variables
 ``B_c``  gyro bias [rad/s] of segment ``c``;
 ``S_c``  visual scale ``k_v = h_configured / h_true`` of segment ``c`` (only with self-calibration);
 ``W_c``  wheel-base factor ``k_b = b_true / b_configured`` of segment ``c`` (only with self-calibration);
-``O_c``  offset [rad] of the AHRS heading from the true heading in segment ``c`` (whenever the IMU is used).
+``O_c``  offset [rad] of the AHRS heading from the true heading in segment ``c`` (whenever the IMU is used);
+a registered sensor's own state (:class:`fusion_vo.sensors.registry.State`) is a variable per segment too
+(:meth:`GraphBuilder.state_key`), with its prior on the first and its random walk between segments.
 
 A segment is ``GraphConfig.calibration_interval`` seconds of nodes (default 1 s); node ``k`` uses the
 variables of its segment ``c(k)``. Slowly varying quantities are thus variables tied by random walks
@@ -154,6 +156,9 @@ def R(k: int) -> int:
 _NO_INCREMENT = np.zeros(3)
 _NO_INCREMENT.flags.writeable = False
 
+#: GTSAM symbol letters of the sensors' own state variables (the built-in ones use x, b, o, s, w, r)
+_STATE_LETTERS = "acdefghijklmnpqtuvyz"
+
 #: graph steps of the sensors ordered before this set the initial guess of a node; the builder then adds the
 #: motion model where none measured the translation (:meth:`GraphBuilder.node`)
 GUESS_ORDER = 40.0
@@ -205,11 +210,15 @@ class GraphBuilder:
     X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
 
     def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
-                 calibrate: tuple[bool, bool] | None = None):
-        """``offset``, ``t_origin`` and ``calibrate`` let a stream be built one interval at a time: local
-        node ``n`` is variable ``X(offset + n)``, segments count from ``t_origin``, and ``calibrate``
-        says which calibration factors are estimated (default: where observable in ``iv``)."""
+                 calibrate: tuple[bool, bool] | None = None, states: tuple | None = None):
+        """``offset``, ``t_origin``, ``calibrate`` and ``states`` let a stream be built one interval at a time:
+        local node ``n`` is variable ``X(offset + n)``, segments count from ``t_origin``, ``calibrate``
+        says which calibration factors are estimated (default: where observable in ``iv``) and ``states``
+        which sensors' state variables exist (default: ``iv.states``)."""
         self.iv = iv
+        self.states = tuple(iv.states if states is None else states)
+        # each state's variables: one letter of GTSAM's symbols per state, besides the built-in ones
+        self._state_letter = {st.name: _STATE_LETTERS[i] for i, st in enumerate(self.states)}
         self.config = config
         self.offset = offset
         if calibrate is None:
@@ -316,6 +325,8 @@ class GraphBuilder:
             priors.append((W(0), 1.0, cfg.wheel_model(self.iv.twist)[1], est.get("wheel_base_factor", 1.0)))
         if self.kr_on:
             priors.append((R(0), 1.0, self.iv.wheel_scale_sigma, est.get("wheel_scale", 1.0)))
+        for st in self.states:
+            priors.append((self.state_key(st.name, 0), st.initial, st.sigma, est.get(st.name, st.initial)))
         for key, mean, sigma, guess in priors:
             nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
             nf.values[key] = guess
@@ -388,6 +399,11 @@ class GraphBuilder:
         """The pose variable of local node ``n``."""
         return X(self.offset + n)
 
+    def state_key(self, name: str, segment: int) -> int:
+        """The variable of a sensor's state ``name`` (:class:`fusion_vo.sensors.registry.State`) in ``segment``
+        (``NodeContext.segment``)."""
+        return gtsam.symbol(self._state_letter[name], segment)
+
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:
         """Bias and calibration variables of segment ``c``, tied to the ``previous`` segment (``c-1``, or an
         earlier one across a stretch without nodes) by random walks over the time between them."""
@@ -404,6 +420,9 @@ class GraphBuilder:
             walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
         if self.kr_on:
             walks.append((R, cfg.ekf.scale_random_walk, estimate.get("wheel_scale", 1.0)))
+        for st in self.states:
+            walks.append((lambda c, name=st.name: self.state_key(name, c), st.random_walk,
+                          estimate.get(st.name, st.initial)))
         for key, q, guess in walks:
             sigma = max(q * np.sqrt(span), 1e-7)
             nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
@@ -415,7 +434,8 @@ class GraphBuilder:
         c = int(self.segment[n])
         keys = [B(c)] if self.iv.uses("gyro") else []
         keys += [O(c)] if self.ahrs_offset_on else []
-        return keys + ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
+        keys += ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
+        return keys + [self.state_key(st.name, c) for st in self.states]
 
     def _unary(self, nf: NodeFactors, n: int, node: NodeContext | None = None) -> None:
         """The registered sensors' factors at node ``n`` alone (``graph_unary``, e.g. an absolute heading);
@@ -890,6 +910,8 @@ def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: Node
         estimate["wheel_base_factor"] = isam.calculateEstimateDouble(W(int(builder.segment[n])))
     if builder.kr_on:
         estimate["wheel_scale"] = isam.calculateEstimateDouble(R(int(builder.segment[n])))
+    for st in builder.states:
+        estimate[st.name] = isam.calculateEstimateDouble(builder.state_key(st.name, int(builder.segment[n])))
     estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
 
 
@@ -919,6 +941,8 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
         out["wheel_base"] = float(iv.wheel_base * kb)
     if builder.kr_on:
         out["wheel_scale"] = float(values.atDouble(R(last)))
+    for st in builder.states:  # the sensors' own states
+        out[st.name] = float(values.atDouble(builder.state_key(st.name, last)))
     return out
 
 

@@ -5,7 +5,7 @@
     fusion = StreamingFusion(backend="ekf", sensors=["camera", "wheel", "imu"], wheel_config=cfg,
                              camera_height=0.095)
     for msg in messages:                       # any order within the reorder window
-        fusion.add_wheel(WheelTicks(t, left, right))   # or add_visual / add_imu / add_twist / add_range
+        fusion.add("wheel", WheelTicks(t, left, right))   # any registered sensor's sample (add_wheel ... too)
         estimate = fusion.current_estimate()   # Estimate(t, pose (x, y, yaw), covariance 3x3)
     result = fusion.finish()                   # FusionResult with the online trajectory
 
@@ -117,8 +117,6 @@ from fusion_vo.measurements import (
 
 logger = logging.getLogger(__name__)
 
-#: streams whose counts are reported under the backends' sensor names
-_COUNTED_AS = {"imu": "gyro", "odom": "wheel"}
 
 
 @dataclass
@@ -175,7 +173,8 @@ class StreamingFusion:
         ``"ekf"`` or ``"gtsam"`` (iSAM2).
     config : FusionConfig or dict, optional
     sensors : list of str
-        The sensors that will be added (of ``camera, wheel, odom, imu, range``).
+        The sensors that will be added: registered sensor names (:mod:`fusion_vo.sensors.registry`; built in:
+        ``camera, wheel, odom, imu, range, gps``).
     wheel_config : WheelConfig, optional
         Needed for ``add_wheel``.
     imu_T_BS : ndarray (4, 4), optional
@@ -248,7 +247,15 @@ class StreamingFusion:
         self.rewinds = 0
         self._monitor = LiveHeadingMonitor(self.config)
         self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
-        self._buffers: dict[str, list] = {name: [] for name in ("wheel", "odom", "imu", "range")}
+        # per-stream buffers of (t, payload): every sensor with a live intake (registry.Live), the built-in
+        # ones always (odometry twists also arrive for a declared "wheel"), the others when declared
+        self._buffers: dict[str, list] = {s.name: [] for s in registry.sensors() if s.live is not None and
+                                          (s.name in registry.BUILTIN_ORDER or s.name in self.sensors)}
+        # each buffered stream's intake (registry.Live), its SensorStreams field and the name it is counted under
+        self._intake = {name: registry.get(name) for name in self._buffers}
+        self._counted = {name: s.live.counted_as or name for name, s in self._intake.items()}
+        #: the sensors' own state variables (registry.State) in both backends
+        self._states = registry.states(self.sensors)
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
         self._t_nodes: list[float] = []
@@ -272,6 +279,37 @@ class StreamingFusion:
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
 
     # ------------------------------------------------------------------ input
+    def add(self, sensor: str, sample) -> None:
+        """Add one sample of the registered sensor ``sensor`` (:mod:`fusion_vo.sensors.registry`).
+
+        The sample is what that sensor's :class:`~fusion_vo.sensors.registry.Live` intake takes (``wheel``:
+        :class:`~fusion_vo.measurements.WheelTicks`, ``odom``: ``TwistSample``, ``imu``: ``ImuSample``,
+        ``range``: ``RangeSample``); ``camera`` takes a :class:`VisualIncrement` (:meth:`add_visual`) and ``gps``
+        a :class:`GpsFix` (:meth:`add_gps`). A sample that cannot be read is counted as gated, like a
+        non-finite one; an unknown or undeclared sensor is an :class:`InputError`.
+        """
+        with self._lock:
+            spec = self._intake.get(sensor)
+            if spec is None:  # not a buffered stream: the camera, GPS, or a mistake
+                try:
+                    spec = registry.get(sensor)
+                except KeyError:
+                    raise InputError(f"unknown sensor '{sensor}' (use {', '.join(registry.names())})") from None
+                if sensor == "camera":  # the two intakes that make nodes
+                    return self.add_visual(sample)
+                if sensor == "gps":
+                    return self.add_gps(sample)
+                self._check(sensor)
+                raise InputError(f"sensor '{sensor}' has no live intake (its registration has no registry.Live)")
+            try:
+                t, payload = spec.live.sample(sample)
+            except (AttributeError, TypeError, ValueError, IndexError) as exc:
+                self._check(sensor)
+                self._count(self._counted[sensor]).gated += 1
+                logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
+                return
+            self._add(sensor, t, payload)
+
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame)."""
         with self._lock:
@@ -299,25 +337,20 @@ class StreamingFusion:
             self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
-        """Add one sample of cumulative wheel ticks."""
-        with self._lock:
-            self._add("wheel", m.t, (m.left, m.right))
+        """Add one sample of cumulative wheel ticks (``add("wheel", m)``)."""
+        self.add("wheel", m)
 
     def add_twist(self, m: TwistSample) -> None:
-        """Add one wheel-odometry twist ``(vx, vy, wz)`` in the body frame."""
-        with self._lock:
-            self._add("odom", m.t, (m.vx, m.vy, m.wz))
+        """Add one wheel-odometry twist ``(vx, vy, wz)`` in the body frame (``add("odom", m)``)."""
+        self.add("odom", m)
 
     def add_imu(self, m: ImuSample) -> None:
-        """Add one IMU sample (gyro, accel and optionally an orientation quaternion)."""
-        with self._lock:
-            q = None if m.orientation is None else np.asarray(m.orientation, dtype=np.float64)
-            self._add("imu", m.t, (np.asarray(m.gyro, dtype=np.float64), np.asarray(m.accel, dtype=np.float64), q))
+        """Add one IMU sample: gyro, accel and optionally an orientation quaternion (``add("imu", m)``)."""
+        self.add("imu", m)
 
     def add_range(self, m: RangeSample) -> None:
-        """Add one range-finder distance to the ground."""
-        with self._lock:
-            self._add("range", m.t, float(m.distance))
+        """Add one range-finder distance to the ground (``add("range", m)``)."""
+        self.add("range", m)
 
     def add_gps(self, fix: GpsFix) -> None:
         """One fix (east, north in ENU at the datum, 2x2 covariance); a non-finite or non-positive-definite
@@ -475,13 +508,11 @@ class StreamingFusion:
 
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
-        sensor = _COUNTED_AS.get(stream, stream)
+        sensor = self._counted[stream]  # the name its counts are reported under
         if not self._valid(sensor, t, [x for x in payload if x is not None] if isinstance(payload, tuple)
                            else payload):
             return
         t = float(t)
-        if stream == "wheel":
-            payload = (int(payload[0]), int(payload[1]))
         self._touch(stream, t)
         if self._late(sensor, t):
             return
@@ -680,10 +711,10 @@ class StreamingFusion:
         range finder) the neighbours the spike check's running median reads around those (the same values
         as in batch use); until the AHRS offset is known (samples with an orientation), the IMU's first quarter second after
         ``t0`` too."""
-        extra = int(self.config.imu.spike_window) + 1
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
-            more = extra if name in ("imu", "range") else 0  # the streams with a spike check
+            live = self._intake[name].live
+            more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
             hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
             if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
@@ -691,22 +722,14 @@ class StreamingFusion:
             rows = buf[lo:hi]
             if reach is not None:  # the time of the last sample read (any new one, if all were read)
                 reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
-            if len(rows) < (1 if name == "range" else 2):
+            if len(rows) < live.min_rows:
                 continue
-            t = np.array([r[0] for r in rows])
-            if name == "wheel":
-                ticks = np.array([r[1] for r in rows], dtype=np.int64)
-                streams.wheel = WheelData(t, ticks[:, 0], ticks[:, 1], self.wheel_config)
-            elif name == "odom":
-                v = np.array([r[1] for r in rows])
-                streams.odom = TwistData(t, v[:, 0], v[:, 1], v[:, 2])
-            elif name == "imu":
-                q = [r[1][2] for r in rows]
-                streams.imu = ImuData(t, np.array([r[1][0] for r in rows]), np.array([r[1][1] for r in rows]),
-                                      None if any(x is None for x in q) else np.array(q), self.imu_T_BS,
-                                      None, self.imu_noise)
+            data = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)  # the sensor's own module
+            field_name = self._intake[name].field
+            if field_name is not None:
+                setattr(streams, field_name, data)
             else:
-                streams.range = RangeData(t, np.array([r[1] for r in rows]))
+                streams.extra[name] = data
         return streams
 
     def _interval(self, t0: float, t1: float, heading_offset: float | None):
@@ -858,13 +881,13 @@ class StreamingFusion:
         kv, kb = self._calibration_flags()
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist)
+            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, states=self._states)
             self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(_NodeRecord(None, None))
-            self._graph = _OnlineGraph(cfg, t, (kv, kb), self.background)
+            self._graph = _OnlineGraph(cfg, t, (kv, kb), self.background, self._states)
             pose, cov = self._graph.start()
             self._record(pose, cov)
 
@@ -1006,8 +1029,10 @@ class StreamingFusion:
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
     """The samples of ``streams`` as ``(arrival time, kind, message)`` in arrival order.
 
-    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``). Samples arrive at their own
-    time, the visual increments ``camera_delay`` seconds after their ``t1`` (frontend latency).
+    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``), or for a sensor registered outside the
+    library whose :class:`~fusion_vo.sensors.registry.Live` intake gives ``samples``, the sensor
+    (``add(kind, message)``). Samples arrive at their own time, the visual increments ``camera_delay`` seconds
+    after their ``t1`` (frontend latency).
     """
     msgs: list[tuple[float, int, str, object]] = []
     if streams.visual:
@@ -1024,6 +1049,10 @@ def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> 
         msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
     if streams.range is not None:
         msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    for name, data in streams.extra.items():
+        live = registry.get(name).live if name in registry.names() else None
+        if live is not None and live.samples is not None and data is not None:
+            msgs += [(float(t), 4, name, m) for t, m in live.samples(data)]
     msgs.sort(key=lambda m: (m[0], m[1]))
     return [(float(m[0]), m[2], m[3]) for m in msgs]
 
@@ -1034,6 +1063,8 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
                                           ("odom", streams.odom is not None), ("imu", streams.imu is not None),
                                           ("range", streams.range is not None)) if present]
+    sensors += [name for name, data in streams.extra.items()  # sensors registered outside the library
+                if data is not None and name in registry.names() and registry.get(name).live is not None]
     imu = streams.imu
     return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
                            imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,
@@ -1086,7 +1117,8 @@ class _OnlineGraph:
     run, whatever the worker's timing.
     """
 
-    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False):
+    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False,
+                 states: tuple = ()):
         import gtsam
 
         from fusion_vo.backends import graph
@@ -1096,6 +1128,7 @@ class _OnlineGraph:
         self.config = config
         self.t_origin = t_origin
         self.calibrate = calibrate
+        self.states = states  # the sensors' own state variables (registry.State)
         # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
         # a conditioning that Cholesky can report as indeterminate
         self.isam = gtsam.ISAM2(graph.isam_params())
@@ -1119,7 +1152,7 @@ class _OnlineGraph:
 
     def _node_factors(self, n: int, iv, first: bool, previous_pose):
         builder = self.graph.GraphBuilder(iv, self.config, offset=n - 1, t_origin=self.t_origin,
-                                          calibrate=self.calibrate)
+                                          calibrate=self.calibrate, states=self.states)
         nf = builder.node(1, previous_pose, self.estimate)
         if first:
             head = builder.first_node()

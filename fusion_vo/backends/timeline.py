@@ -183,6 +183,8 @@ class Intervals:
     extra : dict
         Sensor name -> its measurements on the grid, for sensors registered outside the library
         (:mod:`fusion_vo.sensors.registry`; the built-in ones have the fields above).
+    states : tuple of registry.State
+        The state variables the sensors with data add to the backends (:class:`fusion_vo.sensors.registry.State`).
     """
 
     t: np.ndarray
@@ -219,6 +221,7 @@ class Intervals:
     initial_pose: np.ndarray | None = None
     initial_sigma: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
+    states: tuple = ()
 
     @property
     def n_steps(self) -> int:
@@ -340,6 +343,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         wc = streams.wheel.config
         iv.wheel_scale_sigma = float(2.0 * wc.radius_sigma / (wc.wheel_radius_left + wc.wheel_radius_right))
     iv.heading_offset = heading_offset
+    iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None])
     for sensor, step in registry.ordered("intervals"):  # each sensor's samples onto the grid (its own module)
         if sensor.data(streams) is not None:
             step.run(iv, streams, config, counts)

@@ -19,7 +19,7 @@ def add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", "-c", help="YAML run configuration (see fusion-vo run --print-config)")
     p.add_argument("--frontend", choices=["klt", "features"], help="visual frontend (default: klt)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
-    p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: what each recording has)")
+    p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} or any registered sensor (default: what each recording has)")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
     cluster = p.add_mutually_exclusive_group()
     cluster.add_argument("--workers", "-j", type=int, metavar="N",

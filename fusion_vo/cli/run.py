@@ -23,7 +23,8 @@ def register(sub) -> None:
     p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
     p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
-    p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} (default: the camera, wheels and IMU the recording has; gps is fused only when listed)")
+    p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} or any sensor a package registers (entry point "
+                        "fusion_vo.sensors) (default: the camera, wheels and IMU the recording has; gps is fused only when listed)")
     p.add_argument("--threads", type=positive_int, metavar="N",
                    help="threads for decoding frames ahead of the tracker and for OpenCV (default: the cores "
                         "available); the results do not depend on it")

@@ -38,7 +38,7 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -410,10 +410,23 @@ def graph_ahrs(builder, nf, node) -> None:
     nf.sensors.append("ahrs")
 
 
+def _live_sample(m) -> tuple:
+    """A live :class:`~fusion_vo.measurements.ImuSample`: ``(t, (gyro, accel, orientation or None))``."""
+    q = None if m.orientation is None else np.asarray(m.orientation, dtype=np.float64)
+    return m.t, (np.asarray(m.gyro, dtype=np.float64), np.asarray(m.accel, dtype=np.float64), q)
+
+
+def _live_data(t, rows, fusion) -> ImuData:
+    q = [r[2] for r in rows]
+    return ImuData(t, np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                   None if any(x is None for x in q) else np.array(q), fusion.imu_T_BS, None, fusion.imu_noise)
+
+
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
     intervals=Step(10, add_intervals), ekf_measurements=ekf_measurements,
     ekf_blocks=(Step(30, ekf_gyro), Step(50, ekf_ahrs)), ekf_start=ekf_ahrs_start,
     graph_factors=(Step(30, graph_guess), Step(50, graph_gyro)), graph_unary=(Step(80, graph_ahrs),),
+    live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
 ))

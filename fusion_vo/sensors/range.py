@@ -21,7 +21,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.measurements import RangeData
 from fusion_vo.sensors.imu import running_median
 from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -155,8 +155,16 @@ def graph_unary(builder, nf, node) -> None:
         nf.sensors.append("range")
 
 
+def _live_sample(m) -> tuple:
+    """A live :class:`~fusion_vo.measurements.RangeSample`: ``(t, distance)``."""
+    return m.t, float(m.distance)
+
+
 register(Sensor(
     name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
     has=lambda recording: recording.has_range(), config=("range", RangeNoise), intervals=Step(40, add_intervals),
     ekf_measurements=ekf_measurements, ekf_blocks=(Step(60, ekf_blocks),), graph_unary=(Step(90, graph_unary),),
+    # the streaming buffers read as many neighbours around an interval as the gyro's spike check
+    live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,
+              neighbours=lambda config: int(config.imu.spike_window) + 1),
 ))

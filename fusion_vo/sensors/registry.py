@@ -20,9 +20,18 @@ registration order): a sensor's measurements may need another's (the camera's sl
 IMU's), and the EKF's stacked update and the graph's factor lists keep one fixed order. The built-in
 sensors use multiples of 10; a new one picks any number (the default 100 runs after them).
 
-What a sensor cannot add through its registration: a new state variable. The EKF's state and the graph's
-calibration variables (pose, twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset)
-are fixed; a new sensor's model uses those (:data:`fusion_vo.sensors.model.ARGUMENT_SIZES`).
+A sensor may add state: each :class:`State` it declares (a bias, a scale, an offset: a scalar with a
+prior and a random walk) becomes a measurement-model argument of that name, carried by both backends
+whenever the sensor's data is used: the EKF appends it to its state vector (the prior as its initial
+value and variance, the random walk as process noise; :class:`~fusion_vo.backends.ekf.PlanarEkf`), the
+factor graph makes it a variable per calibration segment tied by the random walk, like the gyro bias
+(:meth:`~fusion_vo.backends.graph.GraphBuilder.state_key`). Its estimate at the end is reported in
+``FusionResult.calibration`` under its name (and ``NAME_sigma`` by the EKF). The built-in state (pose,
+twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset) is
+:data:`fusion_vo.sensors.model.ARGUMENT_SIZES`.
+
+A sensor fed live (:meth:`fusion_vo.backends.streaming.StreamingFusion.add`) declares a :class:`Live`
+intake: how one sample is checked and buffered, and how buffered samples become its data.
 """
 
 from __future__ import annotations
@@ -43,6 +52,72 @@ class Step:
 
     order: float
     run: Callable
+
+
+@dataclass(frozen=True)
+class State:
+    """A scalar state variable a sensor adds to both backends (module docstring).
+
+    Attributes
+    ----------
+    name : str
+        The measurement-model argument it is (unique among all sensors' states and the built-in arguments).
+    initial : float
+        Prior mean and initial value (default 0).
+    sigma : float
+        Prior standard deviation (default 1; positive).
+    random_walk : float
+        Random walk [unit/√s] (default 0: a constant, estimated from all the data).
+    """
+
+    name: str
+    initial: float = 0.0
+    sigma: float = 1.0
+    random_walk: float = 0.0
+
+    def __post_init__(self) -> None:
+        import math
+
+        if not (math.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"state '{self.name}': sigma must be a positive number, not {self.sigma}")
+        if not (math.isfinite(self.random_walk) and self.random_walk >= 0):
+            raise ValueError(f"state '{self.name}': random_walk must be a non-negative number, not {self.random_walk}")
+        if not math.isfinite(self.initial):
+            raise ValueError(f"state '{self.name}': initial must be a finite number, not {self.initial}")
+
+
+@dataclass(frozen=True)
+class Live:
+    """How :meth:`StreamingFusion.add <fusion_vo.backends.streaming.StreamingFusion.add>` takes a sensor's samples.
+
+    Attributes
+    ----------
+    sample : callable
+        ``sample(m) -> (t, payload)``: the time and the values of one sample ``m`` (a number, an array or a tuple
+        of them; ``None`` entries are allowed and not checked); a non-finite or malformed one is counted as gated.
+    data : callable
+        ``data(t, payloads, fusion) -> data``: the buffered samples around a node interval (``t`` an array, the
+        payloads a list, ``fusion`` the :class:`~fusion_vo.backends.streaming.StreamingFusion` for its
+        calibrations) as the sensor's data for :class:`~fusion_vo.backends.timeline.SensorStreams`.
+    min_rows : int
+        Samples an interval needs to be built from (default 2: they are interpolated at the node times).
+    neighbours : int or callable
+        Extra samples read on each side of an interval (a running median around them; default 0), or
+        ``neighbours(config) -> int``.
+    counted_as : str or None
+        The name its counts are reported under (default: the sensor's).
+    samples : callable or None
+        ``samples(data) -> iterable of (t, sample)``: its data as live samples, for replaying a recording
+        (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``) of a sensor
+        registered outside the library.
+    """
+
+    sample: Callable
+    data: Callable
+    min_rows: int = 2
+    neighbours: Any = 0
+    counted_as: str | None = None
+    samples: Callable | None = None
 
 
 @dataclass(frozen=True)
@@ -118,6 +193,11 @@ class Sensor:
     graph_run : callable or None
         ``graph_run(builder) -> object or None`` for a sensor whose factors depend on the online estimate (GPS):
         ``add(nf, n, pose_covariance)`` at every node, ``finish(result)`` at the end.
+    states : tuple of State
+        State variables the sensor adds to both backends while its data is used (module docstring).
+    live : Live or None
+        Its intake in :class:`~fusion_vo.backends.streaming.StreamingFusion` (``add(name, sample)``); the
+        camera and GPS, whose samples make nodes, have intakes of their own (``add_visual``, ``add_gps``).
     """
 
     name: str
@@ -143,6 +223,8 @@ class Sensor:
     graph_unary: tuple = ()
     graph_keyframes: Callable | None = None
     graph_run: Callable | None = None
+    states: tuple = ()
+    live: Live | None = None
 
     def data(self, streams) -> Any:
         """Its data in ``streams`` (a :class:`~fusion_vo.backends.timeline.SensorStreams`), or None."""
@@ -185,6 +267,15 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
     """
     if sensor.name in _REGISTRY and not replace:
         raise ValueError(f"sensor '{sensor.name}' is already registered")
+    from fusion_vo.sensors.model import ARGUMENT_SIZES
+
+    taken = set(ARGUMENT_SIZES) | {st.name for s in _REGISTRY.values() if s.name != sensor.name for st in s.states}
+    for state in sensor.states:
+        if not isinstance(state, State):
+            raise ValueError(f"sensor '{sensor.name}': states must be registry.State, not {type(state).__name__}")
+        if state.name in taken:
+            raise ValueError(f"sensor '{sensor.name}': state '{state.name}' is already a state of the backends")
+        taken.add(state.name)
     _REGISTRY[sensor.name] = sensor
     _ORDERED.clear()
     return sensor
@@ -207,6 +298,10 @@ def registered(sensor: Sensor):
         unregister(sensor.name)
 
 
+#: the entry-point group through which an installed package adds its sensors (the command line included)
+ENTRY_POINTS = "fusion_vo.sensors"
+
+
 def _load_builtins() -> None:
     global _loaded
     if _loaded:
@@ -216,6 +311,36 @@ def _load_builtins() -> None:
 
     for module in BUILTIN_MODULES:
         importlib.import_module(module)
+    load_entry_points()
+
+
+def load_entry_points(group: str = ENTRY_POINTS) -> list[str]:
+    """Register the sensors that installed packages declare in the entry-point ``group``; returns their names.
+
+    An entry point names a :class:`Sensor` (registered), a function (called: it registers) or a module
+    (imported: it registers at import), e.g. in a package's ``pyproject.toml``::
+
+        [project.entry-points."fusion_vo.sensors"]
+        compass = "my_robot.compass:COMPASS"
+
+    One that fails to load is logged and skipped (the command line then reports its name as unknown).
+    """
+    import logging
+    from importlib.metadata import entry_points
+
+    log = logging.getLogger(__name__)
+    before = set(_REGISTRY)
+    for ep in entry_points(group=group):
+        try:
+            obj = ep.load()
+            if isinstance(obj, Sensor):
+                if obj.name not in _REGISTRY:
+                    register(obj)
+            elif callable(obj):
+                obj()
+        except Exception as exc:  # a broken plugin must not stop the library
+            log.warning("sensor entry point %s (%s) not loaded: %s", ep.name, ep.value, exc)
+    return [name for name in _REGISTRY if name not in before]
 
 
 #: the built-in sensors' order (whichever module is imported first)
@@ -238,6 +363,12 @@ def get(name: str) -> Sensor:
     """The sensor called ``name`` (KeyError when none is)."""
     _load_builtins()
     return _REGISTRY[name]
+
+
+def states(used) -> tuple[State, ...]:
+    """The state variables the sensors named in ``used`` add (in :func:`sensors` order)."""
+    used = set(used)
+    return tuple(state for s in sensors() if s.name in used for state in s.states)
 
 
 def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:

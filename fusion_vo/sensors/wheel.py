@@ -83,7 +83,7 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
-from fusion_vo.sensors.registry import Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -552,6 +552,26 @@ def _pick_twist(streams, selected):
     return None
 
 
+def _live_ticks(m) -> tuple:
+    """A live :class:`~fusion_vo.measurements.WheelTicks` sample: ``(t, (left, right))``."""
+    return m.t, (m.left, m.right)
+
+
+def _live_ticks_data(t, rows, fusion) -> WheelData:
+    ticks = np.array(rows, dtype=np.int64)
+    return WheelData(t, ticks[:, 0], ticks[:, 1], fusion.wheel_config)
+
+
+def _live_twist(m) -> tuple:
+    """A live :class:`~fusion_vo.measurements.TwistSample`: ``(t, (vx, vy, wz))``."""
+    return m.t, (m.vx, m.vy, m.wz)
+
+
+def _live_twist_data(t, rows, fusion) -> TwistData:
+    v = np.array(rows)
+    return TwistData(t, v[:, 0], v[:, 1], v[:, 2])
+
+
 register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
     read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
@@ -559,6 +579,7 @@ register(Sensor(
     intervals=Step(20, add_intervals), ekf_measurements=ekf_measurements,
     ekf_blocks=(Step(20, ekf_wheel), Step(40, ekf_standstill)),
     graph_factors=(Step(10, graph_translation), Step(60, graph_standstill), Step(70, graph_heading)),
+    live=Live(_live_ticks, _live_ticks_data),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",
@@ -567,6 +588,7 @@ register(Sensor(
                                       and not ("wheel" in selected and present.get("wheel", False))),
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
     config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals),
+    live=Live(_live_twist, _live_twist_data, counted_as="wheel"),
 ))
 
 __all__ = [

@@ -1,0 +1,171 @@
+"""A compass defined outside the library: everything a new sensor needs, in this file alone.
+
+``COMPASS_SENSOR`` is an absolute heading; ``OFFSET_COMPASS_SENSOR`` a heading with an unknown constant
+offset (a magnetometer's declination or mounting error), which it adds to both backends as a state
+variable (``compass_offset``), reads from a recording's ``compass0/data.csv`` (``#timestamp [ns],yaw [rad]``)
+and takes live through ``StreamingFusion.add("compass", CompassSample(t, yaw))``.
+
+Nothing here registers on import (the tests register inside ``registry.registered``); ``register_offset_compass``
+is what the ``fusion_vo.sensors`` entry point of a package would name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.errors import InputError
+from fusion_vo.geometry import se2
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.registry import Live, Sensor, State, Step
+
+
+@dataclass
+class CompassData:
+    """Headings [rad] at times ``t`` [s]."""
+
+    t: np.ndarray
+    yaw: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class CompassSample:
+    """One live heading."""
+
+    t: float
+    yaw: float
+
+
+@dataclass
+class CompassNoise:
+    """Compass noise.
+
+    Attributes
+    ----------
+    sigma : float
+        Standard deviation of one heading [rad] (default 0.02).
+    """
+
+    sigma: float = 0.02
+
+
+@dataclass(frozen=True)
+class CompassModel(MeasurementModel):
+    """``h = ψ``: the pose's heading."""
+
+    name: str = "compass"
+    args: tuple = ("heading",)
+    dim: int = 1
+    angle_rows: tuple = (0,)
+
+    def evaluate(self, heading):
+        h = np.asarray(heading, dtype=np.float64)
+        return h, {"heading": np.ones(h.shape + (1,))}
+
+
+@dataclass(frozen=True)
+class OffsetCompassModel(MeasurementModel):
+    """``h = ψ + o``: the heading plus the compass's own offset, a state it adds (``compass_offset``)."""
+
+    name: str = "compass"
+    args: tuple = ("heading", "compass_offset")
+    dim: int = 1
+    angle_rows: tuple = (0,)
+
+    def evaluate(self, heading, compass_offset):
+        h = np.asarray(heading, dtype=np.float64) + np.asarray(compass_offset, dtype=np.float64)
+        one = np.ones(h.shape + (1,))
+        return h, {"heading": one, "compass_offset": one.copy()}
+
+
+COMPASS = CompassModel()
+OFFSET_COMPASS = OffsetCompassModel()
+
+
+# --------------------------------------------------------------------------- hooks
+def compass_intervals(iv, streams, config, counts):
+    """Headings at the nodes within ``max_gap`` of a reading (``iv.extra["compass"]``)."""
+    data = streams.extra["compass"]
+    T = iv.t
+    j = np.clip(np.searchsorted(data.t, T), 1, len(data.t) - 1)
+    near = np.minimum(np.abs(data.t[j] - T), np.abs(data.t[j - 1] - T)) <= config.max_gap
+    iv.extra["compass"] = (near, se2.wrap_angle(np.interp(T, data.t, np.unwrap(data.yaw))))
+    counts.setdefault("compass", SensorCount()).used += int(near.sum())
+
+
+def compass_measurements(iv, config):
+    if "compass" not in iv.extra:
+        return {}
+    ok, yaw = iv.extra["compass"]
+    return {"compass": (ok, yaw, config.section("compass").sigma ** 2)}
+
+
+def _ekf_block(model):
+    def block(ekf, meas, k):
+        m = meas.get("compass")
+        return [ekf.block(model, m[1][k + 1], m[2])] if m is not None and m[0][k + 1] else []
+    return block
+
+
+def compass_factor(builder, nf, node):
+    if "compass" not in builder.iv.extra:
+        return
+    ok, yaw = builder.iv.extra["compass"]
+    if ok[node.g1]:
+        var = builder.config.section("compass").sigma ** 2
+        nf.factors.append(builder.model_factor(COMPASS, [yaw[node.g1]], [[var]], {"heading": (node.xj,)}))
+        nf.sensors.append("compass")
+
+
+def offset_compass_factor(builder, nf, node):
+    if "compass" not in builder.iv.extra:
+        return
+    ok, yaw = builder.iv.extra["compass"]
+    if ok[node.g1]:
+        var = builder.config.section("compass").sigma ** 2
+        keys = {"heading": (node.xj,), "compass_offset": (builder.state_key("compass_offset", node.segment),)}
+        nf.factors.append(builder.model_factor(OFFSET_COMPASS, [yaw[node.g1]], [[var]], keys))
+        nf.sensors.append("compass")
+
+
+def read_compass(recording) -> CompassData:
+    """``compass0/data.csv`` of a recording: ``timestamp [ns], yaw [rad]`` per row."""
+    path = recording.path / "compass0" / "data.csv"
+    rows = []
+    for number, line in enumerate(path.read_text().splitlines(), 1):
+        if not line.strip() or line.startswith("#"):
+            continue
+        try:
+            t_ns, yaw = (float(v) for v in line.split(","))
+        except ValueError:
+            raise InputError("expected 'timestamp [ns],yaw [rad]'", path, number) from None
+        rows.append((t_ns * 1e-9, yaw))
+    data = np.array(rows, dtype=np.float64).reshape(-1, 2)
+    return CompassData(data[:, 0], data[:, 1])
+
+
+COMPASS_SENSOR = Sensor(name="compass", where="compass0/", config=("compass", CompassNoise),
+                        intervals=Step(100, compass_intervals), ekf_measurements=compass_measurements,
+                        ekf_blocks=(Step(100, _ekf_block(COMPASS)),), graph_unary=(Step(100, compass_factor),))
+
+#: the compass with an unknown constant offset, estimated by both backends (prior 0 ± 0.5 rad)
+OFFSET_COMPASS_SENSOR = dataclasses.replace(
+    COMPASS_SENSOR, folder="compass0", read=read_compass,
+    states=(State("compass_offset", initial=0.0, sigma=0.5),),
+    ekf_blocks=(Step(100, _ekf_block(OFFSET_COMPASS)),), graph_unary=(Step(100, offset_compass_factor),),
+    live=Live(sample=lambda m: (m.t, float(m.yaw)),
+              data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64)),
+              samples=lambda data: ((t, CompassSample(t, y)) for t, y in zip(data.t, data.yaw))),
+)
+
+
+def register_offset_compass() -> None:
+    """What a package's ``fusion_vo.sensors`` entry point names: registers the offset compass."""
+    registry.register(OFFSET_COMPASS_SENSOR)
