@@ -11,6 +11,13 @@ configuration, KLT frontend) and prints, per recording:
 * the largest difference [percentage points] between a fused track's leg-length error and visual
   odometry's over the straight legs of the ground truth (``legs`` of ``metrics.json``).
 
+With ``--sensors`` it also prints, per recording, how honest each input's stated noise is against the
+truth (:func:`sensor_nees`): the mean NEES of the visual increments (3 when their covariances are right)
+and the mean squared normalised error of each of their components (1 each), the NEES of the wheels' arc
+increments after their best-fitting distance scale and wheel-base factor (what the backends estimate),
+and the NIS of the gyro's angle per node interval after its mean bias — the numbers that say which
+sensor's error model is wrong on a recording where a fused track is worse than the best input.
+
 With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
 same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
 divided by 4, other robust kernels of the factor graph), printing the fused ATEs of each: what tells
@@ -18,7 +25,7 @@ which input or which part of the model makes a fused track worse than the best s
 
 Run::
 
-    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--variants]
+    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--sensors] [--variants]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -56,6 +63,78 @@ def leg_gap(metrics: dict, name: str) -> float:
     vo, other = metrics["vo"].get("legs") or [], metrics[name].get("legs") or []
     gaps = [abs(a["error_pct"] - b["error_pct"]) for a, b in zip(vo, other)]
     return max(gaps) if gaps else float("nan")
+
+
+def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
+    """Each input's errors against the truth, normalised by the noise the backends assume for it.
+
+    On the backends' node grid (:func:`fusion_vo.backends.timeline.build_intervals`, default configuration
+    with the recording's noise keys): the visual increments' NEES ``eᵀ Σ⁻¹ e`` and the mean of each
+    component's ``e² / σ²``; the wheels' arc increments against the true ones scaled by the least-squares
+    distance scale and wheel-base factor, with the arc model's covariance; the gyro's angle per interval
+    minus the least-squares bias against ``σ_g² Δt``. Consistent: 3, (1, 1, 1), 3, 1. For the camera's
+    and the gyro's heading errors also ``whiteness``: the variance of their sums over 64 consecutive node
+    intervals divided by 64 times the variance of one, which is 1 when the errors are independent from
+    interval to interval, as both backends assume (below 1: errors that cancel over time, so the summed
+    heading is better than the stated noise says; above: errors that persist).
+    """
+    from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
+    from fusion_vo.backends.timeline import build_intervals
+    from fusion_vo.geometry import se2
+    from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn
+
+    rec = Recording(seq)
+    config = as_config(None)
+    streams = streams_from_recording(rec, visual_increments, None, config)
+    config = with_recorded_noise(config, streams)
+    iv = build_intervals(streams, config)
+    gt = rec.groundtruth()
+    yaw = np.unwrap(gt.xyyaw[:, 2])
+    truth = np.stack([np.interp(iv.t, gt.t, gt.xyyaw[:, 0]), np.interp(iv.t, gt.t, gt.xyyaw[:, 1]),
+                      np.interp(iv.t, gt.t, yaw)], axis=1)
+
+    def between(i0, i1) -> np.ndarray:
+        return np.array([se2.between(truth[a], truth[b]) for a, b in zip(i0, i1)]).reshape(-1, 3)
+
+    def whiteness(errors: np.ndarray, n: int = 16) -> float:
+        if len(errors) < 8 * n:
+            return float("nan")
+        e = np.nan_to_num(errors[: len(errors) // n * n])
+        return float(np.var(e.reshape(-1, n).sum(axis=1)) / (n * np.nanvar(errors)))
+
+    def nees(e, cov) -> np.ndarray:
+        return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
+
+    out = {}
+    if len(iv.vis_i0):
+        e = iv.vis_delta - between(iv.vis_i0, iv.vis_i1)
+        e[:, 2] = se2.wrap_angle(e[:, 2])
+        z2 = np.mean(e**2 / np.einsum("nii->ni", iv.vis_cov), axis=0)
+        single = iv.vis_i1 == iv.vis_i0 + 1
+        heading = np.full(iv.n_steps, np.nan)
+        heading[iv.vis_i0[single]] = e[single, 2]
+        out["camera"] = (f"NEES {np.mean(nees(e, iv.vis_cov)):.2f} (x, y, yaw: {z2[0]:.2f} {z2[1]:.2f} {z2[2]:.2f}), "
+                         f"heading whiteness {whiteness(heading):.2f}")
+    steps = np.arange(iv.n_steps)
+    if iv.uses("wheel") and iv.wheel_ok.any():
+        ok = iv.wheel_ok
+        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[ok]
+        true = between(steps, steps + 1)[ok]
+        cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0], iv.dt,
+                             gyro_turn(iv))[ok]
+        dist, true_dist = np.hypot(inc[:, 0], inc[:, 1]), np.hypot(true[:, 0], true[:, 1])
+        k_r = float(np.sum(dist * true_dist) / max(np.sum(true_dist**2), 1e-30))
+        k_b = float(np.sum(inc[:, 2] * true[:, 2]) / max(np.sum(true[:, 2] ** 2), 1e-30))
+        e = inc - true * np.array([k_r, k_r, k_b])
+        out["wheel"] = f"NEES {np.mean(nees(e, cov)):.3f} (after scale {k_r:.4f}, base factor {k_b:.4f})"
+    if iv.uses("gyro") and iv.gyro_ok.any():
+        ok = iv.gyro_ok
+        r = (iv.gyro_angle - np.diff(truth[:, 2]))[ok]
+        dt = iv.dt[ok]
+        bias = float(np.sum(r) / np.sum(dt))
+        out["gyro"] = (f"NIS {np.mean((r - bias * dt) ** 2 / (config.imu.gyro_noise_density**2 * dt)):.2f}, "
+                       f"whiteness {whiteness(r - bias * dt):.2f}")
+    return out
 
 
 def compare(seq: Path, run_dir: Path) -> dict:
@@ -157,6 +236,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="keep the recordings and runs here (default: a temporary folder)")
     parser.add_argument("--only", help="comma-separated standard recordings (default: all with camera and wheels)")
+    parser.add_argument("--sensors", action="store_true",
+                        help="also print each input's NEES against the truth (runs visual odometry once more)")
     parser.add_argument("--variants", action="store_true",
                         help="also re-fuse each recording's increments with VARIANTS")
     args = parser.parse_args(argv)
@@ -174,6 +255,9 @@ def main(argv=None) -> int:
                      *("yes" if r[k] else "NO" for k in ("fused_le_best", "smoothed_le_ekf", "batch_le_online")),
                      f"{max(r['legs'].values()):.3f}"]
             print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+            if args.sensors:
+                for sensor, text in sensor_nees(seq, run_visual_odometry(Recording(seq)).increments).items():
+                    print(f"    {name} {sensor}: {text}", flush=True)
             if args.variants:
                 for label, ate in variants(seq).items():
                     print(f"    {name} {label:24s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import dataclasses
 import threading
+from concurrent.futures import Executor
 from dataclasses import dataclass, field
 
 import cv2
@@ -40,7 +41,8 @@ from frontends.frame_check import check_frame, texture_measure
 from frontends.matching import MATCHERS, gate_distances, match_descriptors
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, apply_similarity, estimate_similarity, judge_fit
-from frontends.tracking import LkSettings, exposure_correction, fit_affine, reduce_for_exposure, track_points
+from frontends.tracking import (WARP_HERE, LkSettings, exposure_correction, fit_affine, reduce_for_exposure,
+                                track_points, warp_reference)
 
 _DEFAULT_MAX_DISTANCE = {"patch": 0.9, "orb": 80.0}
 
@@ -275,10 +277,16 @@ class FeatureFrontend:
         self._rng = np.random.default_rng(cfg.seed)
         # an ORB object per thread: prepare() may run in several threads at once (cv2.ORB is not thread-safe)
         self._orb_local = threading.local()
+        self._executor: Executor | None = None
         self._shape: tuple[int, int] | None = None
         self._dense = DenseFallback(self.point_map, DirectConfig(central_region=cfg.central_region)) \
             if cfg.dense_fallback else None
         self.reset()
+
+    def set_executor(self, executor: Executor | None) -> None:
+        """Let the frontend warp the reference for the refinement in ``executor`` (``None``: never), while
+        it measures the exposure change in the calling thread. The results are the same without it."""
+        self._executor = executor
 
     def reset(self) -> None:
         """Forget the reference frame and the motion prediction."""
@@ -430,8 +438,11 @@ class FeatureFrontend:
             return path, status, fit, n, reason
         p0 = ref.pts[i0[fit.inliers]].astype(np.float64)
         affine = fit_affine(p0, cur.pts[i1[fit.inliers]].astype(np.float64))
+        warping = None if self._executor is None else \
+            self._executor.submit(warp_reference, ref.image, affine, self._lk.warp_tolerance)
         exposure = exposure_correction(ref.small, cur.small, affine, 0.01)
-        tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk, exposure=exposure)
+        tr = track_points(ref.image, cur.image, p0, affine, 1, self._lk, exposure=exposure,
+                          warped=WARP_HERE if warping is None else warping.result())
         if len(tr.index) < cfg.min_inliers:
             return path, MotionStatus.TOO_FEW_FEATURES, fit, n, "refinement lost the points"
         src = ref.rect[i0[fit.inliers]][tr.index]

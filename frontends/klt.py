@@ -31,6 +31,7 @@ reference and the prediction is dropped.
 
 from __future__ import annotations
 
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass
 
 import cv2
@@ -43,8 +44,8 @@ from frontends.direct import DenseFallback, DirectConfig
 from frontends.frame_check import check_frame, texture_measure
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 from frontends.similarity import RobustOptions, SimilarityFit, apply_similarity, estimate_similarity, judge_fit
-from frontends.tracking import (LkSettings, check_backward, exposure_correction, fit_affine, reduce_for_exposure,
-                                track_forward)
+from frontends.tracking import (WARP_HERE, LkSettings, check_backward, exposure_correction, fit_affine,
+                                reduce_for_exposure, track_forward, warp_reference)
 
 
 @dataclass
@@ -281,6 +282,69 @@ class PreparedFrame:
 
 
 @dataclass
+class _Setup:
+    """Where an attempt starts: the reference points in view of the guess and the image-space motion.
+
+    Attributes
+    ----------
+    p0 : ndarray, shape (k, 2)
+        The reference points that the guess keeps in view (raw image coordinates, float64).
+    src : ndarray, shape (k, 2)
+        Their rectified coordinates.
+    affine : ndarray, shape (2, 3)
+        The guess as an image-space affine map (least squares through the point map).
+    warped : ndarray or None or WARP_HERE
+        :func:`frontends.tracking.warp_reference` of the reference by ``affine``, when it was made
+        ahead; ``WARP_HERE`` when the tracker is to make it.
+    """
+
+    p0: np.ndarray
+    src: np.ndarray
+    affine: np.ndarray
+    warped: object = WARP_HERE
+
+
+def _setup(point_map: PointMap, ref_pts: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray,
+           shape: tuple[int, int], border: int, min_inliers: int) -> _Setup | None:
+    """The :class:`_Setup` of tracking ``ref_pts`` (rectified: ``ref_rect``) from the rectified similarity
+    ``guess`` in frames of ``shape``; ``None`` when fewer than ``min_inliers`` points stay in view."""
+    h, w = shape
+    b = border
+    init = point_map.to_image(apply_similarity(guess, ref_rect))
+    inside = (init[:, 0] >= b) & (init[:, 0] <= w - 1 - b) & (init[:, 1] >= b) & (init[:, 1] <= h - 1 - b)
+    if np.count_nonzero(inside) < min_inliers:
+        return None
+    p0 = ref_pts[inside].astype(np.float64)
+    return _Setup(p0, ref_rect[inside], fit_affine(p0, init[inside]))
+
+
+@dataclass
+class _Ahead:
+    """The predicted attempt of the next frame, set up in another thread (:meth:`KltFrontend.set_executor`).
+
+    It is used only when the frontend is in the state it was made for: the same reference image and
+    points, and the same prediction (so the same next timestamp); it is then what the tracker would
+    have computed itself, bit for bit.
+    """
+
+    ref_img: np.ndarray
+    ref_pts: np.ndarray
+    prediction: np.ndarray
+    future: Future  # of (ref_rect, _Setup or None)
+
+
+def _set_up_ahead(point_map: PointMap, ref_img: np.ndarray, ref_pts: np.ndarray, prediction: np.ndarray,
+                  border: int, min_inliers: int, warp_tolerance: float) -> tuple[np.ndarray, _Setup | None]:
+    """What :meth:`KltFrontend._process` computes first for the predicted attempt: the rectified
+    reference points and the attempt's :class:`_Setup` with the reference warped."""
+    ref_rect = point_map.to_rectified(ref_pts.astype(np.float64))
+    setup = _setup(point_map, ref_pts, ref_rect, prediction, ref_img.shape, border, min_inliers)
+    if setup is not None:
+        setup.warped = warp_reference(ref_img, setup.affine, warp_tolerance)
+    return ref_rect, setup
+
+
+@dataclass
 class _Attempt:
     """One tracking attempt from a given initial guess."""
 
@@ -313,7 +377,24 @@ class KltFrontend:
         self._dense = DenseFallback(self.point_map, DirectConfig(central_region=self.config.central_region)) \
             if self.config.dense_fallback else None
         self._corner_plan: tuple[tuple[int, int], CornerPlan] | None = None
+        self._executor: Executor | None = None
+        self._next_t: float | None = None
         self.reset()
+
+    def set_executor(self, executor: Executor | None) -> None:
+        """Let the frontend set up the next frame's tracking in ``executor`` (``None``: never).
+
+        After a measured frame, when the next frame's timestamp is known (:meth:`expect`), the
+        rectified reference points, the predicted motion as an image-space map and the reference warped
+        by it are computed in ``executor`` while the caller goes on; the next :meth:`process` uses them
+        when nothing changed meanwhile. The results are the same as without an executor.
+        """
+        self._executor = executor
+        self._ahead = None
+
+    def expect(self, timestamp: float | None) -> None:
+        """The timestamp of the frame that the next :meth:`process` call will most likely get (a hint)."""
+        self._next_t = timestamp
 
     # ------------------------------------------------------------------ state
     def reset(self) -> None:
@@ -326,6 +407,7 @@ class KltFrontend:
         self._ref_small: np.ndarray | None = None  # reduced reference for the exposure comparison
         self._cur_texture = float("nan")
         self._cur_small: np.ndarray | None = None
+        self._ahead: _Ahead | None = None
 
     # ------------------------------------------------------------ public API
     def process(self, image: np.ndarray | PreparedFrame, timestamp: float) -> FrameMotion:
@@ -380,11 +462,16 @@ class KltFrontend:
             self._set_reference(img, t, np.zeros((0, 2), np.float32))
             return self._failed(t, MotionStatus.TOO_FEW_FEATURES, "too few corners in the reference frame")
 
-        ref_rect = self.point_map.to_rectified(self._ref_pts.astype(np.float64))
         attempts: list[_Attempt] = []
         prediction = self._history.predict(dt)
+        ahead = self._take_ahead(prediction)
+        if ahead is not None:
+            ref_rect, setup = ahead
+        else:
+            ref_rect = self.point_map.to_rectified(self._ref_pts.astype(np.float64))
+            setup = WARP_HERE
         if prediction is not None:
-            attempts.append(self._attempt("predicted", img, ref_rect, prediction, cfg.pyramid_levels))
+            attempts.append(self._attempt("predicted", img, ref_rect, prediction, cfg.pyramid_levels, setup))
         if not attempts or attempts[-1].status is not MotionStatus.OK:
             attempts.append(self._attempt("retry", img, ref_rect, np.eye(2, 3), cfg.retry_pyramid_levels))
         if attempts[-1].status is not MotionStatus.OK and cfg.global_fallback:
@@ -433,7 +520,28 @@ class KltFrontend:
                 return checked
         self._history.succeeded(fit.matrix, dt)
         self._set_reference(img, t, best.next_pts)
+        self._start_ahead(t)
         return motion
+
+    def _start_ahead(self, t: float) -> None:
+        """Set up the next frame's predicted attempt in the executor (when there is one and a hint)."""
+        if self._executor is None or self._next_t is None or not self._next_t > t:
+            return
+        prediction = self._history.predict(self._next_t - t)
+        if prediction is None:
+            return
+        cfg = self.config
+        future = self._executor.submit(_set_up_ahead, self.point_map, self._ref_img, self._ref_pts, prediction,
+                                       cfg.border, cfg.min_inliers, cfg.warp_tolerance)
+        self._ahead = _Ahead(self._ref_img, self._ref_pts, prediction, future)
+
+    def _take_ahead(self, prediction: np.ndarray | None) -> tuple[np.ndarray, _Setup | None] | None:
+        """The set-up made ahead for this frame, when it was made for this state; consumed either way."""
+        ahead, self._ahead = self._ahead, None
+        if ahead is None or prediction is None or ahead.ref_img is not self._ref_img \
+                or ahead.ref_pts is not self._ref_pts or not np.array_equal(ahead.prediction, prediction):
+            return None
+        return ahead.future.result()
 
     def _dense_motion(self, img: np.ndarray, t: float, texture: float, why: str) -> FrameMotion | None:
         """The per-frame dense fallback (``None`` when disabled or when it fails too)."""
@@ -453,7 +561,8 @@ class KltFrontend:
         motion.n_features = len(self._ref_pts)
         return motion
 
-    def _attempt(self, path: str, img: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray, levels: int) -> _Attempt:
+    def _attempt(self, path: str, img: np.ndarray, ref_rect: np.ndarray, guess: np.ndarray, levels: int,
+                 setup: _Setup | None | object = WARP_HERE) -> _Attempt:
         """Track the reference points from the rectified similarity ``guess`` and fit a similarity.
 
         The guess is turned into an image-space affine map ``A`` (least squares through the point
@@ -462,18 +571,17 @@ class KltFrontend:
         biases the measured rotation by a fraction of a percent). If the fitted motion then differs
         from ``A`` by more than ``refine_tolerance``, the points are tracked once more through the
         fitted motion at full resolution.
+
+        ``setup`` is this attempt's :class:`_Setup` when it was made ahead (``None``: too few points in
+        view), ``WARP_HERE`` to make it here.
         """
         cfg = self.config
-        h, w = img.shape
-        b = cfg.border
-        init = self.point_map.to_image(apply_similarity(guess, ref_rect))
-        inside = (init[:, 0] >= b) & (init[:, 0] <= w - 1 - b) & (init[:, 1] >= b) & (init[:, 1] <= h - 1 - b)
-        if np.count_nonzero(inside) < cfg.min_inliers:
+        if setup is WARP_HERE:
+            setup = _setup(self.point_map, self._ref_pts, ref_rect, guess, img.shape, cfg.border, cfg.min_inliers)
+        if setup is None:
             return _Attempt(path, None, MotionStatus.TOO_FEW_FEATURES, "prediction leaves too few points in view")
-        p0 = self._ref_pts[inside].astype(np.float64)
-        src = ref_rect[inside]
-        affine = fit_affine(p0, init[inside])
-        outcome = self._track(img, p0, src, affine, levels)
+        p0, src, affine = setup.p0, setup.src, setup.affine
+        outcome = self._track(img, p0, src, affine, levels, warped=setup.warped)
         if isinstance(outcome, _Attempt):
             outcome.path = path
             return outcome
@@ -486,10 +594,10 @@ class KltFrontend:
                 fit, p1, n_tracked, keep = outcome2
         return self._judge(path, fit, n_tracked, p1)
 
-    def _track(self, img, p0, src, affine, levels, exposure=(1.0, 0.0)):
+    def _track(self, img, p0, src, affine, levels, exposure=(1.0, 0.0), warped=WARP_HERE):
         """Tracking from ``affine(p0)`` and a robust fit; an ``_Attempt`` on failure."""
         cfg = self.config
-        forward = track_forward(self._ref_img, img, p0, affine, levels, self._lk, exposure=exposure)
+        forward = track_forward(self._ref_img, img, p0, affine, levels, self._lk, exposure=exposure, warped=warped)
         tr = forward.result
         if cfg.forward_backward and cfg.fb_skip_ratio is not None and len(tr.index) >= cfg.min_inliers:
             # the backward check only when the forward tracks do not agree on one motion

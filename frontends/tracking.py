@@ -116,6 +116,20 @@ def _lk_arguments(settings: LkSettings) -> dict:
                 flags=cv2.OPTFLOW_USE_INITIAL_FLOW, minEigThreshold=settings.min_eigen)
 
 
+def warp_reference(ref_img: np.ndarray, affine: np.ndarray, tolerance: float) -> np.ndarray | None:
+    """The reference as it would look after the motion ``affine`` (its patches keep their shape), or
+    ``None`` when ``affine``'s linear part is within ``tolerance`` of the identity (a translation does not
+    deform patches, the reference is tracked from as it is). What :func:`track_forward` tracks from."""
+    if np.abs(affine[:, :2] - np.eye(2)).max() > tolerance:
+        h, w = ref_img.shape
+        return cv2.warpAffine(ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return None
+
+
+#: ``warped`` argument of :func:`track_forward`: warp the reference there
+WARP_HERE = object()
+
+
 def track_forward(
     ref_img: np.ndarray,
     img: np.ndarray,
@@ -125,15 +139,21 @@ def track_forward(
     settings: LkSettings,
     start: np.ndarray | None = None,
     exposure: tuple[float, float] = (1.0, 0.0),
+    warped: np.ndarray | None | object = WARP_HERE,
 ) -> ForwardTracks:
-    """The forward pass of :func:`track_points` (same parameters), without the backward check."""
+    """The forward pass of :func:`track_points` (same parameters), without the backward check.
+
+    ``warped`` is :func:`warp_reference` of ``ref_img`` by ``affine`` with ``settings.warp_tolerance``
+    when it was already made (in another thread); by default it is made here.
+    """
     h, w = img.shape
     s = settings
     p0 = np.asarray(p0, dtype=np.float64)
     moved = np.ascontiguousarray(p0 @ affine[:, :2].T + affine[:, 2], dtype=np.float32)
-    if np.abs(affine[:, :2] - np.eye(2)).max() > s.warp_tolerance:
-        # the reference as it would look after the motion: its patches keep their shape
-        ref = cv2.warpAffine(ref_img, affine, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    if warped is WARP_HERE:
+        warped = warp_reference(ref_img, affine, s.warp_tolerance)
+    if warped is not None:
+        ref = warped
         q0 = moved
     else:  # a translation does not deform patches: track from the reference itself
         ref = ref_img
@@ -175,6 +195,7 @@ def track_points(
     settings: LkSettings,
     start: np.ndarray | None = None,
     exposure: tuple[float, float] = (1.0, 0.0),
+    warped: np.ndarray | None | object = WARP_HERE,
 ) -> TrackResult:
     """Track reference points ``p0`` into ``img`` given the expected image-space motion ``affine``.
 
@@ -194,11 +215,14 @@ def track_points(
     exposure : (gain, offset)
         Brightness change from the reference to the current frame (see :func:`exposure_change`);
         the reference is corrected by it before tracking.
+    warped : ndarray or None, optional
+        :func:`warp_reference` of ``ref_img`` by ``affine`` with ``settings.warp_tolerance``, when it was
+        made elsewhere (another thread); by default it is made here.
 
     The forward pass is :func:`track_forward`; with ``settings.forward_backward`` the points are then
     checked by :func:`check_backward`.
     """
-    forward = track_forward(ref_img, img, p0, affine, levels, settings, start, exposure)
+    forward = track_forward(ref_img, img, p0, affine, levels, settings, start, exposure, warped)
     return check_backward(forward, settings) if settings.forward_backward else forward.result
 
 

@@ -19,8 +19,10 @@ Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``thread
 thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
 per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
 calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
-derotation, ground geometry, the track) while the frontend measures the next frame. OpenCV releases the GIL while it decodes and filters, so they overlap on the
-cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
+derotation, ground geometry, the track) while the frontend measures the next frame; a frontend with a
+``set_executor`` method gets one more thread for work it can hand off (KLT: the next frame's reference
+warped by the predicted motion; features: the reference warped for the refinement). OpenCV releases the
+GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
 the calling thread, OpenCV single-threaded).
@@ -237,17 +239,22 @@ class VisualOdometry:
         """Latest ``(x, y, yaw)`` of the visual track (``None`` before the first frame)."""
         return self.poses[-1] if self.poses else None
 
-    def process(self, image, t: float, height: float | None = None) -> tuple[FrameMotion, VisualIncrement | None]:
+    def process(self, image, t: float, height: float | None = None,
+                height_sigma: float = 0.0) -> tuple[FrameMotion, VisualIncrement | None]:
         """Process one frame; returns the frontend's motion and the body increment (``None`` for a first frame).
 
-        ``image`` is the frame, or what the frontend's ``prepare`` made of it.
+        ``image`` is the frame, or what the frontend's ``prepare`` made of it; ``height`` a measured camera
+        height [m] (a range finder's) with its standard deviation ``height_sigma``.
         """
         motion = self.frontend.process(image, t)
-        return motion, self.finish(motion, height)
+        return motion, self.finish(motion, height, height_sigma)
 
-    def finish(self, motion: FrameMotion, height: float | None = None) -> VisualIncrement | None:
+    def finish(self, motion: FrameMotion, height: float | None = None,
+               height_sigma: float = 0.0) -> VisualIncrement | None:
         """The second half of :meth:`process`: the body increment of the frontend's ``motion`` (``None``
         for a first frame), derotated and through the ground geometry, appended to the track.
+        The height's uncertainty goes into the increment's covariance
+        (:meth:`~fusion_vo.geometry.ground.GroundGeometry.body_increment`).
 
         Nothing in it feeds back into the frontend, so a run does it in another thread while the frontend
         measures the next frame (:func:`run_visual_odometry`); it must see the motions in frame order.
@@ -260,7 +267,7 @@ class VisualOdometry:
         if self.derotation is not None and motion.ok and motion.prev_timestamp is not None:
             motion.info["measured_matrix"] = motion.matrix
             motion.matrix = self.derotation.apply(motion.matrix, motion.prev_timestamp, motion.timestamp)
-        inc = self.geometry.increment(motion, height)
+        inc = self.geometry.increment(motion, height, height_sigma)
         if inc.ok:
             self._append(inc)
         return inc
@@ -412,12 +419,33 @@ def _shut_down(pool: ThreadPoolExecutor | None):
 
 def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     """Camera height at ``times`` from the range finder (linear interpolation), or ``None``."""
+    out = range_heights(recording, times)
+    return None if out is None else out[0]
+
+
+def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Camera height at ``times`` from the range finder (linear interpolation) and its standard deviation,
+    or ``None`` without a range finder.
+
+    The standard deviation of one reading is measured from the readings
+    (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction ``a`` of the way
+    between two readings has ``σ² ((1 - a)² + a²)``.
+    """
     if not recording.has_range():
         return None
     r: RangeData = recording.range()
     if len(r) == 0:
         return None
-    return np.interp(times, r.t, r.distance)
+    from fusion_vo.sensors.range import reading_sigma
+
+    times = np.asarray(times, dtype=np.float64)
+    heights = np.interp(times, r.t, r.distance)
+    sigma = reading_sigma(r) or 0.0
+    t = np.asarray(r.t, dtype=np.float64)
+    j = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
+    span = t[j] - t[j - 1] if len(t) > 1 else np.ones_like(times)
+    a = np.clip((times - t[j - 1]) / np.where(span > 0, span, 1.0), 0.0, 1.0) if len(t) > 1 else np.zeros_like(times)
+    return heights, sigma * np.sqrt((1.0 - a) ** 2 + a**2)
 
 
 def run_visual_odometry(
@@ -463,7 +491,8 @@ def run_visual_odometry(
         frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None
-    heights = heights_for(recording, recording.frame_times) if config.use_range else None
+    ranged = range_heights(recording, recording.frame_times) if config.use_range else None
+    heights, height_sigmas = (None, None) if ranged is None else ranged
     derotation = None
     if config.gyro_derotation and recording.has_imu():
         derotation = GyroDerotation(recording.imu(), geometry)
@@ -490,8 +519,15 @@ def run_visual_odometry(
                              getattr(frontend, "prepare", None), threads)
     # with threads, the increments are computed in a thread of their own, one frame behind the frontend
     post = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-geometry") if threads > 1 else None
+    # and a frontend that can do part of its work in another thread (KLT: setting up the next frame's
+    # tracking, told the next frame's timestamp; features: warping the reference) does so in one more
+    ahead = None
+    if threads > 1 and hasattr(frontend, "set_executor"):
+        ahead = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-ahead")
+        frontend.set_executor(ahead)
+    frame_times = recording.frame_times
     pending: deque = deque()
-    with opencv_threads(threads), closing(source), _shut_down(post):
+    with opencv_threads(threads), closing(source), _shut_down(post), _shut_down(ahead):
         for k, (frame, image) in enumerate(source):
             if frame.image is None:
                 skipped.append(frame.error or frame.source)
@@ -504,14 +540,18 @@ def run_visual_odometry(
                 continue
             bad_run = 0
             h = None if heights is None else float(heights[frame.index])
+            h_sigma = 0.0 if height_sigmas is None else float(height_sigmas[frame.index])
+            if ahead is not None and hasattr(frontend, "expect"):
+                following = frame.index + 1
+                frontend.expect(float(frame_times[following]) if 0 < following < len(frame_times) else None)
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
             inliers.append(motion.n_inliers)
             if post is None:
-                collect(vo.finish(motion, h))
+                collect(vo.finish(motion, h, h_sigma))
             else:
-                pending.append(post.submit(vo.finish, motion, h))
+                pending.append(post.submit(vo.finish, motion, h, h_sigma))
                 while pending and (pending[0].done() or len(pending) > 2 * threads + 2):
                     collect(pending.popleft().result())
             if progress:

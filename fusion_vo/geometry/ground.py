@@ -150,10 +150,17 @@ class GroundGeometry:
         k = (height or self.height) / self.rectifier.f
         return self._qc + k * (np.asarray(rectified, dtype=np.float64).reshape(-1, 2) - self.rectifier.c) @ self._R2.T
 
-    def body_increment(self, params: np.ndarray, cov: np.ndarray | None = None, height: float | None = None):
-        """``(dx, dy, dyaw)`` and its covariance from similarity parameters ``(tx, ty, θ, log s)``."""
+    def body_increment(self, params: np.ndarray, cov: np.ndarray | None = None, height: float | None = None,
+                       height_sigma: float = 0.0):
+        """``(dx, dy, dyaw)`` and its covariance from similarity parameters ``(tx, ty, θ, log s)``.
+
+        ``height_sigma`` [m] is the uncertainty of ``height`` (a range finder's reading): the translation
+        scales with the height, so it adds ``σ_h² j jᵀ`` with ``j = ∂(dx, dy)/∂h`` to the covariance, an
+        error proportional to the distance moved that the frontend's residuals cannot show.
+        """
         tx, ty, th, lam = (float(v) for v in params)
-        k = (height or self.height) / self.rectifier.f
+        h = height or self.height
+        k = h / self.rectifier.f
         c = self.rectifier.c
         es = math.exp(lam)
         Rt = _rot(th)
@@ -174,6 +181,9 @@ class GroundGeometry:
         J[:2, 3] = -Rm @ dg_dlam
         J[2, 2] = -self._sigma
         P = J @ np.asarray(cov, dtype=np.float64) @ J.T
+        if height_sigma > 0:
+            j_h = -Rm @ (g - self._qc) / h  # d = q_c - R(-φ) g with g - q_c proportional to h
+            P[:2, :2] += height_sigma**2 * np.outer(j_h, j_h)
         P = 0.5 * (P + P.T)
         P[0, 0] = max(P[0, 0], self.min_sigma_xy**2)
         P[1, 1] = max(P[1, 1], self.min_sigma_xy**2)
@@ -198,14 +208,15 @@ class GroundGeometry:
         t = Sc - lin @ c
         return np.column_stack([lin, t])
 
-    def increment(self, motion: FrameMotion, height: float | None = None) -> VisualIncrement:
-        """A :class:`VisualIncrement` from a frontend's :class:`FrameMotion`."""
+    def increment(self, motion: FrameMotion, height: float | None = None, height_sigma: float = 0.0) -> VisualIncrement:
+        """A :class:`VisualIncrement` from a frontend's :class:`FrameMotion` (``height_sigma``: see
+        :meth:`body_increment`)."""
         t0 = motion.prev_timestamp if motion.prev_timestamp is not None else motion.timestamp
         if not motion.ok:
             return VisualIncrement(t0, motion.timestamp, np.zeros(3), np.diag([np.inf] * 3), 1.0,
                                    motion.status.value, motion.n_inliers)
         p = motion.params
-        delta, P = self.body_increment(p, motion.covariance, height)
+        delta, P = self.body_increment(p, motion.covariance, height, height_sigma)
         return VisualIncrement(t0, motion.timestamp, delta, P, float(math.exp(-p[3])), "ok", motion.n_inliers)
 
 

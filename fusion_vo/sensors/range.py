@@ -69,6 +69,27 @@ def camera_height(data: RangeData, noise: RangeNoise | None = None) -> CameraHei
     return CameraHeight(np.asarray(data.t, dtype=np.float64), np.where(ok, d, np.nan), ok, n_gated)
 
 
+def reading_sigma(data: RangeData, noise: RangeNoise | None = None) -> float | None:
+    """Standard deviation [m] of one reading, measured from the readings themselves.
+
+    The second difference ``z_{i+1} - 2 z_i + z_{i-1}`` of white noise of standard deviation ``σ`` has
+    variance ``6 σ²``, while a height that changes smoothly over a few samples (a slope, a vibration much
+    slower than the sample rate) contributes little to it; so ``σ = rms(second differences) / √6`` (an upper
+    bound when the height itself changes fast). Readings the gate of :func:`camera_height` rejects and second
+    differences above ``spike_threshold`` are left out. None with fewer than 10 usable second differences.
+    """
+    noise = noise or RangeNoise()
+    h = camera_height(data, noise)
+    z = h.height[h.valid]
+    if len(z) < 12:
+        return None
+    d2 = np.diff(z, 2)
+    d2 = d2[np.abs(d2) <= noise.spike_threshold]
+    if len(d2) < 10:
+        return None
+    return float(np.sqrt(np.mean(d2**2) / 6.0))
+
+
 @dataclass(frozen=True)
 class RangeModel(MeasurementModel):
     """The range reading as a measurement of the visual scale (module docstring).

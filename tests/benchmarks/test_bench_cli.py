@@ -2,7 +2,8 @@
 
 import pytest
 
-from fusion_vo.benchmark import BASELINE_SCRIPT, first_frames, load_baseline, run_benchmark
+from fusion_vo.benchmark import (BASELINE_SCRIPT, EndToEnd, bound_table, first_frames, load_baseline, run_benchmark,
+                                 wall_bound_ms)
 from fusion_vo.cli.main import main
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import make_standard
@@ -64,6 +65,25 @@ def test_short_benchmark_prints_both_sides_and_ratios(short):
     for label in ("plain OpenCV script, OpenCV's default threads", "plain OpenCV script, OpenCV on 1 thread",
                   "klt, 1 thread |", "klt, 2 threads |"):
         assert f"| {label}" in table
+    assert "shortest possible wall time per frame" in table and "| klt, 2 threads | " in table.split("what the CPU")[1]
+
+
+def test_the_bound_is_the_calling_threads_cpu_or_the_total_over_the_cores():
+    # the plain script's bounds: max(6, 9 / 2) = 6 beside 10 on one thread, then max(8, 16 / 2) = 8 beside 9
+    plain = EndToEnd("plain OpenCV script", None, 100, baseline=True, cpu_ms=[9.0, 16.0], thread_ms=[6.0, 8.0])
+    single = EndToEnd("plain OpenCV script", 1, 100, baseline=True, cpu_ms=[10.0, 9.0], thread_ms=[10.0, 9.0])
+    one = EndToEnd("klt", 1, 100, cpu_ms=[4.0, 5.0], thread_ms=[4.0, 5.0])
+    two = EndToEnd("klt", 2, 100, cpu_ms=[4.6, 3.0], thread_ms=[2.2, 2.0])  # total / 2 vs the tracker
+    features = EndToEnd('features:{"descriptor": "orb"}', 2, 100, cpu_ms=[3.0, 3.0], thread_ms=[1.0, 1.0])
+    assert [wall_bound_ms(two, r, cores=2) for r in (0, 1)] == [pytest.approx(2.3), pytest.approx(2.0)]
+    assert wall_bound_ms(two, 0, cores=1) == pytest.approx(4.6)  # two threads on one core
+    lines = bound_table([plain, single, one, two, features], cores=2).splitlines()
+    assert len(lines) == 5 and not any("plain OpenCV" in line for line in lines)
+    cells = [[c.strip() for c in line.strip("|").split("|")] for line in lines[2:]]
+    # ceilings: 6 / 4 = 1.5 and 8 / 5 = 1.6 against 3; 6 / 2.3 and 8 / 2.0 against 5; 6 / 1.5 and 8 / 1.5
+    assert cells[0][2:] == ["4.50 (4.00-5.00) ms", "7.00 (6.00-8.00) ms", "1.55 (1.50-1.60)", "3", "no"]
+    assert cells[1][4:] == ["3.30 (2.61-4.00)", "5", "no"]
+    assert cells[2][4:] == ["4.67 (4.00-5.33)", "2", "yes"]
 
 
 def test_a_variant_row_runs_the_frontend_with_its_options(short, monkeypatch):
@@ -129,3 +149,31 @@ def test_klt_profile_times_every_stage(short, monkeypatch, capsys):
            "derotation, geometry"]
     parts = sum(float(rows[k][1]) for k in top) + float(rows[next(k for k in rows if k.startswith("everything"))][1])
     assert parts == pytest.approx(float(rows["all"][1]), abs=0.01)
+
+
+def test_handoff_benchmark_runs_both_ways_and_compares_them(short, monkeypatch, capsys):
+    """``benchmarks/bench_handoff.py``: each frontend with and without its hand-off thread, same results."""
+    import sys
+    from pathlib import Path
+
+    monkeypatch.syspath_prepend(str(Path(BASELINE_SCRIPT).parent))
+    import bench_handoff
+
+    monkeypatch.setattr(sys, "argv", ["bench_handoff.py", "--sequence", str(short), "--frames", "12",
+                                      "--repeats", "1"])
+    assert bench_handoff.main() == 0
+    out = capsys.readouterr().out
+    for fe in ("klt", "features"):
+        for way in ("on", "off"):
+            assert f"| {fe} | {way} |" in out
+    assert out.count("identical bit for bit") == 4 and "DIFFERENT" not in out
+    # the comparison itself can tell results apart
+    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+
+    a = run_visual_odometry(Recording(short), OdometryConfig(threads=1), frames=Recording(short).frames(stop=8))
+    b = run_visual_odometry(Recording(short), OdometryConfig(threads=1), frames=Recording(short).frames(stop=8))
+    assert bench_handoff.same(a, b)
+    import dataclasses
+
+    b.increments[3] = dataclasses.replace(b.increments[3], delta=b.increments[3].delta + 1e-12)
+    assert not bench_handoff.same(a, b)

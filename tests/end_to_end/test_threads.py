@@ -167,11 +167,11 @@ def test_an_error_of_the_geometry_stage_reaches_the_caller(standard_recording, m
     calls = []
     original = GroundGeometry.increment
 
-    def failing(self, motion, height=None):
+    def failing(self, motion, height=None, height_sigma=0.0):
         calls.append(threading.current_thread().name)
         if len(calls) == 6:
             raise RuntimeError("increment 6 failed")
-        return original(self, motion, height)
+        return original(self, motion, height, height_sigma)
 
     monkeypatch.setattr(GroundGeometry, "increment", failing)
     with pytest.raises(RuntimeError, match="increment 6 failed"):

@@ -375,3 +375,71 @@ def test_klt_forward_backward_check_only_when_the_forward_tracks_disagree(monkey
 def test_klt_fb_skip_ratio_is_checked(ratio):
     with pytest.raises(ValueError, match="fb_skip_ratio"):
         KltConfig(fb_skip_ratio=ratio)
+
+
+def test_klt_set_up_ahead_in_an_executor_gives_the_same_motions(monkeypatch):
+    """With an executor and the next timestamp, KLT warps the reference for the next frame in the executor's
+    thread; the motions are the same bit for bit, and a wrong hint only means the tracker warps it itself."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    import frontends.klt as klt
+    import frontends.tracking as tracking
+
+    motions = [similarity_about(WIDTH / 2, HEIGHT / 2 + 600.0, 0.0, 0.0, 2.5)] * 24  # turning: every frame warps
+    frames = [f for f, _ in sequence(motions, "gravel", 1024 - WIDTH / 2, 424 - HEIGHT / 2)]
+    times = [0.05 * k for k in range(len(frames))]
+    warps: list[str] = []
+    for owner in (klt, tracking):
+        original = owner.warp_reference
+        monkeypatch.setattr(owner, "warp_reference", lambda *a, _f=original: warps.append(
+            threading.current_thread().name) or _f(*a))
+    plain, ahead = klt.KltFrontend(), klt.KltFrontend()
+    wrong = {6, 13}  # frames whose hint is off: the set-up made for them is not used
+    in_plain = in_ahead = 0
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ahead") as pool:
+        ahead.set_executor(pool)
+        for k, (image, t) in enumerate(zip(frames, times)):
+            warps.clear()
+            a = plain.process(image, t)
+            in_plain += len(warps)
+            warps.clear()
+            ahead.expect(None if k + 1 == len(times) else times[k + 1] + (0.01 if k + 1 in wrong else 0.0))
+            b = ahead.process(image, t)
+            pool.submit(lambda: None).result()  # the set-up for the next frame is done
+            in_ahead += warps.count(threading.current_thread().name)
+            assert a.status == b.status and a.n_inliers == b.n_inliers and (a.ok or k == 0)
+            if k:
+                np.testing.assert_array_equal(a.matrix, b.matrix)
+                np.testing.assert_array_equal(a.covariance, b.covariance)
+    # the predicted attempt's warp moved to the executor on every frame but the first two (no prediction
+    # yet) and the two with a wrong hint
+    assert in_plain >= len(frames) - 2
+    assert in_plain - in_ahead == len(frames) - 2 - len(wrong)
+
+
+def test_features_warp_in_an_executor_gives_the_same_motions(monkeypatch):
+    """With an executor, the feature frontend warps the reference for the refinement there, while it
+    measures the exposure change; the motions are the same bit for bit."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    import frontends.features as features
+    from frontends.features import FeatureFrontend
+
+    motions = [similarity_about(WIDTH / 2, HEIGHT / 2 + 600.0, 0.0, 0.0, 2.5)] * 12
+    frames = [f for f, _ in sequence(motions, "gravel", 1024 - WIDTH / 2, 424 - HEIGHT / 2)]
+    threads: list[str] = []
+    original = features.warp_reference
+    monkeypatch.setattr(features, "warp_reference", lambda *a: threads.append(
+        threading.current_thread().name) or original(*a))
+    plain, other = FeatureFrontend(), FeatureFrontend()
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="warp") as pool:
+        other.set_executor(pool)
+        for k, image in enumerate(frames):
+            a, b = plain.process(image, 0.05 * k), other.process(image, 0.05 * k)
+            assert a.status == b.status and a.n_inliers == b.n_inliers and (a.ok or k == 0)
+            if k:
+                np.testing.assert_array_equal(a.matrix, b.matrix)
+                np.testing.assert_array_equal(a.covariance, b.covariance)
+    assert len(threads) == len(frames) - 1 and all(name.startswith("warp") for name in threads)

@@ -135,6 +135,24 @@ def test_covariance_matches_monte_carlo():
     assert np.allclose(np.sqrt(np.diag(emp)), np.sqrt(np.diag(P)), rtol=0.08)
 
 
+def test_height_uncertainty_enters_the_translation_covariance():
+    """A measured height (a range finder's) with standard deviation σ_h: the increment's covariance gains the
+    spread of the translation over heights drawn from N(h, σ_h²) (it scales with the height; yaw does not)."""
+    cam = make_camera(0.25, 0.02, 0.1, 0.05, -0.03, [0, 0, 0, 0])
+    geo = GroundGeometry(cam, min_sigma_xy=0, min_sigma_yaw=0)
+    p = np.array([30.0, -60.0, 0.03, 0.001])  # a few cm of motion and a turn
+    C = np.diag([1e-4, 1e-4, 1e-9, 1e-9])
+    sigma_h = 5e-4
+    _, P0 = geo.body_increment(p, C, 0.1)
+    _, P = geo.body_increment(p, C, 0.1, sigma_h)
+    heights = np.random.default_rng(4).normal(0.1, sigma_h, 4000)
+    spread = np.cov(np.array([geo.body_increment(p, None, h)[0] for h in heights]).T)
+    added = P - P0
+    assert np.allclose(added[2], 0.0) and np.allclose(added[:, 2], 0.0)
+    assert np.allclose(np.sqrt(np.diag(added)[:2]), np.sqrt(np.diag(spread)[:2]), rtol=0.06)
+    assert added[0, 0] > 10 * P0[0, 0]  # here it dominates what the pixels say
+
+
 def test_camera_not_looking_down_is_rejected():
     T = np.eye(4)
     T[:3, 3] = [0, 0, 0.1]  # camera z along body z: looking up

@@ -79,3 +79,19 @@ def test_gate_and_robust_kernels():
     np.testing.assert_allclose(robust_loss(d, "huber", 1.345), [0.125, 1.345 * 3.0 - 0.5 * 1.345**2])
     np.testing.assert_allclose(robust_weight(d, "cauchy", 2.0), [4.0 / 4.25, 4.0 / 13.0])
     np.testing.assert_allclose(robust_loss(d, None, 1.0), 0.5 * d**2)
+
+
+def test_range_reading_sigma_from_the_readings():
+    """The noise of a range finder's readings is measured from their second differences, not from the slow
+    vibration of the height they follow; gated spikes do not count."""
+    from fusion_vo.measurements import RangeData
+    from fusion_vo.sensors.range import reading_sigma
+
+    rng = np.random.default_rng(7)
+    t = np.arange(0.0, 20.0, 1 / 40)
+    height = 0.1 + 0.001 * np.sin(2 * np.pi * 3.0 * t)  # 1 mm at 3 Hz, sampled at 40 Hz
+    for sigma in (2e-4, 5e-4, 2e-3):
+        z = height + rng.normal(0.0, sigma, len(t))
+        z[100] += 0.05  # a spike
+        assert reading_sigma(RangeData(t, z)) == pytest.approx(sigma, rel=0.12)
+    assert reading_sigma(RangeData(t[:5], height[:5])) is None
