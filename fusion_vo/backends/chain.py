@@ -40,6 +40,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import gtsam
 import numpy as np
@@ -90,6 +91,19 @@ class Layout:
     def n_blocks(self) -> int:
         return len(self.starts) - 1
 
+    @cached_property
+    def padded_index(self) -> np.ndarray:
+        """Position of each column in the padded block storage (K, size)."""
+        block = np.searchsorted(self.starts, np.arange(self.n), side="right") - 1
+        return np.arange(self.n) - self.starts[block] + block * self.size
+
+    @cached_property
+    def padding(self) -> np.ndarray:
+        """Flat positions, in the diagonal blocks (K, size, size), of the padding columns' diagonal entries."""
+        pad = np.setdiff1d(np.arange(self.n_blocks * self.size), self.padded_index)
+        block, i = pad // self.size, pad % self.size
+        return block * self.size * self.size + i * (self.size + 1)
+
     def columns(self, keys: np.ndarray) -> np.ndarray:
         """First column of each of ``keys``."""
         if "_order" not in self.__dict__:
@@ -105,8 +119,8 @@ class Layout:
         """Flat positions in the block storage (diagonal blocks, then the blocks below them) of the
         entries ``H[rows, cols]``; -1 for entries above the block diagonal (mirrored elsewhere)."""
         K, M = self.n_blocks, self.size
-        br = np.searchsorted(self.starts, rows, side="right") - 1
-        bc = np.searchsorted(self.starts, cols, side="right") - 1
+        block = self.padded_index // M  # the block of each column, and the column within it
+        br, bc = block[rows], block[cols]
         lr, lc = rows - self.starts[br], cols - self.starts[bc]
         if np.any(np.abs(br - bc) > 1):
             raise NotAChain("a factor couples blocks that are not neighbours")
@@ -159,31 +173,40 @@ class System:
         self.D = flat[:K * M * M].reshape(K, M, M)
         self.E = flat[K * M * M:].reshape(max(K - 1, 0), M, M)
         self.g = np.zeros(K * M)
-        starts = lay.starts
-        self._index = np.concatenate([np.arange(starts[k], starts[k + 1]) - starts[k] + k * M for k in range(K)])
+        self._index = lay.padded_index
         self.g[self._index] = g
-        for k in range(K):  # padding: decoupled unit variables
-            m = starts[k + 1] - starts[k]
-            self.D[k, m:, m:] = np.eye(M - m)
+        self.D.reshape(-1)[lay.padding] = 1.0  # padding: decoupled unit variables
+        # E_k couples only the last few columns of block k to block k+1 (what reaches across the cut):
+        # the first column of block k that E_k touches, M where none does
+        touched = np.any(self.E != 0.0, axis=1)  # (K-1, M): columns of block k with a coupling
+        self.tail = np.where(touched.any(axis=1), np.argmax(touched, axis=1), M)
 
     def factor(self, damping: float = 0.0):
-        """Block Cholesky factors ``(L_k, C_k)`` of ``H + damping I``; :class:`Indeterminate` if not positive definite."""
+        """Block Cholesky factors ``(L_k, C_k)`` of ``H + damping I``; :class:`Indeterminate` if not positive definite.
+
+        ``E_k`` is zero left of column ``tail[k]`` of block ``k``, so ``C_k = E_k L_k⁻ᵀ`` is zero there too
+        (forward substitution through leading zeros): ``C_k`` comes from the trailing corner of ``L_k``
+        alone and the update of the next diagonal block, ``C_k C_kᵀ``, has that few columns' rank.
+        """
         K, M = self.D.shape[0], self.D.shape[1]
         L = np.empty_like(self.D)
-        C = np.empty_like(self.E)
+        C = np.zeros_like(self.E)
         eye = damping * np.eye(M)
-        prev = None
+        prev = None  # the nonzero columns of C_{k-1}
         for k in range(K):
             Dk = self.D[k] + eye if damping > 0 else self.D[k]
-            if prev is not None:
+            if prev is not None and prev.shape[1]:
                 Dk = Dk - prev @ prev.T
             Lk, info = _potrf(Dk, lower=1, clean=1)
             if info != 0 or not np.all(np.isfinite(Lk)):
                 raise Indeterminate(f"the normal equations are not positive definite (block {k})")
             L[k] = Lk
             if k < K - 1:
-                Ct, info = _trtrs(Lk, self.E[k].T, lower=1)
-                prev = C[k] = Ct.T
+                c = int(self.tail[k])
+                if c < M:
+                    Ct, info = _trtrs(Lk[c:, c:], self.E[k, :, c:].T, lower=1)
+                    C[k, :, c:] = Ct.T
+                prev = C[k, :, c:]
         return L, C
 
     def solve(self, factors) -> np.ndarray:
@@ -192,12 +215,20 @@ class System:
         K, M = L.shape[0], L.shape[1]
         y = np.empty((K, M))
         g = self.g.reshape(K, M)
+        tail = self.tail  # C_k is zero left of column tail[k] (factor)
         for k in range(K):
-            r = g[k] if k == 0 else g[k] - C[k - 1] @ y[k - 1]
+            r = g[k]
+            if k > 0:
+                c = int(tail[k - 1])
+                r = r - C[k - 1, :, c:] @ y[k - 1, c:]
             y[k] = _trtrs(L[k], r, lower=1)[0]
         x = np.empty((K, M))
         for k in range(K - 1, -1, -1):
-            r = y[k] if k == K - 1 else y[k] - C[k].T @ x[k + 1]
+            r = y[k]
+            if k < K - 1:
+                c = int(tail[k])
+                r = r.copy()
+                r[c:] -= C[k, :, c:].T @ x[k + 1]
             x[k] = _trtrs(L[k], r, lower=1, trans=1)[0]
         return x.reshape(-1)[self._index]
 
@@ -220,8 +251,12 @@ class System:
             Linv = _trtri(L[k], lower=1)[0]
             s = Linv.T @ Linv
             if sigma is not None:
-                G = _trtrs(L[k], C[k].T, lower=1, trans=1)[0]
-                s += G @ sigma @ G.T
+                # G_k Σ G_kᵀ with G_k = L_k⁻ᵀ C_kᵀ, C_k zero left of its tail column c:
+                # (L_k⁻¹)[c:]ᵀ (C_k[:, c:]ᵀ Σ C_k[:, c:]) (L_k⁻¹)[c:]
+                c = int(self.tail[k])
+                if c < M:
+                    Cc, P = C[k, :, c:], Linv[c:]
+                    s += P.T @ (Cc.T @ sigma @ Cc) @ P
             sigma = s
             sel = order[bounds[k]:bounds[k + 1]]
             if len(sel):

@@ -182,11 +182,11 @@ class ModelFactors:
         self.names = [n for n in f0.model.args if n in f0.keys]
         self.rows = list(range(f0.model.dim)) if f0.rows is None else list(f0.rows)
         self.keys = {n: np.array([f.keys[n] for f in factors], dtype=np.int64) for n in self.names}
-        self.fixed = {n: np.array([[f.fixed[n]] if np.ndim(f.fixed[n]) == 0 else f.fixed[n] for f in factors], dtype=np.float64)
-                      for n in f0.fixed}
+        self.fixed = {n: _stacked([f.fixed[n] for f in factors], (-1,)) for n in f0.fixed}
         self.params = {n: np.array([f.params[n] for f in factors], dtype=np.float64) for n in f0.params}
-        self.z = np.array([np.asarray(f.z, dtype=np.float64).reshape(-1) for f in factors])
-        self.whiten = whitening(np.array([np.atleast_2d(f.covariance) for f in factors], dtype=np.float64))
+        self.z = _stacked([f.z for f in factors], (-1,))
+        m = len(self.rows)  # the covariance is that of the selected rows
+        self.whiten = whitening(_stacked([f.covariance for f in factors], (m, m)))
         self.robust = f0.robust
         #: exact as a linear factor: a linear model without a robust kernel
         self.linear = f0.model.linear and f0.robust is None
@@ -261,6 +261,16 @@ class ModelFactors:
                 items += [int(key[r]), a[r]]
             out.append(gtsam.JacobianFactor(*items, b[r], unit))
         return out
+
+
+def _stacked(items: list, shape: tuple) -> np.ndarray:
+    """``items`` (numbers or arrays, all of one size) as one float array (N, *shape); one conversion of
+    the whole list, per item only when they differ in shape."""
+    try:
+        out = np.asarray(items, dtype=np.float64)
+    except ValueError:  # arrays of different shapes (but one size)
+        out = np.array([np.asarray(x, dtype=np.float64).reshape(-1) for x in items])
+    return out.reshape((len(items),) + shape)
 
 
 _HEADING = np.array([[[0.0, 0.0, 1.0]]])

@@ -124,7 +124,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn, standstill
 
 logger = logging.getLogger(__name__)
 
@@ -152,6 +152,9 @@ def W(k: int) -> int:
 def R(k: int) -> int:
     return gtsam.symbol("r", k)
 
+
+_NO_INCREMENT = np.zeros(3)
+_NO_INCREMENT.flags.writeable = False
 
 #: GTSAM symbol letters of the sensors' own state variables (the built-in ones use x, b, o, s, w, r)
 _STATE_LETTERS = "acdefghijklmnpqtuvyz"
@@ -238,7 +241,10 @@ class GraphBuilder:
         # bias and calibration variables: one per segment of `calibration_interval` seconds
         origin = self.t[0] if t_origin is None else t_origin
         self.segment = np.floor((self.t - origin) / config.graph.calibration_interval + 1e-9).astype(int)
+        # the same as Python lists: indexed once per node, faster than numpy scalars
+        self._grid, self._segment, self._times = self.grid.tolist(), self.segment.tolist(), iv.t.tolist()
         self._robust = _robust_kernel(config)
+        self._kernel = (config.graph.robust, config.graph.robust_k) if self._robust is not None else None
         # the AHRS offset variables exist with the IMU (an AHRS may report in any interval of a stream)
         self.ahrs_offset_on = iv.uses("gyro") and config.imu.ahrs_offset_walk > 0
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
@@ -252,6 +258,7 @@ class GraphBuilder:
             self._turn = gyro_turn(iv)
             self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
                                              np.diff(iv.t), self._turn)
+            self._still = standstill(iv.wheel_dl, iv.wheel_dr, np.diff(iv.t), config.wheel_model(iv.twist)[0])
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -259,9 +266,8 @@ class GraphBuilder:
                      rows: tuple | None = None, robust: bool = True) -> ModelFactor:
         """A measurement of a sensor model (:mod:`fusion_vo.backends.factors`), in the robust kernel unless
         ``robust`` is False."""
-        kernel = (self.config.graph.robust, self.config.graph.robust_k) if robust and self._robust is not None else None
-        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys,
-                           np.asarray(cov, dtype=np.float64), fixed or {}, params or {}, rows, kernel)
+        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys, np.asarray(cov, dtype=np.float64),
+                           fixed or {}, params or {}, rows, self._kernel if robust else None)
 
     def noise(self, cov: np.ndarray, robust: bool = True):
         base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, dtype=np.float64))
@@ -339,21 +345,21 @@ class GraphBuilder:
         the translation a weak constant-twist factor keeps it determined. Then the unary steps
         (``graph_unary``) of the node.
         """
-        iv, cfg = self.iv, self.config
+        cfg = self.config
         est = estimate or {}
-        g0, g1 = int(self.grid[n - 1]), int(self.grid[n])
-        c = int(self.segment[n])
-        node = NodeContext(n=n, g0=g0, g1=g1, dt=float(iv.t[g1] - iv.t[g0]), segment=c,
+        g0, g1 = self._grid[n - 1], self._grid[n]
+        c, previous = self._segment[n], self._segment[n - 1]
+        node = NodeContext(n=n, g0=g0, g1=g1, dt=self._times[g1] - self._times[g0], segment=c,
                            xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est)
-        nf = NodeFactors(n, float(self.t[n]))
-        if c != self.segment[n - 1]:
-            self._new_segment(nf, c, est, int(self.segment[n - 1]))
+        nf = NodeFactors(n, self._times[g1])
+        if c != previous:
+            self._new_segment(nf, c, est, previous)
         steps = registry.ordered("graph_factors")
         for _, step in steps:
             if step.order >= GUESS_ORDER:
                 break
             step.run(self, nf, node)
-        last = est.get("last_increment", np.zeros(3))
+        last = est.get("last_increment", _NO_INCREMENT)
         translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
         if translation is None:
@@ -383,6 +389,11 @@ class GraphBuilder:
         turn = None if self._turn is None else self._turn[g0:g1].sum()
         return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
                                  turn)[0]
+
+    def wheels_at_rest(self, g0: int, g1: int) -> bool:
+        """Both wheels at rest in every interval from grid index ``g0`` to ``g1``
+        (:func:`~fusion_vo.sensors.wheel.standstill`, evaluated for all intervals at once)."""
+        return bool(self._still[g0:g1].all())
 
     def key(self, n: int) -> int:
         """The pose variable of local node ``n``."""
@@ -437,8 +448,12 @@ class GraphBuilder:
             step.run(self, nf, node)
 
     def count(self, nf: NodeFactors) -> None:
+        counts = self.counts
         for s in nf.sensors:
-            self.counts.setdefault(s, SensorCount()).used += 1
+            c = counts.get(s)
+            if c is None:
+                c = counts[s] = SensorCount()
+            c.used += 1
 
 
 def initial_calibration(iv: Intervals) -> dict:
@@ -639,7 +654,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             model_factors.extend(f for f in nf.factors if isinstance(f, ModelFactor))
         for key, v in nf.values.items():
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
-        t0 = time.process_time()
+        t0 = time.process_time() if incremental else 0.0
         new_graph = gtsam.NonlinearFactorGraph()
         if incremental:
             lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)

@@ -381,6 +381,19 @@ def when(t: float, T: np.ndarray) -> str:
     return f"t={t:.2f} ({t - T[0]:.2f} s in)"
 
 
+def node_indices(T: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """:func:`node_index` of every time in ``t`` at once; -1 where no node is within 1 us."""
+    t = np.asarray(t, dtype=np.float64)
+    i = np.clip(np.searchsorted(T, t), 0, len(T) - 1)
+    prev = np.maximum(i - 1, 0)
+    out = np.full(len(t), -1, dtype=np.int64)
+    at_i = np.abs(T[i] - t) < 1e-6
+    out[at_i] = i[at_i]
+    at_prev = (i >= 1) & (np.abs(T[prev] - t) < 1e-6)  # the earlier of two matches, as node_index
+    out[at_prev] = prev[at_prev]
+    return out
+
+
 def node_index(T: np.ndarray, t: float) -> int | None:
     i = int(np.clip(np.searchsorted(T, t), 0, len(T) - 1))
     for j in (i - 1, i):

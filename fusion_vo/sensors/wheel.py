@@ -489,9 +489,7 @@ def graph_translation(builder, nf, node) -> None:
     g0, g1, xi, xj, est = node.g0, node.g1, node.xi, node.xj, node.estimate
     if not (iv.uses("wheel") and iv.wheel_ok[g0:g1].all()):
         return
-    wheel_noise = cfg.wheel_model(iv.twist)[0]
-    node.scratch["still"] = bool(standstill(iv.wheel_dl[g0:g1], iv.wheel_dr[g0:g1], np.diff(iv.t[g0:g1 + 1]),
-                                            wheel_noise).all())
+    node.scratch["still"] = builder.wheels_at_rest(g0, g1)
     m, cov = builder.wheel_increment(g0, g1)
     yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
     speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())

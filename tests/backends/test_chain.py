@@ -14,8 +14,10 @@ def streams():
     return SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height)
 
 
-def _random_chain(rng, sizes):
-    """A random SPD block-tridiagonal matrix with blocks of ``sizes`` (dense) and a right-hand side."""
+def _random_chain(rng, sizes, reach=None):
+    """A random SPD block-tridiagonal matrix with blocks of ``sizes`` and a right-hand side: rows tie each
+    block to the next, dense, or (``reach``) only the last ``reach`` columns of a block to the next block,
+    as the graph's cuts do."""
     n = sum(sizes)
     A = np.zeros((n + 5, n))
     starts = np.concatenate([[0], np.cumsum(sizes)])
@@ -26,14 +28,20 @@ def _random_chain(rng, sizes):
             if r >= len(A):
                 A = np.vstack([A, np.zeros((1, n))])
             A[r, starts[k]:hi] = rng.normal(size=hi - starts[k])
+            if reach is not None and r % 2:  # every other row within the block only
+                A[r, starts[k + 1]:] = 0.0
             r += 1
+        if reach is not None and k + 1 < len(sizes):  # nothing left of the last `reach` columns reaches across
+            rows = np.flatnonzero(A[:, starts[k + 1]:hi].any(axis=1))
+            A[np.ix_(rows, np.arange(starts[k], starts[k + 1] - reach))] = 0.0
     return A.T @ A, rng.normal(size=n), starts
 
 
-def test_block_sweeps_solve_and_invert_a_block_tridiagonal_system():
+@pytest.mark.parametrize("reach", [None, 2])
+def test_block_sweeps_solve_and_invert_a_block_tridiagonal_system(reach):
     rng = np.random.default_rng(0)
     sizes = [4, 6, 3, 5, 4]
-    H, g, starts = _random_chain(rng, sizes)
+    H, g, starts = _random_chain(rng, sizes, reach)
     n = len(g)
     lay = chain.Layout(np.arange(n), np.ones(n, dtype=np.int64), np.arange(n), n, starts, max(sizes))
     rows, cols = np.nonzero(H)
@@ -42,6 +50,8 @@ def test_block_sweeps_solve_and_invert_a_block_tridiagonal_system():
     keep = slots >= 0
     flat[slots[keep]] = H[rows[keep], cols[keep]]
     system = chain.System(lay, flat, g)
+    if reach is not None:  # the couplings reach across from the last columns of each block only
+        assert np.all(system.tail == np.array(sizes[:-1]) - reach)
     factors = system.factor()
     np.testing.assert_allclose(system.solve(factors), np.linalg.solve(H, g), rtol=1e-9, atol=1e-12)
     damped = system.solve(system.factor(0.7))

@@ -119,3 +119,28 @@ def test_odometry_twist_stands_in_for_encoder_ticks():
     R = 0.4 / 0.2
     np.testing.assert_allclose(end, [R * np.sin(0.6), R * (1 - np.cos(0.6)), 0.6], atol=5e-3)
     assert set(fuse(streams, "none").trajectories) == {"wheel"}
+
+
+def test_camera_increments_are_checked_counted_and_put_in_time_order():
+    cam = np.arange(0, 2.0, 0.05)
+    wheel = _wheel(np.arange(0, 2.0, 0.02))
+    clean = _visual(cam)
+    for i, inc in enumerate(clean):
+        inc.delta[2] = 0.001 * i  # tells the increments apart
+    nodes = node_times(SensorStreams(visual=clean, wheel=wheel), FusionConfig())
+    vis = list(clean)
+    bad = {3: "lost", 5: "nan", 7: "not positive definite", 9: "off the grid"}
+    vis[3] = VisualIncrement(vis[3].t0, vis[3].t1, vis[3].delta, vis[3].covariance, status="lost")
+    vis[5] = VisualIncrement(vis[5].t0, vis[5].t1, np.array([np.nan, 0.0, 0.0]), vis[5].covariance)
+    vis[7] = VisualIncrement(vis[7].t0, vis[7].t1, vis[7].delta, -np.eye(3))
+    vis[9] = VisualIncrement(vis[9].t0 + 0.003, vis[9].t1, vis[9].delta, vis[9].covariance)
+    vis[11], vis[12] = vis[12], vis[11]  # one increment arrives after the next one
+    iv = build_intervals(SensorStreams(visual=vis, wheel=wheel), FusionConfig(), nodes=nodes)
+    count = iv.counts["camera"]
+    assert (count.missing, count.gated, count.reordered, count.used) == (1, 3, 1, len(vis) - len(bad))
+    kept = [inc for i, inc in enumerate(clean) if i not in bad]  # in time order, the swap undone
+    np.testing.assert_array_equal(iv.vis_delta[:, 2], [inc.delta[2] for inc in kept])
+    np.testing.assert_allclose(iv.t[iv.vis_i0], [inc.t0 for inc in kept], atol=1e-9)
+    np.testing.assert_allclose(iv.t[iv.vis_i1], [inc.t1 for inc in kept], atol=1e-9)
+    # the intervals of the dropped increments are not covered by the camera: a note says so only when long
+    assert not any("camera lost" in note for note in iv.notes)
