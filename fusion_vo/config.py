@@ -55,7 +55,7 @@ def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
     from fusion_vo.odometry import OdometryConfig
 
     return {"odometry": (OdometryConfig, _ODOMETRY_EXCLUDE), "klt": (KltConfig, ()),
-            "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ("sensors",))}
+            "features": (FeatureConfig, ()), "direct": (DirectConfig, ()), "fusion": (FusionConfig, ("sensors", "states"))}
 
 
 @dataclass
@@ -142,11 +142,11 @@ def run_model() -> type[BaseModel]:
     sections = tuple(s.config for s in registry.sensors() if s.config is not None and s.config[0] not in own)
     registered = registry.names()  # the built-in names in their documented order, then the others
     names = tuple(n for n in SENSORS if n in registered) + tuple(n for n in registered if n not in SENSORS)
-    return _run_model(names, sections)
+    return _run_model(names, sections, registry.all_states())
 
 
 @functools.cache
-def _run_model(sensor_names: tuple[str, ...], sensor_sections: tuple) -> type[BaseModel]:
+def _run_model(sensor_names: tuple[str, ...], sensor_sections: tuple, states: tuple = ()) -> type[BaseModel]:
     from pydantic import ConfigDict, Field, create_model, field_validator
 
     from fusion_vo import schema
@@ -159,11 +159,21 @@ def _run_model(sensor_names: tuple[str, ...], sensor_sections: tuple) -> type[Ba
     }
     for name, (cls, exclude) in _sections().items():
         section = schema.model_of(cls, exclude)
-        if name == "fusion" and sensor_sections:  # the registered sensors' sections, through the same schema
+        if name == "fusion" and (sensor_sections or states):  # the registered sensors' sections and states
             extra = {}
             for key, section_cls in sensor_sections:
                 sub = schema.model_of(section_cls)
                 extra[key] = (sub, Field(default_factory=sub, description=sub.__doc__))
+            if states:
+                from fusion_vo.sensors.registry import StatePrior
+
+                priors = {}
+                for state in states:
+                    sub = schema.model_of(StatePrior, defaults=state.prior())
+                    priors[state.name] = (sub, Field(default_factory=sub, description=f"{state.name}: its prior "
+                                                                                  "(initial, sigma) and random walk"))
+                model = create_model("States", __config__=ConfigDict(extra="forbid"), **priors)
+                extra["states"] = (model, Field(default_factory=model, description=schema.field_docs(cls)["states"]))
             section = create_model("FusionConfig", __base__=section, **extra)
         fields[name] = (section, Field(default_factory=section, description=docs[name]))
     fields["evaluate"] = (bool, Field(True, description=docs["evaluate"]))
@@ -193,6 +203,8 @@ def validate_config(data: dict, path: Path | None = None) -> RunConfig:
             built = cls.from_dict(schema.plain(getattr(values, name)), path, (name,))
             sections[name] = {k: v for k, v in schema.plain(built).items() if k not in exclude}
             sections[name].update(schema.plain(built.sensors))
+            if built.states:
+                sections[name]["states"] = schema.plain(built.states)
             continue
         built = schema.to_dataclass(cls, getattr(values, name), path, (name,))  # the stage's own checks
         sections[name] = {k: v for k, v in schema.plain(built).items() if k not in exclude}

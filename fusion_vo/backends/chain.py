@@ -421,18 +421,18 @@ def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterati
     return values, it, system
 
 
-def pose_marginals(system: System, pose_keys: list[int]) -> np.ndarray:
+def pose_marginals(system: System, pose_keys: list[int], dim: int = 3) -> np.ndarray:
     """Marginal covariances (N, 3, 3) of ``pose_keys`` from the linearisation ``system`` (GTSAM's Pose2
     tangent space), as :func:`fusion_vo.backends.graph.pose_marginals` computes them with GTSAM's
     ``Marginals``: with vague priors (σ = 100) on every variable when the system is not positive
-    definite, NaN if it still is not."""
+    definite, NaN if it still is not. ``dim=1``: the variances (N, 1, 1) of scalar variables."""
     columns = system.lay.columns(np.asarray(pose_keys, dtype=np.int64))
     try:
-        return system.marginal_blocks(system.factor(), columns, 3)
+        return system.marginal_blocks(system.factor(), columns, dim)
     except Indeterminate:
         logger.warning("gtsam: marginals of a poorly conditioned system; adding vague priors")
     try:
-        return system.marginal_blocks(system.factor(1e-4), columns, 3)
+        return system.marginal_blocks(system.factor(1e-4), columns, dim)
     except Indeterminate:
         logger.warning("gtsam: no marginal covariances (the linearised system is indeterminate)")
-        return np.full((len(pose_keys), 3, 3), np.nan)
+        return np.full((len(pose_keys), dim, dim), np.nan)

@@ -171,6 +171,10 @@ class FusionConfig:
         Configuration sections of sensors registered outside the library (:mod:`fusion_vo.sensors.registry`,
         ``Sensor.config``): section name -> its dataclass, read from the configuration's ``section:`` key
         through the same schema (default: the dataclass's defaults); see :meth:`section`.
+    states : dict
+        Prior and random walk of the state variables registered sensors add, by state name (``initial``,
+        ``sigma``, ``random_walk``: :class:`~fusion_vo.sensors.registry.StatePrior`), read from the configuration's
+        ``states:`` key (default: as each sensor registers it, ``Sensor.states``).
     """
 
     step_hz: float = 20.0
@@ -202,6 +206,7 @@ class FusionConfig:
     ekf: EkfConfig = field(default_factory=EkfConfig)
     graph: GraphConfig = field(default_factory=GraphConfig)
     sensors: dict = field(default_factory=dict)
+    states: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.validate()
@@ -230,6 +235,11 @@ class FusionConfig:
                 raise InputError(f"'{key}' must not be negative, not {value}")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
+        for name, prior in self.states.items():
+            try:
+                prior.check(f"states.{name}")
+            except ValueError as exc:
+                raise InputError(str(exc)) from None
 
     def wheel_model(self, twist: bool) -> tuple[WheelNoise, float]:
         """Noise model and wheel-base prior sigma of encoder ticks (``twist=False``) or an odometry twist."""
@@ -252,9 +262,11 @@ class FusionConfig:
             if sensor.config is not None and sensor.config[0] not in own:
                 name, section_cls = sensor.config
                 sections[name] = schema.build(section_cls, data.pop(name, None) or {}, path, prefix + (name,))
-        config = schema.build(cls, data, path, prefix, exclude=("sensors",))
-        if sections:
+        states = _state_priors(data.pop("states", None), path, prefix + ("states",))
+        config = schema.build(cls, data, path, prefix, exclude=("sensors", "states"))
+        if sections or states:
             config.sensors = sections
+            config.states = states
             try:  # their values, named like the built-in sections' (``fusion: 'compass.sigma' must be ...``)
                 config.validate()
             except InputError as exc:
@@ -282,6 +294,29 @@ class FusionConfig:
         return dataclasses.asdict(self)
 
 
+def _state_priors(data, path, prefix: tuple) -> dict:
+    """The ``states:`` section: each registered state's :class:`~fusion_vo.sensors.registry.StatePrior`, its
+    defaults the registered ones (every registered state when any is configured; none otherwise)."""
+    from fusion_vo import schema
+    from fusion_vo.sensors import registry
+
+    data = {} if data is None else data
+    where = ".".join(prefix)
+    if not isinstance(data, dict):
+        raise InputError(f"{where}: expected a mapping of key: value, got {data!r}", path)
+    known = {state.name: state for state in registry.all_states()}
+    for name in data:
+        if name not in known:
+            listed = f" (known: {', '.join(known)})" if known else " (no registered sensor adds a state)"
+            raise InputError(f"{where}.{name}: unknown key{listed}", path)
+    out = {}
+    for name, state in known.items():
+        model = schema.model_of(registry.StatePrior, defaults=state.prior())
+        values = schema.validate(model, data.get(name) or {}, path, prefix + (name,))
+        out[name] = schema.to_dataclass(registry.StatePrior, values, path, prefix + (name,))
+    return out
+
+
 #: noise parameters that must be strictly positive besides every ``*sigma*`` (a zero would claim a perfect sensor)
 _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
 
@@ -292,7 +327,7 @@ def _numbers(obj, prefix: str = ""):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
             yield from _numbers(value, f"{prefix}{f.name}.")
-        elif isinstance(value, dict):  # the registered sensors' sections
+        elif isinstance(value, dict) and f.name == "sensors":  # the registered sensors' sections
             for name, section in value.items():
                 if dataclasses.is_dataclass(section):
                     yield from _numbers(section, f"{prefix}{name}.")

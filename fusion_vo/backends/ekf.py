@@ -373,12 +373,14 @@ def calibration_observable(iv: Intervals) -> tuple[bool, bool]:
     """Whether the visual scale and the wheel base can be told apart from the motion.
 
     The visual scale needs an independent distance (wheels or the range finder) next to the camera;
-    the wheel base needs an independent heading change (camera, gyro or AHRS) next to the wheels.
+    the wheel base needs an independent heading change (camera, gyro, or a sensor that measures the heading:
+    the AHRS, a registered one declaring ``absolute_heading``) next to the wheels.
     """
     cam = len(iv.vis_i0) > 0
     wheel = iv.uses("wheel")
     kv = cam and (wheel or iv.range_ok.any())
-    kb = wheel and (cam or iv.uses("gyro") or iv.ahrs_ok.any())
+    kb = wheel and (cam or iv.uses("gyro") or any(s.gives_heading(iv) for s in registry.sensors()
+                                                   if s.absolute_heading))
     return bool(kv), bool(kb)
 
 

@@ -690,6 +690,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.counts["gtsam_online"] = counts
         online_values = retired.complete(isam.calculateEstimate())
         result.calibration["gtsam_online"] = _calibration(online_values, builder)
+        _state_sigmas(result.calibration["gtsam_online"], builder, lambda keys: [isam.marginalCovariance(k)[0, 0]
+                                                                                  for k in keys])
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
         if gcfg.residuals:
@@ -732,6 +734,13 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             else:
                 cov = pose_marginals(lin, solution, n_nodes)
             result.covariances["gtsam"] = world_covariances(poses[:, 2], cov)
+            if problem is not None:
+                with threadpool_limits(limits=1, user_api="blas"):
+                    _state_sigmas(result.calibration["gtsam"], builder,
+                                  lambda keys: chain.pose_marginals(lin, keys, dim=1)[:, 0, 0])
+            else:
+                _state_sigmas(result.calibration["gtsam"], builder, lambda keys, m=None: [
+                    (m := m or gtsam.Marginals(lin, solution)).marginalCovariance(k)[0, 0] for k in keys])
             result.timing["gtsam_marginals"] = time.process_time() - t1
         if gcfg.residuals:
             if problem is not None:  # GTSAM's linearisation at the same point as the solver's last one
@@ -944,6 +953,21 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     for st in builder.states:  # the sensors' own states
         out[st.name] = float(values.atDouble(builder.state_key(st.name, last)))
     return out
+
+
+def _state_sigmas(out: dict, builder: GraphBuilder, variances) -> None:
+    """``NAME_sigma`` in ``out`` for each of the sensors' own states (their last segment's variable), as the EKF
+    reports it; ``variances(keys)`` gives their marginal variances. Nothing when the marginals fail."""
+    if not builder.states:
+        return
+    last = int(builder.segment[-1])
+    try:
+        var = variances([builder.state_key(st.name, last) for st in builder.states])
+    except RuntimeError as exc:  # an indeterminate system: the estimates stand without their sigma
+        logger.warning("gtsam: no marginal variance of the sensors' states (%s)", exc)
+        return
+    for st, v in zip(builder.states, var):
+        out[f"{st.name}_sigma"] = float(np.sqrt(v))
 
 
 def isam_params() -> gtsam.ISAM2Params:

@@ -252,15 +252,15 @@ class StreamingFusion:
         self.rewinds = 0
         self._monitor = LiveHeadingMonitor(self.config)
         self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
-        # per-stream buffers of (t, payload): every sensor with a live intake (registry.Live), the built-in
-        # ones always (odometry twists also arrive for a declared "wheel"), the others when declared
-        self._buffers: dict[str, list] = {s.name: [] for s in registry.sensors() if s.live is not None and
-                                          (s.name in registry.BUILTIN_ORDER or s.name in self.sensors)}
-        # each buffered stream's intake (registry.Live), its SensorStreams field and the name it is counted under
-        self._intake = {name: registry.get(name) for name in self._buffers}
+        # every sensor with a live intake (registry.Live), the built-in ones always (odometry twists also arrive
+        # for a declared "wheel"), the others when declared: its registration and the name it is counted under
+        self._intake = {s.name: s for s in registry.sensors() if s.live is not None and
+                        (s.name in registry.BUILTIN_ORDER or s.name in self.sensors)}
         self._counted = {name: s.live.counted_as or name for name, s in self._intake.items()}
+        # per-stream buffers of (t, payload) of those whose samples are interpolated at the nodes (no Live.take)
+        self._buffers: dict[str, list] = {name: [] for name, s in self._intake.items() if s.live.take is None}
         #: the sensors' own state variables (registry.State) in both backends
-        self._states = registry.states(self.sensors)
+        self._states = registry.states(self.sensors, self.config)
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
         self._t_nodes: list[float] = []
@@ -290,33 +290,38 @@ class StreamingFusion:
     def add(self, sensor: str, sample) -> None:
         """Add one sample of the registered sensor ``sensor`` (:mod:`fusion_vo.sensors.registry`).
 
-        The sample is what that sensor's :class:`~fusion_vo.sensors.registry.Live` intake takes (``wheel``:
-        :class:`~fusion_vo.measurements.WheelTicks`, ``odom``: ``TwistSample``, ``imu``: ``ImuSample``,
-        ``range``: ``RangeSample``); ``camera`` takes a :class:`VisualIncrement` (:meth:`add_visual`) and ``gps``
-        a :class:`GpsFix` (:meth:`add_gps`). A sample that cannot be read is counted as gated, like a
-        non-finite one; an unknown or undeclared sensor is an :class:`InputError`.
+        The sample is what that sensor's :class:`~fusion_vo.sensors.registry.Live` intake takes (``camera``:
+        :class:`~fusion_vo.measurements.VisualIncrement`, ``wheel``: :class:`~fusion_vo.measurements.WheelTicks`,
+        ``odom``: ``TwistSample``, ``imu``: ``ImuSample``, ``range``: ``RangeSample``, ``gps``: ``GpsFix``). Every
+        sample is read by its intake and checked (declared, finite, within the horizon) here; one that cannot be
+        read is counted as gated, like a non-finite one; an unknown or undeclared sensor is an
+        :class:`InputError`. A sensor whose samples make nodes (camera, GPS) then hands it on (``Live.take``);
+        the others' samples are buffered and interpolated at the nodes.
         """
         with self._lock:
             spec = self._intake.get(sensor)
-            if spec is None:  # not a buffered stream: the camera, GPS, or a mistake
+            if spec is None:  # an undeclared sensor, one without a live intake, or a mistake
                 try:
-                    spec = registry.get(sensor)
+                    registry.get(sensor)
                 except KeyError:
                     raise InputError(f"unknown sensor '{sensor}' (use {', '.join(registry.names())})") from None
-                if sensor == "camera":  # the two intakes that make nodes
-                    return self.add_visual(sample)
-                if sensor == "gps":
-                    return self.add_gps(sample)
                 self._check(sensor)
                 raise InputError(f"sensor '{sensor}' has no live intake (its registration has no registry.Live)")
+            live = spec.live
+            if live.take is not None:
+                self._check(sensor)
             try:
-                t, payload = spec.live.sample(sample)
+                t, payload = live.sample(sample)
+                values = None if live.take is None else _values(payload) if live.values is None else live.values(payload)
             except (AttributeError, TypeError, ValueError, IndexError) as exc:
                 self._check(sensor)
                 self._count(self._counted[sensor]).gated += 1
                 logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
                 return
-            self._add(sensor, self._synchronised(sensor, t, payload), payload)
+            if live.take is None:
+                self._add(sensor, self._synchronised(sensor, t, payload), payload)
+            elif self._valid(self._counted[sensor], t, values):
+                live.take(self, payload)
 
     def _synchronised(self, stream: str, t, payload):
         """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
@@ -345,30 +350,30 @@ class StreamingFusion:
         return t_f
 
     def add_visual(self, inc: VisualIncrement) -> None:
-        """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame)."""
-        with self._lock:
-            self._check("camera")
-            values = [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
-            if not self._valid("camera", inc.t1, values):
-                return
-            self._touch("visual", inc.t1)
-            if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
-                return
-            if not inc.ok:
-                self._count("camera").missing += 1
-                self._advance(inc.t1)
-                return
-            if self.backend == "gtsam" and self._t_nodes and inc.t0 < self._t_nodes[-1] - 1e-9:
-                attached = self._on_nodes(inc)
-                if attached is None:
-                    self._count("camera").late += 1
-                    logger.warning("camera increment ending at t=%.3f could not be attached to the nodes; "
-                                   "not applied", inc.t1)
-                    return
-                inc = attached
-            self._insert_visual(inc)
-            self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
+        """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame;
+        ``add("camera", inc)``)."""
+        self.add("camera", inc)
+
+    def take_increment(self, inc: VisualIncrement) -> None:
+        """The camera's intake (``Live.take``), after the checks of :meth:`add`: the increment makes its node."""
+        self._touch("visual", inc.t1)
+        if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
+            return
+        if not inc.ok:
+            self._count("camera").missing += 1
             self._advance(inc.t1)
+            return
+        if self.backend == "gtsam" and self._t_nodes and inc.t0 < self._t_nodes[-1] - 1e-9:
+            attached = self._on_nodes(inc)
+            if attached is None:
+                self._count("camera").late += 1
+                logger.warning("camera increment ending at t=%.3f could not be attached to the nodes; "
+                               "not applied", inc.t1)
+                return
+            inc = attached
+        self._insert_visual(inc)
+        self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
+        self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
         """Add one sample of cumulative wheel ticks (``add("wheel", m)``)."""
@@ -388,23 +393,23 @@ class StreamingFusion:
 
     def add_gps(self, fix: GpsFix) -> None:
         """One fix (east, north in ENU at the datum, 2x2 covariance); a non-finite or non-positive-definite
-        one is counted as gated."""
-        with self._lock:
-            self._check("gps")
-            if not self._valid("gps", fix.t, [fix.enu, fix.covariance]):
-                return
-            self._touch("gps", fix.t)
-            if self._late("gps", fix.t):
-                return
-            enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
-            cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
-            if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
-                self._count("gps").gated += 1
-                return
-            if self._gps and fix.t < self._gps[-1].t:
-                self._count("gps").reordered += 1
-            bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
-            self._advance(fix.t)
+        one is counted as gated (``add("gps", fix)``)."""
+        self.add("gps", fix)
+
+    def take_fix(self, fix: GpsFix) -> None:
+        """GPS's intake (``Live.take``), after the checks of :meth:`add`: the fix waits for its node."""
+        self._touch("gps", fix.t)
+        if self._late("gps", fix.t):
+            return
+        enu = np.asarray(fix.enu, dtype=np.float64).ravel()[:2]
+        cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
+        if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
+            self._count("gps").gated += 1
+            return
+        if self._gps and fix.t < self._gps[-1].t:
+            self._count("gps").reordered += 1
+        bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
+        self._advance(fix.t)
 
     # ------------------------------------------------------------------ output
     def current_estimate(self, t: float | None = None) -> Estimate | None:
@@ -552,8 +557,7 @@ class StreamingFusion:
     def _add(self, stream: str, t: float, payload) -> None:
         self._check(stream)
         sensor = self._counted[stream]  # the name its counts are reported under
-        if not self._valid(sensor, t, [x for x in payload if x is not None] if isinstance(payload, tuple)
-                           else payload):
+        if not self._valid(sensor, t, _values(payload)):
             return
         t = float(t)
         self._touch(stream, t)
@@ -944,7 +948,8 @@ class StreamingFusion:
     def _calibration_flags(self) -> tuple[bool, bool]:
         s = set(self.sensors)
         wheel = bool(s & {"wheel", "odom"})
-        return "camera" in s and (wheel or "range" in s), wheel and bool(s & {"camera", "imu"})
+        heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)  # a heading reference
+        return "camera" in s and (wheel or "range" in s), wheel and heading
 
     # ------------------------------------------------------------------ backends
     def _first_node(self, t: float) -> None:
@@ -1096,6 +1101,11 @@ class StreamingFusion:
             c.used = 0
         for s in sensors:
             rec.counts.setdefault(s, SensorCount()).used += 1
+
+
+def _values(payload):
+    """The numbers of a live sample's payload that must be finite: its entries that are not None."""
+    return [x for x in payload if x is not None] if isinstance(payload, tuple) else payload
 
 
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:

@@ -343,7 +343,8 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         wc = streams.wheel.config
         iv.wheel_scale_sigma = float(2.0 * wc.radius_sigma / (wc.wheel_radius_left + wc.wheel_radius_right))
     iv.heading_offset = heading_offset
-    iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None])
+    iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
+                                config)
     for sensor, step in registry.ordered("intervals"):  # each sensor's samples onto the grid (its own module)
         if sensor.data(streams) is not None:
             step.run(iv, streams, config, counts)

@@ -55,7 +55,7 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
-from fusion_vo.sensors.registry import Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 log = logging.getLogger(__name__)
 
@@ -603,9 +603,25 @@ def _keyframes(iv):
     return np.flatnonzero(iv.gps_ok) if iv.gps_ok is not None else None
 
 
+def _live_sample(fix) -> tuple:
+    """A live :class:`~fusion_vo.measurements.GpsFix`: its time and itself."""
+    return fix.t, fix
+
+
+def _live_values(fix) -> list:
+    """The numbers of a fix that must be finite."""
+    return [fix.enu, fix.covariance]
+
+
+def _live_take(fusion, fix) -> None:
+    """Streaming: a fix is applied at its node (:meth:`~fusion_vo.backends.streaming.StreamingFusion.take_fix`)."""
+    fusion.take_fix(fix)
+
+
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
     default=False, config=("gps", GpsNoise), world_frame=_world_frame, node_times=node_times, intervals=Step(50, add_intervals),
     ekf_run=_ekf_run, graph_run=_graph_run, graph_keyframes=_keyframes,
+    live=Live(_live_sample, values=_live_values, take=_live_take),
 ))

@@ -416,6 +416,11 @@ def graph_ahrs(builder, nf, node) -> None:
     nf.sensors.append("ahrs")
 
 
+def has_heading(iv) -> bool:
+    """Whether the AHRS gives headings on the grid ``iv`` (a heading reference: ``Sensor.absolute_heading``)."""
+    return bool(iv.ahrs_ok.any())
+
+
 def _live_sample(m) -> tuple:
     """A live :class:`~fusion_vo.measurements.ImuSample`: ``(t, (gyro, accel, orientation or None))``."""
     q = None if m.orientation is None else np.asarray(m.orientation, dtype=np.float64)
@@ -434,5 +439,6 @@ register(Sensor(
     intervals=Step(10, add_intervals), ekf_measurements=ekf_measurements,
     ekf_blocks=(Step(30, ekf_gyro), Step(50, ekf_ahrs)), ekf_start=ekf_ahrs_start,
     graph_factors=(Step(30, graph_guess), Step(50, graph_gyro)), graph_unary=(Step(80, graph_ahrs),),
+    absolute_heading=has_heading,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
 ))

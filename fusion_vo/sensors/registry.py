@@ -25,7 +25,9 @@ prior and a random walk) becomes a measurement-model argument of that name, carr
 whenever the sensor's data is used: the EKF appends it to its state vector (the prior as its initial
 value and variance, the random walk as process noise; :class:`~fusion_vo.backends.ekf.PlanarEkf`), the
 factor graph makes it a variable per calibration segment tied by the random walk, like the gyro bias
-(:meth:`~fusion_vo.backends.graph.GraphBuilder.state_key`). Its estimate at the end is reported in
+(:meth:`~fusion_vo.backends.graph.GraphBuilder.state_key`). Its prior and random walk are the registered ones
+unless the configuration sets them (``fusion: {states: {NAME: {initial, sigma, random_walk}}}``,
+:class:`StatePrior`). Its estimate at the end is reported in
 ``FusionResult.calibration`` under its name (and ``NAME_sigma`` by the EKF). The built-in state (pose,
 twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset) is
 :data:`fusion_vo.sensors.model.ARGUMENT_SIZES`.
@@ -85,6 +87,50 @@ class State:
         if not math.isfinite(self.initial):
             raise ValueError(f"state '{self.name}': initial must be a finite number, not {self.initial}")
 
+    def prior(self) -> StatePrior:
+        """Its prior and random walk as a configuration section (the defaults of ``fusion: {states: {NAME: ...}}``)."""
+        return StatePrior(self.initial, self.sigma, self.random_walk)
+
+    def configured(self, prior: StatePrior | None) -> State:
+        """This state with the prior and random walk of ``prior`` (itself when None)."""
+        if prior is None:
+            return self
+        return State(self.name, prior.initial, prior.sigma, prior.random_walk)
+
+
+@dataclass
+class StatePrior:
+    """Prior and random walk of a sensor's state variable, as configured (``fusion: {states: {NAME: ...}}``).
+
+    Its defaults are those the sensor registers (:class:`State`); a configuration replaces them.
+
+    Attributes
+    ----------
+    initial : float
+        Prior mean and initial value.
+    sigma : float
+        Prior standard deviation (positive).
+    random_walk : float
+        Random walk [unit/√s] (0: a constant, estimated from all the data).
+    """
+
+    initial: float = 0.0
+    sigma: float = 1.0
+    random_walk: float = 0.0
+
+    def check(self, key: str) -> None:
+        """Raise ``ValueError`` naming ``key`` (``states.NAME``) for a value that cannot work."""
+        import math
+
+        for leaf in ("initial", "sigma", "random_walk"):
+            value = getattr(self, leaf)
+            if not math.isfinite(value):
+                raise ValueError(f"'{key}.{leaf}' must be a finite number, not {value}")
+        if self.sigma <= 0:
+            raise ValueError(f"'{key}.sigma' must be positive, not {self.sigma}")
+        if self.random_walk < 0:
+            raise ValueError(f"'{key}.random_walk' must not be negative, not {self.random_walk}")
+
 
 @dataclass(frozen=True)
 class Live:
@@ -110,14 +156,24 @@ class Live:
         ``samples(data) -> iterable of (t, sample)``: its data as live samples, for replaying a recording
         (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``) of a sensor
         registered outside the library.
+    take : callable or None
+        ``take(fusion, payload)``: for a sensor whose samples make nodes rather than being interpolated at them
+        (the camera's increments, GPS fixes): what the fusion does with a sample that was read and passed the
+        checks every sample gets (declared, finite, within the horizon) instead of buffering it (``data``,
+        ``min_rows`` and ``neighbours`` are then unused).
+    values : callable or None
+        ``values(payload) -> list``: the numbers of a sample that must be finite (default: the payload's
+        entries that are not None).
     """
 
     sample: Callable
-    data: Callable
+    data: Callable | None = None
     min_rows: int = 2
     neighbours: Any = 0
     counted_as: str | None = None
     samples: Callable | None = None
+    take: Callable | None = None
+    values: Callable | None = None
 
 
 @dataclass(frozen=True)
@@ -195,9 +251,15 @@ class Sensor:
         ``add(nf, n, pose_covariance)`` at every node, ``finish(result)`` at the end.
     states : tuple of State
         State variables the sensor adds to both backends while its data is used (module docstring).
+    absolute_heading : bool or callable
+        The sensor measures the heading (absolute, or up to an offset it estimates as a state): beside the
+        wheels it is a heading reference, so the wheel-base factor is estimated
+        (:func:`~fusion_vo.backends.ekf.calibration_observable`), as with the camera or the gyro. True: when its
+        samples are used on the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that
+        says so (the IMU: when its AHRS gives headings). Default False.
     live : Live or None
         Its intake in :class:`~fusion_vo.backends.streaming.StreamingFusion` (``add(name, sample)``); the
-        camera and GPS, whose samples make nodes, have intakes of their own (``add_visual``, ``add_gps``).
+        camera and GPS, whose samples make nodes, hand them on with ``Live.take``.
     """
 
     name: str
@@ -225,12 +287,19 @@ class Sensor:
     graph_run: Callable | None = None
     states: tuple = ()
     live: Live | None = None
+    absolute_heading: Any = False
 
     def data(self, streams) -> Any:
         """Its data in ``streams`` (a :class:`~fusion_vo.backends.timeline.SensorStreams`), or None."""
         if self.field is not None:
             return getattr(streams, self.field)
         return streams.extra.get(self.name)
+
+    def gives_heading(self, iv) -> bool:
+        """Whether it is a heading reference on the node grid ``iv`` (:attr:`absolute_heading`)."""
+        if callable(self.absolute_heading):
+            return bool(self.absolute_heading(iv))
+        return bool(self.absolute_heading) and iv.uses(self.name)
 
     def available(self, data) -> bool:
         """Whether ``data`` has enough samples to be used."""
@@ -365,10 +434,18 @@ def get(name: str) -> Sensor:
     return _REGISTRY[name]
 
 
-def states(used) -> tuple[State, ...]:
-    """The state variables the sensors named in ``used`` add (in :func:`sensors` order)."""
+def states(used, config=None) -> tuple[State, ...]:
+    """The state variables the sensors named in ``used`` add (in :func:`sensors` order), with the prior and random
+    walk ``config`` (a :class:`~fusion_vo.backends.config.FusionConfig`) sets in its ``states`` section."""
     used = set(used)
-    return tuple(state for s in sensors() if s.name in used for state in s.states)
+    configured = getattr(config, "states", None) or {}
+    return tuple(state.configured(configured.get(state.name)) for s in sensors() if s.name in used
+                 for state in s.states)
+
+
+def all_states() -> tuple[State, ...]:
+    """Every registered sensor's state variables, as registered (in :func:`sensors` order)."""
+    return tuple(state for s in sensors() for state in s.states)
 
 
 def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:

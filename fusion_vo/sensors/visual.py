@@ -17,7 +17,7 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
-from fusion_vo.sensors.registry import Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 
 @dataclass(frozen=True)
@@ -141,8 +141,24 @@ def graph_factors(builder, nf, node) -> None:
                 node.heading = d[2]
 
 
+def _live_sample(inc) -> tuple:
+    """A live :class:`~fusion_vo.measurements.VisualIncrement`: its time (``t1``) and itself."""
+    return inc.t1, inc
+
+
+def _live_values(inc) -> list:
+    """The numbers of an increment that must be finite (the delta and covariance of a usable one)."""
+    return [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
+
+
+def _live_take(fusion, inc) -> None:
+    """Streaming: an increment makes its node (:meth:`~fusion_vo.backends.streaming.StreamingFusion.take_increment`)."""
+    fusion.take_increment(inc)
+
+
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
     intervals=Step(30, add_intervals), ekf_measurements=ekf_measurements, ekf_blocks=(Step(10, ekf_blocks),),
     graph_factors=(Step(20, graph_factors),),
+    live=Live(_live_sample, values=_live_values, take=_live_take),
 ))
