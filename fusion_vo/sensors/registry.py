@@ -28,12 +28,13 @@ factor graph makes it a variable per calibration segment tied by the random walk
 (:meth:`~fusion_vo.backends.graph.GraphBuilder.state_key`). Its prior and random walk are the registered ones
 unless the configuration sets them (``fusion: {states: {NAME: {initial, sigma, random_walk}}}``,
 :class:`StatePrior`). Its estimate at the end is reported in
-``FusionResult.calibration`` under its name (and ``NAME_sigma`` by the EKF). The built-in state (pose,
+``FusionResult.calibration`` under its name, with its standard deviation as ``NAME_sigma``. The built-in state (pose,
 twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset) is
 :data:`fusion_vo.sensors.model.ARGUMENT_SIZES`.
 
 A sensor fed live (:meth:`fusion_vo.backends.streaming.StreamingFusion.add`) declares a :class:`Live`
-intake: how one sample is checked and buffered, and how buffered samples become its data.
+intake: how one sample is read and checked, and how buffered samples become its data, or (the camera, GPS:
+samples that make nodes) where a checked sample goes instead (``Live.take``).
 """
 
 from __future__ import annotations
@@ -78,14 +79,7 @@ class State:
     random_walk: float = 0.0
 
     def __post_init__(self) -> None:
-        import math
-
-        if not (math.isfinite(self.sigma) and self.sigma > 0):
-            raise ValueError(f"state '{self.name}': sigma must be a positive number, not {self.sigma}")
-        if not (math.isfinite(self.random_walk) and self.random_walk >= 0):
-            raise ValueError(f"state '{self.name}': random_walk must be a non-negative number, not {self.random_walk}")
-        if not math.isfinite(self.initial):
-            raise ValueError(f"state '{self.name}': initial must be a finite number, not {self.initial}")
+        self.prior().check(f"state {self.name}")
 
     def prior(self) -> StatePrior:
         """Its prior and random walk as a configuration section (the defaults of ``fusion: {states: {NAME: ...}}``)."""
