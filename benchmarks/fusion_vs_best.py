@@ -18,6 +18,11 @@ increments after their best-fitting distance scale and wheel-base factor (what t
 and the NIS of the gyro's angle per node interval after its mean bias — the numbers that say which
 sensor's error model is wrong on a recording where a fused track is worse than the best input.
 
+With ``--seeds N`` every recording is also generated with ``N`` other seeds (the same profile and options,
+seeds ``seed + 100 i``), and a summary per recording prints how often and by how much on average the
+RTS-smoothed EKF beats the EKF and GTSAM batch beats iSAM2 over the standard seed and these: what tells a
+systematic loss of a smoother from the chance of one drive.
+
 With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
 same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
 divided by 4, other robust kernels of the factor graph), printing the fused ATEs of each: what tells
@@ -25,7 +30,7 @@ which input or which part of the model makes a fused track worse than the best s
 
 Run::
 
-    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--sensors] [--variants]
+    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors] [--variants]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -50,6 +55,7 @@ from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
+from fusion_vo.simulation.generate import simulate
 from fusion_vo.simulation.standard import STANDARD, make_standard
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
@@ -232,10 +238,24 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
     return out
 
 
+def smoother_summary(rows: list[dict]) -> str:
+    """How the smoothers compare with their filters over several seeds of one drive (rows of :func:`compare`):
+    mean relative ATE difference [%] and the number of seeds where the smoother is at most the filter."""
+    out = []
+    for smoother, flt, label in (("ekf_smoothed", "ekf", "RTS vs EKF"), ("gtsam", "gtsam_online", "batch vs iSAM2"),
+                                 ("gtsam", "ekf", "batch vs EKF")):
+        d = np.array([r["ate"][smoother] / r["ate"][flt] - 1.0 for r in rows if smoother in r["ate"] and flt in r["ate"]])
+        if len(d):
+            out.append(f"{label} {100 * d.mean():+.1f} % on average, at most the filter on {int(np.sum(d <= 0))} of {len(d)}")
+    return "; ".join(out)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="keep the recordings and runs here (default: a temporary folder)")
     parser.add_argument("--only", help="comma-separated standard recordings (default: all with camera and wheels)")
+    parser.add_argument("--seeds", type=int, default=0,
+                        help="also generate every recording with this many other seeds and summarise the smoothers")
     parser.add_argument("--sensors", action="store_true",
                         help="also print each input's NEES against the truth (runs visual odometry once more)")
     parser.add_argument("--variants", action="store_true",
@@ -247,14 +267,23 @@ def main(argv=None) -> int:
     print(" | ".join(header))
     try:
         for name in names:
-            t0 = time.perf_counter()
-            seq = make_standard(name, out / name)
-            r = compare(seq, out / f"run_{name}")
-            cells = [name, *(f"{r['ate'].get(k, float('nan')):.3f}" for k in SINGLE), f"{r['best']:.3f}",
-                     *(f"{r['ate'].get(k, float('nan')):.3f}" for k in FUSED),
-                     *("yes" if r[k] else "NO" for k in ("fused_le_best", "smoothed_le_ekf", "batch_le_online")),
-                     f"{max(r['legs'].values()):.3f}"]
-            print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+            profile, seed, options, _ = STANDARD[name]
+            rows = []
+            for i in range(args.seeds + 1):
+                t0 = time.perf_counter()
+                label = name if i == 0 else f"{name} (seed {seed + 100 * i})"
+                folder = name if i == 0 else f"{name}_seed{seed + 100 * i}"
+                seq = (make_standard(name, out / folder) if i == 0
+                       else simulate(out / folder, profile=profile, seed=seed + 100 * i, **options))
+                r = compare(seq, out / f"run_{folder}")
+                rows.append(r)
+                cells = [label, *(f"{r['ate'].get(k, float('nan')):.3f}" for k in SINGLE), f"{r['best']:.3f}",
+                         *(f"{r['ate'].get(k, float('nan')):.3f}" for k in FUSED),
+                         *("yes" if r[k] else "NO" for k in ("fused_le_best", "smoothed_le_ekf", "batch_le_online")),
+                         f"{max(r['legs'].values()):.3f}"]
+                print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+            if args.seeds:
+                print(f"    {name}, {len(rows)} seeds: " + smoother_summary(rows), flush=True)
             if args.sensors:
                 for sensor, text in sensor_nees(seq, run_visual_odometry(Recording(seq)).increments).items():
                     print(f"    {name} {sensor}: {text}", flush=True)

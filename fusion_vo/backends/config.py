@@ -56,7 +56,11 @@ class GraphConfig:
         M-estimator on the visual, wheel, gyro and heading factors: ``"huber"``, ``"cauchy"`` or
         ``"none"`` (default ``"huber"``).
     robust_k : float
-        Kernel width in standard deviations (default 1.345 for Huber; 2.3849 is Cauchy's classic).
+        Kernel width for a factor of one row, in standard deviations; a factor of ``m`` rows gets the width
+        with the same tail probability on its whitened distance, ``sqrt(chi2.ppf(chi2.cdf(k², 1), m))``
+        (:func:`fusion_vo.backends.graph.kernel_width`). Default 3.2905: where the EKF's default gate
+        (``gate_probability`` 0.999) starts, so that a measurement the filter takes at full weight keeps its
+        full weight in the graph (1.345 is Huber's classic for one row, 2.3849 Cauchy's).
     keyframe_every : int
         Keep one pose variable every this many nodes (default 1: every camera frame).
     batch : bool
@@ -80,7 +84,7 @@ class GraphConfig:
     """
 
     robust: str = "huber"
-    robust_k: float = 1.345
+    robust_k: float = 3.2905
     keyframe_every: int = 1
     batch: bool = True
     online: bool = True
@@ -219,6 +223,8 @@ class FusionConfig:
             raise InputError("gate_probability must be in (0, 1]")
         if self.graph.robust not in ROBUST_KERNELS:
             raise InputError(f"graph.robust must be one of {', '.join(ROBUST_KERNELS)}, not {self.graph.robust!r}")
+        if not self.graph.robust_k > 0:
+            raise InputError(f"'graph.robust_k' must be positive, not {self.graph.robust_k}")
         if self.graph.calibration_interval <= 0:
             raise InputError("graph.calibration_interval must be positive")
         if self.graph.keyframe_every < 1:

@@ -410,7 +410,7 @@ def graph_ahrs(builder, nf, node) -> None:
     else:
         # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
         # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)
-        nm = builder.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]))
+        nm = builder.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]), dof=1)
         heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
         nf.factors.append(gtsam.PriorFactorPose2(node.xj, heading, nm))
     nf.sensors.append("ahrs")

@@ -507,9 +507,9 @@ def graph_translation(builder, nf, node) -> None:
         cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
         if builder.kr_on:  # distance scaled by the wheels' radius factor
             nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
-                                                   fixed={"wheel_base_factor": 1.0}))
+                                                   fixed={"wheel_base_factor": 1.0}, dof=2))
         else:
-            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov_xy)))
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov_xy, dof=2)))
         if yaw_ok:
             node.scratch["wheel_heading"] = (m, float(np.sqrt(cov[2, 2])))
     else:
