@@ -21,7 +21,12 @@ reference (after the least-squares SE(2) alignment of each track to the fixes). 
    the AHRS is kept (the monitor's span edge moved by hand, ``--edges``), a gyro scale factor (the
    slope of the AHRS heading against the gyro's integral where the AHRS is kept, and the fused tracks
    with the gyro scaled), and the accelerometer as a speed-scale observation (forward acceleration
-   integrated over the start, the stop and the restart against the odometry's speed change).
+   integrated over the start, the stop and the restart against the odometry's speed change);
+8. the gyro's noise at rest as a fourth candidate: its white noise density measured at the standstill
+   (:func:`fusion_vo.sensors.imu.rest_noise_density`) and given to the backends for the intervals at
+   rest (``imu.gyro_rest_noise_density``), so that the zero-velocity update pins the bias, with and
+   without the AHRS, beside the default; the same with a tighter zero-velocity update, and other
+   settings of the odometry's error model (each one changed alone).
 
 Usage::
 
@@ -53,7 +58,7 @@ from fusion_vo.backends.timeline import build_intervals  # noqa: E402
 from fusion_vo.measurements import PoseData  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf  # noqa: E402
-from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro_yaw  # noqa: E402
+from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro_yaw, rest_noise_density  # noqa: E402
 from fusion_vo.sensors.sync import rate_delay  # noqa: E402
 
 BINS = 50.0  # [s] error-over-time bins
@@ -273,6 +278,7 @@ def main(argv: list[str] | None = None) -> int:
                 for a, b in zip(edges[:-1], edges[1:])]
         print(f"  {name:38s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
     model_candidates(odom, imu, t_gps, enu, t0)
+    rest_noise_candidate(odom, imu, t_gps, enu, delay)
     return 0
 
 
@@ -336,6 +342,31 @@ def model_candidates(odom, imu, t_gps, enu, t0: float) -> None:
         print(f"    {lo:5.1f}-{hi:5.1f} s: accelerometer {dv_acc:+.2f} m/s, odometry {dv_odom:+.2f} m/s, "
               f"ratio {dv_acc / dv_odom:.2f} ± {white / abs(dv_odom):.2f} (white-noise part only)")
 
+
+def rest_noise_candidate(odom, imu, t_gps, enu, delay: float) -> None:
+    print("8. the gyro's noise at rest used where the wheels are at rest, and other settings (GPS only as the reference)")
+    gyro = gyro_yaw(imu, ImuNoise())
+    still = ((np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)).astype(float)
+    resting = np.interp(gyro.t, np.asarray(odom.t) - delay, still) > 0.999  # on the gyro's clock
+    density = rest_noise_density(gyro, resting)
+    print(f"  density at rest {density:.2e} rad/s/√Hz over {np.count_nonzero(resting)} samples "
+          f"(recorded {imu.noise.get('gyroscope_noise_density', float('nan')):.2e})")
+    names = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+    rest = {"imu": {"gyro_rest_noise_density": density}}
+    variants = [("gyro + AHRS", "default", {}), ("gyro + AHRS", "rest density", rest),
+                ("gyro only", "default", {}), ("gyro only", "rest density", rest)]
+    variants += [("gyro + AHRS", f"rest density, standstill_yaw_rate {v:g}",
+                  {**rest, "odom": {"standstill_yaw_rate": v}}) for v in (3e-3, 2e-3, 1e-3)]
+    variants += [("gyro + AHRS", f"standstill_yaw_rate {v:g}", {"odom": {"standstill_yaw_rate": v}}) for v in (3e-3, 1e-3)]
+    variants += [("gyro + AHRS", f"yaw_scale_time {v:g}", {"odom": {"yaw_scale_time": v}}) for v in (2.0, 10.0, 20.0)]
+    variants += [("gyro + AHRS", f"scale_random_walk {v:g}", {"ekf": {"scale_random_walk": v}}) for v in (3e-5, 1e-3)]
+    print(f"  {'RMS [m]':52s}" + " ".join(f"{n:>13s}" for n in names) + "  batch gyro bias at the end")
+    for label, setting, options in variants:
+        source = imu if label == "gyro + AHRS" else dataclasses.replace(imu, orientation=None)
+        result = fuse(SensorStreams(odom=odom, imu=source), "all", FusionConfig.from_dict(options))
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
+        bias = result.calibration["gtsam"]["gyro_bias"]
+        print(f"  {label + ', ' + setting:52s}" + " ".join(f"{e:13.3f}" for e in errors) + f"  {bias * 1e3:+.3f} mrad/s")
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -11,6 +11,14 @@ with a bias ``b_g`` that the backends estimate (random walk, ``σ_bw`` = ``gyros
 rate ``f`` one sample has standard deviation ``σ_g √f``; the mean rate over an interval ``Δt`` has
 variance ``σ_g² / Δt`` and the integrated angle ``σ_g² Δt``.
 
+At rest the gyro measures only its own noise: no driving vibration, no true rate. A recorded density
+(e.g. from a ROS message's covariance) that includes the vibration, or is merely conservative, makes
+the zero-velocity update (:mod:`fusion_vo.sensors.wheel`) fix the bias less than the samples at rest
+allow; ``gyro_rest_noise_density``, when set, is used instead for the intervals in which the wheels
+report rest (:func:`rest_noise_density` measures it from such samples). It is not measured by default:
+on robot_localization's Husky log the bias it pins at the one standstill is not the bias that serves
+the drive best (``benchmarks/husky_diagnosis.py``, section 8).
+
 Spikes (an impossible sample) are found against a running median: a sample further than ``spike_threshold``
 from the median of its ``2w+1`` neighbours, or above ``max_rate``, or not finite, is gated (counted) and
 replaced by the median so integration carries on.
@@ -31,6 +39,7 @@ from gravity when no AHRS orientation is recorded.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,6 +80,9 @@ class ImuNoise:
         their noise allows is dropped by the consistency monitor, :mod:`fusion_vo.backends.monitor`.
         A positive value, e.g. 0.02 for a magnetometer that may stray by about 10° in a minute or two,
         lets the backends estimate a wandering offset instead).
+    gyro_rest_noise_density : float
+        ``σ_rest`` [rad/s/√Hz]: the gyro's white noise density at rest, used instead of ``σ_g`` (when
+        lower) for the intervals in which the wheels report a standstill (default 0: ``σ_g`` everywhere).
     spike_threshold : float
         Distance from the running median that marks a spike [rad/s] (default 1.0).
     spike_window : int
@@ -84,9 +96,16 @@ class ImuNoise:
     gyro_bias_sigma: float = 0.02
     ahrs_yaw_sigma: float = 0.02
     ahrs_offset_walk: float = 0.0
+    gyro_rest_noise_density: float = 0.0
     spike_threshold: float = 1.0
     spike_window: int = 2
     max_rate: float = 10.0
+
+    def density(self, at_rest) -> np.ndarray:
+        """``σ_g`` per interval, ``min(σ_g, σ_rest)`` where ``at_rest`` (bool or bool array) when ``σ_rest`` is set."""
+        rest = self.gyro_rest_noise_density
+        rest = min(rest, self.gyro_noise_density) if rest > 0 else self.gyro_noise_density
+        return np.where(at_rest, rest, self.gyro_noise_density)
 
     def with_sensor_keys(self, keys: dict) -> "ImuNoise":
         """Copy with the EuRoC keys of ``imu0/sensor.yaml`` applied where present and positive."""
@@ -160,6 +179,46 @@ def running_median(x: np.ndarray, half_width: int, valid: np.ndarray | None = No
     return np.where(np.isfinite(med), med, 0.0)
 
 
+#: fewest gyro samples at rest (about 2 s at 30 Hz) for :func:`rest_noise_density`: the relative error of a
+#: standard deviation from ``n`` samples is about ``1/√(2n)``, 9 % here
+REST_MIN_SAMPLES = 60
+
+
+def rest_noise_density(gyro: GyroYaw, at_rest: np.ndarray, min_samples: int = REST_MIN_SAMPLES) -> float | None:
+    """White noise density [rad/s/√Hz] of the gyro measured at rest, or None with too few samples.
+
+    Parameters
+    ----------
+    gyro : GyroYaw
+        Body yaw rates (gated samples are left out).
+    at_rest : ndarray (N,) bool
+        The samples taken while the robot stood still (its true rate is zero: the gyro reads its bias
+        plus its noise).
+    min_samples : int
+        Fewest samples at rest needed.
+
+    Returns
+    -------
+    float or None
+        The robust standard deviation (1.4826 times the median absolute deviation) of the samples about
+        the median of their own standstill (the bias may differ between standstills), times
+        ``1/√f`` at the gyro's sample rate ``f``. This is the density of white noise; the samples at rest
+        of robot_localization's Husky log are white (their means over 0.03 to 2 s shrink as ``1/√n``).
+    """
+    at_rest = np.asarray(at_rest, bool) & ~gyro.gated
+    if np.count_nonzero(at_rest) < min_samples or len(gyro.t) < 2:
+        return None
+    edges = np.diff(np.concatenate([[0], at_rest.astype(np.int8), [0]]))
+    residuals = [gyro.rate[a:b] - np.median(gyro.rate[a:b])
+                 for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)) if b - a >= 3]
+    if not residuals or sum(len(r) for r in residuals) < min_samples:
+        return None
+    r = np.concatenate(residuals)
+    sigma = 1.4826 * float(np.median(np.abs(r)))
+    rate_hz = 1.0 / float(np.median(np.diff(gyro.t)))
+    return sigma / math.sqrt(rate_hz) if sigma > 0 else None
+
+
 def cumulative_angle(gyro: GyroYaw) -> np.ndarray:
     """Trapezoidal integral of the yaw rate from the first sample [rad] (N,)."""
     if len(gyro.t) == 0:
@@ -226,7 +285,7 @@ def tilt_from_accel(accel: np.ndarray, T_BS: np.ndarray | None = None) -> tuple[
 
 __all__ = [
     "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "gated_yaw_rate",
-    "running_median",
+    "running_median", "rest_noise_density", "REST_MIN_SAMPLES",
     "cumulative_angle", "quat_to_matrix", "ahrs_heading", "tilt_from_accel",
 ]
 
@@ -349,10 +408,13 @@ def add_intervals(iv, streams, config, counts) -> None:
 
 
 def ekf_measurements(iv, config) -> dict:
-    """``gyro`` -> (ok, mean rate, σ_g²/Δt) per interval; ``ahrs`` -> (ok, heading, σ_ψ²) at the nodes."""
+    """``gyro`` -> (ok, mean rate, σ_g²/Δt) per interval (``σ_rest`` where the wheels are at rest);
+    ``ahrs`` -> (ok, heading, σ_ψ²) at the nodes."""
+    from fusion_vo.sensors.wheel import at_rest
+
     out = {}
     if iv.uses("gyro"):
-        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / iv.dt, config.imu.gyro_noise_density**2 / iv.dt)
+        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / iv.dt, config.imu.density(at_rest(iv, config))**2 / iv.dt)
     if iv.ahrs_ok.any():
         out["ahrs"] = (iv.ahrs_ok, iv.ahrs_yaw, config.imu.ahrs_yaw_sigma**2)
     return out
@@ -385,11 +447,11 @@ def graph_guess(builder, nf, node) -> None:
 
 
 def graph_gyro(builder, nf, node) -> None:
-    """``d_ψ + B_c Δt - Θ`` with ``σ² = σ_g² Δt`` (linear, not robust)."""
+    """``d_ψ + B_c Δt - Θ`` with ``σ² = σ_g² Δt`` (``σ_rest`` with the wheels at rest; linear, not robust)."""
     angle = node.scratch.get("gyro_angle")
     if angle is None:
         return
-    var = GYRO.variance(builder.config.imu.gyro_noise_density, node.dt)
+    var = float(GYRO.variance(builder.config.imu.density(bool(node.scratch.get("still"))), node.dt))
     nf.factors.append(builder.model_factor(GYRO, [angle], [[var]], {"motion": (node.xi, node.xj),
                                                                      "gyro_bias": (builder.B(node.segment),)},
                                            params={"dt": node.dt}, robust=False))

@@ -117,7 +117,7 @@ class WheelNoise:
         Both wheels slower than this [m/s] over an interval is a standstill (default 1e-3; 0 disables
         the zero-velocity update).
     standstill_yaw_rate : float
-        Standard deviation [rad/s] of the zero yaw rate at a standstill (default 3e-3: vibration of
+        Standard deviation [rad/s] of the zero yaw rate at a standstill (default 1e-2: vibration of
         a robot at rest).
     """
 
@@ -440,6 +440,14 @@ def gyro_turn(iv) -> np.ndarray | None:
     return np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
 
 
+def at_rest(iv, config) -> np.ndarray:
+    """True for the node intervals in which the wheels are usable and both at rest (:func:`standstill`);
+    all False without wheels."""
+    if not iv.uses("wheel"):
+        return np.zeros(iv.n_steps, bool)
+    return iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, iv.dt, config.wheel_model(iv.twist)[0])
+
+
 def ekf_measurements(iv, config) -> dict:
     """``wheel`` -> (ok, u, R): the arc as a twist per interval (components the consistency monitor dropped
     get a vague variance), and ``standstill`` -> (ok, σ²) where both wheels are at rest."""
@@ -462,10 +470,9 @@ def ekf_measurements(iv, config) -> dict:
         R[drop, :2, :] = R[drop, :, :2] = 0.0
         R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
     out["wheel"] = (iv.wheel_ok, u, R)
-    noise = config.wheel_model(iv.twist)[0]
-    still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+    still = at_rest(iv, config)
     if still.any():
-        out["standstill"] = (still, noise.standstill_yaw_rate**2)
+        out["standstill"] = (still, config.wheel_model(iv.twist)[0].standstill_yaw_rate**2)
     return out
 
 

@@ -5,7 +5,8 @@ import math
 import numpy as np
 
 from fusion_vo.measurements import ImuData, RangeData
-from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, discrete_sigma, gyro_yaw, tilt_from_accel
+from fusion_vo.sensors.imu import (ImuNoise, ahrs_heading, cumulative_angle, discrete_sigma, gyro_yaw, rest_noise_density,
+                                  tilt_from_accel)
 from fusion_vo.sensors.range import camera_height
 
 
@@ -62,3 +63,18 @@ def test_range_outliers_are_gated():
     h = camera_height(RangeData(np.arange(20) * 0.1, d))
     assert h.n_gated == 3
     np.testing.assert_allclose(h.height[h.valid], 0.1)
+
+
+def test_rest_noise_density_is_measured_about_each_standstills_own_bias():
+    rng = np.random.default_rng(0)
+    hz, density = 30.0, 5e-4
+    rate = np.concatenate([np.full(300, 0.002), np.full(150, 0.5), np.full(300, -0.001)])
+    rate = rate + density * np.sqrt(hz) * rng.standard_normal(len(rate))
+    at_rest = np.ones(len(rate), bool)
+    at_rest[300:450] = False
+    g = gyro_yaw(_imu(rate, hz=hz))
+    measured = rest_noise_density(g, at_rest)
+    assert abs(measured / density - 1.0) < 0.12, measured
+    # one median over both standstills would add their 3 mrad/s bias difference to the scatter
+    assert rest_noise_density(g, at_rest, min_samples=10) == measured
+    assert rest_noise_density(g, np.arange(len(rate)) < 40) is None  # 1.3 s at rest: too few samples
