@@ -230,6 +230,9 @@ class StreamingFusion:
         self.config = as_config(config)
         if imu_noise:
             self.config = dataclasses.replace(self.config, imu=self.config.imu.with_sensor_keys(imu_noise))
+        if self.config.imu.gyro_rest_noise_density > 0:
+            logger.warning("imu.gyro_rest_noise_density is not used by streaming fusion: the gyro keeps its "
+                           "noise density at rest too")
         self.backend = backend
         self.sensors = list(sensors)
         bad = [s for s in self.sensors if s not in registry.names()]

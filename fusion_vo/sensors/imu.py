@@ -83,6 +83,8 @@ class ImuNoise:
     gyro_rest_noise_density : float
         ``σ_rest`` [rad/s/√Hz]: the gyro's white noise density at rest, used instead of ``σ_g`` (when
         lower) for the intervals in which the wheels report a standstill (default 0: ``σ_g`` everywhere).
+        Used by ``fusion-vo run`` (EKF, RTS, GTSAM batch, iSAM2); streaming fusion (``replay``,
+        :class:`~fusion_vo.backends.streaming.StreamingFusion`) keeps ``σ_g`` and logs a warning.
     spike_threshold : float
         Distance from the running median that marks a spike [rad/s] (default 1.0).
     spike_window : int
