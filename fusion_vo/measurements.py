@@ -111,8 +111,9 @@ class GpsFix:
 class WheelConfig:
     """Differential-drive calibration (``wheel0/sensor.yaml``).
 
-    ``radius_sigma`` is the standard deviation [m] of the wheel radii (their common error, from tyre
-    pressure, wear and load), or None when the file does not state it.
+    ``radius_sigma`` is the standard deviation [m] of each wheel's radius error (from tyre pressure,
+    wear and load), or None when the file does not state it: the prior of the wheels' common distance
+    scale and, as independent left and right errors, of their curvature bias.
     """
 
     ticks_per_revolution: float
@@ -120,6 +121,12 @@ class WheelConfig:
     wheel_radius_right: float
     wheel_base: float
     radius_sigma: float | None = None
+
+    def relative_radius_sigma(self, default: float) -> float:
+        """``radius_sigma / radius`` (the mean of the two radii), or ``default`` when it is not stated."""
+        if self.radius_sigma is None:
+            return float(default)
+        return float(2.0 * self.radius_sigma / (self.wheel_radius_left + self.wheel_radius_right))
 
 
 @dataclass

@@ -33,6 +33,35 @@ from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, robust_loss, robust_weight
 
 
+def gaussian_factor(items: list, b, unit):
+    """GTSAM's ``JacobianFactor(k_1, A_1, ..., b, unit)`` of whitened blocks ``items = [k_1, A_1, ...]``.
+
+    GTSAM's Python interface builds a ``JacobianFactor`` of at most three variables; one of more (a wheel
+    heading with its wheel-base factor and curvature bias: two poses and two scalars) becomes the same
+    quadratic ``½‖Σ A_i δ_i - b‖²`` as a ``HessianFactor`` (``G_ij = A_iᵀA_j``, ``g_i = A_iᵀb``,
+    ``f = bᵀb``), summed from two-variable pieces that each carry one off-diagonal block, and turned back
+    into a ``JacobianFactor`` of as many rows as the measurement has (GTSAM's Cholesky of it).
+    """
+    if len(items) <= 6:
+        return gtsam.JacobianFactor(*items, b, unit)
+    keys = [int(k) for k in items[0::2]]
+    A = [np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in items[1::2]]
+    b = np.asarray(b, dtype=np.float64).reshape(-1)
+    graph = gtsam.GaussianFactorGraph()
+    placed = set()
+    f = float(b @ b)
+    for i in range(len(keys)):
+        for j in range(i + 1, len(keys)):
+            gi = A[i].T @ b if i not in placed else np.zeros(A[i].shape[1])
+            gj = A[j].T @ b if j not in placed else np.zeros(A[j].shape[1])
+            Gii = A[i].T @ A[i] if i not in placed else np.zeros((A[i].shape[1],) * 2)
+            Gjj = A[j].T @ A[j] if j not in placed else np.zeros((A[j].shape[1],) * 2)
+            placed.update((i, j))
+            graph.push_back(gtsam.HessianFactor(keys[i], keys[j], Gii, A[i].T @ A[j], gi, Gjj, gj, f))
+            f = 0.0
+    return gtsam.JacobianFactor(gtsam.HessianFactor(graph))  # back to its one whitened row
+
+
 @dataclass
 class ModelFactor:
     """One measurement of ``model`` in the graph.
@@ -125,7 +154,7 @@ class ModelFactor:
                 WJ = W @ (jac[name][rows] if sub else jac[name])
                 items += [int(key), WJ if link is None else WJ @ link]
             b = -ew
-        factor = gtsam.JacobianFactor(*items, b, _UNIT[len(rows)])
+        factor = gaussian_factor(items, b, _UNIT[len(rows)])
         if point is None:
             point = ValuesMaker().make(current)
         return gtsam.LinearContainerFactor(factor, point)
@@ -259,7 +288,7 @@ class ModelFactors:
             items = []
             for key, a in zip(keys, A):
                 items += [int(key[r]), a[r]]
-            out.append(gtsam.JacobianFactor(*items, b[r], unit))
+            out.append(gaussian_factor(items, b[r], unit))
         return out
 
 

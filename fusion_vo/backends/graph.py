@@ -744,7 +744,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
         if gcfg.residuals:
-            final = isam.calculateEstimate()
+            final = isam.calculateBestEstimate()  # fully back-substituted (no wildfire threshold)
             result.residuals["gtsam_online"] = graph_residuals(
                 model_factors, final, gtsam.Marginals(isam.getFactorsUnsafe(), final), builder)
     if lag is not None:

@@ -264,6 +264,12 @@ class StreamingFusion:
         self._buffers: dict[str, list] = {name: [] for name, s in self._intake.items() if s.live.take is None}
         #: the sensors' own state variables (registry.State) in both backends
         self._states = registry.states(self.sensors, self.config)
+        if wheel_config is not None:  # the wheels' curvature bias and its prior, as in a batch run
+            from fusion_vo.sensors.wheel import curvature_states
+
+            self._states = curvature_states(self._states, self.config,
+                                                wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
+                                                wheel_config.wheel_base)
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
         self._t_nodes: list[float] = []

@@ -340,8 +340,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     if streams.camera_height_sigma is not None and streams.camera_height:
         iv.visual_scale_sigma = float(streams.camera_height_sigma / streams.camera_height)
     if streams.wheel is not None and streams.wheel.config.radius_sigma is not None:
-        wc = streams.wheel.config
-        iv.wheel_scale_sigma = float(2.0 * wc.radius_sigma / (wc.wheel_radius_left + wc.wheel_radius_right))
+        iv.wheel_scale_sigma = streams.wheel.config.relative_radius_sigma(iv.wheel_scale_sigma)
     iv.heading_offset = heading_offset
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)

@@ -329,7 +329,7 @@ def test_the_command_line_runs_a_sensor_an_installed_package_registers(compass_r
     ("fusion: {states: {compass_offset: {random_walk: -0.1}}}\n", "fusion: 'states.compass_offset.random_walk' must "
                                                                    "not be negative, not -0.1"),
     ("fusion: {states: {compass_ofset: {sigma: 1}}}\n", "fusion.states.compass_ofset: unknown key (known: "
-                                                        "compass_offset)"),
+                                                        "wheel_curvature, compass_offset)"),
 ])
 def test_run_yaml_errors_about_a_registered_sensor_name_the_key(tmp_path, text, message):
     from fusion_vo.config import load_config
