@@ -1,10 +1,10 @@
 """What the frontends' hand-off thread saves: visual odometry with two threads, with and without it.
 
-With ``--threads`` of 2 or more, :func:`fusion_vo.odometry.run_visual_odometry` gives a frontend that has
-a ``set_executor`` method one more thread for work it can hand off (KLT: the next frame's reference
-warped by the predicted motion; features: the reference warped for the refinement while the exposure
-change is measured). This script runs each frontend over a recording (default: the standard random60
-drive, generated) with two threads, with that thread and without it (``set_executor`` made a no-op),
+With two or more threads and ``odometry.handoff`` (default false), :func:`fusion_vo.odometry.run_visual_odometry`
+gives a frontend that has a ``set_executor`` method one more thread for work it can hand off (KLT: the
+next frame's reference warped by the predicted motion; features: the reference warped for the refinement
+while the exposure change is measured). This script runs each frontend over a recording (default: the
+standard random60 drive, generated) with two threads, with that thread and without it,
 interleaved and alternating which goes first, and prints per run the wall time per frame, the CPU time
 per frame of the whole process and of the calling (tracking) thread, and the load average. It then
 checks that both ways gave the same increments, bit for bit. Usage::
@@ -34,21 +34,11 @@ from fusion_vo.simulation.standard import make_standard
 
 def timed_run(sequence: Path, frontend: str, handoff: bool):
     """One two-thread run: (result, wall ms per frame, CPU ms per frame, calling thread's CPU ms per frame)."""
-    from frontends import make_frontend
-
-    cls = type(make_frontend(frontend))
-    original = cls.__dict__.get("set_executor")
-    if not handoff and original is not None:
-        cls.set_executor = lambda self, executor: None
-    try:
-        rec = Recording(sequence)
-        n = len(rec)
-        cpu, own = time.process_time(), time.thread_time()
-        result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=2))
-        cpu, own = time.process_time() - cpu, time.thread_time() - own
-    finally:
-        if original is not None:
-            cls.set_executor = original
+    rec = Recording(sequence)
+    n = len(rec)
+    cpu, own = time.process_time(), time.thread_time()
+    result = run_visual_odometry(rec, OdometryConfig(frontend=frontend, threads=2, handoff=handoff))
+    cpu, own = time.process_time() - cpu, time.thread_time() - own
     return result, 1e3 * result.elapsed_s / n, 1e3 * cpu / n, 1e3 * own / n
 
 

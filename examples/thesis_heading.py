@@ -31,7 +31,7 @@ import time
 
 import numpy as np
 
-from common import FRONTENDS, REALISTIC, example_parser, fmt, format_table, generate, output_dir, to_trajectory
+from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, realistic_options, to_trajectory
 from fusion_vo.evaluation.metrics import evaluate_trajectory, to_planar
 from fusion_vo.evaluation.plots import plot_heading
 from fusion_vo.measurements import PoseData
@@ -53,8 +53,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     options = {"radius": 0.15, "supersample": 1} if args.quick else {}
     if args.realistic:
-        options["realistic"] = REALISTIC  # exposure blur as the realistic standard recordings
-        options.update(exposure_time=0.004, blur_samples=3)
+        options.update(realistic_options("good light"))
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
         seq = generate("circle", out / "circle", args.seed, **options)

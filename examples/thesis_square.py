@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import time
 
-from common import FRONTENDS, REALISTIC, example_parser, fmt, format_table, generate, output_dir, to_trajectory
+from common import FRONTENDS, example_parser, fmt, format_table, generate, output_dir, realistic_options, to_trajectory
 from fusion_vo.evaluation.metrics import detect_legs, evaluate_trajectory, leg_errors, to_planar
 from fusion_vo.evaluation.plots import plot_trajectories
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
@@ -51,8 +51,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     options = {"side": 0.3, "supersample": 1} if args.quick else {}
     if args.realistic:
-        options["realistic"] = REALISTIC  # exposure blur as the realistic standard recordings
-        options.update(exposure_time=0.004, blur_samples=3)
+        options.update(realistic_options("good light"))
     with output_dir(args.out) as out:
         t_start = time.perf_counter()
         seq = generate("square", out / "square", args.seed, **options)

@@ -19,9 +19,11 @@ Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``thread
 thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
 per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
 calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
-derotation, ground geometry, the track) while the frontend measures the next frame; a frontend with a
-``set_executor`` method gets one more thread for work it can hand off (KLT: the next frame's reference
-warped by the predicted motion; features: the reference warped for the refinement). OpenCV releases the
+derotation, ground geometry, the track) while the frontend measures the next frame. With ``handoff``, a
+frontend with a ``set_executor`` method gets one more thread for work it can hand off (KLT: the next
+frame's reference warped by the predicted motion; features: the reference warped for the refinement);
+it shortens the tracking thread but costs thread wake-ups, and on two idle cores it gave no wall-clock
+gain (``benchmarks/bench_handoff.py``), so it is off by default. OpenCV releases the
 GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
@@ -111,6 +113,10 @@ class OdometryConfig:
         single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
         (:func:`prepared_frames`) and lets OpenCV use ``N`` threads. ``None`` (the default) uses the
         cores available to the process. The results do not depend on it.
+    handoff : bool
+        With ``threads >= 2``, give a frontend that can hand work off (KLT, features) one more thread
+        for it (default false: on two idle cores it saved the tracking thread 0.5-0.6 ms per frame but
+        the wall time did not fall). The results do not depend on it.
     """
 
     frontend: str = "klt"
@@ -127,6 +133,7 @@ class OdometryConfig:
     check_lens: bool = True
     max_bridge: float = 1.0
     threads: int | None = None
+    handoff: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.max_bridge, bool) or not self.max_bridge >= 0:
@@ -534,7 +541,7 @@ def run_visual_odometry(
     # and a frontend that can do part of its work in another thread (KLT: setting up the next frame's
     # tracking, told the next frame's timestamp; features: warping the reference) does so in one more
     ahead = None
-    if threads > 1 and hasattr(frontend, "set_executor"):
+    if threads > 1 and config.handoff and hasattr(frontend, "set_executor"):
         ahead = ThreadPoolExecutor(max_workers=1, thread_name_prefix="fusion-vo-ahead")
         frontend.set_executor(ahead)
     frame_times = recording.frame_times

@@ -37,10 +37,12 @@ def test_threads_give_the_single_threaded_result_frame_for_frame(standard_record
     one = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend, threads=1))
     two = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend, threads=2))
     three = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend, threads=3))
+    handed = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend, threads=2, handoff=True))
     assert len(one.skipped) == 2 and one.n_frames == len(frames) - 2
     assert one.failures == {} and one.distance > 0.1
     _same(one, two)
     _same(one, three)
+    _same(one, handed)
 
 
 def test_read_ahead_keeps_order_and_stays_within_its_depth():
