@@ -25,12 +25,18 @@ systematic loss of a smoother from the chance of one drive.
 
 With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
 same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
-divided by 4, other robust kernels of the factor graph), printing the fused ATEs of each: what tells
-which input or which part of the model makes a fused track worse than the best single sensor.
+divided by 4, other robust kernels of the factor graph) and with the wheels' noise set to what the
+generator put into them (:func:`true_wheel_noise`), printing the fused ATEs of each: what tells which
+input or which part of the model makes a fused track worse than the best single sensor.
+
+``--equal-radii`` generates every recording with its right wheel's radius error equal to its left
+one's (same images, same seed): a radius difference turns the robot by a fixed angle per metre, which
+the backends do not estimate (they estimate the common radius and the wheel base), so this separates
+that error from the rest.
 
 Run::
 
-    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors] [--variants]
+    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors] [--variants] [--equal-radii]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -52,10 +58,10 @@ from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation import evaluate_run
 from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
-from fusion_vo.odometry import run_visual_odometry
+from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
-from fusion_vo.simulation.generate import simulate
+from fusion_vo.simulation.generate import SimulationOptions, simulate
 from fusion_vo.simulation.standard import STANDARD, make_standard
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
@@ -79,10 +85,11 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
     component's ``e² / σ²``; the wheels' arc increments against the true ones scaled by the least-squares
     distance scale and wheel-base factor, with the arc model's covariance; the gyro's angle per interval
     minus the least-squares bias against ``σ_g² Δt``. Consistent: 3, (1, 1, 1), 3, 1. For the camera's
-    and the gyro's heading errors also ``whiteness``: the variance of their sums over 64 consecutive node
-    intervals divided by 64 times the variance of one, which is 1 when the errors are independent from
-    interval to interval, as both backends assume (below 1: errors that cancel over time, so the summed
-    heading is better than the stated noise says; above: errors that persist).
+    and the gyro's heading errors also ``whiteness``: the variance of their sums over 16 (and 64)
+    consecutive node intervals divided by 16 (64) times the variance of one, which is 1 when the errors
+    are independent from interval to interval, as both backends assume (below 1: errors that cancel over
+    time, so the summed heading is better than the stated noise says; above: errors that persist), and
+    the camera's correlation of consecutive heading errors (0 when independent).
     """
     from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
     from fusion_vo.backends.timeline import build_intervals
@@ -108,6 +115,10 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         e = np.nan_to_num(errors[: len(errors) // n * n])
         return float(np.var(e.reshape(-1, n).sum(axis=1)) / (n * np.nanvar(errors)))
 
+    def lag_one(errors: np.ndarray) -> float:
+        pair = np.isfinite(errors[:-1]) & np.isfinite(errors[1:])
+        return float(np.corrcoef(errors[:-1][pair], errors[1:][pair])[0, 1]) if pair.sum() > 8 else float("nan")
+
     def nees(e, cov) -> np.ndarray:
         return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
 
@@ -120,7 +131,8 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         heading = np.full(iv.n_steps, np.nan)
         heading[iv.vis_i0[single]] = e[single, 2]
         out["camera"] = (f"NEES {np.mean(nees(e, iv.vis_cov)):.2f} (x, y, yaw: {z2[0]:.2f} {z2[1]:.2f} {z2[2]:.2f}), "
-                         f"heading whiteness {whiteness(heading):.2f}")
+                         f"heading whiteness {whiteness(heading):.2f} (over 64 intervals "
+                         f"{whiteness(heading, 64):.2f}), lag-1 correlation {lag_one(heading):.2f}")
     steps = np.arange(iv.n_steps)
     if iv.uses("wheel") and iv.wheel_ok.any():
         ok = iv.wheel_ok
@@ -139,7 +151,7 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         dt = iv.dt[ok]
         bias = float(np.sum(r) / np.sum(dt))
         out["gyro"] = (f"NIS {np.mean((r - bias * dt) ** 2 / (config.imu.gyro_noise_density**2 * dt)):.2f}, "
-                       f"whiteness {whiteness(r - bias * dt):.2f}")
+                       f"whiteness {whiteness(r - bias * dt):.2f} (over 64 intervals {whiteness(r - bias * dt, 64):.2f})")
     return out
 
 
@@ -159,15 +171,49 @@ def compare(seq: Path, run_dir: Path) -> dict:
     }
 
 
-#: re-fusion variants: name -> (sensors or None for all but GPS, camera covariance factor, fusion options)
+#: the frontend's floors on a visual increment's standard deviations (``odometry.min_sigma_xy``, ``min_sigma_yaw``)
+FLOOR = (OdometryConfig.min_sigma_xy, OdometryConfig.min_sigma_yaw)
+
+#: re-fusion variants: name -> (sensors or None for all but GPS, camera covariance factor, floors (xy, yaw) on
+#: the camera's standard deviations, fusion options)
 VARIANTS = {
-    "default": (None, 1.0, {}),
-    "camera + wheels": (["camera", "wheel"], 1.0, {}),
-    "camera + gyro": (["camera", "imu"], 1.0, {}),
-    "camera covariance / 4": (None, 0.25, {}),
-    "graph kernel none": (None, 1.0, {"graph": {"robust": "none"}}),
-    "graph kernel cauchy": (None, 1.0, {"graph": {"robust": "cauchy", "robust_k": 2.3849}}),
+    "default": (None, 1.0, FLOOR, {}),
+    "camera + wheels": (["camera", "wheel"], 1.0, FLOOR, {}),
+    "camera + gyro": (["camera", "imu"], 1.0, FLOOR, {}),
+    "camera alone": (["camera"], 1.0, FLOOR, {}),
+    "camera covariance / 4": (None, 0.25, FLOOR, {}),
+    "camera without yaw floor": (None, 1.0, (FLOOR[0], 0.0), {}),
+    "camera without floors": (None, 1.0, (0.0, 0.0), {}),
+    "graph kernel none": (None, 1.0, FLOOR, {"graph": {"robust": "none"}}),
+    "graph kernel cauchy": (None, 1.0, FLOOR, {"graph": {"robust": "cauchy", "robust_k": 2.3849}}),
 }
+
+
+def true_wheel_noise(seq: Path) -> dict:
+    """The wheel noise the generator put into a recording, as fusion options: ``k`` its slip [m^½] and
+    ``sigma_floor`` the standard deviation of a travel from two counts floored to whole ticks (one tick
+    over √6), from ``simulation.yaml``. Not what a user can know; a check of the wheels' weight."""
+    import math
+
+    import yaml
+
+    o = yaml.safe_load((seq / "simulation.yaml").read_text())["options"]
+    tick = 2 * math.pi * o["wheel_radius"] / o["ticks_per_revolution"]
+    return {"wheel": {"k": max(float(o["slip"]), 1e-6), "sigma_floor": tick / math.sqrt(6)}}
+
+
+def with_floor(increments, factor: float, floor: tuple[float, float]):
+    """``increments`` with their covariances scaled by ``factor`` and their diagonal floored as the frontend
+    does (:meth:`fusion_vo.geometry.ground.GroundGeometry.body_increment`)."""
+    out = []
+    for inc in increments:
+        cov = np.asarray(inc.covariance, dtype=float) * factor
+        if inc.ok:
+            cov = cov.copy()
+            for i, f in ((0, floor[0]), (1, floor[0]), (2, floor[1])):
+                cov[i, i] = max(cov[i, i], f**2)
+        out.append(dataclasses.replace(inc, covariance=cov))
+    return out
 
 
 def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
@@ -211,11 +257,12 @@ def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
 
 
 def variants(seq: Path) -> dict[str, dict[str, float]]:
-    """Fused ATE [mm] per track for each of :data:`VARIANTS`, re-fusing one visual odometry run."""
+    """Fused ATE [mm] per track for each of :data:`VARIANTS` and with :func:`true_wheel_noise`, re-fusing one
+    visual odometry run (without the frontend's floors, which the variants apply)."""
     rec = Recording(seq)
-    vo = run_visual_odometry(rec)
+    vo = run_visual_odometry(rec, OdometryConfig(min_sigma_xy=0.0, min_sigma_yaw=0.0))
     for key, value in inputs_against_truth(rec, vo).items():
-        print(f"    {seq.name} {key}: {value:.3g}")
+        print(f"    {seq.name} {key.replace('camera', 'camera before the floors')}: {value:.3g}")
     gt = rec.groundtruth()
     reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
 
@@ -225,9 +272,10 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
         return ape_rmse(ref, align_se2(ref, est)) * 1e3
 
     out = {}
-    for name, (sensors, factor, options) in VARIANTS.items():
-        increments = vo.increments if factor == 1.0 else [
-            dataclasses.replace(i, covariance=np.asarray(i.covariance) * factor) for i in vo.increments]
+    runs = dict(VARIANTS)
+    runs["wheels at their true noise"] = (None, 1.0, FLOOR, true_wheel_noise(seq))
+    for name, (sensors, factor, floor, options) in runs.items():
+        increments = with_floor(vo.increments, factor, floor)
         try:
             result = backends.run_backends(rec, dataclasses.replace(vo, increments=increments), sensors=sensors,
                                            backend="all", options=options)
@@ -260,6 +308,8 @@ def main(argv=None) -> int:
                         help="also print each input's NEES against the truth (runs visual odometry once more)")
     parser.add_argument("--variants", action="store_true",
                         help="also re-fuse each recording's increments with VARIANTS")
+    parser.add_argument("--equal-radii", action="store_true",
+                        help="generate the recordings with the right wheel's radius error equal to the left's")
     args = parser.parse_args(argv)
     names = args.only.split(",") if args.only else [n for n in STANDARD if n not in SKIP]
     out = args.out or Path(tempfile.mkdtemp(prefix="fusion-vs-best-"))
@@ -268,12 +318,15 @@ def main(argv=None) -> int:
     try:
         for name in names:
             profile, seed, options, _ = STANDARD[name]
+            if args.equal_radii:
+                left = options.get("radius_error_left", SimulationOptions.radius_error_left)
+                options = {**options, "radius_error_right": left}
             rows = []
             for i in range(args.seeds + 1):
                 t0 = time.perf_counter()
                 label = name if i == 0 else f"{name} (seed {seed + 100 * i})"
                 folder = name if i == 0 else f"{name}_seed{seed + 100 * i}"
-                seq = (make_standard(name, out / folder) if i == 0
+                seq = (make_standard(name, out / folder) if i == 0 and not args.equal_radii
                        else simulate(out / folder, profile=profile, seed=seed + 100 * i, **options))
                 r = compare(seq, out / f"run_{folder}")
                 rows.append(r)
@@ -289,7 +342,7 @@ def main(argv=None) -> int:
                     print(f"    {name} {sensor}: {text}", flush=True)
             if args.variants:
                 for label, ate in variants(seq).items():
-                    print(f"    {name} {label:24s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
+                    print(f"    {name} {label:26s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
                                                              for k, v in ate.items()), flush=True)
     finally:
         if args.out is None:
