@@ -126,7 +126,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment, gyro_turn, standstill
+from fusion_vo.sensors.wheel import arc_covariance, arc_increment, at_rest, gyro_turn
 
 logger = logging.getLogger(__name__)
 
@@ -259,7 +259,7 @@ class GraphBuilder:
             self._turn = gyro_turn(iv)
             self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
                                              np.diff(iv.t), self._turn)
-            self._still = standstill(iv.wheel_dl, iv.wheel_dr, np.diff(iv.t), config.wheel_model(iv.twist)[0])
+            self._still = at_rest(iv, config)
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -409,7 +409,7 @@ class GraphBuilder:
 
     def wheels_at_rest(self, g0: int, g1: int) -> bool:
         """Both wheels at rest in every interval from grid index ``g0`` to ``g1``
-        (:func:`~fusion_vo.sensors.wheel.standstill`, evaluated for all intervals at once)."""
+        (:func:`~fusion_vo.sensors.wheel.at_rest`, evaluated for all intervals at once)."""
         return bool(self._still[g0:g1].all())
 
     def key(self, n: int) -> int:

@@ -260,14 +260,13 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     seconds give the bias to ``σ_ψ / T``, where the median of per-interval rate differences (what the
     whole-recording check uses when there is no standstill) follows the AHRS' interval noise.
     """
-    from fusion_vo.sensors.wheel import arc_increment, standstill
+    from fusion_vo.sensors.wheel import arc_increment, at_rest
 
     if not iv.uses("gyro"):
         return None, False
     dt = iv.dt
     if iv.uses("wheel"):
-        noise, _ = config.wheel_model(iv.twist)
-        still = iv.wheel_ok & iv.gyro_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+        still = at_rest(iv, config) & iv.gyro_ok
         if np.count_nonzero(still) >= 10:
             return float(np.median(iv.gyro_angle[still] / dt[still])), True
     refs = []

@@ -169,7 +169,7 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
 
     ``gyro_bias`` [rad/s] replaces the bias the check estimates itself (:func:`_gyro_bias`).
     """
-    from fusion_vo.sensors.wheel import arc_increment, standstill
+    from fusion_vo.sensors.wheel import arc_increment, at_rest
 
     cfg = config
     if not cfg.monitor or iv.n_steps < 2:
@@ -184,7 +184,7 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
         noise, base_sigma = cfg.wheel_model(iv.twist)
         inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
         wheel_yaw = inc[:, 2]
-        still = iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, dt, noise)
+        still = at_rest(iv, cfg)
     bias = 0.0
     if iv.uses("gyro"):
         bias = _gyro_bias(iv, wheel_yaw, still) if gyro_bias is None else float(gyro_bias)
