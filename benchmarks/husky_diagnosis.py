@@ -26,13 +26,20 @@ reference (after the least-squares SE(2) alignment of each track to the fixes). 
    (:func:`fusion_vo.sensors.imu.rest_noise_density`) and given to the backends for the intervals at
    rest (``imu.gyro_rest_noise_density``), so that the zero-velocity update pins the bias, with and
    without the AHRS, beside the default; the same with a tighter zero-velocity update, and other
-   settings of the odometry's error model (each one changed alone).
+   settings of the odometry's error model (each one changed alone);
+9. each sensor's model against what the log shows of it, each change beside the default in the same run:
+   the IMU's mounting (gravity in the body frame, and the gyro read about the vertical instead of the body's
+   z axis), the gyro's Allan deviation at rest and its bias random walk, the odometry twist's yaw-rate
+   error against the gyro (size and correlation time), and the AHRS heading's departure from the gyro
+   (delay, white part, slow part and its correlation time) with the AHRS offset modelled as a
+   Gauss-Markov error of that size (EKF only).
 
 Usage::
 
-    python benchmarks/husky_diagnosis.py [BAG]
+    python benchmarks/husky_diagnosis.py [BAG] [--section9]
 
-Takes a few minutes (GTSAM batch and iSAM2 over the whole log, once per variant of sections 5-7).
+Takes a few minutes (GTSAM batch and iSAM2 over the whole log, once per variant of sections 5-9);
+``--section9`` prints section 9 alone (about 3 minutes).
 """
 
 from __future__ import annotations
@@ -58,7 +65,8 @@ from fusion_vo.backends.timeline import build_intervals  # noqa: E402
 from fusion_vo.measurements import PoseData  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf  # noqa: E402
-from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro_yaw, rest_noise_density  # noqa: E402
+from fusion_vo.sensors.imu import (ImuNoise, ahrs_heading, cumulative_angle, gated_yaw_rate, gyro_yaw,  # noqa: E402
+                                   quat_to_matrix, rest_noise_density)
 from fusion_vo.sensors.sync import rate_delay  # noqa: E402
 
 BINS = 50.0  # [s] error-over-time bins
@@ -139,6 +147,7 @@ def ekf_bias_track(streams: SensorStreams, config: FusionConfig, drop_wheel_yaw:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("bag", nargs="?", default=str(DEFAULT_BAG), help="robot_localization's test1.bag")
+    parser.add_argument("--section9", action="store_true", help="print section 9 only")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         seq = Path(tmp) / "husky"
@@ -147,6 +156,10 @@ def main(argv: list[str] | None = None) -> int:
         odom, imu = rec.odom(), rec.imu()
         t_gps, enu = read_gps(seq)
     t0 = float(odom.t[0])
+    if args.section9:
+        gyro = gyro_yaw(imu, ImuNoise())
+        sensor_model_candidates(odom, imu, t_gps, enu, rate_delay(odom.t, odom.wz, gyro.t, gyro.rate) or 0.0)
+        return 0
     claimed = float(imu.noise.get("gyroscope_noise_density", np.nan))
     gyro = gyro_yaw(imu, ImuNoise())
     rate_hz = 1.0 / float(np.median(np.diff(gyro.t)))
@@ -279,6 +292,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  {name:38s} {rms(err):5.2f} " + " ".join(f"{v:5.1f}" for v in bins))
     model_candidates(odom, imu, t_gps, enu, t0)
     rest_noise_candidate(odom, imu, t_gps, enu, delay)
+    sensor_model_candidates(odom, imu, t_gps, enu, delay)
     return 0
 
 
@@ -367,6 +381,190 @@ def rest_noise_candidate(odom, imu, t_gps, enu, delay: float) -> None:
         errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
         bias = result.calibration["gtsam"]["gyro_bias"]
         print(f"  {label + ', ' + setting:52s}" + " ".join(f"{e:13.3f}" for e in errors) + f"  {bias * 1e3:+.3f} mrad/s")
+
+def allan_deviation(rate: np.ndarray, dt: float, taus: tuple) -> list[float]:
+    """Overlapping Allan deviation [rad/s] of rate samples ``rate`` spaced ``dt`` at averaging times ``taus`` [s]."""
+    angle = np.concatenate([[0.0], np.cumsum(rate) * dt])
+    out = []
+    for tau in taus:
+        m = int(round(tau / dt))
+        if 2 * m >= len(angle):
+            out.append(float("nan"))
+            continue
+        d = angle[2 * m:] - 2.0 * angle[m:-m] + angle[:-2 * m]
+        out.append(float(np.sqrt(np.mean(d**2) / (2.0 * tau**2))))
+    return out
+
+
+def with_yaw_rate(imu, rate: np.ndarray):
+    """``imu`` with its gyro changed along the body-z row of ``R_BS`` so that its body yaw rate is ``rate``."""
+    axis = np.asarray(imu.T_BS, dtype=np.float64)[2, :3]
+    gyro = np.asarray(imu.gyro, dtype=np.float64)
+    return dataclasses.replace(imu, gyro=gyro + (rate - gyro @ axis)[:, None] * axis[None, :])
+
+
+def sensor_model_candidates(odom, imu, t_gps, enu, delay: float) -> None:
+    print("9. sensor models against their measured behaviour (GPS only as the reference)")
+    names = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+    r_bs = np.asarray(imu.T_BS, dtype=np.float64)[:3, :3]
+    acc_b = np.asarray(imu.accel, dtype=np.float64) @ r_bs.T
+    w_b = np.asarray(imu.gyro, dtype=np.float64) @ r_bs.T
+    still = ((np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)).astype(float)
+    rest = np.interp(imu.t, np.asarray(odom.t) - delay, still) > 0.999
+    print("  9a. the IMU's mounting: gravity in the body frame (launch file's static transform applied)")
+    for label, m in (("at rest", rest), ("whole log", np.ones(len(rest), bool))):
+        g = acc_b[m].mean(axis=0)
+        g /= np.linalg.norm(g)
+        print(f"    mean accelerometer direction {label:9s}: ({g[0]:+.4f}, {g[1]:+.4f}, {g[2]:+.4f}), "
+              f"{np.degrees(np.arccos(g[2])):.2f} deg from body z")
+    heading = ahrs_heading(imu)
+    r_wb = quat_to_matrix(imu.orientation) @ r_bs.T
+    up = r_wb[:, 2, :]  # the world's vertical in body coordinates (AHRS roll and pitch)
+    tilt = np.degrees(np.arccos(np.clip(up[:, 2], -1.0, 1.0)))
+    print(f"    AHRS tilt of the body: median {np.median(tilt):.2f} deg, 95th percentile {np.quantile(tilt, 0.95):.2f} deg; "
+          f"body-z turn {np.sum(np.abs(w_b[:-1, 2]) * np.diff(imu.t)):.3f} rad, about the vertical "
+          f"{np.sum(np.abs(np.einsum('nj,nj->n', up, w_b)[:-1]) * np.diff(imu.t)):.3f} rad")
+    g_all = acc_b.mean(axis=0) / np.linalg.norm(acc_b.mean(axis=0))
+    # the rate of the heading (the yaw of roll-pitch-yaw), psi' = (sin(roll) w_y + cos(roll) w_z) / cos(pitch)
+    euler = (up[:, 1] * w_b[:, 1] + up[:, 2] * w_b[:, 2]) / (1.0 - up[:, 0] ** 2)
+    rates = {"body z (default)": w_b[:, 2],
+             "heading rate, AHRS roll and pitch per sample": euler,
+             "about the AHRS vertical, per sample": np.einsum("nj,nj->n", up, w_b),
+             "about the mean gravity axis (mounting corrected)": w_b @ g_all}
+    print(f"    {'yaw rate':48s} {'DR':>6s}" + " ".join(f"{n:>13s}" for n in names)
+          + "  bias at rest (DR) mrad/s")
+    for label, rate in rates.items():
+        gy = gated_yaw_rate(imu.t, rate)
+        bias = float(np.median(gy.rate[rest]))
+        dr = rms(gps_errors(dead_reckoning(odom, gy, bias, delay), t_gps, enu))
+        result = fuse(SensorStreams(odom=odom, imu=with_yaw_rate(imu, rate)), "all", FusionConfig())
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
+        print(f"    {label:48s} {dr:6.3f}" + " ".join(f"{e:13.3f}" for e in errors) + f"  {bias * 1e3:+.3f}")
+    b_rest = np.median(w_b[rest], axis=0)
+    print(f"    gyro at rest, body x/y/z: {b_rest[0] * 1e3:+.2f} / {b_rest[1] * 1e3:+.2f} / {b_rest[2] * 1e3:+.2f} mrad/s; "
+          f"roll at rest {np.degrees(np.median(np.arctan2(up[rest, 1], up[rest, 2]))):+.2f} deg, while driving "
+          f"{np.degrees(np.median(np.arctan2(up[~rest, 1], up[~rest, 2]))):+.2f} deg (the tilted rates mix the "
+          "y-axis bias into the heading rate's)")
+
+    print("  9b. the gyro at rest: Allan deviation [rad/s] of the standstill (white noise falls as 1/sqrt(tau))")
+    gyro = gyro_yaw(imu, ImuNoise())
+    dt = float(np.median(np.diff(gyro.t)))
+    longest = max(runs(rest), key=lambda r: r[1] - r[0])
+    taus = (0.1, 0.3, 1.0, 2.0, 3.0)
+    adev = allan_deviation(gyro.rate[longest[0]:longest[1]], dt, taus)
+    print("    tau " + " ".join(f"{t:g} s: {a:.2e}" for t, a in zip(taus, adev))
+          + f"; white density {adev[0] * np.sqrt(taus[0]):.2e} rad/s/sqrt(Hz); a "
+          f"{(longest[1] - longest[0]) * dt:.1f} s standstill cannot show a bias walk")
+    for walk in (2e-5, 1e-5, 5e-5, 1e-4):
+        result = fuse(SensorStreams(odom=odom, imu=imu), "all",
+                      FusionConfig.from_dict({"imu": {"gyro_random_walk": walk}}))
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
+        print(f"    gyro_random_walk {walk:g}{' (default)' if walk == 2e-5 else '':10s}"
+              + " ".join(f"{e:13.3f}" for e in errors))
+
+    print("  9c. the odometry twist's yaw rate against the gyro (twist moved back by its delay)")
+    bias0 = float(np.median(gyro.rate[rest]))
+    g = np.interp(np.asarray(odom.t) - delay, gyro.t, gyro.rate) - bias0
+    moving = np.abs(odom.vx) > 0.1
+    turn = moving & (np.abs(g) > 0.1)
+    k = float(np.sum(odom.wz[moving] * g[moving]) / np.sum(g[moving] ** 2))
+    rel = odom.wz / k - g
+    print(f"    ratio over all motion {k:.3f}; residual yaw rate/gyro rate in turns: std {np.std(rel[turn] / g[turn]):.3f} "
+          f"(model yaw_scale 0.3); on straight legs (|w|<0.02): residual std {np.std(rel[moving & (np.abs(g) < 0.02)]):.4f} rad/s")
+    r = rel[moving] - rel[moving].mean()
+    ac = [float(np.sum(r[:-L] * r[L:]) / np.sum(r * r)) for L in (1, 5, 10, 20, 50, 100)]
+    print("    residual autocorrelation at lag 0.1/0.5/1/2/5/10 s: " + " ".join(f"{a:.2f}" for a in ac)
+          + " (model yaw_scale_time 5 s)")
+    in_turn = [(a, b) for a, b in runs(turn) if b - a >= 30]
+    rt = [rel[a:b] / g[a:b] - np.mean(rel[a:b] / g[a:b]) for a, b in in_turn]
+    ac = [float(sum(np.sum(x[:-L] * x[L:]) for x in rt if len(x) > L) / sum(np.sum(x * x) for x in rt))
+          for L in (1, 5, 10, 20)]
+    print(f"    within {len(in_turn)} turns of 3 s or more: relative error about each turn's mean, autocorrelation at "
+          "lag 0.1/0.5/1/2 s: " + " ".join(f"{a:.2f}" for a in ac) + "; std of the turns' mean relative error "
+          f"{np.std([np.mean(rel[a:b] / g[a:b]) for a, b in in_turn]):.3f}")
+    for opts in ({}, {"odom": {"yaw_scale": 0.15}}, {"odom": {"yaw_scale_time": 10.0, "yaw_scale": 0.15}},
+                 {"odom": {"k_yaw": 0.05}}, {"odom": {"k_yaw": 0.01}}):
+        result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig.from_dict(opts))
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
+        print(f"    {str(opts or 'default'):48s}" + " ".join(f"{e:13.3f}" for e in errors))
+
+    print("  9d. the AHRS heading against the gyro's integral where the monitor keeps it (first 180 s)")
+    ahrs = ahrs_heading(imu)
+    m = ahrs.valid & (ahrs.t < ahrs.t[0] + 180.0)
+    angle = np.interp(ahrs.t[m], gyro.t, cumulative_angle(gyro))
+    dev = np.unwrap(ahrs.yaw[m]) - angle
+    tt = ahrs.t[m] - ahrs.t[0]
+    dev -= np.polyval(np.polyfit(tt, dev, 1), tt)  # a constant gyro bias and the AHRS north removed
+    step = float(np.median(np.diff(tt)))
+    acf = np.array([np.sum(dev[:-L] * dev[L:]) / np.sum(dev * dev) for L in range(1, int(60.0 / step))])
+    tau = step * (1 + int(np.argmax(acf < np.exp(-1.0)))) if np.any(acf < np.exp(-1.0)) else float("nan")
+    config = with_recorded_noise(FusionConfig(), SensorStreams(odom=odom, imu=imu))
+    node = float(np.median(np.diff(build_intervals(synchronise_odometry(SensorStreams(odom=odom, imu=imu), config)[0],
+                                                   config).t)))
+    high = dev - np.convolve(dev, np.ones(150) / 150.0, mode="same")
+    ahrs_rate = np.gradient(np.unwrap(ahrs.yaw[ahrs.valid]), ahrs.t[ahrs.valid])
+    lag = rate_delay(ahrs.t[ahrs.valid], ahrs_rate, gyro.t, gyro.rate, min_correlation=0.3)
+    print(f"    AHRS heading behind the gyro (yaw-rate cross-correlation): "
+          + ("not resolved" if lag is None else f"{lag * 1e3:.0f} ms")
+          + f"; its white part (departure minus its 5 s running mean) {np.degrees(np.std(high[150:-150])):.2f} deg")
+    print(f"    departure after the best constant bias: std {np.degrees(np.std(dev)):.1f} deg, correlation time "
+          f"{tau:.1f} s; as white noise at the fusion's "
+          f"{node:.2f} s nodes that is sigma {np.std(dev) * np.sqrt(2.0 * tau / node):.2f} rad "
+          f"(stated ahrs_yaw_sigma 0.02 rad; README: the fusion given 0.04 to 0.15 rad, the monitor left at 0.02, "
+          "gives RTS 2.51 to 2.56 m)")
+    implied = []
+    for lo, hi in ((0.0, 60.0), (60.0, 120.0), (120.0, 180.0)):
+        w = (tt >= lo) & (tt < hi)
+        design = np.column_stack([tt[w], np.ones(np.count_nonzero(w))])
+        implied.append(-np.linalg.lstsq(design, (np.unwrap(ahrs.yaw[m]) - angle)[w], rcond=None)[0][0])
+    print("    gyro bias the AHRS implies over 0-60 / 60-120 / 120-180 s: "
+          + " / ".join(f"{b * 1e3:+.2f}" for b in implied) + f" mrad/s (at rest {bias0 * 1e3:+.2f}); a bias walk of "
+          f"2e-5 rad/s/sqrt(s) allows about {2e-5 * np.sqrt(60.0) * 1e3:.2f} mrad/s per minute: the AHRS's wander "
+          "and a wandering bias cannot be told apart")
+    print("  9e. the AHRS offset as a Gauss-Markov error of the measured size (EKF only; the monitor as by default)")
+    print(f"    {'offset sigma, correlation time, white sigma':48s}" + " ".join(f"{n:>13s}" for n in names[:2]))
+    for sigma, tau_o, white in ((0.0, 0.0, 0.02), (0.08, 12.0, 0.02), (0.08, 12.0, 0.005), (0.04, 12.0, 0.02),
+                                (0.08, 60.0, 0.02), (0.04, 60.0, 0.02)):
+        with gauss_markov_ahrs_offset(sigma, tau_o):
+            cfg = FusionConfig.from_dict({"imu": {"ahrs_yaw_sigma": white, "ahrs_offset_walk": 1e-9 if sigma else 0.0}})
+            result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", cfg)
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names[:2]]
+        dropped = sum(1 for n in result.notes if "inconsistent" in n)
+        label = "default (absolute heading)" if not sigma else f"{sigma:g} rad, {tau_o:g} s, {white:g} rad"
+        print(f"    {label:48s}" + " ".join(f"{e:13.3f}" for e in errors) + f"  ({dropped} spans dropped)")
+
+
+@contextlib.contextmanager
+def gauss_markov_ahrs_offset(sigma: float, tau: float):
+    """Diagnosis only: the EKF's AHRS offset as a first-order Gauss-Markov error (stationary ``sigma`` [rad],
+    correlation time ``tau`` [s]) instead of a random walk; nothing changes when ``sigma`` is 0."""
+    if not sigma:
+        yield
+        return
+    init, predict = ekf_mod.PlanarEkf.__init__, ekf_mod.PlanarEkf.predict
+    ao = ekf_mod.AO
+
+    def patched_init(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        self.kf.P[ao, ao] = sigma**2
+
+    def patched_predict(self, dt):
+        phi = float(np.exp(-dt / tau))
+        self.kf.x[ao, 0] *= phi
+        self.kf.P[ao, :] *= phi
+        self.kf.P[:, ao] *= phi
+        F = predict(self, dt).copy()
+        self.kf.P[ao, ao] += sigma**2 * (1.0 - phi**2)
+        self.kf.P_prior = self.kf.P.copy()
+        F[ao, ao] = phi
+        return F
+
+    ekf_mod.PlanarEkf.__init__, ekf_mod.PlanarEkf.predict = patched_init, patched_predict
+    try:
+        yield
+    finally:
+        ekf_mod.PlanarEkf.__init__, ekf_mod.PlanarEkf.predict = init, predict
+
 
 if __name__ == "__main__":
     sys.exit(main())
