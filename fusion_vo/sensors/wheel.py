@@ -122,8 +122,8 @@ class WheelNoise:
         a robot at rest).
     estimate_curvature : bool
         Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`;
-        encoder ticks only; default False: on the generated ``hard`` drive it made the EKF 22 % and its
-        smoother 41 % worse at the default wheel noise, README "Fusion").
+        encoder ticks only; default False: on the generated drives it improves ``hard`` and
+        ``height_error`` but costs ``random60``'s EKF and iSAM2 4-5 %, README "Unequal wheel radii").
     """
 
     k: float = 0.01
