@@ -26,7 +26,7 @@ systematic loss of a smoother from the chance of one drive.
 With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
 same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
 divided by 4, other robust kernels of the factor graph) and with the wheels' noise set to what the
-generator put into them (:func:`true_wheel_noise`), printing the fused ATEs of each: what tells which
+generator put into them (:func:`true_wheel_noise`; also with the wheels' curvature bias estimated), printing the fused ATEs of each: what tells which
 input or which part of the model makes a fused track worse than the best single sensor.
 
 ``--equal-radii`` generates every recording with its right wheel's radius error equal to its left
@@ -186,6 +186,7 @@ VARIANTS = {
     "camera without floors": (None, 1.0, (0.0, 0.0), {}),
     "graph kernel none": (None, 1.0, FLOOR, {"graph": {"robust": "none"}}),
     "graph kernel cauchy": (None, 1.0, FLOOR, {"graph": {"robust": "cauchy", "robust_k": 2.3849}}),
+    "wheel curvature estimated": (None, 1.0, FLOOR, {"wheel": {"estimate_curvature": True}}),
 }
 
 
@@ -274,6 +275,9 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
     out = {}
     runs = dict(VARIANTS)
     runs["wheels at their true noise"] = (None, 1.0, FLOOR, true_wheel_noise(seq))
+    honest = true_wheel_noise(seq)
+    honest["wheel"]["estimate_curvature"] = True
+    runs["true noise, curvature estimated"] = (None, 1.0, FLOOR, honest)
     for name, (sensors, factor, floor, options) in runs.items():
         increments = with_floor(vo.increments, factor, floor)
         try:
@@ -342,7 +346,7 @@ def main(argv=None) -> int:
                     print(f"    {name} {sensor}: {text}", flush=True)
             if args.variants:
                 for label, ate in variants(seq).items():
-                    print(f"    {name} {label:26s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
+                    print(f"    {name} {label:31s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
                                                              for k, v in ate.items()), flush=True)
     finally:
         if args.out is None:

@@ -33,33 +33,33 @@ from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, robust_loss, robust_weight
 
 
-def gaussian_factor(items: list, b, unit):
+def gaussian_factor(items: list, b, unit, values: gtsam.Values | None = None):
     """GTSAM's ``JacobianFactor(k_1, A_1, ..., b, unit)`` of whitened blocks ``items = [k_1, A_1, ...]``.
 
-    GTSAM's Python interface builds a ``JacobianFactor`` of at most three variables; one of more (a wheel
-    heading with its wheel-base factor and curvature bias: two poses and two scalars) becomes the same
-    quadratic ``½‖Σ A_i δ_i - b‖²`` as a ``HessianFactor`` (``G_ij = A_iᵀA_j``, ``g_i = A_iᵀb``,
-    ``f = bᵀb``), summed from two-variable pieces that each carry one off-diagonal block, and turned back
-    into a ``JacobianFactor`` of as many rows as the measurement has (GTSAM's Cholesky of it).
+    GTSAM's Python interface builds a ``JacobianFactor`` of at most three variables. One of more (a wheel
+    factor with its radius factor, wheel-base factor and curvature bias: two poses and up to three
+    scalars) is built by GTSAM itself, as the linearisation at ``values`` (which must hold every key) of a
+    :class:`gtsam.CustomFactor` whose error and Jacobians are ``-b`` and the blocks, under the unit noise
+    model: the same ``Σ A_i δ_i - b``, of as many rows as the measurement has. (Summing two-variable
+    ``HessianFactor`` pieces and factoring the sum back into rows, as this did before, fails in GTSAM's
+    Cholesky whenever the quadratic of a two-row factor over nine dimensions comes out a rounding error
+    short of positive semi-definite.)
     """
     if len(items) <= 6:
         return gtsam.JacobianFactor(*items, b, unit)
+    if values is None:
+        raise ValueError("a factor of more than three variables needs the values it is linearised at")
     keys = [int(k) for k in items[0::2]]
-    A = [np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in items[1::2]]
-    b = np.asarray(b, dtype=np.float64).reshape(-1)
-    graph = gtsam.GaussianFactorGraph()
-    placed = set()
-    f = float(b @ b)
-    for i in range(len(keys)):
-        for j in range(i + 1, len(keys)):
-            gi = A[i].T @ b if i not in placed else np.zeros(A[i].shape[1])
-            gj = A[j].T @ b if j not in placed else np.zeros(A[j].shape[1])
-            Gii = A[i].T @ A[i] if i not in placed else np.zeros((A[i].shape[1],) * 2)
-            Gjj = A[j].T @ A[j] if j not in placed else np.zeros((A[j].shape[1],) * 2)
-            placed.update((i, j))
-            graph.push_back(gtsam.HessianFactor(keys[i], keys[j], Gii, A[i].T @ A[j], gi, Gjj, gj, f))
-            f = 0.0
-    return gtsam.JacobianFactor(gtsam.HessianFactor(graph))  # back to its one whitened row
+    blocks = [np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in items[1::2]]
+    error = -np.asarray(b, dtype=np.float64).reshape(-1)
+
+    def fixed(this, v, jacobians):
+        if jacobians is not None:
+            for i, a in enumerate(blocks):
+                jacobians[i] = a
+        return error
+
+    return gtsam.CustomFactor(unit, keys, fixed).linearize(values)
 
 
 @dataclass
@@ -154,9 +154,9 @@ class ModelFactor:
                 WJ = W @ (jac[name][rows] if sub else jac[name])
                 items += [int(key), WJ if link is None else WJ @ link]
             b = -ew
-        factor = gaussian_factor(items, b, _UNIT[len(rows)])
         if point is None:
             point = ValuesMaker().make(current)
+        factor = gaussian_factor(items, b, _UNIT[len(rows)], point)
         return gtsam.LinearContainerFactor(factor, point)
 
     def _wrapped_rows(self, rows: list) -> list:
@@ -288,7 +288,7 @@ class ModelFactors:
             items = []
             for key, a in zip(keys, A):
                 items += [int(key[r]), a[r]]
-            out.append(gaussian_factor(items, b[r], unit))
+            out.append(gaussian_factor(items, b[r], unit, values))
         return out
 
 

@@ -122,8 +122,8 @@ class WheelNoise:
         a robot at rest).
     estimate_curvature : bool
         Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`;
-        encoder ticks only; default False: on the generated ``hard`` drive it made the EKF 22 % and its
-        smoother 41 % worse at the default wheel noise, README "Fusion").
+        encoder ticks only; default False: on the generated drives it improves ``hard`` and
+        ``height_error`` but costs ``random60``'s EKF and iSAM2 4-5 %, README "Unequal wheel radii").
     """
 
     k: float = 0.01
@@ -378,30 +378,54 @@ class StandstillModel(MeasurementModel):
 
 @dataclass(frozen=True)
 class CurvedWheelModel(WheelModel):
-    """:class:`WheelModel` with the wheels' curvature bias ``c`` [rad/m]: unequal left and right radius errors
-    (UMBmark's type A error) make the wheels report a turn ``c`` per metre driven that the body did not make.
+    """:class:`WheelModel` with unequal left and right radius errors (UMBmark's type A error), through the
+    wheels' curvature bias ``c`` [rad/m].
 
-    ``h(δ, k_r, k_b, c) = (k_r d_x, k_r d_y, k_b d_ψ + c d_x)``; Jacobians as :class:`WheelModel`'s plus
-    ``∂h_ψ/∂d_x = c`` and ``∂h/∂c = (0, 0, d_x)ᵀ``. With relative radius errors ``ε_l, ε_r`` (true radius
-    ``r (1 + ε)``) and wheel base ``b``, ``c ≈ (ε_l - ε_r) / b``; its prior (:data:`CURVATURE`) has mean 0
-    and ``σ_c = √2 σ_ε / b`` for independent per-wheel errors of standard deviation ``σ_ε`` (``radius_sigma
-    / radius`` of ``wheel0/sensor.yaml``, else ``wheel_scale_sigma``). Constant over the run: a tyre's
-    radius changes with wear and load over hours, not within a recording.
-    Arguments ``motion``, ``wheel_scale``, ``wheel_base_factor``, ``wheel_curvature``.
+    With per-wheel scales ``s_l, s_r`` (reported travel over rolled travel, ``r_configured / r_true`` of
+    each wheel), configured base ``b`` and true base ``b_t``, a body motion of arc length ``d`` and turn
+    ``θ`` rolls ``d ∓ θ b_t / 2`` and the wheels report::
+
+        d_reported = k_r d + (c b² k_b / (4 k_r)) θ,    θ_reported = k_b θ + c d
+
+    with ``k_r = (s_l + s_r) / 2``, ``k_b = k_r b_t / b`` and ``c = (s_r - s_l) / b``: the wheels report a
+    turn ``c`` per metre driven that the body did not make, and, turning, a forward travel ``c b² / 4``
+    per radian (the faster wheel's excess over the slower one's), exactly, whatever the motion. So
+    ``h(δ, k_r, k_b, c) = (k_r d_x + q c d_ψ, k_r d_y, k_b d_ψ + c d_x)`` with ``q = b² k_b / (4 k_r)``;
+    Jacobians as :class:`WheelModel`'s plus ``∂h_x/∂d_ψ = q c``, ``∂h_x/∂k_r = d_x - q c d_ψ / k_r``,
+    ``∂h_x/∂k_b = q c d_ψ / k_b``, ``∂h_ψ/∂d_x = c`` and ``∂h/∂c = (q d_ψ, 0, d_x)ᵀ``. With relative radius
+    errors ``ε_l, ε_r`` (true radius ``r (1 + ε)``), ``c ≈ (ε_l - ε_r) / b``; its prior (:data:`CURVATURE`)
+    has mean 0 and ``σ_c = √2 σ_ε / b`` for independent per-wheel errors of standard deviation ``σ_ε``
+    (``radius_sigma / radius`` of ``wheel0/sensor.yaml``, else ``wheel_scale_sigma``). Constant over the
+    run: a tyre's radius changes with wear and load over hours, not within a recording.
+    Arguments ``motion``, ``wheel_scale``, ``wheel_base_factor``, ``wheel_curvature``; parameter
+    ``wheel_base`` (the configured ``b`` [m]).
     """
 
     args: tuple = ("motion", "wheel_scale", "wheel_base_factor", "wheel_curvature")
 
-    def evaluate(self, motion, wheel_scale, wheel_base_factor, wheel_curvature):
+    def evaluate(self, motion, wheel_scale, wheel_base_factor, wheel_curvature, wheel_base):
         h, j_d, j_r, j_b = scaled_motion(motion, wheel_scale, wheel_base_factor)
         d = np.asarray(motion, dtype=np.float64)
         if d.ndim == 1:
             c = float(np.asarray(wheel_curvature, dtype=np.float64).reshape(-1)[0])
+            k_r = float(np.asarray(wheel_scale, dtype=np.float64).reshape(-1)[0])
+            k_b = float(np.asarray(wheel_base_factor, dtype=np.float64).reshape(-1)[0])
+            b = float(np.asarray(wheel_base, dtype=np.float64).reshape(-1)[0])
         else:
             c = np.asarray(wheel_curvature, dtype=np.float64)[..., 0]
+            k_r = np.asarray(wheel_scale, dtype=np.float64)[..., 0]
+            k_b = np.asarray(wheel_base_factor, dtype=np.float64)[..., 0]
+            b = np.broadcast_to(np.asarray(wheel_base, dtype=np.float64), c.shape)
+        q = 0.25 * b**2 * k_b / k_r
+        turn = q * c * d[..., 2]  # forward travel the radius difference reports while turning
+        h[..., 0] += turn
         h[..., 2] += c * d[..., 0]
+        j_d[..., 0, 2] += q * c
         j_d[..., 2, 0] += c
+        j_r[..., 0, 0] -= turn / k_r
+        j_b[..., 0, 0] += turn / k_b
         j_c = np.zeros(d.shape[:-1] + (3, 1))
+        j_c[..., 0, 0] = q * d[..., 2]
         j_c[..., 2, 0] = d[..., 0]
         return h, {"motion": j_d, "wheel_scale": j_r, "wheel_base_factor": j_b, "wheel_curvature": j_c}
 
@@ -534,7 +558,7 @@ def ekf_measurements(iv, config) -> dict:
         R = R.copy()
         R[drop, :2, :] = R[drop, :, :2] = 0.0
         R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
-    out["wheel"] = (iv.wheel_ok, u, R)
+    out["wheel"] = (iv.wheel_ok, u, R, iv.wheel_base)
     still = at_rest(iv, config)
     if still.any():
         out["standstill"] = (still, config.wheel_model(iv.twist)[0].standstill_yaw_rate**2)
@@ -543,7 +567,11 @@ def ekf_measurements(iv, config) -> dict:
 
 def ekf_wheel(ekf, meas: dict, k: int) -> list:
     m = meas.get("wheel")
-    return [ekf.block(wheel_model(ekf.states), m[1][k], m[2][k])] if m is not None and m[0][k] else []
+    if m is None or not m[0][k]:
+        return []
+    model = wheel_model(ekf.states)
+    params = {"wheel_base": m[3]} if model is CURVED_WHEEL else {}
+    return [ekf.block(model, m[1][k], m[2][k], **params)]
 
 
 def ekf_standstill(ekf, meas: dict, k: int) -> list:
@@ -554,7 +582,9 @@ def ekf_standstill(ekf, meas: dict, k: int) -> list:
 def graph_translation(builder, nf, node) -> None:
     """The arc increment over the node interval: with the wheel-base factor estimated (or the yaw dropped) its
     translation (scaled by the radius factor when estimated) with a free heading, the heading change then a
-    factor of its own (:func:`graph_heading`); otherwise GTSAM's ``BetweenFactorPose2`` with the whole arc."""
+    factor of its own (:func:`graph_heading`); with the curvature bias estimated the two translation rows of
+    :class:`CurvedWheelModel` (its forward travel of a turn); otherwise GTSAM's ``BetweenFactorPose2`` with
+    the whole arc."""
     import gtsam
 
     iv, cfg = builder.iv, builder.config
@@ -578,7 +608,18 @@ def graph_translation(builder, nf, node) -> None:
         cov_xy = cov.copy()
         cov_xy[2, :] = cov_xy[:, 2] = 0.0
         cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-        if builder.kr_on:  # distance scaled by the wheels' radius factor
+        if curved:  # distance scaled by the radius factor, with the forward travel of the radius difference
+            keys = {"motion": (xi, xj), "wheel_curvature": (builder.state_key(CURVATURE.name, node.segment),)}
+            fixed = {}
+            for name, on, key in (("wheel_scale", builder.kr_on, builder.R),
+                                  ("wheel_base_factor", builder.kb_on, builder.W)):
+                if on:
+                    keys[name] = (key(node.segment),)
+                else:
+                    fixed[name] = 1.0
+            nf.factors.append(builder.model_factor(CURVED_WHEEL, m, cov[:2, :2], keys, fixed=fixed,
+                                                   params={"wheel_base": iv.wheel_base}, rows=(0, 1)))
+        elif builder.kr_on:  # distance scaled by the wheels' radius factor
             nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
                                                    fixed={"wheel_base_factor": 1.0}, dof=2))
         else:
@@ -609,15 +650,16 @@ def graph_heading(builder, nf, node) -> None:
     if wheel_heading is None:
         return
     model = wheel_model(builder.states)
-    keys, fixed = {"motion": (node.xi, node.xj)}, {"wheel_scale": 1.0}
+    keys, fixed, params = {"motion": (node.xi, node.xj)}, {"wheel_scale": 1.0}, {}
     if builder.kb_on:
         keys["wheel_base_factor"] = (builder.W(node.segment),)
     else:
         fixed["wheel_base_factor"] = 1.0
     if model is CURVED_WHEEL:
         keys["wheel_curvature"] = (builder.state_key(CURVATURE.name, node.segment),)
+        params["wheel_base"] = builder.iv.wheel_base
     nf.factors.append(builder.model_factor(model, wheel_heading[0], [[wheel_heading[1] ** 2]], keys,
-                                           fixed=fixed, rows=(2,)))
+                                           fixed=fixed, params=params, rows=(2,)))
 
 
 def _pick_ticks(streams, selected):

@@ -41,3 +41,27 @@ def test_a_radius_difference_is_estimated_within_its_covariance(streams, backend
 
 def test_the_curvature_bias_is_not_estimated_by_default(streams):
     assert "wheel_curvature" not in fuse(streams, "ekf").calibration["ekf"]
+
+
+def test_a_two_row_factor_of_five_variables_linearises():
+    # the translation rows of a wheel factor with its radius factor, wheel-base factor and curvature bias, as
+    # whitened for iSAM2 on the generated random60 drive: summed from two-variable Hessian pieces and factored
+    # back into rows, GTSAM's Cholesky found this rank-2 quadratic indefinite
+    import gtsam
+    import numpy as np
+
+    from fusion_vo.backends.factors import ValuesMaker, gaussian_factor
+
+    keys = [gtsam.symbol("x", 1100), gtsam.symbol("x", 1101), gtsam.symbol("r", 55), gtsam.symbol("w", 55),
+            gtsam.symbol("a", 55)]
+    blocks = [np.array([[-1.7393e+03, 0.0, -1.2248e+00], [0.0, -2.4046e+03, -1.5643e+01]]),
+              np.array([[1.7393e+03, -7.9999e-03, 1.2241e+00], [1.1060e-02, 2.4046e+03, 0.0]]),
+              np.array([[1.1325e+01], [-1.0007e-03]]), np.array([[5.5539e-06], [0.0]]), np.array([[0.0002], [0.0]])]
+    b = np.array([-5.63004652e-06, 9.52181415e-15])
+    items = [v for key, a in zip(keys, blocks) for v in (key, a)]
+    values = ValuesMaker().make({keys[0]: gtsam.Pose2(), keys[1]: gtsam.Pose2(0.01, 0, 0), keys[2]: 1.0,
+                                 keys[3]: 1.0, keys[4]: 0.0})
+    factor = gaussian_factor(items, b, gtsam.noiseModel.Unit.Create(2), values)
+    A, rhs = factor.jacobian()
+    np.testing.assert_allclose(A, np.hstack(blocks), rtol=1e-12)  # the same rows, GTSAM's key order
+    np.testing.assert_allclose(rhs, b, rtol=1e-12)

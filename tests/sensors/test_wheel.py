@@ -109,3 +109,23 @@ def test_standstill_needs_both_wheels_at_rest():
     still = standstill([0.0, 0.0, 1e-5, 0.0], [0.0, 2e-4, 1e-5, 0.0], [0.1, 0.1, 0.1, 0.1], noise)
     assert still.tolist() == [True, False, True, True]
     assert not standstill([0.0], [0.0], [0.1], WheelNoise(standstill_speed=0.0)).any()
+
+
+@pytest.mark.parametrize("d,theta", [(0.0, 0.05), (0.01, 0.0), (0.01, 0.045), (-0.01, 0.045), (0.015, -0.03)])
+def test_curved_model_predicts_what_wheels_of_unequal_radii_report(d, theta):
+    # radii 0.6 % too large on the left, 0.4 % too small on the right of what is configured, base 1.5 % wider:
+    # the robot drives an arc of length d turning by theta over one camera interval
+    from fusion_vo.sensors.wheel import CURVED_WHEEL
+
+    b, b_true = 0.3, 0.3 * 1.015
+    s_l, s_r = 1 / 1.006, 1 / 0.996  # reported over rolled travel
+    k_r, c = 0.5 * (s_l + s_r), (s_r - s_l) / b
+    k_b = k_r * b_true / b
+    rolled_l, rolled_r = d - theta * b_true / 2, d + theta * b_true / 2
+    motion = arc_increment(rolled_l, rolled_r, b_true)[0]
+    reported = arc_increment(s_l * rolled_l, s_r * rolled_r, b)[0]
+    h = CURVED_WHEEL.evaluate(motion, [k_r], [k_b], [c], b)[0]
+    # turning, the faster wheel's excess reports c b^2 / 4 per radian of forward travel (3.8e-5 m here for a
+    # turn in place); what is left is of second order in the interval's turn
+    assert abs(reported[0] - h[0]) < 2e-7
+    assert abs(reported[2] - h[2]) < 2e-7
