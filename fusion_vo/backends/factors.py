@@ -33,33 +33,47 @@ from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, robust_loss, robust_weight
 
 
-def gaussian_factor(items: list, b, unit):
+def gaussian_factor(items: list, b, unit, jacobian: bool = True):
     """GTSAM's ``JacobianFactor(k_1, A_1, ..., b, unit)`` of whitened blocks ``items = [k_1, A_1, ...]``.
 
-    GTSAM's Python interface builds a ``JacobianFactor`` of at most three variables; one of more (a wheel
-    heading with its wheel-base factor and curvature bias: two poses and two scalars) becomes the same
-    quadratic ``½‖Σ A_i δ_i - b‖²`` as a ``HessianFactor`` (``G_ij = A_iᵀA_j``, ``g_i = A_iᵀb``,
-    ``f = bᵀb``), summed from two-variable pieces that each carry one off-diagonal block, and turned back
-    into a ``JacobianFactor`` of as many rows as the measurement has (GTSAM's Cholesky of it).
+    GTSAM's Python interface builds a ``JacobianFactor`` of at most three variables; one of more (the wheels'
+    whole arc with its radius and wheel-base factors, or a wheel heading with its wheel-base factor and
+    curvature bias: two poses and two scalars) becomes the same quadratic ``½‖Σ A_i δ_i - b‖²`` as a
+    ``HessianFactor`` (``G_ij = A_iᵀA_j``, ``g_i = A_iᵀb``, ``f = bᵀb``), summed from two-variable pieces
+    that each carry one off-diagonal block. That is returned as it is unless ``jacobian`` (iSAM2, whose QR
+    factorisation takes ``JacobianFactor`` s only), which turns it back into a ``JacobianFactor`` (GTSAM's
+    Cholesky of it). The quadratic of ``m`` rows over more than ``m`` columns is singular, and where that
+    Cholesky stops at a pivot that rounding leaves just off zero (the wheels' arc: three rows over two poses
+    and two scalars), ``10⁻¹⁰`` of the largest diagonal element is added to the diagonal first: a damping
+    far below anything measured that makes the quadratic definite.
     """
     if len(items) <= 6:
         return gtsam.JacobianFactor(*items, b, unit)
     keys = [int(k) for k in items[0::2]]
     A = [np.atleast_2d(np.asarray(a, dtype=np.float64)) for a in items[1::2]]
     b = np.asarray(b, dtype=np.float64).reshape(-1)
-    graph = gtsam.GaussianFactorGraph()
-    placed = set()
-    f = float(b @ b)
-    for i in range(len(keys)):
-        for j in range(i + 1, len(keys)):
-            gi = A[i].T @ b if i not in placed else np.zeros(A[i].shape[1])
-            gj = A[j].T @ b if j not in placed else np.zeros(A[j].shape[1])
-            Gii = A[i].T @ A[i] if i not in placed else np.zeros((A[i].shape[1],) * 2)
-            Gjj = A[j].T @ A[j] if j not in placed else np.zeros((A[j].shape[1],) * 2)
-            placed.update((i, j))
-            graph.push_back(gtsam.HessianFactor(keys[i], keys[j], Gii, A[i].T @ A[j], gi, Gjj, gj, f))
-            f = 0.0
-    return gtsam.JacobianFactor(gtsam.HessianFactor(graph))  # back to its one whitened row
+
+    def hessian(eps: float) -> gtsam.HessianFactor:
+        graph = gtsam.GaussianFactorGraph()
+        placed = set()
+        f = float(b @ b)
+        for i in range(len(keys)):
+            for j in range(i + 1, len(keys)):
+                gi = A[i].T @ b if i not in placed else np.zeros(A[i].shape[1])
+                gj = A[j].T @ b if j not in placed else np.zeros(A[j].shape[1])
+                Gii = A[i].T @ A[i] + eps * np.eye(A[i].shape[1]) if i not in placed else np.zeros((A[i].shape[1],) * 2)
+                Gjj = A[j].T @ A[j] + eps * np.eye(A[j].shape[1]) if j not in placed else np.zeros((A[j].shape[1],) * 2)
+                placed.update((i, j))
+                graph.push_back(gtsam.HessianFactor(keys[i], keys[j], Gii, A[i].T @ A[j], gi, Gjj, gj, f))
+                f = 0.0
+        return gtsam.HessianFactor(graph)
+
+    if not jacobian:
+        return hessian(0.0)
+    try:
+        return gtsam.JacobianFactor(hessian(0.0))  # back to whitened rows
+    except RuntimeError:  # a pivot rounded off zero: definite by a negligible damping
+        return gtsam.JacobianFactor(hessian(1e-10 * max(float(np.max(np.sum(a * a, axis=0))) for a in A)))
 
 
 @dataclass
@@ -279,8 +293,9 @@ class ModelFactors:
         keys = [self.keys[n][:, i] for n in self.names for i in range(self.keys[n].shape[1])]
         return keys, A, b
 
-    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list[gtsam.JacobianFactor]:
-        """:meth:`jacobian` as one GTSAM ``JacobianFactor`` per factor."""
+    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list:
+        """:meth:`jacobian` as one GTSAM ``JacobianFactor`` per factor (a ``HessianFactor`` for one of more
+        than three variables, :func:`gaussian_factor`)."""
         keys, A, b = self.jacobian(values, poses)
         unit = gtsam.noiseModel.Unit.Create(len(self.rows))
         out = []
@@ -288,7 +303,7 @@ class ModelFactors:
             items = []
             for key, a in zip(keys, A):
                 items += [int(key[r]), a[r]]
-            out.append(gaussian_factor(items, b[r], unit))
+            out.append(gaussian_factor(items, b[r], unit, jacobian=False))
         return out
 
 
