@@ -26,9 +26,9 @@ that factor is used. Each sensor's factors are built by its own module, register
     prior      X_0 = initial pose,  B_0 ~ N(0, σ_b²),  S_0 ~ N(1, σ_s²),  W_0 ~ N(1, σ_w²),  O_0 ~ N(0, σ_ψ²)
     visual     sensors.visual  e = (S_c d_x, S_c d_y, d_ψ) - m        Σ = frontend covariance
                (without self-calibration: BetweenFactorPose2)
-    wheel      sensors.wheel   e = (R_c d_x, R_c d_y, d_ψ) - m        Σ = arc model, heading row free
-               and e = W_c d_ψ - m_ψ                                  σ² = Σ_ψψ
-               (without self-calibration: BetweenFactorPose2 with the whole arc covariance)
+    wheel      sensors.wheel   e = (R_c d_x, R_c d_y, W_c d_ψ) - m    Σ = arc model (whole, as the EKF's)
+               (a stream component the monitor dropped: e = (R_c d_x, R_c d_y) - m_xy and
+               e = W_c d_ψ - m_ψ apart; without self-calibration: BetweenFactorPose2, whole arc covariance)
     gyro       sensors.imu     e = d_ψ + B_c Δt - Θ_ij                σ² = σ_g² Δt      (linear)
     standstill sensors.wheel   e = d_ψ   (wheels at rest)             σ = σ_still Δt   (linear)
     walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ),

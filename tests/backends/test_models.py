@@ -9,7 +9,7 @@ import pytest
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.ekf import DIM, PlanarEkf
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, group
-from fusion_vo.backends.graph import B, O, X, S, W
+from fusion_vo.backends.graph import B, O, R, X, S, W
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import STANDSTILL, WHEEL
@@ -203,3 +203,51 @@ def test_native_factors_the_graph_keeps_equal_the_models():
         np.testing.assert_allclose(A, rot @ np.concatenate(blocks, axis=2)[0], atol=1e-12 if size < 1e-12 else 10 * size)
         if size > 0:  # and they do differ: the rotation matters
             assert np.abs(A - np.concatenate(blocks, axis=2)[0]).max() > 0.01
+
+
+def test_whole_wheel_arc_of_four_variables():
+    """The wheels' whole arc with its radius and wheel-base factors (two poses and two scalars, a covariance that
+    correlates the distance and the heading change, as one wheel's slip does): the batch's linearisation (a
+    HessianFactor) and the incremental solvers' frozen one (a JacobianFactor) are GTSAM's linearisation of the
+    same CustomFactor."""
+    v = _values()
+    v.insert(R(0), 1.002)
+    cov = np.array([[4e-7, 0.0, 2e-7], [0.0, 3e-7, 1e-7], [2e-7, 1e-7, 2e-6]])
+    f = ModelFactor(WHEEL, np.array([0.05, 0.02, 0.07]),
+                    {"motion": (X(0), X(1)), "wheel_scale": (R(0),), "wheel_base_factor": (W(0),)}, cov,
+                    robust=("huber", 3.0))
+    rng = np.random.default_rng(1)
+    for values in (v, _moved(v)):
+        theirs = f.custom_factor().linearize(values)
+        mine = ModelFactors([f]).linearize(values)[0]
+        for _ in range(5):
+            delta = gtsam.VectorValues()
+            for key in f.all_keys():
+                delta.insert(key, rng.normal(size=3 if chr(gtsam.Symbol(key).chr()) == "x" else 1) * 1e-3)
+            assert np.isclose(mine.error(delta), theirs.error(delta), rtol=1e-9)
+    lookup = lambda k: v.atPose2(k) if chr(gtsam.Symbol(k).chr()) == "x" else v.atDouble(k)  # noqa: E731
+    frozen = f.linearized(lookup)
+    theirs = gtsam.LinearContainerFactor(f.custom_factor().linearize(v), v)
+    assert np.isclose(frozen.error(_moved(v)), theirs.error(_moved(v)), rtol=1e-8)
+
+
+def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does():
+    """With the radius and wheel-base factors estimated, each wheel interval is one factor of the whole arc and its
+    covariance (the EKF's measurement), not a translation and an independent heading change: their
+    correlation is what lets a heading known from the gyro correct the wheels' distance."""
+    from fusion_vo.backends import SensorStreams
+    from fusion_vo.backends.graph import GraphBuilder
+    from fusion_vo.backends.timeline import build_intervals
+    from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+    s = synthetic_streams(SyntheticOptions(duration=2.0), seed=4)
+    config = FusionConfig()
+    iv = build_intervals(SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height), config)
+    builder = GraphBuilder(iv, config)
+    assert builder.kr_on and builder.kb_on
+    nf = builder.node(5, gtsam.Pose2())
+    wheel = [f for f in nf.factors if isinstance(f, ModelFactor) and f.model is WHEEL]
+    assert len(wheel) == 1
+    f = wheel[0]
+    assert f.rows is None and f.covariance.shape == (3, 3) and set(f.keys) == {"motion", "wheel_scale", "wheel_base_factor"}
+    assert abs(f.covariance[0, 2]) > 0 or abs(f.covariance[1, 2]) > 0
