@@ -105,12 +105,22 @@ def test_an_internal_error_is_one_line_with_status_1_and_cleans_up(recording, tm
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_an_interrupted_run_leaves_nothing(sig, recording, tmp_path):
-    """The run is stopped by a signal while visual odometry runs (a slowed KLT frontend, the default, makes sure it is)."""
+    """The run is stopped by a signal while visual odometry runs: the KLT frontend (the default) is slowed
+    down, and marks its first frame and waits there until the test has seen the mark, so the signal arrives
+    inside visual odometry, with the staging folder in place, however loaded the machine is."""
+    inside = tmp_path / "inside-vo"
     script = (
         "import sys, time\n"
         "import frontends.klt as o\n"
         "real = o.KltFrontend.process\n"
+        "import os\n"
         "def slow(self, *a, **k):\n"
+        f"    inside = {str(inside)!r}\n"
+        "    if not hasattr(slow, 'seen'):\n"  # the first frame: mark it, then wait for the test to see it
+        "        slow.seen = open(inside, 'w').close()\n"
+        "        start = time.monotonic()\n"
+        "        while os.path.exists(inside) and time.monotonic() < start + 60:\n"
+        "            time.sleep(0.02)\n"
         "    time.sleep(0.2)\n"
         "    return real(self, *a, **k)\n"
         "o.KltFrontend.process = slow\n"
@@ -121,10 +131,11 @@ def test_an_interrupted_run_leaves_nothing(sig, recording, tmp_path):
     proc = subprocess.Popen([sys.executable, "-c", script, "run", str(recording), "--out", str(out), *QUICK],
                             stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 60
-    while not any(p.name.startswith(STAGING_PREFIX) for p in tmp_path.iterdir()):
+    while not inside.exists():
         assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it was interrupted"
         time.sleep(0.05)
-    time.sleep(0.3)
+    inside.unlink()
+    assert any(p.name.startswith(STAGING_PREFIX) for p in tmp_path.iterdir())
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
     assert proc.returncode == 128 + sig, err
