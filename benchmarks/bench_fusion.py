@@ -20,7 +20,7 @@ prints the N functions with the largest cumulative time of one batch run (cProfi
 
 Usage::
 
-    nice -n -15 python benchmarks/bench_fusion.py [--seconds 60] [--scale 10] [--repeat 3] [--profile 25]
+    nice -n -15 python benchmarks/bench_fusion.py [--seconds 60] [--scale 10] [--repeat 3] [--profile 25] [--visual-frame-error F]
 """
 
 from __future__ import annotations
@@ -55,15 +55,19 @@ def _streams(seconds: float) -> SensorStreams:
 BATCH_ONLY = {"graph": {"online": False}}
 
 
-def measure(seconds: float, repeat: int = 1) -> dict:
+def measure(seconds: float, repeat: int = 1, options: dict | None = None) -> dict:
+    """CPU seconds of each backend on a generated drive of ``seconds`` (median of ``repeat`` runs); ``options``:
+    top-level fusion options for every backend (e.g. ``visual_frame_error``)."""
+    options = options or {}
     streams = _streams(seconds)
     frames = len(streams.visual)
-    batch_only = FusionConfig.from_dict(BATCH_ONLY)
-    online_only = FusionConfig.from_dict({"graph": {"batch": False}})
+    ekf = FusionConfig.from_dict(options)
+    batch_only = FusionConfig.from_dict({**BATCH_ONLY, **options})
+    online_only = FusionConfig.from_dict({"graph": {"batch": False}, **options})
     fuse(streams, "gtsam", FusionConfig.from_dict({"graph": {"batch": False, "online": False}}))  # warm up imports
     runs = []
     for _ in range(repeat):  # the backends one after the other, repeated
-        ekf_s, _ = _cpu(lambda: fuse(streams, "ekf"))
+        ekf_s, _ = _cpu(lambda: fuse(streams, "ekf", ekf))
         gtsam_s, batch = _cpu(lambda: fuse(streams, "gtsam", batch_only))
         isam_ms = fuse(streams, "gtsam", online_only).timing["gtsam_online_per_node_ms"]
         split = {k: batch.timing.get(k, 0.0) for k in ("timeline", "gtsam_build", "gtsam_solve", "gtsam_marginals")}
@@ -127,9 +131,12 @@ def main() -> int:
     parser.add_argument("--scale", type=int, default=10, help="length factor of the long drive")
     parser.add_argument("--repeat", type=int, default=1, help="runs of each measurement (the median is shown)")
     parser.add_argument("--profile", type=int, default=0, metavar="N", help="print the N costliest functions of a batch run")
+    parser.add_argument("--visual-frame-error", type=float, default=0.0,
+                        help="fusion.visual_frame_error of every backend (default 0, as the default configuration)")
     args = parser.parse_args()
     print(f"load average {' '.join(f'{x:.1f}' for x in os.getloadavg())}")
-    rows = [measure(args.seconds, args.repeat), measure(args.seconds * args.scale, args.repeat)]
+    options = {"visual_frame_error": args.visual_frame_error} if args.visual_frame_error else {}
+    rows = [measure(args.seconds, args.repeat, options), measure(args.seconds * args.scale, args.repeat, options)]
     print(f"{'drive':>8} {'frames':>7} {'EKF [s]':>8} {'x real':>7} {'GTSAM [s]':>10} {'x real':>7} {'iSAM2 [ms/frame]':>17}")
     for r in rows:
         print(f"{r['seconds']:>7.0f}s {r['frames']:>7d} {r['ekf']:>8.3f} {r['seconds'] / r['ekf']:>7.0f} "

@@ -33,7 +33,7 @@ and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, wh
 
 Usage::
 
-    python benchmarks/consistency.py [--seeds 25] [--duration 30]
+    python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F]
 """
 
 from __future__ import annotations
@@ -125,11 +125,12 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
     kv, kb = ekf_mod.calibration_observable(iv)
-    f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma)
+    f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
+                          camera=len(iv.vis_i0) > 0)
     meas = ekf_mod.interval_measurements(iv, config)
     out: dict[str, tuple[int, list]] = {}
     for k in range(iv.n_steps):
-        f.predict(iv.dt[k])
+        f.predict(iv.dt[k], ekf_mod.frame_error_cov(meas, k))
         blocks = ekf_mod.step_blocks(f, meas, k)
         for sensor, dof, value in leave_one_out_nis(f.P, blocks):
             out.setdefault(sensor, (dof, []))[1].append((iv.t[k + 1], value))
@@ -195,10 +196,12 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=25)
     parser.add_argument("--duration", type=float, default=30.0)
+    parser.add_argument("--visual-frame-error", type=float, default=0.0,
+                        help="fusion.visual_frame_error of the backends (the drives' camera errors are independent)")
     args = parser.parse_args(argv)
     t0 = time.process_time()
     nis: dict = {}
-    nees = run(args.seeds, args.duration, nis=nis)
+    nees = run(args.seeds, args.duration, config=FusionConfig(visual_frame_error=args.visual_frame_error), nis=nis)
     n = args.seeds
     lo, hi = band(3, n)
     print(f"NEES of (x, y, yaw), {n} seeds of a {args.duration:.0f} s generated drive (camera, wheels, gyro), "

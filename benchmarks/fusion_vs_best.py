@@ -12,8 +12,10 @@ configuration, KLT frontend) and prints, per recording:
   odometry's over the straight legs of the ground truth (``legs`` of ``metrics.json``).
 
 With ``--sensors`` it also prints, per recording, how honest each input's stated noise is against the
-truth (:func:`sensor_nees`): the mean NEES of the visual increments (3 when their covariances are right)
-and the mean squared normalised error of each of their components (1 each), the NEES of the wheels' arc
+truth (:func:`sensor_nees`): the mean NEES of the visual increments (3 when their covariances are right),
+the mean squared normalised error of each of their components (1 each) and the correlation of each
+component's errors one and two frames apart (0 when independent, as both backends assume), for the KLT
+frontend and for the feature frontend; the NEES of the wheels' arc
 increments after their best-fitting distance scale and wheel-base factor (what the backends estimate),
 and the NIS of the gyro's angle per node interval after its mean bias — the numbers that say which
 sensor's error model is wrong on a recording where a fused track is worse than the best input.
@@ -66,6 +68,8 @@ from fusion_vo.simulation.standard import STANDARD, make_standard
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 SINGLE = ("vo", "wheel")
+#: the frontends whose visual increments ``--sensors`` checks against the truth (the default first)
+FRONTENDS = ("klt", "features")
 #: standard recordings without a camera-and-wheels drive to compare (calibration manoeuvres, no motion)
 SKIP = ("standstill", "turn_in_place", "straight", "umbmark_cw", "umbmark_ccw")
 
@@ -89,7 +93,9 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
     consecutive node intervals divided by 16 (64) times the variance of one, which is 1 when the errors
     are independent from interval to interval, as both backends assume (below 1: errors that cancel over
     time, so the summed heading is better than the stated noise says; above: errors that persist), and
-    the camera's correlation of consecutive heading errors (0 when independent).
+    for each component of the camera's errors (x, y, yaw) the correlation of the errors of increments one
+    and two node intervals apart (lag 1, lag 2; 0 when independent; -0.5 at lag 1 and 0 at lag 2 when an
+    increment's error is the difference of independent errors of its two frames).
     """
     from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
     from fusion_vo.backends.timeline import build_intervals
@@ -115,9 +121,10 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         e = np.nan_to_num(errors[: len(errors) // n * n])
         return float(np.var(e.reshape(-1, n).sum(axis=1)) / (n * np.nanvar(errors)))
 
-    def lag_one(errors: np.ndarray) -> float:
-        pair = np.isfinite(errors[:-1]) & np.isfinite(errors[1:])
-        return float(np.corrcoef(errors[:-1][pair], errors[1:][pair])[0, 1]) if pair.sum() > 8 else float("nan")
+    def lagged(errors: np.ndarray, lag: int = 1) -> float:
+        a, b = errors[:-lag], errors[lag:]
+        pair = np.isfinite(a) & np.isfinite(b)
+        return float(np.corrcoef(a[pair], b[pair])[0, 1]) if pair.sum() > 8 else float("nan")
 
     def nees(e, cov) -> np.ndarray:
         return np.einsum("ni,ni->n", e, np.linalg.solve(cov, e[..., None])[..., 0])
@@ -128,11 +135,14 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
         e[:, 2] = se2.wrap_angle(e[:, 2])
         z2 = np.mean(e**2 / np.einsum("nii->ni", iv.vis_cov), axis=0)
         single = iv.vis_i1 == iv.vis_i0 + 1
-        heading = np.full(iv.n_steps, np.nan)
-        heading[iv.vis_i0[single]] = e[single, 2]
+        grid = np.full((iv.n_steps, 3), np.nan)  # each single-interval increment's error at its interval
+        grid[iv.vis_i0[single]] = e[single]
+        heading = grid[:, 2]
+        lags = ", ".join(f"{c} {lagged(grid[:, i], 1):+.2f} {lagged(grid[:, i], 2):+.2f}"
+                         for i, c in enumerate(("x", "y", "yaw")))
         out["camera"] = (f"NEES {np.mean(nees(e, iv.vis_cov)):.2f} (x, y, yaw: {z2[0]:.2f} {z2[1]:.2f} {z2[2]:.2f}), "
                          f"heading whiteness {whiteness(heading):.2f} (over 64 intervals "
-                         f"{whiteness(heading, 64):.2f}), lag-1 correlation {lag_one(heading):.2f}")
+                         f"{whiteness(heading, 64):.2f}), lag-1 and lag-2 correlation of consecutive errors: {lags}")
     steps = np.arange(iv.n_steps)
     if iv.uses("wheel") and iv.wheel_ok.any():
         ok = iv.wheel_ok
@@ -342,8 +352,12 @@ def main(argv=None) -> int:
             if args.seeds:
                 print(f"    {name}, {len(rows)} seeds: " + smoother_summary(rows), flush=True)
             if args.sensors:
-                for sensor, text in sensor_nees(seq, run_visual_odometry(Recording(seq)).increments).items():
-                    print(f"    {name} {sensor}: {text}", flush=True)
+                for frontend in FRONTENDS:
+                    vo = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend))
+                    for sensor, text in sensor_nees(seq, vo.increments).items():
+                        if sensor == "camera" or frontend == FRONTENDS[0]:
+                            label = f"camera ({frontend})" if sensor == "camera" else sensor
+                            print(f"    {name} {label}: {text}", flush=True)
             if args.variants:
                 for label, ate in variants(seq).items():
                     print(f"    {name} {label:31s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"

@@ -118,6 +118,15 @@ class FusionConfig:
         Prior standard deviations of those two factors around 1 (default 0.05 each). A
         ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces ``visual_scale_sigma`` by
         ``height_sigma / height``.
+    visual_frame_error : float
+        Fraction of each visual increment's stated variance that is the error of its two frames' own
+        measurements rather than of the increment (default 0: independent increments). A frontend that
+        measures each frame against the previous one puts that frame's error into both increments it
+        belongs to, with opposite signs, so consecutive increments' errors correlate at
+        ``-visual_frame_error / 2``. Both backends then model the increment between frames ``a`` and ``b``
+        as ``z = motion + e_b - e_a + w``, each frame's error ``e`` with covariance ``visual_frame_error / 2``
+        times the stated one and ``w`` with ``1 - visual_frame_error`` times it
+        (:mod:`fusion_vo.sensors.visual`). Must be below 1.
     wheel_scale_sigma : float
         Prior standard deviation of the wheels' distance scale ``k_r`` (their common radius error)
         around 1 (default 0.01); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml`` replaces it by
@@ -189,6 +198,7 @@ class FusionConfig:
     visual_scale_sigma: float = 0.05
     wheel_base_sigma: float = 0.05
     wheel_scale_sigma: float = 0.01
+    visual_frame_error: float = 0.0
     odom_base_sigma: float = 0.3
     sync_odometry: bool = True
     max_odom_delay: float = 1.0
@@ -225,6 +235,8 @@ class FusionConfig:
             raise InputError(f"graph.robust must be one of {', '.join(ROBUST_KERNELS)}, not {self.graph.robust!r}")
         if not self.graph.robust_k > 0:
             raise InputError(f"'graph.robust_k' must be positive, not {self.graph.robust_k}")
+        if not self.visual_frame_error < 1.0:
+            raise InputError(f"'visual_frame_error' must be below 1, not {self.visual_frame_error}")
         if self.graph.calibration_interval <= 0:
             raise InputError("graph.calibration_interval must be positive")
         if self.graph.keyframe_every < 1:

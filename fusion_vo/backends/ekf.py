@@ -79,6 +79,12 @@ Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ`` and the Huber/Cauchy w
 state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
 the fixes, with that alignment's uncertainty.
 
+With ``visual_frame_error > 0`` the state ends with the camera's errors at the previous and the current
+frame (:data:`FRAME_ERRORS` each; :mod:`fusion_vo.sensors.visual`): each prediction moves the current one
+into the previous one's place (a linear transition, so the smoother treats them like any state) and
+starts the new frame's at zero with its covariance, and a visual increment over one interval is
+``h + (e_this - e_prev)/Δt`` with the rest of its noise.
+
 The smoother runs backwards over the stored priors and posteriors::
 
     C_k = P_k Fᵀ_{k+1} (P⁻_{k+1})⁻¹
@@ -99,11 +105,14 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import Gate, MeasurementModel
+from fusion_vo.sensors.visual import frame_error_cov
 
 logger = logging.getLogger(__name__)
 
 PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
 DIM = 11
+#: size of a camera frame error (x, y, ψ of a visual increment)
+FRAME_ERRORS = 3
 #: state columns of each measurement-model argument (:mod:`fusion_vo.sensors.model`); the interval
 #: models are evaluated per unit time, on the twist state
 STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gyro_bias": slice(BG, BG + 1),
@@ -131,12 +140,16 @@ class PlanarEkf:
     states : tuple of registry.State
         State variables the sensors add (:class:`fusion_vo.sensors.registry.State`), appended to the state
         vector after the built-in ones with their prior and random walk.
+    camera : bool
+        Visual increments are fused. With ``config.visual_frame_error > 0`` the state then ends with the
+        camera's frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
-                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None, states=()):
+                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None, states=(),
+                 camera: bool = False):
         # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
         from filterpy.kalman import ExtendedKalmanFilter
         from scipy.stats import chi2
@@ -152,6 +165,12 @@ class PlanarEkf:
         self.columns = dict(STATE_COLUMNS)
         for i, state in enumerate(self.states):
             self.columns[state.name] = slice(DIM + i, DIM + i + 1)
+        #: the camera's frame errors: (columns of the previous node's, of this node's), or None
+        self.frame_errors: tuple[slice, slice] | None = None
+        if camera and config.visual_frame_error > 0:
+            self.frame_errors = (slice(dim, dim + FRAME_ERRORS), slice(dim + FRAME_ERRORS, dim + 2 * FRAME_ERRORS))
+            self.dim = dim = dim + 2 * FRAME_ERRORS
+        self._frame_cov = np.eye(FRAME_ERRORS) * _FROZEN_VAR
         self.kf = ExtendedKalmanFilter(dim_x=dim, dim_z=1)
         x = np.zeros(dim)
         x[:3] = config.initial_pose if initial_pose is None else initial_pose
@@ -172,6 +191,8 @@ class PlanarEkf:
         var[KB] = config.wheel_model(twist)[1] ** 2 if self.estimate_kb else _FROZEN_VAR
         # the AHRS north is aligned to the initial heading; no offset walk: an AHRS trusted as absolute
         var[AO] = config.imu.ahrs_yaw_sigma**2 if config.imu.ahrs_offset_walk > 0 else _FROZEN_VAR
+        if self.frame_errors is not None:  # (no frame measured yet: their covariance comes with the first)
+            var[self.frame_errors[0]] = var[self.frame_errors[1]] = _FROZEN_VAR
         self.kf.P = np.diag(var)
         self.gate = Gate(config.gate_probability, _REJECT_FACTOR)
         self.counts: dict[str, SensorCount] = {}
@@ -186,8 +207,13 @@ class PlanarEkf:
         return self.kf.P
 
     # ------------------------------------------------------------------ prediction
-    def predict(self, dt: float) -> np.ndarray:
-        """Constant-twist prediction over ``dt``; returns the transition Jacobian ``F``."""
+    def predict(self, dt: float, frame_cov: np.ndarray | None = None) -> np.ndarray:
+        """Constant-twist prediction over ``dt``; returns the transition Jacobian ``F``.
+
+        With frame errors in the state, this node's becomes the previous node's and the new node's error
+        starts at zero with covariance ``frame_cov`` (3, 3) (:func:`fusion_vo.sensors.visual.frame_error_cov`;
+        ``None``: the last one given).
+        """
         cfg = self.config
         x = self.x
         vx, vy, w = x[VX], x[VY], x[W]
@@ -224,6 +250,16 @@ class PlanarEkf:
         x_new[PX] += c * ax - s * ay
         x_new[PY] += s * ax + c * ay
         x_new[YAW] = se2.wrap_angle(x[YAW] + th)
+        if self.frame_errors is not None:  # e_prev <- e_this, e_this <- a new frame's error
+            e0, e1 = self.frame_errors
+            if frame_cov is not None:
+                self._frame_cov = np.asarray(frame_cov, dtype=np.float64)
+            F[e0, e0] = 0.0
+            F[e0, e1] = np.eye(FRAME_ERRORS)
+            F[e1, e1] = 0.0
+            Q[e1, e1] += self._frame_cov
+            x_new[e0] = x[e1]
+            x_new[e1] = 0.0
         self.kf.x = x_new.reshape(self.dim, 1)
         self.kf.P = F @ self.kf.P @ F.T + Q
         self.kf.x_prior = self.kf.x.copy()
@@ -320,7 +356,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                    iv.initial_pose, iv.initial_sigma, iv.states)
+                    iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt
@@ -342,7 +378,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
         run.node(ekf, 0)
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
-        Fs[k + 1] = ekf.predict(dt[k])
+        Fs[k + 1] = ekf.predict(dt[k], frame_error_cov(meas, k))
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
         ekf.update(step_blocks(ekf, meas, k))
         for run in at_nodes:

@@ -396,12 +396,17 @@ def scalar_table(keys: np.ndarray, values: np.ndarray) -> dict:
     return {"keys": np.asarray(keys, dtype=np.int64), "values": np.asarray(values, dtype=np.float64)}
 
 
+#: GTSAM symbol letters of the Pose2 variables: the poses and the camera's frame poses
+#: (:func:`fusion_vo.backends.graph.X`, :func:`~fusion_vo.backends.graph.F`)
+POSE_LETTERS = ("x", "F")
+
+
 def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:
     """All Pose2 values at once: ``{"keys": sorted keys, "xyyaw": (N, 3)}`` (``keys``: those of an
     earlier table of values with the same variables)."""
     xyyaw = gtsam.utilities.extractPose2(values)
     if keys is None:
-        keys = np.array([k for k in values.keys() if chr(gtsam.Symbol(k).chr()) == "x"], dtype=np.int64)
+        keys = np.array([k for k in values.keys() if chr(gtsam.Symbol(k).chr()) in POSE_LETTERS], dtype=np.int64)
     return {"keys": keys, "xyyaw": np.asarray(xyyaw, dtype=np.float64).reshape(-1, 3)}
 
 

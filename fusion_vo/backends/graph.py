@@ -124,7 +124,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.backends.factors import ModelFactor, ModelFactors, ValuesMaker, group, pose_table
+from fusion_vo.backends.factors import POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, group, pose_table
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.wheel import arc_covariance, arc_increment, at_rest, gyro_turn
 
@@ -153,6 +153,16 @@ def W(k: int) -> int:
 
 def R(k: int) -> int:
     return gtsam.symbol("r", k)
+
+
+#: GTSAM symbol letter of the camera's frame poses (:func:`F`)
+FRAME_LETTER = POSE_LETTERS[1]
+
+
+def F(k: int) -> int:
+    """The camera's measured pose at node ``k`` (``X(k)`` with that frame's own error; ``visual_frame_error``,
+    :mod:`fusion_vo.sensors.visual`)."""
+    return gtsam.symbol(FRAME_LETTER, k)
 
 
 _NO_INCREMENT = np.zeros(3)
@@ -188,7 +198,8 @@ class NodeContext:
     variables ``B``, ``S``, ``W``, ``R``, ``O`` of it), ``xi, xj`` the pose keys of the previous node and this
     one, ``estimate`` the running estimates for initial guesses. Steps before :data:`GUESS_ORDER` set
     ``translation`` (2,) and ``heading`` (the interval's motion, for the initial guess) when they measure them;
-    ``scratch`` passes anything else between one sensor's steps.
+    ``previous_pose`` is the previous node's current estimate; ``scratch`` passes anything else between one
+    sensor's steps (``new_frames``: variables that start at this node's initial pose).
     """
 
     n: int
@@ -199,6 +210,7 @@ class NodeContext:
     xi: int
     xj: int
     estimate: dict
+    previous_pose: gtsam.Pose2 | None = None
     translation: np.ndarray | None = None
     heading: float | None = None
     scratch: dict = field(default_factory=dict)
@@ -210,6 +222,7 @@ class GraphBuilder:
     #: the variables' keys, for the sensors' graph steps (pose, gyro bias, AHRS offset, visual scale, wheel base
     #: and radius factors of a segment; module docstring)
     X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
+    F = staticmethod(F)
 
     def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
                  calibrate: tuple[bool, bool] | None = None, states: tuple | None = None):
@@ -252,6 +265,8 @@ class GraphBuilder:
         for c in self.counts.values():
             c.used = 0
         self.visual_spans = self._visual_spans()
+        #: global nodes whose frame pose ``F`` exists (a stream built one interval at a time shares one set)
+        self.frames: set[int] = set()
         if iv.uses("wheel"):  # per-interval arc increments, vectorised
             self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
             self._wheel_inc[:, 0] *= iv.cx
@@ -367,7 +382,8 @@ class GraphBuilder:
         g0, g1 = self._grid[n - 1], self._grid[n]
         c, previous = self._segment[n], self._segment[n - 1]
         node = NodeContext(n=n, g0=g0, g1=g1, dt=self._times[g1] - self._times[g0], segment=c,
-                           xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est)
+                           xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est,
+                           previous_pose=previous_pose)
         nf = NodeFactors(n, self._times[g1])
         if c != previous:
             self._new_segment(nf, c, est, previous)
@@ -387,6 +403,8 @@ class GraphBuilder:
             nf.factors.append(gtsam.BetweenFactorPose2(node.xi, node.xj, gtsam.Pose2(*guess), nm))
             nf.sensors.append("motion_model")
         nf.values[node.xj] = previous_pose.compose(gtsam.Pose2(*guess))
+        for key in node.scratch.pop("new_frames", ()):  # frame poses start at their node's pose
+            nf.values[key] = nf.values[node.xj]
         nf.guess = guess
         for _, step in steps:  # (sorted by order)
             if step.order >= GUESS_ORDER:
@@ -814,7 +832,8 @@ def time_rank(builder: GraphBuilder):
         letter = (keys >> np.uint64(56)).astype(np.int64)  # gtsam.Symbol: the letter in the top byte
         index = (keys & np.uint64((1 << 56) - 1)).astype(np.int64)
         first = np.searchsorted(seg, index).astype(np.float64) - 0.5  # a segment's first node, before it
-        return np.where(letter == ord("x"), index - builder.offset, first)
+        pose = (letter == ord("x")) | (letter == ord(FRAME_LETTER))
+        return np.where(pose, index - builder.offset, first)
 
     return rank
 
@@ -857,6 +876,7 @@ class Retired:
         if end <= self.first:
             return
         keys = [X(b.offset + k) for k in range(self.first, end)]
+        keys += [F(b.offset + k) for k in range(self.first, end) if b.offset + k in b.frames]
         seg_keys = []
         for c in np.unique(seg[self.first:end]):
             seg_keys += b.segment_keys(int(np.searchsorted(seg, c)))
@@ -912,7 +932,7 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
             return new[key]
         if key == X(prev):
             return prev_pose
-        if chr(gtsam.Symbol(key).chr()) == "x":
+        if chr(gtsam.Symbol(key).chr()) in POSE_LETTERS:
             return solver.calculateEstimatePose2(key)
         return solver.calculateEstimateDouble(key)
 
@@ -946,7 +966,7 @@ def pose_marginals(linear: gtsam.GaussianFactorGraph, solution: gtsam.Values, n_
         logger.warning("gtsam: marginals of a poorly conditioned system; adding vague priors")
         linear = linear.clone()
         for key in solution.keys():
-            dim = 3 if chr(gtsam.Symbol(key).chr()) == "x" else 1
+            dim = 3 if chr(gtsam.Symbol(key).chr()) in POSE_LETTERS else 1
             linear.add(gtsam.JacobianFactor(key, np.eye(dim) * 0.01, np.zeros(dim), gtsam.noiseModel.Unit.Create(dim)))
         try:
             marginals = gtsam.Marginals(linear, solution)

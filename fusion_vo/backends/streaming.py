@@ -107,6 +107,7 @@ import numpy as np
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
+from fusion_vo.sensors.visual import frame_error_cov
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
@@ -967,7 +968,8 @@ class StreamingFusion:
         kv, kb = self._calibration_flags()
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, states=self._states)
+            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, states=self._states,
+                                  camera="camera" in self.sensors)
             self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
@@ -984,7 +986,7 @@ class StreamingFusion:
     def _ekf_step(self, iv) -> None:
         ekf = self._ekf
         meas = interval_measurements(iv, self.config)
-        ekf.predict(float(iv.dt[0]))
+        ekf.predict(float(iv.dt[0]), frame_error_cov(meas, 0))
         ekf.update(step_blocks(ekf, meas, 0))
         t1 = float(iv.t[-1])
         for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
@@ -1238,13 +1240,23 @@ class _OnlineGraph:
         # the first node's own factors come with the first interval (which knows the sensors)
         self._pending_first = True
         self.factors: dict[int, list[int]] = {}  # node -> indices of its factors in iSAM2
+        self.frames: set[int] = set()  # nodes whose camera frame pose exists
+        self.frames_made: dict[int, set[int]] = {}  # node -> the frame poses its factors tie
         self.online[0] = np.asarray(cfg.initial_pose, dtype=np.float64)
         return self.online[0].copy(), np.diag([1e-8, 1e-8, 1e-8])
 
     def _node_factors(self, n: int, iv, first: bool, previous_pose):
         builder = self.graph.GraphBuilder(iv, self.config, offset=n - 1, t_origin=self.t_origin,
                                           calibrate=self.calibrate, states=self.states)
+        # the camera's frame poses made so far (fusion_vo.sensors.visual); a node rebuilt for late data makes
+        # again the ones it made (their ties go with its old factors)
+        self.frames -= self.frames_made.pop(n, set())
+        builder.frames = self.frames
+        before = {g for g in (n - 1, n) if g in self.frames}  # (its interval's two nodes)
         nf = builder.node(1, previous_pose, self.estimate)
+        made = {g for g in (n - 1, n) if g in self.frames} - before
+        if made:
+            self.frames_made[n] = made
         if first:
             head = builder.first_node()
             head.factors.extend(nf.factors)
@@ -1298,6 +1310,8 @@ class _OnlineGraph:
         self.last = n
         for old in [k for k in self.factors if k < self._forget_below]:
             del self.factors[old]
+            self.frames_made.pop(old, None)
+            self.frames.discard(old - 1)  # (no later node reaches back that far)
         pose, cov = self._pose_cov(n)
         self.prev_pose = self.gtsam.Pose2(*map(float, pose))
         self.graph.track_estimate(self.estimate, self.isam, builder, 1, nf)

@@ -4,7 +4,9 @@ The robot drives a smooth path with twist ``v(t) = v₀ (1 + 0.3 sin(0.3 t))``,
 ``ω(t) = ω₀ sin(0.21 t) + 0.5 ω₀ sin(0.67 t + 1)``. From the exact trajectory it produces:
 
 * visual increments at ``camera_hz`` (with timestamp jitter): the true increment with its translation
-  scaled by ``visual_scale`` (a camera-height error) plus Gaussian noise of the stated covariance;
+  scaled by ``visual_scale`` (a camera-height error) plus Gaussian noise of the stated covariance, of which
+  the fraction ``visual_frame_error`` is the difference of the two frames' own errors (consecutive
+  increments' errors then correlate at ``-visual_frame_error / 2``, :mod:`fusion_vo.sensors.visual`);
 * cumulative signed-32-bit encoder counts at ``wheel_hz`` starting near the wrap point, from the true
   wheel travel of a robot whose real wheel base is ``wheel_base * wheel_base_factor`` and whose real
   wheel radius is ``wheel_radius * wheel_radius_factor`` (the configuration states ``wheel_radius``);
@@ -40,6 +42,7 @@ class SyntheticOptions:
     visual_sigma_xy: float = 0.0015
     visual_sigma_yaw: float = 0.001
     visual_scale: float = 1.0
+    visual_frame_error: float = 0.0
     wheel_base: float = 0.4
     wheel_radius: float = 0.05
     ticks_per_revolution: float = 4096.0
@@ -101,10 +104,14 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
     pc = pose_at(tc)
     cov = np.diag([o.visual_sigma_xy**2, o.visual_sigma_xy**2, o.visual_sigma_yaw**2])
     visual = []
+    # each frame's own error (visual_frame_error): from a generator of its own, so that the other draws stay
+    frame = np.random.default_rng([seed, 1]).multivariate_normal(np.zeros(3), 0.5 * o.visual_frame_error * cov,
+                                                                  len(tc))
     for i in range(1, len(tc)):
         d = se2.between(pc[i - 1], pc[i])
         d[:2] *= o.visual_scale
-        d = d + rng.multivariate_normal(np.zeros(3), cov)
+        d = d + np.sqrt(1.0 - o.visual_frame_error) * rng.multivariate_normal(np.zeros(3), cov)
+        d = d + frame[i] - frame[i - 1]
         status = "ok"
         if any(a <= tc[i] <= b for a, b in o.lost_frames):
             status = "lost"

@@ -7,6 +7,23 @@ is the body motion between the frames with its translation in units of the confi
 
 with ``k_v = h_configured / h_true`` (the visual scale) and ``Σ_vis`` the frontend's covariance.
 Jacobians: ``∂h/∂δ = diag(k_v, k_v, 1)``, ``∂h/∂k_v = (d_x, d_y, 0)ᵀ``.
+
+Frame errors. A frontend that measures each frame against the previous one (KLT tracks the points from
+where it found them in the previous frame) puts a frame's own measurement error into both increments
+that frame belongs to, with opposite signs: consecutive increments' errors are negatively correlated and
+the sum of many increments is better than independent increments with the stated covariance say. With
+``visual_frame_error = f > 0`` (:class:`~fusion_vo.backends.config.FusionConfig`) the noise of the
+increment from frame ``a`` to frame ``b`` is modelled as moving-average::
+
+    n = e_b - e_a + w,     e ~ N(0, f/2 Σ_vis),     w ~ N(0, (1 - f) Σ_vis)
+
+so one increment's total covariance stays ``Σ_vis`` and consecutive ones correlate at ``-f/2``. The EKF
+carries the errors of the previous and the current frame in its state (:func:`frame_error_cov`,
+:func:`ekf_blocks`): each prediction shifts the current frame's error into the previous one's place
+(which marginalises the older one) and starts the new frame's at zero with covariance ``f/2 Σ_vis``;
+the update then has ``∓I/Δt`` in their columns. The factor graph gives each frame a pose ``F_k`` tied
+to the node's pose by ``BetweenFactorPose2(X_k, F_k, identity, f/2 Σ_vis)`` and puts the increment
+between the frame poses with ``(1 - f) Σ_vis`` (:func:`graph_factors`).
 """
 
 from __future__ import annotations
@@ -112,12 +129,41 @@ def ekf_measurements(iv, config) -> dict:
         vis_u[free] = se2.log(iv.vis_delta[m]) / span[m]
         vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
         vis_ok[free] = True
-    return {"visual": (vis_ok, vis_u, vis_R)}
+    out = {"visual": (vis_ok, vis_u, vis_R)}
+    f = config.visual_frame_error
+    if f > 0:  # single-interval increments: their frames' errors and the rest (module docstring)
+        single = np.zeros(K, bool)
+        frame_cov = np.full((K, 3, 3), np.nan)
+        one = iv.vis_i1 - iv.vis_i0 == 1
+        single[iv.vis_i0[one]] = True
+        frame_cov[iv.vis_i0[one]] = 0.5 * f * iv.vis_cov[one]
+        out["visual_frames"] = (single, frame_cov, iv.dt.copy(), f)
+    return out
+
+
+def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
+    """Covariance of the camera's error at the frame that ends interval ``k`` (``f/2 Σ_vis`` of the increment
+    over that interval), or None where no single-interval increment ends there (the EKF keeps the last)."""
+    m = meas.get("visual_frames")
+    return m[1][k] if m is not None and m[0][k] else None
 
 
 def ekf_blocks(ekf, meas: dict, k: int) -> list:
+    """The increment of interval ``k`` as a block; with frame errors in the state (module docstring) its noise
+    is ``(1 - f) R`` and the two frames' errors enter as ``(e_this - e_prev) / Δt``."""
     m = meas.get("visual")
-    return [ekf.block(VISUAL, m[1][k], m[2][k])] if m is not None and m[0][k] else []
+    if m is None or not m[0][k]:
+        return []
+    frames = meas.get("visual_frames")
+    if ekf.frame_errors is None or frames is None or not frames[0][k]:
+        return [ekf.block(VISUAL, m[1][k], m[2][k])]
+    name, z, h, H, R, angle = ekf.block(VISUAL, m[1][k], m[2][k] * (1.0 - frames[3]))
+    e0, e1 = ekf.frame_errors
+    x = ekf.x
+    inv_dt = 1.0 / frames[2][k]
+    H[:, e0] -= np.eye(3) * inv_dt
+    H[:, e1] += np.eye(3) * inv_dt
+    return [(name, z, h + (x[e1] - x[e0]) * inv_dt, H, R, angle)]
 
 
 def graph_factors(builder, nf, node) -> None:
@@ -126,19 +172,54 @@ def graph_factors(builder, nf, node) -> None:
     import gtsam
 
     est = node.estimate
+    f = builder.config.visual_frame_error
     for start, d, cov in builder.visual_spans.get(node.n, []):
-        xs = builder.X(builder.offset + start)
+        xs, xj = builder.X(builder.offset + start), node.xj
+        if f > 0:
+            frames = _frame_poses(builder, nf, node, start, 0.5 * f * cov)
+            if frames is not None:
+                (xs, xj), cov = frames, (1.0 - f) * cov
         if builder.kv_on:
-            nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, node.xj),
+            nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, xj),
                                                                      "visual_scale": (builder.S(node.segment),)}))
         else:
-            nf.factors.append(gtsam.BetweenFactorPose2(xs, node.xj, gtsam.Pose2(*d), builder.noise(cov)))
+            nf.factors.append(gtsam.BetweenFactorPose2(xs, xj, gtsam.Pose2(*d), builder.noise(cov)))
         nf.sensors.append("camera")
         if start == node.n - 1:
             if node.translation is None:
                 node.translation = d[:2] / est.get("visual_scale", 1.0)
             if node.heading is None:
                 node.heading = d[2]
+
+
+def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | None:
+    """The frame poses ``F`` of an increment's first and last node (module docstring), each made with its
+    tie ``X⁻¹ F ~ N(0, frame_cov)`` the first time an increment touches it; None when the first node's
+    frame pose does not exist and that node is not the previous one (whose current estimate starts it)."""
+    import gtsam
+
+    a, b = builder.offset + start, builder.offset + node.n
+    if a not in builder.frames:
+        if start != node.n - 1 or node.previous_pose is None:
+            return None
+        nf.values[builder.F(a)] = node.previous_pose
+    new = [g for g in (a, b) if g not in builder.frames]
+    frame_cov = np.asarray(frame_cov, dtype=np.float64)
+    for g in new:
+        # the frame's error is in the increments' units: with the visual scale estimated the tie is the same
+        # model (a tie in metres would shrink with the whole track, and pull the common scale of camera and
+        # wheels, which only the priors fix, away from them)
+        if builder.kv_on:
+            nf.factors.append(builder.model_factor(VISUAL, np.zeros(3), frame_cov,
+                                                   {"motion": (builder.X(g), builder.F(g)),
+                                                    "visual_scale": (builder.S(node.segment),)}, robust=False))
+        else:
+            nf.factors.append(gtsam.BetweenFactorPose2(builder.X(g), builder.F(g), gtsam.Pose2(),
+                                                       gtsam.noiseModel.Gaussian.Covariance(frame_cov)))
+        builder.frames.add(g)
+    if b in new:  # starts at this node's initial pose (GraphBuilder.node)
+        node.scratch.setdefault("new_frames", []).append(builder.F(b))
+    return builder.F(a), builder.F(b)
 
 
 def _live_sample(inc) -> tuple:

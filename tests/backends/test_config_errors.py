@@ -15,6 +15,9 @@ from fusion_vo.errors import InputError
     ({"visual_scale_sigma": -0.01}, "visual_scale_sigma"),
     ({"range": {"sigma": 0.0}}, "range.sigma"),
     ({"imu": {"ahrs_offset_walk": -0.1}}, "imu.ahrs_offset_walk"),
+    ({"visual_frame_error": -0.1}, "visual_frame_error"),
+    ({"visual_frame_error": 1.0}, "visual_frame_error"),
+    ({"visual_frame_error": float("nan")}, "visual_frame_error"),
 ])
 def test_bad_sigma_names_the_key(options, key):
     with pytest.raises(InputError) as exc:

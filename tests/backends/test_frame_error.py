@@ -1,0 +1,57 @@
+"""The camera's frame errors (``visual_frame_error``): consecutive increments sharing a frame's error."""
+
+import numpy as np
+import pytest
+from backend_synth import position_errors, streams_of
+
+from fusion_vo.backends import FusionConfig, StreamingFusion, fuse
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+TRACKS = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+
+
+@pytest.fixture(scope="module")
+def camera_only():
+    """A drive whose camera increments share half their variance with their neighbours, fused by the camera
+    alone without and with the frame errors modelled."""
+    s = synthetic_streams(SyntheticOptions(duration=8.0, visual_frame_error=0.5, visual_sigma_yaw=0.003), seed=3)
+    streams = streams_of(s).select(["camera"])
+    return s, {f: fuse(streams, "all", FusionConfig(visual_frame_error=f)) for f in (0.0, 0.5)}
+
+
+def test_every_backend_gives_the_long_run_heading_variance_of_the_frame_errors(camera_only):
+    """Over N increments the heading's variance is N σ² for independent ones, and (N (1 - f) + f) σ² when the
+    fraction f of each increment's variance is its two frames' errors (the sum telescopes): about half."""
+    s, runs = camera_only
+    n = len(s.visual)
+    expected = (n * 0.5 + 0.5) / n
+    for name in TRACKS:
+        independent = runs[0.0].covariances[name][-1, 2, 2]
+        modelled = runs[0.5].covariances[name][-1, 2, 2]
+        assert modelled / independent == pytest.approx(expected, rel=0.1), name
+
+
+def test_frame_errors_leave_the_common_scale_of_camera_and_wheels_to_the_priors():
+    """Camera and wheels measure only the ratio of their scales; a frame's tie in metres would shrink with the
+    whole track and pull both scales (2.7 % here), so the graph ties a frame in the increments' units."""
+    s = synthetic_streams(SyntheticOptions(duration=20.0, visual_frame_error=0.5, visual_sigma_yaw=0.003), seed=1)
+    streams = streams_of(s).select(["camera", "wheel"])
+    config = {"graph": {"online": False}}
+    before, after = (fuse(streams, "gtsam", FusionConfig.from_dict({"visual_frame_error": f, **config}))
+                     for f in (0.0, 0.5))
+    for key in ("visual_scale", "wheel_scale"):
+        assert after.calibration["gtsam"][key] == pytest.approx(before.calibration["gtsam"][key], abs=2e-3), key
+
+
+@pytest.mark.parametrize("backend, batch_name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_streaming_models_the_frame_errors_as_the_batch_run(camera_only, backend, batch_name):
+    s, runs = camera_only
+    fusion = StreamingFusion(backend, FusionConfig(visual_frame_error=0.5), ["camera"])
+    for v in s.visual:
+        fusion.add_visual(v)
+    track = fusion.finish().trajectories[batch_name]
+    ref = runs[0.5].trajectories[batch_name]
+    common = np.isin(np.round(ref.t, 9), np.round(track.t, 9))
+    ours = track.xyyaw[np.isin(np.round(track.t, 9), np.round(ref.t, 9))]
+    assert common.sum() > 0.95 * len(ref)
+    assert np.max(np.abs(ours - ref.xyyaw[common])) < 1e-6
