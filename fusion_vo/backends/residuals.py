@@ -85,6 +85,7 @@ def sensor_nis(factors: list[ModelFactor], values: gtsam.Values, marginals: gtsa
     for f in factors:
         groups.setdefault((f.model.name, _end_key(f)), []).append(f)
     out: dict[str, list] = {}
+    fallback = 0
     for (name, end), fs in groups.items():
         n, t = node_of(end)
         if n % stride:
@@ -113,11 +114,20 @@ def sensor_nis(factors: list[ModelFactor], values: gtsam.Values, marginals: gtsa
             for j, kj in enumerate(keys):
                 P[offsets[i]:offsets[i + 1], offsets[j]:offsets[j + 1]] = joint.at(ki, kj)
         S = np.eye(len(e)) - A @ P @ A.T
-        try:
+        S = 0.5 * (S + S.T)
+        if np.all(np.isfinite(S)) and np.linalg.eigvalsh(S)[0] > 0.0:
             value = float(e @ np.linalg.solve(S, e))
-        except np.linalg.LinAlgError:
-            continue
+        else:
+            # the residual's covariance came out indefinite: the marginals weigh this measurement less than
+            # its stated noise (the robust kernel down-weighted it; it is then far outside its noise) or are
+            # of another linearisation (iSAM2's frozen factors). Its residual against the stated noise
+            # alone, ẽᵀẽ, is taken instead: never above the NIS, never negative
+            fallback += 1
+            value = float(e @ e)
         out.setdefault((name, len(e)), []).append((t, value))
+    if fallback:
+        logger.debug("%d measurements' residual covariance was not positive definite: NIS against their noise alone",
+                     fallback)
     usual = {}
     for (name, dof), rows in out.items():
         if len(rows) > len(out.get((name, usual.get(name, -1)), ())):
