@@ -231,23 +231,28 @@ def test_whole_wheel_arc_of_four_variables():
     assert np.isclose(frozen.error(_moved(v)), theirs.error(_moved(v)), rtol=1e-8)
 
 
-def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does():
+@pytest.mark.parametrize("curvature", [True, False])
+def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does(curvature):
     """With the radius and wheel-base factors estimated, each wheel interval is one factor of the whole arc and its
     covariance (the EKF's measurement), not a translation and an independent heading change: their
-    correlation is what lets a heading known from the gyro correct the wheels' distance."""
+    correlation is what lets a heading known from the gyro correct the wheels' distance. With the curvature
+    bias (the default) the whole arc is the curved model's."""
     from fusion_vo.backends import SensorStreams
     from fusion_vo.backends.graph import GraphBuilder
     from fusion_vo.backends.timeline import build_intervals
     from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+    from fusion_vo.sensors.wheel import CURVED_WHEEL
 
     s = synthetic_streams(SyntheticOptions(duration=2.0), seed=4)
-    config = FusionConfig()
+    config = FusionConfig.from_dict({"wheel": {"estimate_curvature": curvature}})
     iv = build_intervals(SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height), config)
     builder = GraphBuilder(iv, config)
     assert builder.kr_on and builder.kb_on
     nf = builder.node(5, gtsam.Pose2())
-    wheel = [f for f in nf.factors if isinstance(f, ModelFactor) and f.model is WHEEL]
+    model = CURVED_WHEEL if curvature else WHEEL
+    wheel = [f for f in nf.factors if isinstance(f, ModelFactor) and f.model.name == "wheel"]
     assert len(wheel) == 1
     f = wheel[0]
-    assert f.rows is None and f.covariance.shape == (3, 3) and set(f.keys) == {"motion", "wheel_scale", "wheel_base_factor"}
+    expected = {"motion", "wheel_scale", "wheel_base_factor"} | ({"wheel_curvature"} if curvature else set())
+    assert f.model is model and f.rows is None and f.covariance.shape == (3, 3) and set(f.keys) == expected
     assert abs(f.covariance[0, 2]) > 0 or abs(f.covariance[1, 2]) > 0
