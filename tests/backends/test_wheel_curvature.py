@@ -39,8 +39,10 @@ def test_a_radius_difference_is_estimated_within_its_covariance(streams, backend
     assert abs(c) > 2.0 * sigma  # no radius difference is not what it finds
 
 
-def test_the_curvature_bias_is_not_estimated_by_default(streams):
-    assert "wheel_curvature" not in fuse(streams, "ekf").calibration["ekf"]
+def test_the_curvature_bias_is_estimated_by_default_and_can_be_turned_off(streams):
+    assert "wheel_curvature" in fuse(streams, "ekf").calibration["ekf"]
+    off = FusionConfig.from_dict({"wheel": {"estimate_curvature": False}})
+    assert "wheel_curvature" not in fuse(streams, "ekf", off).calibration["ekf"]
 
 
 def test_a_two_row_factor_of_five_variables_linearises():
