@@ -110,7 +110,10 @@ def test_an_interrupted_run_leaves_nothing(sig, recording, tmp_path):
     inside visual odometry, with the staging folder in place, however loaded the machine is."""
     inside = tmp_path / "inside-vo"
     script = (
-        "import sys, time\n"
+        "import signal, sys, time\n"
+        # Ctrl-C as from an interactive shell, even when the tests were started in the background (which
+        # starts them with SIGINT ignored, and the child would inherit that)
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "import frontends.klt as o\n"
         "real = o.KltFrontend.process\n"
         "import os\n"
