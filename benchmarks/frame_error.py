@@ -25,14 +25,13 @@ import numpy as np
 
 from fusion_vo import backends
 from fusion_vo.backends import FusionConfig, fuse
-from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 from fusion_vo.simulation.standard import STANDARD, make_standard
 
 sys.path.insert(0, str(Path(__file__).parent))
-from fusion_vs_best import FUSED, SKIP  # noqa: E402
+from fusion_vs_best import FUSED, SKIP, ate_against  # noqa: E402
 
 TRUE_FRAME_ERROR = 0.5
 
@@ -45,14 +44,7 @@ def recordings(names: list[str], out: Path, values: list[float]) -> None:
             make_standard(name, seq)
         rec = Recording(seq)
         vo = run_visual_odometry(rec)
-        gt = rec.groundtruth()
-        reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
-
-        def ate(track) -> float:
-            est = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
-            ref, est = associate(reference, est)
-            return ape_rmse(ref, align_se2(ref, est)) * 1e3
-
+        ate = ate_against(rec)
         vo_ate = ate(vo.track)
         for f in [0.0, *values]:
             result = backends.run_backends(rec, vo, backend="all", options={"visual_frame_error": f})

@@ -267,13 +267,8 @@ def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
     return out
 
 
-def variants(seq: Path) -> dict[str, dict[str, float]]:
-    """Fused ATE [mm] per track for each of :data:`VARIANTS` and with :func:`true_wheel_noise`, re-fusing one
-    visual odometry run (without the frontend's floors, which the variants apply)."""
-    rec = Recording(seq)
-    vo = run_visual_odometry(rec, OdometryConfig(min_sigma_xy=0.0, min_sigma_yaw=0.0))
-    for key, value in inputs_against_truth(rec, vo).items():
-        print(f"    {seq.name} {key.replace('camera', 'camera before the floors')}: {value:.3g}")
+def ate_against(rec: Recording):
+    """``ate(track)``: the ATE [mm] of a track (PoseData) against ``rec``'s ground truth, after SE(2) alignment."""
     gt = rec.groundtruth()
     reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
 
@@ -282,6 +277,17 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
         ref, est = associate(reference, est)
         return ape_rmse(ref, align_se2(ref, est)) * 1e3
 
+    return ate
+
+
+def variants(seq: Path) -> dict[str, dict[str, float]]:
+    """Fused ATE [mm] per track for each of :data:`VARIANTS` and with :func:`true_wheel_noise`, re-fusing one
+    visual odometry run (without the frontend's floors, which the variants apply)."""
+    rec = Recording(seq)
+    vo = run_visual_odometry(rec, OdometryConfig(min_sigma_xy=0.0, min_sigma_yaw=0.0))
+    for key, value in inputs_against_truth(rec, vo).items():
+        print(f"    {seq.name} {key.replace('camera', 'camera before the floors')}: {value:.3g}")
+    ate = ate_against(rec)
     out = {}
     runs = dict(VARIANTS)
     runs["wheels at their true noise"] = (None, 1.0, FLOOR, true_wheel_noise(seq))
