@@ -22,8 +22,9 @@ carries the errors of the previous and the current frame in its state (:func:`fr
 :func:`ekf_blocks`): each prediction shifts the current frame's error into the previous one's place
 (which marginalises the older one) and starts the new frame's at zero with covariance ``f/2 Σ_vis``;
 the update then has ``∓I/Δt`` in their columns. The factor graph gives each frame a pose ``F_k`` tied
-to the node's pose by ``BetweenFactorPose2(X_k, F_k, identity, f/2 Σ_vis)`` and puts the increment
-between the frame poses with ``(1 - f) Σ_vis`` (:func:`graph_factors`).
+to the node's pose by this model with a zero reading and ``f/2 Σ_vis`` (in the increments' units, through
+the visual scale when it is estimated; else ``BetweenFactorPose2(X_k, F_k, identity, f/2 Σ_vis)``) and
+puts the increment between the frame poses with ``(1 - f) Σ_vis`` (:func:`graph_factors`).
 """
 
 from __future__ import annotations
