@@ -34,7 +34,8 @@ class EkfConfig:
     yaw_accel_sigma : float
         Angular acceleration noise [rad/s²·√s] (default 1.0).
     scale_random_walk : float
-        Random walk of the visual scale and wheel-base factor [1/√s] (default 1e-4).
+        Random walk of the visual scale, the wheels' radius factor and their wheel-base factor [1/√s], in both
+        backends (default 1e-4).
     smoother : bool
         Run the Rauch–Tung–Striebel pass (default True).
     """

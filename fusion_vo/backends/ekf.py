@@ -244,6 +244,8 @@ class PlanarEkf:
             Q[KV, KV] += cfg.ekf.scale_random_walk**2 * dt
         if self.estimate_kb:
             Q[KB, KB] += cfg.ekf.scale_random_walk**2 * dt
+        if self.estimate_kv and self.estimate_kb:  # the wheels' radius factor, estimated as in __init__
+            Q[KR, KR] += cfg.ekf.scale_random_walk**2 * dt
         for i, state in enumerate(self.states):
             Q[DIM + i, DIM + i] += state.random_walk**2 * dt
         x_new = x.copy()
