@@ -279,9 +279,8 @@ class ModelFactors:
         keys = [self.keys[n][:, i] for n in self.names for i in range(self.keys[n].shape[1])]
         return keys, A, b
 
-    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list:
-        """:meth:`jacobian` as one GTSAM ``JacobianFactor`` per factor (a ``HessianFactor`` for one of more
-        than three variables, :func:`gaussian_factor`)."""
+    def linearize(self, values: gtsam.Values, poses: dict | None = None) -> list[gtsam.JacobianFactor]:
+        """:meth:`jacobian` as one GTSAM ``JacobianFactor`` per factor (:func:`gaussian_factor`)."""
         keys, A, b = self.jacobian(values, poses)
         unit = gtsam.noiseModel.Unit.Create(len(self.rows))
         out = []

@@ -580,6 +580,25 @@ def ekf_standstill(ekf, meas: dict, k: int) -> list:
     return [ekf.block(STANDSTILL, 0.0, m[1])] if m is not None and m[0][k] else []
 
 
+def _graph_arguments(builder, node, scale: bool) -> tuple:
+    """The run's wheel model (:func:`wheel_model`) and its arguments in a graph factor over ``node``'s
+    interval: ``(model, keys, fixed, params)``, with the radius factor (only if ``scale``) and the wheel-base
+    factor as variables where estimated, else fixed at 1, and with the curved model its curvature bias and
+    the configured wheel base."""
+    model = wheel_model(builder.states)
+    keys, fixed, params = {"motion": (node.xi, node.xj)}, {}, {}
+    for name, on, key in (("wheel_scale", scale and builder.kr_on, builder.R),
+                          ("wheel_base_factor", builder.kb_on, builder.W)):
+        if on:
+            keys[name] = (key(node.segment),)
+        else:
+            fixed[name] = 1.0
+    if model is CURVED_WHEEL:
+        keys["wheel_curvature"] = (builder.state_key(CURVATURE.name, node.segment),)
+        params["wheel_base"] = builder.iv.wheel_base
+    return model, keys, fixed, params
+
+
 def graph_translation(builder, nf, node) -> None:
     """The arc increment over the node interval.
 
@@ -617,17 +636,8 @@ def graph_translation(builder, nf, node) -> None:
         # (and the curvature bias), its distance through the radius factor (when estimated), with the arc
         # covariance's correlation of the translation and the heading change (one wheel's slip moves both,
         # so a heading the gyro knows corrects the distance)
-        keys = {"motion": (xi, xj), "wheel_base_factor": (builder.W(node.segment),)}
-        fixed, params = {}, None
-        if builder.kr_on:
-            keys["wheel_scale"] = (builder.R(node.segment),)
-        else:
-            fixed["wheel_scale"] = 1.0
-        if curved:
-            keys["wheel_curvature"] = (builder.state_key(CURVATURE.name, node.segment),)
-            params = {"wheel_base": iv.wheel_base}
-        nf.factors.append(builder.model_factor(CURVED_WHEEL if curved else WHEEL, m, cov, keys, fixed=fixed,
-                                               params=params))
+        model, keys, fixed, params = _graph_arguments(builder, node, scale=True)
+        nf.factors.append(builder.model_factor(model, m, cov, keys, fixed=fixed, params=params))
     elif not yaw_ok or builder.kb_on or curved:
         # translation from the arc; the heading change goes through the wheel-base factor, or
         # not at all where the consistency monitor dropped the wheels' yaw component
@@ -637,16 +647,9 @@ def graph_translation(builder, nf, node) -> None:
         cov_xy[2, :] = cov_xy[:, 2] = 0.0
         cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
         if curved:  # distance scaled by the radius factor, with the forward travel of the radius difference
-            keys = {"motion": (xi, xj), "wheel_curvature": (builder.state_key(CURVATURE.name, node.segment),)}
-            fixed = {}
-            for name, on, key in (("wheel_scale", builder.kr_on, builder.R),
-                                  ("wheel_base_factor", builder.kb_on, builder.W)):
-                if on:
-                    keys[name] = (key(node.segment),)
-                else:
-                    fixed[name] = 1.0
-            nf.factors.append(builder.model_factor(CURVED_WHEEL, m, cov[:2, :2], keys, fixed=fixed,
-                                                   params={"wheel_base": iv.wheel_base}, rows=(0, 1)))
+            model, keys, fixed, params = _graph_arguments(builder, node, scale=True)
+            nf.factors.append(builder.model_factor(model, m, cov[:2, :2], keys, fixed=fixed, params=params,
+                                                   rows=(0, 1)))
         elif builder.kr_on:  # distance scaled by the wheels' radius factor
             nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
                                                    fixed={"wheel_base_factor": 1.0}, dof=2))
@@ -677,15 +680,7 @@ def graph_heading(builder, nf, node) -> None:
     wheel_heading = node.scratch.get("wheel_heading")
     if wheel_heading is None:
         return
-    model = wheel_model(builder.states)
-    keys, fixed, params = {"motion": (node.xi, node.xj)}, {"wheel_scale": 1.0}, {}
-    if builder.kb_on:
-        keys["wheel_base_factor"] = (builder.W(node.segment),)
-    else:
-        fixed["wheel_base_factor"] = 1.0
-    if model is CURVED_WHEEL:
-        keys["wheel_curvature"] = (builder.state_key(CURVATURE.name, node.segment),)
-        params["wheel_base"] = builder.iv.wheel_base
+    model, keys, fixed, params = _graph_arguments(builder, node, scale=False)
     nf.factors.append(builder.model_factor(model, wheel_heading[0], [[wheel_heading[1] ** 2]], keys,
                                            fixed=fixed, params=params, rows=(2,)))
 
