@@ -21,15 +21,23 @@ and the NIS of the gyro's angle per node interval after its mean bias — the nu
 sensor's error model is wrong on a recording where a fused track is worse than the best input.
 
 With ``--seeds N`` every recording is also generated with ``N`` other seeds (the same profile and options,
-seeds ``seed + 100 i``), and a summary per recording prints how often and by how much on average the
-RTS-smoothed EKF beats the EKF and GTSAM batch beats iSAM2 over the standard seed and these: what tells a
-systematic loss of a smoother from the chance of one drive.
+seeds ``seed + 100 i``), and a summary per recording (:func:`seed_summary`) prints, over the standard seed
+and these, the mean ATE of visual odometry and of every fused track, each fused track's mean relative
+difference from the best single input and on how many seeds it is at most that input, and how often and
+by how much on average the RTS-smoothed EKF beats the EKF and GTSAM batch beats iSAM2: what tells a
+systematic loss from the chance of one drive. With ``--out`` a recording already there with the same
+profile, seed and options is reused instead of generated again.
 
 With ``--variants`` it then runs visual odometry once more (default configuration) and re-fuses the
 same increments with the variants of :data:`VARIANTS` (other sensor subsets, the camera's covariances
-divided by 4, other robust kernels of the factor graph) and with the wheels' noise set to what the
-generator put into them (:func:`true_wheel_noise`; also with the wheels' curvature bias estimated), printing the fused ATEs of each: what tells which
-input or which part of the model makes a fused track worse than the best single sensor.
+divided by 4, other robust kernels of the factor graph), with the wheels' noise set to what the
+generator put into them (:func:`true_wheel_noise`; also with the wheels' curvature bias estimated) and
+with "oracle statistics" (:func:`oracle_options`: the camera's covariances scaled per component to its
+errors against the truth, its lag-1 heading correlation as ``visual_frame_error``, the wheels at their true
+noise; and the same camera with the default wheels), printing the fused ATEs of each: what tells which input or which part of the model makes a fused
+track worse than the best single sensor, and whether better stated noise would close the gap.
+``--variants NAME,NAME`` runs only those variants (``default`` is always run); with ``--seeds`` the
+variants run on every seed and are summarised over them like the main table (:func:`seed_summary`).
 
 ``--equal-radii`` generates every recording with its right wheel's radius error equal to its left
 one's (same images, same seed): a radius difference turns the robot by a fixed angle per metre, which
@@ -38,7 +46,8 @@ that error from the rest.
 
 Run::
 
-    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors] [--variants] [--equal-radii]
+    python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors]
+        [--variants [NAME,...]] [--equal-radii]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -64,7 +73,7 @@ from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.generate import SimulationOptions, simulate
-from fusion_vo.simulation.standard import STANDARD, make_standard
+from fusion_vo.simulation.standard import STANDARD
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 SINGLE = ("vo", "wheel")
@@ -227,12 +236,20 @@ def with_floor(increments, factor: float, floor: tuple[float, float]):
     return out
 
 
-def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
-    """How honest the inputs' stated noise is on this recording: the visual increments' RMS errors and
-    mean NIS against the true increments (3 if their covariances are right), and the gyro's scatter about
-    the true yaw rate beside the scatter its ``sensor.yaml`` density states."""
+def camera_errors(rec: Recording, increments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The errors of the usable (``ok``) visual ``increments`` against ``rec``'s ground truth.
+
+    Returns
+    -------
+    errors : (n, 3) array
+        Each increment minus the true body-frame increment over its interval (x, y [m], yaw [rad]).
+    covariances : (n, 3, 3) array
+        Their stated covariances.
+    chained : (n,) bool array
+        True where an increment starts at the frame where the previous one (in this list) ends, so that
+        the two share a frame (the first is False).
+    """
     from fusion_vo.geometry import se2
-    from fusion_vo.sensors.imu import ImuNoise, gyro_yaw
 
     gt = rec.groundtruth()
     yaw = np.unwrap(gt.xyyaw[:, 2])
@@ -241,16 +258,54 @@ def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
         return np.array([np.interp(t, gt.t, gt.xyyaw[:, 0]), np.interp(t, gt.t, gt.xyyaw[:, 1]),
                          np.interp(t, gt.t, yaw)])
 
-    errors, nis, sigmas = [], [], []
-    for inc in vo.increments:
-        if not inc.ok:
-            continue
-        e = np.asarray(inc.delta, dtype=float) - se2.between(pose(inc.t0), pose(inc.t1))
-        e[2] = se2.wrap_angle(e[2])
-        cov = np.asarray(inc.covariance, dtype=float)
-        errors.append(e)
-        nis.append(float(e @ np.linalg.solve(cov, e)))
-        sigmas.append(np.sqrt(np.diag(cov)))
+    used = [inc for inc in increments if inc.ok]
+    errors = np.zeros((len(used), 3))
+    for k, inc in enumerate(used):
+        errors[k] = np.asarray(inc.delta, dtype=float) - se2.between(pose(inc.t0), pose(inc.t1))
+        errors[k, 2] = se2.wrap_angle(errors[k, 2])
+    covariances = np.array([np.asarray(inc.covariance, dtype=float) for inc in used]).reshape(-1, 3, 3)
+    chained = np.array([k > 0 and used[k].t0 == used[k - 1].t1 for k in range(len(used))], dtype=bool)
+    return errors, covariances, chained
+
+
+def noise_statistics(errors: np.ndarray, covariances: np.ndarray, chained: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Second-order statistics of increment errors against their stated covariances.
+
+    Parameters
+    ----------
+    errors, covariances, chained
+        As returned by :func:`camera_errors`.
+
+    Returns
+    -------
+    ratio : (3,) array
+        Per component (x, y, yaw) the mean of ``e² / σ²`` over the drive: the factor by which the stated
+        variance would have to be scaled to match the errors' mean square (1 when honest).
+    lag1 : (3,) array
+        Per component the correlation of the errors of consecutive increments that share a frame
+        (``chained``; NaN with fewer than 9 such pairs).
+    """
+    variances = np.einsum("nii->ni", covariances)
+    ratio = np.mean(errors**2 / variances, axis=0)
+    pairs = np.flatnonzero(chained)
+    lag1 = np.full(3, np.nan)
+    if len(pairs) > 8:
+        for i in range(3):
+            lag1[i] = np.corrcoef(errors[pairs - 1, i], errors[pairs, i])[0, 1]
+    return ratio, lag1
+
+
+def inputs_against_truth(rec: Recording, vo) -> dict[str, float]:
+    """How honest the inputs' stated noise is on this recording: the visual increments' RMS errors and
+    mean NIS against the true increments (3 if their covariances are right), and the gyro's scatter about
+    the true yaw rate beside the scatter its ``sensor.yaml`` density states."""
+    from fusion_vo.sensors.imu import ImuNoise, gyro_yaw
+
+    gt = rec.groundtruth()
+    yaw = np.unwrap(gt.xyyaw[:, 2])
+    errors, covariances, _ = camera_errors(rec, vo.increments)
+    nis = np.einsum("ni,ni->n", errors, np.linalg.solve(covariances, errors[..., None])[..., 0])
+    sigmas = np.sqrt(np.einsum("nii->ni", covariances))
     rms = np.sqrt(np.mean(np.square(errors), axis=0))
     out = {"camera rms x [m]": rms[0], "camera rms yaw [rad]": rms[2],
            "camera median sigma x [m]": float(np.median(np.array(sigmas)[:, 0])),
@@ -280,9 +335,55 @@ def ate_against(rec: Recording):
     return ate
 
 
-def variants(seq: Path) -> dict[str, dict[str, float]]:
-    """Fused ATE [mm] per track for each of :data:`VARIANTS` and with :func:`true_wheel_noise`, re-fusing one
-    visual odometry run (without the frontend's floors, which the variants apply)."""
+#: the largest ``visual_frame_error`` the oracle variant sets (the model needs it below 1)
+MAX_FRAME_ERROR = 0.95
+
+
+def oracle_options(rec: Recording, increments, wheels: bool = True) -> tuple[np.ndarray, dict, str]:
+    """The "oracle statistics" variant: what the camera's and the wheels' noise models would be if their
+    errors against the truth were known. A diagnostic, not something a user can set up.
+
+    Parameters
+    ----------
+    rec : the recording (its ground truth and ``simulation.yaml``).
+    increments : the visual increments as the default fuses them (with the frontend's floors).
+    wheels : also set the wheels to their true noise (else they keep the default's).
+
+    Returns
+    -------
+    scale : (3,) array
+        Per component (x, y, yaw) the square root of :func:`noise_statistics`' variance ratio; the oracle
+        fuses each increment with covariance ``D Σ D``, ``D = diag(scale)`` (correlations kept).
+    options : dict
+        Fusion options: ``visual_frame_error`` ``f = -2 ρ`` for a negative lag-1 heading correlation ``ρ``
+        (the MA(1) model's lag-1 correlation is ``-f/2``; at most :data:`MAX_FRAME_ERROR`), else 0, and
+        with ``wheels`` the wheels at :func:`true_wheel_noise`.
+    text : str
+        The statistics, for printing.
+    """
+    ratio, lag1 = noise_statistics(*camera_errors(rec, increments))
+    rho = lag1[2]
+    frame_error = float(min(-2.0 * rho, MAX_FRAME_ERROR)) if np.isfinite(rho) and rho < 0 else 0.0
+    options = {**(true_wheel_noise(rec.path) if wheels else {}), "visual_frame_error": frame_error}
+    text = (f"camera e²/σ² (x, y, yaw) {ratio[0]:.3g} {ratio[1]:.3g} {ratio[2]:.3g}, lag-1 correlation "
+            f"{lag1[0]:+.2f} {lag1[1]:+.2f} {lag1[2]:+.2f}, visual_frame_error {frame_error:.2f}")
+    return np.sqrt(ratio), options, text
+
+
+def scaled(increments, scale: np.ndarray):
+    """``increments`` with covariances ``D Σ D``, ``D = diag(scale)``."""
+    return [dataclasses.replace(inc, covariance=np.asarray(inc.covariance, dtype=float) * np.outer(scale, scale))
+            for inc in increments]
+
+
+ORACLE = "oracle statistics"
+ORACLE_CAMERA = "oracle camera only"
+
+
+def variants(seq: Path, only: list[str] | None = None) -> dict[str, dict[str, float]]:
+    """Fused ATE [mm] per track for each of :data:`VARIANTS`, with :func:`true_wheel_noise` and with
+    :func:`oracle_options`, re-fusing one visual odometry run (without the frontend's floors, which the
+    variants apply). ``only``: run just these variant names (and ``default``)."""
     rec = Recording(seq)
     vo = run_visual_odometry(rec, OdometryConfig(min_sigma_xy=0.0, min_sigma_yaw=0.0))
     for key, value in inputs_against_truth(rec, vo).items():
@@ -294,8 +395,20 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
     honest = true_wheel_noise(seq)
     honest["wheel"]["estimate_curvature"] = True
     runs["true noise, curvature estimated"] = (None, 1.0, FLOOR, honest)
+    runs[ORACLE] = (None, 1.0, FLOOR, None)  # options from the floored increments, below
+    runs[ORACLE_CAMERA] = (None, 1.0, FLOOR, None)
+    if only:
+        unknown = set(only) - set(runs)
+        if unknown:
+            raise SystemExit(f"unknown variant(s) {', '.join(sorted(unknown))} (choose from {', '.join(runs)})")
+        runs = {k: v for k, v in runs.items() if k == "default" or k in only}
     for name, (sensors, factor, floor, options) in runs.items():
         increments = with_floor(vo.increments, factor, floor)
+        if name in (ORACLE, ORACLE_CAMERA):
+            scale, options, text = oracle_options(rec, increments, wheels=name == ORACLE)
+            if name == ORACLE:
+                print(f"    {seq.name} oracle: {text}")
+            increments = scaled(increments, scale)
         try:
             result = backends.run_backends(rec, dataclasses.replace(vo, increments=increments), sensors=sensors,
                                            backend="all", options=options)
@@ -306,16 +419,52 @@ def variants(seq: Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def smoother_summary(rows: list[dict]) -> str:
-    """How the smoothers compare with their filters over several seeds of one drive (rows of :func:`compare`):
-    mean relative ATE difference [%] and the number of seeds where the smoother is at most the filter."""
-    out = []
-    for smoother, flt, label in (("ekf_smoothed", "ekf", "RTS vs EKF"), ("gtsam", "gtsam_online", "batch vs iSAM2"),
-                                 ("gtsam", "ekf", "batch vs EKF")):
-        d = np.array([r["ate"][smoother] / r["ate"][flt] - 1.0 for r in rows if smoother in r["ate"] and flt in r["ate"]])
-        if len(d):
-            out.append(f"{label} {100 * d.mean():+.1f} % on average, at most the filter on {int(np.sum(d <= 0))} of {len(d)}")
-    return "; ".join(out)
+def relative(rows: list[dict], track: str, reference: str) -> np.ndarray:
+    """Per seed (rows of :func:`compare`) the relative ATE difference ``track / reference - 1``; ``reference``
+    may be ``"best"``, the best single input of that seed. Seeds where ``reference``'s ATE is 0 (a drive
+    that happened not to move, so that the wheels are exact) are left out."""
+    def value(r, k):
+        return r["best"] if k == "best" else r["ate"].get(k)
+
+    return np.array([value(r, track) / value(r, reference) - 1.0 for r in rows
+                     if value(r, track) is not None and value(r, reference) is not None and value(r, reference) > 0])
+
+
+def comparison(rows: list[dict], track: str, reference: str, label: str) -> str:
+    """``label``, the mean relative ATE difference [%] of ``track`` against ``reference`` over the seeds and
+    on how many seeds ``track`` is at most ``reference`` (empty when neither is there)."""
+    d = relative(rows, track, reference)
+    if not len(d):
+        return ""
+    return f"{label} {100 * d.mean():+.1f} % on average, at most on {int(np.sum(d <= 0))} of {len(d)}"
+
+
+def seed_summary(rows: list[dict]) -> list[str]:
+    """Lines summarising several seeds of one drive (rows of :func:`compare`): the mean ATE [mm] of every
+    single input and fused track; each fused track against the best single input; the smoothers against
+    their filters and GTSAM batch against the EKF."""
+    tracks = [k for k in (*SINGLE, "best", *FUSED) if all(k == "best" or k in r["ate"] for r in rows)]
+    means = ", ".join(f"{k} {np.mean([r['best'] if k == 'best' else r['ate'][k] for r in rows]):.3f}" for k in tracks)
+    lines = [f"mean ATE [mm] {means}",
+             "fused vs best input: " + "; ".join(c for k in FUSED if (c := comparison(rows, k, "best", k))),
+             "; ".join(c for c in (comparison(rows, "ekf_smoothed", "ekf", "RTS vs EKF"),
+                                   comparison(rows, "gtsam", "gtsam_online", "batch vs iSAM2"),
+                                   comparison(rows, "gtsam", "ekf", "batch vs EKF")) if c)]
+    return lines
+
+
+def recording(out: Path, folder: str, profile: str, seed: int, options: dict) -> Path:
+    """``out/folder``, generated unless it already holds a recording of ``profile``, ``seed`` and ``options``."""
+    import yaml
+
+    seq = out / folder
+    info = seq / "simulation.yaml"
+    if info.exists():
+        stored = yaml.safe_load(info.read_text())
+        wanted = yaml.safe_load(yaml.safe_dump(dataclasses.asdict(dataclasses.replace(SimulationOptions(), **options))))
+        if stored.get("profile") == profile and stored.get("seed") == seed and stored.get("options") == wanted:
+            return seq
+    return simulate(seq, profile=profile, seed=seed, **options)
 
 
 def main(argv=None) -> int:
@@ -326,8 +475,8 @@ def main(argv=None) -> int:
                         help="also generate every recording with this many other seeds and summarise the smoothers")
     parser.add_argument("--sensors", action="store_true",
                         help="also print each input's NEES against the truth (runs visual odometry once more)")
-    parser.add_argument("--variants", action="store_true",
-                        help="also re-fuse each recording's increments with VARIANTS")
+    parser.add_argument("--variants", nargs="?", const="", default=None, metavar="NAME,...",
+                        help="also re-fuse each recording's increments with VARIANTS (or only those named)")
     parser.add_argument("--equal-radii", action="store_true",
                         help="generate the recordings with the right wheel's radius error equal to the left's")
     args = parser.parse_args(argv)
@@ -341,13 +490,14 @@ def main(argv=None) -> int:
             if args.equal_radii:
                 left = options.get("radius_error_left", SimulationOptions.radius_error_left)
                 options = {**options, "radius_error_right": left}
-            rows = []
+            rows, seqs = [], []
             for i in range(args.seeds + 1):
                 t0 = time.perf_counter()
                 label = name if i == 0 else f"{name} (seed {seed + 100 * i})"
                 folder = name if i == 0 else f"{name}_seed{seed + 100 * i}"
-                seq = (make_standard(name, out / folder) if i == 0 and not args.equal_radii
-                       else simulate(out / folder, profile=profile, seed=seed + 100 * i, **options))
+                seq = recording(out, folder if not args.equal_radii else f"{folder}_equal_radii", profile,
+                                seed + 100 * i, options)
+                seqs.append(seq)
                 r = compare(seq, out / f"run_{folder}")
                 rows.append(r)
                 cells = [label, *(f"{r['ate'].get(k, float('nan')):.3f}" for k in SINGLE), f"{r['best']:.3f}",
@@ -356,18 +506,29 @@ def main(argv=None) -> int:
                          f"{max(r['legs'].values()):.3f}"]
                 print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
             if args.seeds:
-                print(f"    {name}, {len(rows)} seeds: " + smoother_summary(rows), flush=True)
+                for line in seed_summary(rows):
+                    print(f"    {name}, {len(rows)} seeds: {line}", flush=True)
             if args.sensors:
                 for frontend in FRONTENDS:
-                    vo = run_visual_odometry(Recording(seq), OdometryConfig(frontend=frontend))
-                    for sensor, text in sensor_nees(seq, vo.increments).items():
+                    vo = run_visual_odometry(Recording(seqs[0]), OdometryConfig(frontend=frontend))
+                    for sensor, text in sensor_nees(seqs[0], vo.increments).items():
                         if sensor == "camera" or frontend == FRONTENDS[0]:
                             label = f"camera ({frontend})" if sensor == "camera" else sensor
                             print(f"    {name} {label}: {text}", flush=True)
-            if args.variants:
-                for label, ate in variants(seq).items():
-                    print(f"    {name} {label:31s} " + "  ".join(f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}"
-                                                             for k, v in ate.items()), flush=True)
+            if args.variants is not None:
+                only = [v.strip() for v in args.variants.split(",") if v.strip()]
+                per_variant: dict[str, list[dict]] = {}
+                for seq, r in zip(seqs, rows):  # with --seeds every seed, and a summary per variant
+                    for label, ate in variants(seq, only).items():
+                        print(f"    {seq.name} {label:31s} " + "  ".join(
+                            f"{k} {v:.3f}" if isinstance(v, float) else f"{k}: {v}" for k, v in ate.items()), flush=True)
+                        if "failed" not in ate:
+                            per_variant.setdefault(label, []).append(
+                                {"ate": {**{k: r["ate"][k] for k in SINGLE if k in r["ate"]}, **ate}, "best": r["best"]})
+                if args.seeds:
+                    for label, variant_rows in per_variant.items():
+                        for line in seed_summary(variant_rows):
+                            print(f"    {name}, {label}, {len(variant_rows)} seeds: {line}", flush=True)
     finally:
         if args.out is None:
             shutil.rmtree(out, ignore_errors=True)
