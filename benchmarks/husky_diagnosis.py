@@ -32,14 +32,21 @@ reference (after the least-squares SE(2) alignment of each track to the fixes). 
    z axis), the gyro's Allan deviation at rest and its bias random walk, the odometry twist's yaw-rate
    error against the gyro (size and correlation time), and the AHRS heading's departure from the gyro
    (delay, white part, slow part and its correlation time) with the AHRS offset modelled as a
-   Gauss-Markov error of that size (EKF only).
+   Gauss-Markov error of that size (EKF only);
+10. the gyro bias random walk by maximum likelihood, without GPS: the one standstill's samples alone (a
+   bias walk plus white noise), and the EKF's prediction-error log-likelihood ``L`` over the whole log
+   (:mod:`noise_likelihood` beside this script, which checks the method on generated drives): ``L``
+   profiled over the walk with and without the AHRS, its maximum found by a bounded search, ``L`` jointly
+   with the AHRS's noise model (white sigma, offset random walk, Gauss-Markov offset), all four backends
+   at the estimates beside the default and dead reckoning, and the same profile on robot_localization's
+   Jackal log (``test2.bag``).
 
 Usage::
 
-    python benchmarks/husky_diagnosis.py [BAG] [--section9]
+    python benchmarks/husky_diagnosis.py [BAG] [--section9] [--section10]
 
-Takes a few minutes (GTSAM batch and iSAM2 over the whole log, once per variant of sections 5-9);
-``--section9`` prints section 9 alone (about 3 minutes).
+Takes a few minutes (GTSAM batch and iSAM2 over the whole log, once per variant of sections 5-10);
+``--section9`` prints section 9 alone (about 3 minutes), ``--section10`` section 10 alone.
 """
 
 from __future__ import annotations
@@ -62,6 +69,7 @@ from fusion_vo.backends import FusionConfig, SensorStreams, fuse  # noqa: E402
 from fusion_vo.backends import ekf as ekf_mod  # noqa: E402
 from fusion_vo.backends.batch import synchronise_odometry, with_recorded_noise  # noqa: E402
 from fusion_vo.backends.timeline import build_intervals  # noqa: E402
+from fusion_vo.geometry import se2  # noqa: E402
 from fusion_vo.measurements import PoseData  # noqa: E402
 from fusion_vo.recording import Recording  # noqa: E402
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf  # noqa: E402
@@ -70,6 +78,7 @@ from fusion_vo.sensors.imu import (ImuNoise, ahrs_heading, cumulative_angle, gat
 from fusion_vo.sensors.sync import rate_delay  # noqa: E402
 
 BINS = 50.0  # [s] error-over-time bins
+JACKAL_BAG = REPO / "tests" / "data" / "robot_localization" / "test2.bag"
 COURSE_BIN = 25.0  # [s] heading-against-GPS-course bins
 
 
@@ -148,6 +157,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("bag", nargs="?", default=str(DEFAULT_BAG), help="robot_localization's test1.bag")
     parser.add_argument("--section9", action="store_true", help="print section 9 only")
+    parser.add_argument("--section10", action="store_true", help="print section 10 only")
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         seq = Path(tmp) / "husky"
@@ -159,6 +169,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.section9:
         gyro = gyro_yaw(imu, ImuNoise())
         sensor_model_candidates(odom, imu, t_gps, enu, rate_delay(odom.t, odom.wz, gyro.t, gyro.rate) or 0.0)
+        return 0
+    if args.section10:
+        gyro = gyro_yaw(imu, ImuNoise())
+        likelihood_candidates(odom, imu, t_gps, enu, rate_delay(odom.t, odom.wz, gyro.t, gyro.rate) or 0.0, JACKAL_BAG)
         return 0
     claimed = float(imu.noise.get("gyroscope_noise_density", np.nan))
     gyro = gyro_yaw(imu, ImuNoise())
@@ -293,6 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     model_candidates(odom, imu, t_gps, enu, t0)
     rest_noise_candidate(odom, imu, t_gps, enu, delay)
     sensor_model_candidates(odom, imu, t_gps, enu, delay)
+    likelihood_candidates(odom, imu, t_gps, enu, delay, JACKAL_BAG)
     return 0
 
 
@@ -548,12 +563,12 @@ def gauss_markov_ahrs_offset(sigma: float, tau: float):
         init(self, *args, **kwargs)
         self.kf.P[ao, ao] = sigma**2
 
-    def patched_predict(self, dt):
+    def patched_predict(self, dt, frame_cov=None):
         phi = float(np.exp(-dt / tau))
         self.kf.x[ao, 0] *= phi
         self.kf.P[ao, :] *= phi
         self.kf.P[:, ao] *= phi
-        F = predict(self, dt).copy()
+        F = predict(self, dt, frame_cov).copy()
         self.kf.P[ao, ao] += sigma**2 * (1.0 - phi**2)
         self.kf.P_prior = self.kf.P.copy()
         F[ao, ao] = phi
@@ -564,6 +579,127 @@ def gauss_markov_ahrs_offset(sigma: float, tau: float):
         yield
     finally:
         ekf_mod.PlanarEkf.__init__, ekf_mod.PlanarEkf.predict = init, predict
+
+
+
+def rest_walk_likelihood(rate: np.ndarray, dt: float, walk: float) -> float:
+    """Log-likelihood of gyro samples at rest as a bias random walk ``walk`` [rad/s/√s] plus white noise, the
+    white noise's variance at its maximum-likelihood value (a scalar Kalman filter, diffuse initial bias).
+
+    ``rate`` should be white apart from the walk: the Husky's 30 Hz samples at rest correlate at lag one
+    (0.54: the IMU filters its output), which a white-noise model takes for a walk; their 0.1 s means do not
+    (0.05), so :func:`likelihood_candidates` passes those.
+    """
+    def nll(log_var: float) -> float:
+        var = float(np.exp(log_var))
+        b, p, total = float(rate[0]), 1.0, 0.0
+        for y in rate[1:]:
+            p += walk**2 * dt
+            s = p + var
+            total += 0.5 * (np.log(2.0 * np.pi * s) + (y - b) ** 2 / s)
+            k = p / s
+            b, p = b + k * (y - b), (1.0 - k) * p
+        return total
+
+    from scipy.optimize import minimize_scalar
+
+    v0 = float(np.log(np.var(rate)))
+    return -float(minimize_scalar(nll, bounds=(v0 - 3.0, v0 + 1.0), method="bounded").fun)
+
+
+def likelihood_candidates(odom, imu, t_gps, enu, delay: float, jackal_bag: Path | None) -> None:
+    import noise_likelihood as nl
+
+    print("10. the gyro bias walk (and the AHRS noise) by maximum likelihood of the EKF's innovations, GPS not used")
+    names = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+    gyro = gyro_yaw(imu, ImuNoise())
+    still = ((np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)).astype(float)
+    rest = np.interp(gyro.t, np.asarray(odom.t) - delay, still) > 0.999
+    longest = max(runs(rest), key=lambda r: r[1] - r[0])
+    dt = float(np.median(np.diff(gyro.t)))
+    at_rest = gyro.rate[longest[0]:longest[1]]
+    walks = (1e-6, 1e-5, 2e-5, 5e-5, 1e-4, 3e-4, 1e-3, 3e-3, 1e-2)
+    m = 3  # samples per 0.1 s mean (see rest_walk_likelihood)
+    means = at_rest[: len(at_rest) // m * m].reshape(-1, m).mean(axis=1)
+    centred = [x - x.mean() for x in (at_rest, means)]
+    lag1 = [float(np.sum(x[:-1] * x[1:]) / np.sum(x * x)) for x in centred]
+    rest_l = np.array([rest_walk_likelihood(means, dt * m, w) for w in walks])
+    best = int(np.argmax(rest_l))
+    lo, hi = nl.interval(np.array(walks), rest_l, walks[best], float(rest_l[best]))
+    print(f"  10a. the {len(at_rest) * dt:.1f} s standstill alone, as a bias walk + white noise (lag-1 correlation of "
+          f"the samples {lag1[0]:.2f}, of their {len(means)} means over {m * dt:.2f} s {lag1[1]:.2f}, which are used):")
+    print("    L - Lmax at walk " + ", ".join(f"{w:g}: {v - rest_l.max():.1f}" for w, v in zip(walks, rest_l))
+          + f"; 95 % interval [{lo:.1e}, {hi:.1e}]")
+    print("  10b. profile of L over the walk (EKF, default configuration otherwise); RMS against GPS [m]")
+    with_ahrs = SensorStreams(odom=odom, imu=imu)
+    gyro_only = SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=None))
+    ml = {}
+    for label, streams in (("gyro + AHRS", with_ahrs), ("gyro only", gyro_only)):
+        prof = []
+        for w in walks:
+            value, result = nl.log_likelihood(streams, {"imu.gyro_random_walk": w})
+            prof.append(value)
+            errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names[:2]]
+            print(f"    {label:12s} walk {w:7.0e}{' (default)' if w == 2e-5 else '':10s} L {value:11.2f}   "
+                  f"EKF {errors[0]:.3f}  RTS {errors[1]:.3f}", flush=True)
+        best, l_max, calls = nl.estimate(streams, ("imu.gyro_random_walk",))
+        w_ml = best["imu.gyro_random_walk"]
+        prof = np.array(prof)
+        lo, hi = nl.interval(np.array(walks), prof, w_ml, l_max)
+        ml[label] = w_ml
+        print(f"    {label:12s} ML walk {w_ml:.2e} (bounded search over log10 in {nl.BOUNDS['imu.gyro_random_walk']}, "
+              f"{calls} runs), L {l_max:.2f}; 95 % interval [{lo:.1e}, {hi:.1e}]", flush=True)
+    print("  10c. the same jointly with the AHRS's noise model (L is comparable only where the monitor drops the same "
+          "span, 180.3 s to the end)")
+    grid = (1e-5, 1e-4, 1e-3, 3e-3)
+    models = [(f"white sigma {s:g} rad", {"imu.ahrs_yaw_sigma": s}, None) for s in (0.02, 0.04, 0.08)]
+    models += [(f"+ offset walk {w:g} rad/sqrt(s)", {"imu.ahrs_offset_walk": w}, None) for w in (1e-3, 3e-3)]
+    models += [(f"+ Gauss-Markov offset {s:g} rad, {tau:g} s", {"imu.ahrs_offset_walk": 1e-9}, (s, tau))
+               for s, tau in ((0.02, 12.0), (0.04, 12.0), (0.08, 12.0), (0.04, 60.0))]
+    print(f"    {'AHRS model':40s}" + "".join(f"{f'L at {w:g}':>14s}" for w in grid) + "   RTS RMS at each walk [m]")
+    for label, values, gm in models:
+        row, rts = [], []
+        for w in grid:
+            with gauss_markov_ahrs_offset(*gm) if gm else contextlib.nullcontext():
+                value, result = nl.log_likelihood(with_ahrs, {**values, "imu.gyro_random_walk": w})
+            same = any("(180.3 s in) to" in n and "(395.6 s in)" in n for n in result.notes)
+            row.append(f"{value:13.1f}{'' if same else '*'}")
+            rts.append(rms(gps_errors(result.trajectories["ekf_smoothed"], t_gps, enu)))
+        print(f"    {label:40s}" + "".join(f"{v:>14s}" for v in row) + "   " + " / ".join(f"{e:.2f}" for e in rts),
+              flush=True)
+    print("    (* the monitor dropped another span: that L is over other measurements)")
+    print("  10d. all four backends at the ML walks, beside the default and dead reckoning (same run)")
+    bias0 = float(np.median(gyro.rate[rest]))
+    print(f"    {'wheel + gyro dead reckoning (standstill bias)':48s} "
+          f"{rms(gps_errors(dead_reckoning(odom, gyro, bias0, delay), t_gps, enu)):13.3f}")
+    print(f"    {'':48s}" + " ".join(f"{n:>13s}" for n in names))
+    for label, walk in (("default (2e-05)", 2e-5), (f"ML with the AHRS ({ml['gyro + AHRS']:.1e})", ml["gyro + AHRS"]),
+                        (f"ML gyro only ({ml['gyro only']:.1e}), used with the AHRS", ml["gyro only"])):
+        result = fuse(with_ahrs, "all", FusionConfig.from_dict({"imu": {"gyro_random_walk": walk}}))
+        errors = [rms(gps_errors(result.trajectories[n], t_gps, enu)) for n in names]
+        print(f"    {label:48s}" + " ".join(f"{e:13.3f}" for e in errors), flush=True)
+    if jackal_bag is None or not jackal_bag.exists():
+        return
+    print("  10e. robot_localization's Jackal (test2.bag): L over the walk and the final position's distance to "
+          "robot_localization's (1.0206, 3.4292) [m]")
+    with tempfile.TemporaryDirectory() as tmp:
+        seq = Path(tmp) / "jackal"
+        import_bag(jackal_bag, seq, imu_topic="/imu/data", odom_topic="/jackal_velocity_controller/odom", overwrite=True)
+        rec = Recording(seq)
+        j_odom, j_imu = rec.odom(), rec.imu()
+    yaw0 = float(se2.yaw_of_quaternion(np.asarray(j_imu.orientation[:1]))[0])  # the IMU's absolute heading
+    jackal = SensorStreams(odom=j_odom, imu=j_imu)
+    for w in (1e-6, 2e-5, 1e-4, 1e-3):
+        value, result = nl.log_likelihood(jackal, {"imu.gyro_random_walk": w})
+        dist = []
+        for n in names[:2]:
+            xy = result.trajectories[n].xyyaw
+            d = yaw0 - xy[0, 2]
+            final = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]]) @ (xy[-1, :2] - xy[0, :2])
+            dist.append(float(np.linalg.norm(final - np.array([1.0206, 3.4292]))))
+        print(f"    walk {w:7.0e} L {value:11.2f}   EKF {dist[0]:.3f}  RTS {dist[1]:.3f}", flush=True)
+    best, l_max, calls = nl.estimate(jackal, ("imu.gyro_random_walk",))
+    print(f"    ML walk {best['imu.gyro_random_walk']:.2e} (L {l_max:.2f}, {calls} runs)")
 
 
 if __name__ == "__main__":
