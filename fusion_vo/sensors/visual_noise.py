@@ -104,7 +104,7 @@ class VisualNoiseConfig:
 
     def __post_init__(self) -> None:
         if self.min_intervals < 100:
-            raise InputError(f"'min_intervals' must be at least {100}, not {self.min_intervals}")
+            raise InputError(f"'min_intervals' must be at least 100, not {self.min_intervals}")
 
 
 @dataclass
