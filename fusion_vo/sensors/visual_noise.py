@@ -46,9 +46,10 @@ How far the data can resolve this is set by the gyro: its white noise is in ever
 generated 20 Hz recordings the gyro's per-interval σ (38 µrad) is 2.5-3 times the camera's (12-16 µrad),
 so the camera's part is about a tenth of ``Var d``; over a 30 s drive (600 intervals) the standard error
 of ``f`` is then several tenths, and the estimate is reported but not applied. A third heading sensor
-(the wheels, after their calibration) does not help there: their per-interval heading error (0.4-0.8 mrad
-from the tick quantisation) is 30 times the camera's, so the three-cornered hat's
-``(Var(c-g) + Var(c-w) - Var(g-w)) / 2`` carries the sampling noise of two variances a thousand times the
+(the wheels, after their calibration) does not help there: their per-interval heading error against the
+truth is 0.4-0.8 mrad before the calibration and at least 0.15 mrad after it (one tick over √6 on each
+wheel, over the wheel base), 10-50 times the camera's, so the three-cornered hat's
+``(Var(c-g) + Var(c-w) - Var(g-w)) / 2`` carries the sampling noise of two variances 100-2500 times the
 camera's; it is not used.
 
 Batch only: it runs where the whole recording is put on the node grid
