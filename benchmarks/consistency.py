@@ -33,7 +33,7 @@ and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, wh
 
 Usage::
 
-    python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F]
+    python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F] [--visual-noise]
 """
 
 from __future__ import annotations
@@ -126,7 +126,7 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     iv = build_intervals(streams, config)
     kv, kb = ekf_mod.calibration_observable(iv)
     f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                          camera=len(iv.vis_i0) > 0)
+                          camera=len(iv.vis_i0) > 0, frame_error=iv.visual_frame_error)
     meas = ekf_mod.interval_measurements(iv, config)
     out: dict[str, tuple[int, list]] = {}
     for k in range(iv.n_steps):
@@ -198,10 +198,14 @@ def main(argv=None) -> int:
     parser.add_argument("--duration", type=float, default=30.0)
     parser.add_argument("--visual-frame-error", type=float, default=0.0,
                         help="fusion.visual_frame_error of the backends (the drives' camera errors are independent)")
+    parser.add_argument("--visual-noise", action="store_true",
+                        help="estimate the camera's heading noise from the gyro's (fusion.visual_noise.estimate)")
     args = parser.parse_args(argv)
     t0 = time.process_time()
     nis: dict = {}
-    nees = run(args.seeds, args.duration, config=FusionConfig(visual_frame_error=args.visual_frame_error), nis=nis)
+    config = FusionConfig.from_dict({"visual_frame_error": args.visual_frame_error,
+                                     "visual_noise": {"estimate": args.visual_noise}})
+    nees = run(args.seeds, args.duration, config=config, nis=nis)
     n = args.seeds
     lo, hi = band(3, n)
     print(f"NEES of (x, y, yaw), {n} seeds of a {args.duration:.0f} s generated drive (camera, wheels, gyro), "

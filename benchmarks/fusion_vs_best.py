@@ -44,10 +44,16 @@ one's (same images, same seed): a radius difference turns the robot by a fixed a
 the backends do not estimate (they estimate the common radius and the wheel base), so this separates
 that error from the rest.
 
+``--visual-noise estimate`` fuses with the camera's heading noise estimated from the gyro's
+(``fusion: {visual_noise: {estimate: true}}``, :mod:`fusion_vo.sensors.visual_noise`) and prints each
+recording's estimate (variance scale and lag-1 correlation with their standard errors, and whether each was
+applied); ``--visual-noise force`` applies the estimates however uncertain. Beside ``--sensors``'s
+truth-based ``e²/σ²`` of the heading and its lag-1 correlation, this says how well the data resolve them.
+
 Run::
 
     python benchmarks/fusion_vs_best.py [--out DIR] [--only square,circle] [--seeds N] [--sensors]
-        [--variants [NAME,...]] [--equal-radii]
+        [--variants [NAME,...]] [--equal-radii] [--visual-noise estimate|force]
 
 Generation renders every frame, so the whole set takes several minutes on two cores.
 """
@@ -174,9 +180,18 @@ def sensor_nees(seq: Path, visual_increments) -> dict[str, str]:
     return out
 
 
-def compare(seq: Path, run_dir: Path) -> dict:
-    """Run the pipeline on ``seq`` and return the figures of one table row per track."""
-    run_pipeline(seq, run_dir, RunConfig(backend="all", evaluate=False))
+#: ``--visual-noise``: the fusion options of each mode (``force`` applies the estimates however uncertain)
+VISUAL_NOISE = {"estimate": {"visual_noise": {"estimate": True}},
+                "force": {"visual_noise": {"estimate": True, "scale_tolerance": 1e9, "frame_error_tolerance": 1e9}}}
+
+
+def compare(seq: Path, run_dir: Path, fusion: dict | None = None) -> dict:
+    """Run the pipeline on ``seq`` (fusion options ``fusion``) and return the figures of one table row per
+    track (``visual_noise``: the camera's heading noise estimate of summary.json, when made)."""
+    import json
+
+    run_pipeline(seq, run_dir, RunConfig(backend="all", evaluate=False, fusion=dict(fusion or {})))
+    summary = json.loads((run_dir / "summary.json").read_text())
     metrics = evaluate_run(run_dir, seq)
     ate = {k: metrics[k]["ate_m"] * 1e3 for k in (*SINGLE, *FUSED) if k in metrics}
     best = min(ate[k] for k in SINGLE if k in ate)
@@ -187,6 +202,7 @@ def compare(seq: Path, run_dir: Path) -> dict:
         "fused_le_best": all(ate[k] <= best for k in FUSED if k in ate),
         "smoothed_le_ekf": ate.get("ekf_smoothed", 0) <= ate.get("ekf", 0),
         "batch_le_online": ate.get("gtsam", 0) <= ate.get("gtsam_online", 0),
+        "visual_noise": (summary.get("fusion") or {}).get("visual_noise") or {},
     }
 
 
@@ -467,6 +483,11 @@ def recording(out: Path, folder: str, profile: str, seed: int, options: dict) ->
     return simulate(seq, profile=profile, seed=seed, **options)
 
 
+def _num(value, fmt: str = ".2f") -> str:
+    """``value`` formatted, ``-`` for None."""
+    return "-" if value is None else format(value, fmt)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", type=Path, help="keep the recordings and runs here (default: a temporary folder)")
@@ -477,6 +498,9 @@ def main(argv=None) -> int:
                         help="also print each input's NEES against the truth (runs visual odometry once more)")
     parser.add_argument("--variants", nargs="?", const="", default=None, metavar="NAME,...",
                         help="also re-fuse each recording's increments with VARIANTS (or only those named)")
+    parser.add_argument("--visual-noise", choices=sorted(VISUAL_NOISE),
+                        help="fuse with the camera's heading noise estimated from the gyro's (fusion.visual_noise; "
+                             "force: applied however uncertain) and print the estimates")
     parser.add_argument("--equal-radii", action="store_true",
                         help="generate the recordings with the right wheel's radius error equal to the left's")
     args = parser.parse_args(argv)
@@ -498,13 +522,21 @@ def main(argv=None) -> int:
                 seq = recording(out, folder if not args.equal_radii else f"{folder}_equal_radii", profile,
                                 seed + 100 * i, options)
                 seqs.append(seq)
-                r = compare(seq, out / f"run_{folder}")
+                r = compare(seq, out / f"run_{folder}", VISUAL_NOISE.get(args.visual_noise))
                 rows.append(r)
                 cells = [label, *(f"{r['ate'].get(k, float('nan')):.3f}" for k in SINGLE), f"{r['best']:.3f}",
                          *(f"{r['ate'].get(k, float('nan')):.3f}" for k in FUSED),
                          *("yes" if r[k] else "NO" for k in ("fused_le_best", "smoothed_le_ekf", "batch_le_online")),
                          f"{max(r['legs'].values()):.3f}"]
                 print(" | ".join(cells), f"  ({time.perf_counter() - t0:.0f} s)", flush=True)
+                vn = r["visual_noise"]
+                if vn:
+                    print(f"    {label} camera heading noise estimated: variance scale {_num(vn.get('scale'))} ± "
+                          f"{_num(vn.get('scale_se'))} ({'applied' if vn.get('scale_applied') else 'not applied'}), "
+                          f"lag-1 correlation {_num(vn.get('correlation'), '+.2f')} ± {_num(vn.get('correlation_se'))}"
+                          f" -> f {_num(vn.get('frame_error'))} "
+                          f"({'applied' if vn.get('frame_error_applied') else 'not applied'}), "
+                          f"{vn.get('intervals')} intervals", flush=True)
             if args.seeds:
                 for line in seed_summary(rows):
                     print(f"    {name}, {len(rows)} seeds: {line}", flush=True)

@@ -414,7 +414,8 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
             note = note.replace("the other sensors carried the estimate",
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
-    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses")}
+    summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses",
+                                                                     "visual_noise")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates

@@ -105,6 +105,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         whole = _fuse_piece(streams, names, config, delay)
         result.merge(whole)
         result.inconsistent = whole.inconsistent
+        result.visual_noise = whole.visual_noise
         result.pauses = bridged
         result.notes[:0] = pause_notes(bridged, t_first)
         for text in result.notes:
@@ -134,6 +135,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     result.pauses = sorted(bridged + joined, key=lambda entry: entry["start"])
     longest = max(used, key=lambda r: max((len(tr) for tr in r.trajectories.values()), default=0))
     result.calibration.update(longest.calibration)
+    result.visual_noise = longest.visual_noise
     for r in used:
         for backend_name, counts in r.counts.items():
             total = result.counts.setdefault(backend_name, {})
@@ -168,6 +170,8 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0
     result.inconsistent = [ep.as_dict() for ep in iv.episodes]
+    if iv.visual_noise is not None:
+        result.visual_noise = iv.visual_noise.as_dict()
     if "ekf" in names:
         # single-threaded BLAS for the filter's small matrices: with OpenBLAS's threads (one per core by
         # default) each 5x5 inverse of the update cost about 2.5 ms of CPU instead of 0.02 ms on a busy

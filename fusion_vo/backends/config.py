@@ -17,6 +17,7 @@ from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
 from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
+from fusion_vo.sensors.visual_noise import VisualNoiseConfig
 
 ROBUST_KERNELS = ("huber", "cauchy", "none")
 
@@ -128,6 +129,10 @@ class FusionConfig:
         as ``z = motion + e_b - e_a + w``, each frame's error ``e`` with covariance ``visual_frame_error / 2``
         times the stated one and ``w`` with ``1 - visual_frame_error`` times it
         (:mod:`fusion_vo.sensors.visual`). Must be below 1.
+    visual_noise : VisualNoiseConfig
+        Estimate the camera's heading noise (a scale of its stated variance, and ``visual_frame_error``)
+        from the camera's and the gyro's heading changes over the recording, without ground truth
+        (:mod:`fusion_vo.sensors.visual_noise`; ``estimate``, default False; batch runs only).
     wheel_scale_sigma : float
         Prior standard deviation of the wheels' distance scale ``k_r`` (their common radius error)
         around 1 (default 0.01); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml`` replaces it by
@@ -200,6 +205,7 @@ class FusionConfig:
     wheel_base_sigma: float = 0.05
     wheel_scale_sigma: float = 0.01
     visual_frame_error: float = 0.0
+    visual_noise: VisualNoiseConfig = field(default_factory=VisualNoiseConfig)
     odom_base_sigma: float = 0.3
     sync_odometry: bool = True
     max_odom_delay: float = 1.0
@@ -337,7 +343,7 @@ def _state_priors(data, path, prefix: tuple) -> dict:
 
 
 #: noise parameters that must be strictly positive besides every ``*sigma*`` (a zero would claim a perfect sensor)
-_POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
+_POSITIVE = {"scale_tolerance", "frame_error_tolerance", "gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
 
 
 def _numbers(obj, prefix: str = ""):

@@ -141,15 +141,17 @@ class PlanarEkf:
         State variables the sensors add (:class:`fusion_vo.sensors.registry.State`), appended to the state
         vector after the built-in ones with their prior and random walk.
     camera : bool
-        Visual increments are fused. With ``config.visual_frame_error > 0`` the state then ends with the
-        camera's frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
+        Visual increments are fused. With a frame error ``f > 0`` the state then ends with the camera's
+        frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
+    frame_error : float, optional
+        That ``f`` (default ``config.visual_frame_error``; :attr:`Intervals.visual_frame_error` in batch use).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
                  estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
                  twist: bool = False, visual_scale_sigma: float | None = None,
                  wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None, states=(),
-                 camera: bool = False):
+                 camera: bool = False, frame_error: float | None = None):
         # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
         from filterpy.kalman import ExtendedKalmanFilter
         from scipy.stats import chi2
@@ -167,7 +169,8 @@ class PlanarEkf:
             self.columns[state.name] = slice(DIM + i, DIM + i + 1)
         #: the camera's frame errors: (columns of the previous node's, of this node's), or None
         self.frame_errors: tuple[slice, slice] | None = None
-        if camera and config.visual_frame_error > 0:
+        frame_error = config.visual_frame_error if frame_error is None else frame_error
+        if camera and frame_error > 0:
             self.frame_errors = (slice(dim, dim + FRAME_ERRORS), slice(dim + FRAME_ERRORS, dim + 2 * FRAME_ERRORS))
             self.dim = dim = dim + 2 * FRAME_ERRORS
         self._frame_cov = np.eye(FRAME_ERRORS) * _FROZEN_VAR
@@ -358,7 +361,8 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     start = time.process_time()
     kv_ok, kb_ok = calibration_observable(iv)
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                    iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0)
+                    iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
+                    frame_error=iv.visual_frame_error)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt

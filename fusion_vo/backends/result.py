@@ -67,6 +67,9 @@ class FusionResult:
         Pauses in every stream at which the estimate was split (``start``, ``end``, ``seconds`` on the
         recording clock, and ``joined``: ``camera``, ``held`` or ``gps``); see
         :mod:`fusion_vo.backends.pauses`.
+    visual_noise : dict
+        The camera's heading noise estimated from the gyro's (``fusion.visual_noise.estimate``,
+        :class:`~fusion_vo.sensors.visual_noise.VisualNoiseEstimate`); empty when not estimated.
     residuals : dict
         Backend -> sensor -> ``(dof, rows)``: the factor graph's per-sensor NIS at its solution, rows
         ``(t, NIS)`` (only with ``GraphConfig.residuals``; :mod:`fusion_vo.backends.residuals`).
@@ -80,6 +83,7 @@ class FusionResult:
     timing: dict[str, float] = field(default_factory=dict)
     inconsistent: list[dict] = field(default_factory=list)
     pauses: list[dict] = field(default_factory=list)
+    visual_noise: dict = field(default_factory=dict)
     residuals: dict = field(default_factory=dict)
 
     @property
@@ -108,6 +112,7 @@ class FusionResult:
             "timing_s": self.timing,
             "inconsistent": list(self.inconsistent),
             "pauses": list(self.pauses),
+            "visual_noise": dict(self.visual_noise),
         }
 
 

@@ -506,6 +506,9 @@ class StreamingFusion:
                 ms = [x[1] * 1e3 for x in later]
                 text += f", re-estimated {len(ms)} times ({min(ms):.0f}-{max(ms):.0f} ms, last {ms[-1]:.0f} ms)"
             result.notes.append(text)
+        if self.config.visual_noise.estimate and "camera" in self.sensors:
+            result.notes.append("camera heading noise not estimated in streaming use (fusion.visual_noise.estimate is "
+                                "for batch runs): the stated noise and visual_frame_error were used")
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))

@@ -38,6 +38,7 @@ from fusion_vo.backends.result import SensorCount
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
 
 logger = logging.getLogger(__name__)
 
@@ -185,6 +186,11 @@ class Intervals:
         (:mod:`fusion_vo.sensors.registry`; the built-in ones have the fields above).
     states : tuple of registry.State
         The state variables the sensors with data add to the backends (:class:`fusion_vo.sensors.registry.State`).
+    visual_frame_error : float
+        The camera's frame-error share ``f`` both backends use (:mod:`fusion_vo.sensors.visual`):
+        ``FusionConfig.visual_frame_error``, or the estimate of :mod:`fusion_vo.sensors.visual_noise`.
+    visual_noise : VisualNoiseEstimate or None
+        What that estimate found (``fusion.visual_noise.estimate``; None when off or in streaming use).
     """
 
     t: np.ndarray
@@ -222,6 +228,8 @@ class Intervals:
     initial_sigma: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
     states: tuple = ()
+    visual_frame_error: float = 0.0
+    visual_noise: VisualNoiseEstimate | None = None
 
     @property
     def n_steps(self) -> int:
@@ -336,6 +344,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         ahrs_ok=np.zeros(K + 1, bool), ahrs_yaw=np.zeros(K + 1), range_ok=np.zeros(K + 1, bool),
         range_height=np.full(K + 1, np.nan), camera_height=streams.camera_height, counts=counts, notes=notes,
         visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma,
+        visual_frame_error=config.visual_frame_error,
     )
     if streams.camera_height_sigma is not None and streams.camera_height:
         iv.visual_scale_sigma = float(streams.camera_height_sigma / streams.camera_height)
@@ -351,7 +360,9 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     iv.wheel_speed_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
         from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
+        from fusion_vo.sensors.visual_noise import apply
 
+        iv.visual_noise = apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)

@@ -131,7 +131,7 @@ def ekf_measurements(iv, config) -> dict:
         vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
         vis_ok[free] = True
     out = {"visual": (vis_ok, vis_u, vis_R)}
-    f = config.visual_frame_error
+    f = iv.visual_frame_error
     if f > 0:  # single-interval increments: their frames' errors and the rest (module docstring)
         single = np.zeros(K, bool)
         frame_cov = np.full((K, 3, 3), np.nan)
@@ -173,7 +173,7 @@ def graph_factors(builder, nf, node) -> None:
     import gtsam
 
     est = node.estimate
-    f = builder.config.visual_frame_error
+    f = builder.iv.visual_frame_error
     for start, d, cov in builder.visual_spans.get(node.n, []):
         xs, xj = builder.X(builder.offset + start), node.xj
         if f > 0:
