@@ -34,6 +34,7 @@ and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, wh
 Usage::
 
     python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F]
+        [--visual-scale-random-walk Q]
 """
 
 from __future__ import annotations
@@ -198,10 +199,17 @@ def main(argv=None) -> int:
     parser.add_argument("--duration", type=float, default=30.0)
     parser.add_argument("--visual-frame-error", type=float, default=0.0,
                         help="fusion.visual_frame_error of the backends (the drives' camera errors are independent)")
+    parser.add_argument("--visual-scale-random-walk", type=float, default=None,
+                        help="fusion.ekf.visual_scale_random_walk of the backends (the drives' camera height is "
+                             "constant; default: the configuration's default)")
     args = parser.parse_args(argv)
     t0 = time.process_time()
     nis: dict = {}
-    nees = run(args.seeds, args.duration, config=FusionConfig(visual_frame_error=args.visual_frame_error), nis=nis)
+    config = FusionConfig(visual_frame_error=args.visual_frame_error)
+    if args.visual_scale_random_walk is not None:
+        config = dataclasses.replace(config, ekf=dataclasses.replace(
+            config.ekf, visual_scale_random_walk=args.visual_scale_random_walk))
+    nees = run(args.seeds, args.duration, config=config, nis=nis)
     n = args.seeds
     lo, hi = band(3, n)
     print(f"NEES of (x, y, yaw), {n} seeds of a {args.duration:.0f} s generated drive (camera, wheels, gyro), "
