@@ -34,6 +34,7 @@ and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, wh
 Usage::
 
     python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F] [--visual-noise]
+        [--visual-scale-random-walk Q]
 """
 
 from __future__ import annotations
@@ -200,11 +201,17 @@ def main(argv=None) -> int:
                         help="fusion.visual_frame_error of the backends (the drives' camera errors are independent)")
     parser.add_argument("--visual-noise", action="store_true",
                         help="estimate the camera's heading noise from the gyro's (fusion.visual_noise.estimate)")
+    parser.add_argument("--visual-scale-random-walk", type=float, default=None,
+                        help="fusion.ekf.visual_scale_random_walk of the backends (the drives' camera height is "
+                             "constant; default: the configuration's default)")
     args = parser.parse_args(argv)
     t0 = time.process_time()
     nis: dict = {}
     config = FusionConfig.from_dict({"visual_frame_error": args.visual_frame_error,
                                      "visual_noise": {"estimate": args.visual_noise}})
+    if args.visual_scale_random_walk is not None:
+        config = dataclasses.replace(config, ekf=dataclasses.replace(
+            config.ekf, visual_scale_random_walk=args.visual_scale_random_walk))
     nees = run(args.seeds, args.duration, config=config, nis=nis)
     n = args.seeds
     lo, hi = band(3, n)

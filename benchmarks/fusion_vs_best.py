@@ -34,7 +34,8 @@ divided by 4, other robust kernels of the factor graph), with the wheels' noise 
 generator put into them (:func:`true_wheel_noise`; also with the wheels' curvature bias estimated) and
 with "oracle statistics" (:func:`oracle_options`: the camera's covariances scaled per component to its
 errors against the truth, its lag-1 heading correlation as ``visual_frame_error``, the wheels at their true
-noise; and the same camera with the default wheels), printing the fused ATEs of each: what tells which input or which part of the model makes a fused
+noise; and the same camera with the default wheels; and the oracle with the visual scale's former random
+walk of 1e-4 /√s), printing the fused ATEs of each: what tells which input or which part of the model makes a fused
 track worse than the best single sensor, and whether better stated noise would close the gap.
 ``--variants NAME,NAME`` runs only those variants (``default`` is always run); with ``--seeds`` the
 variants run on every seed and are summarised over them like the main table (:func:`seed_summary`).
@@ -222,6 +223,7 @@ VARIANTS = {
     "graph kernel none": (None, 1.0, FLOOR, {"graph": {"robust": "none"}}),
     "graph kernel cauchy": (None, 1.0, FLOOR, {"graph": {"robust": "cauchy", "robust_k": 2.3849}}),
     "wheel curvature estimated": (None, 1.0, FLOOR, {"wheel": {"estimate_curvature": True}}),
+    "visual scale random walk 1e-4": (None, 1.0, FLOOR, {"ekf": {"visual_scale_random_walk": 1e-4}}),
 }
 
 
@@ -394,6 +396,8 @@ def scaled(increments, scale: np.ndarray):
 
 ORACLE = "oracle statistics"
 ORACLE_CAMERA = "oracle camera only"
+#: the oracle with the visual scale's random walk of 1e-4 /√s that both backends had before it became 0
+ORACLE_WALK = "oracle with visual scale walk 1e-4"
 
 
 def variants(seq: Path, only: list[str] | None = None) -> dict[str, dict[str, float]]:
@@ -413,6 +417,7 @@ def variants(seq: Path, only: list[str] | None = None) -> dict[str, dict[str, fl
     runs["true noise, curvature estimated"] = (None, 1.0, FLOOR, honest)
     runs[ORACLE] = (None, 1.0, FLOOR, None)  # options from the floored increments, below
     runs[ORACLE_CAMERA] = (None, 1.0, FLOOR, None)
+    runs[ORACLE_WALK] = (None, 1.0, FLOOR, None)
     if only:
         unknown = set(only) - set(runs)
         if unknown:
@@ -420,8 +425,10 @@ def variants(seq: Path, only: list[str] | None = None) -> dict[str, dict[str, fl
         runs = {k: v for k, v in runs.items() if k == "default" or k in only}
     for name, (sensors, factor, floor, options) in runs.items():
         increments = with_floor(vo.increments, factor, floor)
-        if name in (ORACLE, ORACLE_CAMERA):
-            scale, options, text = oracle_options(rec, increments, wheels=name == ORACLE)
+        if name in (ORACLE, ORACLE_CAMERA, ORACLE_WALK):
+            scale, options, text = oracle_options(rec, increments, wheels=name != ORACLE_CAMERA)
+            if name == ORACLE_WALK:
+                options = {**options, "ekf": {"visual_scale_random_walk": 1e-4}}
             if name == ORACLE:
                 print(f"    {seq.name} oracle: {text}")
             increments = scaled(increments, scale)

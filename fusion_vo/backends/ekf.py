@@ -244,7 +244,7 @@ class PlanarEkf:
         Q[BG, BG] += cfg.imu.gyro_random_walk**2 * dt
         Q[AO, AO] += cfg.imu.ahrs_offset_walk**2 * dt
         if self.estimate_kv:
-            Q[KV, KV] += cfg.ekf.scale_random_walk**2 * dt
+            Q[KV, KV] += cfg.ekf.visual_scale_random_walk**2 * dt
         if self.estimate_kb:
             Q[KB, KB] += cfg.ekf.scale_random_walk**2 * dt
         if self.estimate_kv and self.estimate_kb:  # the wheels' radius factor, estimated as in __init__

@@ -450,7 +450,7 @@ class GraphBuilder:
         if self.ahrs_offset_on:
             walks.append((O, cfg.imu.ahrs_offset_walk, estimate.get("ahrs_offset", 0.0)))
         if self.kv_on:
-            walks.append((S, cfg.ekf.scale_random_walk, estimate.get("visual_scale", 1.0)))
+            walks.append((S, cfg.ekf.visual_scale_random_walk, estimate.get("visual_scale", 1.0)))
         if self.kb_on:
             walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
         if self.kr_on:

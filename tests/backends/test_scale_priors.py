@@ -62,3 +62,29 @@ def test_bad_sigma_in_sensor_yaml_names_the_key(tmp_path):
         " radius_sigma: -0.001}\n")
     with pytest.raises(InputError, match="radius_sigma"):
         Recording(tmp_path).wheel()
+
+
+
+def test_camera_height_uncertainty_grows_only_by_its_small_walk(drive):
+    # a rigidly mounted camera keeps its height: the visual scale's default random walk is a tenth of the
+    # wheels' (the wheels measure only the ratio of the two scales, so nothing else holds the camera's);
+    # its sigma grows with the configured walk
+    import math
+
+    from fusion_vo.backends import FusionConfig
+
+    streams = _with_radius_error(drive, 0.0, 0.0005, 1e-4)
+    prior = 1e-4 / streams.camera_height
+    duration = drive.truth.t[-1] - drive.truth.t[0]
+    default = FusionConfig().ekf.visual_scale_random_walk
+    assert default <= 0.1 * FusionConfig().ekf.scale_random_walk
+    sigmas = []
+    for walk in (None, 1e-3):
+        config = FusionConfig()
+        if walk is not None:
+            config = dataclasses.replace(config, ekf=dataclasses.replace(config.ekf, visual_scale_random_walk=walk))
+        sigmas.append(fuse(streams, "ekf", config).calibration["ekf"]["visual_scale_sigma"])
+    assert sigmas[0] <= math.sqrt(prior**2 + default**2 * duration) * 1.0001
+    assert sigmas[0] <= 1.001 * prior
+    assert sigmas[1] > 2 * prior
+    assert sigmas[1] <= math.sqrt(prior**2 + 1e-3**2 * duration) * 1.0001
