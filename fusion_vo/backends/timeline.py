@@ -38,6 +38,7 @@ from fusion_vo.backends.result import SensorCount
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
 from fusion_vo.sensors import registry
+from fusion_vo.sensors import visual_noise
 from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
 
 logger = logging.getLogger(__name__)
@@ -360,9 +361,8 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     iv.wheel_speed_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
         from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
-        from fusion_vo.sensors.visual_noise import apply
 
-        iv.visual_noise = apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
+        iv.visual_noise = visual_noise.apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
