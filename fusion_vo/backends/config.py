@@ -353,7 +353,8 @@ def _state_priors(data, path, prefix: tuple) -> dict:
 
 
 #: noise parameters that must be strictly positive besides every ``*sigma*`` (a zero would claim a perfect sensor)
-_POSITIVE = {"scale_tolerance", "frame_error_tolerance", "gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap"}
+_POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", "spike_threshold", "step_hz", "max_gap",
+             "scale_tolerance", "frame_error_tolerance"}
 
 
 def _numbers(obj, prefix: str = ""):

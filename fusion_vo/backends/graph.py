@@ -31,7 +31,7 @@ that factor is used. Each sensor's factors are built by its own module, register
                e = W_c d_ψ - m_ψ apart; without self-calibration: BetweenFactorPose2, whole arc covariance)
     gyro       sensors.imu     e = d_ψ + B_c Δt - Θ_ij                σ² = σ_g² Δt      (linear)
     standstill sensors.wheel   e = d_ψ   (wheels at rest)             σ = σ_still Δt   (linear)
-    walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1}, W_c - W_{c-1} ~ N(0, q² τ),
+    walks      B_c - B_{c-1} ~ N(0, σ_bw² τ),  S_c - S_{c-1} ~ N(0, q_v² τ),  W_c - W_{c-1} ~ N(0, q² τ),
                O_c - O_{c-1} ~ N(0, σ_ow² τ)                                           (τ: segment length)
     heading    sensors.imu     e = ψ_k + O_c - ψ_AHRS                 σ² = σ_ψ²
                (an absolute AHRS, no offset: PriorFactorPose2 on the heading)

@@ -268,18 +268,16 @@ def apply(iv, config) -> VisualNoiseEstimate | None:
     cfg = config.visual_noise
     if not cfg.estimate:
         return None
-    K = iv.n_steps
-    camera, camera_var = np.full(K, np.nan), np.full(K, np.nan)
-    gyro = np.full(K, np.nan)
-    if len(iv.vis_i0) and iv.uses("gyro"):
+    if not len(iv.vis_i0) or not iv.uses("gyro"):
+        out = VisualNoiseEstimate(note="camera heading noise not estimated: it needs the camera and the gyro")
+    else:
+        K = iv.n_steps
+        camera, camera_var = np.full(K, np.nan), np.full(K, np.nan)
         single = iv.vis_i1 == iv.vis_i0 + 1
         camera[iv.vis_i0[single]] = iv.vis_delta[single, 2]
         camera_var[iv.vis_i0[single]] = iv.vis_cov[single, 2, 2]
         gyro = np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
-    gyro_var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt) * np.ones(K)
-    if not len(iv.vis_i0) or not iv.uses("gyro"):
-        out = VisualNoiseEstimate(note="camera heading noise not estimated: it needs the camera and the gyro")
-    else:
+        gyro_var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt) * np.ones(K)
         out = estimate(camera, camera_var, gyro, gyro_var, cfg)
     if out.scale_applied:
         root = np.sqrt(out.scale)
