@@ -266,11 +266,14 @@ class StreamingFusion:
         #: the sensors' own state variables (registry.State) in both backends
         self._states = registry.states(self.sensors, self.config)
         if wheel_config is not None:  # the wheels' curvature bias and its prior, as in a batch run
-            from fusion_vo.sensors.wheel import curvature_states
+            from fusion_vo.sensors.wheel import curvature_observable, curvature_states
 
+            # whether the IMU brings an AHRS heading is known only from its samples: a stream decides from the
+            # camera and GPS declared (a batch run of wheels and an AHRS alone estimates the curvature)
+            observable = curvature_observable(camera="camera" in self.sensors, ahrs=False, gps="gps" in self.sensors)
             self._states = curvature_states(self._states, self.config,
-                                                wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
-                                                wheel_config.wheel_base)
+                                            wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
+                                            wheel_config.wheel_base, observable)
         self._visual: list[VisualIncrement] = []
         self._latest = -np.inf
         self._t_nodes: list[float] = []

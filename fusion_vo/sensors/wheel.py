@@ -78,6 +78,7 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -120,11 +121,14 @@ class WheelNoise:
     standstill_yaw_rate : float
         Standard deviation [rad/s] of the zero yaw rate at a standstill (default 1e-2: vibration of
         a robot at rest).
-    estimate_curvature : bool
+    estimate_curvature : bool or "auto"
         Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`;
-        encoder ticks only, an odometry twist has no radii; default True: on the generated drives it
-        improves ``hard``, ``height_error``, ``tilted`` and ``gps_outage`` and costs ``random60``'s EKF
-        and iSAM2 4 %, README "Unequal wheel radii").
+        encoder ticks only, an odometry twist has no radii). ``"auto"`` (default): when a camera, an AHRS
+        heading or GPS is fused (:func:`curvature_observable`); on the generated drives, which all have a
+        camera, it improves ``hard``, ``height_error``, ``tilted`` and ``gps_outage`` and costs
+        ``random60``'s EKF and iSAM2 4 % (README "Unequal wheel radii"). With the wheels and a gyro alone
+        the curvature's turn and the gyro's bias are told apart only by changes of speed, and the
+        heading then follows the two priors' split (README "Wheels and a gyro alone").
     """
 
     k: float = 0.01
@@ -136,7 +140,7 @@ class WheelNoise:
     yaw_scale_time: float = 0.0
     standstill_speed: float = 1e-3
     standstill_yaw_rate: float = 1e-2
-    estimate_curvature: bool = True
+    estimate_curvature: bool | Literal["auto"] = "auto"
 
 
 def odom_twist_noise() -> WheelNoise:
@@ -445,11 +449,28 @@ def curvature_sigma(radius_rel_sigma: float, wheel_base: float) -> float:
     return float(math.sqrt(2.0) * radius_rel_sigma / wheel_base)
 
 
-def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float) -> tuple:
-    """``states`` without the curvature bias unless ``config.wheel.estimate_curvature``; with it, its prior set
-    from the wheels' relative radius uncertainty and base (:func:`curvature_sigma`), unless the
-    configuration's ``states`` section sets it."""
-    if not config.wheel.estimate_curvature:
+def curvature_observable(camera: bool, ahrs: bool, gps: bool) -> bool:
+    """Whether the wheels' curvature bias is estimated under ``estimate_curvature: "auto"``: when a sensor
+    besides the wheels and the gyro measures the heading or its change (a camera, an AHRS heading, GPS).
+
+    The wheels' turn carries ``c`` per metre driven, the gyro's its bias ``b`` per second; with nothing else,
+    only their difference ``c v - b`` is measured, and the two separate only through changes of speed ``v``.
+    The estimate of that split then leans on the two priors, and the heading drifts at the split's error:
+    on generated 120 s wheel + gyro drives (4 seeds, ``python benchmarks/curvature_without_heading.py``)
+    with equal radii the fused tracks were 4.9-5.8 m off against 1.2 m for the wheels alone and
+    0.5-0.7 m without the state; only with a 1 % radius difference each way (1.4 prior sigma) did the state
+    pay (6.1-6.7 m against 8.9-9.1 m).
+    """
+    return camera or ahrs or gps
+
+
+def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float,
+                     observable: bool = True) -> tuple:
+    """``states`` with the curvature bias only if ``config.wheel.estimate_curvature`` is true, or ``"auto"`` and
+    ``observable`` (:func:`curvature_observable`); with it, its prior set from the wheels' relative radius
+    uncertainty and base (:func:`curvature_sigma`), unless the configuration's ``states`` section sets it."""
+    wanted = config.wheel.estimate_curvature
+    if wanted is False or (wanted == "auto" and not observable):
         return tuple(st for st in states if st.name != CURVATURE.name)
     if CURVATURE.name in (getattr(config, "states", None) or {}):
         return tuple(states)
@@ -512,7 +533,14 @@ def add_intervals(iv, streams, config, counts) -> None:
     iv.wheel_ok, iv.wheel_dl, iv.wheel_dr = ok, np.diff(left), np.diff(right)
     iv.wheel_base = travel.wheel_base
     if streams.wheel is not None:
-        iv.states = curvature_states(iv.states, config, iv.wheel_scale_sigma, travel.wheel_base)
+        observable = curvature_observable(camera=any(v.ok for v in streams.visual or ()),
+                                          ahrs=streams.imu is not None and streams.imu.orientation is not None,
+                                          gps=streams.gps is not None)
+        iv.states = curvature_states(iv.states, config, iv.wheel_scale_sigma, travel.wheel_base, observable)
+        if config.wheel.estimate_curvature == "auto" and not observable:
+            iv.notes.append("wheel curvature bias not estimated: without a camera, an AHRS heading or GPS only the "
+                            "wheels and the gyro measure the turn, and a radius difference cannot be told from the "
+                            "gyro's bias (fusion.wheel.estimate_curvature: true estimates it anyway)")
     count.used += int(ok.sum())
     count.missing += int((~ok).sum())
 
@@ -741,5 +769,5 @@ __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
     "WheelModel", "CurvedWheelModel", "StandstillModel", "WHEEL", "CURVED_WHEEL", "STANDSTILL", "CURVATURE",
-    "curvature_sigma", "curvature_states", "wheel_model", "gyro_turn",
+    "curvature_sigma", "curvature_observable", "curvature_states", "wheel_model", "gyro_turn",
 ]

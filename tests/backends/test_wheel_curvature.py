@@ -67,3 +67,43 @@ def test_a_two_row_factor_of_five_variables_linearises():
     A, rhs = factor.jacobian()
     np.testing.assert_allclose(A, np.hstack(blocks), rtol=1e-12)  # the same rows, GTSAM's key order
     np.testing.assert_allclose(rhs, b, rtol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def wheels_and_gyro():
+    """A 60 s drive with equal wheel radii fused from the encoder wheels and the gyro alone."""
+    s = synthetic_streams(SyntheticOptions(duration=60.0), seed=1)
+    return s, streams_of(s).select(["wheel", "imu"])
+
+
+def test_without_a_heading_reference_the_curvature_is_not_estimated_by_default(wheels_and_gyro):
+    from backend_synth import position_errors
+
+    s, streams = wheels_and_gyro
+    auto = fuse(streams, "all")
+    forced = fuse(streams, "all", FusionConfig.from_dict({"wheel": {"estimate_curvature": True}}))
+    assert "wheel_curvature" not in auto.calibration["ekf"] and "wheel_curvature" in forced.calibration["ekf"]
+    assert any(n.startswith("wheel curvature bias not estimated") for n in auto.notes)
+    assert not any(n.startswith("wheel curvature bias not estimated") for n in forced.notes)
+    # with equal radii the state only trades the gyro's bias for a turn the wheels do not make
+    for name in ("ekf", "gtsam"):
+        _, rms_auto = position_errors(auto.trajectories[name], s.truth)
+        _, rms_forced = position_errors(forced.trajectories[name], s.truth)
+        assert rms_auto < 0.5 * rms_forced, (name, rms_auto, rms_forced)
+        assert auto.calibration[name]["gyro_bias"] == pytest.approx(0.01, abs=0.005), name
+
+
+def test_an_ahrs_heading_makes_the_curvature_estimated_by_default():
+    s = synthetic_streams(SyntheticOptions(duration=5.0, ahrs_sigma=0.02), seed=2)
+    result = fuse(streams_of(s).select(["wheel", "imu"]), "ekf")
+    assert "wheel_curvature" in result.calibration["ekf"]
+
+
+@pytest.mark.parametrize("value", ["sometimes", 2])
+def test_estimate_curvature_accepts_true_false_or_auto(value):
+    from fusion_vo.errors import InputError
+
+    for ok in (True, False, "auto"):
+        assert FusionConfig.from_dict({"wheel": {"estimate_curvature": ok}}).wheel.estimate_curvature == ok
+    with pytest.raises(InputError, match="estimate_curvature"):
+        FusionConfig.from_dict({"wheel": {"estimate_curvature": value}})
