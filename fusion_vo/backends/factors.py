@@ -345,12 +345,9 @@ def covariance_noise(cov) -> gtsam.noiseModel.Gaussian:
     The graph then solved another problem than the filter: on the generated ``square`` drive (seed 101)
     the batch solution's translations equalled the camera's to 1e-10 m while the gyro moved the headings
     by 8.5 µrad RMS, where the RTS smoother's moved by the stated correlation (1.4 µm RMS). Here the
-    model is diagonal only when the covariance is exactly diagonal.
+    model is always the full Gaussian (for a diagonal covariance the same whitening).
     """
-    cov = np.atleast_2d(np.asarray(cov, dtype=np.float64))
-    if not np.any(cov - np.diag(np.diag(cov))):
-        return gtsam.noiseModel.Diagonal.Variances(np.diag(cov).copy())
-    return gtsam.noiseModel.Gaussian.Covariance(cov, False)
+    return gtsam.noiseModel.Gaussian.Covariance(np.atleast_2d(np.asarray(cov, dtype=np.float64)), False)
 
 
 def whitening(cov: np.ndarray) -> np.ndarray:

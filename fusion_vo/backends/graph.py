@@ -642,7 +642,10 @@ def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Val
     update, each robust factor's weight is evaluated at the new estimate; where one differs (by more than
     :data:`REWEIGHT_TOLERANCE`), all the node's sensor-model factors are linearised again at that estimate
     and replace the ones that went in (an iterated update, as an iterated EKF's, and the batch solution's
-    reweighting at each iteration), at most ``passes`` times.
+    reweighting at each iteration), at most ``passes`` times. Only a node with a weight below 1 at the
+    prediction is checked: with every factor inside its kernel there, the update moves the node by a
+    weighted mean of residuals inside their kernels (on the 16 generated drives of the measurement below,
+    1210 nodes were linearised again, every one of them with a weight below 1 at the prediction).
 
     Why: the prediction of the newest pose comes from the wheels (translation) and the gyro (heading),
     and the camera's residual there carries their error, which is far larger than the camera's own noise
@@ -655,15 +658,17 @@ def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Val
     of passes made.
     """
     index = list(isam.update(graph, values).getNewFactorsIndices())
+    if passes <= 0 or min(weights, default=1.0) >= 1.0:
+        return index, 0
     model = [i for i, f in enumerate(factors) if isinstance(f, ModelFactor)]
     robust = [j for j, i in enumerate(model) if factors[i].robust is not None]
-    if not robust:
-        return index, 0
-    lookup = estimate_lookup(isam)
     made = 0
     for _ in range(passes):
+        estimate = estimate_lookup(isam)
+        lookup = {key: estimate(key) for j in robust for key in factors[model[j]].all_keys()}.__getitem__
         if all(abs(factors[model[j]].weight(lookup) - weights[j]) <= REWEIGHT_TOLERANCE for j in robust):
             break
+        lookup = estimate
         weights = []
         again = gtsam.NonlinearFactorGraph()
         for f in freeze_custom_factors([factors[i] for i in model], lookup, maker, weights):
