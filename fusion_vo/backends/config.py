@@ -93,6 +93,11 @@ class GraphConfig:
     residuals : bool
         Compute each sensor's NIS at the batch and iSAM2 solutions (``FusionResult.residuals``,
         :mod:`fusion_vo.backends.residuals`; a consistency check, costs joint marginals; default False).
+    reweight_passes : int
+        iSAM2 (and the streaming fusion's) linearises a node's sensor-model factors again at its updated
+        estimate, at most this many times, when a robust weight there differs from the one at the
+        prediction (:func:`fusion_vo.backends.graph.update_reweighted`; default 2, 0: the weights at the
+        prediction).
     """
 
     robust: str = "huber"
@@ -106,6 +111,7 @@ class GraphConfig:
     marginals: bool = True
     calibration_interval: float = 1.0
     residuals: bool = False
+    reweight_passes: int = 2
 
 
 @dataclass

@@ -1278,7 +1278,7 @@ class _OnlineGraph:
         if self._pool is not None:
             return None
         builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
-        return [builder, nf, None]
+        return [builder, nf, None, None]
 
     def freeze(self, prepared: list) -> None:
         """Linearise the prepared node's custom factors at the current estimate (background: the worker does)."""
@@ -1286,7 +1286,8 @@ class _OnlineGraph:
             return
         n, nf = self.n + 1, prepared[1]
         lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, n - 1)
-        prepared[2] = self.graph.freeze_custom_factors(nf.factors, lookup)
+        prepared[3] = []
+        prepared[2] = self.graph.freeze_custom_factors(nf.factors, lookup, weights=prepared[3])
 
     def step(self, iv, prepared: list | None = None):
         """Add the node ending ``iv`` (its factors from :meth:`prepare` / :meth:`freeze` when given):
@@ -1300,19 +1301,21 @@ class _OnlineGraph:
 
     def _add_node(self, n: int, iv, prepared: list | None):
         if prepared is None:
-            prepared = self._node_factors(n, iv, self._pending_first, self.prev_pose) + (None,)
-        builder, nf, frozen = prepared
+            prepared = self._node_factors(n, iv, self._pending_first, self.prev_pose) + (None, None)
+        builder, nf, frozen, weights = prepared
         if frozen is None:
             lookup = self.graph.current_value_lookup(nf.values, self.isam, self.prev_pose, n - 1)
-            frozen = self.graph.freeze_custom_factors(nf.factors, lookup)
+            weights = []
+            frozen = self.graph.freeze_custom_factors(nf.factors, lookup, weights=weights)
         self._pending_first = False
         g = self.gtsam.NonlinearFactorGraph()
         for f in frozen:
             g.add(f)
         values = self.gtsam.Values()
         self.graph.insert_values(values, nf.values)
-        result = self.isam.update(g, values)
-        self.factors[n] = list(result.getNewFactorsIndices())
+        # the robust weights at the updated estimate, as the whole-recording iSAM2 (graph.update_reweighted)
+        self.factors[n] = self.graph.update_reweighted(self.isam, g, values, nf.factors, weights,
+                                                       passes=self.config.graph.reweight_passes)[0]
         self.last = n
         for old in [k for k in self.factors if k < self._forget_below]:
             del self.factors[old]

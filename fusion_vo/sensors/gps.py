@@ -247,7 +247,9 @@ class GpsModel:
         """GTSAM noise model of one fix: the Gaussian covariance inside the robust kernel."""
         import gtsam
 
-        base = gtsam.noiseModel.Gaussian.Covariance(self.covariance(fix_covariance))
+        from fusion_vo.backends.factors import covariance_noise
+
+        base = covariance_noise(self.covariance(fix_covariance))
         k = self.noise.kernel_width
         if self.noise.kernel == "huber":
             return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), base)

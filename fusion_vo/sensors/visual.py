@@ -199,6 +199,8 @@ def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | 
     frame pose does not exist and that node is not the previous one (whose current estimate starts it)."""
     import gtsam
 
+    from fusion_vo.backends.factors import covariance_noise
+
     a, b = builder.offset + start, builder.offset + node.n
     if a not in builder.frames:
         if start != node.n - 1 or node.previous_pose is None:
@@ -216,7 +218,7 @@ def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | 
                                                     "visual_scale": (builder.S(node.segment),)}, robust=False))
         else:
             nf.factors.append(gtsam.BetweenFactorPose2(builder.X(g), builder.F(g), gtsam.Pose2(),
-                                                       gtsam.noiseModel.Gaussian.Covariance(frame_cov)))
+                                                       covariance_noise(frame_cov)))
         builder.frames.add(g)
     if b in new:  # starts at this node's initial pose (GraphBuilder.node)
         node.scratch.setdefault("new_frames", []).append(builder.F(b))

@@ -8,7 +8,7 @@ import pytest
 
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.ekf import DIM, PlanarEkf
-from fusion_vo.backends.factors import ModelFactor, ModelFactors, group
+from fusion_vo.backends.factors import ModelFactor, ModelFactors, covariance_noise, group, pose_table
 from fusion_vo.backends.graph import B, O, R, X, S, W
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.visual import VISUAL
@@ -118,7 +118,7 @@ def test_model_factor_jacobians_match_finite_differences():
         factor = f.custom_factor()
         A = factor.linearize(v).jacobian()[0]
         # undo the noise model's whitening to compare with the unwhitened error
-        R = gtsam.noiseModel.Gaussian.Covariance(np.atleast_2d(f.covariance)).R()
+        R = covariance_noise(f.covariance).R()
         num = np.hstack(_numeric_jacobians(factor, v, list(factor.keys())))
         np.testing.assert_allclose(np.linalg.solve(R, A), num, atol=1e-6, err_msg=f.model.name)
 
@@ -126,7 +126,8 @@ def test_model_factor_jacobians_match_finite_differences():
 @pytest.mark.parametrize("robust", [None, ("huber", 1.345), ("cauchy", 0.5)])
 def test_grouped_linearisation_equals_gtsams_custom_factor(robust):
     """Error, information and gradient of each factor as GTSAM computes them for a CustomFactor with the same
-    (robust) noise model, including GTSAM's reading of a nearly diagonal covariance as diagonal."""
+    (robust) noise model, including a covariance of small entries whose correlation GTSAM's default noise
+    model would drop (``NEAR_DIAGONAL``)."""
     v = _values()
     for values in (v, _moved(v)):
         factors = _factors(robust)
@@ -256,3 +257,45 @@ def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does(curvature):
     expected = {"motion", "wheel_scale", "wheel_base_factor"} | ({"wheel_curvature"} if curvature else set())
     assert f.model is model and f.rows is None and f.covariance.shape == (3, 3) and set(f.keys) == expected
     assert abs(f.covariance[0, 2]) > 0 or abs(f.covariance[1, 2]) > 0
+
+
+#: a visual increment's covariance of the generated drives: σ 20 µm and 20 µrad (the frontend's floors), its lateral
+#: and heading errors correlated by -0.145; every entry is below GTSAM's 1e-9 test for a diagonal covariance
+SMALL_CORRELATED = np.array([[4e-10, 0.0, 0.0], [0.0, 4e-10, -5.8e-11], [0.0, -5.8e-11, 4e-10]])
+
+
+def test_small_covariance_keeps_its_correlation_in_every_factor():
+    """The graph weighs a measurement by its whole covariance, however small its entries: the frozen factor of
+    the incremental solvers, the grouped factors of the batch solution, the CustomFactor and the noise model
+    of GTSAM's own factors all have the information ``Σ⁻¹`` (GTSAM's default noise model would make it
+    diagonal)."""
+    info = np.linalg.inv(SMALL_CORRELATED)
+    assert abs(info[1, 2]) > 0.1 * info[1, 1]
+    np.testing.assert_allclose(covariance_noise(SMALL_CORRELATED).R().T @ covariance_noise(SMALL_CORRELATED).R(),
+                               info, rtol=1e-9)
+    v = gtsam.Values()
+    v.insert(X(0), gtsam.Pose2(0.0, 0.0, 0.0))
+    v.insert(X(1), gtsam.Pose2(0.01, 0.0, 0.0))  # at the measured increment: ∂h/∂ξ_1 is the identity
+    f = ModelFactor(VISUAL, np.array([0.01, 0.0, 0.0]), {"motion": (X(0), X(1))}, SMALL_CORRELATED,
+                    fixed={"visual_scale": 1.0})
+    frozen = f.linearized(lambda k: v.atPose2(k)).linearize(v)
+    grouped = ModelFactors([f]).linearize(v, pose_table(v))[0]
+    custom = f.custom_factor().linearize(v)
+    for linear in (frozen, grouped, custom):
+        A = linear.jacobian()[0][:, 3:]  # the block of X(1)
+        np.testing.assert_allclose(A.T @ A, info, rtol=1e-9)
+
+
+def test_graph_moves_the_translation_with_the_heading_by_the_stated_correlation():
+    """A heading the gyro corrects moves the camera's translation by ``Σ_yψ / Σ_ψψ`` times the correction, as in
+    the EKF's update (GTSAM's own BetweenFactorPose2 with the graph's noise model)."""
+    g = gtsam.NonlinearFactorGraph()
+    g.add(gtsam.PriorFactorPose2(X(0), gtsam.Pose2(), gtsam.noiseModel.Isotropic.Sigma(3, 1e-9)))
+    g.add(gtsam.BetweenFactorPose2(X(0), X(1), gtsam.Pose2(0.01, 0.0, 0.0), covariance_noise(SMALL_CORRELATED)))
+    g.add(gtsam.PriorFactorPose2(X(1), gtsam.Pose2(0.0, 0.0, 1e-5), gtsam.noiseModel.Diagonal.Sigmas(np.array([1e3, 1e3, 1e-7]))))
+    v = gtsam.Values()
+    v.insert(X(0), gtsam.Pose2())
+    v.insert(X(1), gtsam.Pose2(0.01, 0.0, 0.0))
+    p = gtsam.LevenbergMarquardtOptimizer(g, v).optimize().atPose2(X(1))
+    np.testing.assert_allclose(p.y(), SMALL_CORRELATED[1, 2] / SMALL_CORRELATED[2, 2] * p.theta(), rtol=1e-3)
+    assert abs(p.y()) > 1e-6
