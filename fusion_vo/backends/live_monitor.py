@@ -255,10 +255,20 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     """The gyro's bias over the kept intervals and whether it was measured at rest.
 
     With ten intervals at rest, the median rate there (as the whole-recording check does). Without,
-    the rate difference to the AHRS heading (else the camera's, else the wheels' yaw)
-    is averaged over the span where both are measured: the heading change telescopes, so a few
-    seconds give the bias to ``σ_ψ / T``, where the median of per-interval rate differences (what the
-    whole-recording check uses when there is no standstill) follows the AHRS' interval noise.
+    the rate difference to a heading reference is averaged over the span where both are measured: the
+    heading change telescopes, so the bias comes out to ``σ / T`` with ``σ`` the reference's error over
+    the span. Of the AHRS and the camera, the reference with the smaller stated error is taken: the
+    AHRS's is ``√2 σ_ψ`` per run of readings (its end points; plus its offset walk over the span), the
+    camera's the root of its increments' summed heading variances. The median of per-interval rate
+    differences (what the whole-recording check uses when there is no standstill) would follow the
+    AHRS's interval noise. The wheels' yaw, which depends on their calibration, is used only without either.
+
+    Why the smaller error: over the first seconds of a stream the AHRS's end points give the bias to
+    ``√2 σ_ψ / T``, 0.028 rad/s after 1 s at σ_ψ 0.02 rad, twenty times ``monitor_bias_sigma``; the camera's
+    summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s. With the AHRS
+    taken first, the honest gyro was dropped for about a second 1-3 s into 3 of 4 streamed 120 s drives
+    with wheels, gyro, AHRS and camera (``python benchmarks/monitor_false_alarms.py --seeds 1
+    --durations 120 --biases 0``, NIS 18-26).
     """
     from fusion_vo.sensors.wheel import arc_increment, at_rest
 
@@ -269,22 +279,25 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
         still = at_rest(iv, config) & iv.gyro_ok
         if np.count_nonzero(still) >= 10:
             return float(np.median(iv.gyro_angle[still] / dt[still])), True
-    refs = []
+    refs = []  # (error variance of the summed reference heading, ok, heading change per interval)
     ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:] & iv.gyro_ok
     if np.count_nonzero(ok) >= 10:
-        refs.append((ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
+        runs = int(np.count_nonzero(np.diff(np.concatenate(([0], ok.astype(np.int8)))) == 1))
+        var = runs * 2.0 * config.imu.ahrs_yaw_sigma**2 + config.imu.ahrs_offset_walk**2 * float(np.sum(dt[ok]))
+        refs.append((var, ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
     if len(iv.vis_i0):  # the camera's heading increments (independent of every calibration)
-        ok, angle, _ = visual_heading_rows(iv)
+        ok, angle, var = visual_heading_rows(iv, with_variance=True)
         ok &= iv.gyro_ok
         if np.count_nonzero(ok) >= 10:
-            refs.append((ok, angle))
-    if iv.uses("wheel"):
+            refs.append((float(np.sum(var[ok])), ok, angle))
+    if not refs and iv.uses("wheel"):
         ok = iv.wheel_ok & iv.gyro_ok
         if np.count_nonzero(ok) >= 10:
-            refs.append((ok, arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[:, 2]))
-    for ok, angle in refs:
-        return float(np.sum(iv.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
-    return None, False
+            refs.append((0.0, ok, arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[:, 2]))
+    if not refs:
+        return None, False
+    _, ok, angle = min(refs, key=lambda r: r[0])
+    return float(np.sum(iv.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
 
 
 class _Column:
