@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from fusion_vs_best import noise_statistics, scaled, seed_summary  # noqa: E402
+from fusion_vs_best import correlated_floor, noise_statistics, scaled, seed_summary, with_floor  # noqa: E402
 
 
 def test_noise_statistics_recover_variance_ratio_and_lag1_correlation():
@@ -48,6 +48,31 @@ def test_scaled_covariance_keeps_correlations():
     np.testing.assert_allclose(np.diag(out.covariance), [1.0, 4.0, 9.0])
     d, d0 = np.sqrt(np.diag(out.covariance)), np.sqrt(np.diag(cov))
     np.testing.assert_allclose(out.covariance / np.outer(d, d), cov / np.outer(d0, d0))
+
+
+def test_correlated_floor_keeps_correlation_coefficients_and_raises_only_small_sigmas():
+    """The "floor keeps correlations" variant: σ below the floor raised to it, σ above it kept, correlation
+    coefficients those of the unfloored covariance; the default floor raises the diagonal alone."""
+    @dataclasses.dataclass
+    class Increment:
+        covariance: np.ndarray
+        ok: bool = True
+
+    sd = np.array([1.3e-6, 4e-6, 5e-5])  # x, y under the 2e-5 floor, yaw above it
+    rho = np.array([[1.0, 0.1, 0.0], [0.1, 1.0, -0.9], [0.0, -0.9, 1.0]])
+    cov = rho * np.outer(sd, sd)
+    out = correlated_floor(cov, (2e-5, 2e-5))
+    s = np.sqrt(np.diag(out))
+    np.testing.assert_allclose(s, [2e-5, 2e-5, 5e-5])
+    np.testing.assert_allclose(out / np.outer(s, s), rho, atol=1e-12)
+    (diag_floor,) = with_floor([Increment(cov)], 1.0, (2e-5, 2e-5))
+    (kept,) = with_floor([Increment(cov)], 1.0, (2e-5, 2e-5, "correlated"))
+    np.testing.assert_allclose(kept.covariance, out)
+    np.testing.assert_allclose(np.diag(diag_floor.covariance), np.diag(out))
+    assert diag_floor.covariance[1, 2] == cov[1, 2]  # the diagonal floor leaves the covariance: ρ falls to -0.18
+    # a component of zero variance gets the floor alone, without correlations
+    zero = correlated_floor(np.diag([0.0, 1e-12, 0.0]), (2e-5, 1e-5))
+    np.testing.assert_allclose(zero, np.diag([4e-10, 4e-10, 1e-10]))
 
 
 def test_seed_summary_compares_with_the_best_input_per_seed():
