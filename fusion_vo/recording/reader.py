@@ -55,6 +55,10 @@ STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "o
 #: bit depths a 16-bit frame may hold
 BIT_DEPTHS = (10, 12, 14, 16)
 
+#: tick counts are 32-bit counters, signed or unsigned (:mod:`fusion_vo.sensors.wheel` takes their changes
+#: modulo 2^32): a count outside [-2^31, 2^32) is not one
+_TICK_RANGE = (-(2.0**31), 2.0**32)
+
 
 @dataclass
 class Frame:
@@ -248,10 +252,11 @@ class Recording:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
         meta = self._yaml("imu0", required=False)
         T = parse_matrix(meta["T_BS"], "T_BS", self.path / "imu0" / "sensor.yaml") if "T_BS" in meta else np.eye(4)
-        noise = {k: float(meta[k]) for k in (
+        ypath = self.path / "imu0" / "sensor.yaml"
+        noise = {k: _optional_sigma(meta, k, ypath, zero=k.endswith("random_walk")) for k in (
             "gyroscope_noise_density", "gyroscope_random_walk",
-            "accelerometer_noise_density", "accelerometer_random_walk") if k in meta}
-        rate = float(meta["rate_hz"]) if "rate_hz" in meta else None
+            "accelerometer_noise_density", "accelerometer_random_walk") if meta.get(k) is not None}
+        rate = _optional_sigma(meta, "rate_hz", ypath)
         return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
 
     def wheel(self) -> WheelData:
@@ -262,6 +267,11 @@ class Recording:
         if np.any(frac > 0):
             i = int(np.flatnonzero(frac.max(axis=1) > 0)[0])
             raise InputError("tick counts must be integers", path, int(tab.lines[i]))
+        out = ((tab.values < _TICK_RANGE[0]) | (tab.values >= _TICK_RANGE[1])).any(axis=1)
+        if np.any(out):
+            i = int(np.flatnonzero(out)[0])
+            raise InputError(f"tick count {tab.values[i][np.argmax(np.abs(tab.values[i]))]:.0f} is not a 32-bit counter "
+                             "(signed or unsigned)", path, int(tab.lines[i]))
         meta = self._yaml("wheel0", required=True)
         ypath = self.path / "wheel0" / "sensor.yaml"
         keys = ("ticks_per_revolution", "wheel_radius_left", "wheel_radius_right", "wheel_base")
@@ -317,6 +327,7 @@ class Recording:
 
 
 # ---------------------------------------------------------------------- ground truth
+
 def unit_quaternions(q: np.ndarray, lines: np.ndarray, path: Path, what: str) -> np.ndarray:
     """``q`` (rows w, x, y, z) normalised; a row whose norm is more than 0.05 from 1 is an error naming its line."""
     norms = np.linalg.norm(q, axis=1)
@@ -411,14 +422,15 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
     write_atomic(path, buf.getvalue())
 
 
-def _optional_sigma(meta: dict, key: str, path: Path) -> float | None:
-    """An optional positive standard deviation of a ``sensor.yaml``; a bad value is an InputError naming the key."""
+def _optional_sigma(meta: dict, key: str, path: Path, zero: bool = False) -> float | None:
+    """An optional positive number of a ``sensor.yaml`` (a standard deviation, a noise density, a rate; with
+    ``zero`` also 0, e.g. a random walk that is not there); a bad value is an InputError naming the key."""
     if meta.get(key) is None:
         return None
     try:
         value = float(meta[key])
     except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be a number", path) from None
-    if not np.isfinite(value) or value <= 0:
-        raise InputError(f"'{key}' must be positive", path)
+        raise InputError(f"'{key}' must be a number, not {meta[key]!r}", path) from None
+    if not np.isfinite(value) or value < 0 or (value == 0 and not zero):
+        raise InputError(f"'{key}' must be {'non-negative' if zero else 'positive'}, not {value}", path)
     return value

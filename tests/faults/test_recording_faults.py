@@ -193,12 +193,34 @@ def bad_bit_depth(rec):
     return "cam0/sensor.yaml", None
 
 
+def wheel_tick_beyond_2_53(rec):
+    p = rec / "wheel0" / "data.csv"
+    return "wheel0/data.csv", _set_row(p, 6, _field(p, 6, 0) + ",99999999999999999999999,12")
+
+
+def imu_yaml_noise_not_a_number(rec):
+    p = rec / "imu0" / "sensor.yaml"
+    text = p.read_text()
+    assert "gyroscope_noise_density:" in text
+    p.write_text("\n".join("gyroscope_noise_density: low" if ln.startswith("gyroscope_noise_density:") else ln
+                           for ln in text.splitlines()) + "\n")
+    return "imu0/sensor.yaml: 'gyroscope_noise_density' must be a number", None
+
+
+def imu_yaml_noise_nan(rec):
+    p = rec / "imu0" / "sensor.yaml"
+    p.write_text("\n".join("gyroscope_random_walk: .nan" if ln.startswith("gyroscope_random_walk:") else ln
+                           for ln in p.read_text().splitlines()) + "\n")
+    return "imu0/sensor.yaml: 'gyroscope_random_walk' must be non-negative", None
+
+
 FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time, decreasing_wheel_time,
           negative_timestamp, absolute_frame_path, frame_path_leaving_the_recording, timestamp_near_2_63,
           ground_truth_with_one_row, ground_truth_repeated_time, ground_truth_bad_quaternion,
           imu_on_another_clock, ground_truth_on_another_clock, missing_frame_list, imu_symlink_loop,
           wheel_broken_link, frame_list_is_a_folder, binary_imu_file, empty_frame_list, one_frame, no_frame_folder,
-          camera_yaml_missing_key, camera_yaml_not_yaml, wheel_yaml_negative_radius, bad_bit_depth]
+          camera_yaml_missing_key, camera_yaml_not_yaml, wheel_yaml_negative_radius, bad_bit_depth,
+          wheel_tick_beyond_2_53, imu_yaml_noise_not_a_number, imu_yaml_noise_nan]
 
 
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.__name__ for f in FAULTS])

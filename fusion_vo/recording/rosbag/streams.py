@@ -46,7 +46,7 @@ def _measure(summary: StreamSummary, t: np.ndarray) -> None:
         summary.t_first_ns, summary.t_last_ns = int(t[0]), int(t[-1])
     if len(t) > 1:
         dt = np.median(np.diff(t)) * 1e-9
-        summary.rate_hz = round(float(1.0 / dt), 3) if dt > 0 else None
+        summary.rate_hz = (round(float(1.0 / dt), 3) or None) if dt > 0 else None
 
 
 def finite(values: Sequence[float]) -> bool:
