@@ -23,6 +23,8 @@ def whole_number(minimum: int, reason: str = "") -> Callable[[str], int]:
     return parse
 
 
+#: a random seed (numpy's generators take whole numbers of at least 0)
+random_seed = whole_number(0, "a random seed")
 #: a whole number of at least 1 (threads, repeats)
 positive_int = whole_number(1)
 #: a number of frames: at least one frame pair

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import RunConfig
+from fusion_vo.cli.arguments import random_seed
 
 DEMO_PROFILE = "square"
 
@@ -20,7 +21,7 @@ def register(sub) -> None:
                                    "and write a trajectory plot and an HTML report.")
     p.add_argument("--out", "-o", default="fusion-vo-demo", help="output folder (default: ./fusion-vo-demo)")
     p.add_argument("--frontend", choices=["klt", "features", "direct"], default="klt")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=random_seed, default=0)
     p.set_defaults(func=run)
 
 

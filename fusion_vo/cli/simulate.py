@@ -6,6 +6,7 @@ import argparse
 import importlib
 
 from fusion_vo.errors import InputError
+from fusion_vo.cli.arguments import random_seed
 
 
 class _LazyNames:
@@ -41,7 +42,7 @@ def register(sub) -> None:
                    metavar="PROFILE", help="driving profile, one of %(choices)s (default: %(default)s)")
     p.add_argument("--standard", choices=_LazyNames("fusion_vo.simulation.standard", "STANDARD"), metavar="NAME",
                    help="one of the standard recordings, %(choices)s (fixes profile, options, seed)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=random_seed, default=0)
     p.add_argument("--duration", type=float, help="duration [s] (random, standstill)")
     p.add_argument("--texture", choices=["gravel", "grass", "brick"])
     p.add_argument("--config", help="YAML file of options")

@@ -6,6 +6,8 @@ import pytest
 
 from fault_tools import assert_error, cli, snapshot
 
+from fusion_vo.cli.main import main
+
 TINY = ("--profile", "straight", "-O", "length=0.01", "-O", "width=32", "-O", "height=24", "-O", "fu=40",
         "-O", "fv=40", "-O", "cu=15.5", "-O", "cv=11.5", "-O", "supersample=1")
 
@@ -57,3 +59,14 @@ def test_import_bag_refuses_a_folder_it_did_not_write(tmp_path, capsys):
     status, _, err = cli(capsys, "import-bag", tmp_path / "missing.bag", out)
     assert_error(status, err, "thesis", "not empty")
     assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", ["simulate", "demo"])
+def test_a_negative_seed_is_a_usage_error_naming_the_option(command, tmp_path, capsys):
+    argv = [command, str(tmp_path / "rec"), "--seed", "-1"] if command == "simulate" else [command, "--seed", "-1"]
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--seed" in err and "Traceback" not in err
+    assert not (tmp_path / "rec").exists()
