@@ -223,7 +223,8 @@ class GpsData:
     horizontal_sigma : float
         Default standard deviation [m] used for fixes without a covariance.
     skipped : dict
-        Reason -> number of fixes skipped (``no fix``, ``NaN``, ``zero covariance``).
+        Reason -> number of fixes skipped (``no fix``, ``NaN``, ``zero covariance``: any covariance that is not
+        positive definite).
     notes : list of str
         What was assumed or skipped, for the run's notes.
     """
