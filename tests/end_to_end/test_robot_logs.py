@@ -101,6 +101,18 @@ def test_husky_against_gps(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     episodes = summary["fusion"]["inconsistent"]
     assert [e["component"] for e in episodes] == ["AHRS heading"], episodes
+    assert not [n for n in summary["notes"] if "T_BS" in n]  # mounted as the launch file says
     # the AHRS departs from the gyro and the GPS course from about 190 s on; its first three minutes are kept
     t0 = float(t_gps[0])
     assert 150.0 < episodes[0]["start"] - t0 < 195.0 and episodes[0]["end"] - t0 > 390.0, episodes
+
+
+def test_husky_imu_imported_without_its_mounting_is_named(tmp_path):
+    """Without the launch file's static transform the IMU's T_BS is the identity: the gyro's z axis is not the
+    body's, the check drops its yaw rate for the whole log, and the run says which axis turns with the wheels."""
+    seq, out = tmp_path / "SEQ", tmp_path / "OUT"
+    assert main(["import-bag", str(DATA / "test1.bag"), str(seq)]) == 0
+    assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "ekf"]) == 0
+    notes = json.loads((out / "summary.json").read_text())["notes"]
+    hints = [n for n in notes if "T_BS" in n]
+    assert len(hints) == 1 and "gyro's +y axis follows the yaw rate of the wheels" in hints[0], notes
