@@ -36,12 +36,13 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import cv2
 import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap, similarity_params
-from frontends.config import ConfigMixin
+from frontends.config import AT_LEAST_0, AT_LEAST_1, FRACTION, POSITIVE, ConfigMixin, Range, check_ranges
 from frontends.frame_check import check_frame
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
 
@@ -125,16 +126,19 @@ class DirectConfig(ConfigMixin):
     central_region: float | None = None
     grid_limit: bool = False
 
+    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
+    RANGES: ClassVar[dict[str, Range]] = {
+        "min_level_size": Range(8), "finest_level": AT_LEAST_0, "iterations": AT_LEAST_1,
+        "finest_iterations": AT_LEAST_1, "epsilon": AT_LEAST_0, "huber": POSITIVE, "smoothing": AT_LEAST_0,
+        "min_correlation": Range(-1, 1), "min_correlation_fallback": Range(-1, 1),  # ZNCC
+        "min_overlap": Range(0, 1, open_low=True), "max_abs_log_scale": POSITIVE, "min_texture": AT_LEAST_0,
+        "min_texture_ratio": FRACTION, "max_prediction_gap": AT_LEAST_0, "max_failures": AT_LEAST_1,
+        "min_sigma": AT_LEAST_0, "max_pixels": Range(4),  # a similarity has four parameters
+        "max_clipped": FRACTION, "central_region": Range(0.1, 1),
+    }
+
     def __post_init__(self) -> None:
-        if self.min_level_size < 8:
-            raise ValueError("min_level_size must be at least 8")
-        if self.finest_level < 0 or self.iterations < 1 or (self.finest_iterations is not None
-                                                             and self.finest_iterations < 1):
-            raise ValueError("finest_level must be >= 0 and iterations and finest_iterations >= 1")
-        if not 0.0 < self.min_overlap <= 1.0:
-            raise ValueError("min_overlap must lie in (0, 1]")
-        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
-            raise ValueError("central_region must lie in [0.1, 1]")
+        check_ranges(self, self.RANGES)
 
     @property
     def region(self) -> float:

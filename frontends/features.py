@@ -27,12 +27,14 @@ import dataclasses
 import threading
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import cv2
 import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
-from frontends.config import ConfigMixin
+from frontends.config import (AT_LEAST_0, AT_LEAST_1, FRACTION, POSITIVE, ConfigMixin, Range, check_ranges,
+                              shared_ranges)
 from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
 from frontends.direct import DenseFallback, DirectConfig
 from frontends.corners import scale_detector
@@ -181,7 +183,21 @@ class FeatureConfig(ConfigMixin):
     central_region: float | None = None
     adaptive_detector: bool = True
 
+    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
+    RANGES: ClassVar[dict[str, Range]] = shared_ranges(RobustOptions.RANGES, "threshold", "confidence",
+                                                       "max_iterations", "min_sigma", "min_inliers",
+                                                       "max_abs_log_scale", "min_spread") | {
+        "max_corners": AT_LEAST_1, "min_quality": FRACTION, "min_metric": AT_LEAST_0, "detect_level": AT_LEAST_0,
+        "harris_k": AT_LEAST_0, "block_size": AT_LEAST_1, "fast_threshold": AT_LEAST_0, "patch_radius": AT_LEAST_1,
+        "max_distance": POSITIVE, "ratio": Range(0, 1, open_low=True), "gate_radius": AT_LEAST_0,
+        "window": Range(3), "fb_threshold": POSITIVE, "refine_threshold": POSITIVE, "seed": AT_LEAST_0,
+        "min_inlier_ratio": FRACTION, "min_texture": AT_LEAST_0, "min_texture_ratio": FRACTION,
+        "max_prediction_gap": AT_LEAST_0, "max_failures": AT_LEAST_1, "verify_below": AT_LEAST_0,
+        "verify_tolerance": AT_LEAST_0, "central_region": Range(0.1, 1),
+    }
+
     def __post_init__(self) -> None:
+        check_ranges(self, self.RANGES)
         self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
         if any(v < 1 or v % 2 == 0 for v in self.neighbourhood):
             raise ValueError("neighbourhood must be two positive odd integers")
@@ -195,8 +211,6 @@ class FeatureConfig(ConfigMixin):
             raise ValueError(f"refine must be 'lk', 'subpix' or 'none', not {self.refine!r}")
         if self.max_corners < self.min_inliers:
             raise ValueError("max_corners must be at least min_inliers")
-        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
-            raise ValueError("central_region must lie in [0.1, 1]")
         self.robust_options(self.threshold)  # validates method, threshold, confidence
 
     @property

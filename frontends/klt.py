@@ -33,12 +33,14 @@ from __future__ import annotations
 
 from concurrent.futures import Executor, Future
 from dataclasses import dataclass
+from typing import ClassVar
 
 import cv2
 import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
-from frontends.config import ConfigMixin
+from frontends.config import (AT_LEAST_0, AT_LEAST_1, FRACTION, POSITIVE, ConfigMixin, Range, check_ranges,
+                              shared_ranges)
 from frontends.corners import CornerPlan, grid_shape, plan_corners, spread_corners
 from frontends.direct import DenseFallback, DirectConfig
 from frontends.frame_check import check_frame, texture_measure
@@ -213,19 +215,28 @@ class KltConfig(ConfigMixin):
     grid_cell: float = 0.0
     central_region: float | None = None
 
+    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
+    RANGES: ClassVar[dict[str, Range]] = shared_ranges(RobustOptions.RANGES, "threshold", "confidence",
+                                                       "max_iterations", "min_sigma", "min_inliers",
+                                                       "max_abs_log_scale", "min_spread") | {
+        "max_tracks": AT_LEAST_1, "replenish_below": AT_LEAST_0, "quality_level": Range(0, 1, open_low=True),
+        "min_distance": AT_LEAST_0, "block_size": AT_LEAST_1, "pyramid_levels": AT_LEAST_0,
+        "retry_pyramid_levels": AT_LEAST_0, "lk_iterations": AT_LEAST_1, "lk_epsilon": AT_LEAST_0,
+        "min_eigen": AT_LEAST_0, "fb_threshold": POSITIVE, "fb_skip_ratio": Range(0, 1, open_low=True),
+        "warp_tolerance": AT_LEAST_0, "refine_tolerance": AT_LEAST_0, "exposure_tolerance": AT_LEAST_0,
+        "border": AT_LEAST_0, "seed": AT_LEAST_0, "min_inlier_ratio": FRACTION, "min_texture": AT_LEAST_0,
+        "min_texture_ratio": FRACTION, "max_prediction_gap": AT_LEAST_0, "max_failures": AT_LEAST_1,
+        "global_downsample": AT_LEAST_1, "min_global_response": AT_LEAST_0, "verify_below": AT_LEAST_0,
+        "verify_tolerance": AT_LEAST_0, "min_quality_level": Range(0, 1, open_low=True), "grid_cell": AT_LEAST_0,
+        "central_region": Range(0.1, 1),
+    }
+
     def __post_init__(self) -> None:
         if self.window < 5 or self.window % 2 == 0:
-            raise ValueError("window must be an odd number of at least 5")
+            raise ValueError(f"window must be an odd number of at least 5, not {self.window}")
+        check_ranges(self, self.RANGES)
         if self.max_tracks < self.min_inliers or self.replenish_below > self.max_tracks:
             raise ValueError("need min_inliers <= replenish_below <= max_tracks")
-        if self.pyramid_levels < 0 or self.retry_pyramid_levels < 0:
-            raise ValueError("pyramid levels must be non-negative")
-        if self.fb_skip_ratio is not None and not 0.0 < self.fb_skip_ratio <= 1.0:
-            raise ValueError("fb_skip_ratio must lie in (0, 1] or be None")
-        if not 0.0 <= self.min_inlier_ratio <= 1.0:
-            raise ValueError("min_inlier_ratio must lie in [0, 1]")
-        if self.central_region is not None and not 0.1 <= self.central_region <= 1.0:
-            raise ValueError("central_region must lie in [0.1, 1]")
         if self.min_quality_level is not None and not 0.0 < self.min_quality_level <= self.quality_level:
             raise ValueError("need 0 < min_quality_level <= quality_level")
         self.robust_options()  # validates method, threshold, confidence

@@ -37,10 +37,12 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from frontends.base import MotionStatus
+from frontends.config import AT_LEAST_0, AT_LEAST_1, AT_LEAST_2, POSITIVE, PROBABILITY, Range, check_ranges
 
 logger = logging.getLogger(__name__)
 
@@ -88,15 +90,20 @@ class RobustOptions:
     min_inliers: int = 6
     min_spread: float = 10.0
 
+    #: the range of every number field (:func:`frontends.config.check_ranges`); the frontends' configurations
+    #: take the ranges of the fields they share from here
+    RANGES: ClassVar[dict[str, Range]] = {
+        "threshold": POSITIVE, "confidence": PROBABILITY, "max_iterations": AT_LEAST_1,
+        "min_sample_distance": AT_LEAST_0, "max_abs_log_scale": POSITIVE, "refine_iterations": AT_LEAST_0,
+        "min_sigma": AT_LEAST_0,  # 0: the residuals' own spread, however small
+        "min_inliers": AT_LEAST_2,  # a similarity needs two points
+        "min_spread": AT_LEAST_0,
+    }
+
     def __post_init__(self) -> None:
         if self.method not in ("ransac", "lmeds"):
             raise ValueError(f"robust method must be 'ransac' or 'lmeds', not {self.method!r}")
-        if not self.threshold > 0:
-            raise ValueError("threshold must be positive")
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError("confidence must lie in (0, 1)")
-        if self.max_iterations < 1:
-            raise ValueError("max_iterations must be at least 1")
+        check_ranges(self, self.RANGES)
 
 
 @dataclass

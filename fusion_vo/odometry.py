@@ -41,7 +41,7 @@ from collections import Counter, deque
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Iterator, TypeVar
+from typing import Callable, ClassVar, Iterable, Iterator, TypeVar
 
 import cv2
 import numpy as np
@@ -49,6 +49,7 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
+from frontends.config import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
@@ -135,11 +136,15 @@ class OdometryConfig:
     threads: int | None = None
     handoff: bool = False
 
+    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
+    RANGES: ClassVar[dict[str, Range]] = {
+        "height": POSITIVE, "min_sigma_xy": AT_LEAST_0, "min_sigma_yaw": AT_LEAST_0,  # 0: no floor
+        "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0, "threads": AT_LEAST_1,
+    }
+
     def __post_init__(self) -> None:
-        if isinstance(self.max_bridge, bool) or not self.max_bridge >= 0:
-            raise ValueError(f"max_bridge must be a number of seconds of at least 0, not {self.max_bridge!r}")
-        if self.threads is not None and (isinstance(self.threads, bool) or not isinstance(self.threads, int)
-                                         or self.threads < 1):
+        check_ranges(self, self.RANGES)
+        if self.threads is not None and not isinstance(self.threads, int):
             raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
 
     def thread_count(self) -> int:

@@ -146,6 +146,7 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     except (NameError, TypeError):  # an annotation that cannot be resolved: such fields accept any value
         hints = {f.name: f.type for f in dataclasses.fields(cls) if not isinstance(f.type, str)}
     docs = field_docs(cls)
+    ranges = getattr(cls, "RANGES", {})  # frontends.config.Range of number fields
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(cls):
         if f.name in exclude or not f.init:
@@ -159,7 +160,10 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
         else:
             raise TypeError(f"{cls.__name__}.{f.name} has no default")
         description = docs.get(f.name)
-        extra = {"unit": _unit(description)} if _unit(description) else None
+        extra = {"unit": _unit(description)} if _unit(description) else {}
+        if f.name in ranges:  # the dataclass's table of ranges (checked by its __post_init__), for editors
+            extra.update(ranges[f.name].json_schema())
+        extra = extra or None
         if dataclasses.is_dataclass(default):
             nested = model_of(type(default), defaults=default)
             fields[f.name] = (nested, Field(default_factory=nested, description=description))

@@ -12,6 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+from frontends.config import AT_LEAST_1, FRACTION, Range
 from fusion_vo.errors import InputError
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
@@ -262,18 +263,22 @@ class FusionConfig:
             raise InputError(f"'visual_frame_error' must be below 1, not {self.visual_frame_error}")
         if self.graph.calibration_interval <= 0:
             raise InputError("graph.calibration_interval must be positive")
-        if self.graph.keyframe_every < 1:
-            raise InputError("graph.keyframe_every must be at least 1")
         if not self.monitor_window > 0 or not 0.0 < self.monitor_probability < 1.0 or not self.monitor_bias_sigma > 0:
             raise InputError("monitor_window and monitor_bias_sigma must be positive, monitor_probability in (0, 1)")
         for key, value in _numbers(self):
             if not math.isfinite(value):
                 raise InputError(f"'{key}' must be a finite number, not {value}")
             leaf = key.rsplit(".", 1)[-1]
+            problem = _RANGES[leaf].error(f"'{key}'", value) if leaf in _RANGES else None
+            if problem:
+                raise InputError(problem)
             if ("sigma" in leaf or leaf in _POSITIVE) and value <= 0:
                 raise InputError(f"'{key}' must be positive, not {value}")
             if value < 0:
                 raise InputError(f"'{key}' must not be negative, not {value}")
+        if not self.range.min_range < self.range.max_range:
+            raise InputError(f"'range.min_range' must be below 'range.max_range' ({self.range.max_range}), "
+                             f"not {self.range.min_range}")
         if len(tuple(self.initial_pose)) != 3:
             raise InputError("initial_pose needs three numbers (x, y, yaw)")
         for name, prior in self.states.items():
@@ -363,8 +368,14 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
              "scale_tolerance", "frame_error_tolerance"}
 
 
+#: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
+#: (:class:`frontends.config.Range`; every other number must not be negative)
+_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
+
+
 def _numbers(obj, prefix: str = ""):
-    """``(dotted key, value)`` of every float field of a (nested) config dataclass, except the pose."""
+    """``(dotted key, value)`` of every number field (float or int) of a (nested) config dataclass, except the
+    pose."""
     for f in dataclasses.fields(obj):
         value = getattr(obj, f.name)
         if dataclasses.is_dataclass(value):
@@ -373,5 +384,6 @@ def _numbers(obj, prefix: str = ""):
             for name, section in value.items():
                 if dataclasses.is_dataclass(section):
                     yield from _numbers(section, f"{prefix}{name}.")
-        elif isinstance(value, float) and f.name not in ("initial_pose", "camera_height"):
+        elif isinstance(value, (float, int)) and not isinstance(value, bool) \
+                and f.name not in ("initial_pose", "camera_height"):
             yield f"{prefix}{f.name}", value

@@ -2,14 +2,23 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from fault_tools import assert_error, cli
+from frontends.direct import DirectConfig
+from frontends.features import FeatureConfig
+from frontends.klt import KltConfig
+from frontends.similarity import RobustOptions
+from fusion_vo.config import validate_config
+from fusion_vo.errors import InputError
+from fusion_vo.odometry import OdometryConfig
 
 BAD = {
-    "negative_height": ("odometry: {height: -0.1}", "odometry.height"),
+    "negative_height": ("odometry: {height: -0.1}", "odometry: height must be positive, not -0.1"),
     "text_height": ("odometry: {height: abc}", "odometry.height: expected a number"),
-    "nan_height": ("odometry: {height: .nan}", "odometry.height"),
+    "nan_height": ("odometry: {height: .nan}", "odometry: height must be a finite number, not nan"),
     "text_window": ("klt: {window: thirteen}", "klt.window: expected"),
     "even_window": ("klt: {window: 4}", "klt"),
     "unknown_feature_key_of_the_frontend_not_used": ("features: {bogus: 1}", "features"),
@@ -20,6 +29,9 @@ BAD = {
     "section": ("odometri: {}", "odometri"),
     "not_a_mapping": ("- a\n- list", "mapping"),
     "invalid_yaml": ("klt: {window: [5\n", "not valid YAML"),
+    "zero_lk_iterations": ("klt: {lk_iterations: 0}", "klt: lk_iterations must be at least 1, not 0"),
+    "negative_reweight_passes": ("fusion: {graph: {reweight_passes: -1}}",
+                                 "fusion: 'graph.reweight_passes' must not be negative, not -1"),
 }
 
 
@@ -46,3 +58,66 @@ def test_a_sensor_the_recording_lacks_names_the_folder(recording, tmp_path, caps
     status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--sensors", "camera,imu")
     assert_error(status, err, "imu0/", "sensors to use include 'imu'")
     assert "was asked for" not in err
+
+
+#: values that cannot work, once accepted (some silently giving a wrong answer): (YAML, the start of the message)
+OUT_OF_RANGE = [
+    ("klt: {lk_iterations: 0}", "klt: lk_iterations must be at least 1, not 0"),
+    ("klt: {min_sigma: -1}", "klt: min_sigma must be at least 0, not -1"),
+    ("direct: {min_sigma: -1}", "direct: min_sigma must be at least 0, not -1"),
+    ("features: {min_sigma: -1}", "features: min_sigma must be at least 0, not -1"),
+    ("klt: {fb_threshold: -1}", "klt: fb_threshold must be positive, not -1"),
+    ("klt: {min_inliers: 0}", "klt: min_inliers must be at least 2, not 0"),
+    ("klt: {global_downsample: 0}", "klt: global_downsample must be at least 1, not 0"),
+    ("klt: {min_texture: .inf}", "klt: min_texture must be a finite number, not inf"),
+    ("features: {ratio: .nan}", "features: ratio must be a finite number, not nan"),
+    ("odometry: {min_sigma_xy: -1}", "odometry: min_sigma_xy must be at least 0, not -1"),
+    ("odometry: {max_bad_start_frames: -3}", "odometry: max_bad_start_frames must be at least 1, not -3"),
+    ("fusion: {graph: {reweight_passes: -1}}", "fusion: 'graph.reweight_passes' must not be negative, not -1"),
+    ("fusion: {graph: {max_iterations: 0}}", "fusion: 'graph.max_iterations' must be at least 1, not 0"),
+    ("fusion: {graph: {keyframe_every: 0}}", "fusion: 'graph.keyframe_every' must be at least 1, not 0"),
+    ("fusion: {imu: {spike_window: -1}}", "fusion: 'imu.spike_window' must not be negative, not -1"),
+    ("fusion: {monitor_whole_fraction: 1.5}", "fusion: 'monitor_whole_fraction' must be in [0, 1], not 1.5"),
+    ("fusion: {range: {min_range: 3}}", "fusion: 'range.min_range' must be below 'range.max_range'"),
+]
+
+_SECTIONS = {"klt": KltConfig, "features": FeatureConfig, "direct": DirectConfig, "odometry": OdometryConfig}
+
+
+def _outside(cls, name):
+    """Values of the field ``name`` of ``cls`` just outside each end of its range (``cls.RANGES``)."""
+    bound = cls.RANGES[name]
+    kind = float if "float" in next(f.type for f in dataclasses.fields(cls) if f.name == name) else int
+    if bound.low is not None:
+        yield kind(bound.low if bound.open_low else bound.low - 1)
+    if bound.high is not None:
+        yield kind(bound.high if bound.open_high else bound.high + 1)
+
+
+#: besides, every field with a range in its dataclass's table, just outside it
+EVERY_RANGE = [(section, name, value) for section, cls in _SECTIONS.items() for name in cls.RANGES
+               for value in _outside(cls, name)]
+
+
+@pytest.mark.parametrize("text, message", OUT_OF_RANGE + [
+    (f"{section}: {{{name}: {value!r}}}", f"{section}: {name} must be ") for section, name, value in EVERY_RANGE],
+    ids=[t for t, _ in OUT_OF_RANGE] + [f"{s}.{n}={v!r}" for s, n, v in EVERY_RANGE])
+def test_a_value_that_cannot_work_is_one_line_naming_the_key(text, message, tmp_path):
+    import yaml
+
+    path = tmp_path / "run.yaml"
+    with pytest.raises(InputError) as err:
+        validate_config(yaml.safe_load(text), path)
+    assert str(err.value).startswith(f"{path}: {message}")
+    assert "\n" not in str(err.value)
+    section, values = next(iter(yaml.safe_load(text).items()))
+    if section in _SECTIONS:  # library users get the same error from the dataclass
+        with pytest.raises(ValueError, match=message.split(": ", 1)[1].split(" must ")[0] + " must "):
+            _SECTIONS[section](**values)
+
+
+def test_every_default_is_in_range_and_every_range_names_a_field():
+    for cls in (*_SECTIONS.values(), RobustOptions):
+        cls()
+        assert set(cls.RANGES) <= {f.name for f in dataclasses.fields(cls)}, cls
+    validate_config({})
