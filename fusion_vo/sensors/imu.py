@@ -169,7 +169,7 @@ def mounting_hint(data: ImuData, t, rate, against: str) -> str | None:
     if np.count_nonzero(ok) < 20 or np.count_nonzero(finite) < 2 or not np.std(rate[ok]) > 0:
         return None
     axes = np.stack([np.interp(t[ok], data.t[finite], gyro[finite, i]) for i in range(3)], axis=1)
-    body = axes @ np.asarray(data.T_BS, dtype=np.float64)[2, :3]
+    body = np.interp(t[ok], data.t[finite], body_yaw_rate(data)[finite])
 
     def corr(x: np.ndarray) -> float:
         return float(np.corrcoef(x, rate[ok])[0, 1]) if np.std(x) > 0 else 0.0
