@@ -15,13 +15,14 @@ drift after GPS is withheld on a real recording.
    odometry (twist) and IMU with the GPS of the first half only; the second half is scored against its
    withheld fixes (plain RMS in ENU of the antenna), with the receiver's claimed sigma and with the
    fixes' scatter (2 m, ``fusion.gps.min_sigma``) as its floor, and with the scatter the world-frame
-   alignment measures (``fusion.gps.estimate_sigma``; 1.51 m per axis). Beside it: wheel dead reckoning and the
+   alignment measures (``fusion.gps.estimate_sigma``; 1.51 m per axis); ``--husky-split`` fuses another
+   fraction than the first half. Beside it: wheel dead reckoning and the
    backends without GPS, placed in ENU by aligning them to the first half's fixes (the same
    information the fused run gets), scored the same way.
 
 Usage::
 
-    python benchmarks/gps_fusion.py [--out DIR] [--skip-husky] [--estimate-sigma]
+    python benchmarks/gps_fusion.py [--out DIR] [--skip-husky] [--estimate-sigma] [--husky-split FRACTION]
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ def gps_outage(out: Path, options: dict | None = None) -> dict:
     return rows
 
 
-def husky(out: Path) -> dict:
+def husky(out: Path, split: float = 0.5) -> dict:
     from fusion_vo.cli.main import main as cli
 
     seq = out / "husky"
@@ -145,7 +146,7 @@ def husky(out: Path) -> dict:
         assert cli(["-q", "import-bag", str(BAG), str(seq), "--static-tf", HUSKY_IMU_TF]) == 0
     rec = Recording(seq)
     gps = rec.gps()
-    t_mid = 0.5 * (float(gps.t[0]) + float(gps.t[-1]))
+    t_mid = float(gps.t[0]) + split * (float(gps.t[-1]) - float(gps.t[0]))
     first = gps_subset(gps, gps.t <= t_mid)
     second = gps_subset(gps, gps.t > t_mid)
     rows = {}
@@ -201,6 +202,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=None, help="working folder (default: a temporary one)")
     ap.add_argument("--skip-husky", action="store_true")
+    ap.add_argument("--husky-split", type=float, default=0.5,
+                    help="fraction of the Husky recording whose fixes are fused (default 0.5: the first half)")
     ap.add_argument("--estimate-sigma", action="store_true",
                     help="gps_outage with fusion.gps.estimate_sigma on (the Husky part always shows both)")
     args = ap.parse_args()
@@ -209,7 +212,7 @@ def main() -> None:
         out.mkdir(parents=True, exist_ok=True)
         gps_outage(out, {"gps": {"estimate_sigma": True}} if args.estimate_sigma else None)
         if not args.skip_husky:
-            husky(out)
+            husky(out, args.husky_split)
 
 
 if __name__ == "__main__":
