@@ -195,7 +195,7 @@ class FusionConfig:
         :func:`~fusion_vo.sensors.wheel.odom_twist_noise`).
     gps : GpsNoise
         Gate and robust kernel of GPS fixes (:class:`~fusion_vo.sensors.gps.GpsNoise`: ``gate_chi2``,
-        ``kernel``, ``kernel_width``, ``min_sigma``); the fixes carry their own covariance.
+        ``kernel``, ``kernel_width``, ``min_sigma``, ``estimate_sigma``); the fixes carry their own covariance.
     gps_reacquire : float
         After every fix of this many seconds [s] has failed the gate, the estimate rather than the fixes
         is taken to be wrong (a drift during an outage, a bad start): the next fix is applied anyway, the

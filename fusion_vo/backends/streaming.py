@@ -27,6 +27,8 @@ GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the p
 (``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
 (plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
 and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+The fixes keep their stated sigma (floored by ``fusion.gps.min_sigma``): ``fusion.gps.estimate_sigma``,
+the scatter measured by a batch run's world-frame alignment, is not applied here.
 The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
 kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
 as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).

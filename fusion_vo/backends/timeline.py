@@ -182,6 +182,10 @@ class Intervals:
         Start pose and its standard deviations ``(x, y, yaw)`` when the world frame was aligned to the
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
         ``initial_pose``, taken as exact.
+    gps_min_sigma : float or None
+        The fixes' sigma floor [m] measured by the world-frame alignment when they scatter significantly
+        more than the receiver states (``fusion.gps.estimate_sigma``, :func:`~fusion_vo.sensors.gps.scatter_floor`);
+        None: ``fusion.gps.min_sigma``.
     extra : dict
         Sensor name -> its measurements on the grid, for sensors registered outside the library
         (:mod:`fusion_vo.sensors.registry`; the built-in ones have the fields above).
@@ -227,6 +231,7 @@ class Intervals:
     gps: GpsData | None = None
     initial_pose: np.ndarray | None = None
     initial_sigma: np.ndarray | None = None
+    gps_min_sigma: float | None = None
     extra: dict = field(default_factory=dict)
     states: tuple = ()
     visual_frame_error: float = 0.0

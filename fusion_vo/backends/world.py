@@ -11,7 +11,11 @@ the datum of ``gps0/sensor.yaml``, and nothing tells the backends which way the 
    (from the fixes' noise) is below :data:`TARGET_YAW_SIGMA`, or the whole recording is used;
 3. the AHRS headings, aligned to the configured initial heading, are turned by the same rotation;
 4. both backends then start at the aligned first pose, with a prior of three times the fit's
-   standard deviations (heading at least :data:`MIN_YAW_SIGMA`), and the fixes themselves refine it.
+   standard deviations (heading at least :data:`MIN_YAW_SIGMA`), and the fixes themselves refine it;
+5. with ``fusion.gps.estimate_sigma``, the fit's residuals measure the fixes' actual scatter about the
+   GPS-free track (its own drift over the fitted span, from its covariance, taken out); when that is
+   significantly larger than the receiver's stated sigma (:func:`~fusion_vo.sensors.gps.scatter_floor`),
+   ``Intervals.gps_min_sigma`` raises the fixes' sigma floor to it for both backends, and a note says so.
 
 While the robot has not moved a few fix sigmas the heading is unobservable; the configured initial
 heading is then kept, the first pose is put under the first fix, and a note says so.
@@ -27,7 +31,7 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.timeline import Intervals
-from fusion_vo.sensors.gps import align_to_fixes, predict
+from fusion_vo.sensors.gps import align_to_fixes, fixes_in, predict, scatter_floor
 
 logger = logging.getLogger(__name__)
 
@@ -100,4 +104,35 @@ def align_world(iv: Intervals, config: FusionConfig) -> None:
                     f"{math.degrees(iv.initial_pose[2]):.2f} deg (east = 0, counter-clockwise) estimated from the "
                     f"fixes of the first {min(window, traj.t[-1] - t_first):.0f} s (± {math.degrees(fit.yaw_sigma):.2f} deg, "
                     f"fit residual {fit.rms:.3f} m, {fit.n_outliers} of {fit.n} fixes ignored as outliers)")
+    logger.info("%s", iv.notes[-1])
+    if config.gps.estimate_sigma:
+        floor_from_scatter(iv, config, fit, track, traj, t_first + window, fix_sigma)
+
+
+def track_drift_var(track, traj, gps, t_end: float) -> float:
+    """Mean per-axis variance [m²] the GPS-free track gained since the first fitted fix, over the fitted fixes
+    (from its own covariance; 0 when it has none)."""
+    name = "ekf_smoothed" if "ekf_smoothed" in track.trajectories else "ekf"
+    cov = track.covariances.get(name)
+    if cov is None or len(cov) != len(traj.t):
+        return 0.0
+    idx = fixes_in(gps, traj.t[0], min(t_end, traj.t[-1]))
+    if not len(idx):
+        return 0.0
+    var = np.interp(gps.t[idx], traj.t, 0.5 * (cov[:, 0, 0] + cov[:, 1, 1]))
+    return float(np.mean(np.maximum(var - var[0], 0.0)))
+
+
+def floor_from_scatter(iv: Intervals, config: FusionConfig, fit, track, traj, t_end: float, fix_sigma: float) -> None:
+    """Raise the fixes' sigma floor to their measured scatter when it is significantly above the stated sigma."""
+    est = scatter_floor(fit, fix_sigma, track_drift_var(track, traj, iv.gps, t_end))
+    if not est.significant or not est.sigma > max(config.gps.min_sigma, fix_sigma):
+        return
+    iv.gps_min_sigma = est.sigma
+    # the heading's sigma came from the stated sigma: scaled to the measured one (position sigma is the fit's rms)
+    iv.initial_sigma[2] = float(np.clip(iv.initial_sigma[2] * est.sigma / max(fix_sigma, 1e-12), MIN_YAW_SIGMA,
+                                        MAX_YAW_SIGMA))
+    iv.notes.append(f"gps: fixes scatter {est.sigma:.2f} m per axis about the GPS-free track ({est.n} fixes of the "
+                    f"alignment, its own drift {est.drift:.2f} m taken out), stated {est.stated:.2f} m: {est.sigma:.2f} m "
+                    "used (fusion.gps.min_sigma); set fusion.gps.estimate_sigma: false to keep the stated")
     logger.info("%s", iv.notes[-1])

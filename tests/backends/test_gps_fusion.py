@@ -231,3 +231,72 @@ def test_husky_cut_with_gps_from_the_command_line(tmp_path):
         assert c["used"] + c["gated"] + c["missing"] == n and c["used"] > n // 2
     assert any(note.startswith("gps: ") and "first heading" in note for note in summary["notes"])
     assert "gps" in yaml.safe_load((out / "run.yaml").read_text())["sensors"]
+
+
+# ---------------------------------------------------------------------- the fixes' scatter measured
+SCATTER_TRUE = 0.2  # [m] per axis: what the simulated receiver's fixes scatter
+SCATTER_OPTIONS = {"duration": 40.0, "gps": True, "gps_rate": 5.0, "gps_noise": SCATTER_TRUE,
+                   "gps_lever_arm": [-0.3, 0.2, 0.5], "gps_heading_deg": HEADING, "gps_origin": ORIGIN.tolist()}
+
+
+@pytest.fixture(scope="module")
+def scatter_rec(tmp_path_factory):
+    return Recording(simulate(tmp_path_factory.mktemp("gpsscatter") / "rec", profile="random", seed=5,
+                              **{**TINY, **SCATTER_OPTIONS}))
+
+
+def _stated(streams, sigma):
+    """The same fixes, each claiming ``sigma`` per axis."""
+    gps = streams.gps
+    cov = np.tile(np.eye(2) * sigma ** 2, (len(gps.t), 1, 1))
+    return dataclasses.replace(streams, gps=dataclasses.replace(gps, covariance=cov))
+
+
+def _aligned(streams, options):
+    from fusion_vo.backends.batch import as_config, build_intervals
+    from fusion_vo.backends.world import align_world
+
+    config = as_config(options)
+    iv = build_intervals(streams, config)
+    align_world(iv, config)
+    return iv
+
+
+def test_fixes_scattering_four_times_their_claim_are_fused_with_the_measured_sigma(scatter_rec):
+    """A receiver claiming a quarter of its true scatter: the alignment measures the scatter, both backends
+    fuse with it, and the gate, which with the claim throws most genuine fixes away (measured: EKF 158,
+    graph 125 of 201), rejects none."""
+    streams = _stated(streams_from_recording(scatter_rec, None, ["wheel", "imu", "gps"]), SCATTER_TRUE / 4)
+    iv = _aligned(streams, {"gps": {"estimate_sigma": True}})
+    # the estimate's standard error is about sigma / sqrt(2 m) for the m = 161 fixes of the alignment (32 s):
+    # 3 of them (measured 0.1996 m)
+    assert any("(161 fixes of the alignment" in n for n in iv.notes), iv.notes
+    assert iv.gps_min_sigma == pytest.approx(SCATTER_TRUE, rel=3.0 / math.sqrt(2 * 161)), iv.gps_min_sigma
+    measured = fuse(streams, "all", {"gps": {"estimate_sigma": True}})
+    claimed = fuse(streams, "all", {"gps": {"estimate_sigma": False}})
+    assert any("fixes scatter" in n and "fusion.gps.estimate_sigma: false" in n for n in measured.notes)
+    assert not any("fixes scatter" in n for n in claimed.notes)
+    for name in ("ekf", "gtsam"):
+        assert measured.counts[name]["gps"].gated == 0, (name, measured.counts[name]["gps"])
+        assert claimed.counts[name]["gps"].gated > 10, (name, claimed.counts[name]["gps"])
+
+
+def test_honest_fixes_keep_their_stated_sigma(scatter_rec):
+    """Fixes that scatter as they claim: no floor is raised and the estimate changes nothing."""
+    streams = streams_from_recording(scatter_rec, None, ["wheel", "imu", "gps"])
+    iv = _aligned(streams, {"gps": {"estimate_sigma": True}})
+    assert iv.gps_min_sigma is None
+    on = fuse(streams, "ekf", {"gps": {"estimate_sigma": True}})
+    off = fuse(streams, "ekf", {"gps": {"estimate_sigma": False}})
+    np.testing.assert_array_equal(on.trajectories["ekf"].xyyaw, off.trajectories["ekf"].xyyaw)
+    assert not any("fixes scatter" in n for n in on.notes)
+
+
+def test_scatter_floor_accounts_for_the_tracks_drift():
+    """The χ² test against stated sigma and drift: residuals explained by the track's own drift raise nothing."""
+    fit = gps_model.Alignment(0.0, np.zeros(2), rms=math.sqrt(2) * 0.5, n=101)
+    assert gps_model.scatter_floor(fit, 0.3).significant
+    assert gps_model.scatter_floor(fit, 0.3).sigma == pytest.approx(0.5 * math.sqrt(202 / 199))
+    drifting = gps_model.scatter_floor(fit, 0.3, drift_var=0.45 ** 2)
+    assert not drifting.significant and drifting.sigma < 0.3
+    assert not gps_model.scatter_floor(fit, 0.5).significant
