@@ -1,4 +1,5 @@
-"""Why the fused tracks of robot_localization's Husky log drift: the figures behind the README's "Real robots".
+"""Why the fused tracks of robot_localization's Husky log drift: the figures behind
+benchmarks/findings/robot_logs.md "Real robots".
 
 The recording is ``tests/data/robot_localization/test1.bag`` (BSD; 395 s, 359 m, odometry twist 10 Hz,
 IMU 30 Hz, GPS 2.5 Hz), imported as :mod:`examples.husky_gps` does. GPS is never fused here: it is the
@@ -525,7 +526,8 @@ def sensor_model_candidates(odom, imu, t_gps, enu, delay: float) -> None:
     print(f"    departure after the best constant bias: std {np.degrees(np.std(dev)):.1f} deg, correlation time "
           f"{tau:.1f} s; as white noise at the fusion's "
           f"{node:.2f} s nodes that is sigma {np.std(dev) * np.sqrt(2.0 * tau / node):.2f} rad "
-          f"(stated ahrs_yaw_sigma 0.02 rad; README: the fusion given 0.04 to 0.15 rad, the monitor left at 0.02, "
+          f"(stated ahrs_yaw_sigma 0.02 rad; benchmarks/findings/robot_logs.md: "
+          "the fusion given 0.04 to 0.15 rad, the monitor left at 0.02, "
           "gives RTS 2.51 to 2.56 m)")
     implied = []
     for lo, hi in ((0.0, 60.0), (60.0, 120.0), (120.0, 180.0)):

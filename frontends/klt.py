@@ -87,7 +87,7 @@ class KltConfig(ConfigMixin):
         forward tracks, and when at least this fraction of them are its inliers (and the fit is
         accepted) the check is skipped; otherwise the points are checked backward and the fit is made
         again on the survivors. ``None`` (the default): always check. Faster, less accurate on some
-        recordings (``README.md``, Speed).
+        recordings (``benchmarks/findings/speed.md``, "Speed").
     warp_tolerance : float
         When the guessed motion's linear part differs from the identity by more than this (largest
         element; 0.015 is about 0.86 deg or 1.5 % scale), the reference is warped by it before
