@@ -41,6 +41,32 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+def version_text() -> str:
+    """``fusion-vo VERSION`` and the versions of the libraries its results depend on (read from the
+    installed distributions' metadata, nothing imported), for bug reports."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    from fusion_vo import __version__
+
+    def installed(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return "not installed"
+
+    libraries = ", ".join(f"{name} {installed(name)}" for name in
+                          ("numpy", "scipy", "opencv-python-headless", "gtsam", "filterpy", "evo"))
+    return f"fusion-vo {__version__} (Python {sys.version.split()[0]}; {libraries})"
+
+
+class _Version(argparse.Action):
+    """``--version``: the text of :func:`version_text` on one line (argparse's own action wraps it)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(version_text())
+        parser.exit(0)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="fusion-vo",
@@ -48,6 +74,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv for debug output)")
     parser.add_argument("-q", "--quiet", action="store_true", help="only errors")
+    parser.add_argument("--version", action=_Version, nargs=0,
+                        help="print the version of fusion-vo and of the libraries it uses, and exit")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
         try:
