@@ -29,3 +29,10 @@ random_seed = whole_number(0, "a random seed")
 positive_int = whole_number(1)
 #: a number of frames: at least one frame pair
 frame_count = whole_number(2, "one frame pair")
+
+
+def frame_id(text: str) -> str:
+    """An ``argparse`` type: a ROS frame name (not empty, no spaces)."""
+    if not text.strip() or any(c.isspace() for c in text):
+        raise argparse.ArgumentTypeError(f"expected a frame name such as 'odom' (no spaces), not {text!r}")
+    return text

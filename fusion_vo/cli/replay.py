@@ -80,16 +80,14 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.backends.result import write_pose_covariances
     from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
     from fusion_vo.cli.progress import progress_bar
+    from fusion_vo.cli.run import apply_overrides
     from fusion_vo.config import load_config
     from fusion_vo.pipeline import resolve_sensors
     from fusion_vo.recording import Recording, write_tum
 
     if args.background and args.backend != "gtsam":
         raise InputError("--background is for --backend gtsam (the EKF's steps are cheap)")
-    cfg = load_config(args.config)
-    if args.sensors:
-        cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
-    cfg.validate()
+    cfg = apply_overrides(load_config(args.config), argparse.Namespace(sensors=args.sensors))  # --backend: its own
     rec = Recording(args.sequence)
     sensors = [s for s in resolve_sensors(rec, cfg) if s != "gps"]
     fusion_cfg = as_config(cfg.fusion)
@@ -98,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError("the output must be a folder, but a file of that name exists", out)
+    _check_output_folder(out, rec)
+    _check_timing(args, rec, sensors)
     vo = None
     if "camera" in sensors:
         from fusion_vo.odometry import run_visual_odometry
@@ -110,6 +110,9 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("the recording has no samples of the chosen sensors", rec.path)
     fusion = streaming_for(streams, args.backend, fusion_cfg, background=args.background)
     rows, call_ms = _play(fusion, msgs, args.speed, args.rate)
+    if not rows:
+        raise InputError(f"--rate {args.rate:g}: no live pose read in the recording's "
+                         f"{msgs[-1][0] - msgs[0][0]:.3g} s; give a higher rate")
     online = fusion.finish()
     offline = fuse(streams, args.backend, fusion_cfg)
 
@@ -154,6 +157,28 @@ def run(args: argparse.Namespace) -> int:
     for note in online.notes:
         print(f"note: {note}")
     return 0
+
+
+def _check_output_folder(out: Path, rec) -> None:
+    """The live poses go beside, never into, the recording, and never over a run's own trajectories."""
+    from fusion_vo.pipeline import RUN_MARKER
+
+    target, source = out.resolve(), rec.path.resolve()
+    if target == source or source in target.parents:
+        raise InputError(f"the output folder is part of the recording ({rec.path}); give another output folder", out)
+    if (out / RUN_MARKER).is_file():
+        raise InputError("the output folder holds a 'fusion-vo run' (replay would overwrite its trajectories "
+                         "but not its metrics); give another output folder", out)
+
+
+def _check_timing(args: argparse.Namespace, rec, sensors: list[str]) -> None:
+    """A camera delay longer than the recording would only make the player wait (or query) past its end."""
+    t = rec.frame_times if "camera" in sensors else None
+    if t is None or len(t) < 2:
+        return
+    span = float(t[-1] - t[0])
+    if args.camera_delay > span:
+        raise InputError(f"--camera-delay {args.camera_delay:g}: longer than the recording's {span:.3g} s of frames")
 
 
 def _play(fusion, msgs, speed: float, rate: float) -> tuple[list, list]:

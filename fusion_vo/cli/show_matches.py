@@ -39,8 +39,8 @@ def run(args: argparse.Namespace) -> int:
                          Path(args.sequence) / "cam0" / "data.csv")
     frames = list(recording.frames(args.frame - 1, args.frame + 1))
     for frame in frames:
-        if frame.image is None:
-            raise InputError(frame.error or "frame cannot be read", frame.source)
+        if frame.image is None:  # the reader's reason already names the file and its line of cam0/data.csv
+            raise InputError(frame.error) if frame.error else InputError("frame cannot be read", frame.source)
     try:
         matches = find_matches(frames[0].image, frames[1].image, args.frontend,
                                point_map=GroundRectifier(recording.camera))

@@ -1,0 +1,157 @@
+"""The commands after ``run`` given bad input: a broken run folder (``export``, ``evaluate``, ``compare``),
+options that override the configuration, output folders that are an input (``replay``, ``batch``,
+``sweep``), and playback options that cannot work. Each is one line naming the file or the option, exit
+status 2, and nothing written."""
+
+from __future__ import annotations
+
+import shutil
+import stat
+from pathlib import Path
+
+import pytest
+
+from fault_tools import assert_error, cli, snapshot
+
+
+def _files(root: Path) -> dict:
+    """The snapshot without the folders' modification times."""
+    return {k: v if not stat.S_ISDIR(v[0]) else v[0] for k, v in snapshot(root).items()}
+
+
+def _one_line(err: str) -> None:
+    assert len([ln for ln in err.splitlines() if ln.strip()]) == 1, err
+
+
+# ------------------------------------------------------------------ a broken run folder
+def run_yaml_syntax_error(run):
+    (run / "run.yaml").write_text("sequence: [unclosed\n")
+    return "run.yaml:2", "not valid YAML"
+
+
+def quaternion_of_rounding_noise(run):
+    """A near-zero quaternion would be normalised into an arbitrary rotation (here 180 degrees of yaw)."""
+    p = run / "ekf.tum"
+    lines = p.read_text().splitlines()
+    fields = lines[5].split()
+    fields[4:8] = ["0", "0", "-0.000002", "0"]
+    lines[5] = " ".join(fields)
+    p.write_text("\n".join(lines) + "\n")
+    return "ekf.tum:6", "quaternion has norm 0.000"
+
+
+def folder_named_like_a_trajectory(run):
+    (run / "extra.tum").mkdir()
+    return "extra.tum", "is a folder"
+
+
+RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory]
+
+
+def _export(run, tmp_path):
+    return ("export", run, tmp_path / "x.mcap", "--to", "mcap")
+
+
+def _evaluate(run, tmp_path):
+    return ("evaluate", run)
+
+
+def _compare(run, tmp_path):
+    return ("compare", run, "--out", tmp_path / "cmp")
+
+
+@pytest.mark.parametrize("command", [_export, _evaluate, _compare], ids=["export", "evaluate", "compare"])
+@pytest.mark.parametrize("fault", RUN_FAULTS, ids=[f.__name__ for f in RUN_FAULTS])
+def test_a_broken_run_folder_is_one_line_naming_the_file(fault, command, run_folder, tmp_path, capsys):
+    where, what = fault(run_folder)
+    before = _files(tmp_path)
+    status, _, err = cli(capsys, *command(run_folder, tmp_path))
+    assert_error(status, err, where, what)
+    _one_line(err)
+    assert _files(tmp_path) == before  # (evaluate's staging folder came and went: folders' times may change)
+
+
+def test_compare_tells_apart_runs_of_the_same_name(pristine_run, tmp_path, capsys):
+    a, b = tmp_path / "a" / "x" / "run", tmp_path / "b" / "x" / "run"
+    shutil.copytree(pristine_run, a)
+    shutil.copytree(pristine_run, b)
+    status, _, err = cli(capsys, "compare", a, b, "--out", tmp_path / "cmp")
+    assert status == 0, err
+    import json
+
+    assert sorted(json.loads((tmp_path / "cmp" / "compare.json").read_text())) == ["a/x/run", "b/x/run"]
+
+
+def test_compare_refuses_a_run_given_twice(pristine_run, tmp_path, capsys):
+    status, _, err = cli(capsys, "compare", pristine_run, f"{pristine_run}/", "--out", tmp_path / "cmp")
+    assert_error(status, err, "given twice")
+    assert not (tmp_path / "cmp").exists()
+
+
+# ------------------------------------------------------------------ options over the configuration
+OPTIONS = [
+    (("run", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar", "'sonar'"]),
+    (("run", "{rec}", "--out", "{out}", "--sensors", ""), ["--sensors ''", "no sensor"]),
+    (("run", "{rec}", "--out", "{out}", "--focal-length", "200"), ["--focal-length", "--uncalibrated"]),
+    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "-5"), ["--focal-length -5", "positive"]),
+    (("replay", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar"]),
+    (("replay", "{rec}", "--out", "{out}", "--sensors", ","), ["--sensors ','", "no sensor"]),
+    (("batch", "{rec}", "--out", "{out}", "--sensors", "sonar", "--workers", "1"), ["--sensors sonar"]),
+    (("export", "{run}", "{out}", "--to", "mcap", "--frame-id", ""), ["--frame-id"]),
+    (("export", "{run}", "{out}", "--to", "mcap", "--trajectories", ""), ["--trajectories ''"]),
+]
+
+
+@pytest.mark.parametrize("args, fragments", OPTIONS, ids=[" ".join(a[:1] + a[3:]) or "x" for a, _ in OPTIONS])
+def test_an_option_the_configuration_rejects_names_the_option(args, fragments, pristine, pristine_run, tmp_path,
+                                                              capsys):
+    out = tmp_path / "out"
+    args = [str(a).format(rec=pristine, run=pristine_run, out=out) for a in args]
+    status, _, err = cli(capsys, *args)
+    assert_error(status, err, *fragments)
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ output folders that are an input
+def test_replay_never_writes_into_the_recording_or_over_a_run(recording, run_folder, tmp_path, capsys):
+    for out in (recording, recording / "cam0", run_folder):
+        before = snapshot(tmp_path)
+        status, _, err = cli(capsys, "replay", recording, "--out", out, "--speed", "0")
+        assert_error(status, err, str(out))
+        assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", ["batch", "sweep"])
+@pytest.mark.parametrize("where", ["the_recording", "inside_the_recording", "beside_the_recording"])
+def test_batch_output_folder_that_is_or_holds_a_run_of_the_recording_itself(command, where, recording, tmp_path,
+                                                                            capsys):
+    out = {"the_recording": recording, "inside_the_recording": recording / "batch",
+           "beside_the_recording": tmp_path}[where]  # tmp_path/rec would be the run folder of rec
+    grid = tmp_path.parent / f"{tmp_path.name}-grid.yaml"
+    grid.write_text("grid: {fusion.max_gap: [0.25]}\n")
+    extra = ["--grid", grid] if command == "sweep" else []
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, command, recording, "--out", out, "--workers", "1", "--no-dashboard", *extra)
+    assert_error(status, err, "give another output folder")
+    assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ playback options that cannot work
+@pytest.mark.parametrize("option, fragment", [(("--camera-delay", "1e9"), "--camera-delay"),
+                                              (("--sensors", "wheel,imu", "--rate", "1e-9"), "--rate")])
+def test_replay_timing_that_reads_nothing_is_an_error(option, fragment, pristine, tmp_path, capsys):
+    """(a camera delay of 1e9 s made the player query the estimate 50 times a second for 30 years)"""
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "replay", pristine, "--out", out, "--speed", "0", *option)
+    assert_error(status, err, fragment)
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ show-matches
+def test_show_matches_names_a_missing_frame_once(recording, tmp_path, capsys):
+    frame = sorted((recording / "cam0" / "data").iterdir())[2]
+    frame.unlink()
+    status, _, err = cli(capsys, "show-matches", recording, "--frame", "2", "--out", tmp_path / "m.png")
+    assert_error(status, err, "image file missing", "cam0/data.csv line 4")
+    assert err.count(frame.name) == 1, err
+    assert not (tmp_path / "m.png").exists()
