@@ -39,11 +39,12 @@ def _check_out(out: str | Path) -> Path:
 def _check_inputs(out: Path, labelled: list[tuple[Path, str]]) -> None:
     """Before any cluster starts: the batch folder is not inside a recording, and no task's run folder
     (``out/<label>``) is or holds a recording (``fusion-vo run`` would refuse each task only on its worker)."""
+    from fusion_vo.outputs import check_outside
+
+    check_outside(out, [path for path, _ in labelled])
     target = out.resolve()
     for path, label in labelled:
         source = Path(path).resolve()
-        if target == source or source in target.parents:
-            raise InputError(f"the output folder is part of the recording {path}; give another output folder", out)
         run_dir = target / label
         if run_dir == source or run_dir in source.parents:
             raise InputError(f"the run folder of recording {path} would be {out / label}, which holds the recording; "

@@ -161,11 +161,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_output_folder(out: Path, rec) -> None:
     """The live poses go beside, never into, the recording, and never over a run's own trajectories."""
+    from fusion_vo.outputs import check_outside
     from fusion_vo.pipeline import RUN_MARKER
 
-    target, source = out.resolve(), rec.path.resolve()
-    if target == source or source in target.parents:
-        raise InputError(f"the output folder is part of the recording ({rec.path}); give another output folder", out)
+    check_outside(out, [rec.path])
     if (out / RUN_MARKER).is_file():
         raise InputError("the output folder holds a 'fusion-vo run' (replay would overwrite its trajectories "
                          "but not its metrics); give another output folder", out)

@@ -155,3 +155,55 @@ def test_show_matches_names_a_missing_frame_once(recording, tmp_path, capsys):
     assert_error(status, err, "image file missing", "cam0/data.csv line 4")
     assert err.count(frame.name) == 1, err
     assert not (tmp_path / "m.png").exists()
+
+
+# ------------------------------------------------------------------ compare: all three files or none
+@pytest.mark.parametrize("failure", [RuntimeError("a plotting bug"), KeyboardInterrupt()], ids=["error", "ctrl_c"])
+def test_a_failed_compare_leaves_no_part_of_a_comparison(failure, pristine_run, tmp_path, capsys, monkeypatch):
+    import fusion_vo.evaluation.compare as compare
+
+    earlier = tmp_path / "earlier"
+    status, _, err = cli(capsys, "compare", pristine_run, "--out", earlier)
+    assert status == 0, err
+
+    def broken(*args, **kwargs):
+        raise failure
+
+    monkeypatch.setattr(compare, "plot_compare", broken)
+    before = _files(tmp_path)
+    for out in (tmp_path / "new", earlier):
+        status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+        assert status in (1, 130), err
+        assert _files(tmp_path) == before  # no compare.json without its table and plot; the earlier one whole
+
+
+# ------------------------------------------------------------------ evaluate: part of a trajectory on the clock
+def test_a_trajectory_half_outside_the_ground_truth_is_said_to_be(run_folder, capsys, caplog):
+    p = run_folder / "vo.tum"
+    rows = [ln.split() for ln in p.read_text().splitlines() if not ln.startswith("#")]
+    shift = (float(rows[-1][0]) - float(rows[0][0])) / 2  # half the drive later: another clock's offset
+    p.write_text("".join(f"{float(r[0]) + shift:.9f} {' '.join(r[1:])}\n" for r in rows))
+    status, _, err = cli(capsys, "evaluate", run_folder)
+    assert status == 0, err
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING" and "vo.tum" in r.getMessage()]
+    assert len(said) == 1 and "lie within the ground truth's time span" in said[0], said
+    assert not any("ekf.tum" in r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+
+
+# ------------------------------------------------------------------ outputs written into the recording
+def test_show_matches_never_writes_over_a_frame_or_into_the_recording(recording, tmp_path, capsys):
+    frame = sorted((recording / "cam0" / "data").iterdir())[0]
+    for out, fragment in [(frame, "part of an input"), (recording / "m.png", "part of an input"),
+                          (tmp_path / "m.txt", "ending in .png")]:
+        before = snapshot(tmp_path)
+        status, _, err = cli(capsys, "show-matches", recording, "--frame", "3", "--out", out)
+        assert_error(status, err, str(out), fragment)
+        assert snapshot(tmp_path) == before
+
+
+def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, tmp_path):
+    before = snapshot(pristine)
+    for out in (pristine, pristine / "cam0" / "data"):
+        status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+        assert_error(status, err, str(out), "part of an input")
+    assert snapshot(pristine) == before
