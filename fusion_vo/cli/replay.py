@@ -23,33 +23,16 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
 import os
 import shutil
 import tempfile
 import time
 from pathlib import Path
 
+from fusion_vo.cli.arguments import non_negative_number, positive_number
 from fusion_vo.errors import InputError
 
 OUTPUTS = ("live_{b}.csv", "live_{b}.tum", "stream_{b}.tum", "replay.json")
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
-    return value
-
-
-def _positive(text: str) -> float:
-    value = _non_negative(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
-    return value
 
 
 def register(sub) -> None:
@@ -60,12 +43,12 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["ekf", "gtsam"], default="ekf", help="streaming backend (default: ekf)")
     p.add_argument("--config", "-c", help="YAML configuration file (as for fusion-vo run)")
     p.add_argument("--sensors", help="comma-separated sensors to use (default: what the recording has)")
-    p.add_argument("--speed", type=_non_negative, default=1.0,
+    p.add_argument("--speed", type=non_negative_number, default=1.0,
                    help="playback speed: 1 = the recording's own pace, N = N times faster, 0 = as fast as possible")
-    p.add_argument("--rate", type=_positive, default=50.0, help="rate [Hz] at which live poses are read (default 50)")
-    p.add_argument("--camera-delay", type=_non_negative, default=0.0,
+    p.add_argument("--rate", type=positive_number, default=50.0, help="rate [Hz] at which live poses are read (default 50)")
+    p.add_argument("--camera-delay", type=non_negative_number, default=0.0,
                    help="seconds after its frame that a visual increment arrives (frontend latency, default 0)")
-    p.add_argument("--window", type=_non_negative,
+    p.add_argument("--window", type=non_negative_number,
                    help="reorder window [s] (default: the configuration's reorder_window)")
     p.add_argument("--background", action="store_true",
                    help="with --backend gtsam: run iSAM2's updates on a worker thread, off the caller's")

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fusion_vo.cli.arguments import positive_int
+from fusion_vo.cli.arguments import positive_int, positive_number
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
@@ -32,7 +32,7 @@ def register(sub) -> None:
     p.add_argument("--uncalibrated", action="store_true",
                    help="the camera has no calibration: ignore the intrinsics' distortion (pinhole of the given or "
                         "stated focal length, lens distortion estimated from the frames)")
-    p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
+    p.add_argument("--focal-length", type=positive_number, help="approximate focal length [px] for --uncalibrated")
     p.add_argument("--print-config", action="store_true",
                    help="print the configuration (every option, its default and description; with --config, the "
                         "file's values) as YAML and exit")

@@ -93,7 +93,12 @@ OPTIONS = [
     (("run", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar", "'sonar'"]),
     (("run", "{rec}", "--out", "{out}", "--sensors", ""), ["--sensors ''", "no sensor"]),
     (("run", "{rec}", "--out", "{out}", "--focal-length", "200"), ["--focal-length", "--uncalibrated"]),
-    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "-5"), ["--focal-length -5", "positive"]),
+    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "-5"), ["--focal-length", "-5"]),
+    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "nan"), ["--focal-length", "nan"]),
+    (("calibrate", "lever-arm", "{rec}", "--height-std", "nan"), ["--height-std", "nan"]),
+    (("calibrate", "height", "{rec}", "--distance", "inf", "--out", "{out}"), ["--distance", "inf"]),
+    (("calibrate", "intrinsics", "{rec}/cam0/data", "--board", "9x6", "--square", "0.02", "--out", "{out}"),
+     ["cam0/data", "is a folder"]),
     (("replay", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar"]),
     (("replay", "{rec}", "--out", "{out}", "--sensors", ","), ["--sensors ','", "no sensor"]),
     (("batch", "{rec}", "--out", "{out}", "--sensors", "sonar", "--workers", "1"), ["--sensors sonar"]),
@@ -207,3 +212,38 @@ def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, t
         status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
         assert_error(status, err, str(out), "part of an input")
     assert snapshot(pristine) == before
+
+
+# ------------------------------------------------------------------ import-bag: a topic without messages
+BAGS = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
+
+
+@pytest.fixture(scope="module")
+def bag_without_imu_messages(tmp_path_factory) -> Path:
+    """The Husky bag with its /imu/data connection kept and its messages left out."""
+    rosbag1 = pytest.importorskip("rosbags.rosbag1")
+    from rosbags.typesys import Stores, get_typestore
+
+    out = tmp_path_factory.mktemp("bags") / "no_imu_messages.bag"
+    store = get_typestore(Stores.ROS1_NOETIC)
+    with rosbag1.Reader(BAGS / "test1_140s_to_152s.bag") as reader, rosbag1.Writer(out) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        for conn, t, raw in reader.messages():
+            if conn.topic != "/imu/data":
+                writer.write(conns[conn.id], t, raw)
+    return out
+
+
+def test_a_topic_without_messages_is_left_out_or_an_error_when_named(bag_without_imu_messages, tmp_path, capsys):
+    status, out, err = cli(capsys, "import-bag", bag_without_imu_messages, tmp_path / "rec")
+    assert status == 0, err
+    assert "/imu/data: no message; imu0/ not written" in out
+    assert sorted(p.name for p in (tmp_path / "rec").iterdir() if not p.name.startswith(".")) == ["gps0", "odom0"]
+    # the recording is usable as it is: no sensor claimed without a sample
+    status, _, err = cli(capsys, "run", tmp_path / "rec", "--out", tmp_path / "run", "--backend", "ekf",
+                         "--no-evaluate")
+    assert status == 0, err
+
+    status, _, err = cli(capsys, "import-bag", bag_without_imu_messages, tmp_path / "named", "--imu-topic", "/imu/data")
+    assert_error(status, err, "--imu-topic /imu/data", "no message")
+    assert not (tmp_path / "named").exists()
