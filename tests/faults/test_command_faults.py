@@ -247,3 +247,28 @@ def test_a_topic_without_messages_is_left_out_or_an_error_when_named(bag_without
     status, _, err = cli(capsys, "import-bag", bag_without_imu_messages, tmp_path / "named", "--imu-topic", "/imu/data")
     assert_error(status, err, "--imu-topic /imu/data", "no message")
     assert not (tmp_path / "named").exists()
+
+
+# ------------------------------------------------------------------ replay: all files or none
+@pytest.mark.parametrize("failure", [OSError(28, "No space left on device"), KeyboardInterrupt()],
+                         ids=["full_disk", "ctrl_c"])
+def test_an_interrupted_replay_leaves_the_earlier_files_whole(failure, pristine, tmp_path, capsys, monkeypatch):
+    import fusion_vo.backends.result as result
+
+    args = ("replay", pristine, "--speed", "0", "--sensors", "wheel,imu", "--out")
+    earlier = tmp_path / "earlier"
+    status, _, err = cli(capsys, *args, earlier)
+    assert status == 0, err
+    calls = []
+
+    def fail_late(*a, **kw):  # the covariances are written after the live poses
+        calls.append(a)
+        raise failure
+
+    monkeypatch.setattr(result, "write_pose_covariances", fail_late)
+    before = _files(tmp_path)
+    for out in (tmp_path / "new", earlier):
+        status, _, err = cli(capsys, *args, out)
+        assert status in (2, 130), err
+        assert _files(tmp_path) == before  # no new live poses beside old trajectories; no new folder
+    assert calls
