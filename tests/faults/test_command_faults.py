@@ -272,3 +272,14 @@ def test_an_interrupted_replay_leaves_the_earlier_files_whole(failure, pristine,
         assert status in (2, 130), err
         assert _files(tmp_path) == before  # no new live poses beside old trajectories; no new folder
     assert calls
+
+
+# ------------------------------------------------------------------ sweep: a ranking that cannot be made
+def test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option(pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("grid: {fusion.max_gap: [0.25]}\n")
+    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
+                           "--no-dashboard", "--backend", "ekf", "--trajectory", "ekf_smothed")
+    assert_error(status, err, "--trajectory ekf_smothed", "ekf_smoothed")  # the names the runs have
+    assert "no parameter set completed" not in out
+    assert (tmp_path / "sweep" / "results.csv").is_file()  # the runs themselves are kept
