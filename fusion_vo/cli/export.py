@@ -41,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
         gt = groundtruth_of_run(args.run_dir)
         if gt is not None:
             trajectories.append(gt)
+        elif names is None:  # by default the ground truth goes with the run: say when it cannot
+            print("note: no ground truth exported: run.yaml names no recording with state_groundtruth_estimate0/ "
+                  "(moved or deleted?); --no-groundtruth leaves it out without this note")
         elif names:
             raise InputError("no ground truth: run.yaml names no recording with state_groundtruth_estimate0/",
                              args.run_dir)

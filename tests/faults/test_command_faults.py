@@ -283,3 +283,12 @@ def test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option(
     assert_error(status, err, "--trajectory ekf_smothed", "ekf_smoothed")  # the names the runs have
     assert "no parameter set completed" not in out
     assert (tmp_path / "sweep" / "results.csv").is_file()  # the runs themselves are kept
+
+
+def test_export_says_when_the_ground_truth_of_the_run_is_gone(run_folder, tmp_path, capsys):
+    config = run_folder / "run.yaml"
+    config.write_text("\n".join(f"sequence: {tmp_path / 'moved'}" if ln.startswith("sequence:") else ln
+                                for ln in config.read_text().splitlines()) + "\n")
+    status, out, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
+    assert status == 0, err
+    assert "no ground truth exported" in out and "groundtruth" not in out.split("note:")[0]
