@@ -292,3 +292,18 @@ def test_export_says_when_the_ground_truth_of_the_run_is_gone(run_folder, tmp_pa
     status, out, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
     assert status == 0, err
     assert "no ground truth exported" in out and "groundtruth" not in out.split("note:")[0]
+
+
+@pytest.mark.filterwarnings("error")  # a warning is output the user did not ask for
+@pytest.mark.parametrize("frontend", ["features", "klt"])
+def test_show_matches_on_textureless_frames_draws_no_match_without_a_warning(frontend, recording, tmp_path, capsys):
+    import cv2
+    import numpy as np
+
+    for png in sorted((recording / "cam0" / "data").iterdir())[2:4]:
+        cv2.imwrite(str(png), np.full((120, 160), 90, np.uint8))  # readable, but nothing to match
+    status, out, err = cli(capsys, "show-matches", recording, "--frame", "3", "--frontend", frontend,
+                           "--out", tmp_path / "m.png")
+    assert status == 0, err
+    assert "0 matches" in out and (tmp_path / "m.png").is_file()
+    assert err.strip() == ""  # (klt was an internal error; features printed matplotlib's legend warning)
