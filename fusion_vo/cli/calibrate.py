@@ -157,6 +157,7 @@ def run_lever_arm(args: argparse.Namespace) -> int:
     from fusion_vo.recording import Recording
 
     rec = Recording(args.seq)
+    _check_turn_in_place(rec)
     motions, geometry = frame_motions(rec)
     r = lever_arm_from_turn([m.matrix for m in motions if m.ok], geometry, args.height_std)
     print(r.summary())
@@ -166,6 +167,25 @@ def run_lever_arm(args: argparse.Namespace) -> int:
 
     _camera_out(rec, args.out, set_lever)
     return 0
+
+
+def _check_turn_in_place(rec) -> None:
+    """With wheels, refuse a drive: the frames' fixed point is then the centre of the arc driven, not the
+    axle, and the lever arm would come out wrong with a tiny standard deviation."""
+    if not rec.has_wheel():
+        return
+    import numpy as np
+
+    from fusion_vo.sensors.wheel import ticks_to_travel
+
+    travel = ticks_to_travel(rec.wheel())
+    dl, dr = np.diff(travel.left), np.diff(travel.right)
+    axle = float(np.sum(np.abs(dl + dr))) / 2.0  # distance the axle centre moved
+    arcs = float(np.sum(np.abs(dr - dl))) / 2.0  # distance each wheel moved about it
+    if axle > 0.01 and axle > 0.25 * arcs:
+        turned = math.degrees(2.0 * arcs / travel.wheel_base)
+        raise InputError(f"not a turn in place: the wheels moved the axle {axle:.3f} m while turning {turned:.0f} "
+                         "deg; record a turn in place about the axle", rec.path / "wheel0" / "data.csv")
 
 
 def run_wheels(args: argparse.Namespace) -> int:
