@@ -133,6 +133,15 @@ def _inside(path: Path, folder: Path) -> bool:
         return False
 
 
+def check_outside(target: str | Path, inputs: Iterable[str | Path], what: str = "output folder") -> None:
+    """Raise :class:`InputError` if ``target`` (a file or folder to write) is one of ``inputs`` or lies inside
+    one (a recording): outputs go beside the inputs, never into them."""
+    resolved = Path(target).resolve()
+    for p in inputs:
+        if _inside(resolved, Path(p).resolve()):
+            raise InputError(f"the {what} is part of an input of this command ({p}); give another {what}", target)
+
+
 def check_replaceable(target: str | Path, marker: str, force: bool = False,
                       inputs: Iterable[str | Path] = (), what: str = "output folder") -> None:
     """Raise :class:`InputError` unless ``target`` may be written (and an existing one replaced).

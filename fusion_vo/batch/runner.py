@@ -36,10 +36,26 @@ def _check_out(out: str | Path) -> Path:
     return out
 
 
+def _check_inputs(out: Path, labelled: list[tuple[Path, str]]) -> None:
+    """Before any cluster starts: the batch folder is not inside a recording, and no task's run folder
+    (``out/<label>``) is or holds a recording (``fusion-vo run`` would refuse each task only on its worker)."""
+    from fusion_vo.outputs import check_outside
+
+    check_outside(out, [path for path, _ in labelled])
+    target = out.resolve()
+    for path, label in labelled:
+        source = Path(path).resolve()
+        run_dir = target / label
+        if run_dir == source or run_dir in source.parents:
+            raise InputError(f"the run folder of recording {path} would be {out / label}, which holds the recording; "
+                             "give another output folder", out)
+
+
 def plan_batch(recordings: list[str | Path], config: RunConfig, out: str | Path) -> list[Task]:
     """One task per recording; checks the recordings (folders, none twice) without reading them."""
     out = _check_out(out).absolute()
     labelled = _labels(recordings)
+    _check_inputs(out, labelled)
     settings = config_data(config)
     return [Task(recording=str(path), label=label, run_dir=str(out / label),
                  record=str(out / RECORDS / f"{label}.json"), config=settings)
@@ -50,6 +66,7 @@ def plan_sweep(recordings: list[str | Path], grid: Grid, out: str | Path) -> lis
     """One task per (recording, parameter set), recording-major."""
     out = _check_out(out).absolute()
     labelled = _labels(recordings)
+    _check_inputs(out, labelled)
     settings = [config_data(c) for c in grid.configs]
     return [Task(recording=str(path), label=label, run_dir=str(out / label / ps.name),
                  record=str(out / RECORDS / label / f"{ps.name}.json"), config=cfg, params=dict(ps.values),

@@ -22,7 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 
 logger = logging.getLogger(__name__)
 
@@ -131,9 +131,7 @@ def detect_corners(image: np.ndarray, board: Board) -> np.ndarray | None:
 
 def read_image(path: str | Path) -> np.ndarray:
     """Read an image file unchanged (grey or colour, 8 or 16 bit); :class:`InputError` if unreadable."""
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("image file not found", path)
+    path = check_file(path)  # names a folder, a broken link ... as such
     try:  # decoded from bytes: cv2.imread fails on paths that are not valid UTF-8
         data = path.read_bytes()
     except OSError as exc:

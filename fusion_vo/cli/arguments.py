@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Callable
 
 
@@ -29,3 +30,37 @@ random_seed = whole_number(0, "a random seed")
 positive_int = whole_number(1)
 #: a number of frames: at least one frame pair
 frame_count = whole_number(2, "one frame pair")
+
+
+def frame_id(text: str) -> str:
+    """An ``argparse`` type: a ROS frame name (not empty, no spaces)."""
+    if not text.strip() or any(c.isspace() for c in text):
+        raise argparse.ArgumentTypeError(f"expected a frame name such as 'odom' (no spaces), not {text!r}")
+    return text
+
+
+def finite_number(text: str) -> float:
+    """An ``argparse`` type: a finite number (not NaN or infinite)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, not {text}")
+    return value
+
+
+def non_negative_number(text: str) -> float:
+    """An ``argparse`` type: a finite number >= 0 (a standard deviation, a delay, a speed)."""
+    value = finite_number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
+    return value
+
+
+def positive_number(text: str) -> float:
+    """An ``argparse`` type: a finite number > 0 (a length, a rate, a focal length)."""
+    value = non_negative_number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
+    return value

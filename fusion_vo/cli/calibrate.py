@@ -12,6 +12,7 @@ import argparse
 import math
 from pathlib import Path
 
+from fusion_vo.cli.arguments import finite_number, non_negative_number, positive_number
 from fusion_vo.errors import InputError
 
 
@@ -39,15 +40,15 @@ def register(sub) -> None:
     _board_options(q)
     q.add_argument("--board-origin", default="0,0", metavar="X,Y",
                    help="body-frame position of the board's first inner corner [m] (default 0,0)")
-    q.add_argument("--board-yaw", type=float, default=0.0, metavar="DEG",
+    q.add_argument("--board-yaw", type=finite_number, default=0.0, metavar="DEG",
                    help="direction of the board's rows from body x [deg] (default 0)")
     q.add_argument("--out", required=True, metavar="FILE", help="cam0/sensor.yaml to write with the measured T_BS")
     q.set_defaults(func=run_floor)
 
     q = kinds.add_parser("height", help="camera height from a straight drive of known length (thesis method)")
     q.add_argument("seq", metavar="SEQ", help="recording of a straight drive")
-    q.add_argument("--distance", required=True, type=float, metavar="M", help="driven distance [m]")
-    q.add_argument("--distance-std", type=float, default=0.001, metavar="M",
+    q.add_argument("--distance", required=True, type=positive_number, metavar="M", help="driven distance [m]")
+    q.add_argument("--distance-std", type=non_negative_number, default=0.001, metavar="M",
                    help="standard deviation of the measured distance [m] (default 0.001)")
     q.add_argument("--allow-failed", action="store_true", help="accept frames the frontend failed on")
     q.add_argument("--out", metavar="FILE", help="cam0/sensor.yaml to write with the measured height")
@@ -55,7 +56,7 @@ def register(sub) -> None:
 
     q = kinds.add_parser("lever-arm", help="camera offset from the rotation centre from a turn in place")
     q.add_argument("seq", metavar="SEQ", help="recording of a turn in place about the axle")
-    q.add_argument("--height-std", type=float, default=0.0, metavar="M",
+    q.add_argument("--height-std", type=non_negative_number, default=0.0, metavar="M",
                    help="standard deviation of the camera height [m], propagated into the result")
     q.add_argument("--out", metavar="FILE", help="cam0/sensor.yaml to write with the measured lever arm")
     q.set_defaults(func=run_lever_arm)
@@ -72,7 +73,7 @@ def register(sub) -> None:
 
 def _board_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--board", required=True, metavar="COLSxROWS", help="inner corners of the chessboard, e.g. 9x6")
-    p.add_argument("--square", required=True, type=float, metavar="METRES", help="side of one square [m]")
+    p.add_argument("--square", required=True, type=positive_number, metavar="METRES", help="side of one square [m]")
 
 
 def _pair(text: str, name: str) -> tuple[float, float]:
@@ -156,6 +157,7 @@ def run_lever_arm(args: argparse.Namespace) -> int:
     from fusion_vo.recording import Recording
 
     rec = Recording(args.seq)
+    _check_turn_in_place(rec)
     motions, geometry = frame_motions(rec)
     r = lever_arm_from_turn([m.matrix for m in motions if m.ok], geometry, args.height_std)
     print(r.summary())
@@ -165,6 +167,25 @@ def run_lever_arm(args: argparse.Namespace) -> int:
 
     _camera_out(rec, args.out, set_lever)
     return 0
+
+
+def _check_turn_in_place(rec) -> None:
+    """With wheels, refuse a drive: the frames' fixed point is then the centre of the arc driven, not the
+    axle, and the lever arm would come out wrong with a tiny standard deviation."""
+    if not rec.has_wheel():
+        return
+    import numpy as np
+
+    from fusion_vo.sensors.wheel import ticks_to_travel
+
+    travel = ticks_to_travel(rec.wheel())
+    dl, dr = np.diff(travel.left), np.diff(travel.right)
+    axle = float(np.sum(np.abs(dl + dr))) / 2.0  # distance the axle centre moved
+    arcs = float(np.sum(np.abs(dr - dl))) / 2.0  # distance each wheel moved about it
+    if axle > 0.01 and axle > 0.25 * arcs:
+        turned = math.degrees(2.0 * arcs / travel.wheel_base)
+        raise InputError(f"not a turn in place: the wheels moved the axle {axle:.3f} m while turning {turned:.0f} "
+                         "deg; record a turn in place about the axle", rec.path / "wheel0" / "data.csv")
 
 
 def run_wheels(args: argparse.Namespace) -> int:

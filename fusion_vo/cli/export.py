@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from fusion_vo.cli.arguments import frame_id
 from fusion_vo.errors import InputError
 
 
@@ -20,7 +21,7 @@ def register(sub) -> None:
     p.add_argument("--to", dest="fmt", choices=["rosbag2", "mcap"], required=True, help="output format")
     p.add_argument("--trajectories", help="comma-separated names to export, 'groundtruth' among them for the "
                                           "recording's (default: every *.tum of RUN and the ground truth)")
-    p.add_argument("--frame-id", default="odom", help="fixed frame of the poses (default: odom)")
+    p.add_argument("--frame-id", type=frame_id, default="odom", help="fixed frame of the poses (default: odom)")
     p.add_argument("--no-groundtruth", action="store_true", help="leave the recording's ground truth out")
     p.set_defaults(func=run)
 
@@ -28,7 +29,11 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     from fusion_vo.export.ros import export_trajectories, groundtruth_of_run, load_run_trajectories
 
-    names = [n.strip() for n in args.trajectories.split(",") if n.strip()] if args.trajectories else None
+    names = None
+    if args.trajectories is not None:
+        names = [n.strip() for n in args.trajectories.split(",") if n.strip()]
+        if not names:
+            raise InputError(f"--trajectories {args.trajectories!r}: no trajectory named (give e.g. ekf,groundtruth)")
     want_gt = not args.no_groundtruth and (names is None or "groundtruth" in names)
     run_names = [n for n in names if n != "groundtruth"] if names else None
     trajectories = load_run_trajectories(args.run_dir, run_names) if run_names or names is None else []
@@ -36,6 +41,9 @@ def run(args: argparse.Namespace) -> int:
         gt = groundtruth_of_run(args.run_dir)
         if gt is not None:
             trajectories.append(gt)
+        elif names is None:  # by default the ground truth goes with the run: say when it cannot
+            print("note: no ground truth exported: run.yaml names no recording with state_groundtruth_estimate0/ "
+                  "(moved or deleted?); --no-groundtruth leaves it out without this note")
         elif names:
             raise InputError("no ground truth: run.yaml names no recording with state_groundtruth_estimate0/",
                              args.run_dir)

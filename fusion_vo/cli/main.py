@@ -99,8 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with handle_signals():
             return int(args.func(args) or 0)
-    except InputError as exc:
-        print(f"fusion-vo: error: {exc}", file=sys.stderr)
+    except InputError as exc:  # one line, even when a library's message (a YAML parser's) spans several
+        print(f"fusion-vo: error: {' '.join(part.strip() for part in str(exc).splitlines() if part.strip())}",
+              file=sys.stderr)
         return 2
     except OSError as exc:  # permissions, a full disk, a path that cannot be created
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""

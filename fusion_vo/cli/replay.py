@@ -23,33 +23,15 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import math
-import os
 import shutil
-import tempfile
 import time
 from pathlib import Path
 
+from fusion_vo.cli.arguments import non_negative_number, positive_number
+from fusion_vo.outputs import StagedFiles
 from fusion_vo.errors import InputError
 
 OUTPUTS = ("live_{b}.csv", "live_{b}.tum", "stream_{b}.tum", "replay.json")
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: '{text}'") from None
-    if not math.isfinite(value) or value < 0:
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
-    return value
-
-
-def _positive(text: str) -> float:
-    value = _non_negative(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
-    return value
 
 
 def register(sub) -> None:
@@ -60,12 +42,12 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["ekf", "gtsam"], default="ekf", help="streaming backend (default: ekf)")
     p.add_argument("--config", "-c", help="YAML configuration file (as for fusion-vo run)")
     p.add_argument("--sensors", help="comma-separated sensors to use (default: what the recording has)")
-    p.add_argument("--speed", type=_non_negative, default=1.0,
+    p.add_argument("--speed", type=non_negative_number, default=1.0,
                    help="playback speed: 1 = the recording's own pace, N = N times faster, 0 = as fast as possible")
-    p.add_argument("--rate", type=_positive, default=50.0, help="rate [Hz] at which live poses are read (default 50)")
-    p.add_argument("--camera-delay", type=_non_negative, default=0.0,
+    p.add_argument("--rate", type=positive_number, default=50.0, help="rate [Hz] at which live poses are read (default 50)")
+    p.add_argument("--camera-delay", type=non_negative_number, default=0.0,
                    help="seconds after its frame that a visual increment arrives (frontend latency, default 0)")
-    p.add_argument("--window", type=_non_negative,
+    p.add_argument("--window", type=non_negative_number,
                    help="reorder window [s] (default: the configuration's reorder_window)")
     p.add_argument("--background", action="store_true",
                    help="with --backend gtsam: run iSAM2's updates on a worker thread, off the caller's")
@@ -80,16 +62,14 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.backends.result import write_pose_covariances
     from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
     from fusion_vo.cli.progress import progress_bar
+    from fusion_vo.cli.run import apply_overrides
     from fusion_vo.config import load_config
     from fusion_vo.pipeline import resolve_sensors
     from fusion_vo.recording import Recording, write_tum
 
     if args.background and args.backend != "gtsam":
         raise InputError("--background is for --backend gtsam (the EKF's steps are cheap)")
-    cfg = load_config(args.config)
-    if args.sensors:
-        cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
-    cfg.validate()
+    cfg = apply_overrides(load_config(args.config), argparse.Namespace(sensors=args.sensors))  # --backend: its own
     rec = Recording(args.sequence)
     sensors = [s for s in resolve_sensors(rec, cfg) if s != "gps"]
     fusion_cfg = as_config(cfg.fusion)
@@ -98,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError("the output must be a folder, but a file of that name exists", out)
+    _check_output_folder(out, rec)
+    _check_timing(args, rec, sensors)
     vo = None
     if "camera" in sensors:
         from fusion_vo.odometry import run_visual_odometry
@@ -110,50 +92,77 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("the recording has no samples of the chosen sensors", rec.path)
     fusion = streaming_for(streams, args.backend, fusion_cfg, background=args.background)
     rows, call_ms = _play(fusion, msgs, args.speed, args.rate)
+    if not rows:
+        raise InputError(f"--rate {args.rate:g}: no live pose read in the recording's "
+                         f"{msgs[-1][0] - msgs[0][0]:.3g} s; give a higher rate")
     online = fusion.finish()
     offline = fuse(streams, args.backend, fusion_cfg)
 
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=".fusion-vo-partial-", dir=out))
     b = args.backend
-    try:
-        table = np.array(rows, dtype=np.float64).reshape(-1, 10)
-        np.savetxt(staging / f"live_{b}.csv", table, delimiter=",",
-                   fmt=["%.9f", "%.9f", "%.9g", "%.9g", "%.9g", "%.6g", "%.6g", "%.6g", "%.6f", "%.4f"],
-                   header="t_query,t,x,y,yaw,var_x,var_y,var_yaw,predicted,call_ms", comments="")
-        write_tum(staging / f"live_{b}.tum", table[:, 0], table[:, 2:5])
-        name = "ekf" if b == "ekf" else "gtsam_online"
-        if name in online.trajectories:
-            write_tum(staging / f"stream_{b}.tum", online.trajectories[name].t, online.trajectories[name].xyyaw)
-        for key, traj in offline.trajectories.items():
-            if len(traj):
-                write_tum(staging / f"{key}.tum", traj.t, traj.xyyaw)
-                cov = offline.covariances.get(key)
-                if cov is not None and len(cov) == len(traj):
-                    write_pose_covariances(staging / f"{key}.cov.csv", traj.t, cov)
-        lat = np.array(call_ms) if call_ms else np.zeros(1)
-        info = {
-            "sequence": str(rec.path.resolve()), "backend": b, "sensors": sensors, "speed": args.speed,
-            "rate_hz": args.rate, "camera_delay_s": args.camera_delay,
-            "reorder_window_s": fusion_cfg.reorder_window, "samples": len(msgs), "live_poses": len(table),
-            "call_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
-                        "max": float(lat.max())},
-            "rewinds": fusion.rewinds,
-            "counts": {s: c.as_dict() for s, c in online.counts.get(name, {}).items()},
-            "notes": online.notes,
-        }
-        with open(staging / "replay.json", "w") as f:
-            json.dump(info, f, indent=2)
-        for p in staging.iterdir():
-            os.replace(p, out / p.name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
+    try:  # every file together or none (a failure or Ctrl-C keeps an earlier replay's files whole)
+        with StagedFiles(out, what="output folder") as staged:
+            staging = staged.path
+            table = np.array(rows, dtype=np.float64).reshape(-1, 10)
+            np.savetxt(staging / f"live_{b}.csv", table, delimiter=",",
+                       fmt=["%.9f", "%.9f", "%.9g", "%.9g", "%.9g", "%.6g", "%.6g", "%.6g", "%.6f", "%.4f"],
+                       header="t_query,t,x,y,yaw,var_x,var_y,var_yaw,predicted,call_ms", comments="")
+            write_tum(staging / f"live_{b}.tum", table[:, 0], table[:, 2:5])
+            name = "ekf" if b == "ekf" else "gtsam_online"
+            if name in online.trajectories:
+                write_tum(staging / f"stream_{b}.tum", online.trajectories[name].t, online.trajectories[name].xyyaw)
+            for key, traj in offline.trajectories.items():
+                if len(traj):
+                    write_tum(staging / f"{key}.tum", traj.t, traj.xyyaw)
+                    cov = offline.covariances.get(key)
+                    if cov is not None and len(cov) == len(traj):
+                        write_pose_covariances(staging / f"{key}.cov.csv", traj.t, cov)
+            lat = np.array(call_ms) if call_ms else np.zeros(1)
+            info = {
+                "sequence": str(rec.path.resolve()), "backend": b, "sensors": sensors, "speed": args.speed,
+                "rate_hz": args.rate, "camera_delay_s": args.camera_delay,
+                "reorder_window_s": fusion_cfg.reorder_window, "samples": len(msgs), "live_poses": len(table),
+                "call_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
+                            "max": float(lat.max())},
+                "rewinds": fusion.rewinds,
+                "counts": {s: c.as_dict() for s, c in online.counts.get(name, {}).items()},
+                "notes": online.notes,
+            }
+            with open(staging / "replay.json", "w") as f:
+                json.dump(info, f, indent=2)
+            staged.commit()
+    except BaseException:
+        if created:
+            shutil.rmtree(out, ignore_errors=True)  # only what this command made
+        raise
     print(f"replayed {len(msgs)} samples; {len(table)} live poses at {args.rate:g} Hz -> {out / f'live_{b}.tum'}; "
           f"call p50 {info['call_ms']['p50']:.3f} ms, p99 {info['call_ms']['p99']:.3f} ms, "
           f"max {info['call_ms']['max']:.3f} ms")
     for note in online.notes:
         print(f"note: {note}")
     return 0
+
+
+def _check_output_folder(out: Path, rec) -> None:
+    """The live poses go beside, never into, the recording, and never over a run's own trajectories."""
+    from fusion_vo.outputs import check_outside
+    from fusion_vo.pipeline import RUN_MARKER
+
+    check_outside(out, [rec.path])
+    if (out / RUN_MARKER).is_file():
+        raise InputError("the output folder holds a 'fusion-vo run' (replay would overwrite its trajectories "
+                         "but not its metrics); give another output folder", out)
+
+
+def _check_timing(args: argparse.Namespace, rec, sensors: list[str]) -> None:
+    """A camera delay longer than the recording would only make the player wait (or query) past its end."""
+    t = rec.frame_times if "camera" in sensors else None
+    if t is None or len(t) < 2:
+        return
+    span = float(t[-1] - t[0])
+    if args.camera_delay > span:
+        raise InputError(f"--camera-delay {args.camera_delay:g}: longer than the recording's {span:.3g} s of frames")
 
 
 def _play(fusion, msgs, speed: float, rate: float) -> tuple[list, list]:

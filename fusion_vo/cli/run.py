@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fusion_vo.cli.arguments import positive_int
+from fusion_vo.cli.arguments import positive_int, positive_number
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
@@ -32,7 +32,7 @@ def register(sub) -> None:
     p.add_argument("--uncalibrated", action="store_true",
                    help="the camera has no calibration: ignore the intrinsics' distortion (pinhole of the given or "
                         "stated focal length, lens distortion estimated from the frames)")
-    p.add_argument("--focal-length", type=float, help="approximate focal length [px] for --uncalibrated")
+    p.add_argument("--focal-length", type=positive_number, help="approximate focal length [px] for --uncalibrated")
     p.add_argument("--print-config", action="store_true",
                    help="print the configuration (every option, its default and description; with --config, the "
                         "file's values) as YAML and exit")
@@ -41,22 +41,45 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _sensor_list(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise InputError(f"--sensors {text!r}: no sensor named (give e.g. camera,wheel,imu)")
+    return names
+
+
 def apply_overrides(cfg, args):
-    if args.frontend:
-        cfg.frontend = args.frontend
-    if args.backend:
-        cfg.backend = args.backend
-    if args.sensors:
-        cfg.sensors = [s.strip() for s in args.sensors.split(",") if s.strip()]
+    """The command-line options over the configuration file's values (``run``, ``replay``, ``batch``,
+    ``sweep``): each is checked by the configuration's own schema, and a value it rejects is an error
+    naming the option rather than the configuration key."""
+    def odometry(**values):
+        return lambda c: setattr(c, "odometry", {**c.odometry, **values})
+
+    overrides = []  # (option as typed, setter)
+    if getattr(args, "frontend", None):
+        overrides.append((f"--frontend {args.frontend}", lambda c: setattr(c, "frontend", args.frontend)))
+    if getattr(args, "backend", None):
+        overrides.append((f"--backend {args.backend}", lambda c: setattr(c, "backend", args.backend)))
+    if getattr(args, "sensors", None) is not None:
+        names = _sensor_list(args.sensors)
+        overrides.append((f"--sensors {args.sensors}", lambda c: setattr(c, "sensors", names)))
     if getattr(args, "threads", None) is not None:
-        cfg.odometry = {**cfg.odometry, "threads": args.threads}
+        overrides.append((f"--threads {args.threads}", odometry(threads=args.threads)))
     if getattr(args, "no_evaluate", False):
-        cfg.evaluate = False
+        overrides.append(("--no-evaluate", lambda c: setattr(c, "evaluate", False)))
     if getattr(args, "uncalibrated", False):
-        cfg.odometry = {**cfg.odometry, "uncalibrated": True}
+        overrides.append(("--uncalibrated", odometry(uncalibrated=True)))
     if getattr(args, "focal_length", None) is not None:
-        cfg.odometry = {**cfg.odometry, "focal_length": args.focal_length}
-    cfg.validate()
+        overrides.append((f"--focal-length {args.focal_length:g}", odometry(focal_length=args.focal_length)))
+    for option, apply in overrides:
+        apply(cfg)
+        try:
+            cfg.validate()
+        except InputError as exc:
+            raise InputError(f"{option}: {exc.message}") from None
+    if getattr(args, "focal_length", None) is not None and not cfg.odometry.get("uncalibrated"):
+        raise InputError("--focal-length is used only with --uncalibrated (a calibrated camera keeps the focal "
+                         "length of cam0/sensor.yaml)")
     return cfg
 
 

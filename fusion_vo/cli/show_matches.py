@@ -30,23 +30,27 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.evaluation.matches import find_matches, to_grey8
     from fusion_vo.evaluation.plots import plot_matches
     from fusion_vo.geometry.ground import GroundRectifier
+    from fusion_vo.outputs import check_outside
     from fusion_vo.recording import Recording
 
     recording = Recording(args.sequence)
+    out = Path(args.out or f"matches_{args.frame}.png")
+    if out.suffix.lower() != ".png":
+        raise InputError("the image is written as PNG: give a file name ending in .png", out)
+    check_outside(out, [recording.path], "output image")
     count = len(recording)
     if not 1 <= args.frame < count:
         raise InputError(f"--frame must lie between 1 and {count - 1} (the recording has {count} frames)",
                          Path(args.sequence) / "cam0" / "data.csv")
     frames = list(recording.frames(args.frame - 1, args.frame + 1))
     for frame in frames:
-        if frame.image is None:
-            raise InputError(frame.error or "frame cannot be read", frame.source)
+        if frame.image is None:  # the reader's reason already names the file and its line of cam0/data.csv
+            raise InputError(frame.error) if frame.error else InputError("frame cannot be read", frame.source)
     try:
         matches = find_matches(frames[0].image, frames[1].image, args.frontend,
                                point_map=GroundRectifier(recording.camera))
     except ValueError as exc:
         raise InputError(str(exc), frames[1].source) from None
-    out = Path(args.out or f"matches_{args.frame}.png")
     dt = frames[1].t - frames[0].t
     title = (f"{args.frontend}: frames {args.frame - 1} -> {args.frame} ({dt * 1e3:.0f} ms): "
              f"{len(matches.previous)} matches, {matches.n_inliers} inliers")

@@ -6,7 +6,7 @@ import argparse
 import importlib
 
 from fusion_vo.errors import InputError
-from fusion_vo.cli.arguments import random_seed
+from fusion_vo.cli.arguments import positive_number, random_seed
 
 
 class _LazyNames:
@@ -43,7 +43,7 @@ def register(sub) -> None:
     p.add_argument("--standard", choices=_LazyNames("fusion_vo.simulation.standard", "STANDARD"), metavar="NAME",
                    help="one of the standard recordings, %(choices)s (fixes profile, options, seed)")
     p.add_argument("--seed", type=random_seed, default=0)
-    p.add_argument("--duration", type=float, help="duration [s] (random, standstill)")
+    p.add_argument("--duration", type=positive_number, help="duration [s] (random, standstill)")
     p.add_argument("--texture", choices=["gravel", "grass", "brick"])
     p.add_argument("--config", help="YAML file of options")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",

@@ -6,6 +6,7 @@ import argparse
 import time
 
 from fusion_vo.batch.tasks import METRICS
+from fusion_vo.errors import InputError
 from fusion_vo.cli.batch import (add_common, announce, batch_progress, client_options, finish, load_run_config,
                                   quiet_dask)
 
@@ -53,11 +54,15 @@ def run(args: argparse.Namespace) -> int:
     with open_client(announce=announce, **client_options(args)) as client, batch_progress() as update:
         frame = run_sweep(args.recordings, args.grid, config, client, out=args.out, rank=args.rank,
                           rank_trajectory=args.trajectory, progress=update)
-    _print_best(frame, args.rank, args.trajectory)
-    return finish(frame, args.out, started)
+    problem = _print_best(frame, args.rank, args.trajectory)
+    status = finish(frame, args.out, started)
+    if problem:  # the sets ran and are in results.csv, but the ranking asked for cannot be made
+        raise InputError(problem)
+    return status
 
 
-def _print_best(frame, metric: str, trajectory: str | None) -> None:
+def _print_best(frame, metric: str, trajectory: str | None) -> str | None:
+    """Print the best parameter set; returns why none can be ranked when that is the user's option's doing."""
     from fusion_vo.batch.runner import best_sets, describe_set
 
     ranked, used = best_sets(frame, metric, trajectory)
@@ -65,5 +70,14 @@ def _print_best(frame, metric: str, trajectory: str | None) -> None:
         name = ranked["parameter_set"].iloc[0]
         print(f"best parameter set: {name} ({describe_set(frame, name)}): mean {metric} of {used} "
               f"{ranked['mean'].iloc[0]:.5g} over {ranked['recordings'].iloc[0]} recordings")
-    else:
-        print("no parameter set completed on every recording")
+        return None
+    ok = frame[frame["status"] == "ok"]
+    names = list(dict.fromkeys(ok["trajectory"].dropna())) if "trajectory" in ok else []
+    if len(ok) and trajectory is not None and trajectory not in names:
+        return (f"--trajectory {trajectory}: no run has this trajectory (they have: {', '.join(names) or 'none'}); "
+                "the parameter sets are not ranked")
+    if len(ok) and (metric not in ok or ok[metric].isna().all()):
+        print(f"parameter sets not ranked: no run has {metric} (not evaluated: --no-evaluate, or no ground truth)")
+        return None
+    print("no parameter set completed on every recording")
+    return None

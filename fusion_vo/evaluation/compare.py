@@ -14,6 +14,8 @@ from pathlib import Path
 from evo.core.trajectory import PoseTrajectory3D
 
 from fusion_vo.evaluation.evaluate import evaluate_trajectories, resolve_sequence
+from fusion_vo.errors import InputError
+from fusion_vo.outputs import StagedFiles, check_outside
 from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, find_trajectories, read_groundtruth, read_run_config,
                                      write_metrics)
 from fusion_vo.evaluation.metrics import to_planar
@@ -23,9 +25,30 @@ logger = logging.getLogger(__name__)
 
 
 def run_labels(run_dirs: list[Path]) -> list[str]:
-    """Folder names, or ``parent/name`` for names that occur more than once."""
-    names = [d.resolve().name for d in run_dirs]
-    return [f"{d.resolve().parent.name}/{n}" if names.count(n) > 1 else n for d, n in zip(run_dirs, names)]
+    """Folder names, with as many parent folders as it takes to tell apart names that occur more than once.
+
+    Raises
+    ------
+    InputError
+        If a run folder is given twice (its rows would be one run's, shown as two).
+    """
+    resolved = [Path(d).resolve() for d in run_dirs]
+    for i, r in enumerate(resolved):
+        if r in resolved[:i]:
+            raise InputError(f"run folder given twice (as {run_dirs[resolved.index(r)]} and {run_dirs[i]})",
+                             run_dirs[i])
+    depth = [1] * len(resolved)
+
+    def label(i: int) -> str:
+        return "/".join(resolved[i].parts[-depth[i]:])
+
+    while True:
+        labels = [label(i) for i in range(len(resolved))]
+        clash = [i for i, lab in enumerate(labels) if labels.count(lab) > 1]
+        if not clash:
+            return labels
+        for i in clash:
+            depth[i] += 1
 
 
 def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
@@ -66,11 +89,23 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         overlay[label] = {name: r.anchored for name, r in results.items()}
         sequences.append(sequence.resolve())
         reference = reference or to_planar(gt)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_metrics(out_dir / "compare.json", table)
-    write_compare_csv(out_dir / "compare.csv", table)
+    check_outside(out_dir, sorted(set(sequences)))
     shared = len(set(sequences)) == 1
-    plot_compare(reference if shared else None, overlay, out_dir / "compare.png")
+    created = not out_dir.exists()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    try:  # the three files together or none of them (an error or Ctrl-C keeps an earlier comparison whole)
+        with StagedFiles(out_dir, what="output folder") as staged:
+            write_metrics(staged.path / "compare.json", table)
+            write_compare_csv(staged.path / "compare.csv", table)
+            plot_compare(reference if shared else None, overlay, staged.path / "compare.png")
+            staged.commit()
+    except BaseException:
+        if created:
+            try:
+                out_dir.rmdir()
+            except OSError:
+                pass
+        raise
     logger.info("compared %d runs into %s", len(run_dirs), out_dir)
     return table
 

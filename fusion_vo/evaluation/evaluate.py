@@ -99,6 +99,11 @@ def evaluate_trajectories(reference: PoseTrajectory3D,
             results[name] = evaluate_trajectory(reference, estimate, legs)
         except InputError as exc:
             raise InputError(exc.message, path) from None
+        span = float(estimate.timestamps[-1] - estimate.timestamps[0])
+        covered = results[name].figures["duration_s"]
+        if span > 0 and covered < 0.9 * span:  # another clock, or a ground truth of part of the drive
+            logger.warning("%s: only %.3g s of its %.3g s lie within the ground truth's time span; its figures "
+                           "cover that part only", path, covered, span)
     return results
 
 

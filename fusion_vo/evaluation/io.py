@@ -26,10 +26,9 @@ from typing import TYPE_CHECKING
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from frontends.base import MotionStatus
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_file
 from fusion_vo.outputs import write_atomic  # noqa: F401  (the one atomic writer, used by plots and report)
 
 if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
@@ -89,9 +88,7 @@ def _floats(fields: list[str], path: Path, line: int) -> list[float]:
 
 
 def _read_lines(path: Path) -> list[str]:
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found", path)
+    path = check_file(path)
     try:
         return path.read_text(encoding="utf-8-sig").splitlines()
     except (OSError, UnicodeDecodeError) as exc:
@@ -139,8 +136,9 @@ def read_tum_poses(path: str | Path) -> TumPoses:
     Raises
     ------
     InputError
-        If the file is missing, empty, a row does not hold eight finite numbers, a quaternion has zero
-        length or a timestamp is earlier than the one before (a repeated timestamp keeps its last pose).
+        If the file is missing, empty, a row does not hold eight finite numbers, a quaternion's norm is
+        more than 0.05 from 1, or a timestamp is earlier than the one before (a repeated timestamp keeps
+        its last pose).
     """
     path = Path(path)
     rows, line_numbers, stamps = [], [], []
@@ -153,8 +151,6 @@ def read_tum_poses(path: str | Path) -> TumPoses:
             raise InputError(f"expected 8 columns 'timestamp x y z qx qy qz qw', got {len(fields)}",
                              path, number)
         values = _floats(fields, path, number)
-        if math.hypot(*values[4:8]) < 1e-9:
-            raise InputError("quaternion has zero length", path, number)
         rows.append(values)
         line_numbers.append(number)
         stamps.append(int((Decimal(fields[0]) * 1_000_000_000).to_integral_value()))
@@ -163,8 +159,11 @@ def read_tum_poses(path: str | Path) -> TumPoses:
     data = np.array(rows)
     keep = _increasing_rows(data[:, 0], line_numbers, path)
     data = data[keep]
-    quat_wxyz = data[:, [7, 4, 5, 6]]
-    quat_wxyz /= np.linalg.norm(quat_wxyz, axis=1, keepdims=True)
+    from fusion_vo.recording.reader import unit_quaternions
+
+    # the ground truth's rule: a norm more than 0.05 from 1 is an error (normalising a quaternion of
+    # norm 1e-6 would turn rounding noise into an arbitrary rotation)
+    quat_wxyz = unit_quaternions(data[:, [7, 4, 5, 6]], np.asarray(line_numbers)[keep], path, "quaternion")
     return TumPoses(data[:, 0], np.asarray(stamps, dtype=np.int64)[keep], data[:, 1:4], quat_wxyz)
 
 
@@ -302,21 +301,15 @@ def read_run_config(run_dir: str | Path) -> dict:
     Raises
     ------
     InputError
-        If the file exists but is not a YAML mapping.
+        If the file exists but is not a YAML mapping (read by the one YAML reader,
+        :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line).
     """
+    from fusion_vo.geometry.camera import load_yaml
+
     path = Path(run_dir) / "run.yaml"
-    if not path.is_file():
+    if not os.path.lexists(path):
         return {}
-    try:
-        config = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except yaml.YAMLError as exc:
-        line = getattr(getattr(exc, "problem_mark", None), "line", None)
-        raise InputError(f"invalid YAML: {exc}", path, None if line is None else line + 1) from None
-    if config is None:
-        return {}
-    if not isinstance(config, dict):
-        raise InputError("expected a mapping at the top level", path)
-    return config
+    return load_yaml(path)
 
 
 def _json_safe(value):

@@ -92,7 +92,9 @@ def _klt_matches(prev: np.ndarray, cur: np.ndarray, config: KltConfig):
     detector = DetectorSettings(method="shi_tomasi", max_corners=config.max_tracks,
                                 min_quality=config.quality_level, block_size=config.block_size,
                                 border=config.border + config.window // 2, level=1)
-    p0 = detect_corners(prev, detector).astype(np.float64)
+    p0 = detect_corners(prev, detector).astype(np.float64).reshape(-1, 2)
+    if not len(p0):  # a textureless frame: nothing to track (OpenCV rejects an empty point array)
+        return p0, p0.copy(), config.robust_options(), config.seed
     tracked = track_points(prev, cur, p0, np.eye(2, 3), config.retry_pyramid_levels, config.lk_settings())
     return p0[tracked.index], tracked.points, config.robust_options(), config.seed
 

@@ -300,6 +300,30 @@ def parse_matrix(entry, name: str, path: str | Path | None) -> np.ndarray:
     return m
 
 
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, but a key given twice in one mapping is an error (PyYAML keeps the last one:
+    a section written twice in a configuration would silently lose the first one's values)."""
+
+
+def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False):
+    seen: dict = {}
+    for key_node, _ in node.value:
+        if key_node.tag == "tag:yaml.org,2002:merge":
+            continue
+        key = loader.construct_object(key_node, deep=True)
+        try:
+            first = seen.setdefault(key, key_node.start_mark.line)
+        except TypeError:  # an unhashable key: PyYAML's own error follows
+            continue
+        if first != key_node.start_mark.line:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"key '{key}' given twice (first on line {first + 1})", key_node.start_mark)
+    return loader.construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+
+
 def load_yaml(path: str | Path) -> dict:
     """Load a YAML mapping, with :class:`InputError` for a missing, unreadable or malformed file."""
     path = check_file(path)
@@ -309,7 +333,7 @@ def load_yaml(path: str | Path) -> dict:
         # EuRoC files start with a '%YAML:1.0' directive that PyYAML does not accept
         if text.startswith("%YAML:"):
             text = text.split("\n", 1)[1] if "\n" in text else ""
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
     except yaml.YAMLError as exc:
         line = getattr(getattr(exc, "problem_mark", None), "line", None)
         raise InputError(f"not valid YAML ({getattr(exc, 'problem', exc)})", path, None if line is None else line + 1) from None

@@ -60,7 +60,9 @@ def test_height_from_straight_drive(tmp_path):
     r = height_from_drive(motions, geometry.rectifier.f, geometry.rectifier.c, 0.3, 0.0005)
     assert abs(r.height - 0.11) < 0.001
     assert 0 < r.height_std < 0.001
-    assert main(["calibrate", "height", str(seq), "--distance", "-1"]) == 2
+    with pytest.raises(SystemExit) as exc:  # a usage error naming --distance
+        main(["calibrate", "height", str(seq), "--distance", "-1"])
+    assert exc.value.code == 2
 
 
 @pytest.fixture(scope="module")

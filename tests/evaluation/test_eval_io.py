@@ -23,7 +23,9 @@ def test_tum_roundtrip_of_values(tmp_path):
     ("1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 1\n", 2, "expected 8 columns"),
     ("1.0 0 0 0 0 0 0 1\n2.0 0 x 0 0 0 0 1\n", 2, "expected numbers"),
     ("1.0 0 0 0 0 0 0 1\n2.0 0 nan 0 0 0 0 1\n", 2, "non-finite"),
-    ("1.0 0 0 0 0 0 0 0\n", 1, "zero length"),
+    ("1.0 0 0 0 0 0 0 0\n", 1, "norm 0.000, not 1"),
+    ("1.0 0 0 0 0 0 0 1\n2.0 0 0 0 0 0 2e-6 0\n", 2, "norm 0.000, not 1"),  # not turned into 180 degrees
+    ("1.0 0 0 0 0 0 0 1.2\n", 1, "norm 1.200, not 1"),
     ("2.0 0 0 0 0 0 0 1\n1.0 0 0 0 0 0 0 1\n", 2, "earlier than the one before"),
 ])
 def test_malformed_tum_rows_are_located(tmp_path, text, line, message):

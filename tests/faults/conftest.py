@@ -28,3 +28,19 @@ def pristine(tmp_path_factory) -> Path:
 def recording(pristine, tmp_path) -> Path:
     """A fresh copy of the recording in ``tmp_path/rec`` to break."""
     return Path(shutil.copytree(pristine, tmp_path / "rec", symlinks=True))
+
+
+@pytest.fixture(scope="session")
+def pristine_run(pristine, tmp_path_factory) -> Path:
+    """A run folder of the recording (EKF only; never modify it: use ``run_folder``)."""
+    from fusion_vo.cli.main import main
+
+    out = tmp_path_factory.mktemp("faults_run") / "run"
+    assert main(["-q", "run", str(pristine), "--out", str(out), "--backend", "ekf", "--no-evaluate"]) == 0
+    return out
+
+
+@pytest.fixture
+def run_folder(pristine_run, tmp_path) -> Path:
+    """A fresh copy of the run folder in ``tmp_path/run`` to break."""
+    return Path(shutil.copytree(pristine_run, tmp_path / "run", symlinks=True))

@@ -26,8 +26,13 @@ def snapshot(root: Path, skip: Path | None = None) -> dict[str, tuple]:
 
 
 def cli(capsys, *args: str) -> tuple[int, str, str]:
-    """Run ``fusion-vo ARGS`` in this process; returns (status, stdout, stderr). A traceback fails the test."""
-    status = main([str(a) for a in args])
+    """Run ``fusion-vo ARGS`` in this process; returns (status, stdout, stderr). A traceback fails the test.
+
+    A usage error (argparse exits) gives its exit status like any other error."""
+    try:
+        status = main([str(a) for a in args])
+    except SystemExit as exc:
+        status = exc.code
     captured = capsys.readouterr()
     assert "Traceback" not in captured.err
     return status, captured.out, captured.err

@@ -32,6 +32,10 @@ BAD = {
     "zero_lk_iterations": ("klt: {lk_iterations: 0}", "klt: lk_iterations must be at least 1, not 0"),
     "negative_reweight_passes": ("fusion: {graph: {reweight_passes: -1}}",
                                  "fusion: 'graph.reweight_passes' must not be negative, not -1"),
+    # PyYAML keeps the last of two equal keys: the first section's values were lost without a word
+    "section_twice": ("fusion:\n  max_gap: 1.0\nfusion:\n  reorder_window: 0.1",
+                      "my-config.yaml:3: not valid YAML (key 'fusion' given twice (first on line 1))"),
+    "key_twice": ("fusion:\n  max_gap: 1.0\n  max_gap: 2.0", "my-config.yaml:3: not valid YAML (key 'max_gap' given twice"),
 }
 
 

@@ -108,7 +108,7 @@ def import_bag(
         summary = ImportSummary(bag, out, topics)
         with RecordingWriter(out, force=overwrite, inputs=inputs, source=f"import-bag {bag.name}") as writer:
             _Importer(reader, bag, writer.root, chosen, topics, cam_yaml, camera_yaml, list(static_tfs),
-                      summary).run()
+                      summary).run({name for name, topic in requested.items() if topic})
             writer.commit()
     for s in summary.streams:
         log.debug("%s <- %s: %d rows, %.1f Hz, %d duplicates, %d dropped", s.stream, s.topic, s.written,
@@ -116,6 +116,10 @@ def import_bag(
     for note in summary.notes:
         log.debug("note: %s", note)
     return summary
+
+
+#: the option of ``fusion-vo import-bag`` that names each stream's topic
+TOPIC_OPTIONS = {"cam0": "--image-topic", "imu0": "--imu-topic", "odom0": "--odom-topic", "gps0": "--gps-topic"}
 
 
 class _Importer:
@@ -140,7 +144,10 @@ class _Importer:
         self.tf_topics = [t.topic for t in topics if t.msgtype == TF_MESSAGE and frame_name(t.topic) == "tf_static"]
 
     # -------------------------------------------------------------- main loop
-    def run(self) -> None:
+    def run(self, explicit: set[str] = frozenset()) -> None:
+        """Read the messages and write the streams; a stream whose topic has no message is left out (its
+        folder would make the recording claim a sensor it has no sample of), an error when its topic was
+        given (``explicit``)."""
         wanted = {t.topic: name for name, t in self.chosen.items()}
         extra = set(self.tf_topics) | ({self.caminfo_topic} if self.caminfo_topic else set())
         conns = [c for c in self.reader.connections if c.topic in wanted or c.topic in extra]
@@ -155,8 +162,18 @@ class _Importer:
             elif self.camera_info is None and conn.msgtype == CAMERA_INFO and float(msg.k[0]) > 0:
                 self.camera_info = msg
         self.body_frame = self.body_frame or "base_link"
+        empty = [name for name in self.chosen if not self.rows[name].summary.messages]
+        for name in empty:
+            topic = self.chosen[name].topic
+            if name in explicit:
+                raise InputError(f"{TOPIC_OPTIONS[name]} {topic}: the topic has no message", self.bag)
+            self.summary.notes.append(f"{topic}: no message; {name}/ not written")
+        if len(empty) == len(self.chosen):
+            raise InputError("no message on any supported topic (" + ", ".join(self.chosen[n].topic for n in empty)
+                             + ")", self.bag)
         for name in self.chosen:
-            getattr(self, f"_finish_{name}")()
+            if name not in empty:
+                getattr(self, f"_finish_{name}")()
             self.summary.streams.append(self.rows[name].summary)
 
     def _messages(self, conns):

@@ -1,0 +1,323 @@
+"""The commands after ``run`` given bad input: a broken run folder (``export``, ``evaluate``, ``compare``),
+options that override the configuration, output folders that are an input (``replay``, ``batch``,
+``sweep``), and playback options that cannot work. Each is one line naming the file or the option, exit
+status 2, and nothing written."""
+
+from __future__ import annotations
+
+import shutil
+import stat
+from pathlib import Path
+
+import pytest
+
+from fault_tools import assert_error, cli, snapshot
+
+
+def _files(root: Path) -> dict:
+    """The snapshot without the folders' modification times."""
+    return {k: v if not stat.S_ISDIR(v[0]) else v[0] for k, v in snapshot(root).items()}
+
+
+def _one_line(err: str) -> None:
+    assert len([ln for ln in err.splitlines() if ln.strip()]) == 1, err
+
+
+# ------------------------------------------------------------------ a broken run folder
+def run_yaml_syntax_error(run):
+    (run / "run.yaml").write_text("sequence: [unclosed\n")
+    return "run.yaml:2", "not valid YAML"
+
+
+def quaternion_of_rounding_noise(run):
+    """A near-zero quaternion would be normalised into an arbitrary rotation (here 180 degrees of yaw)."""
+    p = run / "ekf.tum"
+    lines = p.read_text().splitlines()
+    fields = lines[5].split()
+    fields[4:8] = ["0", "0", "-0.000002", "0"]
+    lines[5] = " ".join(fields)
+    p.write_text("\n".join(lines) + "\n")
+    return "ekf.tum:6", "quaternion has norm 0.000"
+
+
+def folder_named_like_a_trajectory(run):
+    (run / "extra.tum").mkdir()
+    return "extra.tum", "is a folder"
+
+
+RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory]
+
+
+def _export(run, tmp_path):
+    return ("export", run, tmp_path / "x.mcap", "--to", "mcap")
+
+
+def _evaluate(run, tmp_path):
+    return ("evaluate", run)
+
+
+def _compare(run, tmp_path):
+    return ("compare", run, "--out", tmp_path / "cmp")
+
+
+@pytest.mark.parametrize("command", [_export, _evaluate, _compare], ids=["export", "evaluate", "compare"])
+@pytest.mark.parametrize("fault", RUN_FAULTS, ids=[f.__name__ for f in RUN_FAULTS])
+def test_a_broken_run_folder_is_one_line_naming_the_file(fault, command, run_folder, tmp_path, capsys):
+    where, what = fault(run_folder)
+    before = _files(tmp_path)
+    status, _, err = cli(capsys, *command(run_folder, tmp_path))
+    assert_error(status, err, where, what)
+    _one_line(err)
+    assert _files(tmp_path) == before  # (evaluate's staging folder came and went: folders' times may change)
+
+
+def test_compare_tells_apart_runs_of_the_same_name(pristine_run, tmp_path, capsys):
+    a, b = tmp_path / "a" / "x" / "run", tmp_path / "b" / "x" / "run"
+    shutil.copytree(pristine_run, a)
+    shutil.copytree(pristine_run, b)
+    status, _, err = cli(capsys, "compare", a, b, "--out", tmp_path / "cmp")
+    assert status == 0, err
+    import json
+
+    assert sorted(json.loads((tmp_path / "cmp" / "compare.json").read_text())) == ["a/x/run", "b/x/run"]
+
+
+def test_compare_refuses_a_run_given_twice(pristine_run, tmp_path, capsys):
+    status, _, err = cli(capsys, "compare", pristine_run, f"{pristine_run}/", "--out", tmp_path / "cmp")
+    assert_error(status, err, "given twice")
+    assert not (tmp_path / "cmp").exists()
+
+
+# ------------------------------------------------------------------ options over the configuration
+OPTIONS = [
+    (("run", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar", "'sonar'"]),
+    (("run", "{rec}", "--out", "{out}", "--sensors", ""), ["--sensors ''", "no sensor"]),
+    (("run", "{rec}", "--out", "{out}", "--focal-length", "200"), ["--focal-length", "--uncalibrated"]),
+    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "-5"), ["--focal-length", "-5"]),
+    (("run", "{rec}", "--out", "{out}", "--uncalibrated", "--focal-length", "nan"), ["--focal-length", "nan"]),
+    (("calibrate", "lever-arm", "{rec}", "--height-std", "nan"), ["--height-std", "nan"]),
+    (("calibrate", "height", "{rec}", "--distance", "inf", "--out", "{out}"), ["--distance", "inf"]),
+    (("calibrate", "intrinsics", "{rec}/cam0/data", "--board", "9x6", "--square", "0.02", "--out", "{out}"),
+     ["cam0/data", "is a folder"]),
+    (("replay", "{rec}", "--out", "{out}", "--sensors", "sonar"), ["--sensors sonar"]),
+    (("replay", "{rec}", "--out", "{out}", "--sensors", ","), ["--sensors ','", "no sensor"]),
+    (("batch", "{rec}", "--out", "{out}", "--sensors", "sonar", "--workers", "1"), ["--sensors sonar"]),
+    (("export", "{run}", "{out}", "--to", "mcap", "--frame-id", ""), ["--frame-id"]),
+    (("export", "{run}", "{out}", "--to", "mcap", "--trajectories", ""), ["--trajectories ''"]),
+]
+
+
+@pytest.mark.parametrize("args, fragments", OPTIONS, ids=[" ".join(a[:1] + a[3:]) or "x" for a, _ in OPTIONS])
+def test_an_option_the_configuration_rejects_names_the_option(args, fragments, pristine, pristine_run, tmp_path,
+                                                              capsys):
+    out = tmp_path / "out"
+    args = [str(a).format(rec=pristine, run=pristine_run, out=out) for a in args]
+    status, _, err = cli(capsys, *args)
+    assert_error(status, err, *fragments)
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ output folders that are an input
+def test_replay_never_writes_into_the_recording_or_over_a_run(recording, run_folder, tmp_path, capsys):
+    for out in (recording, recording / "cam0", run_folder):
+        before = snapshot(tmp_path)
+        status, _, err = cli(capsys, "replay", recording, "--out", out, "--speed", "0")
+        assert_error(status, err, str(out))
+        assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("command", ["batch", "sweep"])
+@pytest.mark.parametrize("where", ["the_recording", "inside_the_recording", "beside_the_recording"])
+def test_batch_output_folder_that_is_or_holds_a_run_of_the_recording_itself(command, where, recording, tmp_path,
+                                                                            capsys):
+    out = {"the_recording": recording, "inside_the_recording": recording / "batch",
+           "beside_the_recording": tmp_path}[where]  # tmp_path/rec would be the run folder of rec
+    grid = tmp_path.parent / f"{tmp_path.name}-grid.yaml"
+    grid.write_text("grid: {fusion.max_gap: [0.25]}\n")
+    extra = ["--grid", grid] if command == "sweep" else []
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, command, recording, "--out", out, "--workers", "1", "--no-dashboard", *extra)
+    assert_error(status, err, "give another output folder")
+    assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ playback options that cannot work
+@pytest.mark.parametrize("option, fragment", [(("--camera-delay", "1e9"), "--camera-delay"),
+                                              (("--sensors", "wheel,imu", "--rate", "1e-9"), "--rate")])
+def test_replay_timing_that_reads_nothing_is_an_error(option, fragment, pristine, tmp_path, capsys):
+    """(a camera delay of 1e9 s made the player query the estimate 50 times a second for 30 years)"""
+    out = tmp_path / "out"
+    status, _, err = cli(capsys, "replay", pristine, "--out", out, "--speed", "0", *option)
+    assert_error(status, err, fragment)
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ show-matches
+def test_show_matches_names_a_missing_frame_once(recording, tmp_path, capsys):
+    frame = sorted((recording / "cam0" / "data").iterdir())[2]
+    frame.unlink()
+    status, _, err = cli(capsys, "show-matches", recording, "--frame", "2", "--out", tmp_path / "m.png")
+    assert_error(status, err, "image file missing", "cam0/data.csv line 4")
+    assert err.count(frame.name) == 1, err
+    assert not (tmp_path / "m.png").exists()
+
+
+# ------------------------------------------------------------------ compare: all three files or none
+@pytest.mark.parametrize("failure", [RuntimeError("a plotting bug"), KeyboardInterrupt()], ids=["error", "ctrl_c"])
+def test_a_failed_compare_leaves_no_part_of_a_comparison(failure, pristine_run, tmp_path, capsys, monkeypatch):
+    import fusion_vo.evaluation.compare as compare
+
+    earlier = tmp_path / "earlier"
+    status, _, err = cli(capsys, "compare", pristine_run, "--out", earlier)
+    assert status == 0, err
+
+    def broken(*args, **kwargs):
+        raise failure
+
+    monkeypatch.setattr(compare, "plot_compare", broken)
+    before = _files(tmp_path)
+    for out in (tmp_path / "new", earlier):
+        status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+        assert status in (1, 130), err
+        assert _files(tmp_path) == before  # no compare.json without its table and plot; the earlier one whole
+
+
+# ------------------------------------------------------------------ evaluate: part of a trajectory on the clock
+def test_a_trajectory_half_outside_the_ground_truth_is_said_to_be(run_folder, capsys, caplog):
+    p = run_folder / "vo.tum"
+    rows = [ln.split() for ln in p.read_text().splitlines() if not ln.startswith("#")]
+    shift = (float(rows[-1][0]) - float(rows[0][0])) / 2  # half the drive later: another clock's offset
+    p.write_text("".join(f"{float(r[0]) + shift:.9f} {' '.join(r[1:])}\n" for r in rows))
+    status, _, err = cli(capsys, "evaluate", run_folder)
+    assert status == 0, err
+    said = [r.getMessage() for r in caplog.records if r.levelname == "WARNING" and "vo.tum" in r.getMessage()]
+    assert len(said) == 1 and "lie within the ground truth's time span" in said[0], said
+    assert not any("ekf.tum" in r.getMessage() for r in caplog.records if r.levelname == "WARNING")
+
+
+# ------------------------------------------------------------------ outputs written into the recording
+def test_show_matches_never_writes_over_a_frame_or_into_the_recording(recording, tmp_path, capsys):
+    frame = sorted((recording / "cam0" / "data").iterdir())[0]
+    for out, fragment in [(frame, "part of an input"), (recording / "m.png", "part of an input"),
+                          (tmp_path / "m.txt", "ending in .png")]:
+        before = snapshot(tmp_path)
+        status, _, err = cli(capsys, "show-matches", recording, "--frame", "3", "--out", out)
+        assert_error(status, err, str(out), fragment)
+        assert snapshot(tmp_path) == before
+
+
+def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, tmp_path):
+    before = snapshot(pristine)
+    for out in (pristine, pristine / "cam0" / "data"):
+        status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+        assert_error(status, err, str(out), "part of an input")
+    assert snapshot(pristine) == before
+
+
+# ------------------------------------------------------------------ import-bag: a topic without messages
+BAGS = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
+
+
+@pytest.fixture(scope="module")
+def bag_without_imu_messages(tmp_path_factory) -> Path:
+    """The Husky bag with its /imu/data connection kept and its messages left out."""
+    rosbag1 = pytest.importorskip("rosbags.rosbag1")
+    from rosbags.typesys import Stores, get_typestore
+
+    out = tmp_path_factory.mktemp("bags") / "no_imu_messages.bag"
+    store = get_typestore(Stores.ROS1_NOETIC)
+    with rosbag1.Reader(BAGS / "test1_140s_to_152s.bag") as reader, rosbag1.Writer(out) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=store) for c in reader.connections}
+        for conn, t, raw in reader.messages():
+            if conn.topic != "/imu/data":
+                writer.write(conns[conn.id], t, raw)
+    return out
+
+
+def test_a_topic_without_messages_is_left_out_or_an_error_when_named(bag_without_imu_messages, tmp_path, capsys):
+    status, out, err = cli(capsys, "import-bag", bag_without_imu_messages, tmp_path / "rec")
+    assert status == 0, err
+    assert "/imu/data: no message; imu0/ not written" in out
+    assert sorted(p.name for p in (tmp_path / "rec").iterdir() if not p.name.startswith(".")) == ["gps0", "odom0"]
+    # the recording is usable as it is: no sensor claimed without a sample
+    status, _, err = cli(capsys, "run", tmp_path / "rec", "--out", tmp_path / "run", "--backend", "ekf",
+                         "--no-evaluate")
+    assert status == 0, err
+
+    status, _, err = cli(capsys, "import-bag", bag_without_imu_messages, tmp_path / "named", "--imu-topic", "/imu/data")
+    assert_error(status, err, "--imu-topic /imu/data", "no message")
+    assert not (tmp_path / "named").exists()
+
+
+# ------------------------------------------------------------------ replay: all files or none
+@pytest.mark.parametrize("failure", [OSError(28, "No space left on device"), KeyboardInterrupt()],
+                         ids=["full_disk", "ctrl_c"])
+def test_an_interrupted_replay_leaves_the_earlier_files_whole(failure, pristine, tmp_path, capsys, monkeypatch):
+    import fusion_vo.backends.result as result
+
+    args = ("replay", pristine, "--speed", "0", "--sensors", "wheel,imu", "--out")
+    earlier = tmp_path / "earlier"
+    status, _, err = cli(capsys, *args, earlier)
+    assert status == 0, err
+    calls = []
+
+    def fail_late(*a, **kw):  # the covariances are written after the live poses
+        calls.append(a)
+        raise failure
+
+    monkeypatch.setattr(result, "write_pose_covariances", fail_late)
+    before = _files(tmp_path)
+    for out in (tmp_path / "new", earlier):
+        status, _, err = cli(capsys, *args, out)
+        assert status in (2, 130), err
+        assert _files(tmp_path) == before  # no new live poses beside old trajectories; no new folder
+    assert calls
+
+
+# ------------------------------------------------------------------ sweep: a ranking that cannot be made
+def test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option(pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("grid: {fusion.max_gap: [0.25]}\n")
+    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
+                           "--no-dashboard", "--backend", "ekf", "--trajectory", "ekf_smothed")
+    assert_error(status, err, "--trajectory ekf_smothed", "ekf_smoothed")  # the names the runs have
+    assert "no parameter set completed" not in out
+    assert (tmp_path / "sweep" / "results.csv").is_file()  # the runs themselves are kept
+
+
+def test_export_says_when_the_ground_truth_of_the_run_is_gone(run_folder, tmp_path, capsys):
+    config = run_folder / "run.yaml"
+    config.write_text("\n".join(f"sequence: {tmp_path / 'moved'}" if ln.startswith("sequence:") else ln
+                                for ln in config.read_text().splitlines()) + "\n")
+    status, out, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
+    assert status == 0, err
+    assert "no ground truth exported" in out and "groundtruth" not in out.split("note:")[0]
+
+
+@pytest.mark.filterwarnings("error")  # a warning is output the user did not ask for
+@pytest.mark.parametrize("frontend", ["features", "klt"])
+def test_show_matches_on_textureless_frames_draws_no_match_without_a_warning(frontend, recording, tmp_path, capsys):
+    import cv2
+    import numpy as np
+
+    for png in sorted((recording / "cam0" / "data").iterdir())[2:4]:
+        cv2.imwrite(str(png), np.full((120, 160), 90, np.uint8))  # readable, but nothing to match
+    status, out, err = cli(capsys, "show-matches", recording, "--frame", "3", "--frontend", frontend,
+                           "--out", tmp_path / "m.png")
+    assert status == 0, err
+    assert "0 matches" in out and (tmp_path / "m.png").is_file()
+    assert err.strip() == ""  # (klt was an internal error; features printed matplotlib's legend warning)
+
+
+# ------------------------------------------------------------------ calibrate lever-arm: a drive, not a turn
+def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
+    """The frames' fixed point of an arc is the arc's centre: the lever arm came out wrong, to 0.1 mm."""
+    from fusion_vo.simulation import simulate
+
+    small = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
+             "gt_rate": 50.0, "imu_rate": 100.0}  # the camera of conftest.SMALL
+    rec = simulate(tmp_path / "arc", profile="circle", seed=4, radius=0.1, length=0.06, **small)
+    out = tmp_path / "sensor.yaml"
+    status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
+    assert_error(status, err, "wheel0/data.csv", "not a turn in place")
+    assert not out.exists()
