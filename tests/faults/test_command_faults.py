@@ -45,7 +45,15 @@ def folder_named_like_a_trajectory(run):
     return "extra.tum", "is a folder"
 
 
-RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory]
+def file_given_as_the_run(run):
+    """A file where the run folder should be (a trajectory, say) is not a "run folder not found"."""
+    shutil.rmtree(run)
+    run.write_text("0 0 0 0 0 0 0 1\n")
+    return str(run), "is a file, not a run folder"
+
+
+RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory,
+              file_given_as_the_run]
 
 
 def _export(run, tmp_path):
