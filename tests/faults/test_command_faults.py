@@ -329,3 +329,19 @@ def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
     status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
     assert_error(status, err, "wheel0/data.csv", "not a turn in place")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("what", ["plain_folder", "text_file"])
+@pytest.mark.parametrize("listing", [False, True], ids=["import", "list"])
+def test_import_bag_on_something_that_is_no_bag_says_what_a_bag_is(what, listing, pristine, tmp_path, capsys):
+    if what == "plain_folder":
+        bag, fragment = pristine, "a folder without metadata.yaml"  # a recording given where the bag goes
+    else:
+        bag, fragment = tmp_path / "topics.txt", "does not end in .bag, .mcap or .db3"
+        bag.write_text("/imu/data\n")
+    before = snapshot(tmp_path)
+    args = ["--list"] if listing else [tmp_path / "rec"]
+    status, _, err = cli(capsys, "import-bag", bag, *args)
+    assert_error(status, err, str(bag), "not a ROS bag", fragment, "ROS 2 bag folder (holding metadata.yaml)")
+    assert "Expected metadata file" not in err
+    assert snapshot(tmp_path) == before
