@@ -345,3 +345,17 @@ def test_import_bag_on_something_that_is_no_bag_says_what_a_bag_is(what, listing
     assert_error(status, err, str(bag), "not a ROS bag", fragment, "ROS 2 bag folder (holding metadata.yaml)")
     assert "Expected metadata file" not in err
     assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ sweep: a grid with a value given twice
+@pytest.mark.parametrize("text, line", [("grid:\n  features.detector: [harris, harris, fast]\n", 2),
+                                        ("grid:\n  fusion.max_gap:\n    - 0.25\n    - 0.5\n    - 2.5e-1\n", 5)],
+                         ids=["flow_list", "block_list_same_number"])
+def test_a_sweep_grid_value_given_twice_names_the_file_line_and_key(text, line, pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(text)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid)
+    key = text.split("\n")[1].strip().split(":")[0]
+    assert_error(status, err, f"{grid}:{line}:", f"grid key '{key}'", "given twice")
+    assert snapshot(tmp_path) == before
