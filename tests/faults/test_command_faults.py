@@ -359,3 +359,24 @@ def test_a_sweep_grid_value_given_twice_names_the_file_line_and_key(text, line, 
     key = text.split("\n")[1].strip().split(":")[0]
     assert_error(status, err, f"{grid}:{line}:", f"grid key '{key}'", "given twice")
     assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ bench: frames that measured nothing
+def test_bench_gives_no_rate_for_frames_that_measured_nothing(recording, pristine, capsys):
+    """Textureless frames cost almost nothing: 2000+ frames/s beside 'ok 0.0 %' was printed as a speed."""
+    import re
+
+    import cv2
+    import numpy as np
+
+    status, out, err = cli(capsys, "bench", pristine, "--repeats", "1", "--threads", "1", "--frontend", "klt")
+    assert status == 0, err  # the unbroken recording is measured
+    assert "not a speed" not in out and re.search(r"\| klt, 1 thread \| \d+ \|", out), out
+
+    for png in (recording / "cam0" / "data").iterdir():
+        cv2.imwrite(str(png), np.full((120, 160), 90, np.uint8))
+    status, out, err = cli(capsys, "bench", recording, "--repeats", "1", "--threads", "1", "--frontend", "klt")
+    assert_error(status, err, str(recording), "no speed measured", "klt, 1 thread (0 %)")
+    assert not re.search(r"\d frames/s", out), out  # no rate anywhere, in the progress lines or the tables
+    assert "| klt, 1 thread | not a speed: 0 % of frame pairs tracked | not comparable |" in out
+    assert "klt          33 frames" in out and "->  not a speed: 0 % of frame pairs tracked" in out
