@@ -433,6 +433,9 @@ def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
 def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOptions, rng: np.random.Generator) -> dict:
     motion = _motion_for(profile, o, rng)
     t_end = motion.t[-1]
+    if len(motion.t) < 2 or t_end - o.exposure_time < 1.0 / o.camera_rate:  # a recording is at least a frame pair
+        raise ValueError(f"the '{profile}' drive lasts {t_end:.3g} s: too short for two camera frames at "
+                         f"{o.camera_rate:g} Hz (make it longer: duration, length, side, radius or angle)")
     T_BS = camera_mount(o.lever_arm, o.camera_height, o.tilt_x_deg, o.tilt_y_deg, o.lateral_offset)
     ns = lambda t: np.int64(o.start_time_ns) + np.rint(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
 

@@ -70,3 +70,12 @@ def test_a_negative_seed_is_a_usage_error_naming_the_option(command, tmp_path, c
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--seed" in err and "Traceback" not in err
     assert not (tmp_path / "rec").exists()
+
+
+@pytest.mark.parametrize("profile, duration", [("random", "1e-9"), ("standstill", "0.001")])
+def test_simulate_a_drive_shorter_than_two_frames_is_an_error(profile, duration, tmp_path, capsys):
+    """--duration 1e-9 was an internal error (IndexError); 0.001 s wrote a one-frame recording nothing can run on."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY[2:], "--profile", profile, "--duration", duration)
+    assert_error(status, err, f"'{profile}' drive lasts", "too short for two camera frames", "duration")
+    assert snapshot(tmp_path) == before
