@@ -380,3 +380,18 @@ def test_bench_gives_no_rate_for_frames_that_measured_nothing(recording, pristin
     assert not re.search(r"\d frames/s", out), out  # no rate anywhere, in the progress lines or the tables
     assert "| klt, 1 thread | not a speed: 0 % of frame pairs tracked | not comparable |" in out
     assert "klt          33 frames" in out and "->  not a speed: 0 % of frame pairs tracked" in out
+
+
+# ------------------------------------------------------------------ calibrate wheels: UMBmark without squares
+def test_umbmark_on_runs_that_are_not_the_two_squares_is_refused(pristine, tmp_path, capsys):
+    """A straight drive given as both squares printed a wheel base of 2e60 m (exit 0, and written with --out)."""
+    other = Path(shutil.copytree(pristine, tmp_path / "other"))
+    out = tmp_path / "wheel.yaml"
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--method", "umbmark", "--ccw", other, "--out", out)
+    assert_error(status, err, str(pristine), "not a clockwise square", "turns 0 deg clockwise")
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--method", "umbmark", "--ccw", pristine,
+                         "--out", out)
+    assert_error(status, err, "--ccw", "the same recording")
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--ccw", other, "--out", out)
+    assert_error(status, err, "--ccw is used only with --method umbmark")
+    assert not out.exists()
