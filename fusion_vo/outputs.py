@@ -143,7 +143,8 @@ def check_outside(target: str | Path, inputs: Iterable[str | Path], what: str = 
 
 
 def check_replaceable(target: str | Path, marker: str, force: bool = False,
-                      inputs: Iterable[str | Path] = (), what: str = "output folder") -> None:
+                      inputs: Iterable[str | Path] = (), what: str = "output folder",
+                      remedy: str = "give a new folder, or --force to replace it") -> None:
     """Raise :class:`InputError` unless ``target`` may be written (and an existing one replaced).
 
     Parameters
@@ -153,6 +154,8 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
     force : allow replacing a non-empty folder without the marker.
     inputs : paths the command reads; the target may not be or contain any of them.
     what : words for the folder in messages.
+    remedy : what the message tells the user to do about a folder fusion-vo did not write (a command
+        without ``--force`` says so).
     """
     target = Path(target)
     resolved = target.resolve()
@@ -177,8 +180,7 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
         except OSError as exc:
             raise InputError(f"cannot read the {what} ({exc.strerror})", target) from None
         if not empty:
-            raise InputError(f"the {what} exists, is not empty and was not written by fusion-vo; "
-                             f"give a new folder, or --force to replace it", target)
+            raise InputError(f"the {what} exists, is not empty and was not written by fusion-vo; {remedy}", target)
 
 
 class _LockedStaging:

@@ -79,3 +79,28 @@ def test_simulate_a_drive_shorter_than_two_frames_is_an_error(profile, duration,
     status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY[2:], "--profile", profile, "--duration", duration)
     assert_error(status, err, f"'{profile}' drive lasts", "too short for two camera frames", "duration")
     assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("where", ["out_is_a_file", "run_is_not_ours", "recording_is_not_ours"])
+def test_demo_checks_its_folders_before_generating_and_offers_no_force(where, tmp_path, capsys, monkeypatch):
+    """demo generated its recording (a minute) before finding run/ was someone else's, then told the user to
+    give --force, which demo does not have; an --out that is a file gave 'File exists'."""
+    out = tmp_path / "demo"
+    if where == "out_is_a_file":
+        out.write_text("mine")
+        named, fragment = out, "must be a folder, but a file of that name exists"
+    else:
+        folder = out / ("run" if where == "run_is_not_ours" else "recording")
+        folder.mkdir(parents=True)
+        (folder / "notes.txt").write_text("mine")
+        named, fragment = folder, "was not written by fusion-vo; give another --out"
+
+    def no_generation(*args, **kwargs):
+        raise AssertionError("the demo recording was generated before the folders were checked")
+
+    monkeypatch.setattr("fusion_vo.simulation.simulate", no_generation)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "demo", "--out", out)
+    assert_error(status, err, str(named), fragment)
+    assert "--force" not in err
+    assert snapshot(tmp_path) == before
