@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo import schema
     from fusion_vo.geometry.camera import load_yaml
     from fusion_vo.simulation import SimulationOptions, simulate
+    from fusion_vo.simulation.robot import SHAPE_OPTIONS
     from fusion_vo.simulation.standard import STANDARD
 
     if args.standard:
@@ -82,6 +83,12 @@ def run(args: argparse.Namespace) -> int:
     if args.texture:
         options["texture"] = args.texture
     opts = schema.build(SimulationOptions, options, args.config)
+    for key, profiles in SHAPE_OPTIONS.items():  # an option the profile ignores would be silently lost
+        if getattr(opts, key) is not None and profile not in profiles:
+            given = "--duration" if key == "duration" and args.duration is not None else (
+                f"-O {key}" if any(o.split("=", 1)[0].strip() == key for o in args.option) else None)
+            raise InputError(f"{given or repr(key)}: not used by the '{profile}' profile (only by "
+                             f"{', '.join(profiles)})", None if given else args.config)
     if args.print_config:
         model = schema.model_of(SimulationOptions)
         header = f"# fusion-vo simulate options (profile {profile}, seed {seed})"

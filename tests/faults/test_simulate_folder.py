@@ -76,7 +76,7 @@ def test_a_negative_seed_is_a_usage_error_naming_the_option(command, tmp_path, c
 def test_simulate_a_drive_shorter_than_two_frames_is_an_error(profile, duration, tmp_path, capsys):
     """--duration 1e-9 was an internal error (IndexError); 0.001 s wrote a one-frame recording nothing can run on."""
     before = snapshot(tmp_path)
-    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY[2:], "--profile", profile, "--duration", duration)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY[4:], "--profile", profile, "--duration", duration)
     assert_error(status, err, f"'{profile}' drive lasts", "too short for two camera frames", "duration")
     assert snapshot(tmp_path) == before
 
@@ -103,4 +103,15 @@ def test_demo_checks_its_folders_before_generating_and_offers_no_force(where, tm
     status, _, err = cli(capsys, "demo", "--out", out)
     assert_error(status, err, str(named), fragment)
     assert "--force" not in err
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("option, named", [(("--duration", "5"), "--duration"), (("-O", "side=2"), "-O side"),
+                                           (("-O", "radius = 0.2"), "-O radius")])
+def test_simulate_a_shape_option_the_profile_ignores_is_an_error(option, named, tmp_path, capsys):
+    """'--profile straight --duration 5' silently drove the default 1 m instead (the option only shapes random
+    and standstill drives)."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, *option)
+    assert_error(status, err, f"{named}: not used by the 'straight' profile", "(only by ")
     assert snapshot(tmp_path) == before
