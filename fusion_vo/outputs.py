@@ -82,9 +82,23 @@ def _random_name(prefix: str) -> str:
     return f"{prefix}{secrets.token_hex(4)}"
 
 
-def make_folder(path: str | Path) -> Path:
-    """Create a folder and its parents (mode ``0o777`` less the umask); an existing folder is fine."""
+def check_folder_target(path: str | Path, what: str = "output folder") -> Path:
+    """Raise :class:`InputError` if the folder ``path`` cannot be created because it, or a folder above it,
+    is a file (checked before a command's work, and by :func:`make_folder`)."""
     path = Path(path)
+    for p in (path, *path.parents):
+        if os.path.lexists(p):
+            if not p.is_dir():
+                where = "a file of that name exists" if p == path else f"{p} is a file"
+                raise InputError(f"the {what} must be a folder, but {where}", path)
+            break
+    return path
+
+
+def make_folder(path: str | Path, what: str = "output folder") -> Path:
+    """Create a folder and its parents (mode ``0o777`` less the umask); an existing folder is fine, a file
+    in the way is an :class:`InputError`."""
+    path = check_folder_target(path, what)
     path.mkdir(parents=True, exist_ok=True)
     return path
 

@@ -395,3 +395,21 @@ def test_umbmark_on_runs_that_are_not_the_two_squares_is_refused(pristine, tmp_p
     status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--ccw", other, "--out", out)
     assert_error(status, err, "--ccw is used only with --method umbmark")
     assert not out.exists()
+
+
+# ------------------------------------------------------------------ an output folder that is a file
+@pytest.mark.parametrize("under", [False, True], ids=["a_file", "under_a_file"])
+def test_compare_out_that_is_a_file_says_so_before_evaluating(under, pristine_run, tmp_path, capsys, monkeypatch):
+    """It evaluated every run, then said only 'File exists'."""
+    taken = tmp_path / "taken"
+    taken.write_text("mine")
+    out = taken / "cmp" if under else taken
+
+    def no_evaluation(*args, **kwargs):
+        raise AssertionError("the runs were evaluated before the output folder was checked")
+
+    monkeypatch.setattr("fusion_vo.evaluation.compare.evaluate_trajectories", no_evaluation)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+    assert_error(status, err, str(out), "must be a folder, but", f"{taken} is a file" if under else "a file of that name")
+    assert snapshot(tmp_path) == before
