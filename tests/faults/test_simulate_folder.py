@@ -115,3 +115,16 @@ def test_simulate_a_shape_option_the_profile_ignores_is_an_error(option, named, 
     status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, *option)
     assert_error(status, err, f"{named}: not used by the 'straight' profile", "(only by ")
     assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("option, fragment", [
+    ("start_time_ns=-5", "option 'start_time_ns' must lie in 0 .. 2^63 - 1"),
+    ("start_time_ns=9223372036854775807", "would run past 2^63 ns"),  # the stamps wrapped round to negative
+    ("featureless_time=[2, 1]", "option 'featureless_time' is [t0, t1] with t0 <= t1"),
+])
+def test_simulate_options_that_would_write_an_unreadable_recording_are_errors(option, fragment, tmp_path, capsys):
+    """Negative or wrapped-round timestamps were written (and refused by every command reading them)."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, "-O", option)
+    assert_error(status, err, fragment)
+    assert snapshot(tmp_path) == before
