@@ -224,12 +224,15 @@ class Grid:
         The full configuration of each parameter set.
     path : Path or None
         The grid file (for messages).
+    drawn : int
+        Parameter sets drawn by ``random: N`` before repeated draws were merged (0 for ``grid:``).
     """
 
     keys: list[str]
     sets: list[ParameterSet]
     configs: list[RunConfig]
     path: Path | None = None
+    drawn: int = 0
 
 
 def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
@@ -282,7 +285,7 @@ def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
         configs.append(apply_values(base, {**fixed, **values}, path))
         sets.append(ParameterSet(f"p{len(sets):0{width}d}", values))
     log.info("%d parameter sets over %s", len(sets), ", ".join(keys))
-    return Grid(keys=keys, sets=sets, configs=configs, path=path)
+    return Grid(keys=keys, sets=sets, configs=configs, path=path, drawn=0 if has_grid else len(combos))
 
 
 def load_grid(path: str | Path, base: RunConfig) -> Grid:

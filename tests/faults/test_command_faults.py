@@ -413,3 +413,13 @@ def test_compare_out_that_is_a_file_says_so_before_evaluating(under, pristine_ru
     status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
     assert_error(status, err, str(out), "must be a folder, but", f"{taken} is a file" if under else "a file of that name")
     assert snapshot(tmp_path) == before
+
+
+def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(pristine, tmp_path, capsys):
+    """'random: 6' over two choices silently ran two parameter sets."""
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("random: 6\nseed: 0\nranges:\n  fusion.max_gap: [0.25, 0.5]\n")
+    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
+                           "--no-dashboard", "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    assert f"note: {grid}: 'random: 6' drew 2 distinct parameter sets; each runs once" in out
