@@ -71,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
     if args.config:
         options.update(load_yaml(args.config))
     for item in args.option:
-        if "=" not in item:
+        key, _, value = item.partition("=")
+        if "=" not in item or not key.strip():
             raise InputError(f"--option needs KEY=VALUE, got '{item}'")
-        key, value = item.split("=", 1)
         try:
             options[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:

@@ -128,3 +128,11 @@ def test_simulate_options_that_would_write_an_unreadable_recording_are_errors(op
     status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, "-O", option)
     assert_error(status, err, fragment)
     assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("item", ["width", "=3", " =3"])
+def test_simulate_an_option_without_a_key_names_the_option(item, tmp_path, capsys):
+    """'-O =3' was reported as '(top level): unknown key' followed by every option's name."""
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, "-O", item)
+    assert_error(status, err, f"--option needs KEY=VALUE, got '{item}'")
+    assert not (tmp_path / "rec").exists()
