@@ -83,12 +83,14 @@ def run(args: argparse.Namespace) -> int:
     if args.texture:
         options["texture"] = args.texture
     opts = schema.build(SimulationOptions, options, args.config)
-    for key, profiles in SHAPE_OPTIONS.items():  # an option the profile ignores would be silently lost
+    # a shape option given on the command line that the profile ignores would be silently lost (a --config
+    # file may hold them all: --print-config writes every option, and its output is meant to be read back)
+    for key, profiles in SHAPE_OPTIONS.items():
         if getattr(opts, key) is not None and profile not in profiles:
             given = "--duration" if key == "duration" and args.duration is not None else (
                 f"-O {key}" if any(o.split("=", 1)[0].strip() == key for o in args.option) else None)
-            raise InputError(f"{given or repr(key)}: not used by the '{profile}' profile (only by "
-                             f"{', '.join(profiles)})", None if given else args.config)
+            if given:
+                raise InputError(f"{given}: not used by the '{profile}' profile (only by {', '.join(profiles)})")
     if args.print_config:
         model = schema.model_of(SimulationOptions)
         header = f"# fusion-vo simulate options (profile {profile}, seed {seed})"
