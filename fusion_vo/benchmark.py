@@ -45,6 +45,20 @@ from fusion_vo.recording.csvio import read_frame_list
 
 log = logging.getLogger(__name__)
 
+#: below this share of frame pairs tracked, a run's frames per second are not a speed (frames that
+#: measured nothing, e.g. textureless ones, cost almost nothing) and its row says so instead of a rate
+MIN_TRACKED = 0.5
+
+
+def tracked_share(frames: int, failed: int) -> float:
+    """The share of the ``frames - 1`` frame pairs of a run that were measured, from its failures."""
+    return min(max(1.0 - failed / max(frames - 1, 1), 0.0), 1.0)
+
+
+def not_a_speed(share: float) -> str:
+    """What a row shows instead of a rate when fewer than :data:`MIN_TRACKED` of its frame pairs were tracked."""
+    return f"not a speed: {100 * share:.0f} % of frame pairs tracked"
+
 
 @dataclass
 class FrontendTiming:
@@ -109,10 +123,13 @@ def _time_stages(frames, n, fe, geometry) -> tuple[float, float, float, int, lis
 
 
 def format_timing(t: FrontendTiming) -> str:
+    if t.ok_fraction < MIN_TRACKED:
+        rate = f"{not_a_speed(t.ok_fraction)};"
+    else:
+        rate = (f"{t.fps_end_to_end:7.1f} frames/s end to end, {t.fps_without_decode:7.1f} without decode; "
+                f"ok {100 * t.ok_fraction:5.1f} %;")
     return (f"{t.frontend:<9} {t.frames:5d} frames  decode {t.decode_ms:6.3f} ms  frontend {t.frontend_ms:6.3f} ms  "
-            f"geometry {t.geometry_ms:6.3f} ms  ->  {t.fps_end_to_end:7.1f} frames/s end to end, "
-            f"{t.fps_without_decode:7.1f} without decode; ok {100 * t.ok_fraction:5.1f} %; "
-            f"peak RSS by quarter {t.rss_mb} MB")
+            f"geometry {t.geometry_ms:6.3f} ms  ->  {rate} peak RSS by quarter {t.rss_mb} MB")
 
 
 def summary_table(timings: list[FrontendTiming]) -> str:
@@ -167,6 +184,11 @@ class EndToEnd:
     rss_mb: list = field(default_factory=list)
     cpu_ms: list = field(default_factory=list)
     thread_ms: list = field(default_factory=list)
+
+    @property
+    def tracked(self) -> float:
+        """The share of frame pairs measured (last repeat): below :data:`MIN_TRACKED` the rate is not a speed."""
+        return tracked_share(self.frames, self.failed)
 
     @property
     def label(self) -> str:
@@ -263,7 +285,7 @@ def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: Bas
             base.cpu_ms.append(cpu)
             base.thread_ms.append(own)
             if report:
-                report(f"repeat {r + 1}/{repeats}: {base.label} {fps:.1f} frames/s")
+                report(f"repeat {r + 1}/{repeats}: {base.label} {_rate(base, fps)}")
         best = max(base.fps[-1] for base in bases)
         for row in rows:
             fps, row.failed, row.rss_mb, cpu, own = time_run(sequence, row.name, row.threads)
@@ -272,8 +294,20 @@ def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: Bas
             row.thread_ms.append(own)
             row.ratio.append(fps / best)
             if report:
-                report(f"repeat {r + 1}/{repeats}: {row.label} {fps:.1f} frames/s ({row.ratio[-1]:.2f}x)")
+                report(f"repeat {r + 1}/{repeats}: {row.label} {_rate(row, fps, row.ratio[-1])}")
     return [*bases, *rows]
+
+
+def _rate(row: EndToEnd, fps: float, ratio: float | None = None) -> str:
+    """A progress line's rate: frames per second (and the ratio), or why there is none."""
+    if row.tracked < MIN_TRACKED:
+        return f"({not_a_speed(row.tracked)})"
+    return f"{fps:.1f} frames/s" + ("" if ratio is None else f" ({ratio:.2f}x)")
+
+
+def not_comparable(rows: list[EndToEnd]) -> list[EndToEnd]:
+    """The rows of :func:`compare_end_to_end` whose rate is not a speed (too few frame pairs tracked)."""
+    return [row for row in rows if row.tracked < MIN_TRACKED]
 
 
 def _span(values: list[float], fmt: str) -> str:
@@ -287,11 +321,15 @@ def end_to_end_table(rows: list[EndToEnd]) -> str:
     """A Markdown table: frames/s and the ratio to the plain script (median, and range over repeats)."""
     lines = ["| run | frames/s end to end | x plain script (the faster run) | CPU time per frame | of it in the "
              "calling thread | failed frames | memory after each quarter |", "|---|---|---|---|---|---|---|"]
+    bases_measured = all(row.tracked >= MIN_TRACKED for row in rows if row.baseline)
     for row in rows:
         ratio = _span(row.ratio, ".2f") if row.ratio else "–"
+        if row.ratio and not (bases_measured and row.tracked >= MIN_TRACKED):
+            ratio = "not comparable"
+        fps = _span(row.fps, ".0f") if row.tracked >= MIN_TRACKED else not_a_speed(row.tracked)
         memory = " / ".join(f"{m:.0f}" for m in row.rss_mb) + " MB" if row.rss_mb else "–"
         own = f"{_span(row.thread_ms, '.2f')} ms" if row.thread_ms else "–"
-        lines.append(f"| {row.label} | {_span(row.fps, '.0f')} | {ratio} | {_span(row.cpu_ms, '.2f')} ms | {own} "
+        lines.append(f"| {row.label} | {fps} | {ratio} | {_span(row.cpu_ms, '.2f')} ms | {own} "
                      f"| {row.failed} | {memory} |")
     return "\n".join(lines)
 
@@ -335,6 +373,8 @@ def bound_table(rows: list[EndToEnd], cores: int | None = None) -> str:
         one, every = TARGETS.get(split_spec(row.name)[0], (float("nan"), float("nan")))
         target = one if row.threads == 1 else every
         reach = "yes" if statistics.median(ceiling) >= target else "no"
+        if row.tracked < MIN_TRACKED or any(b.tracked < MIN_TRACKED for b in bases):
+            reach = "not comparable: too few frame pairs tracked"
         lines.append(f"| {row.label} | {_span(row.cpu_ms, '.2f')} / {_span(row.thread_ms, '.2f')} ms | "
                      f"{_span(bound, '.2f')} ms | {_span(plain, '.2f')} ms | {_span(ceiling, '.2f')} | {target:g} | "
                      f"{reach} |")

@@ -62,3 +62,24 @@ def check_file(path: str | Path) -> Path:
     if not stat.S_ISREG(st.st_mode):
         raise InputError("not a regular file", path)
     return path
+
+
+def check_folder(path: str | Path, what: str = "folder") -> Path:
+    """Raise :class:`InputError` naming ``path`` unless it is a folder; ``what`` names the kind of folder
+    expected (``"run folder"``, ``"recording folder"``) in the message.
+
+    The message says what is wrong: not found, a broken symbolic link, a file (not a folder), or the
+    system's reason.
+    """
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InputError("symbolic link loop", path) from None
+        if exc.errno == errno.ENOENT:
+            raise InputError("broken symbolic link" if os.path.islink(path) else f"{what} not found", path) from None
+        raise InputError(f"cannot open {what} ({exc.strerror})", path) from None
+    if not stat.S_ISDIR(st.st_mode):
+        raise InputError(f"is a file, not a {what}", path)
+    return path

@@ -82,9 +82,23 @@ def _random_name(prefix: str) -> str:
     return f"{prefix}{secrets.token_hex(4)}"
 
 
-def make_folder(path: str | Path) -> Path:
-    """Create a folder and its parents (mode ``0o777`` less the umask); an existing folder is fine."""
+def check_folder_target(path: str | Path, what: str = "output folder") -> Path:
+    """Raise :class:`InputError` if the folder ``path`` cannot be created because it, or a folder above it,
+    is a file (checked before a command's work, and by :func:`make_folder`)."""
     path = Path(path)
+    for p in (path, *path.parents):
+        if os.path.lexists(p):
+            if not p.is_dir():
+                where = "a file of that name exists" if p == path else f"{p} is a file"
+                raise InputError(f"the {what} must be a folder, but {where}", path)
+            break
+    return path
+
+
+def make_folder(path: str | Path, what: str = "output folder") -> Path:
+    """Create a folder and its parents (mode ``0o777`` less the umask); an existing folder is fine, a file
+    in the way is an :class:`InputError`."""
+    path = check_folder_target(path, what)
     path.mkdir(parents=True, exist_ok=True)
     return path
 
@@ -143,7 +157,8 @@ def check_outside(target: str | Path, inputs: Iterable[str | Path], what: str = 
 
 
 def check_replaceable(target: str | Path, marker: str, force: bool = False,
-                      inputs: Iterable[str | Path] = (), what: str = "output folder") -> None:
+                      inputs: Iterable[str | Path] = (), what: str = "output folder",
+                      remedy: str = "give a new folder, or --force to replace it") -> None:
     """Raise :class:`InputError` unless ``target`` may be written (and an existing one replaced).
 
     Parameters
@@ -153,6 +168,8 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
     force : allow replacing a non-empty folder without the marker.
     inputs : paths the command reads; the target may not be or contain any of them.
     what : words for the folder in messages.
+    remedy : what the message tells the user to do about a folder fusion-vo did not write (a command
+        without ``--force`` says so).
     """
     target = Path(target)
     resolved = target.resolve()
@@ -177,8 +194,7 @@ def check_replaceable(target: str | Path, marker: str, force: bool = False,
         except OSError as exc:
             raise InputError(f"cannot read the {what} ({exc.strerror})", target) from None
         if not empty:
-            raise InputError(f"the {what} exists, is not empty and was not written by fusion-vo; "
-                             f"give a new folder, or --force to replace it", target)
+            raise InputError(f"the {what} exists, is not empty and was not written by fusion-vo; {remedy}", target)
 
 
 class _LockedStaging:

@@ -157,8 +157,29 @@ def _as_list(key: str, values, path: Path | None) -> list:
     if isinstance(values, (list, tuple)):
         if not values:
             raise InputError(f"grid key '{key}' has no values to try", path)
+        firsts: dict[str, int] = {}
+        for i, value in enumerate(values):
+            first = firsts.setdefault(yaml.safe_dump(_plain(value), sort_keys=True), i)
+            if first != i:  # every combination would be run twice, or silently once
+                raise InputError(f"grid key '{key}': value {value!r} given twice (values {first + 1} and {i + 1})",
+                                 path, _item_line(path, "grid", key, i))
         return list(values)
     return [values]
+
+
+def _item_line(path: Path | None, section: str, key: str, index: int) -> int | None:
+    """The line (1-based) of item ``index`` of ``section: {key: [...]}`` in the YAML file ``path``, if found."""
+    try:
+        root = yaml.compose(Path(path).read_text(encoding="utf-8")) if path is not None else None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return None
+    for node in (section, key):
+        if not isinstance(root, yaml.MappingNode):
+            return None
+        root = next((v for k, v in root.value if isinstance(k, yaml.ScalarNode) and k.value == node), None)
+    if not isinstance(root, yaml.SequenceNode) or index >= len(root.value):
+        return None
+    return root.value[index].start_mark.line + 1
 
 
 def _draw(key: str, spec, rng: np.random.Generator, path: Path | None):
@@ -203,12 +224,15 @@ class Grid:
         The full configuration of each parameter set.
     path : Path or None
         The grid file (for messages).
+    drawn : int
+        Parameter sets drawn by ``random: N`` before repeated draws were merged (0 for ``grid:``).
     """
 
     keys: list[str]
     sets: list[ParameterSet]
     configs: list[RunConfig]
     path: Path | None = None
+    drawn: int = 0
 
 
 def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
@@ -261,7 +285,7 @@ def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
         configs.append(apply_values(base, {**fixed, **values}, path))
         sets.append(ParameterSet(f"p{len(sets):0{width}d}", values))
     log.info("%d parameter sets over %s", len(sets), ", ".join(keys))
-    return Grid(keys=keys, sets=sets, configs=configs, path=path)
+    return Grid(keys=keys, sets=sets, configs=configs, path=path, drawn=0 if has_grid else len(combos))
 
 
 def load_grid(path: str | Path, base: RunConfig) -> Grid:

@@ -23,7 +23,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_folder
 
 log = logging.getLogger(__name__)
 
@@ -84,8 +84,10 @@ def recording_labels(recordings: list[str | Path]) -> list[tuple[Path, str]]:
     seen: dict[Path, str] = {}
     for given in recordings:
         path = Path(given).expanduser().absolute()
-        if not path.is_dir():
-            raise InputError("recording folder not found", given)
+        try:
+            check_folder(path, "recording folder")
+        except InputError as exc:
+            raise InputError(exc.message, given) from None
         real = path.resolve()
         if real in seen:
             raise InputError(f"recording listed twice (also as {seen[real]})", given)

@@ -166,22 +166,40 @@ def _end_pose(phl: np.ndarray, phr: np.ndarray, r_l: float, r_r: float, b: float
     return se2.integrate(inc)[-1]
 
 
-def umbmark(cw: tuple[WheelData, PoseData], ccw: tuple[WheelData, PoseData]) -> WheelCalibration:
+#: the least true turn [deg] of each UMBmark run, in its direction (a square turns 360 deg)
+UMBMARK_MIN_TURN_DEG = 270.0
+
+
+def umbmark(cw: tuple[WheelData, PoseData], ccw: tuple[WheelData, PoseData],
+            sources: tuple = (None, None)) -> WheelCalibration:
     """UMBmark: ``Ed`` and ``Eb`` from the end-position errors of a clockwise and a counter-clockwise square.
 
     Parameters
     ----------
     cw, ccw : the encoder data and ground truth of each run (the ground truth gives the true end position
         relative to the start).
+    sources : the recordings of the two runs, named by the errors.
+
+    Raises
+    ------
+    InputError
+        If a run does not turn at least :data:`UMBMARK_MIN_TURN_DEG` in its direction by its ground truth
+        (a straight drive, or the two squares swapped): the fit has nothing to separate ``Ed`` and ``Eb``
+        with and its numbers are meaningless.
     """
     runs = []
-    for name, (wheel, gt) in (("cw", cw), ("ccw", ccw)):
+    for (name, (wheel, gt)), source in zip((("cw", cw), ("ccw", ccw)), sources):
         t, phl, phr = wheel_angles(wheel)
         inside = (t >= gt.t[0]) & (t <= gt.t[-1])
         t, phl, phr = t[inside], phl[inside], phr[inside]
         if len(t) < 2:
-            raise InputError(f"the {name} run's encoder samples do not overlap its ground truth")
+            raise InputError(f"the {name} run's encoder samples do not overlap its ground truth", source)
         p = _pose_at(gt, t[[0, -1]])
+        turn = math.degrees(p[1, 2] - p[0, 2]) * (-1 if name == "cw" else 1)
+        if turn < UMBMARK_MIN_TURN_DEG:
+            way = "clockwise" if name == "cw" else "counter-clockwise"
+            raise InputError(f"not a {way} square: the {name} run turns {round(turn)} deg {way} by its ground truth "
+                             f"(UMBmark needs about 360; at least {UMBMARK_MIN_TURN_DEG:.0f})", source)
         runs.append((name, phl, phr, _relative(p[:1], p[1:])[0]))
     nom = cw[0].config
     r_mean = 0.5 * (nom.wheel_radius_left + nom.wheel_radius_right)

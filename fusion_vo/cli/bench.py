@@ -42,7 +42,10 @@ def register(sub) -> None:
                                    "benchmarks/baseline_opencv.py run on the same frames in the same run; then "
                                    "the time per frame of decoding, frontend and ground geometry on one thread. "
                                    f"Default recording: the standard '{STANDARD}' drive (generated, 1201 frames "
-                                   "of 640x360), as benchmarks/bench_frontends.py.")
+                                   "of 640x360), as benchmarks/bench_frontends.py. A run that tracks fewer than "
+                                   "half of the frame pairs (textureless or blurred frames) gets no rate: its rows "
+                                   "say 'not a speed' (and their ratios 'not comparable'), and the command ends "
+                                   "with an error naming those runs and exit status 2.")
     p.add_argument("sequence", nargs="?", help=f"recording folder (default: generate the standard '{STANDARD}')")
     p.add_argument("--frontend", type=frontend_list, default=list(FRONTENDS),
                    help="comma-separated frontends (default: klt,features)")
@@ -54,7 +57,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fusion_vo.benchmark import load_baseline, run_benchmark
+    from fusion_vo.benchmark import MIN_TRACKED, load_baseline, not_comparable, run_benchmark
     from fusion_vo.recording import Recording
 
     with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
@@ -69,6 +72,12 @@ def run(args: argparse.Namespace) -> int:
             if not rec.has_camera():
                 raise InputError("this recording has no camera stream (cam0/data.csv is missing)", rec.path)
             rec.camera, rec.frame_times  # noqa: B018 -- a one-line error for a bad sensor.yaml or data.csv
-        run_benchmark(seq, args.frontend, load_baseline(), args.threads, args.repeats, args.frames,
-                      out=lambda line: print(line, flush=True))
+        rows = run_benchmark(seq, args.frontend, load_baseline(), args.threads, args.repeats, args.frames,
+                             out=lambda line: print(line, flush=True))
+    unmeasured = not_comparable(rows)
+    if unmeasured:
+        runs = "; ".join(f"{row.label} ({100 * row.tracked:.0f} %)" for row in unmeasured)
+        raise InputError(f"no speed measured: fewer than {100 * MIN_TRACKED:.0f} % of the frame pairs tracked by "
+                         f"{runs}; a rate over frames that measured nothing (textureless, blurred) is not a speed",
+                         args.sequence or seq)
     return 0

@@ -198,7 +198,12 @@ def run_wheels(args: argparse.Namespace) -> int:
         if not args.ccw:
             raise InputError("UMBmark needs the counter-clockwise square too (--ccw SEQ2)")
         other = Recording(args.ccw)
-        r = umbmark((rec.wheel(), rec.groundtruth()), (other.wheel(), other.groundtruth()))
+        if other.path.resolve() == rec.path.resolve():
+            raise InputError("--ccw: the same recording as SEQ (UMBmark needs a clockwise and a counter-clockwise "
+                             "square)", args.ccw)
+        r = umbmark((rec.wheel(), rec.groundtruth()), (other.wheel(), other.groundtruth()), sources=(rec.path, other.path))
+    elif args.ccw:
+        raise InputError("--ccw is used only with --method umbmark")
     else:
         r = wheels_from_groundtruth(rec.wheel(), rec.groundtruth())
     print(r.summary())

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import RunConfig
+from fusion_vo.errors import InputError
 from fusion_vo.cli.arguments import random_seed
 
 DEMO_PROFILE = "square"
@@ -26,11 +28,18 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fusion_vo.pipeline import run_pipeline
+    from fusion_vo.outputs import check_replaceable
+    from fusion_vo.pipeline import RUN_MARKER, run_pipeline
+    from fusion_vo.recording.writer import MARKER as RECORDING_MARKER
     from fusion_vo.simulation import simulate
 
     out = Path(args.out)
     seq = out / "recording"
+    # both folders are checked before the recording is generated (a minute's work); demo has no --force
+    if os.path.lexists(out) and not out.is_dir():
+        raise InputError("the demo folder must be a folder, but a file of that name exists", out)
+    check_replaceable(seq, RECORDING_MARKER, what="recording folder", remedy="give another --out")
+    check_replaceable(out / "run", RUN_MARKER, inputs=[seq], remedy="give another --out")
     t0 = time.perf_counter()
     print(f"generating the demo recording ({DEMO_PROFILE} profile, seed {args.seed}) in {seq} ...")
     simulate(seq, profile=DEMO_PROFILE, seed=args.seed)

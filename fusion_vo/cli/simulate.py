@@ -60,6 +60,7 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo import schema
     from fusion_vo.geometry.camera import load_yaml
     from fusion_vo.simulation import SimulationOptions, simulate
+    from fusion_vo.simulation.robot import SHAPE_OPTIONS
     from fusion_vo.simulation.standard import STANDARD
 
     if args.standard:
@@ -70,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
     if args.config:
         options.update(load_yaml(args.config))
     for item in args.option:
-        if "=" not in item:
+        key, _, value = item.partition("=")
+        if "=" not in item or not key.strip():
             raise InputError(f"--option needs KEY=VALUE, got '{item}'")
-        key, value = item.split("=", 1)
         try:
             options[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:
@@ -82,6 +83,14 @@ def run(args: argparse.Namespace) -> int:
     if args.texture:
         options["texture"] = args.texture
     opts = schema.build(SimulationOptions, options, args.config)
+    # a shape option given on the command line that the profile ignores would be silently lost (a --config
+    # file may hold them all: --print-config writes every option, and its output is meant to be read back)
+    for key, profiles in SHAPE_OPTIONS.items():
+        if getattr(opts, key) is not None and profile not in profiles:
+            given = "--duration" if key == "duration" and args.duration is not None else (
+                f"-O {key}" if any(o.split("=", 1)[0].strip() == key for o in args.option) else None)
+            if given:
+                raise InputError(f"{given}: not used by the '{profile}' profile (only by {', '.join(profiles)})")
     if args.print_config:
         model = schema.model_of(SimulationOptions)
         header = f"# fusion-vo simulate options (profile {profile}, seed {seed})"

@@ -50,6 +50,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"best: {best}")
         return finish(frame, args.out, started)
     grid = load_grid(args.grid, config)
+    if len(grid.sets) < grid.drawn:  # random draws among few choices repeat: each distinct set runs once
+        print(f"note: {args.grid}: 'random: {grid.drawn}' drew {len(grid.sets)} distinct parameter sets; "
+              "each runs once")
     plan_sweep(args.recordings, grid, args.out)  # every input error before the cluster starts
     with open_client(announce=announce, **client_options(args)) as client, batch_progress() as update:
         frame = run_sweep(args.recordings, args.grid, config, client, out=args.out, rank=args.rank,

@@ -15,7 +15,7 @@ from evo.core.trajectory import PoseTrajectory3D
 
 from fusion_vo.evaluation.evaluate import evaluate_trajectories, resolve_sequence
 from fusion_vo.errors import InputError
-from fusion_vo.outputs import StagedFiles, check_outside
+from fusion_vo.outputs import StagedFiles, check_folder_target, check_outside, make_folder
 from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, find_trajectories, read_groundtruth, read_run_config,
                                      write_metrics)
 from fusion_vo.evaluation.metrics import to_planar
@@ -75,7 +75,7 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         As :func:`fusion_vo.evaluation.evaluate.evaluate_run`, for the first run at fault.
     """
     run_dirs = [Path(d) for d in run_dirs]
-    out_dir = Path(out_dir)
+    out_dir = check_folder_target(out_dir)  # before the evaluation's work
     table: dict[str, dict[str, dict]] = {}
     overlay: dict[str, dict[str, PoseTrajectory3D]] = {}
     sequences = []
@@ -92,7 +92,7 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     check_outside(out_dir, sorted(set(sequences)))
     shared = len(set(sequences)) == 1
     created = not out_dir.exists()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     try:  # the three files together or none of them (an error or Ctrl-C keeps an earlier comparison whole)
         with StagedFiles(out_dir, what="output folder") as staged:
             write_metrics(staged.path / "compare.json", table)

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from evo.core.trajectory import PoseTrajectory3D
 
-from fusion_vo.errors import InputError
+from fusion_vo.errors import InputError, check_folder
 from fusion_vo.evaluation import plots
 from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, FrameVelocities, find_trajectories, read_groundtruth,
                                      read_run_config, read_tum, read_velocities, write_metrics)
@@ -79,8 +79,7 @@ def resolve_sequence(run_dir: Path, config: dict, sequence_dir: str | Path | Non
             sequence = run_dir / sequence
     else:
         sequence = Path(sequence_dir)
-    if not sequence.is_dir():
-        raise InputError("recording folder not found", sequence)
+    check_folder(sequence, "recording folder")
     if not has_groundtruth(sequence) and not (sequence / "gps0" / "data.csv").is_file():
         raise InputError("recording has no ground truth (and no GPS fixes to score against)",
                          sequence / GROUNDTRUTH_CSV)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from frontends.base import MotionStatus
-from fusion_vo.errors import InputError, check_file
+from fusion_vo.errors import InputError, check_file, check_folder
 from fusion_vo.outputs import write_atomic  # noqa: F401  (the one atomic writer, used by plots and report)
 
 if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
@@ -285,9 +285,7 @@ def find_trajectories(run_dir: str | Path) -> dict[str, Path]:
     InputError
         If ``run_dir`` is not a folder or holds no ``.tum`` file.
     """
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise InputError("run folder not found", run_dir)
+    run_dir = check_folder(run_dir, "run folder")
     files = {p.stem: p for p in sorted(run_dir.glob("*.tum"))}
     if not files:
         raise InputError("no trajectories (*.tum) in run folder", run_dir)

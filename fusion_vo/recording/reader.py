@@ -149,10 +149,15 @@ class Recording:
             self._frame_list = read_frame_list(path)
             if len(self._frame_list[0]) == 0:
                 raise InputError("no frames listed", path)
+            first: dict[str, int] = {}
+            from_files = (self.path / "cam0" / "data").is_dir()  # (a video's rows are its frames in order)
             for name, line in zip(self._frame_list[1], self._frame_list[2]):
                 if Path(name).is_absolute() or ".." in Path(name).parts:
                     raise InputError(f"frame '{name}' is outside cam0/data/ (give a name relative to cam0/data/, "
                                      "without '..')", path, int(line))
+                if from_files and first.setdefault(os.path.normpath(name), int(line)) != line:
+                    raise InputError(f"frame '{name}' listed again (first on line {first[os.path.normpath(name)]}): "
+                                     "one image cannot be taken at two times", path, int(line))
         return self._frame_list
 
     @property

@@ -325,6 +325,10 @@ class SimulationOptions:
         for rect in self.featureless:
             if not isinstance(rect, (list, tuple)) or len(rect) != 4:
                 raise ValueError("option 'featureless' is a list of [x_min, y_min, x_max, y_max] rectangles")
+        if self.featureless_time is not None and self.featureless_time[1] < self.featureless_time[0]:
+            raise ValueError("option 'featureless_time' is [t0, t1] with t0 <= t1")
+        if not 0 <= self.start_time_ns < 2**63:  # the recording's timestamps are nanoseconds in 0 .. 2^63
+            raise ValueError(f"option 'start_time_ns' must lie in 0 .. 2^63 - 1, not {self.start_time_ns}")
 
     @classmethod
     def from_dict(cls, d: dict) -> "SimulationOptions":
@@ -433,6 +437,13 @@ def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
 def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOptions, rng: np.random.Generator) -> dict:
     motion = _motion_for(profile, o, rng)
     t_end = motion.t[-1]
+    if len(motion.t) < 2 or t_end - o.exposure_time < 1.0 / o.camera_rate:  # a recording is at least a frame pair
+        exposure = f" exposed {o.exposure_time:g} s each" if o.exposure_time > 0.5 / o.camera_rate else ""
+        raise ValueError(f"the '{profile}' drive lasts {t_end:.3g} s: too short for two camera frames at "
+                         f"{o.camera_rate:g} Hz{exposure} (make it longer: duration, length, side, radius or angle)")
+    if o.start_time_ns + math.ceil(t_end * 1e9) + 10**9 >= 2**63:  # (a second's margin for the sensors' stamps)
+        raise ValueError(f"option 'start_time_ns': the drive's {t_end:.3g} s would run past 2^63 ns, the last "
+                         "timestamp a recording can hold")
     T_BS = camera_mount(o.lever_arm, o.camera_height, o.tilt_x_deg, o.tilt_y_deg, o.lateral_offset)
     ns = lambda t: np.int64(o.start_time_ns) + np.rint(np.asarray(t) * 1e9).astype(np.int64)  # noqa: E731
 

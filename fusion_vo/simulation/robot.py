@@ -213,6 +213,10 @@ def random_drive(lim: Limits, dt: float, rng: np.random.Generator, duration: flo
     return _motion(v, w, dt)
 
 
+#: the shape options each profile takes (the other profiles ignore them)
+SHAPE_OPTIONS = {"duration": ("random", "standstill"), "side": ("square", "umbmark_cw", "umbmark_ccw"),
+                 "radius": ("circle",), "length": ("straight",), "angle": ("turn_in_place",)}
+
 PROFILES = {
     "square": square,
     "circle": circle,

@@ -45,7 +45,15 @@ def folder_named_like_a_trajectory(run):
     return "extra.tum", "is a folder"
 
 
-RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory]
+def file_given_as_the_run(run):
+    """A file where the run folder should be (a trajectory, say) is not a "run folder not found"."""
+    shutil.rmtree(run)
+    run.write_text("0 0 0 0 0 0 0 1\n")
+    return str(run), "is a file, not a run folder"
+
+
+RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory,
+              file_given_as_the_run]
 
 
 def _export(run, tmp_path):
@@ -321,3 +329,97 @@ def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
     status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
     assert_error(status, err, "wheel0/data.csv", "not a turn in place")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("what", ["plain_folder", "text_file"])
+@pytest.mark.parametrize("listing", [False, True], ids=["import", "list"])
+def test_import_bag_on_something_that_is_no_bag_says_what_a_bag_is(what, listing, pristine, tmp_path, capsys):
+    if what == "plain_folder":
+        bag, fragment = pristine, "a folder without metadata.yaml"  # a recording given where the bag goes
+    else:
+        bag, fragment = tmp_path / "topics.txt", "does not end in .bag, .mcap or .db3"
+        bag.write_text("/imu/data\n")
+    before = snapshot(tmp_path)
+    args = ["--list"] if listing else [tmp_path / "rec"]
+    status, _, err = cli(capsys, "import-bag", bag, *args)
+    assert_error(status, err, str(bag), "not a ROS bag", fragment, "ROS 2 bag folder (holding metadata.yaml)")
+    assert "Expected metadata file" not in err
+    assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ sweep: a grid with a value given twice
+@pytest.mark.parametrize("text, line", [("grid:\n  features.detector: [harris, harris, fast]\n", 2),
+                                        ("grid:\n  fusion.max_gap:\n    - 0.25\n    - 0.5\n    - 2.5e-1\n", 5)],
+                         ids=["flow_list", "block_list_same_number"])
+def test_a_sweep_grid_value_given_twice_names_the_file_line_and_key(text, line, pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(text)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid)
+    key = text.split("\n")[1].strip().split(":")[0]
+    assert_error(status, err, f"{grid}:{line}:", f"grid key '{key}'", "given twice")
+    assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ bench: frames that measured nothing
+def test_bench_gives_no_rate_for_frames_that_measured_nothing(recording, pristine, capsys):
+    """Textureless frames cost almost nothing: 2000+ frames/s beside 'ok 0.0 %' was printed as a speed."""
+    import re
+
+    import cv2
+    import numpy as np
+
+    status, out, err = cli(capsys, "bench", pristine, "--repeats", "1", "--threads", "1", "--frontend", "klt")
+    assert status == 0, err  # the unbroken recording is measured
+    assert "not a speed" not in out and re.search(r"\| klt, 1 thread \| \d+ \|", out), out
+
+    for png in (recording / "cam0" / "data").iterdir():
+        cv2.imwrite(str(png), np.full((120, 160), 90, np.uint8))
+    status, out, err = cli(capsys, "bench", recording, "--repeats", "1", "--threads", "1", "--frontend", "klt")
+    assert_error(status, err, str(recording), "no speed measured", "klt, 1 thread (0 %)")
+    assert not re.search(r"\d frames/s", out), out  # no rate anywhere, in the progress lines or the tables
+    assert "| klt, 1 thread | not a speed: 0 % of frame pairs tracked | not comparable |" in out
+    assert "klt          33 frames" in out and "->  not a speed: 0 % of frame pairs tracked" in out
+
+
+# ------------------------------------------------------------------ calibrate wheels: UMBmark without squares
+def test_umbmark_on_runs_that_are_not_the_two_squares_is_refused(pristine, tmp_path, capsys):
+    """A straight drive given as both squares printed a wheel base of 2e60 m (exit 0, and written with --out)."""
+    other = Path(shutil.copytree(pristine, tmp_path / "other"))
+    out = tmp_path / "wheel.yaml"
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--method", "umbmark", "--ccw", other, "--out", out)
+    assert_error(status, err, str(pristine), "not a clockwise square", "turns 0 deg clockwise")
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--method", "umbmark", "--ccw", pristine,
+                         "--out", out)
+    assert_error(status, err, "--ccw", "the same recording")
+    status, _, err = cli(capsys, "calibrate", "wheels", pristine, "--ccw", other, "--out", out)
+    assert_error(status, err, "--ccw is used only with --method umbmark")
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------ an output folder that is a file
+@pytest.mark.parametrize("under", [False, True], ids=["a_file", "under_a_file"])
+def test_compare_out_that_is_a_file_says_so_before_evaluating(under, pristine_run, tmp_path, capsys, monkeypatch):
+    """It evaluated every run, then said only 'File exists'."""
+    taken = tmp_path / "taken"
+    taken.write_text("mine")
+    out = taken / "cmp" if under else taken
+
+    def no_evaluation(*args, **kwargs):
+        raise AssertionError("the runs were evaluated before the output folder was checked")
+
+    monkeypatch.setattr("fusion_vo.evaluation.compare.evaluate_trajectories", no_evaluation)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "compare", pristine_run, "--out", out)
+    assert_error(status, err, str(out), "must be a folder, but", f"{taken} is a file" if under else "a file of that name")
+    assert snapshot(tmp_path) == before
+
+
+def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(pristine, tmp_path, capsys):
+    """'random: 6' over two choices silently ran two parameter sets."""
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("random: 6\nseed: 0\nranges:\n  fusion.max_gap: [0.25, 0.5]\n")
+    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
+                           "--no-dashboard", "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    assert f"note: {grid}: 'random: 6' drew 2 distinct parameter sets; each runs once" in out

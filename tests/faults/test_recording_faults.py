@@ -50,6 +50,12 @@ def duplicate_frame_time(rec):
     return "cam0/data.csv", _set_row(p, 3, _field(p, 2, 0) + "," + _field(p, 3, 1))
 
 
+def frame_listed_twice(rec):
+    """Two rows naming one image: a pair of identical frames reads as a standstill while the robot drives."""
+    p = rec / "cam0" / "data.csv"
+    return "cam0/data.csv", _set_row(p, 4, _field(p, 4, 0) + "," + _field(p, 3, 1))
+
+
 def decreasing_wheel_time(rec):
     p = rec / "wheel0" / "data.csv"
     row = _rows(p)[11].split(",")
@@ -214,7 +220,8 @@ def imu_yaml_noise_nan(rec):
     return "imu0/sensor.yaml: 'gyroscope_random_walk' must be non-negative", None
 
 
-FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time, decreasing_wheel_time,
+FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time, frame_listed_twice,
+          decreasing_wheel_time,
           negative_timestamp, absolute_frame_path, frame_path_leaving_the_recording, timestamp_near_2_63,
           ground_truth_with_one_row, ground_truth_repeated_time, ground_truth_bad_quaternion,
           imu_on_another_clock, ground_truth_on_another_clock, missing_frame_list, imu_symlink_loop,

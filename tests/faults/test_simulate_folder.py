@@ -70,3 +70,69 @@ def test_a_negative_seed_is_a_usage_error_naming_the_option(command, tmp_path, c
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "--seed" in err and "Traceback" not in err
     assert not (tmp_path / "rec").exists()
+
+
+@pytest.mark.parametrize("profile, duration", [("random", "1e-9"), ("standstill", "0.001")])
+def test_simulate_a_drive_shorter_than_two_frames_is_an_error(profile, duration, tmp_path, capsys):
+    """--duration 1e-9 was an internal error (IndexError); 0.001 s wrote a one-frame recording nothing can run on."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY[4:], "--profile", profile, "--duration", duration)
+    assert_error(status, err, f"'{profile}' drive lasts", "too short for two camera frames", "duration")
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("where", ["out_is_a_file", "run_is_not_ours", "recording_is_not_ours"])
+def test_demo_checks_its_folders_before_generating_and_offers_no_force(where, tmp_path, capsys, monkeypatch):
+    """demo generated its recording (a minute) before finding run/ was someone else's, then told the user to
+    give --force, which demo does not have; an --out that is a file gave 'File exists'."""
+    out = tmp_path / "demo"
+    if where == "out_is_a_file":
+        out.write_text("mine")
+        named, fragment = out, "must be a folder, but a file of that name exists"
+    else:
+        folder = out / ("run" if where == "run_is_not_ours" else "recording")
+        folder.mkdir(parents=True)
+        (folder / "notes.txt").write_text("mine")
+        named, fragment = folder, "was not written by fusion-vo; give another --out"
+
+    def no_generation(*args, **kwargs):
+        raise AssertionError("the demo recording was generated before the folders were checked")
+
+    monkeypatch.setattr("fusion_vo.simulation.simulate", no_generation)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "demo", "--out", out)
+    assert_error(status, err, str(named), fragment)
+    assert "--force" not in err
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("option, named", [(("--duration", "5"), "--duration"), (("-O", "side=2"), "-O side"),
+                                           (("-O", "radius = 0.2"), "-O radius")])
+def test_simulate_a_shape_option_the_profile_ignores_is_an_error(option, named, tmp_path, capsys):
+    """'--profile straight --duration 5' silently drove the default 1 m instead (the option only shapes random
+    and standstill drives)."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, *option)
+    assert_error(status, err, f"{named}: not used by the 'straight' profile", "(only by ")
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("option, fragment", [
+    ("start_time_ns=-5", "option 'start_time_ns' must lie in 0 .. 2^63 - 1"),
+    ("start_time_ns=9223372036854775807", "would run past 2^63 ns"),  # the stamps wrapped round to negative
+    ("featureless_time=[2, 1]", "option 'featureless_time' is [t0, t1] with t0 <= t1"),
+])
+def test_simulate_options_that_would_write_an_unreadable_recording_are_errors(option, fragment, tmp_path, capsys):
+    """Negative or wrapped-round timestamps were written (and refused by every command reading them)."""
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, "-O", option)
+    assert_error(status, err, fragment)
+    assert snapshot(tmp_path) == before
+
+
+@pytest.mark.parametrize("item", ["width", "=3", " =3"])
+def test_simulate_an_option_without_a_key_names_the_option(item, tmp_path, capsys):
+    """'-O =3' was reported as '(top level): unknown key' followed by every option's name."""
+    status, _, err = cli(capsys, "simulate", tmp_path / "rec", *TINY, "-O", item)
+    assert_error(status, err, f"--option needs KEY=VALUE, got '{item}'")
+    assert not (tmp_path / "rec").exists()

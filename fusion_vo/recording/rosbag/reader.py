@@ -44,6 +44,10 @@ class BagTopic:
     count: int
 
 
+#: what :func:`open_reader` can open, in the words of its error messages
+BAG_KINDS = "a ROS 1 .bag file, a ROS 2 bag folder (holding metadata.yaml), or a .mcap or .db3 file"
+
+
 def open_reader(bag: str | Path):
     """An unopened :class:`~rosbags.highlevel.AnyReader` for ``bag`` (ROS 1 file, ROS 2 folder or file)."""
     from rosbags.highlevel import AnyReader
@@ -52,6 +56,10 @@ def open_reader(bag: str | Path):
     bag = Path(bag)
     if not bag.exists():
         raise InputError("bag not found", bag)
+    if bag.is_dir() and not (bag / "metadata.yaml").is_file():
+        raise InputError(f"not a ROS bag: a folder without metadata.yaml (a bag is {BAG_KINDS})", bag)
+    if bag.is_file() and bag.suffix not in (".bag", ".mcap", ".db3"):
+        raise InputError(f"not a ROS bag: the name does not end in .bag, .mcap or .db3 (a bag is {BAG_KINDS})", bag)
     try:
         return AnyReader([bag], default_typestore=get_typestore(Stores.LATEST))
     except Exception as exc:  # rosbags raises several error types for unreadable input
