@@ -26,6 +26,22 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _check_outside_inputs(run_dir: str, out: str) -> None:
+    """The bag may not go into the run folder (a later ``fusion-vo run`` into it replaces the folder as a
+    whole, the bag with it) nor into the recording the run names."""
+    from pathlib import Path
+
+    from fusion_vo.evaluation.io import read_run_config
+    from fusion_vo.outputs import check_outside
+
+    inputs = [run_dir]
+    if (Path(run_dir) / "run.yaml").is_file():
+        named = read_run_config(run_dir).get("sequence")
+        if named and Path(str(named)).is_dir():
+            inputs.append(str(named))
+    check_outside(out, inputs, "output bag")
+
+
 def run(args: argparse.Namespace) -> int:
     from fusion_vo.export.ros import export_trajectories, groundtruth_of_run, load_run_trajectories
 
@@ -34,6 +50,7 @@ def run(args: argparse.Namespace) -> int:
         names = [n.strip() for n in args.trajectories.split(",") if n.strip()]
         if not names:
             raise InputError(f"--trajectories {args.trajectories!r}: no trajectory named (give e.g. ekf,groundtruth)")
+    _check_outside_inputs(args.run_dir, args.out)
     want_gt = not args.no_groundtruth and (names is None or "groundtruth" in names)
     run_names = [n for n in names if n != "groundtruth"] if names else None
     trajectories = load_run_trajectories(args.run_dir, run_names) if run_names or names is None else []

@@ -222,6 +222,17 @@ def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, t
     assert snapshot(pristine) == before
 
 
+def test_export_never_writes_into_the_run_or_its_recording(pristine, run_folder, tmp_path, capsys):
+    """A bag inside the run folder would go when the run is redone (run replaces its folder whole)."""
+    before_rec, before_run = snapshot(pristine), snapshot(run_folder)
+    for out in (run_folder / "run.mcap", run_folder / "bag", pristine / "gt.mcap"):
+        status, _, err = cli(capsys, "export", run_folder, out, "--to", "mcap")
+        assert_error(status, err, str(out), "part of an input")
+    assert snapshot(pristine) == before_rec and snapshot(run_folder) == before_run
+    status, _, err = cli(capsys, "export", run_folder, tmp_path / "beside.mcap", "--to", "mcap")
+    assert status == 0, err
+
+
 # ------------------------------------------------------------------ import-bag: a topic without messages
 BAGS = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
 
