@@ -335,7 +335,7 @@ def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
 
     small = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
              "gt_rate": 50.0, "imu_rate": 100.0}  # the camera of conftest.SMALL
-    rec = simulate(tmp_path / "arc", profile="circle", seed=4, radius=0.1, length=0.06, **small)
+    rec = simulate(tmp_path / "arc", profile="circle", seed=4, radius=0.1, **small)
     out = tmp_path / "sensor.yaml"
     status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
     assert_error(status, err, "wheel0/data.csv", "not a turn in place")
