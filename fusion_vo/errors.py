@@ -42,6 +42,19 @@ class InputError(Exception):
         return where + self.message
 
 
+def _stat(path: Path, missing: str, cannot: str) -> os.stat_result:
+    """``os.stat(path)``, or :class:`InputError` naming ``path``: a symbolic link loop, a broken symbolic
+    link, ``missing`` (nothing there) or ``cannot`` with the system's reason."""
+    try:
+        return os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise InputError("symbolic link loop", path) from None
+        if exc.errno == errno.ENOENT:
+            raise InputError("broken symbolic link" if os.path.islink(path) else missing, path) from None
+        raise InputError(f"{cannot} ({exc.strerror})", path) from None
+
+
 def check_file(path: str | Path) -> Path:
     """Raise :class:`InputError` naming ``path`` unless it is a regular file that can be opened.
 
@@ -49,14 +62,7 @@ def check_file(path: str | Path) -> Path:
     a regular file, or the system's reason (permission denied ...).
     """
     path = Path(path)
-    try:
-        st = os.stat(path)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InputError("symbolic link loop", path) from None
-        if exc.errno == errno.ENOENT:
-            raise InputError("broken symbolic link" if os.path.islink(path) else "file not found", path) from None
-        raise InputError(f"cannot read file ({exc.strerror})", path) from None
+    st = _stat(path, "file not found", "cannot read file")
     if stat.S_ISDIR(st.st_mode):
         raise InputError("is a folder, not a file", path)
     if not stat.S_ISREG(st.st_mode):
@@ -72,14 +78,7 @@ def check_folder(path: str | Path, what: str = "folder") -> Path:
     system's reason.
     """
     path = Path(path)
-    try:
-        st = os.stat(path)
-    except OSError as exc:
-        if exc.errno == errno.ELOOP:
-            raise InputError("symbolic link loop", path) from None
-        if exc.errno == errno.ENOENT:
-            raise InputError("broken symbolic link" if os.path.islink(path) else f"{what} not found", path) from None
-        raise InputError(f"cannot open {what} ({exc.strerror})", path) from None
+    st = _stat(path, f"{what} not found", f"cannot open {what}")
     if not stat.S_ISDIR(st.st_mode):
         raise InputError(f"is a file, not a {what}", path)
     return path
