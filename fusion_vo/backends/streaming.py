@@ -229,6 +229,10 @@ class StreamingFusion:
         if background and backend != "gtsam":
             raise InputError("background updates are for backend 'gtsam' (the EKF's steps are cheap)")
         self.background = bool(background)
+        if backend == "gtsam":  # import GTSAM now (about 0.1 s), not inside the first add() call that makes a node
+            import gtsam  # noqa: F401
+
+            from fusion_vo.backends import graph  # noqa: F401
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
