@@ -26,6 +26,7 @@ the hook (a frame-to-frame similarity ``(dx, dy, dyaw)`` of the body with its 3x
 
 from __future__ import annotations
 
+import gc
 import math
 import sys
 
@@ -127,6 +128,11 @@ def main() -> None:
     node = GroundCameraOdometry()
     executor = MultiThreadedExecutor(num_threads=3)
     executor.add_node(node)
+    # everything made so far (the imported modules: some 100 000 objects) leaves the garbage collector's
+    # scans; otherwise a full collection stalls whichever callback it falls in by about 40 ms
+    # (benchmarks/bench_latency.py --gc-freeze)
+    gc.collect()
+    gc.freeze()
     try:
         executor.spin()
     except KeyboardInterrupt:
