@@ -210,6 +210,14 @@ class StreamingFusion:
         come with them) on a worker thread, off the caller's; GTSAM releases the GIL while it works. A node's
         recorded pose is its initial guess (the last estimate composed with the interval's odometry) until
         its update has finished; results are taken in by the next call.
+
+    Notes
+    -----
+    A call's worst latency in a live process is often not this class's work but one of CPython's full
+    garbage collections, which scan every object the process tracks (about 100 000 once numpy, scipy,
+    GTSAM and filterpy are imported: some 40 ms). Call :func:`gc.freeze` once start-up is done, as
+    ``examples/ros2_node.py`` does; ``benchmarks/bench_latency.py --gc-freeze`` measures the difference.
+    The class changes no global state itself.
     """
 
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
