@@ -401,13 +401,19 @@ class StagedFiles(_LockedStaging):
     (an error, an interrupt) removes the staging folder: the folder keeps its earlier files, untouched.
     The folder is locked meanwhile with the lock of :class:`OutputFolder`, so a run writing it at the
     same time fails cleanly. Errors raised inside that name a staged file name the final file instead.
+    With ``create``, a missing folder is made (:func:`make_folder`) and, when the block is left without
+    :meth:`commit`, removed again: a failed command leaves no folder it made.
     """
 
-    def __init__(self, folder: str | Path, replaces: Iterable[str] = (), what: str = "run folder"):
+    def __init__(self, folder: str | Path, replaces: Iterable[str] = (), what: str = "run folder",
+                 create: bool = False):
         self.folder = Path(folder)
         self.replaces = tuple(replaces)
         self.what = what
+        self.create = create
         self._final = self.folder
+        self._created = False
+        self._committed = False
 
     def __enter__(self) -> "StagedFiles":
         def under_lock() -> None:
@@ -415,8 +421,26 @@ class StagedFiles(_LockedStaging):
                 if stale.is_dir() and not stale.is_symlink():
                     shutil.rmtree(stale, ignore_errors=True)
 
-        self._stage(self.folder, self.what, under_lock, self.folder, None)
+        if self.create:
+            self._created = not os.path.lexists(self.folder)
+            make_folder(self.folder, self.what)
+        try:
+            self._stage(self.folder, self.what, under_lock, self.folder, None)
+        except BaseException:
+            self._remove_created()
+            raise
         return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        super().__exit__(exc_type, exc, tb)
+        if not self._committed:
+            self._remove_created()
+        return None
+
+    def _remove_created(self) -> None:
+        if self._created:  # only a folder this block made, and only what it wrote there
+            shutil.rmtree(self.folder, ignore_errors=True)
+            self._created = False
 
     def commit(self) -> list[Path]:
         """Move the new files into the folder; returns their final paths."""
@@ -428,4 +452,5 @@ class StagedFiles(_LockedStaging):
             for old in self.folder.glob(pattern):
                 if old.name not in names and old.is_file():
                     old.unlink()
+        self._committed = True
         return [self.folder / name for name in names]

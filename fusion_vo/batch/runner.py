@@ -30,10 +30,9 @@ def _as_config(config: RunConfig | str | Path | None) -> RunConfig:
 
 
 def _check_out(out: str | Path) -> Path:
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError("the output must be a folder, but a file of that name exists", out)
-    return out
+    from fusion_vo.outputs import check_folder_target
+
+    return check_folder_target(out)  # a file there, or in the way above it
 
 
 def _check_inputs(out: Path, labelled: list[tuple[Path, str]]) -> None:

@@ -23,12 +23,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import shutil
 import time
 from pathlib import Path
 
 from fusion_vo.cli.arguments import non_negative_number, positive_number
-from fusion_vo.outputs import StagedFiles
+from fusion_vo.outputs import StagedFiles, check_folder_target
 from fusion_vo.errors import InputError
 
 OUTPUTS = ("live_{b}.csv", "live_{b}.tum", "stream_{b}.tum", "replay.json")
@@ -75,9 +74,7 @@ def run(args: argparse.Namespace) -> int:
     fusion_cfg = as_config(cfg.fusion)
     if args.window is not None:
         fusion_cfg = dataclasses.replace(fusion_cfg, reorder_window=args.window)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("the output must be a folder, but a file of that name exists", out)
+    out = check_folder_target(args.out)  # a file there, or in the way above it: before any work
     _check_output_folder(out, rec)
     _check_timing(args, rec, sensors)
     vo = None
@@ -98,44 +95,38 @@ def run(args: argparse.Namespace) -> int:
     online = fusion.finish()
     offline = fuse(streams, args.backend, fusion_cfg)
 
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
     b = args.backend
-    try:  # every file together or none (a failure or Ctrl-C keeps an earlier replay's files whole)
-        with StagedFiles(out, what="output folder") as staged:
-            staging = staged.path
-            table = np.array(rows, dtype=np.float64).reshape(-1, 10)
-            np.savetxt(staging / f"live_{b}.csv", table, delimiter=",",
-                       fmt=["%.9f", "%.9f", "%.9g", "%.9g", "%.9g", "%.6g", "%.6g", "%.6g", "%.6f", "%.4f"],
-                       header="t_query,t,x,y,yaw,var_x,var_y,var_yaw,predicted,call_ms", comments="")
-            write_tum(staging / f"live_{b}.tum", table[:, 0], table[:, 2:5])
-            name = "ekf" if b == "ekf" else "gtsam_online"
-            if name in online.trajectories:
-                write_tum(staging / f"stream_{b}.tum", online.trajectories[name].t, online.trajectories[name].xyyaw)
-            for key, traj in offline.trajectories.items():
-                if len(traj):
-                    write_tum(staging / f"{key}.tum", traj.t, traj.xyyaw)
-                    cov = offline.covariances.get(key)
-                    if cov is not None and len(cov) == len(traj):
-                        write_pose_covariances(staging / f"{key}.cov.csv", traj.t, cov)
-            lat = np.array(call_ms) if call_ms else np.zeros(1)
-            info = {
-                "sequence": str(rec.path.resolve()), "backend": b, "sensors": sensors, "speed": args.speed,
-                "rate_hz": args.rate, "camera_delay_s": args.camera_delay,
-                "reorder_window_s": fusion_cfg.reorder_window, "samples": len(msgs), "live_poses": len(table),
-                "call_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
-                            "max": float(lat.max())},
-                "rewinds": fusion.rewinds,
-                "counts": {s: c.as_dict() for s, c in online.counts.get(name, {}).items()},
-                "notes": online.notes,
-            }
-            with open(staging / "replay.json", "w") as f:
-                json.dump(info, f, indent=2)
-            staged.commit()
-    except BaseException:
-        if created:
-            shutil.rmtree(out, ignore_errors=True)  # only what this command made
-        raise
+    # every file together or none (a failure or Ctrl-C keeps an earlier replay's files whole)
+    with StagedFiles(out, what="output folder", create=True) as staged:
+        staging = staged.path
+        table = np.array(rows, dtype=np.float64).reshape(-1, 10)
+        np.savetxt(staging / f"live_{b}.csv", table, delimiter=",",
+                   fmt=["%.9f", "%.9f", "%.9g", "%.9g", "%.9g", "%.6g", "%.6g", "%.6g", "%.6f", "%.4f"],
+                   header="t_query,t,x,y,yaw,var_x,var_y,var_yaw,predicted,call_ms", comments="")
+        write_tum(staging / f"live_{b}.tum", table[:, 0], table[:, 2:5])
+        name = "ekf" if b == "ekf" else "gtsam_online"
+        if name in online.trajectories:
+            write_tum(staging / f"stream_{b}.tum", online.trajectories[name].t, online.trajectories[name].xyyaw)
+        for key, traj in offline.trajectories.items():
+            if len(traj):
+                write_tum(staging / f"{key}.tum", traj.t, traj.xyyaw)
+                cov = offline.covariances.get(key)
+                if cov is not None and len(cov) == len(traj):
+                    write_pose_covariances(staging / f"{key}.cov.csv", traj.t, cov)
+        lat = np.array(call_ms) if call_ms else np.zeros(1)
+        info = {
+            "sequence": str(rec.path.resolve()), "backend": b, "sensors": sensors, "speed": args.speed,
+            "rate_hz": args.rate, "camera_delay_s": args.camera_delay,
+            "reorder_window_s": fusion_cfg.reorder_window, "samples": len(msgs), "live_poses": len(table),
+            "call_ms": {"p50": float(np.percentile(lat, 50)), "p99": float(np.percentile(lat, 99)),
+                        "max": float(lat.max())},
+            "rewinds": fusion.rewinds,
+            "counts": {s: c.as_dict() for s, c in online.counts.get(name, {}).items()},
+            "notes": online.notes,
+        }
+        with open(staging / "replay.json", "w") as f:
+            json.dump(info, f, indent=2)
+        staged.commit()
     print(f"replayed {len(msgs)} samples; {len(table)} live poses at {args.rate:g} Hz -> {out / f'live_{b}.tum'}; "
           f"call p50 {info['call_ms']['p50']:.3f} ms, p99 {info['call_ms']['p99']:.3f} ms, "
           f"max {info['call_ms']['max']:.3f} ms")

@@ -15,7 +15,7 @@ from evo.core.trajectory import PoseTrajectory3D
 
 from fusion_vo.evaluation.evaluate import evaluate_trajectories, resolve_sequence
 from fusion_vo.errors import InputError
-from fusion_vo.outputs import StagedFiles, check_folder_target, check_outside, make_folder
+from fusion_vo.outputs import StagedFiles, check_folder_target, check_outside
 from fusion_vo.evaluation.io import (GROUNDTRUTH_CSV, find_trajectories, read_groundtruth, read_run_config,
                                      write_metrics)
 from fusion_vo.evaluation.metrics import to_planar
@@ -91,21 +91,12 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         reference = reference or to_planar(gt)
     check_outside(out_dir, sorted(set(sequences)))
     shared = len(set(sequences)) == 1
-    created = not out_dir.exists()
-    make_folder(out_dir)
-    try:  # the three files together or none of them (an error or Ctrl-C keeps an earlier comparison whole)
-        with StagedFiles(out_dir, what="output folder") as staged:
-            write_metrics(staged.path / "compare.json", table)
-            write_compare_csv(staged.path / "compare.csv", table)
-            plot_compare(reference if shared else None, overlay, staged.path / "compare.png")
-            staged.commit()
-    except BaseException:
-        if created:
-            try:
-                out_dir.rmdir()
-            except OSError:
-                pass
-        raise
+    # the three files together or none of them (an error or Ctrl-C keeps an earlier comparison whole)
+    with StagedFiles(out_dir, what="output folder", create=True) as staged:
+        write_metrics(staged.path / "compare.json", table)
+        write_compare_csv(staged.path / "compare.csv", table)
+        plot_compare(reference if shared else None, overlay, staged.path / "compare.png")
+        staged.commit()
     logger.info("compared %d runs into %s", len(run_dirs), out_dir)
     return table
 
