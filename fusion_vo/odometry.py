@@ -33,6 +33,7 @@ the calling thread, OpenCV single-threaded).
 from __future__ import annotations
 
 import logging
+import math
 import os
 import queue
 import threading
@@ -79,6 +80,10 @@ class OdometryConfig:
         Camera height above the floor [m]; ``None`` takes it from ``T_BS`` of ``cam0/sensor.yaml``.
     use_range : bool
         Use the downward range finder (``range0``), when the recording has one, as the camera height.
+    range_smoothing : bool
+        With ``use_range``: estimate the height at every frame from all the readings together with the
+        frames' own change of scale (:mod:`fusion_vo.geometry.height`), instead of from the one or two
+        readings around the frame (default true).
     min_sigma_xy, min_sigma_yaw : float
         Floors on the standard deviation of a visual increment [m], [rad].
     max_bad_start_frames : int
@@ -124,6 +129,7 @@ class OdometryConfig:
     frontend_options: dict = field(default_factory=dict)
     height: float | None = None
     use_range: bool = True
+    range_smoothing: bool = True
     min_sigma_xy: float = 2e-5
     min_sigma_yaw: float = 2e-5
     max_bad_start_frames: int = 5
@@ -195,6 +201,9 @@ class OdometryResult:
     range_scaled : bool
         The increments were scaled frame by frame with the range finder's height (``use_range``), so the
         range finder is already in them and the backends must not use it again.
+    frame_height, frame_height_sigma : ndarray or None
+        With ``range_scaled``: the camera height [m] each processed frame was scaled with, and its standard
+        deviation [m] (smoothed, :mod:`fusion_vo.geometry.height`, or interpolated from the readings).
     """
 
     increments: list[VisualIncrement]
@@ -209,6 +218,8 @@ class OdometryResult:
     elapsed_s: float
     range_scaled: bool = False
     held: list = field(default_factory=list)
+    frame_height: np.ndarray | None = None
+    frame_height_sigma: np.ndarray | None = None
 
     @property
     def n_frames(self) -> int:
@@ -251,6 +262,8 @@ class VisualOdometry:
         self.bridged_s = 0.0
         self.held: list[tuple[float, float]] = []
         self._last_twist = np.zeros(3)
+        #: when a list, :meth:`finish` appends to it every motion it is given, after the derotation
+        self.kept_motions: list[FrameMotion] | None = None
 
     @property
     def pose(self) -> np.ndarray | None:
@@ -278,6 +291,7 @@ class VisualOdometry:
         measures the next frame (:func:`run_visual_odometry`); it must see the motions in frame order.
         """
         if motion.status is MotionStatus.FIRST:
+            self._keep(motion)
             if not self.poses:
                 self.t.append(motion.timestamp)
                 self.poses.append(np.zeros(3))
@@ -286,10 +300,17 @@ class VisualOdometry:
             motion.info["measured_matrix"] = motion.matrix
             motion.matrix, motion.covariance = self.derotation.derotate(motion.matrix, motion.covariance,
                                                                         motion.prev_timestamp, motion.timestamp)
+        self._keep(motion)
         inc = self.geometry.increment(motion, height, height_sigma)
         if inc.ok:
             self._append(inc)
         return inc
+
+    def _keep(self, motion: FrameMotion) -> None:
+        if self.kept_motions is not None:
+            self.kept_motions.append(FrameMotion(motion.timestamp, motion.prev_timestamp, motion.matrix.copy(),
+                                                 motion.covariance.copy(), motion.status,
+                                                 n_inliers=motion.n_inliers))
 
     def _append(self, inc: VisualIncrement) -> None:
         if not self.poses:
@@ -467,6 +488,37 @@ def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, 
     return heights, sigma * np.sqrt((1.0 - a) ** 2 + a**2)
 
 
+def smoothed_heights(recording: Recording, motions: list[FrameMotion]):
+    """The camera height at each of ``motions``' frames from the range finder's readings and the motions'
+    scale (:func:`fusion_vo.geometry.height.smooth_heights`), or ``None`` when the readings do not allow it.
+
+    A motion's scale is used as the height ratio of its two frames when it is measured from the frame
+    just before it in ``motions``.
+    """
+    from fusion_vo.geometry.height import smooth_heights
+    from fusion_vo.sensors.range import camera_height, reading_sigma
+
+    r: RangeData = recording.range()
+    sigma = reading_sigma(r)
+    if sigma is None or len(motions) < 2:
+        return None
+    gated = camera_height(r)
+    t = np.array([m.timestamp for m in motions], dtype=np.float64)
+    log_ratio = np.full(len(motions), np.nan)
+    log_sigma = np.full(len(motions), np.nan)
+    for k in range(1, len(motions)):
+        m = motions[k]
+        if m.ok and m.prev_timestamp is not None and abs(m.prev_timestamp - t[k - 1]) < 1e-9:
+            log_ratio[k] = -m.params[3]
+            log_sigma[k] = math.sqrt(max(float(m.covariance[3, 3]), 0.0))
+    out = smooth_heights(t, log_ratio, log_sigma, gated.t[gated.valid], gated.height[gated.valid], sigma)
+    if out is not None:
+        log.info("camera height from %d range readings and %d frame scales (%d down-weighted, the scales' "
+                 "variance times %.3g); median sigma %.3g mm against %.3g mm for one reading", out.n_readings,
+                 out.n_ratios, out.n_downweighted, out.ratio_factor, 1e3 * float(np.median(out.sigma)), 1e3 * sigma)
+    return out
+
+
 def run_visual_odometry(
     recording: Recording,
     config: OdometryConfig | None = None,
@@ -521,6 +573,8 @@ def run_visual_odometry(
     if config.gyro_derotation and recording.has_imu():
         derotation = GyroDerotation(recording.imu(), geometry)
     vo = VisualOdometry(frontend, geometry, derotation, max_bridge=config.max_bridge)
+    if heights is not None and config.range_smoothing:
+        vo.kept_motions = []
     total = len(recording)
     increments: list[VisualIncrement] = []
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
@@ -582,9 +636,23 @@ def run_visual_odometry(
                 progress(k + 1, total)
         while pending:
             collect(pending.popleft().result())
-    elapsed = time.perf_counter() - start
     if not frame_t:
         raise InputError("no usable frame in the recording", recording.path / "cam0")
+    frame_height = frame_height_sigma = None
+    if heights is not None:
+        used = np.searchsorted(frame_times, np.asarray(frame_t)).clip(0, len(frame_times) - 1)
+        frame_height, frame_height_sigma = heights[used], height_sigmas[used]
+    if vo.kept_motions is not None:
+        smoothed = smoothed_heights(recording, vo.kept_motions)
+        if smoothed is not None:  # the same motions again, each scaled by its frame's smoothed height
+            kept, vo = vo.kept_motions, VisualOdometry(None, geometry, None, max_bridge=config.max_bridge)
+            increments.clear()
+            vel.clear()
+            ratio.clear()
+            for motion, h, h_sigma in zip(kept, smoothed.height, smoothed.sigma):
+                collect(vo.finish(motion, float(h), float(h_sigma)))
+            frame_height, frame_height_sigma = smoothed.height, smoothed.sigma
+    elapsed = time.perf_counter() - start
     return OdometryResult(
         increments=increments,
         frame_t=np.asarray(frame_t),
@@ -598,4 +666,6 @@ def run_visual_odometry(
         held=vo.held,
         elapsed_s=elapsed,
         range_scaled=heights is not None,
+        frame_height=frame_height,
+        frame_height_sigma=frame_height_sigma,
     )
