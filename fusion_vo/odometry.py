@@ -204,6 +204,8 @@ class OdometryResult:
     frame_height, frame_height_sigma : ndarray or None
         With ``range_scaled``: the camera height [m] each processed frame was scaled with, and its standard
         deviation [m] (smoothed, :mod:`fusion_vo.geometry.height`, or interpolated from the readings).
+    height_note : str or None
+        What the height smoothing used and found, in words (``None`` when it did not run).
     """
 
     increments: list[VisualIncrement]
@@ -220,6 +222,7 @@ class OdometryResult:
     held: list = field(default_factory=list)
     frame_height: np.ndarray | None = None
     frame_height_sigma: np.ndarray | None = None
+    height_note: str | None = None
 
     @property
     def n_frames(self) -> int:
@@ -513,9 +516,10 @@ def smoothed_heights(recording: Recording, motions: list[FrameMotion]):
             log_sigma[k] = math.sqrt(max(float(m.covariance[3, 3]), 0.0))
     out = smooth_heights(t, log_ratio, log_sigma, gated.t[gated.valid], gated.height[gated.valid], sigma)
     if out is not None:
-        log.info("camera height from %d range readings and %d frame scales (%d down-weighted, the scales' "
-                 "variance times %.3g); median sigma %.3g mm against %.3g mm for one reading", out.n_readings,
-                 out.n_ratios, out.n_downweighted, out.ratio_factor, 1e3 * float(np.median(out.sigma)), 1e3 * sigma)
+        out.note = (f"camera height from {out.n_readings} range readings and {out.n_ratios} frame scales "
+                    f"({out.n_downweighted} down-weighted, the scales' stated variance times {out.ratio_factor:.3g}): "
+                    f"median sigma {1e3 * float(np.median(out.sigma)):.3g} mm against {1e3 * sigma:.3g} mm for one reading")
+        log.info("%s", out.note)
     return out
 
 
@@ -638,7 +642,7 @@ def run_visual_odometry(
             collect(pending.popleft().result())
     if not frame_t:
         raise InputError("no usable frame in the recording", recording.path / "cam0")
-    frame_height = frame_height_sigma = None
+    frame_height = frame_height_sigma = height_note = None
     if heights is not None:
         used = np.searchsorted(frame_times, np.asarray(frame_t)).clip(0, len(frame_times) - 1)
         frame_height, frame_height_sigma = heights[used], height_sigmas[used]
@@ -652,6 +656,7 @@ def run_visual_odometry(
             for motion, h, h_sigma in zip(kept, smoothed.height, smoothed.sigma):
                 collect(vo.finish(motion, float(h), float(h_sigma)))
             frame_height, frame_height_sigma = smoothed.height, smoothed.sigma
+            height_note = smoothed.note
     elapsed = time.perf_counter() - start
     return OdometryResult(
         increments=increments,
@@ -668,4 +673,5 @@ def run_visual_odometry(
         range_scaled=heights is not None,
         frame_height=frame_height,
         frame_height_sigma=frame_height_sigma,
+        height_note=height_note,
     )

@@ -355,6 +355,8 @@ def run_pipeline(
             summary.vo_seconds = vo.elapsed_s
             if vo.skipped:
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
+            if vo.height_note:
+                summary.notes.append(vo.height_note)
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
             for a, b in vo.held:

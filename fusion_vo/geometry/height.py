@@ -9,8 +9,8 @@ problem:
 
 .. math::
 
-    x_k - x_{k-1} &= -\\log s_k + w_k, \\qquad w_k \\sim N(0,\\ \\sigma_{s,k}^2 + \\sigma_{\\min}^2
-                     + q^2 \\Delta t_k)\\\\
+    x_k - x_{k-1} &= -\\log s_k + w_k, \\qquad w_k \\sim N(0,\\ \\varphi\\,(\\sigma_{s,k}^2 + \\sigma_{\\min}^2
+                     + q^2 \\Delta t_k))\\\\
     \\log r_i &= (1 - a_i)\\, x_k + a_i\\, x_{k+1} + v_i, \\qquad v_i \\sim N(0,\\ (\\sigma_r / r_i)^2)
 
 where ``σ_s`` is the frontend's standard deviation of ``log s``, ``σ_min`` a floor for what it does not
@@ -26,6 +26,12 @@ factor by the backward recurrence of Takahashi et al. (for ``A = L Lᵀ`` with `
 Readings and ratios whose normalised residual exceeds ``huber`` are down-weighted (iteratively
 reweighted least squares with Huber weights), so that a spike the range gate let through, or a frame
 whose scale the frontend got wrong, moves the heights around it by little.
+
+The factor ``φ ≥ 1`` is estimated from the data (variance-component estimation): each ratio's squared
+normalised residual is compared with its redundancy ``1 - (Σ_kk + Σ_{k-1,k-1} - 2 Σ_{k-1,k}) / var_k``
+(the share of its variance the fit does not absorb), and ``φ`` is multiplied by their ratio until it
+settles. On ``tilted`` it stays 1; on the independent renders (rocking, a lens model that is not exact)
+it comes to 50-80, and the stated heights' errors then cover the actual ones.
 
 Each frame's height then carries the noise of about ``σ_r / √n`` for the ``n`` readings within the span
 over which the ratios stay precise, instead of one reading's ``σ_r``: on ``tilted`` the heights' RMS
@@ -89,6 +95,7 @@ class SmoothedHeights:
     n_ratios: int
     n_downweighted: int
     ratio_factor: float = 1.0
+    note: str = ""
 
 
 def smooth_heights(frame_t: np.ndarray, log_ratio: np.ndarray, log_ratio_sigma: np.ndarray,

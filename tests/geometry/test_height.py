@@ -114,9 +114,11 @@ def test_visual_odometry_scales_each_frame_by_the_smoothed_height(tilted):
     for smoothing in (False, True):
         vo = run_visual_odometry(rec, OdometryConfig(range_smoothing=smoothing))
         assert vo.range_scaled and len(vo.frame_height) == len(vo.frame_t)
+        assert (vo.height_note is not None) == smoothing  # the run's notes say what the smoothing used
         e = vo.frame_height - heights(vo.frame_t)  # the simulator's 0.1 m with 1 mm at 3 Hz
         runs[smoothing] = (np.sqrt(np.mean(e**2)), ate(vo.track))
     (h_plain, ate_plain), (h_smooth, ate_smooth) = runs[False], runs[True]
     assert h_plain > 0.4e-3  # each frame's own readings: their 0.5 mm noise
     assert h_smooth < 0.1 * h_plain
     assert ate_smooth < 0.85 * ate_plain  # 0.032 against 0.045 mm on this drive
+    assert "range readings" in vo.height_note
