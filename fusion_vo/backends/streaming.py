@@ -727,6 +727,7 @@ class StreamingFusion:
         x, P = rec.state
         self._ekf.kf.x = x.reshape(-1, 1).copy()
         self._ekf.kf.P = P.copy()
+        self._ekf.linearisation = None  # that node's prediction is not the last one made
         self._heading_offset = rec.heading_offset
         if rec.monitor is not None:
             self._monitor.restore(rec.monitor)
@@ -737,12 +738,12 @@ class StreamingFusion:
         """Pose and covariance of the last node predicted ``dt`` seconds ahead (constant twist)."""
         if self.backend == "ekf":
             kf = self._ekf.kf
-            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy()
+            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
             try:
                 self._ekf.predict(dt)
                 return self._ekf.x[:3].copy(), self._ekf.P[:3, :3].copy()
             finally:
-                kf.x, kf.P, kf.x_prior, kf.P_prior = saved
+                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
         return _extrapolate(self._t_nodes, self._poses, self._covs, dt, self.config)
 
     # ------------------------------------------------------------------ processing
