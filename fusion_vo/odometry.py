@@ -252,10 +252,14 @@ class VisualOdometry:
 
     derotation : GyroDerotation, optional
         Removes the roll and pitch image motion before the geometry.
+    height_filter : HeightFilter, optional
+        Live use with a range finder: the camera height of each frame from the readings given to
+        :meth:`add_range` and the frames' own scale change (:class:`fusion_vo.geometry.height.HeightFilter`),
+        where :meth:`process` is given no ``height``.
     """
 
     def __init__(self, frontend, geometry: GroundGeometry, derotation: GyroDerotation | None = None,
-                 max_bridge: float = 1.0):
+                 max_bridge: float = 1.0, height_filter=None):
         self.frontend = frontend
         self.geometry = geometry
         self.derotation = derotation
@@ -267,6 +271,7 @@ class VisualOdometry:
         self._last_twist = np.zeros(3)
         #: when a list, :meth:`finish` appends to it every motion it is given, after the derotation
         self.kept_motions: list[FrameMotion] | None = None
+        self.height_filter = height_filter
 
     @property
     def pose(self) -> np.ndarray | None:
@@ -295,6 +300,7 @@ class VisualOdometry:
         """
         if motion.status is MotionStatus.FIRST:
             self._keep(motion)
+            self._filtered_height(motion, height, height_sigma)
             if not self.poses:
                 self.t.append(motion.timestamp)
                 self.poses.append(np.zeros(3))
@@ -304,10 +310,30 @@ class VisualOdometry:
             motion.matrix, motion.covariance = self.derotation.derotate(motion.matrix, motion.covariance,
                                                                         motion.prev_timestamp, motion.timestamp)
         self._keep(motion)
+        height, height_sigma = self._filtered_height(motion, height, height_sigma)
         inc = self.geometry.increment(motion, height, height_sigma)
         if inc.ok:
             self._append(inc)
         return inc
+
+    def add_range(self, t: float, distance: float) -> None:
+        """A range finder's reading [m] at ``t`` [s], for the ``height_filter`` (a reading is used by the first
+        frame at or after its time, so give each one before that frame)."""
+        if self.height_filter is None:
+            raise ValueError("add_range needs a height_filter")
+        self.height_filter.add_reading(t, distance)
+
+    def _filtered_height(self, motion: FrameMotion, height, height_sigma):
+        """``(height, height_sigma)`` for ``motion``: the given ones, else the ``height_filter``'s."""
+        if height is not None or self.height_filter is None:
+            return height, height_sigma
+        hf = self.height_filter
+        log_ratio = log_sigma = None
+        if motion.ok and motion.prev_timestamp is not None and hf.last_time == motion.prev_timestamp:
+            log_ratio = -float(motion.params[3])
+            log_sigma = math.sqrt(max(float(motion.covariance[3, 3]), 0.0))
+        out = hf.frame(motion.timestamp, log_ratio, log_sigma)
+        return (None, 0.0) if out is None else out
 
     def _keep(self, motion: FrameMotion) -> None:
         if self.kept_motions is not None:
