@@ -144,8 +144,7 @@ def smooth_heights(frame_t: np.ndarray, log_ratio: np.ndarray, log_ratio_sigma: 
     lr = np.asarray(log_ratio, dtype=np.float64)[1:]
     ls = np.asarray(log_ratio_sigma, dtype=np.float64)[1:]
     have = np.isfinite(lr) & np.isfinite(ls)
-    var_p = np.where(have, np.where(have, ls, 0.0) ** 2 + o.min_sigma**2 + o.random_walk**2 * dt,
-                     o.gap_random_walk**2 * np.maximum(dt, 1e-6))
+    var_p = _step_variance(np.where(have, ls, np.nan), dt, o)
     z_p = np.where(have, lr, 0.0)
 
     w_r = np.ones(len(rt))
@@ -178,6 +177,16 @@ def smooth_heights(frame_t: np.ndarray, log_ratio: np.ndarray, log_ratio_sigma: 
     n_down = int(np.count_nonzero(w_r < 1.0) + np.count_nonzero(have & (w_p < 1.0)))
     return SmoothedHeights(height, height * np.sqrt(var_x), int(len(rt)), int(np.count_nonzero(have)), n_down,
                            float(factor))
+
+
+def _step_variance(ratio_sigma, dt, o: HeightSmoothing):
+    """Variance of ``x_k - x_{k-1}`` about the measured ratio before the factor ``φ``:
+    ``σ_s² + σ_min² + q² Δt``, or the gap's random walk where ``ratio_sigma`` is NaN (no ratio)."""
+    ratio_sigma = np.asarray(ratio_sigma, dtype=np.float64)
+    dt = np.asarray(dt, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        measured = ratio_sigma**2 + o.min_sigma**2 + o.random_walk**2 * dt
+    return np.where(np.isfinite(ratio_sigma), measured, o.gap_random_walk**2 * np.maximum(dt, 1e-6))
 
 
 def _solve(n, ip, z_p, ir, z_r, j, c0, c1):
@@ -300,11 +309,10 @@ class HeightFilter:
         dt = max(t - self._t, 1e-6)
         have = log_ratio is not None and log_ratio_sigma is not None and math.isfinite(log_ratio) \
             and math.isfinite(log_ratio_sigma)
+        q = float(_step_variance(log_ratio_sigma if have else np.nan, dt, o))
+        step = float(log_ratio) if have else 0.0
         if have:
-            q = self.ratio_factor * (log_ratio_sigma**2 + o.min_sigma**2 + o.random_walk**2 * dt)
-            step = float(log_ratio)
-        else:
-            q, step = o.gap_random_walk**2 * dt, 0.0
+            q *= self.ratio_factor
         # the two frames' log heights, jointly
         m = np.array([self._x, self._x + step])
         C = np.array([[self._p, self._p], [self._p, self._p + q]])
