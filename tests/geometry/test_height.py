@@ -97,12 +97,10 @@ def tilted(tmp_path_factory):
                     width=320, height=180, fu=210.0, fv=210.0, cu=159.5, cv=89.5)
 
 
-def test_visual_odometry_scales_each_frame_by_the_smoothed_height(tilted):
+def ate_against(rec):
+    """``ate(track)``: a track's ATE [m] against ``rec``'s ground truth after SE(2) alignment."""
     from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
-    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
-    from fusion_vo.recording import Recording
 
-    rec = Recording(tilted)
     gt = rec.groundtruth()
     reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
 
@@ -110,6 +108,15 @@ def test_visual_odometry_scales_each_frame_by_the_smoothed_height(tilted):
         ref, est = associate(reference, planar_trajectory(track.t, *track.xyyaw.T))
         return ape_rmse(ref, align_se2(ref, est))
 
+    return ate
+
+
+def test_visual_odometry_scales_each_frame_by_the_smoothed_height(tilted):
+    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+    from fusion_vo.recording import Recording
+
+    rec = Recording(tilted)
+    ate = ate_against(rec)
     runs = {}
     for smoothing in (False, True):
         vo = run_visual_odometry(rec, OdometryConfig(range_smoothing=smoothing))
@@ -167,7 +174,6 @@ def test_the_live_filter_takes_the_ratio_factor_it_is_given():
 
 
 def test_live_visual_odometry_with_the_height_filter(tilted):
-    from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
     from fusion_vo.geometry.ground import GroundGeometry
     from fusion_vo.geometry.height import HeightFilter
     from fusion_vo.odometry import VisualOdometry
@@ -176,13 +182,7 @@ def test_live_visual_odometry_with_the_height_filter(tilted):
     from frontends import make_frontend
 
     rec = Recording(tilted)
-    gt = rec.groundtruth()
-    reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
-
-    def ate(track):
-        ref, est = associate(reference, planar_trajectory(track.t, *track.xyyaw.T))
-        return ape_rmse(ref, align_se2(ref, est))
-
+    ate = ate_against(rec)
     rng = rec.range()
     geometry = GroundGeometry(rec.camera)
     runs = {}
