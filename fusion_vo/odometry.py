@@ -496,21 +496,25 @@ def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, 
     """Camera height at ``times`` from the range finder (linear interpolation) and its standard deviation,
     or ``None`` without a range finder.
 
-    The standard deviation of one reading is measured from the readings
-    (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction ``a`` of the way
-    between two readings has ``σ² ((1 - a)² + a²)``.
+    Only the readings the range gate passes are used (:func:`fusion_vo.sensors.range.camera_height`: a
+    spike would otherwise scale the frames around it). The standard deviation of one reading is measured
+    from the readings (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction
+    ``a`` of the way between two readings has ``σ² ((1 - a)² + a²)``.
     """
     if not recording.has_range():
         return None
     r: RangeData = recording.range()
     if len(r) == 0:
         return None
-    from fusion_vo.sensors.range import reading_sigma
+    from fusion_vo.sensors.range import camera_height, reading_sigma
 
+    gated = camera_height(r)
+    if not gated.valid.any():
+        return None
     times = np.asarray(times, dtype=np.float64)
-    heights = np.interp(times, r.t, r.distance)
+    t = np.asarray(gated.t[gated.valid], dtype=np.float64)
+    heights = np.interp(times, t, gated.height[gated.valid])
     sigma = reading_sigma(r) or 0.0
-    t = np.asarray(r.t, dtype=np.float64)
     j = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
     span = t[j] - t[j - 1] if len(t) > 1 else np.ones_like(times)
     a = np.clip((times - t[j - 1]) / np.where(span > 0, span, 1.0), 0.0, 1.0) if len(t) > 1 else np.zeros_like(times)

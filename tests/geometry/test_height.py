@@ -199,3 +199,26 @@ def test_live_visual_odometry_with_the_height_filter(tilted):
             vo.process(frame.image, frame.t, height)
         runs[label] = ate(vo.track())
     assert runs["filter"] < 0.85 * runs["newest reading"]  # 0.013 against 0.037 mm on this drive
+
+
+def test_a_spike_in_the_readings_does_not_scale_the_frames(tilted, tmp_path):
+    # the range gate drops the spike for both ways of taking the height (it used to be interpolated into the
+    # frames around it when the readings were taken frame by frame)
+    import shutil
+
+    from fusion_vo.odometry import range_heights
+    from fusion_vo.recording import Recording
+
+    seq = tmp_path / "spiked"
+    shutil.copytree(tilted, seq)
+    data = seq / "range0" / "data.csv"
+    lines = data.read_text().splitlines()
+    frames = Recording(tilted).frame_times
+    readings = Recording(tilted).range().t
+    i = int(np.argmin(np.abs(readings - frames[len(frames) // 2])))  # the reading nearest a frame
+    stamp, _ = lines[i + 1].split(",")
+    lines[i + 1] = f"{stamp},0.5"  # 0.4 m above the floor's 0.1 m
+    data.write_text("\n".join(lines) + "\n")
+    clean, _ = range_heights(Recording(tilted), frames)
+    spiked, _ = range_heights(Recording(seq), frames)
+    assert np.max(np.abs(spiked - clean)) < 1e-3  # the neighbours' interpolation across the gap only
