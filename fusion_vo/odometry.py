@@ -492,15 +492,19 @@ def heights_for(recording: Recording, times: np.ndarray) -> np.ndarray | None:
     return None if out is None else out[0]
 
 
-def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Camera height at ``times`` from the range finder (linear interpolation) and its standard deviation,
-    or ``None`` without a range finder.
+@dataclass
+class RangeReadings:
+    """A range finder's readings that its gate passes: times ``t`` [s], ``height`` [m], and the standard
+    deviation of one reading [m] measured from them (``None`` when too few)."""
 
-    Only the readings the range gate passes are used (:func:`fusion_vo.sensors.range.camera_height`: a
-    spike would otherwise scale the frames around it). The standard deviation of one reading is measured
-    from the readings (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction
-    ``a`` of the way between two readings has ``σ² ((1 - a)² + a²)``.
-    """
+    t: np.ndarray
+    height: np.ndarray
+    sigma: float | None
+
+
+def range_readings(recording: Recording) -> RangeReadings | None:
+    """The gated readings of the recording's range finder (:func:`fusion_vo.sensors.range.camera_height`,
+    :func:`fusion_vo.sensors.range.reading_sigma`), or ``None`` without a usable one."""
     if not recording.has_range():
         return None
     r: RangeData = recording.range()
@@ -511,31 +515,43 @@ def range_heights(recording: Recording, times: np.ndarray) -> tuple[np.ndarray, 
     gated = camera_height(r)
     if not gated.valid.any():
         return None
+    return RangeReadings(gated.t[gated.valid], gated.height[gated.valid], reading_sigma(r, gated=gated))
+
+
+def range_heights(recording: Recording, times: np.ndarray,
+                  readings: RangeReadings | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Camera height at ``times`` from the range finder (linear interpolation) and its standard deviation,
+    or ``None`` without a range finder (``readings``: the recording's :func:`range_readings`, when at hand).
+
+    Only the readings the range gate passes are used (:func:`fusion_vo.sensors.range.camera_height`: a
+    spike would otherwise scale the frames around it). The standard deviation of one reading is measured
+    from the readings (:func:`fusion_vo.sensors.range.reading_sigma`); a height interpolated a fraction
+    ``a`` of the way between two readings has ``σ² ((1 - a)² + a²)``.
+    """
+    readings = readings or range_readings(recording)
+    if readings is None:
+        return None
     times = np.asarray(times, dtype=np.float64)
-    t = np.asarray(gated.t[gated.valid], dtype=np.float64)
-    heights = np.interp(times, t, gated.height[gated.valid])
-    sigma = reading_sigma(r) or 0.0
+    t = np.asarray(readings.t, dtype=np.float64)
+    heights = np.interp(times, t, readings.height)
+    sigma = readings.sigma or 0.0
     j = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
     span = t[j] - t[j - 1] if len(t) > 1 else np.ones_like(times)
     a = np.clip((times - t[j - 1]) / np.where(span > 0, span, 1.0), 0.0, 1.0) if len(t) > 1 else np.zeros_like(times)
     return heights, sigma * np.sqrt((1.0 - a) ** 2 + a**2)
 
 
-def smoothed_heights(recording: Recording, motions: list[FrameMotion]):
-    """The camera height at each of ``motions``' frames from the range finder's readings and the motions'
+def smoothed_heights(readings: RangeReadings, motions: list[FrameMotion]):
+    """The camera height at each of ``motions``' frames from the range finder's ``readings`` and the motions'
     scale (:func:`fusion_vo.geometry.height.smooth_heights`), or ``None`` when the readings do not allow it.
 
     A motion's scale is used as the height ratio of its two frames when it is measured from the frame
     just before it in ``motions``.
     """
     from fusion_vo.geometry.height import smooth_heights
-    from fusion_vo.sensors.range import camera_height, reading_sigma
 
-    r: RangeData = recording.range()
-    sigma = reading_sigma(r)
-    if sigma is None or len(motions) < 2:
+    if readings.sigma is None or len(motions) < 2:
         return None
-    gated = camera_height(r)
     t = np.array([m.timestamp for m in motions], dtype=np.float64)
     log_ratio = np.full(len(motions), np.nan)
     log_sigma = np.full(len(motions), np.nan)
@@ -544,13 +560,15 @@ def smoothed_heights(recording: Recording, motions: list[FrameMotion]):
         if m.ok and m.prev_timestamp is not None and abs(m.prev_timestamp - t[k - 1]) < 1e-9:
             log_ratio[k] = -m.params[3]
             log_sigma[k] = math.sqrt(max(float(m.covariance[3, 3]), 0.0))
-    out = smooth_heights(t, log_ratio, log_sigma, gated.t[gated.valid], gated.height[gated.valid], sigma)
-    if out is not None:
-        out.note = (f"camera height from {out.n_readings} range readings and {out.n_ratios} frame scales "
-                    f"({out.n_downweighted} down-weighted, the scales' stated variance times {out.ratio_factor:.3g}): "
-                    f"median sigma {1e3 * float(np.median(out.sigma)):.3g} mm against {1e3 * sigma:.3g} mm for one reading")
-        log.info("%s", out.note)
-    return out
+    return smooth_heights(t, log_ratio, log_sigma, readings.t, readings.height, readings.sigma)
+
+
+def _height_note(smoothed, reading_sigma: float) -> str:
+    """What the height smoothing used and found, for the run's notes."""
+    return (f"camera height from {smoothed.n_readings} range readings and {smoothed.n_ratios} frame scales "
+            f"({smoothed.n_downweighted} down-weighted, the scales' stated variance times {smoothed.ratio_factor:.3g}): "
+            f"median sigma {1e3 * float(np.median(smoothed.sigma)):.3g} mm against {1e3 * reading_sigma:.3g} mm "
+            "for one reading")
 
 
 def run_visual_odometry(
@@ -601,7 +619,8 @@ def run_visual_odometry(
         frontend = make_frontend(config.frontend, options, point_map=geometry.rectifier)
     except (TypeError, ValueError) as exc:
         raise InputError(f"frontend configuration: {exc}") from None
-    ranged = range_heights(recording, recording.frame_times) if config.use_range else None
+    readings = range_readings(recording) if config.use_range else None
+    ranged = range_heights(recording, recording.frame_times, readings) if readings is not None else None
     heights, height_sigmas = (None, None) if ranged is None else ranged
     derotation = None
     if config.gyro_derotation and recording.has_imu():
@@ -677,7 +696,7 @@ def run_visual_odometry(
         used = np.searchsorted(frame_times, np.asarray(frame_t)).clip(0, len(frame_times) - 1)
         frame_height, frame_height_sigma = heights[used], height_sigmas[used]
     if vo.kept_motions is not None:
-        smoothed = smoothed_heights(recording, vo.kept_motions)
+        smoothed = smoothed_heights(readings, vo.kept_motions)
         if smoothed is not None:  # the same motions again, each scaled by its frame's smoothed height
             kept, vo = vo.kept_motions, VisualOdometry(None, geometry, None, max_bridge=config.max_bridge)
             increments.clear()
@@ -686,7 +705,8 @@ def run_visual_odometry(
             for motion, h, h_sigma in zip(kept, smoothed.height, smoothed.sigma):
                 collect(vo.finish(motion, float(h), float(h_sigma)))
             frame_height, frame_height_sigma = smoothed.height, smoothed.sigma
-            height_note = smoothed.note
+            height_note = _height_note(smoothed, readings.sigma)
+            log.info("%s", height_note)
     elapsed = time.perf_counter() - start
     return OdometryResult(
         increments=increments,

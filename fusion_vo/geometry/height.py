@@ -50,14 +50,11 @@ measurements of the visual scale (:mod:`fusion_vo.sensors.range`), but not both.
 
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cholesky_banded, cho_solve_banded
-
-logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -98,7 +95,6 @@ class SmoothedHeights:
     n_ratios: int
     n_downweighted: int
     ratio_factor: float = 1.0
-    note: str = ""
 
 
 def smooth_heights(frame_t: np.ndarray, log_ratio: np.ndarray, log_ratio_sigma: np.ndarray,

@@ -69,17 +69,18 @@ def camera_height(data: RangeData, noise: RangeNoise | None = None) -> CameraHei
     return CameraHeight(np.asarray(data.t, dtype=np.float64), np.where(ok, d, np.nan), ok, n_gated)
 
 
-def reading_sigma(data: RangeData, noise: RangeNoise | None = None) -> float | None:
+def reading_sigma(data: RangeData, noise: RangeNoise | None = None, gated: CameraHeight | None = None) -> float | None:
     """Standard deviation [m] of one reading, measured from the readings themselves.
 
     The second difference ``z_{i+1} - 2 z_i + z_{i-1}`` of white noise of standard deviation ``σ`` has
     variance ``6 σ²``, while a height that changes smoothly over a few samples (a slope, a vibration much
     slower than the sample rate) contributes little to it; so ``σ = rms(second differences) / √6`` (an upper
     bound when the height itself changes fast). Readings the gate of :func:`camera_height` rejects and second
-    differences above ``spike_threshold`` are left out. None with fewer than 10 usable second differences.
+    differences above ``spike_threshold`` are left out (``gated``: :func:`camera_height` of ``data`` with
+    ``noise``, when at hand). None with fewer than 10 usable second differences.
     """
     noise = noise or RangeNoise()
-    h = camera_height(data, noise)
+    h = gated if gated is not None else camera_height(data, noise)
     z = h.height[h.valid]
     if len(z) < 12:
         return None
