@@ -236,7 +236,8 @@ class HeightFilter:
     The state is the log height at the last frame. At a new frame the ratio predicts it (the model of the
     module docstring), and each reading taken since the previous frame updates the pair of the two frames'
     log heights it lies between (a reading beyond the new frame waits for the next one). A reading whose
-    normalised innovation exceeds ``huber`` counts with its variance inflated to sit on that bound.
+    normalised innovation ``|r|`` exceeds ``huber`` counts with the Huber weight ``huber / |r|`` (its
+    innovation variance times ``|r| / huber``), as the smoother's readings do.
 
     The ratios' variance factor ``φ`` is not estimated here: a reading is 10-100 times noisier than a
     ratio, so the few seconds of readings a live filter has do not tell how good the ratios are (a
@@ -323,7 +324,7 @@ class HeightFilter:
             y = math.log(r) - float(h @ m)
             S = float(h @ C @ h) + R
             d2 = y * y / S
-            if d2 > o.huber**2:  # bounded influence: the variance that puts it on the bound
+            if d2 > o.huber**2:  # Huber weight huber/|r|: its innovation variance times |r|/huber
                 R += S * (math.sqrt(d2) / o.huber - 1.0)
                 S = float(h @ C @ h) + R
                 self.n_downweighted += 1
