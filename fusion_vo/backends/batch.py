@@ -268,6 +268,8 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
         camera_height_sigma=_height_sigma(recording) if "camera" in sensors else None,
         range_in_visual=bool(getattr(visual, "range_scaled", False)),
     )
+    if streams.visual is not None and streams.range_in_visual:
+        streams.range_height_sigma = _range_height_sigma(visual)
     for s in known:
         if s.name == "camera" or s.read is None or not s.is_wanted(sensors, present):
             continue
@@ -289,6 +291,17 @@ def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = N
     else:
         return None
     return wheel_track(travel, config.initial_pose)
+
+
+def _range_height_sigma(visual) -> float | None:
+    """The median standard deviation [m] of the camera heights visual odometry scaled its frames with
+    (``OdometryResult.frame_height_sigma``), or None when it does not state them."""
+    sigma = getattr(visual, "frame_height_sigma", None)
+    if sigma is None:
+        return None
+    sigma = np.asarray(sigma, dtype=np.float64)
+    sigma = sigma[np.isfinite(sigma) & (sigma > 0)]
+    return float(np.median(sigma)) if len(sigma) else None
 
 
 def _height_sigma(recording) -> float | None:

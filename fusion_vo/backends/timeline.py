@@ -62,7 +62,9 @@ class SensorStreams:
     ``camera_height`` is the height the visual increments were computed with (for the range finder),
     ``camera_height_sigma`` its standard deviation [m] as ``cam0/sensor.yaml`` states it (``height_sigma``).
     ``range_in_visual`` says the visual increments were already scaled with the range finder's heights
-    (visual odometry's ``use_range``): the range finder is then not used again as a height measurement.
+    (visual odometry's ``use_range``): the range finder is then not used again as a height measurement,
+    and ``range_height_sigma`` [m], the typical standard deviation of the heights the frames were scaled
+    with, bounds the prior of the visual scale (their precision is what the increments' scale has).
     """
 
     visual: list[VisualIncrement] | None = None
@@ -73,6 +75,7 @@ class SensorStreams:
     camera_height: float | None = None
     camera_height_sigma: float | None = None
     range_in_visual: bool = False
+    range_height_sigma: float | None = None
     gps: GpsData | None = None
     extra: dict = field(default_factory=dict)
 
@@ -115,7 +118,7 @@ class SensorStreams:
         if not sensors:
             raise InputError("no sensors selected")
         out = SensorStreams(camera_height=self.camera_height, camera_height_sigma=self.camera_height_sigma,
-                            range_in_visual=self.range_in_visual)
+                            range_in_visual=self.range_in_visual, range_height_sigma=self.range_height_sigma)
         for s in registry.sensors():
             data = s.pick(self, sensors) if s.pick is not None else (s.data(self) if s.name in sensors else None)
             if s.field is not None:
@@ -354,6 +357,12 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     )
     if streams.camera_height_sigma is not None and streams.camera_height:
         iv.visual_scale_sigma = float(streams.camera_height_sigma / streams.camera_height)
+    if streams.visual is not None and streams.range_in_visual and streams.range_height_sigma and streams.camera_height:
+        ranged = float(streams.range_height_sigma / streams.camera_height)
+        if ranged < iv.visual_scale_sigma:  # the range finder's heights set the increments' scale
+            iv.visual_scale_sigma = ranged
+            notes.append(f"visual scale: prior σ {ranged:.2g} from the range finder's heights in the visual "
+                         f"increments ({1e3 * streams.range_height_sigma:.3g} mm)")
     if streams.wheel is not None and streams.wheel.config.radius_sigma is not None:
         iv.wheel_scale_sigma = streams.wheel.config.relative_radius_sigma(iv.wheel_scale_sigma)
     iv.heading_offset = heading_offset
