@@ -10,13 +10,17 @@ Every file and folder fusion-vo writes goes through this module, so every output
 :class:`StagedFiles`
     New files added to an existing folder (``fusion-vo evaluate`` adding its metrics, figures and report
     to a run folder): written into a hidden staging folder inside it and renamed into place only when all
-    of them were written.
+    of them were written. The renames are journalled (:data:`COMMIT_JOURNAL`): if the process is killed
+    among them, the next command writing the folder finishes them first, so the folder never keeps a mix
+    of two commands' files.
 :class:`OutputFolder`
     A whole output folder (a run, a generated or imported recording). Everything is written into a hidden
     staging folder beside the target; :meth:`OutputFolder.commit` swaps it into place in one rename and only
     then removes the previous folder. If anything fails, or the process is interrupted, the staging folder
-    is removed and the target is left as it was. While it is open the target is locked, so two commands
-    writing the same folder at once fail cleanly instead of mixing their files.
+    is removed and the target is left as it was. A process killed between the two renames of the swap
+    (the previous folder moved aside, the new one not yet in place) leaves both in the hidden folder; the
+    next command writing that target moves the new one, complete, into place. While it is open the target
+    is locked, so two commands writing the same folder at once fail cleanly instead of mixing their files.
 
 The folder rules (the reason of this module): an existing target is replaced only if it is empty or holds
 the marker file that fusion-vo writes into every output folder of that kind (``marker``); any other folder
@@ -29,6 +33,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import json
 import logging
 import os
 import secrets
@@ -332,6 +337,13 @@ class OutputFolder(_LockedStaging):
             except OSError:
                 continue
             if names and all(n == self.target.name or n.startswith(".previous-") for n in names):
+                staged = holder / self.target.name
+                if not os.path.lexists(self.target) and (staged / self.marker).is_file():
+                    # killed between the two renames of commit(): the previous folder was moved aside and
+                    # the new one, complete (its marker is written last), not yet moved in. Finish the swap.
+                    os.rename(staged, self.target)
+                    log.warning("%s: completed the replacement of the folder that an interrupted command had "
+                                "written", self.target)
                 log.info("removing %s, left by an interrupted command", holder)
                 shutil.rmtree(holder, ignore_errors=True)
 
@@ -386,6 +398,46 @@ def unlock_folder(fd: int, lock_path: Path) -> None:
     os.close(fd)
 
 
+#: journal of a :meth:`StagedFiles.commit` in progress, in the folder being written
+COMMIT_JOURNAL = ".fusion-vo-commit"
+
+
+def finish_staged_commit(folder: str | Path) -> list[str]:
+    """Finish the :meth:`StagedFiles.commit` whose journal is in ``folder``; the names moved (none without one).
+
+    Call with the folder's lock held (:class:`StagedFiles` does). Every file of the journal still in its
+    staging folder is moved into place, the earlier files matching its patterns that the new set does not
+    hold are removed, then the journal. A journal that cannot be read is removed with a warning: the
+    files it named stay as they are.
+    """
+    folder = Path(folder)
+    path = folder / COMMIT_JOURNAL
+    if not path.is_file():
+        return []
+    try:
+        journal = json.loads(path.read_text())
+        staging = folder / str(journal["staging"])
+        names = [str(n) for n in journal["files"]]
+        replaces = [str(p) for p in journal["replaces"]]
+        if not staging.name.startswith(STAGING_PREFIX) or any("/" in n or n in ("", ".", "..") for n in names):
+            raise ValueError("not a journal of fusion-vo")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("%s: cannot read it (%s); removed", path, exc)
+        path.unlink(missing_ok=True)
+        return []
+    moved = []
+    for name in names:
+        if os.path.lexists(staging / name):
+            os.replace(staging / name, folder / name)
+            moved.append(name)
+    for pattern in replaces:
+        for old in folder.glob(pattern):
+            if old.name not in names and old.is_file():
+                old.unlink()
+    path.unlink()
+    return moved
+
+
 class StagedFiles(_LockedStaging):
     """New files for an existing folder (an evaluation added to a run folder), all or nothing.
 
@@ -417,6 +469,10 @@ class StagedFiles(_LockedStaging):
 
     def __enter__(self) -> "StagedFiles":
         def under_lock() -> None:
+            moved = finish_staged_commit(self.folder)  # a commit a killed process had begun
+            if moved:
+                log.warning("%s: moved in the %d files an interrupted command had written (%s)", self.folder,
+                            len(moved), ", ".join(moved))
             for stale in self.folder.glob(STAGING_PREFIX + "*"):  # left by a killed process (we hold the lock)
                 if stale.is_dir() and not stale.is_symlink():
                     shutil.rmtree(stale, ignore_errors=True)
@@ -432,6 +488,9 @@ class StagedFiles(_LockedStaging):
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
+        if self._holder is not None and (self.folder / COMMIT_JOURNAL).is_file():
+            finish_staged_commit(self.folder)  # interrupted inside commit(): every file was written, move them in
+            self._committed = True
         super().__exit__(exc_type, exc, tb)
         if not self._committed:
             self._remove_created()
@@ -443,14 +502,17 @@ class StagedFiles(_LockedStaging):
             self._created = False
 
     def commit(self) -> list[Path]:
-        """Move the new files into the folder; returns their final paths."""
+        """Move the new files into the folder; returns their final paths.
+
+        The files are moved one by one, so first a journal (:data:`COMMIT_JOURNAL`) names the staging folder,
+        the files and the patterns they replace; it is removed when all are in place. A process killed in
+        between (SIGKILL, power loss) leaves the journal, and the next command that writes the folder
+        finishes the moves before anything else (:func:`finish_staged_commit`).
+        """
         assert self.path is not None, "commit() outside the with block"
         names = sorted(p.name for p in self.path.iterdir())
-        for name in names:
-            os.replace(self.path / name, self.folder / name)
-        for pattern in self.replaces:
-            for old in self.folder.glob(pattern):
-                if old.name not in names and old.is_file():
-                    old.unlink()
+        journal = {"staging": self.path.name, "files": names, "replaces": list(self.replaces)}
+        write_atomic(self.folder / COMMIT_JOURNAL, json.dumps(journal))
+        finish_staged_commit(self.folder)
         self._committed = True
         return [self.folder / name for name in names]

@@ -259,3 +259,71 @@ def test_evaluate_fails_at_once_while_a_run_writes_the_folder(recording, tmp_pat
     finally:
         os.close(fd)
     assert not (out / "metrics.json").exists()
+
+
+def _killed_at_rename(function: str, call: int, body: str) -> subprocess.CompletedProcess:
+    """Run ``body`` in a fresh interpreter whose ``os.<function>`` kills the process (SIGKILL: no clean-up
+    runs) right after its ``call``-th call."""
+    script = f"""
+import os, signal
+from pathlib import Path
+from fusion_vo import outputs
+real, calls = os.{function}, []
+def dying(*args, **kwargs):
+    real(*args, **kwargs)
+    calls.append(args)
+    if len(calls) == {call}:
+        os.kill(os.getpid(), signal.SIGKILL)
+os.{function} = dying
+{body}
+"""
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -signal.SIGKILL, proc.stderr
+    return proc
+
+
+def test_files_half_moved_in_by_a_killed_command_are_finished_by_the_next(tmp_path):
+    from fusion_vo.outputs import COMMIT_JOURNAL, StagedFiles
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for name in ("metrics.json", "report.html", "a.png", "old.png", "vo.tum"):
+        (folder / name).write_text("old")
+    body = f"""
+with outputs.StagedFiles(Path({str(folder)!r}), replaces=("metrics.json", "report.html", "*.png")) as staged:
+    for name in ("a.png", "metrics.json", "report.html"):
+        (staged.path / name).write_text("new")
+    staged.commit()
+"""
+    _killed_at_rename("replace", 2, body)  # the journal's own rename, then a.png: the rest not yet moved
+    assert (folder / "a.png").read_text() == "new" and (folder / "metrics.json").read_text() == "old"
+    assert (folder / COMMIT_JOURNAL).is_file()  # what says the folder is mid-way
+    with StagedFiles(folder, replaces=("metrics.json",)) as staged:  # the next writer finishes it first
+        assert {p.name: p.read_text() for p in folder.iterdir() if not p.name.startswith(".")} == {
+            "metrics.json": "new", "report.html": "new", "a.png": "new", "vo.tum": "old"}  # old.png replaced
+        (staged.path / "metrics.json").write_text("newest")
+        staged.commit()
+    assert (folder / "metrics.json").read_text() == "newest" and (folder / "report.html").read_text() == "new"
+    assert sorted(p.name for p in folder.iterdir()) == ["a.png", "metrics.json", "report.html", "vo.tum"]
+
+
+def test_a_folder_swap_cut_by_a_kill_is_finished_by_the_next_command(tmp_path):
+    from fusion_vo.outputs import OutputFolder
+
+    target = tmp_path / "out"
+    target.mkdir()
+    (target / ".fusion-vo-run").write_text("written by fusion-vo\n")
+    (target / "vo.tum").write_text("old")
+    body = f"""
+with outputs.OutputFolder(Path({str(target)!r}), ".fusion-vo-run") as folder:
+    (folder.path / "vo.tum").write_text("new")
+    folder.commit()
+"""
+    _killed_at_rename("rename", 1, body)  # the previous folder moved aside, the new one not yet in place
+    assert not target.exists()
+    with pytest.raises(RuntimeError):
+        with OutputFolder(target, ".fusion-vo-run"):  # the next command: the swap is finished on entry
+            assert (target / "vo.tum").read_text() == "new"
+            raise RuntimeError("this command fails; the finished swap stays")
+    assert (target / "vo.tum").read_text() == "new"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # the hidden folders and the lock are gone
