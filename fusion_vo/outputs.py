@@ -223,8 +223,12 @@ class _LockedStaging:
         self._lock_fd, self._lock_path = lock_folder(lock_target, what)
         try:
             under_lock()
-            self._holder = holder_parent / _random_name(STAGING_PREFIX)
-            os.mkdir(self._holder, 0o777)
+            holder = holder_parent / _random_name(STAGING_PREFIX)
+            try:
+                os.mkdir(holder, 0o777)
+            except OSError as exc:  # permissions, a read-only file system: name the folder being written
+                raise OSError(exc.errno, exc.strerror, str(self._final)) from None
+            self._holder = holder
             self.path = self._holder if inner is None else self._holder / inner
             if inner is not None:
                 os.mkdir(self.path, 0o777)
@@ -373,7 +377,10 @@ def lock_folder(target: Path, what: str = "output folder") -> tuple[int, Path]:
     takes); fail at once with :class:`InputError` if another command has it. Returns the descriptor and path."""
     lock_path = target.parent / f".{target.name}.lock"
     while True:
-        fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:  # permissions, a read-only file system: name the folder being written
+            raise OSError(exc.errno, exc.strerror, str(target)) from None
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

@@ -327,3 +327,31 @@ with outputs.OutputFolder(Path({str(target)!r}), ".fusion-vo-run") as folder:
             raise RuntimeError("this command fails; the finished swap stays")
     assert (target / "vo.tum").read_text() == "new"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]  # the hidden folders and the lock are gone
+
+
+@pytest.mark.parametrize("refused_at", ["lock", "staging"])
+def test_a_folder_it_may_not_write_is_a_one_line_error(recording, tmp_path, capsys, monkeypatch, refused_at):
+    """The machine runs these tests as root, whom permissions do not stop; the refusal is simulated where
+    the operating system would give it: creating the lock file or the hidden staging folder beside the
+    target. The error names the target, never those hidden names."""
+    import fusion_vo.outputs as outputs
+
+    real_mkdir, real_open = os.mkdir, os.open
+
+    def mkdir(path, *args, **kwargs):
+        if refused_at == "staging" and Path(path).name.startswith(STAGING_PREFIX):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_mkdir(path, *args, **kwargs)
+
+    def open_(path, flags, *args, **kwargs):
+        if refused_at == "lock" and str(path).endswith(".lock"):
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(outputs.os, "mkdir", mkdir)
+    monkeypatch.setattr(outputs.os, "open", open_)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", *QUICK)
+    assert_error(status, err, f"{tmp_path / 'out'}: Permission denied")
+    assert STAGING_PREFIX not in err and ".lock" not in err and "Traceback" not in err
+    assert snapshot(tmp_path) == before  # nothing made, no lock file left
