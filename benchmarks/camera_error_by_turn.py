@@ -11,14 +11,26 @@ warps the reference by the predicted motion above ``warp_tolerance`` (0.015: 0.8
 band edge there separates the increments tracked from the reference as it is from the warped ones. Then the
 ATE [mm] of visual odometry and of the default fusion (EKF / RTS / GTSAM batch / iSAM2).
 
+With ``--variants`` the same increments (visual odometry run once without the frontend's floors) are
+also fused with heading variances other than the default's (``max(stated, floor²)``, floor 20 µrad):
+
+* ``band variance (oracle)``: each increment's heading variance set to the mean squared error of its turn
+  band against the ground truth (a diagnostic: no run knows it);
+* ``floor 10 µrad + unwarped turn``: the floor halved, and ``(k ψ)²`` added to the stated variance of an
+  increment that turns by ``ψ`` below the warp tolerance (``k`` 0.0015: the 0.15 % rotation error of
+  patches tracked without warping that the table measures);
+* ``floor 10 µrad``: the floor halved alone.
+
 Run::
 
     python benchmarks/camera_error_by_turn.py [--out DIR] [--only square,random60] [--klt warp_tolerance=0.005]
+        [--variants]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import shutil
 import sys
 import tempfile
@@ -32,7 +44,7 @@ from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import make_standard
 
 sys.path.insert(0, str(Path(__file__).parent))
-from fusion_vs_best import FUSED, ate_against, camera_errors  # noqa: E402
+from fusion_vs_best import FLOOR, FUSED, ate_against, camera_errors, with_floor  # noqa: E402
 
 #: edges [rad per increment] of the turn bands; 0.015 is the KLT frontend's default warp tolerance
 EDGES = (0.0, 0.002, 0.008, 0.015, 0.03, np.inf)
@@ -54,6 +66,44 @@ def turn_bands(errors: np.ndarray, turns: np.ndarray, chained: np.ndarray) -> li
     return rows
 
 
+#: ``k`` of the ``floor 10 µrad + unwarped turn`` variant and the warp tolerance it applies below
+TURN_ERROR, WARP_TOLERANCE = 0.0015, 0.015
+
+
+def heading_variants(rec: Recording, options: dict) -> dict[str, list]:
+    """Label -> the visual increments of one visual odometry run (without floors) with the heading
+    variances of each ``--variants`` case (module docstring), floors applied as the frontend does."""
+    vo = run_visual_odometry(rec, OdometryConfig(frontend_options=options, min_sigma_xy=0.0, min_sigma_yaw=0.0))
+    errors, _, _ = camera_errors(rec, vo.increments)
+    ok = [k for k, inc in enumerate(vo.increments) if inc.ok]
+    turns = np.abs(np.array([vo.increments[k].delta[2] for k in ok]) - errors[:, 2])
+    band_mse = np.zeros(len(ok))
+    for lo, hi in zip(EDGES[:-1], EDGES[1:]):
+        m = (turns >= lo) & (turns < hi)
+        if m.any():
+            band_mse[m] = np.mean(errors[m, 2] ** 2)
+
+    def with_heading(variance) -> list:
+        out = list(vo.increments)
+        for j, k in enumerate(ok):
+            cov = np.array(out[k].covariance, dtype=float)
+            scale = np.sqrt(variance(j, cov[2, 2], abs(out[k].delta[2])) / cov[2, 2])
+            cov[2, :] *= scale
+            cov[:, 2] *= scale
+            out[k] = dataclasses.replace(out[k], covariance=cov)
+        return out
+
+    def unwarped(j, stated, turn):
+        return stated + (TURN_ERROR * turn) ** 2 if turn < WARP_TOLERANCE else stated
+
+    return vo, {
+        "default": with_floor(vo.increments, 1.0, FLOOR),
+        "band variance (oracle)": with_heading(lambda j, stated, turn: band_mse[j]),
+        "floor 10 µrad + unwarped turn": with_floor(with_heading(unwarped), 1.0, (FLOOR[0], 1e-5)),
+        "floor 10 µrad": with_floor(vo.increments, 1.0, (FLOOR[0], 1e-5)),
+    }
+
+
 def parse_options(text: str | None) -> dict:
     """``KEY=VALUE,...`` as a dict of floats (ints where they are whole)."""
     out = {}
@@ -69,6 +119,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, help="keep the recordings here (default: a temporary folder)")
     parser.add_argument("--only", default="square,random60,gps_outage", help="comma-separated standard recordings")
     parser.add_argument("--klt", help="KLT frontend options, KEY=VALUE,...")
+    parser.add_argument("--variants", action="store_true", help="also fuse with other heading variances")
     args = parser.parse_args(argv)
     out = args.out or Path(tempfile.mkdtemp(prefix="camera_error_by_turn_"))
     options = parse_options(args.klt)
@@ -89,6 +140,11 @@ def main(argv=None) -> int:
             fused = backends.run_backends(rec, vo, backend="all")
             print(f"    ATE [mm]: vo {ate(vo.track):.3f}, fused " + " / ".join(f"{ate(fused.trajectories[k]):.3f}" for k in FUSED),
                   flush=True)
+            if args.variants:
+                plain, cases = heading_variants(rec, options)
+                for label, increments in cases.items():
+                    result = backends.run_backends(rec, dataclasses.replace(plain, increments=increments), backend="all")
+                    print(f"    {label:30s} " + " / ".join(f"{ate(result.trajectories[k]):.3f}" for k in FUSED), flush=True)
     finally:
         if args.out is None:
             shutil.rmtree(out, ignore_errors=True)
