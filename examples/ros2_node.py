@@ -64,12 +64,14 @@ class GroundCameraOdometry(Node):
         self.declare_parameter("backend", "ekf")  # "gtsam": iSAM2 (a late camera only within the window)
         self.declare_parameter("rate", 50.0)
         self.declare_parameter("camera_height", 0.095)  # [m] height the visual increments assume
+        self.declare_parameter("camera_height_sigma", 0.001)  # [m] how well that height is known
         p = self.get_parameter
         self.fusion = StreamingFusion(
             p("backend").value,
             FusionConfig(reorder_window=0.05),  # the EKF re-filters anything later from its history
             sensors=["camera", "odom", "imu"],
             camera_height=p("camera_height").value,
+            camera_height_sigma=p("camera_height_sigma").value,  # the visual scale's prior, as height_sigma
             history=2.0,  # seconds of states kept to re-apply late measurements
             horizon=0.5,  # largest prediction beyond the newest sample; also the future-stamp limit
         )

@@ -112,7 +112,7 @@ from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
 from fusion_vo.sensors.visual import frame_error_cov
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
 from fusion_vo.errors import InputError
@@ -189,6 +189,14 @@ class StreamingFusion:
         EuRoC noise keys of ``imu0/sensor.yaml``.
     camera_height : float, optional
         Height the visual increments assume (needed for ``range``).
+    camera_height_sigma : float, optional
+        Its standard deviation [m] (``height_sigma`` of ``cam0/sensor.yaml``): the visual scale's prior,
+        as in a batch run (:func:`~fusion_vo.backends.timeline.scale_priors`; default
+        ``config.visual_scale_sigma``).
+    range_height_sigma : float, optional
+        Given when the visual increments were already scaled with the range finder's heights (an
+        offline visual odometry run's ``frame_height_sigma``, typical value): it bounds that prior as in a
+        batch run, and the range finder is then not used again (its samples are ignored, with a note).
     gps_lever_arm : array_like, optional
         Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
         (default: at the body origin).
@@ -223,6 +231,7 @@ class StreamingFusion:
     def __init__(self, backend: str = "ekf", config: FusionConfig | dict | None = None,
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
+                 camera_height_sigma: float | None = None, range_height_sigma: float | None = None,
                  gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
                  steps_per_call: int | None = 1, background: bool = False):
         if backend not in ("ekf", "gtsam"):
@@ -263,6 +272,9 @@ class StreamingFusion:
         self.imu_T_BS = np.eye(4) if imu_T_BS is None else np.asarray(imu_T_BS, dtype=np.float64)
         self.imu_noise = dict(imu_noise or {})
         self.camera_height = camera_height
+        #: the two scales' priors, as a batch run of the same streams takes them
+        self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config)
+        self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
         self._records: list[_NodeRecord | None] = []
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
@@ -294,7 +306,10 @@ class StreamingFusion:
         self._poses: list[np.ndarray] = []
         self._covs: list[np.ndarray] = []
         self._heading_offset: float | None = None
-        self._notes: list[str] = []
+        self._notes: list[str] = list(self._priors.notes)
+        if self._range_in_visual and "range" in self.sensors:
+            self._notes.append("range finder: already in the visual increments (their per-frame height), "
+                               "not used again as a height measurement")
         self._ekf: PlanarEkf | None = None
         self._graph = None
         from fusion_vo.sensors.gps import GpsModel
@@ -820,6 +835,8 @@ class StreamingFusion:
         ``t0`` too."""
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
+            if name == "range" and self._range_in_visual:  # used once: already in the visual increments
+                continue
             live = self._intake[name].live
             more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
@@ -858,6 +875,8 @@ class StreamingFusion:
         if usable:
             streams.visual = usable
         iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
+        iv.visual_scale_sigma = self._priors.visual_scale_sigma  # what the whole streams give (one interval's
+        iv.wheel_scale_sigma = self._priors.wheel_scale_sigma  # samples do not carry the sensors' files)
         for sensor, c in iv.counts.items():
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
@@ -989,7 +1008,8 @@ class StreamingFusion:
         kv, kb = self._calibration_flags()
         if self.backend == "ekf":
             twist = "odom" in self.sensors and "wheel" not in self.sensors
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, states=self._states,
+            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, visual_scale_sigma=self._priors.visual_scale_sigma,
+                                  wheel_scale_sigma=self._priors.wheel_scale_sigma, states=self._states,
                                   camera="camera" in self.sensors)
             self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
@@ -1182,7 +1202,8 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     imu = streams.imu
     return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
                            imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,
-                           camera_height=streams.camera_height, **kwargs)
+                           camera_height=streams.camera_height, camera_height_sigma=streams.camera_height_sigma,
+                           range_height_sigma=streams.range_height_sigma if streams.range_in_visual else None, **kwargs)
 
 
 def _merge_into(total: dict, part: dict) -> None:

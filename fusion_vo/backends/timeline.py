@@ -333,6 +333,40 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
     return nodes
 
 
+@dataclass
+class ScalePriors:
+    """Prior standard deviations (relative) of the visual scale and of the wheels' distance scale, and the
+    notes that say where they came from (:func:`scale_priors`)."""
+
+    visual_scale_sigma: float
+    wheel_scale_sigma: float
+    notes: list[str] = field(default_factory=list)
+
+
+def scale_priors(config: FusionConfig, camera_height: float | None, camera_height_sigma: float | None = None,
+                 range_height_sigma: float | None = None, wheel_config=None) -> ScalePriors:
+    """The priors of the two scales, the same for batch and streaming runs.
+
+    The visual scale: ``camera_height_sigma / camera_height`` (``height_sigma`` of ``cam0/sensor.yaml``),
+    else ``config.visual_scale_sigma``; when the increments were scaled with the range finder's heights
+    (``range_height_sigma`` given: their typical standard deviation), at most ``range_height_sigma /
+    camera_height``. The wheels' distance scale: ``radius_sigma / radius`` of ``wheel_config``
+    (``wheel0/sensor.yaml``), else ``config.wheel_scale_sigma``.
+    """
+    visual, wheel, notes = config.visual_scale_sigma, config.wheel_scale_sigma, []
+    if camera_height_sigma is not None and camera_height:
+        visual = float(camera_height_sigma / camera_height)
+    if range_height_sigma and camera_height:
+        ranged = float(range_height_sigma / camera_height)
+        if ranged < visual:  # the range finder's heights set the increments' scale
+            visual = ranged
+            notes.append(f"visual scale: prior σ {ranged:.2g} from the range finder's heights in the visual "
+                         f"increments ({1e3 * range_height_sigma:.3g} mm)")
+    if wheel_config is not None and wheel_config.radius_sigma is not None:
+        wheel = wheel_config.relative_radius_sigma(wheel)
+    return ScalePriors(visual, wheel, notes)
+
+
 # --------------------------------------------------------------------------- builder
 def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None,
                     heading_offset: float | None = None) -> Intervals:
@@ -355,16 +389,11 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma,
         visual_frame_error=config.visual_frame_error,
     )
-    if streams.camera_height_sigma is not None and streams.camera_height:
-        iv.visual_scale_sigma = float(streams.camera_height_sigma / streams.camera_height)
-    if streams.visual is not None and streams.range_in_visual and streams.range_height_sigma and streams.camera_height:
-        ranged = float(streams.range_height_sigma / streams.camera_height)
-        if ranged < iv.visual_scale_sigma:  # the range finder's heights set the increments' scale
-            iv.visual_scale_sigma = ranged
-            notes.append(f"visual scale: prior σ {ranged:.2g} from the range finder's heights in the visual "
-                         f"increments ({1e3 * streams.range_height_sigma:.3g} mm)")
-    if streams.wheel is not None and streams.wheel.config.radius_sigma is not None:
-        iv.wheel_scale_sigma = streams.wheel.config.relative_radius_sigma(iv.wheel_scale_sigma)
+    priors = scale_priors(config, streams.camera_height, streams.camera_height_sigma,
+                          streams.range_height_sigma if streams.visual is not None and streams.range_in_visual else None,
+                          None if streams.wheel is None else streams.wheel.config)
+    iv.visual_scale_sigma, iv.wheel_scale_sigma = priors.visual_scale_sigma, priors.wheel_scale_sigma
+    notes.extend(priors.notes)
     iv.heading_offset = heading_offset
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)
