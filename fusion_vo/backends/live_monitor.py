@@ -10,7 +10,9 @@ recording, may trust it again where its absolute heading agrees). Each span in w
 a component was dropped becomes an :class:`~fusion_vo.backends.monitor.Episode`.
 
 Decisions only use data up to the interval they are applied to, so they can differ from the batch
-check's (which also sees what comes after): a lie is used until the check has seen enough of it.
+check's (which also sees what comes after): a lie is used until the check has seen enough of it. Until
+the gyro's bias can be measured (ten intervals at rest or with a heading reference), the gyro neither
+judges the other sources nor is judged: a constant bias is the backends' to estimate, not a lie.
 """
 
 from __future__ import annotations
@@ -181,12 +183,15 @@ class LiveHeadingMonitor:
             self._rest_bias = bias
         elif self._rest_bias is not None:
             bias = self._rest_bias  # the last standstill's bias beats one measured against a moving reference
+        unknown = bias is None and iv.uses("gyro") and "gyro" not in self.dropped
+        if unknown:  # too few intervals yet to measure the bias: the gyro neither judges nor is judged
+            iv.gyro_ok = np.zeros(len(iv.t) - 1, bool)
         episodes = check_heading_sources(iv, self.config, bias)
         kept = {"wheel": iv.wheel_yaw_ok, "gyro": iv.gyro_ok, "ahrs": iv.ahrs_ok[1:]}
         t_now = self._t[-1]
         for name in _COMPONENTS:
-            if not raw[name][-1]:
-                continue  # not measured in the newest interval: no new evidence
+            if not raw[name][-1] or (name == "gyro" and unknown):
+                continue  # not measured in the newest interval (or not judged yet): no new evidence
             liar = not kept[name][-1]
             if liar and name not in self.dropped:
                 ep = next((e for e in reversed(episodes) if e.component == _LABEL[name]), None)
