@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo import backends
-from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import make_standard
 
@@ -70,8 +70,8 @@ def turn_bands(errors: np.ndarray, turns: np.ndarray, chained: np.ndarray) -> li
 TURN_ERROR, WARP_TOLERANCE = 0.0015, 0.015
 
 
-def heading_variants(rec: Recording, options: dict) -> dict[str, list]:
-    """Label -> the visual increments of one visual odometry run (without floors) with the heading
+def heading_variants(rec: Recording, options: dict) -> tuple[OdometryResult, dict[str, list]]:
+    """One visual odometry run without floors, and label -> its visual increments with the heading
     variances of each ``--variants`` case (module docstring), floors applied as the frontend does."""
     vo = run_visual_odometry(rec, OdometryConfig(frontend_options=options, min_sigma_xy=0.0, min_sigma_yaw=0.0))
     errors, _, _ = camera_errors(rec, vo.increments)
