@@ -28,7 +28,7 @@ from baseline_opencv import run as baseline_run  # this folder
 
 from fusion_vo.benchmark import run_benchmark
 from fusion_vo.cli.bench import frame_count, frontend_list, thread_list
-from fusion_vo.cli.run import positive_int
+from fusion_vo.cli.arguments import positive_int
 from fusion_vo.simulation.standard import make_standard
 
 

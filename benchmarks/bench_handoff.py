@@ -26,7 +26,7 @@ import numpy as np
 
 from fusion_vo.benchmark import first_frames
 from fusion_vo.cli.bench import frame_count, frontend_list
-from fusion_vo.cli.run import positive_int
+from fusion_vo.cli.arguments import positive_int
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import make_standard

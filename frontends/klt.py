@@ -357,6 +357,23 @@ def _set_up_ahead(point_map: PointMap, ref_img: np.ndarray, ref_pts: np.ndarray,
     return ref_rect, setup
 
 
+def global_shift(ref: np.ndarray, img: np.ndarray, config: KltConfig,
+                 hann: np.ndarray | None = None) -> tuple[tuple[float, float] | None, np.ndarray]:
+    """Coarse translation (image px) of ``img`` against ``ref`` by phase correlation at ``config``'s
+    ``global_downsample`` (None below ``min_global_response``), and the Hanning window used (pass it back in
+    to reuse it for frames of the same size)."""
+    f = config.global_downsample
+    size = (img.shape[1] // f, img.shape[0] // f)
+    a = cv2.resize(ref, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+    c = cv2.resize(img, size, interpolation=cv2.INTER_AREA).astype(np.float32)
+    if hann is None or hann.shape != a.shape:
+        hann = cv2.createHanningWindow(size, cv2.CV_32F)
+    (dx, dy), response = cv2.phaseCorrelate(a, c, hann)
+    if response < config.min_global_response:
+        return None, hann
+    return (dx * f, dy * f), hann
+
+
 @dataclass
 class _Attempt:
     """One tracking attempt from a given initial guess."""
@@ -637,16 +654,8 @@ class KltFrontend:
 
     def _global_shift(self, img: np.ndarray) -> tuple[float, float] | None:
         """Coarse translation (image px) of ``img`` against the reference by phase correlation."""
-        f = self.config.global_downsample
-        size = (img.shape[1] // f, img.shape[0] // f)
-        a = cv2.resize(self._ref_img, size, interpolation=cv2.INTER_AREA).astype(np.float32)
-        c = cv2.resize(img, size, interpolation=cv2.INTER_AREA).astype(np.float32)
-        if self._hann is None or self._hann.shape != a.shape:
-            self._hann = cv2.createHanningWindow(size, cv2.CV_32F)
-        (dx, dy), response = cv2.phaseCorrelate(a, c, self._hann)
-        if response < self.config.min_global_response:
-            return None
-        return dx * f, dy * f
+        shift, self._hann = global_shift(self._ref_img, img, self.config, self._hann)
+        return shift
 
     # ------------------------------------------------------------ references
     def _set_reference(self, img: np.ndarray, t: float, pts: np.ndarray) -> None:

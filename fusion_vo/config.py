@@ -215,6 +215,9 @@ def validate_config(data: dict, path: Path | None = None) -> RunConfig:
 def load_config(path: str | Path | None) -> RunConfig:
     """Read a YAML configuration (missing keys keep their defaults); ``None`` gives the defaults.
 
+    A run's own ``run.yaml`` reads back as its configuration: the recording it names (``sequence``) is left
+    to the command's argument.
+
     The returned sections hold every option of their stage (the file's values and the defaults).
     """
     if path is None:
@@ -222,7 +225,10 @@ def load_config(path: str | Path | None) -> RunConfig:
     from fusion_vo.geometry.camera import load_yaml
 
     path = Path(path)
-    return validate_config(load_yaml(path), path)
+    data = load_yaml(path)
+    if isinstance(data.get("sequence"), str):  # a run's own run.yaml: the recording it names is the run's argument
+        data = {k: v for k, v in data.items() if k != "sequence"}
+    return validate_config(data, path)
 
 
 def default_config_text(config: RunConfig | None = None) -> str:

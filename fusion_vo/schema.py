@@ -84,6 +84,17 @@ def field_docs(cls: type) -> dict[str, str]:
     return docs
 
 
+#: a docstring's statement of the default: ``(default X)`` as a whole, or ``; default X`` within parentheses
+_DEFAULT_WHOLE = re.compile(r"\s*\(default\b[^()]*(?:\([^()]*\)[^()]*)*\)")
+_DEFAULT_PART = re.compile(r";\s*default\b[^;()]*(?=\))")
+
+
+def without_default(description: str) -> str:
+    """``description`` without what it says of the default (``(default 0.01, ...)``, ``(...; default 0)``): for a
+    section whose defaults differ from its class's, whose docstring states the class's."""
+    return _DEFAULT_PART.sub("", _DEFAULT_WHOLE.sub("", description)).strip()
+
+
 def _unit(description: str) -> str | None:
     match = _UNIT.search(description or "")
     return match.group(1) if match else None
@@ -160,6 +171,8 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
         else:
             raise TypeError(f"{cls.__name__}.{f.name} has no default")
         description = docs.get(f.name)
+        if defaults is not None and description and default != getattr(cls(), f.name, default):
+            description = without_default(description)  # the docstring's default is the class's, not this one
         extra = {"unit": _unit(description)} if _unit(description) else {}
         if f.name in ranges:  # the dataclass's table of ranges (checked by its __post_init__), for editors
             extra.update(ranges[f.name].json_schema())

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from dataclasses import dataclass, field
 
-from frontends.config import AT_LEAST_1, FRACTION, Range
+from frontends.config import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo.errors import InputError
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
@@ -83,7 +84,8 @@ class GraphConfig:
     fixed_lag : float
         Lag [s] of an incremental fixed-lag smoother (``"gtsam_fixed_lag"``); 0 disables it (default 0).
     max_iterations : int
-        Levenberg–Marquardt iterations (default 20).
+        Levenberg–Marquardt iterations (default 20; at most 1000: each one linearises and solves the whole
+        graph).
     relative_tolerance : float
         Stop when an iteration decreases the cost by less than this fraction (default 1e-3; later
         iterations move the poses by far less than their uncertainty).
@@ -98,7 +100,7 @@ class GraphConfig:
         iSAM2 (and the streaming fusion's) linearises a node's sensor-model factors again at its updated
         estimate, at most this many times, when a robust weight there differs from the one at the
         prediction (:func:`fusion_vo.backends.graph.update_reweighted`; default 2, 0: the weights at the
-        prediction).
+        prediction; at most 10: each pass is one more update of every node).
     """
 
     robust: str = "huber"
@@ -122,7 +124,8 @@ class FusionConfig:
     Attributes
     ----------
     step_hz : float
-        Node rate [Hz] where no camera frame provides the nodes (default 20).
+        Node rate [Hz] where no camera frame provides the nodes (default 20; at most 1000: every node is a
+        state of both backends, so the work grows with the rate, and 1e9 Hz never finished).
     max_gap : float
         A gap between two samples of a stream longer than this [s] is not bridged (default 0.25).
     reorder_window : float
@@ -164,7 +167,8 @@ class FusionConfig:
         recording in batch use, over the samples seen so far in streaming use
         (:class:`~fusion_vo.sensors.sync.TwistDelay`).
     max_odom_delay : float
-        Largest delay [s] searched (default 1).
+        Largest delay [s] searched (default 1; at most 10: the search's work grows with it times the
+        recording's length).
     monitor : bool
         Check the heading sources (wheel yaw rate, gyro, AHRS, camera) and the speeds (wheels, camera)
         against each other over windows and drop the component that contradicts the others there
@@ -185,9 +189,9 @@ class FusionConfig:
         (default 0.001; a median over many samples at rest).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
-        finder (default None: taken from the camera's ``T_BS`` by the caller).
+        finder (default None: taken from the camera's ``T_BS`` by the caller; else positive).
     initial_pose : tuple
-        ``(x, y, yaw)`` of the first node (default the origin).
+        ``(x, y, yaw)`` of the first node, three finite numbers [m, m, rad] (default the origin).
     initial_velocity_sigma : float
         Prior standard deviation of the initial speed [m/s] (default 0.5).
     wheel, odom, imu, range : WheelNoise, WheelNoise, ImuNoise, RangeNoise
@@ -265,6 +269,10 @@ class FusionConfig:
             raise InputError("graph.calibration_interval must be positive")
         if not self.monitor_window > 0 or not 0.0 < self.monitor_probability < 1.0 or not self.monitor_bias_sigma > 0:
             raise InputError("monitor_window and monitor_bias_sigma must be positive, monitor_probability in (0, 1)")
+        for key, values in _number_lists(self):  # (a registered sensor's section may hold lists of numbers)
+            for i, value in enumerate(values):
+                if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value):
+                    raise InputError(f"'{key}' must hold finite numbers, not {_shown(values)} (item {i + 1})")
         for key, value in _numbers(self):
             if not math.isfinite(value):
                 raise InputError(f"'{key}' must be a finite number, not {value}")
@@ -276,11 +284,17 @@ class FusionConfig:
                 raise InputError(f"'{key}' must be positive, not {value}")
             if value < 0:
                 raise InputError(f"'{key}' must not be negative, not {value}")
+            problem = _AT_MOST[leaf].error(f"'{key}'", value) if leaf in _AT_MOST else None
+            if problem:
+                raise InputError(problem)
         if not self.range.min_range < self.range.max_range:
             raise InputError(f"'range.min_range' must be below 'range.max_range' ({self.range.max_range}), "
                              f"not {self.range.min_range}")
-        if len(tuple(self.initial_pose)) != 3:
-            raise InputError("initial_pose needs three numbers (x, y, yaw)")
+        _check_pose(self.initial_pose)
+        if self.camera_height is not None:
+            problem = POSITIVE.error("'camera_height'", self.camera_height)
+            if problem:
+                raise InputError(problem)
         for name, prior in self.states.items():
             try:
                 prior.check(f"states.{name}")
@@ -371,6 +385,44 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
 #: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
 #: (:class:`frontends.config.Range`; every other number must not be negative)
 _RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
+
+#: upper bounds of the numbers that set how much work a run does (nodes, iterations, a search's width, a
+#: window's memory), checked after the rules above, so that a typo (``step_hz: 1e9``, which never finished)
+#: is an error rather than a run that does not end or exhausts the memory
+_AT_MOST = {"step_hz": Range(high=1000), "max_iterations": Range(high=1000), "reweight_passes": Range(high=10),
+            "max_odom_delay": Range(high=10), "spike_window": Range(high=50)}
+
+
+def _shown(value) -> str:
+    text = repr(list(value) if isinstance(value, tuple) else value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _check_pose(pose) -> None:
+    """``initial_pose`` must be three finite numbers ``(x, y, yaw)`` (a NaN one made every pose NaN)."""
+    try:
+        values = tuple(pose)
+    except TypeError:
+        values = None
+    if values is None or len(values) != 3 or not all(
+            not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v) for v in values):
+        raise InputError(f"'initial_pose' must be three finite numbers (x, y, yaw), not {_shown(pose)}")
+
+
+def _number_lists(obj, prefix: str = ""):
+    """``(dotted key, list)`` of every list- or tuple-valued field holding numbers of a (nested) config
+    dataclass, registered sensors' sections included, except the pose (checked by :func:`_check_pose`)."""
+    for f in dataclasses.fields(obj):
+        value = getattr(obj, f.name)
+        if dataclasses.is_dataclass(value):
+            yield from _number_lists(value, f"{prefix}{f.name}.")
+        elif isinstance(value, dict) and f.name == "sensors":
+            for name, section in value.items():
+                if dataclasses.is_dataclass(section):
+                    yield from _number_lists(section, f"{prefix}{name}.")
+        elif isinstance(value, (list, tuple)) and f.name != "initial_pose" and any(
+                isinstance(v, numbers.Real) and not isinstance(v, bool) for v in value):
+            yield f"{prefix}{f.name}", value
 
 
 def _numbers(obj, prefix: str = ""):

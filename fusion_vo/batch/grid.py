@@ -19,7 +19,15 @@ draw; integers when both bounds are integers) or from a list of choices::
 
 An optional ``fixed:`` mapping sets keys to one value in every parameter set (e.g.
 ``fixed: {frontend: features}``). Every key and every parameter set is checked against the
-configuration schema (:class:`fusion_vo.config.RunConfig`) before anything runs.
+configuration schema (:class:`fusion_vo.config.RunConfig`) before anything runs. A grid file gives at
+most :data:`MAX_SETS` parameter sets.
+
+A swept key of a frontend's section (``klt.*``, ``features.*``, ``direct.*``) must be one the runs use:
+sweeping ``features.ratio`` while every run uses the KLT frontend would only run the same set again, so
+it is an error naming the key and the frontend the runs use. When the grid also varies ``frontend``, a
+set whose frontend does not use the key gets no value of it (empty in ``results.csv``; the set's
+configuration keeps the base's), and the sets that then coincide run once: only the sets whose frontend
+uses the key differ in it.
 """
 
 from __future__ import annotations
@@ -33,7 +41,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fusion_vo.config import RunConfig, default_config_text
+from fusion_vo.config import FRONTENDS, RunConfig, default_config_text
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
 
@@ -41,6 +49,11 @@ log = logging.getLogger(__name__)
 
 #: the sections of a grid file
 GRID_SECTIONS = ("grid", "random", "seed", "ranges", "fixed")
+
+#: most parameter sets a grid file may give (``random: N``, the combinations of ``grid:``, ``--trials``):
+#: each set is checked before anything runs (some 7 ms) and runs on every recording; ``random:
+#: 1000000000000`` never finished drawing them
+MAX_SETS = 10000
 
 
 @dataclass(frozen=True)
@@ -206,6 +219,38 @@ def _draw(key: str, spec, rng: np.random.Generator, path: Path | None):
     raise InputError(f"range '{key}' must be {{low: A, high: B}} or a list of choices", path)
 
 
+def _section_of(key: str) -> str | None:
+    """The frontend whose section the dotted ``key`` is in (``features.ratio`` -> ``features``), or None."""
+    section = key.split(".", 1)[0]
+    return section if section in FRONTENDS and "." in key else None
+
+
+def check_frontend_keys(keys, frontends, path: Path | None) -> None:
+    """Raise :class:`InputError` for a swept key of a frontend section none of ``frontends`` (the frontends
+    the runs use) reads: every value of it would run the same parameter set."""
+    used = sorted(set(frontends), key=FRONTENDS.index)
+    for key in keys:
+        section = _section_of(key)
+        if section is not None and section not in used:
+            runs = f"the {used[0]} frontend" if len(used) == 1 else f"the {' and '.join(used)} frontends"
+            hint = (f"set 'frontend: {section}' under fixed:, or sweep frontend too" if len(used) == 1
+                    else f"add {section} to the frontends swept")
+            raise InputError(f"grid key '{key}' is an option of the {section} frontend, but the runs use {runs}: "
+                             f"its values would run the same parameter set ({hint})", path)
+
+
+def _without_unused(combos: list[dict], fixed: dict, base: RunConfig, path: Path | None) -> list[tuple[dict, set]]:
+    """Each combination with the set of its keys that its frontend does not read (module docstring); raises
+    :class:`InputError` for a frontend key no run reads."""
+    keys = list(combos[0]) if combos else []
+    frontends = [values.get("frontend", fixed.get("frontend", base.frontend)) for values in combos]
+    if not all(isinstance(f, str) and f in FRONTENDS for f in frontends):
+        return [(values, set()) for values in combos]  # a frontend the configuration rejects: apply_values says so
+    check_frontend_keys(keys, frontends, path)
+    return [(values, {k for k in keys if _section_of(k) not in (None, frontend)})
+            for values, frontend in zip(combos, frontends)]
+
+
 def _plain(value):
     """NumPy scalars as Python values (for YAML, JSON and the configuration)."""
     return value.item() if isinstance(value, np.generic) else value
@@ -256,11 +301,17 @@ def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
         for key in grid:
             check_key(key, path, schema)
         keys = list(grid)
-        combos = [dict(zip(keys, combo)) for combo in itertools.product(*(_as_list(k, grid[k], path) for k in keys))]
+        lists = [_as_list(k, grid[k], path) for k in keys]
+        count = math.prod(len(values) for values in lists)
+        if count > MAX_SETS:
+            raise InputError(f"'grid' gives {count} parameter sets (the product of its keys' numbers of values), "
+                             f"more than {MAX_SETS}: try fewer values, or 'random: N' samples", path)
+        combos = [dict(zip(keys, combo)) for combo in itertools.product(*lists)]
     else:
         n = data["random"]
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise InputError(f"'random' must be a positive number of samples, not {n!r}", path)
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MAX_SETS:
+            raise InputError(f"'random' must be a number of samples from 1 to {MAX_SETS}, not {n!r}",
+                             path)
         ranges = data.get("ranges")
         if not isinstance(ranges, dict) or not ranges:
             raise InputError("the grid is empty: 'random: N' needs 'ranges:' mapping configuration keys to ranges", path)
@@ -277,13 +328,14 @@ def parse_grid(data: dict, base: RunConfig, path: Path | None = None) -> Grid:
         raise InputError(f"key '{overlap[0]}' is both fixed and swept", path)
     sets, configs, seen = [], [], set()
     width = max(3, len(str(len(combos) - 1)))
-    for values in combos:
-        marker = yaml.safe_dump(values, sort_keys=True)
-        if marker in seen:  # random draws of choices can repeat
+    for values, unused in _without_unused(combos, fixed, base, path):
+        shown = {k: (None if k in unused else v) for k, v in values.items()}
+        marker = yaml.safe_dump(shown, sort_keys=True)
+        if marker in seen:  # random draws of choices can repeat, and so can sets without their unused keys
             continue
         seen.add(marker)
-        configs.append(apply_values(base, {**fixed, **values}, path))
-        sets.append(ParameterSet(f"p{len(sets):0{width}d}", values))
+        configs.append(apply_values(base, {**fixed, **{k: v for k, v in values.items() if k not in unused}}, path))
+        sets.append(ParameterSet(f"p{len(sets):0{width}d}", shown))
     log.info("%d parameter sets over %s", len(sets), ", ".join(keys))
     return Grid(keys=keys, sets=sets, configs=configs, path=path, drawn=0 if has_grid else len(combos))
 

@@ -17,10 +17,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fusion_vo.batch.grid import GRID_SECTIONS, Grid, ParameterSet, _schema, apply_values, check_key, config_data
+from fusion_vo.batch.grid import (GRID_SECTIONS, MAX_SETS, Grid, ParameterSet, _schema, apply_values,
+                                  check_frontend_keys, check_key, config_data)
 from fusion_vo.batch.runner import Progress, _check_out, _frame, _labels, write_results
 from fusion_vo.batch.tasks import METRICS, RECORDS, Task, failed_rows, run_task
-from fusion_vo.config import RunConfig
+from fusion_vo.config import FRONTENDS, RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
 
@@ -48,8 +49,8 @@ def load_search(path: str | Path, base: RunConfig, trials: int) -> SearchSpace:
     """Read the search space from ``GRID.yaml``; errors name the file and the key."""
     path = Path(path)
     data = load_yaml(path)
-    if isinstance(trials, bool) or not isinstance(trials, int) or trials < 1:
-        raise InputError(f"--trials must be a positive number, not {trials!r}")
+    if isinstance(trials, bool) or not isinstance(trials, int) or not 1 <= trials <= MAX_SETS:
+        raise InputError(f"--trials must be a number from 1 to {MAX_SETS}, not {trials!r}")
     unknown = sorted(set(data) - set(GRID_SECTIONS))
     if unknown:
         raise InputError(f"unknown grid section '{unknown[0]}' (known: {', '.join(GRID_SECTIONS)})", path)
@@ -78,6 +79,9 @@ def load_search(path: str | Path, base: RunConfig, trials: int) -> SearchSpace:
             raise InputError(f"range '{key}' must be {{low: A, high: B}} (optionally log: true) or a list of choices", path)
     for key in fixed:
         check_key(key, path, schema)
+    frontend = fixed.get("frontend", base.frontend)
+    if "frontend" not in params and frontend in FRONTENDS:  # (a searched frontend: each trial uses its own)
+        check_frontend_keys(params, [frontend], path)
     seed = data.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise InputError(f"'seed' must be an integer, not {seed!r}", path)

@@ -7,8 +7,9 @@ import math
 from typing import Callable
 
 
-def whole_number(minimum: int, reason: str = "") -> Callable[[str], int]:
-    """An ``argparse`` type: a whole number of at least ``minimum`` (``reason`` says why, in the error)."""
+def whole_number(minimum: int, reason: str = "", maximum: int | None = None) -> Callable[[str], int]:
+    """An ``argparse`` type: a whole number of at least ``minimum`` and, when given, at most ``maximum``
+    (``reason`` says why, in the error)."""
     why = f" ({reason})" if reason else ""
 
     def parse(text: str) -> int:
@@ -18,9 +19,11 @@ def whole_number(minimum: int, reason: str = "") -> Callable[[str], int]:
             raise argparse.ArgumentTypeError(f"expected a whole number, not '{text}'") from None
         if value < minimum:
             raise argparse.ArgumentTypeError(f"must be at least {minimum}{why}, not {value}")
+        if maximum is not None and value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum}{why}, not {value}")
         return value
 
-    parse.__name__ = f"whole number >= {minimum}"
+    parse.__name__ = f"whole number >= {minimum}" + (f" and <= {maximum}" if maximum is not None else "")
     return parse
 
 
@@ -30,6 +33,24 @@ random_seed = whole_number(0, "a random seed")
 positive_int = whole_number(1)
 #: a number of frames: at least one frame pair
 frame_count = whole_number(2, "one frame pair")
+#: most threads a run may use (``odometry.threads``: ``fusion_vo.odometry.OdometryConfig.RANGES``, not imported
+#: here so that ``--help`` stays fast; ``tests/faults/test_command_faults.py`` checks that the two agree)
+MAX_THREADS = 256
+#: a number of threads (``--threads``)
+thread_count = whole_number(1, maximum=MAX_THREADS)
+
+
+def non_empty(option: str) -> Callable[[str], str]:
+    """An ``argparse`` type: a text that is not empty or blank (a file, folder or topic name): an empty value
+    would otherwise silently mean the current folder or the default."""
+
+    def parse(text: str) -> str:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"expected {option}, not {text!r}")
+        return text
+
+    parse.__name__ = option
+    return parse
 
 
 def frame_id(text: str) -> str:

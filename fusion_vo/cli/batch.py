@@ -8,6 +8,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
+from fusion_vo.cli.arguments import non_empty
 from fusion_vo.config import BACKENDS, SENSORS
 
 
@@ -16,7 +17,8 @@ def add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", metavar="RECORDING", nargs="+", help="recording folders (paths every worker can see)")
     p.add_argument("--out", "-o", required=True, help="output folder: one run folder per task, results.csv, "
                                                       "results.parquet, report.html")
-    p.add_argument("--config", "-c", help="YAML run configuration (see fusion-vo run --print-config)")
+    p.add_argument("--config", "-c", type=non_empty("a configuration file"),
+                   help="YAML run configuration (see fusion-vo run --print-config)")
     p.add_argument("--frontend", choices=["klt", "features"], help="visual frontend (default: klt)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} or any registered sensor (default: what each recording has)")

@@ -6,7 +6,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from fusion_vo.cli.arguments import frame_count, positive_int
+from fusion_vo.cli.arguments import frame_count, positive_int, thread_count
 from fusion_vo.errors import InputError
 
 #: the frontends that can be measured
@@ -28,8 +28,8 @@ def frontend_list(text: str) -> list[str]:
 
 
 def thread_list(text: str) -> list[int]:
-    """An ``argparse`` type: comma-separated thread counts, each at least 1."""
-    values = [positive_int(s.strip()) for s in text.split(",") if s.strip()]
+    """An ``argparse`` type: comma-separated thread counts, each from 1 to ``MAX_THREADS``."""
+    values = [thread_count(s.strip()) for s in text.split(",") if s.strip()]
     if not values:
         raise argparse.ArgumentTypeError("expected one or more thread counts")
     return sorted(set(values))

@@ -58,9 +58,9 @@ def run(args: argparse.Namespace) -> int:
         gt = groundtruth_of_run(args.run_dir)
         if gt is not None:
             trajectories.append(gt)
-        elif names is None:  # by default the ground truth goes with the run: say when it cannot
-            print("note: no ground truth exported: run.yaml names no recording with state_groundtruth_estimate0/ "
-                  "(moved or deleted?); --no-groundtruth leaves it out without this note")
+        elif names is None:  # by default the ground truth goes with the run: say when it cannot, and why
+            print(f"note: no ground truth exported: {_why_no_groundtruth(args.run_dir)}; "
+                  "--no-groundtruth leaves it out without this note")
         elif names:
             raise InputError("no ground truth: run.yaml names no recording with state_groundtruth_estimate0/",
                              args.run_dir)
@@ -70,3 +70,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"{traj.topic}: {len(traj.stamp_ns)} poses ({cov})")
     print(f"wrote {args.fmt} -> {out}")
     return 0
+
+
+def _why_no_groundtruth(run_dir) -> str:
+    """Why a run has no ground truth to export: its recording has none, or is not where run.yaml says."""
+    from pathlib import Path
+
+    from fusion_vo.evaluation.io import read_run_config
+
+    named = read_run_config(run_dir).get("sequence") if (Path(run_dir) / "run.yaml").is_file() else None
+    if named and Path(str(named)).is_dir():
+        return f"its recording {named} has none (no state_groundtruth_estimate0/)"
+    if named:
+        return f"its recording {named}, named by run.yaml, is not there (moved or deleted?)"
+    return "run.yaml names no recording"

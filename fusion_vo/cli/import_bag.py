@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import argparse
 
+from fusion_vo.cli.arguments import non_empty
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -19,12 +21,16 @@ def register(subparsers) -> None:
                     "A stream whose topic is not given takes the bag's only topic of that message type.",
     )
     parser.add_argument("bag", help="ROS 1 .bag file, ROS 2 bag folder, or .mcap/.db3 file")
-    parser.add_argument("out", nargs="?", help="recording folder: new, empty, or a recording fusion-vo wrote (replaced)")
-    parser.add_argument("--image-topic", help="sensor_msgs/Image or CompressedImage topic (cam0)")
-    parser.add_argument("--imu-topic", help="sensor_msgs/Imu topic (imu0)")
-    parser.add_argument("--odom-topic", help="nav_msgs/Odometry topic (odom0)")
-    parser.add_argument("--gps-topic", help="sensor_msgs/NavSatFix topic (gps0)")
-    parser.add_argument("--camera-yaml", help="cam0/sensor.yaml to use instead of the bag's CameraInfo")
+    # an empty value is a usage error naming the option, not the default topic or the current folder
+    parser.add_argument("out", nargs="?", type=non_empty("a recording folder"),
+                        help="recording folder: new, empty, or a recording fusion-vo wrote (replaced)")
+    topic = non_empty("a topic name")
+    parser.add_argument("--image-topic", type=topic, help="sensor_msgs/Image or CompressedImage topic (cam0)")
+    parser.add_argument("--imu-topic", type=topic, help="sensor_msgs/Imu topic (imu0)")
+    parser.add_argument("--odom-topic", type=topic, help="nav_msgs/Odometry topic (odom0)")
+    parser.add_argument("--gps-topic", type=topic, help="sensor_msgs/NavSatFix topic (gps0)")
+    parser.add_argument("--camera-yaml", type=non_empty("a file name"),
+                        help="cam0/sensor.yaml to use instead of the bag's CameraInfo")
     parser.add_argument("--static-tf", action="append", default=[], metavar="'X Y Z YAW PITCH ROLL PARENT CHILD'",
                         help="a fixed transform missing from the bag's /tf_static, in static_transform_publisher "
                              "order (repeatable)")

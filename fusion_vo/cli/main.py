@@ -103,16 +103,17 @@ def main(argv: list[str] | None = None) -> int:
         print(f"fusion-vo: error: {' '.join(part.strip() for part in str(exc).splitlines() if part.strip())}",
               file=sys.stderr)
         return 2
+    except BrokenPipeError:  # the reader of our output went away (| head): nothing to report (before OSError,
+        try:                 # of which it is one); what is still buffered goes nowhere, not into a second error
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 0
     except OSError as exc:  # permissions, a full disk, a path that cannot be created
         where = f"{exc.filename}: " if getattr(exc, "filename", None) else ""
         print(f"fusion-vo: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    except BrokenPipeError:  # the reader of our output went away (| head): nothing to report
-        try:
-            sys.stdout = open(os.devnull, "w")
-        except OSError:
-            pass
-        return 0
     except KeyboardInterrupt:
         print("fusion-vo: interrupted; nothing was left half-written", file=sys.stderr)
         return 130

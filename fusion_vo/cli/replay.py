@@ -26,7 +26,7 @@ import json
 import time
 from pathlib import Path
 
-from fusion_vo.cli.arguments import non_negative_number, positive_number
+from fusion_vo.cli.arguments import non_empty, non_negative_number, positive_number
 from fusion_vo.outputs import StagedFiles, check_folder_target
 from fusion_vo.errors import InputError
 
@@ -39,7 +39,7 @@ def register(sub) -> None:
     p.add_argument("sequence", help="recording folder (as for fusion-vo run)")
     p.add_argument("--out", "-o", required=True, help="output folder (created if needed)")
     p.add_argument("--backend", choices=["ekf", "gtsam"], default="ekf", help="streaming backend (default: ekf)")
-    p.add_argument("--config", "-c", help="YAML configuration file (as for fusion-vo run)")
+    p.add_argument("--config", "-c", type=non_empty("a configuration file"), help="YAML configuration file (as for fusion-vo run)")
     p.add_argument("--sensors", help="comma-separated sensors to use (default: what the recording has)")
     p.add_argument("--speed", type=non_negative_number, default=1.0,
                    help="playback speed: 1 = the recording's own pace, N = N times faster, 0 = as fast as possible")

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fusion_vo.cli.arguments import positive_int, positive_number
+from fusion_vo.cli.arguments import MAX_THREADS, non_empty, positive_number, thread_count
 from fusion_vo.cli.progress import progress_bar
 from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
 from fusion_vo.errors import InputError
@@ -21,13 +21,14 @@ def register(sub) -> None:
     p.add_argument("--force", action="store_true",
                    help="replace an output folder that is not empty and was not written by fusion-vo run")
     p.add_argument("--frontend", choices=["klt", "features", "direct"], help="visual frontend (default: klt)")
-    p.add_argument("--config", "-c", help="YAML configuration file (see --print-config)")
+    p.add_argument("--config", "-c", type=non_empty("a configuration file"),
+                   help="YAML configuration file (see --print-config)")
     p.add_argument("--backend", choices=BACKENDS, help="fusion backend (default: all)")
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} or any sensor a package registers (entry point "
                         "fusion_vo.sensors) (default: the camera, wheels and IMU the recording has; gps is fused only when listed)")
-    p.add_argument("--threads", type=positive_int, metavar="N",
-                   help="threads for decoding frames ahead of the tracker and for OpenCV (default: the cores "
-                        "available); the results do not depend on it")
+    p.add_argument("--threads", type=thread_count, metavar="N",
+                   help=f"threads for decoding frames ahead of the tracker and for OpenCV, at most {MAX_THREADS} (default: "
+                        "the cores available); the results do not depend on it")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
     p.add_argument("--uncalibrated", action="store_true",
                    help="the camera has no calibration: ignore the intrinsics' distortion (pinhole of the given or "

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from fusion_vo.cli.arguments import non_empty
+
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
@@ -18,7 +20,7 @@ def register(subparsers) -> None:
                         help="index of the current frame (row of cam0/data.csv, from 0); N-1 is the previous")
     parser.add_argument("--frontend", choices=("features", "klt"), default="features",
                         help="whose matching to show (default: features)")
-    parser.add_argument("--out", "-o", metavar="FILE.png", default=None,
+    parser.add_argument("--out", "-o", metavar="FILE.png", default=None, type=non_empty("an image file name"),
                         help="output image (default: matches_<N>.png in the current folder)")
     parser.set_defaults(func=run)
 

@@ -38,11 +38,13 @@ def register(sub) -> None:
     p.add_argument("out", nargs="?", help="output folder: new, empty, or a recording fusion-vo wrote (then replaced)")
     p.add_argument("--force", action="store_true",
                    help="replace a non-empty folder that is not a recording fusion-vo wrote")
-    p.add_argument("--profile", choices=_LazyNames("fusion_vo.simulation.robot", "PROFILES"), default="square",
-                   metavar="PROFILE", help="driving profile, one of %(choices)s (default: %(default)s)")
+    p.add_argument("--profile", choices=_LazyNames("fusion_vo.simulation.robot", "PROFILES"), default=None,
+                   metavar="PROFILE", help="driving profile, one of %(choices)s (default: square, or that of "
+                                           "--standard or of the --config file)")
     p.add_argument("--standard", choices=_LazyNames("fusion_vo.simulation.standard", "STANDARD"), metavar="NAME",
                    help="one of the standard recordings, %(choices)s (fixes profile, options, seed)")
-    p.add_argument("--seed", type=random_seed, default=0)
+    p.add_argument("--seed", type=random_seed, default=None,
+                   help="random seed (default: 0, or that of --standard or of the --config file)")
     p.add_argument("--duration", type=positive_number, help="duration [s] (random, standstill)")
     p.add_argument("--texture", choices=["gravel", "grass", "brick"])
     p.add_argument("--config", help="YAML file of options")
@@ -63,13 +65,26 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.simulation.robot import SHAPE_OPTIONS
     from fusion_vo.simulation.standard import STANDARD
 
+    from fusion_vo.simulation.robot import PROFILES
+
     if args.standard:
         profile, seed, options, _ = STANDARD[args.standard]
         options = dict(options)
     else:
-        profile, seed, options = args.profile, args.seed, {}
-    if args.config:
-        options.update(load_yaml(args.config))
+        profile, seed, options = "square", 0, {}
+    if args.config:  # its profile and seed (as --print-config writes them), then the options
+        data = load_yaml(args.config)
+        if "profile" in data:
+            profile = data.pop("profile")
+            if not isinstance(profile, str) or profile not in PROFILES:
+                raise InputError(f"profile: expected one of {', '.join(PROFILES)}, got {profile!r}", args.config)
+        if "seed" in data:
+            seed = data.pop("seed")
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                raise InputError(f"seed: expected a whole number of at least 0, got {seed!r}", args.config)
+        options.update(data)
+    profile = profile if args.profile is None else args.profile
+    seed = seed if args.seed is None else args.seed
     for item in args.option:
         key, _, value = item.partition("=")
         if "=" not in item or not key.strip():
@@ -93,8 +108,9 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"{given}: not used by the '{profile}' profile (only by {', '.join(profiles)})")
     if args.print_config:
         model = schema.model_of(SimulationOptions)
-        header = f"# fusion-vo simulate options (profile {profile}, seed {seed})"
-        print("\n".join([header] + schema.commented_yaml(model, schema.validate(model, schema.plain(opts)))))
+        header = ["# fusion-vo simulate options: --config reads them back", f"profile: {profile}  # driving profile",
+                  f"seed: {seed}  # random seed"]
+        print("\n".join(header + schema.commented_yaml(model, schema.validate(model, schema.plain(opts)))))
         return 0
     if not args.out:
         raise InputError("simulate needs an output folder (see fusion-vo simulate --help)")

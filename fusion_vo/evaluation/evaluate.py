@@ -77,6 +77,12 @@ def resolve_sequence(run_dir: Path, config: dict, sequence_dir: str | Path | Non
         sequence = Path(str(named)).expanduser()
         if not sequence.is_absolute() and not sequence.exists() and (run_dir / sequence).exists():
             sequence = run_dir / sequence
+        try:
+            check_folder(sequence, "recording folder")
+        except InputError as exc:  # blame run.yaml's key: "RUN/run.yaml: sequence: recording folder X not found"
+            what = (f"recording folder {sequence} not found" if exc.message == "recording folder not found"
+                    else f"{sequence}: {exc.message}")
+            raise InputError(f"sequence: {what}", run_dir / "run.yaml") from None
     else:
         sequence = Path(sequence_dir)
     check_folder(sequence, "recording folder")

@@ -136,9 +136,10 @@ def read_tum_poses(path: str | Path) -> TumPoses:
     Raises
     ------
     InputError
-        If the file is missing, empty, a row does not hold eight finite numbers, a quaternion's norm is
-        more than 0.05 from 1, or a timestamp is earlier than the one before (a repeated timestamp keeps
-        its last pose).
+        If the file is missing, empty, a row does not hold eight finite numbers, a timestamp is beyond
+        the range of int64 nanoseconds (about 9.2e9 s: e.g. nanoseconds written where seconds belong), a
+        quaternion's norm is more than 0.05 from 1, or a timestamp is earlier than the one before (a
+        repeated timestamp keeps its last pose).
     """
     path = Path(path)
     rows, line_numbers, stamps = [], [], []
@@ -151,9 +152,13 @@ def read_tum_poses(path: str | Path) -> TumPoses:
             raise InputError(f"expected 8 columns 'timestamp x y z qx qy qz qw', got {len(fields)}",
                              path, number)
         values = _floats(fields, path, number)
+        stamp = int((Decimal(fields[0]) * 1_000_000_000).to_integral_value())
+        if not -(2**63) <= stamp < 2**63:
+            raise InputError(f"timestamp {fields[0]} is out of range: TUM timestamps are seconds"
+                             f"{' (this looks like nanoseconds)' if abs(values[0]) >= 1e15 else ''}", path, number)
         rows.append(values)
         line_numbers.append(number)
-        stamps.append(int((Decimal(fields[0]) * 1_000_000_000).to_integral_value()))
+        stamps.append(stamp)
     if not rows:
         raise InputError("no poses in trajectory file", path)
     data = np.array(rows)
@@ -300,14 +305,19 @@ def read_run_config(run_dir: str | Path) -> dict:
     ------
     InputError
         If the file exists but is not a YAML mapping (read by the one YAML reader,
-        :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line).
+        :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line), or its
+        ``sequence`` (the recording's folder) is given but is not a path.
     """
     from fusion_vo.geometry.camera import load_yaml
 
     path = Path(run_dir) / "run.yaml"
     if not os.path.lexists(path):
         return {}
-    return load_yaml(path)
+    config = load_yaml(path)
+    named = config.get("sequence")
+    if named is not None and not isinstance(named, (str, os.PathLike)):
+        raise InputError(f"sequence: must be the path of the recording folder, not {named!r}", path)
+    return config
 
 
 def _json_safe(value):

@@ -25,7 +25,7 @@ from frontends.descriptors import distance_matrix, orb_descriptors, patch_descri
 from frontends.detectors import DetectorSettings, detect_corners
 from frontends.features import FeatureConfig
 from frontends.frame_check import check_frame
-from frontends.klt import KltConfig
+from frontends.klt import KltConfig, global_shift
 from frontends.matching import match_descriptors
 from frontends.similarity import estimate_similarity
 from frontends.tracking import track_points
@@ -96,6 +96,15 @@ def _klt_matches(prev: np.ndarray, cur: np.ndarray, config: KltConfig):
     if not len(p0):  # a textureless frame: nothing to track (OpenCV rejects an empty point array)
         return p0, p0.copy(), config.robust_options(), config.seed
     tracked = track_points(prev, cur, p0, np.eye(2, 3), config.retry_pyramid_levels, config.lk_settings())
+    if len(tracked.index) < config.min_inliers and config.global_fallback:
+        # as the frontend does when the motion is too large to track from where the points were: from the
+        # frames' shift by phase correlation
+        shift, _ = global_shift(prev, cur, config)
+        if shift is not None:
+            guess = np.array([[1.0, 0.0, shift[0]], [0.0, 1.0, shift[1]]])
+            moved = track_points(prev, cur, p0, guess, config.retry_pyramid_levels, config.lk_settings())
+            if len(moved.index) > len(tracked.index):
+                tracked = moved
     return p0[tracked.index], tracked.points, config.robust_options(), config.seed
 
 

@@ -210,20 +210,25 @@ class CameraModel:
         dmodel = aliases.get(dmodel, dmodel)
         if dmodel not in DISTORTION_MODELS:
             raise InputError(f"unknown distortion_model '{dmodel}' (use one of {', '.join(DISTORTION_MODELS)})", path)
-        coeffs = np.asarray(data.get("distortion_coefficients", [0.0] * 4), dtype=np.float64)
+        try:
+            coeffs = np.asarray(data.get("distortion_coefficients", [0.0] * 4), dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            raise InputError("'distortion_coefficients' must be a list of numbers", path) from None
         expected = {"radial-tangential": (4, 5), "equidistant": (4,), "division": (1,), "none": (0, 4, 5)}[dmodel]
         if len(coeffs) not in expected:
             raise InputError(f"distortion_coefficients: {dmodel} needs {' or '.join(map(str, expected))} numbers", path)
-        T = parse_matrix(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
-        values = np.array(intr + list(coeffs) + list(T.ravel()))
+        if dmodel == "none" and np.any(coeffs != 0):
+            raise InputError("distortion_coefficients are not all zero but distortion_model is 'none': name the "
+                             "model they belong to (radial-tangential, equidistant, division) or set them to 0", path)
+        T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
+        values = np.array(intr + list(coeffs))
         if not np.all(np.isfinite(values)) or min(res) <= 0 or intr[0] <= 0 or intr[1] <= 0:
             raise InputError("calibration values must be finite and the focal lengths and resolution positive", path)
-        if not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-5) or abs(np.linalg.det(T[:3, :3]) - 1) > 1e-5:
-            raise InputError("T_BS rotation part is not a rotation matrix", path)
+        rate = sensor_number(data, "rate_hz", path, 20.0, high=1e6, unit=" Hz")
         return cls(
             width=res[0], height=res[1], fu=intr[0], fv=intr[1], cu=intr[2], cv=intr[3],
             distortion_model=dmodel, distortion=coeffs if len(coeffs) else np.zeros(4), T_BS=T,
-            rate_hz=float(data.get("rate_hz", 20.0)),
+            rate_hz=rate,
         )
 
     def to_dict(self) -> dict:
@@ -239,17 +244,27 @@ class CameraModel:
         }
 
     def write_yaml(self, path: str | Path) -> None:
-        write_yaml_atomic(path, self.to_dict())
+        """Write ``path`` (atomically); the keys of a file already there that the model does not hold
+        (``height_sigma``, ``camera_noise``, ``bit_depth``, ...) are kept."""
+        data = self.to_dict()
+        if Path(path).is_file():
+            try:
+                old = load_yaml(path)
+            except InputError:  # a file that is no YAML mapping is replaced whole
+                old = {}
+            data.update({key: value for key, value in old.items() if key not in data})
+        write_yaml_atomic(path, data)
 
 
-def uncalibrated_camera(path: str | Path, focal_length: float | None = None) -> CameraModel:
+def uncalibrated_camera(path: str | Path, focal_length: float | None = None, quiet: bool = False) -> CameraModel:
     """A pinhole model for a camera without a calibration (``cam0/sensor.yaml`` without intrinsics).
 
     The resolution, rate and ``T_BS`` are read from the file; the lens is taken as distortion-free
     with its principal point at the image centre. The focal length is ``focal_length`` when given,
     else the file's ``fu, fv`` when it has intrinsics, else that of a 60 degree horizontal field of
     view (``0.866 * width``): the metric scale is then only as good as that guess (a fused run can
-    re-estimate it as the camera height, whose ratio to the focal length is all that matters).
+    re-estimate it as the camera height, whose ratio to the focal length is all that matters), with a
+    warning unless ``quiet`` (a check of the inputs before the run).
     """
     import logging
 
@@ -268,13 +283,15 @@ def uncalibrated_camera(path: str | Path, focal_length: float | None = None) -> 
         fu, fv = intr[0], intr[1]
     else:
         fu = fv = res[0] / (2.0 * np.tan(np.radians(30.0)))
-        logging.getLogger(__name__).warning(
-            "%s: no focal length given; assuming a 60 degree horizontal field of view (%.0f px)", path, fu)
+        if not quiet:
+            logging.getLogger(__name__).warning(
+                "%s: no focal length given; assuming a 60 degree horizontal field of view (%.0f px)", path, fu)
     if not (np.isfinite(fu) and np.isfinite(fv) and fu > 0 and fv > 0):
         raise InputError("focal_length must be a positive number of pixels", path)
-    T = parse_matrix(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
+    T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
     return CameraModel(width=res[0], height=res[1], fu=fu, fv=fv, cu=(res[0] - 1) / 2.0, cv=(res[1] - 1) / 2.0,
-                       distortion_model="none", T_BS=T, rate_hz=float(data.get("rate_hz", 20.0)))
+                       distortion_model="none", T_BS=T, rate_hz=sensor_number(data, "rate_hz", path, 20.0, high=1e6,
+                                                                              unit=" Hz"))
 
 
 def _default_T_BS() -> np.ndarray:
@@ -282,6 +299,80 @@ def _default_T_BS() -> np.ndarray:
     T[:3, :3] = R_BS_DOWN_FORWARD
     T[:3, 3] = [0.25, 0.0, 0.1]
     return T
+
+
+#: largest translation [m] a sensor's ``T_BS`` may state: beyond it the number is a typo, not a lever arm
+MAX_LEVER_ARM_M = 1e3
+
+#: the keys of each ``sensor.yaml`` the library reads (with EuRoC's ``sensor_type`` and ``comment``), for the
+#: warning about a key that is close to one of them (:func:`warn_unknown_keys`)
+SENSOR_KEYS = {
+    "cam0": ("sensor_type", "comment", "rate_hz", "resolution", "camera_model", "intrinsics", "distortion_model",
+             "distortion_coefficients", "T_BS", "height_sigma", "bit_depth", "camera_noise"),
+    "imu0": ("sensor_type", "comment", "rate_hz", "T_BS", "gyroscope_noise_density", "gyroscope_random_walk",
+             "accelerometer_noise_density", "accelerometer_random_walk"),
+    "wheel0": ("sensor_type", "comment", "rate_hz", "ticks_per_revolution", "wheel_radius_left", "wheel_radius_right",
+               "wheel_base", "radius_sigma"),
+    "gps0": ("sensor_type", "comment", "rate_hz", "T_BS", "horizontal_sigma_m", "datum"),
+}
+
+
+def warn_unknown_keys(data: dict, known, path: str | Path) -> list[str]:
+    """Log a warning for each key of ``data`` that is not in ``known`` but close to one of them (a misspelt
+    optional key would otherwise be ignored without a word); other keys (EuRoC's ``comment``, a tool's own
+    keys) are left alone. Returns the warnings."""
+    import difflib
+    import logging
+
+    known = list(known)
+    out = []
+    for key in data:
+        if not isinstance(key, str) or key in known:
+            continue
+        close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
+        if close:
+            out.append(f"{path}: unknown key '{key}' (did you mean '{close[0]}'?)")
+            logging.getLogger(__name__).warning("%s", out[-1])
+    return out
+
+
+def sensor_number(data: dict, key: str, path: str | Path | None, default: float | None = None, *,
+                  zero: bool = False, low: float | None = None, high: float | None = None,
+                  unit: str = "") -> float | None:
+    """The number ``key`` of a ``sensor.yaml`` (``default`` when absent or null): a YAML boolean, a text that
+    is no number, NaN, inf, a negative value (or zero unless ``zero``) or a value outside ``[low, high]``
+    is an :class:`InputError` naming the key."""
+    value = data.get(key)
+    if value is None:
+        return default
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        x = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"'{key}' must be a number, not {value!r}", path) from None
+    if not np.isfinite(x) or x < 0 or (x == 0 and not zero):
+        raise InputError(f"'{key}' must be {'non-negative' if zero else 'positive'}, not {x}", path)
+    if (low is not None and x < low) or (high is not None and x > high):
+        span = f"between {low:g} and {high:g}" if low is not None and high is not None else (
+            f"at least {low:g}" if low is not None else f"at most {high:g}")
+        raise InputError(f"'{key}' must be {span}{unit}, not {x:g}", path)
+    return x
+
+
+def parse_pose(entry, name: str, path: str | Path | None) -> np.ndarray:
+    """A sensor's pose ``T_BS`` (:func:`parse_matrix`): finite numbers, a rotation (orthonormal, det +1,
+    no mirror) and a translation within :data:`MAX_LEVER_ARM_M`, else an :class:`InputError` naming ``name``."""
+    m = parse_matrix(entry, name, path)
+    if not np.all(np.isfinite(m)):
+        raise InputError(f"'{name}' must hold finite numbers (NaN or inf found)", path)
+    R = m[:3, :3]
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or abs(np.linalg.det(R) - 1) > 1e-5:
+        raise InputError(f"{name} rotation part is not a rotation matrix", path)
+    if np.max(np.abs(m[:3, 3])) > MAX_LEVER_ARM_M:
+        raise InputError(f"'{name}' translation {np.max(np.abs(m[:3, 3])):g} m is beyond {MAX_LEVER_ARM_M:g} m: "
+                         "not a lever arm", path)
+    return m
 
 
 def parse_matrix(entry, name: str, path: str | Path | None) -> np.ndarray:

@@ -40,6 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from frontends.base import FrameMotion
@@ -82,6 +83,38 @@ class GroundRectifier:
         self.f = math.sqrt(camera.fu * camera.fv)
         self.c = np.array([camera.cu, camera.cv])
         self._identity_rotation = np.allclose(self.R_VS, np.eye(3), atol=1e-12)
+        self._check_usable()
+
+    #: the smallest rectified width and height [px] of the raw frame that leaves an image to track in (as the
+    #: dense frontend's rectifier needs)
+    MIN_USABLE_PX = 16
+
+    def _check_usable(self) -> None:
+        """A ``ValueError`` when the intrinsics and distortion leave no usable image: a focal length or
+        principal point that overflows, or a raw frame whose border maps to no rectified rectangle of at
+        least :attr:`MIN_USABLE_PX` pixels each way (a principal point far outside the image, a distortion
+        that folds the frame)."""
+        cam = self.camera
+        if not (math.isfinite(self.f) and np.all(np.isfinite(self.c))):
+            raise ValueError(f"the intrinsics {[cam.fu, cam.fv, cam.cu, cam.cv]} overflow: no usable image")
+        if self.trivial:
+            return
+        n, w, h = 64, cam.width, cam.height
+        xs, ys = np.linspace(0, w - 1, n), np.linspace(0, h - 1, n)
+        with np.errstate(all="ignore"):
+            try:
+                left = self.to_rectified(np.column_stack([np.zeros(n), ys]))
+                right = self.to_rectified(np.column_stack([np.full(n, w - 1.0), ys]))
+                top = self.to_rectified(np.column_stack([xs, np.zeros(n)]))
+                bottom = self.to_rectified(np.column_stack([xs, np.full(n, h - 1.0)]))
+            except (cv2.error, OverflowError, ValueError):
+                left = right = top = bottom = np.full((n, 2), np.nan)
+            width = float(np.min(right[:, 0]) - np.max(left[:, 0]))
+            height = float(np.min(bottom[:, 1]) - np.max(top[:, 1]))
+        if not (width > self.MIN_USABLE_PX and height > self.MIN_USABLE_PX):
+            raise ValueError(
+                f"the intrinsics and distortion leave no usable image: the {w}x{h} frame rectifies to no area of "
+                f"{self.MIN_USABLE_PX}x{self.MIN_USABLE_PX} px (check intrinsics and distortion_coefficients)")
 
     @property
     def trivial(self) -> bool:

@@ -1,19 +1,27 @@
 """Strict CSV reading for the recording streams.
 
-Every row must have the expected number of numeric columns; the first column is an integer timestamp in
-nanoseconds that increases strictly. Anything else is an :class:`~fusion_vo.errors.InputError` naming the
-file and the 1-based line. Lines starting with ``#`` and blank lines are skipped.
+Every row must have the expected number of numeric columns (more fields than the stream has, a trailing
+comma included, are an error unless the caller ignores further columns, as the ground truth does); the
+first column is an integer timestamp in nanoseconds (an optional sign and decimal digits, nothing else:
+no ``1.6e18``, ``...0.0`` or ``1_600...``) that increases strictly. Anything else is an
+:class:`~fusion_vo.errors.InputError` naming the file and the 1-based line. Lines starting with ``#`` and
+blank lines are skipped; a UTF-8 byte order mark at the start of the file (Excel writes one) is dropped.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from fusion_vo.errors import InputError, check_file
+
+#: an integer timestamp: an optional sign and ASCII decimal digits (``int()`` alone would also take
+#: ``1_600``, surrounding spaces and other scripts' digits)
+_INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
 @dataclass
@@ -34,18 +42,20 @@ class Table:
 
 
 def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "values",
-               require_increasing: bool = True, allow_nan: bool = False) -> Table:
+               require_increasing: bool = True, allow_nan: bool = False, ignore_extra: bool = False) -> Table:
     """Read ``timestamp [ns], v1, v2, ...`` rows.
 
     Parameters
     ----------
     path : path of the CSV file.
-    columns : number of value columns after the timestamp, or ``(min, max)``; extra columns beyond
-        ``max`` are ignored.
+    columns : number of value columns after the timestamp, or ``(min, max)``; a row with more than
+        ``max`` is an error naming the line (unless ``ignore_extra``).
     what : name of the values, for error messages.
     require_increasing : raise on duplicate or decreasing timestamps.
     allow_nan : keep ``nan`` values (for streams whose reader skips and counts such rows) instead of
         raising; infinite values still raise.
+    ignore_extra : ignore columns beyond ``max`` (where the layout says further columns are ignored: the
+        ground truth) instead of raising.
     """
     path = check_file(path)
     lo, hi = (columns, columns) if isinstance(columns, int) else columns
@@ -54,7 +64,7 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
     lines: list[int] = []
     width = None
     try:
-        fh = open(path, encoding="utf-8")
+        fh = open(path, encoding="utf-8-sig")  # -sig: a leading byte order mark is dropped
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", path) from None
     with fh:
@@ -67,24 +77,18 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
                 n = len(parts) - 1
                 if n < lo:
                     raise InputError(f"expected a timestamp and {lo} {what}, found {len(parts)} fields", path, lineno)
+                if n > hi and not ignore_extra:
+                    trailing = " (a trailing comma?)" if not parts[-1].strip() else ""
+                    raise InputError(f"expected a timestamp and {_count(lo, hi)} {what}, found {len(parts)} "
+                                     f"fields{trailing}", path, lineno)
                 n = min(n, hi)
                 if width is None:
                     width = n
                 elif n != width:
                     raise InputError(f"expected {width + 1} fields like the rows above, found {len(parts)}", path, lineno)
+                t = _timestamp(parts[0], path, lineno)
                 try:
-                    t = int(parts[0])
-                except ValueError:
-                    try:  # tolerate '1.6e18'-style timestamps if they are integral
-                        tf = float(parts[0])
-                        if not math.isfinite(tf) or tf != int(tf):
-                            raise ValueError
-                        t = int(tf)
-                    except ValueError:
-                        raise InputError(f"timestamp '{parts[0].strip()}' is not an integer number of nanoseconds", path, lineno) from None
-                _check_range(t, path, lineno)
-                try:
-                    vals = [float(p) for p in parts[1 : n + 1]]
+                    vals = [_float(p) for p in parts[1 : n + 1]]
                 except ValueError:
                     bad = next(p for p in parts[1 : n + 1] if not _is_float(p))
                     raise InputError(f"'{bad.strip()}' is not a number", path, lineno) from None
@@ -110,7 +114,7 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
     names: list[str] = []
     lines: list[int] = []
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:  # -sig: a leading byte order mark is dropped
             for lineno, raw in enumerate(fh, start=1):
                 s = raw.strip()
                 if not s or s.startswith("#"):
@@ -118,11 +122,11 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
                 parts = [p.strip() for p in s.split(",")]
                 if len(parts) < 2 or not parts[1]:
                     raise InputError("expected 'timestamp,filename'", path, lineno)
-                try:
-                    t = int(parts[0])
-                except ValueError:
-                    raise InputError(f"timestamp '{parts[0]}' is not an integer number of nanoseconds", path, lineno) from None
-                _check_range(t, path, lineno)
+                if len(parts) > 2:
+                    trailing = " (a trailing comma?)" if not parts[-1] else ""
+                    raise InputError(f"expected 2 fields 'timestamp,filename', found {len(parts)}{trailing}",
+                                     path, lineno)
+                t = _timestamp(parts[0], path, lineno)
                 if ts and t <= ts[-1]:
                     kind = "duplicate" if t == ts[-1] else "decreasing"
                     raise InputError(f"{kind} timestamp {t} (previous row has {ts[-1]}); timestamps must increase", path, lineno)
@@ -136,15 +140,35 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
     return np.array(ts, dtype=np.int64), names, np.array(lines, dtype=np.int64)
 
 
+def _count(lo: int, hi: int) -> str:
+    return str(lo) if lo == hi else f"{lo} to {hi}"
+
+
+def _timestamp(text: str, path: Path, lineno: int) -> int:
+    """The integer nanosecond timestamp of a field: an optional sign and decimal digits, in range."""
+    s = text.strip()
+    if not _INTEGER.fullmatch(s):
+        raise InputError(f"timestamp {s!r} is not an integer number of nanoseconds (an optional sign and "
+                         "decimal digits only)", path, lineno)
+    return _check_range(int(s), path, lineno)
+
+
 def _check_range(t: int, path: Path, lineno: int) -> int:
     if not 0 <= t < 2**63:
         raise InputError(f"timestamp {t} is outside the range of nanosecond timestamps (0 to 2^63)", path, lineno)
     return t
 
 
+def _float(s: str) -> float:
+    """``float(s)``, without Python's digit separators (``1_000``): not a number in a CSV file."""
+    if "_" in s:
+        raise ValueError(s)
+    return float(s)
+
+
 def _is_float(s: str) -> bool:
     try:
-        float(s)
+        _float(s)
         return True
     except ValueError:
         return False

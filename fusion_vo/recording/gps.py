@@ -27,7 +27,7 @@ import numpy as np
 import pymap3d
 
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import load_yaml, parse_matrix
+from fusion_vo.geometry.camera import SENSOR_KEYS, load_yaml, parse_pose, warn_unknown_keys
 from fusion_vo.measurements import GpsData
 from fusion_vo.recording.csvio import read_table
 
@@ -117,13 +117,16 @@ def _sensor_yaml(path: Path) -> tuple[dict, list[str]]:
                 "for fixes without a covariance, datum at the first fix")
         return {"lever_arm": np.zeros(3), "sigma": DEFAULT_HORIZONTAL_SIGMA, "datum": None}, [note]
     meta = load_yaml(path)
-    lever = parse_matrix(meta["T_BS"], "T_BS", path)[:3, 3].copy() if "T_BS" in meta else np.zeros(3)
+    warn_unknown_keys(meta, SENSOR_KEYS["gps0"], path)
+    lever = parse_pose(meta["T_BS"], "T_BS", path)[:3, 3].copy() if "T_BS" in meta else np.zeros(3)
     sigma = DEFAULT_HORIZONTAL_SIGMA
     notes = []
     if "horizontal_sigma_m" in meta:
         sigma = _number(meta["horizontal_sigma_m"], "horizontal_sigma_m", path)
         if sigma <= 0:
             raise InputError("'horizontal_sigma_m' must be positive", path)
+        if sigma > 1e6:  # a plain range: its square must not overflow
+            raise InputError(f"'horizontal_sigma_m' must be at most 1e+06 m, not {sigma:g}", path)
     else:
         notes.append(f"{path}: no horizontal_sigma_m, fixes without a covariance get {sigma} m")
     datum = None
@@ -140,9 +143,11 @@ def _sensor_yaml(path: Path) -> tuple[dict, list[str]]:
 
 def _number(value, key: str, path: Path) -> float:
     try:
+        if isinstance(value, bool):  # YAML's true / false are no numbers
+            raise TypeError
         x = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be a number", path) from None
+        raise InputError(f"'{key}' must be a number, not {value!r}", path) from None
     if not math.isfinite(x):
         raise InputError(f"'{key}' must be finite", path)
     return x

@@ -30,6 +30,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -39,7 +40,7 @@ import numpy as np
 
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
-from fusion_vo.geometry.camera import CameraModel, load_yaml, parse_matrix
+from fusion_vo.geometry.camera import SENSOR_KEYS, CameraModel, load_yaml, parse_pose, sensor_number, warn_unknown_keys
 from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
 from fusion_vo.outputs import make_folder, write_atomic
 from fusion_vo.recording.csvio import read_frame_list, read_table
@@ -51,6 +52,15 @@ VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
 #: stream folders of the layout, by the name :meth:`Recording.streams` uses
 STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "odom0", "range": "range0",
                   "gps": "gps0", "groundtruth": "state_groundtruth_estimate0"}
+
+#: the EuRoC noise keys of ``imu0/sensor.yaml``
+IMU_NOISE_KEYS = ("gyroscope_noise_density", "gyroscope_random_walk", "accelerometer_noise_density",
+                  "accelerometer_random_walk")
+
+#: plain ranges of ``sensor.yaml`` numbers: beyond them a value is a typo (and overflows once squared)
+MAX_SIGMA = 1e3  # a standard deviation [m] or noise density
+MIN_LENGTH_M, MAX_LENGTH_M = 1e-6, 1e3  # a wheel radius or wheel base [m]
+MAX_RATE_HZ = 1e6
 
 #: bit depths a 16-bit frame may hold
 BIT_DEPTHS = (10, 12, 14, 16)
@@ -89,6 +99,8 @@ class Recording:
         self._camera: CameraModel | None = None
         self._frame_list: tuple[np.ndarray, list[str], np.ndarray] | None = None
         self._shift: int | None = None
+        self._keys_told: set[str] = set()  # sensor.yaml files already checked for misspelt keys
+        self._defaults_told: set[str] = set()  # streams already warned about defaults used
 
     def __repr__(self) -> str:
         return f"Recording({str(self.path)!r}, streams={self.streams()})"
@@ -113,7 +125,13 @@ class Recording:
         return self._present("range0")
 
     def has_gps(self) -> bool:
-        return self._present("gps0")
+        """Whether ``gps0/`` is present. GPS is fused only when asked for, and scores a run only without
+        ground truth, so a ``gps0/`` whose ``data.csv`` is missing (or a broken link, a link loop, a folder)
+        would be left out without a word: that is an :class:`InputError` naming the file."""
+        if not self._present("gps0"):
+            return False
+        check_file(self.path / "gps0" / "data.csv")
+        return True
 
     def has_groundtruth(self) -> bool:
         return self._present("state_groundtruth_estimate0")
@@ -135,7 +153,9 @@ class Recording:
         """The camera model of ``cam0/sensor.yaml``."""
         if self._camera is None:
             self._need("camera", "cam0")
-            self._camera = CameraModel.from_yaml(self.path / "cam0" / "sensor.yaml")
+            camera = CameraModel.from_yaml(self.path / "cam0" / "sensor.yaml")
+            self.camera_height_sigma()  # the file's other numbers, checked with the model (before any work)
+            self._camera = camera
         return self._camera
 
     @camera.setter
@@ -247,27 +267,35 @@ class Recording:
 
     # ------------------------------------------------------------------ other streams
     def imu(self) -> ImuData:
-        """``imu0``: gyro, accelerometer and (when the 4 extra columns are present) an AHRS orientation."""
+        """``imu0``: gyro, accelerometer and (when the 4 extra columns are present) an AHRS orientation.
+
+        ``imu0/sensor.yaml`` is required (its absence is an :class:`InputError`); without ``T_BS`` the IMU
+        is taken as aligned with the body and without the noise keys the configuration's noise is used, with
+        a warning naming the file."""
         path = self._need("IMU", "imu0")
-        tab = read_table(path, (6, 10), "IMU values")
+        tab = _enough_rows(read_table(path, (6, 10), "IMU values"), path, 2, "IMU")
         if tab.values.shape[1] not in (6, 10):
             raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
         orient = None
         if tab.values.shape[1] == 10:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
-        meta = self._yaml("imu0", required=False)
-        T = parse_matrix(meta["T_BS"], "T_BS", self.path / "imu0" / "sensor.yaml") if "T_BS" in meta else np.eye(4)
+        meta = self._yaml("imu0", required=True)  # the IMU's mounting and noise: never assumed without a word
         ypath = self.path / "imu0" / "sensor.yaml"
-        noise = {k: _optional_sigma(meta, k, ypath, zero=k.endswith("random_walk")) for k in (
-            "gyroscope_noise_density", "gyroscope_random_walk",
-            "accelerometer_noise_density", "accelerometer_random_walk") if meta.get(k) is not None}
-        rate = _optional_sigma(meta, "rate_hz", ypath)
+        T = parse_pose(meta["T_BS"], "T_BS", ypath) if "T_BS" in meta else np.eye(4)
+        noise = {k: _optional_sigma(meta, k, ypath, zero=k.endswith("random_walk")) for k in IMU_NOISE_KEYS
+                 if meta.get(k) is not None}
+        rate = sensor_number(meta, "rate_hz", ypath, high=MAX_RATE_HZ, unit=" Hz")
+        defaults = ([] if "T_BS" in meta else ["no T_BS: the IMU is taken as aligned with the body (identity)"]) + (
+            [] if noise else ["no noise keys: the configuration's IMU noise is used"])
+        if defaults and "imu0" not in self._defaults_told:
+            self._defaults_told.add("imu0")
+            log.warning("%s: %s", ypath, "; ".join(defaults))
         return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
 
     def wheel(self) -> WheelData:
         """``wheel0``: cumulative encoder counts and the wheel calibration."""
         path = self._need("wheel encoder", "wheel0")
-        tab = read_table(path, 2, "tick counts")
+        tab = _enough_rows(read_table(path, 2, "tick counts"), path, 2, "wheel encoder")
         frac = np.abs(tab.values - np.round(tab.values))
         if np.any(frac > 0):
             i = int(np.flatnonzero(frac.max(axis=1) > 0)[0])
@@ -282,14 +310,11 @@ class Recording:
         keys = ("ticks_per_revolution", "wheel_radius_left", "wheel_radius_right", "wheel_base")
         vals = {}
         for k in keys:
-            if k not in meta:
+            if meta.get(k) is None:
                 raise InputError(f"missing key '{k}'", ypath)
-            try:
-                vals[k] = float(meta[k])
-            except (TypeError, ValueError):
-                raise InputError(f"'{k}' must be a number", ypath) from None
-            if not np.isfinite(vals[k]) or vals[k] <= 0:
-                raise InputError(f"'{k}' must be positive", ypath)
+            # a plain range: a count of at least one tick, lengths from a micrometre to a kilometre
+            vals[k] = (sensor_number(meta, k, ypath, low=1, high=2.0**32) if k == "ticks_per_revolution" else
+                       sensor_number(meta, k, ypath, low=MIN_LENGTH_M, high=MAX_LENGTH_M, unit=" m"))
         vals["radius_sigma"] = _optional_sigma(meta, "radius_sigma", ypath)
         counts = tab.values.astype(np.int64)
         return WheelData(tab.t, counts[:, 0], counts[:, 1], WheelConfig(**vals))
@@ -299,15 +324,26 @@ class Recording:
         ``T_BS`` states, or None when the file does not state it."""
         return _optional_sigma(self._yaml("cam0", required=False), "height_sigma", self.path / "cam0" / "sensor.yaml")
 
+    def camera_noise(self):
+        """``camera_noise`` of ``cam0/sensor.yaml``: the camera's heading noise model
+        (:class:`fusion_vo.calibration.camera_noise.CameraNoise`), or None when the file does not state it."""
+        meta = self._yaml("cam0", required=False)
+        if meta.get("camera_noise") is None:
+            return None
+        from fusion_vo.calibration.camera_noise import CameraNoise
+
+        return CameraNoise.from_dict(meta["camera_noise"], self.path / "cam0" / "sensor.yaml")
+
     def odom(self) -> TwistData:
         """``odom0``: body-frame twist."""
-        tab = read_table(self._need("odometry", "odom0"), 3, "twist values")
+        path = self._need("odometry", "odom0")
+        tab = _enough_rows(read_table(path, 3, "twist values"), path, 1, "odometry")
         return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
 
     def range(self) -> RangeData:
         """``range0``: downward distance to the floor."""
         path = self._need("range finder", "range0")
-        tab = read_table(path, 1, "distance")
+        tab = _enough_rows(read_table(path, 1, "distance"), path, 1, "range finder")
         bad = np.flatnonzero(tab.values[:, 0] <= 0)
         if len(bad):
             raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
@@ -328,7 +364,22 @@ class Recording:
         p = self.path / folder / "sensor.yaml"
         if not os.path.lexists(p) and not required:
             return {}
-        return load_yaml(p)
+        data = load_yaml(p)
+        if folder in SENSOR_KEYS and folder not in self._keys_told:  # a misspelt optional key: warned once
+            self._keys_told.add(folder)
+            warn_unknown_keys(data, SENSOR_KEYS[folder], p)
+        return data
+
+
+def _enough_rows(tab, path: Path, need: int, stream: str):
+    """``tab``, or an :class:`InputError` naming ``path`` when it has fewer than ``need`` data rows (an
+    empty or header-only file is not an absent stream: it is a stream that says nothing)."""
+    if len(tab) == 0:
+        raise InputError("no data rows (the file is empty or holds only its header)", path)
+    if len(tab) < need:
+        raise InputError(f"only {len(tab)} data row{'s' if len(tab) != 1 else ''}: the {stream} stream needs at "
+                         f"least {need}", path, int(tab.lines[-1]))
+    return tab
 
 
 # ---------------------------------------------------------------------- ground truth
@@ -351,7 +402,7 @@ def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
     least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
     """
     path = Path(path)
-    tab = read_table(path, (7, 7), "pose values")
+    tab = read_table(path, (7, 7), "pose values", ignore_extra=True)  # further columns are ignored
     if len(tab) < min_poses:
         raise InputError(f"ground truth needs at least {min_poses} poses, found {len(tab)}", path)
     q = unit_quaternions(tab.values[:, 3:7], tab.lines, path, "quaternion")
@@ -369,7 +420,13 @@ def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tupl
     :meth:`Recording.pixel_shift`).
     """
     try:
-        data = Path(path).read_bytes()
+        # opened without blocking and checked to be a regular file before reading: a FIFO (or a device)
+        # named like a frame would otherwise block the run forever
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_BINARY", 0))
+        with open(fd, "rb") as fh:
+            if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):
+                return None, "not a regular file"
+            data = fh.read()
     except FileNotFoundError:
         return None, "image file missing"
     except OSError as exc:
@@ -428,14 +485,7 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
 
 
 def _optional_sigma(meta: dict, key: str, path: Path, zero: bool = False) -> float | None:
-    """An optional positive number of a ``sensor.yaml`` (a standard deviation, a noise density, a rate; with
-    ``zero`` also 0, e.g. a random walk that is not there); a bad value is an InputError naming the key."""
-    if meta.get(key) is None:
-        return None
-    try:
-        value = float(meta[key])
-    except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be a number, not {meta[key]!r}", path) from None
-    if not np.isfinite(value) or value < 0 or (value == 0 and not zero):
-        raise InputError(f"'{key}' must be {'non-negative' if zero else 'positive'}, not {value}", path)
-    return value
+    """An optional positive number of a ``sensor.yaml`` (a standard deviation or a noise density; with
+    ``zero`` also 0, e.g. a random walk that is not there), at most :data:`MAX_SIGMA` (its square must not
+    overflow); a bad value (a YAML boolean too) is an InputError naming the key."""
+    return sensor_number(meta, key, path, zero=zero, high=MAX_SIGMA)

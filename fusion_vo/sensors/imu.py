@@ -88,7 +88,7 @@ class ImuNoise:
     spike_threshold : float
         Distance from the running median that marks a spike [rad/s] (default 1.0).
     spike_window : int
-        Half width ``w`` of the running median (default 2).
+        Half width ``w`` of the running median (default 2; at most 50).
     max_rate : float
         Largest believable yaw rate [rad/s] (default 10).
     """

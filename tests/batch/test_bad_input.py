@@ -120,3 +120,57 @@ def test_thesis_sweep_example_expands_to_valid_sets():
                          "features.threshold"]
     assert len(grid.sets) == 108 and len({tuple(s.values.values()) for s in grid.sets}) == 108
     assert all(c.frontend == "features" and c.backend == "none" for c in grid.configs)
+
+
+# ------------------------------------------------------------------ how many sets a grid gives; unused frontend keys
+@pytest.mark.parametrize("text, needles", [
+    # drew a trillion samples (it never finished): now refused before any draw
+    ("random: 1000000000000\nranges:\n  fusion.max_gap: {low: 0.1, high: 0.3}\n", ["'random'", "1 to 10000"]),
+    ("grid:\n  features.ratio: [0.7, 0.8]\n", ["grid key 'features.ratio'", "the runs use the klt frontend"]),
+])
+def test_a_grid_too_large_or_of_an_unused_frontend_is_one_line_naming_the_file(text, needles, recordings, tmp_path,
+                                                                               capsys):
+    good, _ = recordings
+    grid = tmp_path / "GRID.yaml"
+    grid.write_text(text)
+    out = tmp_path / "out"
+    start = time.perf_counter()
+    _fails(capsys, ["sweep", str(good[0]), "--grid", str(grid), "--out", str(out)], str(grid), *needles)
+    assert time.perf_counter() - start < 10.0
+    assert not out.exists()
+
+
+def test_the_number_of_parameter_sets_is_bounded():
+    from fusion_vo.batch.grid import MAX_SETS
+
+    ranges = {"fusion.max_gap": {"low": 0.1, "high": 0.3}}
+    with pytest.raises(InputError, match=f"'random' must be a number of samples from 1 to {MAX_SETS}, not 10001"):
+        parse_grid({"random": MAX_SETS + 1, "ranges": ranges}, RunConfig())
+    values = [0.1 * i for i in range(1, 101)]  # 100 x 101 combinations
+    with pytest.raises(InputError, match="'grid' gives 10100 parameter sets"):
+        parse_grid({"grid": {"fusion.max_gap": values, "fusion.reorder_window": [0.0, *values]}}, RunConfig())
+
+
+def test_a_key_of_a_frontend_the_runs_do_not_use_is_an_error_unless_the_frontend_is_swept(tmp_path):
+    """``features.ratio: [0.7, 0.8]`` with the KLT frontend ran the same set twice and listed the key as swept."""
+    from fusion_vo.batch.optimize import load_search
+
+    with pytest.raises(InputError, match="'direct.min_sigma' is an option of the direct frontend, but the runs use "
+                                         "the features frontend"):
+        parse_grid({"grid": {"direct.min_sigma": [0.1, 0.2]}, "fixed": {"frontend": "features"}}, RunConfig())
+    assert len(parse_grid({"grid": {"features.ratio": [0.7, 0.8]}}, RunConfig(frontend="features")).sets) == 2
+    # with the frontend swept too, only the sets whose frontend reads the key differ in it
+    grid = parse_grid({"grid": {"frontend": ["klt", "features"], "features.ratio": [0.7, 0.8]}}, RunConfig())
+    assert [s.values for s in grid.sets] == [{"frontend": "klt", "features.ratio": None},
+                                             {"frontend": "features", "features.ratio": 0.7},
+                                             {"frontend": "features", "features.ratio": 0.8}]
+    assert "ratio" not in grid.configs[0].features and grid.configs[2].features["ratio"] == 0.8
+    with pytest.raises(InputError, match="the runs use the klt and direct frontends"):
+        parse_grid({"grid": {"frontend": ["klt", "direct"], "features.ratio": [0.7, 0.8]}}, RunConfig())
+    path = tmp_path / "search.yaml"
+    path.write_text("ranges:\n  features.ratio: {low: 0.6, high: 0.9}\n")
+    with pytest.raises(InputError, match="'features.ratio' is an option of the features frontend"):
+        load_search(path, RunConfig(), trials=5)
+    with pytest.raises(InputError, match="--trials must be a number from 1 to 10000"):
+        load_search(path, RunConfig(frontend="features"), trials=10**12)
+    assert list(load_search(path, RunConfig(frontend="features"), trials=5).params) == ["features.ratio"]

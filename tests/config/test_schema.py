@@ -180,6 +180,7 @@ def test_simulate_prints_its_options_and_reads_them_back(tmp_path, capsys):
     printed = capsys.readouterr().out
     data = yaml.safe_load(printed)
     assert data["noise"] == 2.5 and data["duration"] == 40.0 and data["width"] == 640
+    assert data["profile"] == "random" and data["seed"] == 5  # the drive itself, not only its options
     path = tmp_path / "sim.yaml"
     path.write_text(printed)
     assert main(["simulate", "--config", str(path), "--print-config"]) == 0

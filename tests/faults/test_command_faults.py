@@ -52,8 +52,28 @@ def file_given_as_the_run(run):
     return str(run), "is a file, not a run folder"
 
 
+def tum_in_nanoseconds(run):
+    """Integer nanoseconds where TUM has seconds: 10^27 ns does not fit the int64 stamps."""
+    p = run / "ekf.tum"
+    lines = p.read_text().splitlines()
+    rows = [i for i, ln in enumerate(lines) if ln.strip() and not ln.startswith("#")]
+    for i in rows:
+        fields = lines[i].split()
+        fields[0] = str(round(float(fields[0]) * 1e9))
+        lines[i] = " ".join(fields)
+    p.write_text("\n".join(lines) + "\n")
+    return f"ekf.tum:{rows[0] + 1}", "TUM timestamps are seconds"
+
+
+def run_yaml_sequence_not_a_path(run):
+    p = run / "run.yaml"
+    p.write_text("".join("sequence: 5\n" if ln.startswith("sequence:") else ln
+                         for ln in p.read_text().splitlines(keepends=True)))
+    return "run.yaml: sequence:", "not 5"
+
+
 RUN_FAULTS = [run_yaml_syntax_error, quaternion_of_rounding_noise, folder_named_like_a_trajectory,
-              file_given_as_the_run]
+              file_given_as_the_run, tum_in_nanoseconds, run_yaml_sequence_not_a_path]
 
 
 def _export(run, tmp_path):
@@ -77,6 +97,20 @@ def test_a_broken_run_folder_is_one_line_naming_the_file(fault, command, run_fol
     assert_error(status, err, where, what)
     _one_line(err)
     assert _files(tmp_path) == before  # (evaluate's staging folder came and went: folders' times may change)
+
+
+@pytest.mark.parametrize("command", [_evaluate, _compare], ids=["evaluate", "compare"])
+def test_a_run_yaml_naming_a_recording_that_is_gone_names_run_yaml_and_the_key(command, run_folder, tmp_path,
+                                                                                capsys):
+    """(export says so in a note and exports the trajectories: see test_export_says_when_the_ground_truth...)"""
+    gone = tmp_path / "moved-away"
+    p = run_folder / "run.yaml"
+    p.write_text("".join(f"sequence: {gone}\n" if ln.startswith("sequence:") else ln
+                         for ln in p.read_text().splitlines(keepends=True)))
+    before = _files(tmp_path)
+    status, _, err = cli(capsys, *command(run_folder, tmp_path))
+    assert_error(status, err, f"{run_folder}/run.yaml: sequence: recording folder {gone} not found")
+    assert _files(tmp_path) == before
 
 
 def test_compare_tells_apart_runs_of_the_same_name(pristine_run, tmp_path, capsys):
@@ -311,6 +345,50 @@ def test_export_says_when_the_ground_truth_of_the_run_is_gone(run_folder, tmp_pa
     status, out, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
     assert status == 0, err
     assert "no ground truth exported" in out and "groundtruth" not in out.split("note:")[0]
+    assert "is not there (moved or deleted?)" in out
+
+
+def test_export_of_a_recording_without_ground_truth_says_it_has_none(pristine, tmp_path, capsys):
+    rec = Path(shutil.copytree(pristine, tmp_path / "rec"))
+    shutil.rmtree(rec / "state_groundtruth_estimate0")
+    assert cli(capsys, "-q", "run", rec, "--out", tmp_path / "run", "--backend", "ekf", "--no-evaluate")[0] == 0
+    status, out, err = cli(capsys, "export", tmp_path / "run", tmp_path / "x.mcap", "--to", "mcap")
+    assert status == 0, err
+    assert f"its recording {rec.resolve()} has none" in out and "moved or deleted" not in out
+
+
+def test_a_runs_own_run_yaml_configures_another_run(pristine_run, pristine, tmp_path, capsys):
+    status, _, err = cli(capsys, "-q", "run", pristine, "--out", tmp_path / "again", "--config",
+                         pristine_run / "run.yaml", "--no-evaluate")
+    assert status == 0, err
+    assert (tmp_path / "again" / "ekf.tum").read_text() == (pristine_run / "ekf.tum").read_text()
+
+
+def test_uncalibrated_runs_a_camera_whose_sensor_yaml_has_no_intrinsics(recording, tmp_path, capsys):
+    yaml_path = recording / "cam0" / "sensor.yaml"
+    yaml_path.write_text("".join(ln for ln in yaml_path.read_text().splitlines(keepends=True)
+                                 if not ln.startswith("intrinsics")))
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "plain", "--backend", "none", "--no-evaluate")
+    assert_error(status, err, "sensor.yaml", "missing key 'intrinsics'", "--uncalibrated")
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "run", "--backend", "none", "--no-evaluate",
+                         "--uncalibrated", "--focal-length", "200")
+    assert status == 0, err
+    assert (tmp_path / "run" / "vo.tum").is_file()
+
+
+def test_output_cut_off_by_its_reader_is_no_error(tmp_path):
+    import subprocess
+    import sys
+
+    for args in (["run", "--print-config"], ["simulate", "--standard", "hard", "--print-config"]):
+        cmd = [sys.executable, "-c", "import sys; from fusion_vo.cli.main import main; sys.exit(main(sys.argv[1:]))",
+               *args]
+        reader = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        reader.stdout.close()  # gone before the command writes (as `| true` is): its first write fails
+        err = reader.stderr.read()
+        reader.wait(timeout=120)
+        assert reader.returncode == 0, err
+        assert b"error" not in err, err
 
 
 @pytest.mark.filterwarnings("error")  # a warning is output the user did not ask for
@@ -434,3 +512,38 @@ def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(pristine, 
                            "--no-dashboard", "--backend", "ekf", "--no-evaluate")
     assert status == 0, err
     assert f"note: {grid}: 'random: 6' drew 2 distinct parameter sets; each runs once" in out
+
+
+# ------------------------------------------------------------------ empty option values, --threads' bound
+#: an empty value was taken as '.' (run --config: "is a folder, not a file"; show-matches --out: a picture in the
+#: current folder) or as no value (import-bag --imu-topic: the bag's only IMU topic): now a usage error naming it
+EMPTY_OPTIONS = [
+    (("run", "{rec}", "--out", "{out}", "--config", ""), "argument --config/-c: expected a configuration file"),
+    (("run", "{rec}", "--out", "{out}", "--config", " "), "argument --config/-c: expected a configuration file"),
+    (("import-bag", "{tmp}/x.bag", "{out}", "--imu-topic", ""), "argument --imu-topic: expected a topic name"),
+    (("import-bag", "{tmp}/x.bag", "{out}", "--image-topic", ""), "argument --image-topic: expected a topic name"),
+    (("import-bag", "{tmp}/x.bag", ""), "argument out: expected a recording folder"),
+    (("show-matches", "{rec}", "--frame", "2", "--out", ""), "argument --out/-o: expected an image file name"),
+    (("run", "{rec}", "--out", "{out}", "--threads", "257"), "argument --threads: must be at most 256, not 257"),
+    (("run", "{rec}", "--out", "{out}", "--threads", "100000"), "argument --threads: must be at most 256"),
+]
+
+
+@pytest.mark.parametrize("args, fragment", EMPTY_OPTIONS, ids=[" ".join(a[:1] + a[-2:]) for a, _ in EMPTY_OPTIONS])
+def test_an_empty_option_value_is_a_usage_error_naming_the_option(args, fragment, pristine, tmp_path, capsys,
+                                                                   monkeypatch):
+    work = tmp_path / "cwd"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    out = tmp_path / "out"
+    args = [str(a).format(rec=pristine, out=out, tmp=tmp_path) for a in args]
+    status, _, err = cli(capsys, *args)
+    assert_error(status, err, fragment)
+    assert not out.exists() and not any(work.iterdir())
+
+
+def test_the_threads_bound_of_the_command_line_is_the_configuration_s():
+    from fusion_vo.cli.arguments import MAX_THREADS
+    from fusion_vo.odometry import OdometryConfig
+
+    assert OdometryConfig.RANGES["threads"].high == MAX_THREADS

@@ -125,3 +125,69 @@ def test_every_default_is_in_range_and_every_range_names_a_field():
         cls()
         assert set(cls.RANGES) <= {f.name for f in dataclasses.fields(cls)}, cls
     validate_config({})
+
+
+# ------------------------------------------------------------------ vectors and upper bounds of the backends' options
+#: once accepted: a NaN pose made every fused pose NaN with exit status 0; the upper bounds stop a typo from making
+#: a run that never ends (``step_hz: 1e9``) or exhausts the machine (``odometry.threads: 100000``)
+FUSION_BAD = [
+    ("fusion: {initial_pose: [.nan, 0, 0]}", "fusion: 'initial_pose' must be three finite numbers (x, y, yaw)"),
+    ("fusion: {initial_pose: [0, .inf, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [0, 0, 0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [a, 0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [true, 0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [0, 0, null]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {initial_pose: [[0], 0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
+    ("fusion: {camera_height: .nan}", "fusion: 'camera_height' must be a finite number, not nan"),
+    ("fusion: {camera_height: 0}", "fusion: 'camera_height' must be positive"),
+    ("fusion: {step_hz: 1.0e9}", "fusion: 'step_hz' must be at most 1000, not 1000000000.0"),
+    ("fusion: {graph: {max_iterations: 100000}}", "fusion: 'graph.max_iterations' must be at most 1000"),
+    ("fusion: {graph: {reweight_passes: 11}}", "fusion: 'graph.reweight_passes' must be at most 10"),
+    ("fusion: {max_odom_delay: 1.0e6}", "fusion: 'max_odom_delay' must be at most 10"),
+    ("fusion: {imu: {spike_window: 100000}}", "fusion: 'imu.spike_window' must be at most 50"),
+    ("odometry: {threads: 100000}", "odometry: threads must be in [1, 256], not 100000"),
+]
+
+
+@pytest.mark.parametrize("text, message", FUSION_BAD, ids=[t for t, _ in FUSION_BAD])
+def test_a_vector_or_a_work_setting_that_cannot_work_names_the_key(text, message, tmp_path):
+    import yaml
+
+    path = tmp_path / "run.yaml"
+    with pytest.raises(InputError) as err:
+        validate_config(yaml.safe_load(text), path)
+    assert str(err.value).startswith(f"{path}: {message}")
+    assert "\n" not in str(err.value)
+
+
+def test_the_upper_bounds_themselves_and_a_pose_pass():
+    from fusion_vo.backends.config import FusionConfig
+
+    validate_config({"fusion": {"step_hz": 1000, "max_odom_delay": 10, "initial_pose": [1, -2.5, 3.1],
+                                "graph": {"max_iterations": 1000, "reweight_passes": 10}, "imu": {"spike_window": 50}},
+                     "odometry": {"threads": 256}})
+    import numpy as np
+
+    FusionConfig(initial_pose=np.array([1.0, 2.0, 0.5]))  # library users may give an array
+    with pytest.raises(InputError, match="'initial_pose' must be three finite numbers"):
+        FusionConfig(initial_pose=(float("nan"), 0.0, 0.0))
+
+
+@pytest.mark.parametrize("text, key", [("fusion: {initial_pose: [.nan, 0, 0]}", "initial_pose"),
+                                       ("odometry: {threads: 100000}", "threads"),
+                                       ("fusion: {step_hz: 1.0e9}", "step_hz")])
+def test_run_stops_before_any_work_on_a_nan_pose_or_a_work_setting_too_large(text, key, pristine, tmp_path, capsys,
+                                                                            monkeypatch):
+    """(the NaN pose ran with --no-evaluate and exited 0 with an ekf.tum of NaN)"""
+    cfg = tmp_path / "my-config.yaml"
+    cfg.write_text(text + "\n")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("visual odometry started with a bad configuration")
+
+    monkeypatch.setattr("fusion_vo.pipeline.run_visual_odometry", no_work)
+    status, _, err = cli(capsys, "run", pristine, "--out", tmp_path / "out", "--config", cfg, "--no-evaluate",
+                         "--backend", "ekf")
+    assert_error(status, err, f"{cfg}", key)
+    assert not (tmp_path / "out").exists()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fault_tools import assert_error, cli, snapshot
@@ -220,6 +221,64 @@ def imu_yaml_noise_nan(rec):
     return "imu0/sensor.yaml: 'gyroscope_random_walk' must be non-negative", None
 
 
+def gps_folder_without_data(rec):
+    """GPS is not fused by default and scores a run only without ground truth: a gps0/ without its data.csv
+    would be left out without a word (range0/ without one is an error too)."""
+    (rec / "gps0").mkdir()
+    return "gps0/data.csv: file not found", None
+
+
+def extra_field_in_wheel(rec):
+    p = rec / "wheel0" / "data.csv"
+    return "wheel0/data.csv", _set_row(p, 4, _rows(p)[5] + ",7")
+
+
+def trailing_comma_in_wheel(rec):
+    p = rec / "wheel0" / "data.csv"
+    return "wheel0/data.csv", _set_row(p, 4, _rows(p)[5] + ",")
+
+
+def third_column_in_frame_list(rec):
+    p = rec / "cam0" / "data.csv"
+    return "cam0/data.csv", _set_row(p, 3, _rows(p)[4] + ",extra")
+
+
+def _wheel_timestamp(rec, text):
+    p = rec / "wheel0" / "data.csv"
+    row = _rows(p)[6].split(",")
+    row[0] = text(row[0])
+    return "wheel0/data.csv", _set_row(p, 5, ",".join(row))
+
+
+def float_timestamp_in_wheel(rec):
+    return _wheel_timestamp(rec, lambda t: f"{int(t):.10e}")  # 1.6000000001e+18: integral, still not one
+
+
+def timestamp_with_decimal_point(rec):
+    return _wheel_timestamp(rec, lambda t: t + ".0")
+
+
+def timestamp_with_digit_separators(rec):
+    return _wheel_timestamp(rec, lambda t: t[:4] + "_" + t[4:])
+
+
+def header_only_imu(rec):
+    p = rec / "imu0" / "data.csv"
+    p.write_text(_rows(p)[0] + "\n")
+    return "imu0/data.csv: no data rows", None
+
+
+def empty_imu(rec):
+    (rec / "imu0" / "data.csv").write_text("")
+    return "imu0/data.csv: no data rows", None
+
+
+def one_row_wheel(rec):
+    p = rec / "wheel0" / "data.csv"
+    p.write_text("\n".join(_rows(p)[:2]) + "\n")
+    return "wheel0/data.csv:2: only 1 data row", None
+
+
 FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time, frame_listed_twice,
           decreasing_wheel_time,
           negative_timestamp, absolute_frame_path, frame_path_leaving_the_recording, timestamp_near_2_63,
@@ -227,7 +286,75 @@ FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time
           imu_on_another_clock, ground_truth_on_another_clock, missing_frame_list, imu_symlink_loop,
           wheel_broken_link, frame_list_is_a_folder, binary_imu_file, empty_frame_list, one_frame, no_frame_folder,
           camera_yaml_missing_key, camera_yaml_not_yaml, wheel_yaml_negative_radius, bad_bit_depth,
-          wheel_tick_beyond_2_53, imu_yaml_noise_not_a_number, imu_yaml_noise_nan]
+          wheel_tick_beyond_2_53, imu_yaml_noise_not_a_number, imu_yaml_noise_nan,
+          gps_folder_without_data, extra_field_in_wheel, trailing_comma_in_wheel, third_column_in_frame_list,
+          float_timestamp_in_wheel, timestamp_with_decimal_point, timestamp_with_digit_separators,
+          header_only_imu, empty_imu, one_row_wheel]
+
+
+# ---------------------------------------------------------------------- sensor.yaml values
+def _edit_yaml(path: Path, change) -> None:
+    """Apply ``change(data)`` to a ``sensor.yaml`` (read and written back as YAML)."""
+    import yaml
+
+    data = yaml.safe_load(path.read_text())
+    change(data)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+def _yaml_fault(name: str, folder: str, change, expected: str):
+    """A fault that edits ``FOLDER/sensor.yaml`` with ``change(data)`` and expects ``expected`` after its name."""
+    def fault(rec):
+        _edit_yaml(rec / folder / "sensor.yaml", change)
+        return f"{folder}/sensor.yaml: {expected}", None
+
+    fault.__name__ = name
+    return fault
+
+
+def _set(key, value):
+    return lambda data: data.__setitem__(key, value)
+
+
+def _pose_entry(index, value):
+    return lambda data: data["T_BS"]["data"].__setitem__(index, value)
+
+
+def imu_yaml_missing(rec):
+    """datasets/README.md: a stream's missing sensor.yaml is an error (as for wheel0/ and cam0/), not an
+    identity mounting and default noise assumed without a word."""
+    (rec / "imu0" / "sensor.yaml").unlink()
+    return "imu0/sensor.yaml: file not found", None
+
+
+SENSOR_YAML_FAULTS = [
+    _yaml_fault("imu_T_BS_nan", "imu0", _pose_entry(0, float("nan")), "'T_BS' must hold finite numbers"),
+    _yaml_fault("imu_T_BS_scaled", "imu0", _pose_entry(0, 3.0), "T_BS rotation part is not a rotation matrix"),
+    _yaml_fault("imu_T_BS_shrunk", "imu0", _pose_entry(0, 0.5), "T_BS rotation part is not a rotation matrix"),
+    _yaml_fault("imu_T_BS_mirror", "imu0", _pose_entry(0, -1.0), "T_BS rotation part is not a rotation matrix"),
+    _yaml_fault("camera_T_BS_height_1e300", "cam0", _pose_entry(11, 1e300), "'T_BS' translation"),
+    _yaml_fault("camera_T_BS_lever_arm_1e300", "cam0", _pose_entry(3, 1e300), "'T_BS' translation"),
+    *[_yaml_fault(f"{key}_true", folder, _set(key, True), f"'{key}' must be a number, not True")
+      for folder, key in (("wheel0", "ticks_per_revolution"), ("wheel0", "wheel_radius_left"),
+                          ("wheel0", "wheel_base"), ("wheel0", "radius_sigma"), ("cam0", "height_sigma"),
+                          ("imu0", "gyroscope_noise_density"), ("imu0", "rate_hz"), ("cam0", "rate_hz"))],
+    _yaml_fault("camera_rate_a_word", "cam0", _set("rate_hz", "fast"), "'rate_hz' must be a number, not 'fast'"),
+    _yaml_fault("camera_rate_negative", "cam0", _set("rate_hz", -20), "'rate_hz' must be positive"),
+    _yaml_fault("focal_length_1e308", "cam0", _set("intrinsics", [1e308, 1e308, 79.5, 59.5]), "the intrinsics"),
+    _yaml_fault("principal_point_far_outside", "cam0", _set("intrinsics", [200, 200, 5000, -3000]),
+                "the intrinsics"),
+    _yaml_fault("distortion_1e300", "cam0", _set("distortion_coefficients", [1e300, 0, 0, 0]), "the intrinsics"),
+    _yaml_fault("height_sigma_1e300", "cam0", _set("height_sigma", 1e300), "'height_sigma' must be at most"),
+    _yaml_fault("gyro_noise_1e300", "imu0", _set("gyroscope_noise_density", 1e300),
+                "'gyroscope_noise_density' must be at most"),
+    _yaml_fault("wheel_base_1e-300", "wheel0", _set("wheel_base", 1e-300), "'wheel_base' must be between"),
+    _yaml_fault("wheel_radius_1e300", "wheel0", _set("wheel_radius_right", 1e300),
+                "'wheel_radius_right' must be between"),
+    _yaml_fault("coefficients_with_model_none", "cam0", _set("distortion_model", "none"),
+                "distortion_coefficients are not all zero but distortion_model is 'none'"),
+    imu_yaml_missing,
+]
+FAULTS += SENSOR_YAML_FAULTS
 
 
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.__name__ for f in FAULTS])
@@ -259,3 +386,117 @@ def test_a_stream_not_used_may_be_broken(recording, tmp_path, capsys):
                          "--backend", "none", "--no-evaluate")
     assert status == 0, err
     assert (tmp_path / "out" / "wheel.tum").is_file()
+
+
+def test_replay_of_a_gps_folder_without_data_names_the_file(recording, tmp_path, capsys):
+    where, _ = gps_folder_without_data(recording)
+    status, _, err = cli(capsys, "replay", recording, "--out", tmp_path / "out")
+    assert_error(status, err, where)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_byte_order_mark_is_read_like_any_csv(recording, pristine_run, tmp_path, capsys):
+    """Excel writes a UTF-8 byte order mark before the header: it is no part of the first field."""
+    for folder in ("cam0", "imu0", "wheel0", "state_groundtruth_estimate0"):
+        p = recording / folder / "data.csv"
+        p.write_bytes(b"\xef\xbb\xbf" + p.read_bytes())
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    assert (tmp_path / "out" / "ekf.tum").read_text() == (pristine_run / "ekf.tum").read_text()
+
+
+def test_ground_truth_may_have_further_columns(recording):
+    """datasets/README.md: further ground-truth columns are ignored (EuRoC's has velocities and biases)."""
+    from fusion_vo.recording.reader import read_groundtruth_csv
+
+    p = recording / "state_groundtruth_estimate0" / "data.csv"
+    before = read_groundtruth_csv(p)
+    p.write_text("\n".join(_rows(p)[:1] + [row + ",0.5,0.25," for row in _rows(p)[1:]]) + "\n")
+    after = read_groundtruth_csv(p)
+    assert np.array_equal(after.t, before.t) and np.array_equal(after.xyyaw, before.xyyaw)
+
+
+def test_a_frame_that_is_a_fifo_is_skipped_with_a_warning(recording, tmp_path, capsys, caplog):
+    """Reading a FIFO blocks until something writes to it: a run would wait forever."""
+    import threading
+
+    frame = sorted((recording / "cam0" / "data").iterdir())[5]
+    frame.unlink()
+    os.mkfifo(frame)
+    blocked = []
+
+    def unblock():  # a reader stuck on the FIFO gets end of file (and the test fails instead of hanging)
+        try:
+            os.close(os.open(frame, os.O_WRONLY | os.O_NONBLOCK))
+            blocked.append(True)
+        except OSError:  # nobody has it open for reading
+            pass
+
+    timer = threading.Timer(60.0, unblock)
+    timer.start()
+    try:
+        status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "none",
+                               "--no-evaluate")
+    finally:
+        timer.cancel()
+    assert not blocked, "the run blocked on a FIFO"
+    assert status == 0, err
+    assert f"{frame.name}: not a regular file" in caplog.text
+    assert "1 skipped (unreadable)" in out
+
+
+@pytest.mark.parametrize("folder, key, known", [("cam0", "hieght_sigma", "height_sigma"),
+                                                ("wheel0", "radius_sgma", "radius_sigma"),
+                                                ("imu0", "gyroscope_noise_densty", "gyroscope_noise_density")])
+def test_a_misspelt_sensor_yaml_key_is_a_warning_naming_the_file_and_the_key_meant(recording, caplog, folder, key,
+                                                                                  known):
+    """EuRoC files carry keys the library does not read (comment, sensor_type ...): an unknown key is no
+    error, but one close to a key that file type reads is named with a warning, never silently ignored."""
+    import logging
+
+    from fusion_vo.recording import Recording
+
+    _edit_yaml(recording / folder / "sensor.yaml", lambda data: data.update({key: 0.001, "comment": "x",
+                                                                              "rostopic": "/a"}))
+    rec = Recording(recording)
+    with caplog.at_level(logging.WARNING):
+        {"cam0": lambda: rec.camera, "wheel0": rec.wheel, "imu0": rec.imu}[folder]()
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert warnings == [f"{recording / folder / 'sensor.yaml'}: unknown key '{key}' (did you mean '{known}'?)"]
+
+
+def test_zero_coefficients_with_model_none_and_an_empty_imu_yaml_are_accepted(recording, caplog):
+    """Coefficients that are all zero go with ``distortion_model: none``; an empty imu0/sensor.yaml uses the
+    identity mounting and the configuration's noise, with a warning naming the file."""
+    import logging
+
+    from fusion_vo.recording import Recording
+
+    _edit_yaml(recording / "cam0" / "sensor.yaml",
+               lambda data: data.update({"distortion_model": "none", "distortion_coefficients": [0, 0, 0, 0]}))
+    (recording / "imu0" / "sensor.yaml").write_text("")
+    rec = Recording(recording)
+    with caplog.at_level(logging.WARNING):
+        assert not rec.camera.has_distortion
+        imu = rec.imu()
+    assert np.array_equal(imu.T_BS, np.eye(4)) and imu.noise == {}
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and warnings[0].startswith(f"{recording / 'imu0' / 'sensor.yaml'}: no T_BS")
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("T_BS: {cols: 4, rows: 4, data: [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.4, 0, 0, 0, 1]}",
+     "T_BS rotation part is not a rotation matrix"),
+    ("T_BS: {cols: 4, rows: 4, data: [1, 0, 0, .nan, 0, 1, 0, 0, 0, 0, 1, 0.4, 0, 0, 0, 1]}",
+     "'T_BS' must hold finite numbers"),
+    ("horizontal_sigma_m: true", "'horizontal_sigma_m' must be a number, not True"),
+])
+def test_gps_yaml_pose_and_numbers_are_checked_like_every_sensor_yaml(tmp_path, text, expected):
+    from fusion_vo.errors import InputError
+    from fusion_vo.recording.gps import _sensor_yaml
+
+    p = tmp_path / "sensor.yaml"
+    p.write_text(text + "\n")
+    with pytest.raises(InputError, match=expected.replace("(", r"\(")) as info:
+        _sensor_yaml(p)
+    assert info.value.path == p
