@@ -37,6 +37,12 @@ class VisualIncrement:
         The frontend's status (``"ok"`` when usable; anything else contributes nothing).
     n_inliers : int
         Inlier correspondences behind the estimate.
+    frame_covariance : ndarray, shape (3, 3), optional
+        The part of ``covariance`` that is the error of each of the two frames' own measurements, in the
+        units of ``delta`` (:mod:`fusion_vo.sensors.visual`): an increment's error is ``e_t1 - e_t0 + w``
+        with ``e ~ N(0, frame_covariance)`` shared with the neighbouring increments and
+        ``w ~ N(0, covariance - 2 frame_covariance)`` its own. None (the default): the backends use
+        ``fusion.visual_frame_error``.
     """
 
     t0: float
@@ -46,6 +52,7 @@ class VisualIncrement:
     height_ratio: float = 1.0
     status: str = "ok"
     n_inliers: int = 0
+    frame_covariance: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:

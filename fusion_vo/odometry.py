@@ -118,11 +118,16 @@ class OdometryConfig:
         Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
         single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
         (:func:`prepared_frames`) and lets OpenCV use ``N`` threads. ``None`` (the default) uses the
-        cores available to the process. The results do not depend on it.
+        cores available to the process; at most 256. The results do not depend on it.
     handoff : bool
         With ``threads >= 2``, give a frontend that can hand work off (KLT, features) one more thread
         for it (default false: on two idle cores it saved the tracking thread 0.5-0.6 ms per frame but
         the wall time did not fall). The results do not depend on it.
+    camera_noise : bool
+        Use the heading noise model that ``cam0/sensor.yaml`` states under ``camera_noise`` for this
+        frontend (``fusion-vo calibrate camera-noise``, :mod:`fusion_vo.calibration.camera_noise`): each
+        increment's heading variance by its turn and each frame's own error, in place of the frontend's
+        heading variance and the ``min_sigma_yaw`` floor (default true; without the key nothing changes).
     """
 
     frontend: str = "klt"
@@ -141,11 +146,13 @@ class OdometryConfig:
     max_bridge: float = 1.0
     threads: int | None = None
     handoff: bool = False
+    camera_noise: bool = True
 
     #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
     RANGES: ClassVar[dict[str, Range]] = {
         "height": POSITIVE, "min_sigma_xy": AT_LEAST_0, "min_sigma_yaw": AT_LEAST_0,  # 0: no floor
-        "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0, "threads": AT_LEAST_1,
+        "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0,
+        "threads": Range(1, 256),  # at most 256: 100000 started threads until the process limit was hit
     }
 
     def __post_init__(self) -> None:
@@ -206,6 +213,9 @@ class OdometryResult:
         deviation [m] (smoothed, :mod:`fusion_vo.geometry.height`, or interpolated from the readings).
     height_note : str or None
         What the height smoothing used and found, in words (``None`` when it did not run).
+    noise_note : str or None
+        The camera noise model applied to the increments (``OdometryConfig.camera_noise``), or why the one
+        stated was not, in words (``None``: none stated).
     """
 
     increments: list[VisualIncrement]
@@ -223,6 +233,7 @@ class OdometryResult:
     frame_height: np.ndarray | None = None
     frame_height_sigma: np.ndarray | None = None
     height_note: str | None = None
+    noise_note: str | None = None
 
     @property
     def n_frames(self) -> int:
@@ -707,6 +718,7 @@ def run_visual_odometry(
             frame_height, frame_height_sigma = smoothed.height, smoothed.sigma
             height_note = _height_note(smoothed, readings.sigma)
             log.info("%s", height_note)
+    increments, noise_note = _with_camera_noise(recording, config, increments)
     elapsed = time.perf_counter() - start
     return OdometryResult(
         increments=increments,
@@ -724,4 +736,21 @@ def run_visual_odometry(
         frame_height=frame_height,
         frame_height_sigma=frame_height_sigma,
         height_note=height_note,
+        noise_note=noise_note,
     )
+
+
+def _with_camera_noise(recording: Recording, config: OdometryConfig, increments: list) -> tuple[list, str | None]:
+    """``increments`` with the heading noise model of ``cam0/sensor.yaml`` when it states one for this frontend
+    (``config.camera_noise``), and a note of what was done."""
+    noise = recording.camera_noise() if config.camera_noise else None
+    if noise is None:
+        return increments, None
+    if noise.frontend != config.frontend:
+        note = (f"camera heading noise of cam0/sensor.yaml not used: it was measured with the {noise.frontend} "
+                f"frontend, this run uses {config.frontend}")
+        log.info("%s", note)
+        return increments, note
+    note = noise.describe()
+    log.info("%s", note)
+    return noise.apply(increments), note

@@ -182,7 +182,14 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             times[name] = t
 
     if "camera" in sensors:
-        cam = rec.camera  # cam0/sensor.yaml
+        if odometry.uncalibrated:  # cam0/sensor.yaml may have no intrinsics (the run's own model is checked here)
+            from fusion_vo.geometry.camera import uncalibrated_camera
+
+            cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
+        else:
+            cam = rec.camera  # cam0/sensor.yaml
+        if odometry.camera_noise:
+            rec.camera_noise()  # a bad camera_noise in cam0/sensor.yaml
         t_ns, _, _ = rec._frames_index()  # cam0/data.csv, frame names inside cam0/data/
         if len(t_ns) < 2:
             raise InputError(f"{len(t_ns)} frame listed: visual odometry needs at least two",
@@ -357,6 +364,8 @@ def run_pipeline(
                 summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
             if vo.height_note:
                 summary.notes.append(vo.height_note)
+            if vo.noise_note:
+                summary.notes.append(vo.noise_note)
             if vo.bridged_s > 0:
                 summary.notes.append(f"visual track bridged {vo.bridged_s:.2f} s at constant velocity where the camera was lost")
             for a, b in vo.held:

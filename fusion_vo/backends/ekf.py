@@ -149,7 +149,9 @@ class PlanarEkf:
         Visual increments are fused. With a frame error ``f > 0`` the state then ends with the camera's
         frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
     frame_error : float, optional
-        That ``f`` (default ``config.visual_frame_error``; :attr:`Intervals.visual_frame_error` in batch use).
+        That ``f`` (default ``config.visual_frame_error``; :attr:`Intervals.visual_frame_error` in batch use);
+        only whether it is above 0 matters here (the frames' covariances come with :meth:`predict`), so batch
+        use gives 1 when the increments state their own (:attr:`Intervals.vis_frame_cov`).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
@@ -414,7 +416,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     kv_ok, kb_ok = calibration_observable(iv)
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
                     iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
-                    frame_error=iv.visual_frame_error)
+                    frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt

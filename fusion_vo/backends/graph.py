@@ -314,12 +314,17 @@ class GraphBuilder:
         return base
 
     def _visual_spans(self) -> dict[int, list]:
-        """Visual increments re-expressed between keyframes, keyed by their end node."""
+        """Visual increments re-expressed between keyframes, keyed by their end node: (start node, delta,
+        covariance, covariance of its frames' own errors or None, :func:`fusion_vo.sensors.visual.frame_covariances`;
+        a composed span takes its last increment's, and keeps the inner frames' errors in its covariance)."""
+        from fusion_vo.sensors.visual import frame_covariances
+
         iv = self.iv
         pos = {int(g): n for n, g in enumerate(self.grid)}
         out: dict[int, list] = {}
         chain = None  # (start node, delta, cov, end grid index)
-        for i0, i1, d, c in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov):
+        fcs = frame_covariances(iv)
+        for m, (i0, i1, d, c) in enumerate(zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov)):
             i0, i1 = int(i0), int(i1)
             if chain is not None and chain[3] == i0:
                 delta, cov = _compose_with_covariance(chain[1], chain[2], d, c)
@@ -330,7 +335,7 @@ class GraphBuilder:
                 chain = None
                 continue
             if i1 in pos:
-                out.setdefault(pos[i1], []).append((chain[0], chain[1], chain[2]))
+                out.setdefault(pos[i1], []).append((chain[0], chain[1], chain[2], None if fcs is None else fcs[m]))
                 chain = None
         return out
 

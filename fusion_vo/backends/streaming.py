@@ -197,6 +197,11 @@ class StreamingFusion:
         Given when the visual increments were already scaled with the range finder's heights (an
         offline visual odometry run's ``frame_height_sigma``, typical value): it bounds that prior as in a
         batch run, and the range finder is then not used again (its samples are ignored, with a note).
+    camera_frame_errors : bool, optional
+        The visual increments state their frames' own errors
+        (:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance`, from a camera noise calibration,
+        :mod:`fusion_vo.calibration.camera_noise`): the EKF then carries them in its state as a batch run does
+        (default False: it fuses each increment with its whole covariance; iSAM2 models them either way).
     gps_lever_arm : array_like, optional
         Antenna position in the body frame [m] (``gps0/sensor.yaml`` ``T_BS``), for ``add_gps``
         (default: at the body origin).
@@ -232,7 +237,7 @@ class StreamingFusion:
                  sensors=("camera", "wheel", "imu"), wheel_config: WheelConfig | None = None,
                  imu_T_BS: np.ndarray | None = None, imu_noise: dict | None = None, camera_height: float | None = None,
                  camera_height_sigma: float | None = None, range_height_sigma: float | None = None,
-                 gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
+                 camera_frame_errors: bool = False, gps_lever_arm=None, history: float = 2.0, horizon: float = 1.0,
                  steps_per_call: int | None = 1, background: bool = False):
         if backend not in ("ekf", "gtsam"):
             raise InputError(f"streaming backend must be 'ekf' or 'gtsam', not '{backend}'")
@@ -274,6 +279,7 @@ class StreamingFusion:
         self.camera_height = camera_height
         #: the two scales' priors, as a batch run of the same streams takes them
         self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config)
+        self._camera_frame_errors = bool(camera_frame_errors)
         self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
         self._records: list[_NodeRecord | None] = []
@@ -1010,7 +1016,8 @@ class StreamingFusion:
             twist = "odom" in self.sensors and "wheel" not in self.sensors
             self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, visual_scale_sigma=self._priors.visual_scale_sigma,
                                   wheel_scale_sigma=self._priors.wheel_scale_sigma, states=self._states,
-                                  camera="camera" in self.sensors)
+                                  camera="camera" in self.sensors,
+                                  frame_error=1.0 if self._camera_frame_errors else None)
             self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
@@ -1203,7 +1210,9 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
                            imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,
                            camera_height=streams.camera_height, camera_height_sigma=streams.camera_height_sigma,
-                           range_height_sigma=streams.range_height_sigma if streams.range_in_visual else None, **kwargs)
+                           range_height_sigma=streams.range_height_sigma if streams.range_in_visual else None,
+                           camera_frame_errors=any(inc.frame_covariance is not None for inc in streams.visual or ()),
+                           **kwargs)
 
 
 def _merge_into(total: dict, part: dict) -> None:

@@ -197,6 +197,10 @@ class Intervals:
     visual_frame_error : float
         The camera's frame-error share ``f`` both backends use (:mod:`fusion_vo.sensors.visual`):
         ``FusionConfig.visual_frame_error``, or the estimate of :mod:`fusion_vo.sensors.visual_noise`.
+    vis_frame_cov : ndarray (M, 3, 3) or None
+        The covariance of each increment's frames' own errors when the increments state it
+        (:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance`); it replaces
+        ``visual_frame_error``'s ``f/2 Σ`` (:func:`fusion_vo.sensors.visual.frame_covariances`).
     visual_noise : VisualNoiseEstimate or None
         What that estimate found (``fusion.visual_noise.estimate``; None when off or in streaming use).
     """
@@ -238,6 +242,7 @@ class Intervals:
     extra: dict = field(default_factory=dict)
     states: tuple = ()
     visual_frame_error: float = 0.0
+    vis_frame_cov: np.ndarray | None = None
     visual_noise: VisualNoiseEstimate | None = None
 
     @property

@@ -1,8 +1,9 @@
-"""``fusion-vo calibrate``: camera intrinsics, the camera over the floor, the lever arm and the wheels.
+"""``fusion-vo calibrate``: camera intrinsics, the camera over the floor, the lever arm, the camera's heading noise
+and the wheels.
 
 Each calibration prints its values with their standard deviations. ``intrinsics`` and ``floor`` always
-write the ``cam0/sensor.yaml`` named by ``--out``; ``height``, ``lever-arm`` and ``wheels`` write a
-``sensor.yaml`` (``cam0/`` or ``wheel0/``) only when ``--out`` names one, so a recording is never changed
+write the ``cam0/sensor.yaml`` named by ``--out``; ``height``, ``lever-arm``, ``camera-noise`` and ``wheels``
+write a ``sensor.yaml`` (``cam0/`` or ``wheel0/``) only when ``--out`` names one, so a recording is never changed
 unless asked. Files are replaced atomically and follow the umask.
 """
 
@@ -67,6 +68,20 @@ def register(sub) -> None:
     q.add_argument("--ccw", metavar="SEQ2", help="the counter-clockwise square (UMBmark)")
     q.add_argument("--out", metavar="FILE", help="wheel0/sensor.yaml to write")
     q.set_defaults(func=run_wheels)
+
+    q = kinds.add_parser("camera-noise",
+                         help="the camera's heading noise by turn and each frame's own error, against ground truth",
+                         description="Run visual odometry on drives with ground truth and measure how its heading "
+                                     "errors grow with the turn between two frames and how much of them is each "
+                                     "frame's own (fusion_vo.calibration.camera_noise). With --out the model is "
+                                     "written under camera_noise in that cam0/sensor.yaml (its other keys kept); "
+                                     "runs of the same frontend then use it.")
+    q.add_argument("seqs", nargs="+", metavar="SEQ", help="recordings of the camera with ground truth")
+    q.add_argument("--frontend", choices=("klt", "features", "direct"), default=None,
+                   help="frontend to measure (default: that of --config, else klt)")
+    q.add_argument("--config", metavar="YAML", help="run configuration (its odometry and frontend sections are used)")
+    q.add_argument("--out", metavar="FILE", help="cam0/sensor.yaml to write the model into")
+    q.set_defaults(func=run_camera_noise)
 
     p.set_defaults(func=lambda args: p.print_help() or 2)
 
@@ -186,6 +201,40 @@ def _check_turn_in_place(rec) -> None:
         turned = math.degrees(2.0 * arcs / travel.wheel_base)
         raise InputError(f"not a turn in place: the wheels moved the axle {axle:.3f} m while turning {turned:.0f} "
                          "deg; record a turn in place about the axle", rec.path / "wheel0" / "data.csv")
+
+
+def run_camera_noise(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from fusion_vo.calibration.camera_noise import calibrate
+    from fusion_vo.config import load_config
+    from fusion_vo.geometry.camera import load_yaml, write_yaml_atomic
+    from fusion_vo.recording import Recording
+
+    config = load_config(args.config)
+    if args.frontend:
+        config = dataclasses.replace(config, frontend=args.frontend)
+    try:
+        odometry = config.odometry_config()
+    except ValueError as exc:
+        raise InputError(str(exc), args.config) from None
+    recordings = [Recording(seq) for seq in args.seqs]
+    for rec in recordings:
+        if not rec.has_groundtruth():
+            raise InputError("a calibration drive needs ground truth (state_groundtruth_estimate0/)", rec.path)
+    noise = calibrate(recordings, odometry)
+    print(f"{noise.frontend} frontend, {noise.increments} increments of {len(recordings)} drive(s):")
+    for lo, hi, sigma in zip(noise.edges, noise.edges[1:] + (math.inf,), noise.heading_sigma):
+        print(f"  turn {lo:g}-{hi:g} rad between frames: heading error {1e6 * sigma:.1f} µrad (RMS)")
+    print(f"  each frame's own heading error: {1e6 * noise.frame_sigma:.1f} µrad")
+    if not args.out:
+        print("(not written: give --out cam0/sensor.yaml to write it)")
+        return 0
+    data = load_yaml(args.out) if Path(args.out).is_file() else {}
+    data["camera_noise"] = noise.to_dict()
+    write_yaml_atomic(args.out, data)
+    print(f"-> {args.out}")
+    return 0
 
 
 def run_wheels(args: argparse.Namespace) -> int:

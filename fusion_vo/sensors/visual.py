@@ -25,6 +25,12 @@ the update then has ``∓I/Δt`` in their columns. The factor graph gives each f
 to the node's pose by this model with a zero reading and ``f/2 Σ_vis`` (in the increments' units, through
 the visual scale when it is estimated; else ``BetweenFactorPose2(X_k, F_k, identity, f/2 Σ_vis)``) and
 puts the increment between the frame poses with ``(1 - f) Σ_vis`` (:func:`graph_factors`).
+
+An increment may instead state its frames' error itself
+(:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance` ``Σ_e``, e.g. from a noise calibration
+of the camera, :mod:`fusion_vo.calibration.camera_noise`): then ``e ~ N(0, Σ_e)`` and
+``w ~ N(0, Σ_vis - 2 Σ_e)``, the same model with a frame error of its own size and axes rather than a fixed
+share of every increment's covariance (:func:`frame_covariances`).
 """
 
 from __future__ import annotations
@@ -103,12 +109,43 @@ def add_intervals(iv, streams, config, counts) -> None:
         iv.vis_delta[:, 0] *= cx
         iv.vis_delta[:, 1] *= cy
     count.used += len(keep)
+    stated = [visual[i].frame_covariance for i in keep]
+    if any(c is not None for c in stated):
+        iv.vis_frame_cov = _stated_frame_cov(stated, iv.vis_cov)
     edges = np.zeros(len(T), dtype=np.int64)  # covered intervals: +1 where an increment starts, -1 where it ends
     np.add.at(edges, iv.vis_i0, 1)
     np.add.at(edges, iv.vis_i1, -1)
     covered = np.cumsum(edges)[:-1] > 0
     for a, b in uncovered_runs(T, covered, 0.2):
         notes.append(f"camera lost from {when(a, T)} to {when(b, T)}; the other sensors carried the estimate")
+
+
+def _stated_frame_cov(stated: list, cov: np.ndarray) -> np.ndarray:
+    """The increments' own ``frame_covariance`` s (M, 3, 3), kept below half of their covariance so that ``w`` keeps a positive definite covariance (at most 0.49 of it along every
+    direction); an increment that states none gets a negligible one (1e-6 of its covariance: its frames'
+    errors remain states of the backends)."""
+    out = np.empty_like(cov)
+    for m, c in enumerate(stated):
+        if c is None:
+            out[m] = 1e-6 * cov[m]
+            continue
+        c = np.asarray(c, dtype=np.float64).reshape(3, 3)
+        # largest share of cov[m] that c takes in any direction: eigenvalues of L⁻¹ c L⁻ᵀ
+        L = np.linalg.cholesky(cov[m])
+        Li = np.linalg.inv(L)
+        share = float(np.max(np.linalg.eigvalsh(Li @ (0.5 * (c + c.T)) @ Li.T)))
+        out[m] = c * min(1.0, 0.49 / share) if share > 0 else 1e-6 * cov[m]
+    return out
+
+
+def frame_covariances(iv) -> np.ndarray | None:
+    """Covariance of each increment's frames' own errors (M, 3, 3): the increments' own
+    (:attr:`Intervals.vis_frame_cov`), else ``f/2`` of their covariance with ``visual_frame_error = f > 0``;
+    None: independent increments."""
+    if getattr(iv, "vis_frame_cov", None) is not None:
+        return iv.vis_frame_cov
+    f = iv.visual_frame_error
+    return 0.5 * f * iv.vis_cov if f > 0 else None
 
 
 def ekf_measurements(iv, config) -> dict:
@@ -131,14 +168,17 @@ def ekf_measurements(iv, config) -> dict:
         vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
         vis_ok[free] = True
     out = {"visual": (vis_ok, vis_u, vis_R)}
-    f = iv.visual_frame_error
-    if f > 0:  # single-interval increments: their frames' errors and the rest (module docstring)
+    fc = frame_covariances(iv)
+    if fc is not None:  # single-interval increments: their frames' errors and the rest (module docstring)
         single = np.zeros(K, bool)
         frame_cov = np.full((K, 3, 3), np.nan)
+        rest_R = np.full((K, 3, 3), np.nan)
         one = iv.vis_i1 - iv.vis_i0 == 1
-        single[iv.vis_i0[one]] = True
-        frame_cov[iv.vis_i0[one]] = 0.5 * f * iv.vis_cov[one]
-        out["visual_frames"] = (single, frame_cov, iv.dt.copy(), f)
+        k = iv.vis_i0[one]
+        single[k] = True
+        frame_cov[k] = fc[one]
+        rest_R[k] = (iv.vis_cov[one] - 2.0 * fc[one]) / (span[one] ** 2)[:, None, None]
+        out["visual_frames"] = (single, frame_cov, iv.dt.copy(), rest_R)
     return out
 
 
@@ -151,14 +191,15 @@ def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
 
 def ekf_blocks(ekf, meas: dict, k: int) -> list:
     """The increment of interval ``k`` as a block; with frame errors in the state (module docstring) its noise
-    is ``(1 - f) R`` and the two frames' errors enter as ``(e_this - e_prev) / Δt``."""
+    is ``(1 - f) R`` (``R - 2 Σ_e / Δt²`` with the increments' own frame covariances) and the two frames'
+    errors enter as ``(e_this - e_prev) / Δt``."""
     m = meas.get("visual")
     if m is None or not m[0][k]:
         return []
     frames = meas.get("visual_frames")
     if ekf.frame_errors is None or frames is None or not frames[0][k]:
         return [ekf.block(VISUAL, m[1][k], m[2][k])]
-    name, z, h, H, R, angle = ekf.block(VISUAL, m[1][k], m[2][k] * (1.0 - frames[3]))
+    name, z, h, H, R, angle = ekf.block(VISUAL, m[1][k], frames[3][k])
     e0, e1 = ekf.frame_errors
     x = ekf.x
     inv_dt = 1.0 / frames[2][k]
@@ -173,13 +214,12 @@ def graph_factors(builder, nf, node) -> None:
     import gtsam
 
     est = node.estimate
-    f = builder.iv.visual_frame_error
-    for start, d, cov in builder.visual_spans.get(node.n, []):
+    for start, d, cov, fc in builder.visual_spans.get(node.n, []):
         xs, xj = builder.X(builder.offset + start), node.xj
-        if f > 0:
-            frames = _frame_poses(builder, nf, node, start, 0.5 * f * cov)
+        if fc is not None:
+            frames = _frame_poses(builder, nf, node, start, fc)
             if frames is not None:
-                (xs, xj), cov = frames, (1.0 - f) * cov
+                (xs, xj), cov = frames, cov - 2.0 * fc
         if builder.kv_on:
             nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, xj),
                                                                      "visual_scale": (builder.S(node.segment),)}))

@@ -270,6 +270,9 @@ def apply(iv, config) -> VisualNoiseEstimate | None:
         return None
     if not len(iv.vis_i0) or not iv.uses("gyro"):
         out = VisualNoiseEstimate(note="camera heading noise not estimated: it needs the camera and the gyro")
+    elif iv.vis_frame_cov is not None:  # a calibrated model is better than this estimate, and would not add up
+        out = VisualNoiseEstimate(note="camera heading noise not estimated: the increments state their own "
+                                       "(camera_noise of cam0/sensor.yaml)")
     else:
         K = iv.n_steps
         camera, camera_var = np.full(K, np.nan), np.full(K, np.nan)

@@ -49,9 +49,49 @@ def test_streaming_models_the_frame_errors_as_the_batch_run(camera_only, backend
     fusion = StreamingFusion(backend, FusionConfig(visual_frame_error=0.5), ["camera"])
     for v in s.visual:
         fusion.add_visual(v)
-    track = fusion.finish().trajectories[batch_name]
-    ref = runs[0.5].trajectories[batch_name]
+    _assert_same_track(fusion.finish().trajectories[batch_name], runs[0.5].trajectories[batch_name])
+
+
+def _stating(visual, share: float):
+    """The increments with ``share`` of their covariance stated as each frame's own error."""
+    import dataclasses
+
+    return [dataclasses.replace(v, frame_covariance=share * np.asarray(v.covariance)) for v in visual]
+
+
+def test_frame_errors_stated_by_the_increments_are_the_same_model(camera_only):
+    """An increment's own ``frame_covariance`` of f/2 of its covariance is ``visual_frame_error = f``: every
+    backend gives the same track and covariances to rounding."""
+    import dataclasses
+
+    s, runs = camera_only
+    stated = dataclasses.replace(streams_of(s).select(["camera"]), visual=_stating(s.visual, 0.25))
+    result = fuse(stated, "all", FusionConfig())
+    for name in TRACKS:
+        np.testing.assert_allclose(result.trajectories[name].xyyaw, runs[0.5].trajectories[name].xyyaw,
+                                   rtol=0, atol=1e-9, err_msg=name)
+        np.testing.assert_allclose(result.covariances[name], runs[0.5].covariances[name], rtol=1e-6, atol=1e-15,
+                                   err_msg=name)
+
+
+@pytest.mark.parametrize("backend, batch_name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_streaming_takes_the_frame_errors_the_increments_state(camera_only, backend, batch_name):
+    from fusion_vo.backends.streaming import streaming_for
+
+    import dataclasses
+
+    s, runs = camera_only
+    stated = dataclasses.replace(streams_of(s).select(["camera"]), visual=_stating(s.visual, 0.25))
+    fusion = streaming_for(stated, backend, FusionConfig())
+    for v in stated.visual:
+        fusion.add_visual(v)
+    _assert_same_track(fusion.finish().trajectories[batch_name], runs[0.5].trajectories[batch_name])
+
+
+def _assert_same_track(track, ref) -> None:
+    """A streamed ``track`` has nearly all of the batch ``ref``'s poses, each within 1 µm (1 µrad)."""
     common = np.isin(np.round(ref.t, 9), np.round(track.t, 9))
     ours = track.xyyaw[np.isin(np.round(track.t, 9), np.round(ref.t, 9))]
     assert common.sum() > 0.95 * len(ref)
     assert np.max(np.abs(ours - ref.xyyaw[common])) < 1e-6
+
