@@ -159,6 +159,7 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     docs = field_docs(cls)
     ranges = getattr(cls, "RANGES", {})  # frontends.config.Range of number fields
     fields: dict[str, Any] = {}
+    own = cls() if defaults is not None else None  # the class's defaults, which its docstring states
     for f in dataclasses.fields(cls):
         if f.name in exclude or not f.init:
             continue
@@ -171,7 +172,7 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
         else:
             raise TypeError(f"{cls.__name__}.{f.name} has no default")
         description = docs.get(f.name)
-        if defaults is not None and description and default != getattr(cls(), f.name, default):
+        if own is not None and description and default != getattr(own, f.name, default):
             description = without_default(description)  # the docstring's default is the class's, not this one
         extra = {"unit": _unit(description)} if _unit(description) else {}
         if f.name in ranges:  # the dataclass's table of ranges (checked by its __post_init__), for editors

@@ -247,10 +247,11 @@ def calibrate(recordings: list, config=None) -> CameraNoise:
     from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 
     config = config or OdometryConfig()
-    errors, turns, chained = [], [], []
-    for rec in recordings:
+    for rec in recordings:  # all of them before any work
         if not rec.has_groundtruth():
             raise InputError("a calibration drive needs ground truth (state_groundtruth_estimate0/)", rec.path)
+    errors, turns, chained = [], [], []
+    for rec in recordings:
         vo = run_visual_odometry(rec, replace(config, camera_noise=False))
         e, t, c = heading_errors(rec, vo.increments)
         if len(c):

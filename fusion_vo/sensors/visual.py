@@ -142,7 +142,7 @@ def frame_covariances(iv) -> np.ndarray | None:
     """Covariance of each increment's frames' own errors (M, 3, 3): the increments' own
     (:attr:`Intervals.vis_frame_cov`), else ``f/2`` of their covariance with ``visual_frame_error = f > 0``;
     None: independent increments."""
-    if getattr(iv, "vis_frame_cov", None) is not None:
+    if iv.vis_frame_cov is not None:
         return iv.vis_frame_cov
     f = iv.visual_frame_error
     return 0.5 * f * iv.vis_cov if f > 0 else None
