@@ -68,7 +68,6 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.sensors.imu import mounting_hint
@@ -104,6 +103,8 @@ class Episode:
 @functools.lru_cache(maxsize=64)
 def _chi2_ppf(probability: float, dof: int) -> float:
     """Chi-square quantile (cached: the check asks for the same few many times)."""
+    from scipy.stats import chi2  # on first use: a camera-only run does not load scipy.stats
+
     return float(chi2.ppf(probability, dof))
 
 
