@@ -105,7 +105,8 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import Intervals
+from fusion_vo.backends.ekf_adapter import EkfReadings
+from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
@@ -324,22 +325,32 @@ class PlanarEkf:
         return out
 
     # ------------------------------------------------------------------ measurement blocks
-    def block(self, model: MeasurementModel, z, R, **params):
+    def block(self, model: MeasurementModel, z, R, rows: tuple | None = None, name: str | None = None, **params):
         """``(sensor, z, h, H, R, angle_row)`` of one measurement through ``model`` at the current state.
 
-        The model's arguments are read from the state (:attr:`columns`) and its Jacobians become
-        the columns of ``H``; ``params`` go to :meth:`~fusion_vo.sensors.model.MeasurementModel.evaluate`.
+        The model's arguments are read from the state (:attr:`columns`), except those given in ``params`` (held
+        at those values, with the model's other parameters), and its Jacobians become the columns of ``H``;
+        ``rows`` selects the model's rows that ``R`` covers (``z`` holds all of them); ``name`` (default the
+        model's) is what the block is counted under.
         """
         x = self.kf.x[:, 0]
         columns = self.columns
-        h, jac = model.evaluate(**{name: x[columns[name]] for name in model.args}, **params)
+        h, jac = model.evaluate(**{n: x[columns[n]] for n in model.args if n not in params}, **params)
         H = np.zeros((model.dim, self.dim))
-        for name, J in jac.items():
-            H[:, columns[name]] = J
+        for arg, J in jac.items():
+            if arg not in params:
+                H[:, columns[arg]] = J
         angle = model.angle_rows[0] if model.angle_rows else None
+        name = model.name if name is None else name
+        if rows is not None:
+            rows = list(rows)
+            angle = rows.index(angle) if angle in rows else None
+            z = np.asarray(z, dtype=np.float64).reshape(-1)[rows]
+            return name, z, np.asarray(h)[rows], H[rows], np.asarray(R, dtype=np.float64), angle
         if model.dim == 1:
-            return model.name, np.array([float(z)]), h, H, np.array([[float(R)]]), angle
-        return model.name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
+            return name, np.array([float(np.asarray(z).reshape(-1)[0])]), h, H, \
+                np.array([[float(np.asarray(R).reshape(-1)[0])]]), angle
+        return name, np.asarray(z, dtype=np.float64), h, H, np.asarray(R, dtype=np.float64), angle
 
     # ------------------------------------------------------------------ a measurement of the pose alone
     def update_pose(self, y, H_pose, R) -> None:
@@ -393,21 +404,25 @@ class PlanarEkf:
 # --------------------------------------------------------------------------- batch run over intervals
 def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
     """Twist-space measurements per node interval, vectorised (see the module docstring): every registered
-    sensor's ``ekf_measurements`` (:mod:`fusion_vo.sensors.registry`), merged into one table."""
+    sensor's ``ekf_measurements`` (:mod:`fusion_vo.sensors.registry`), merged into one table, and the sensors'
+    readings on the filter's grid under ``"readings"`` (:class:`~fusion_vo.backends.ekf_adapter.EkfReadings`)."""
     out: dict = {}
     for sensor in registry.sensors():
         if sensor.ekf_measurements is not None:
             out.update(sensor.ekf_measurements(iv, config))
+    out["readings"] = EkfReadings(sensor_readings(iv, config), iv.t)
     return out
 
 
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
     """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`:
-    every registered sensor's ``ekf_blocks``, in their order."""
-    blocks = []
-    for _, step in registry.ordered("ekf_blocks"):
-        blocks.extend(step.run(ekf, meas, k))
-    return blocks
+    every registered sensor's ``ekf_blocks`` and its readings, in their order."""
+    blocks = [(step.order, b) for _, step in registry.ordered("ekf_blocks") for b in step.run(ekf, meas, k)]
+    readings = meas.get("readings")
+    if readings is not None:
+        blocks += readings.blocks(ekf, k)
+        blocks.sort(key=lambda item: item[0])
+    return [b for _, b in blocks]
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
@@ -431,6 +446,9 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
             blocks = sensor.ekf_start(ekf, meas)
             if blocks:
                 ekf.update(blocks)
+    blocks = meas["readings"].start(ekf)
+    if blocks:
+        ekf.update(blocks)
     # sensors applied at the nodes on their own, after each step's update (GPS fixes)
     at_nodes = [run for run in (s.ekf_run(iv, config) for s in registry.sensors() if s.ekf_run is not None)
                 if run is not None]

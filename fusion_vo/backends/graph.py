@@ -126,7 +126,9 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import Intervals
+from fusion_vo.backends.graph_adapter import GraphReadings, interval_factor, node_factor
+from fusion_vo.backends.graph_adapter import guess as readings_guess
+from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, covariance_noise, group,
@@ -259,6 +261,7 @@ class GraphBuilder:
                     if keep is not None and len(keep):
                         nodes = np.union1d(nodes, keep)
         self.grid = nodes  # node index -> interval-grid index
+        self.readings = GraphReadings(sensor_readings(iv, config), nodes)  # the sensors' readings on these nodes
         self.t = iv.t[nodes]
         # bias and calibration variables: one per segment of `calibration_interval` seconds
         origin = self.t[0] if t_origin is None else t_origin
@@ -411,6 +414,12 @@ class GraphBuilder:
             if step.order >= GUESS_ORDER:
                 break
             step.run(self, nf, node)
+        spans = self.readings.ending_at(n)
+        r_translation, r_heading = readings_guess(spans, est, node.dt)
+        if r_translation is not None and node.translation is None:
+            node.translation = r_translation
+        if r_heading is not None:
+            node.heading = r_heading
         last = est.get("last_increment", _NO_INCREMENT)
         translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
@@ -428,6 +437,11 @@ class GraphBuilder:
         for _, step in steps:  # (sorted by order)
             if step.order >= GUESS_ORDER:
                 step.run(self, nf, node)
+        for span in spans:  # the sensors' interval readings that end here
+            xs = X(self.offset + span.start)
+            factor = interval_factor(self, span, xs, node.xj, c, self._times[g1] - self._times[self._grid[span.start]])
+            nf.factors.append(factor)
+            nf.sensors.append(span.readings.sensor)
         self._unary(nf, n, node)
         return nf
 
@@ -448,6 +462,26 @@ class GraphBuilder:
         """Both wheels at rest in every interval from grid index ``g0`` to ``g1``
         (:func:`~fusion_vo.sensors.wheel.at_rest`, evaluated for all intervals at once)."""
         return bool(self._still[g0:g1].all())
+
+    def state_variable(self, name: str, segment: int) -> int | None:
+        """The variable of state ``name`` in calibration ``segment``, or None when the graph does not estimate it."""
+        builtin = {"gyro_bias": (self.iv.uses("gyro"), B), "ahrs_offset": (self.ahrs_offset_on, O),
+                   "visual_scale": (self.kv_on, S), "wheel_base_factor": (self.kb_on, W), "wheel_scale": (self.kr_on, R)}
+        if name in builtin:
+            on, letter = builtin[name]
+            return letter(segment) if on else None
+        if name in self._state_letter:
+            return self.state_key(name, segment)
+        return None
+
+    def state_initial(self, name: str) -> float:
+        """The value a state the graph does not estimate is held at: its initial value (scales 1, offsets 0)."""
+        if name in ("visual_scale", "wheel_base_factor", "wheel_scale"):
+            return 1.0
+        for st in registry.all_states():
+            if st.name == name:
+                return float(st.initial)
+        return 0.0
 
     def key(self, n: int) -> int:
         """The pose variable of local node ``n``."""
@@ -500,6 +534,11 @@ class GraphBuilder:
                                xj=X(self.offset + n), estimate={})
         for _, step in registry.ordered("graph_unary"):
             step.run(self, nf, node)
+        for r, j in self.readings.at(n):  # the sensors' readings at this node
+            factor = node_factor(self, r, j, node.xj, node.segment)
+            if factor is not None:
+                nf.factors.append(factor)
+                nf.sensors.append(r.sensor)
 
     def count(self, nf: NodeFactors) -> None:
         counts = self.counts

@@ -41,6 +41,7 @@ from fusion_vo.measurements.grid import (  # noqa: F401 (the grid's helpers, her
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors import visual_noise
 from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
 from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources, gyro_mounting_note
@@ -344,6 +345,16 @@ def scale_priors(config: FusionConfig, camera_height: float | None, camera_heigh
     if wheel_config is not None and wheel_config.radius_sigma is not None:
         wheel = wheel_config.relative_radius_sigma(wheel)
     return ScalePriors(visual, wheel, notes)
+
+
+def sensor_readings(iv: "Intervals", config: FusionConfig) -> list[Readings]:
+    """Every registered sensor's readings on the grid of ``iv`` (:attr:`Sensor.readings
+    <fusion_vo.sensors.registry.Sensor.readings>`), after the consistency monitor's decisions."""
+    out: list[Readings] = []
+    for sensor in registry.sensors():
+        if sensor.readings is not None:
+            out.extend(r for r in sensor.readings(iv, config) if len(r))
+    return out
 
 
 # --------------------------------------------------------------------------- builder

@@ -128,6 +128,37 @@ def log(p) -> np.ndarray:
     return np.array([(a * x + b * y) / det, (-b * x + a * y) / det, th])
 
 
+def log_many(p) -> np.ndarray:
+    """:func:`log` of increments ``p`` (N, 3) at once."""
+    p = np.asarray(p, dtype=np.float64).reshape(-1, 3)
+    a, b = sinc_terms(p[:, 2])
+    det = a * a + b * b
+    return np.stack([(a * p[:, 0] + b * p[:, 1]) / det, (-b * p[:, 0] + a * p[:, 1]) / det, p[:, 2]], axis=1)
+
+
+def exp_jacobian(twist) -> np.ndarray:
+    """``∂ exp(ξ) / ∂ξ`` (N, 3, 3) of the increments ``exp(ξ) = (a v_x - b v_y, b v_x + a v_y, ω)`` of twists
+    ``ξ = (v_x, v_y, ω)`` (N, 3) over unit time, with ``a = sin ω / ω`` and ``b = (1 - cos ω) / ω``::
+
+        [[a, -b, a' v_x - b' v_y],
+         [b,  a, b' v_x + a' v_y],
+         [0,  0, 1]]
+    """
+    xi = np.asarray(twist, dtype=np.float64).reshape(-1, 3)
+    a, b = sinc_terms(xi[:, 2])
+    da, db = sinc_derivatives(xi[:, 2])
+    J = np.zeros((len(xi), 3, 3))
+    J[:, 0, 0], J[:, 0, 1], J[:, 0, 2] = a, -b, da * xi[:, 0] - db * xi[:, 1]
+    J[:, 1, 0], J[:, 1, 1], J[:, 1, 2] = b, a, db * xi[:, 0] + da * xi[:, 1]
+    J[:, 2, 2] = 1.0
+    return J
+
+
+def log_jacobian(p) -> np.ndarray:
+    """``∂ log(p) / ∂p`` (N, 3, 3) of increments ``p`` (N, 3): the inverse of :func:`exp_jacobian` at ``log(p)``."""
+    return np.linalg.inv(exp_jacobian(log_many(p)))
+
+
 def integrate(increments) -> np.ndarray:
     """Chain increments from the origin: returns ``(N+1) x 3`` poses, the first at the origin."""
     inc = np.asarray(increments, dtype=np.float64).reshape(-1, 3)

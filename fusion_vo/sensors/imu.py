@@ -51,6 +51,7 @@ from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.sensors.wheel import at_rest
+from fusion_vo.sensors.readings import ORDER, Readings
 
 logger = logging.getLogger(__name__)
 
@@ -349,6 +350,12 @@ class GyroModel(MeasurementModel):
     args: tuple = ("motion", "gyro_bias")
     dim: int = 1
     turn_rows: tuple = (0,)
+    uses_dt: bool = True
+    guess_rank: tuple = (None, 0)
+
+    def guess(self, z, estimate: dict, dt: float):
+        """The heading change: the angle less the running bias estimate's share, ``Θ - b̂ Δt``."""
+        return None, float(z[0]) - estimate.get("gyro_bias", 0.0) * dt
 
     def evaluate(self, motion, gyro_bias, dt=1.0):
         d = np.asarray(motion, dtype=np.float64)
@@ -382,6 +389,9 @@ class AhrsModel(MeasurementModel):
     args: tuple = ("heading", "ahrs_offset")
     dim: int = 1
     angle_rows: tuple = (0,)
+
+    def identity(self, fixed: dict) -> bool:
+        return fixed.get("ahrs_offset") == 0.0
 
     def evaluate(self, heading, ahrs_offset):
         psi = np.asarray(heading, dtype=np.float64)
@@ -449,74 +459,18 @@ def add_intervals(iv, streams, config, counts) -> None:
     iv.cy = np.interp(mid, ht, heading.cy[heading.valid])
 
 
-def ekf_measurements(iv, config) -> dict:
-    """``gyro`` -> (ok, mean rate, σ_g²/Δt) per interval (``σ_rest`` where the wheels are at rest);
-    ``ahrs`` -> (ok, heading, σ_ψ²) at the nodes."""
-
-    out = {}
+def readings(iv, config) -> list[Readings]:
+    """The gyro's integrated angle per interval (``σ_g² Δt``, ``σ_rest`` where the wheels are at rest; gated
+    upstream, so not robust) and the AHRS heading at the nodes (``σ_ψ²``)."""
+    out = []
     if iv.uses("gyro"):
-        out["gyro"] = (iv.gyro_ok, iv.gyro_angle / iv.dt, config.imu.density(at_rest(iv, config))**2 / iv.dt)
+        k = np.flatnonzero(iv.gyro_ok)
+        var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt)
+        out.append(Readings("gyro", GYRO, k, k + 1, iv.gyro_angle[k], var[k], robust=False, order=ORDER["gyro"]))
     if iv.ahrs_ok.any():
-        out["ahrs"] = (iv.ahrs_ok, iv.ahrs_yaw, config.imu.ahrs_yaw_sigma**2)
+        n = np.flatnonzero(iv.ahrs_ok)
+        out.append(Readings("ahrs", AHRS, n, n, iv.ahrs_yaw[n], config.imu.ahrs_yaw_sigma**2, order=ORDER["ahrs"]))
     return out
-
-
-def ekf_gyro(ekf, meas: dict, k: int) -> list:
-    m = meas.get("gyro")
-    return [ekf.block(GYRO, m[1][k], m[2][k])] if m is not None and m[0][k] else []
-
-
-def ekf_ahrs(ekf, meas: dict, k: int) -> list:
-    """The AHRS heading at the node ending interval ``k``."""
-    m = meas.get("ahrs")
-    return [ekf.block(AHRS, m[1][k + 1], m[2])] if m is not None and m[0][k + 1] else []
-
-
-def ekf_ahrs_start(ekf, meas: dict) -> list:
-    m = meas.get("ahrs")
-    return [ekf.block(AHRS, m[1][0], m[2])] if m is not None and m[0][0] else []
-
-
-def graph_guess(builder, nf, node) -> None:
-    """The gyro's integrated angle over the interval: the most reliable heading change for the guess."""
-    iv = builder.iv
-    if iv.uses("gyro") and iv.gyro_ok[node.g0:node.g1].all():
-        angle = float(iv.gyro_angle[node.g0:node.g1].sum())
-        node.scratch["gyro_angle"] = angle
-        node.heading = angle - node.estimate.get("gyro_bias", 0.0) * node.dt
-        nf.sensors.append("gyro")
-
-
-def graph_gyro(builder, nf, node) -> None:
-    """``d_ψ + B_c Δt - Θ`` with ``σ² = σ_g² Δt`` (``σ_rest`` with the wheels at rest; linear, not robust)."""
-    angle = node.scratch.get("gyro_angle")
-    if angle is None:
-        return
-    var = float(GYRO.variance(builder.config.imu.density(bool(node.scratch.get("still"))), node.dt))
-    nf.factors.append(builder.model_factor(GYRO, [angle], [[var]], {"motion": (node.xi, node.xj),
-                                                                     "gyro_bias": (builder.B(node.segment),)},
-                                           params={"dt": node.dt}, robust=False))
-
-
-def graph_ahrs(builder, nf, node) -> None:
-    """The AHRS heading at the node: with its offset variable when the offset walks, else GTSAM's
-    ``PriorFactorPose2`` on the heading (the model with the offset fixed at 0)."""
-    iv, cfg = builder.iv, builder.config
-    g = node.g1
-    if not iv.ahrs_ok[g]:
-        return
-    import gtsam
-
-    if builder.ahrs_offset_on:
-        nf.factors.append(builder.model_factor(AHRS, [float(iv.ahrs_yaw[g])], [[cfg.imu.ahrs_yaw_sigma**2]],
-                                               {"heading": (node.xj,), "ahrs_offset": (builder.O(node.segment),)}))
-    else:
-        # an AHRS trusted as absolute (no offset walk): AHRS with its offset fixed at 0, as GTSAM's
-        # PriorFactorPose2 on the heading alone (the same error and Jacobian in the heading row)
-        nm = builder.noise(np.diag([1e6, 1e6, cfg.imu.ahrs_yaw_sigma**2]), dof=1)
-        heading = gtsam.Pose2(0.0, 0.0, float(iv.ahrs_yaw[g]))
-        nf.factors.append(gtsam.PriorFactorPose2(node.xj, heading, nm))
-    nf.sensors.append("ahrs")
 
 
 def has_heading(iv) -> bool:
@@ -539,9 +493,7 @@ def _live_data(t, rows, fusion) -> ImuData:
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
-    intervals=Step(10, add_intervals), ekf_measurements=ekf_measurements,
-    ekf_blocks=(Step(30, ekf_gyro), Step(50, ekf_ahrs)), ekf_start=ekf_ahrs_start,
-    graph_factors=(Step(30, graph_guess), Step(50, graph_gyro)), graph_unary=(Step(80, graph_ahrs),),
+    intervals=Step(10, add_intervals), readings=readings,
     absolute_heading=has_heading,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
 ))

@@ -50,8 +50,14 @@ class MeasurementModel:
     as a linear factor);
     ``angle_rows`` are absolute angles (wrapped to [-π, π) wherever they are compared);
     ``turn_rows`` are heading changes over the measurement's interval, wrapped where the interval's
-    motion is an increment (the graph) and not where it is a rate (the EKF evaluates per unit time).
-    Subclasses implement :meth:`evaluate`.
+    motion is an increment (the graph) and not where it is a rate (the EKF evaluates per unit time);
+    ``increment`` says an interval's reading is a relative pose ``(d_x, d_y, d_ψ)`` (the EKF reads its
+    logarithm, the interval's exact twist, :mod:`fusion_vo.backends.ekf_adapter`);
+    ``uses_dt``: the model's parameter ``dt`` is the length of the reading's interval (the graph passes it;
+    the EKF, per unit time, leaves it at 1);
+    ``guess_rank``: ``(translation, heading)`` ranks of the model's :meth:`guess` of an interval's motion
+    (lower is trusted first; None: it gives none), the factor graph's initial value of a new pose.
+    Subclasses implement :meth:`evaluate`; :meth:`identity`, :meth:`guess` and :meth:`state_prior` are optional.
     """
 
     name: str = ""
@@ -60,10 +66,28 @@ class MeasurementModel:
     angle_rows: tuple = ()
     turn_rows: tuple = ()
     linear: bool = False
+    increment: bool = False
+    uses_dt: bool = False
+    guess_rank: tuple = (None, None)
 
     def evaluate(self, **args) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """Prediction ``h`` (..., dim) and Jacobians ``{arg: (..., dim, size)}`` at the given arguments."""
         raise NotImplementedError
+
+    def identity(self, fixed: dict) -> bool:
+        """Whether ``h`` is its ``motion`` or ``heading`` argument itself when the arguments ``fixed`` hold these
+        values (a scale at 1, an offset at 0): the factor graph then uses GTSAM's own factor of the poses."""
+        return False
+
+    def guess(self, z, estimate: dict, dt: float) -> tuple[np.ndarray | None, float | None]:
+        """An interval's translation ``(d_x, d_y)`` and heading change implied by reading ``z`` at the running
+        ``estimate`` of the states (name -> value): the factor graph's initial guess (:attr:`guess_rank`)."""
+        return None, None
+
+    def state_prior(self, z, variance: float, params: dict) -> tuple[str, float, float] | None:
+        """A node reading of one scalar state solved for it: ``(state, value, sigma)`` (first order), which the
+        factor graph uses as a linear prior on that state; None when the model is not one."""
+        return None
 
     def residual(self, z, **args) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """``h(args) - z`` over an interval (angle and turn rows wrapped), and the Jacobians of ``h``."""

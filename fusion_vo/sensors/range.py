@@ -24,6 +24,7 @@ from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import ordered_fields
+from fusion_vo.sensors.readings import ORDER, Readings
 
 logger = logging.getLogger(__name__)
 
@@ -109,6 +110,11 @@ class RangeModel(MeasurementModel):
         k = np.asarray(visual_scale, dtype=np.float64)
         return camera_height / k, {"visual_scale": (-camera_height / k**2)[..., None]}
 
+    def state_prior(self, z, variance: float, params: dict) -> tuple[str, float, float]:
+        """The reading solved for the visual scale (:meth:`scale_prior`)."""
+        scale, sigma = self.scale_prior(np.asarray(z).reshape(-1)[0], float(np.sqrt(variance)), float(params["camera_height"]))
+        return "visual_scale", scale, sigma
+
     @staticmethod
     def scale_prior(reading, sigma: float, camera_height: float) -> tuple[float, float]:
         """The reading solved for the scale: ``k_v = h_c / z`` with ``σ_k = h_c σ_r / z²`` (first order).
@@ -152,29 +158,13 @@ def add_intervals(iv, streams, config, counts) -> None:
     count.used += int(ok.sum())
 
 
-def ekf_measurements(iv, config) -> dict:
-    """``range`` -> (ok, height, σ_r²) at the nodes."""
-    return {"range": (iv.range_ok, iv.range_height, config.range.sigma**2)} if iv.range_ok.any() else {}
-
-
-def ekf_blocks(ekf, meas: dict, k: int) -> list:
-    m = meas.get("range")
-    if m is None or not m[0][k + 1]:
+def readings(iv, config) -> list[Readings]:
+    """The camera heights at the nodes (``σ_r²``), measurements of the visual scale."""
+    if not iv.range_ok.any():
         return []
-    return [ekf.block(RANGE, m[1][k + 1], m[2], camera_height=ekf.camera_height)]
-
-
-def graph_unary(builder, nf, node) -> None:
-    """The reading solved for the visual scale of the node's segment (:meth:`RangeModel.scale_prior`)."""
-    iv = builder.iv
-    g = node.g1
-    if builder.kv_on and iv.range_ok[g] and iv.camera_height:
-        import gtsam
-
-        scale, sig = RANGE.scale_prior(iv.range_height[g], builder.config.range.sigma, float(iv.camera_height))
-        nm = gtsam.noiseModel.Isotropic.Sigma(1, sig)
-        nf.factors.append(gtsam.PriorFactorDouble(builder.S(node.segment), scale, nm))
-        nf.sensors.append("range")
+    n = np.flatnonzero(iv.range_ok)
+    return [Readings("range", RANGE, n, n, iv.range_height[n], config.range.sigma**2,
+                     params={"camera_height": iv.camera_height}, order=ORDER["range"])]
 
 
 def _live_sample(m) -> tuple:
@@ -185,7 +175,7 @@ def _live_sample(m) -> tuple:
 register(Sensor(
     name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
     has=lambda recording: recording.has_range(), config=("range", RangeNoise), intervals=Step(40, add_intervals),
-    ekf_measurements=ekf_measurements, ekf_blocks=(Step(60, ekf_blocks),), graph_unary=(Step(90, graph_unary),),
+    readings=readings,
     # the streaming buffers read as many neighbours around an interval as the gyro's spike check
     live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,
               neighbours=lambda config: int(config.imu.spike_window) + 1),

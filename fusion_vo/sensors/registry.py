@@ -219,6 +219,10 @@ class Sensor:
         ``run(iv, streams, config, counts)``: its samples onto the node grid, into its fields of
         :class:`~fusion_vo.backends.timeline.Intervals` (``iv.extra[name]`` for a sensor registered outside
         the library), updating ``counts[name]`` (:class:`~fusion_vo.backends.result.SensorCount`).
+    readings : callable or None
+        ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
+        :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
+        (:class:`~fusion_vo.sensors.readings.Readings`): what both backends consume, each through its one adapter.
     ekf_measurements : callable or None
         ``ekf_measurements(iv, config) -> dict``: its per-interval measurements, vectorised, merged into the
         EKF's measurement table (:func:`~fusion_vo.backends.ekf.interval_measurements`).
@@ -273,6 +277,7 @@ class Sensor:
     absolute_position: bool = False
     node_times: Callable | None = None
     intervals: Step | None = None
+    readings: Callable | None = None
     ekf_measurements: Callable | None = None
     ekf_blocks: tuple = ()
     ekf_start: Callable | None = None

@@ -54,6 +54,15 @@ class VisualModel(MeasurementModel):
     args: tuple = ("motion", "visual_scale")
     dim: int = 3
     turn_rows: tuple = (2,)
+    increment: bool = True
+    guess_rank: tuple = (2, 2)
+
+    def identity(self, fixed: dict) -> bool:
+        return fixed.get("visual_scale") == 1.0
+
+    def guess(self, z, estimate: dict, dt: float):
+        """The translation in the running visual scale estimate's units, and the heading change."""
+        return np.asarray(z[:2]) / estimate.get("visual_scale", 1.0), float(z[2])
 
     def evaluate(self, motion, visual_scale):
         one = 1.0 if np.ndim(motion) == 1 else np.ones_like(np.asarray(visual_scale, dtype=np.float64))

@@ -88,6 +88,7 @@ from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
+from fusion_vo.sensors.readings import ORDER, Readings
 
 logger = logging.getLogger(__name__)
 
@@ -355,6 +356,17 @@ class WheelModel(MeasurementModel):
     args: tuple = ("motion", "wheel_scale", "wheel_base_factor")
     dim: int = 3
     turn_rows: tuple = (2,)
+    increment: bool = True
+    guess_rank: tuple = (1, 1)
+
+    def identity(self, fixed: dict) -> bool:
+        return all(fixed.get(name) == 1.0 for name in ("wheel_scale", "wheel_base_factor")) and \
+            fixed.get("wheel_curvature", 0.0) == 0.0
+
+    def guess(self, z, estimate: dict, dt: float):
+        """The arc in the running radius and wheel-base estimates' units."""
+        return (np.asarray(z[:2]) / estimate.get("wheel_scale", 1.0),
+                float(z[2]) / estimate.get("wheel_base_factor", 1.0))
 
     def evaluate(self, motion, wheel_scale, wheel_base_factor):
         h, j_d, j_r, j_b = scaled_motion(motion, wheel_scale, wheel_base_factor)
@@ -589,10 +601,18 @@ def ekf_measurements(iv, config) -> dict:
         R[drop, :2, :] = R[drop, :, :2] = 0.0
         R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
     out["wheel"] = (iv.wheel_ok, u, R, iv.wheel_base)
-    still = at_rest(iv, config)
-    if still.any():
-        out["standstill"] = (still, config.wheel_model(iv.twist)[0].standstill_yaw_rate**2)
     return out
+
+
+def readings(iv, config) -> list[Readings]:
+    """Both wheels at rest over an interval: its heading change is zero (``σ_still Δt``; not robust)."""
+    still = at_rest(iv, config)
+    if not still.any():
+        return []
+    k = np.flatnonzero(still)
+    sigma = config.wheel_model(iv.twist)[0].standstill_yaw_rate * np.maximum(iv.dt[k], 1e-3)
+    return [Readings("standstill", STANDSTILL, k, k + 1, np.zeros(len(k)), sigma**2, robust=False,
+                     order=ORDER["standstill"])]
 
 
 def ekf_wheel(ekf, meas: dict, k: int) -> list:
@@ -602,11 +622,6 @@ def ekf_wheel(ekf, meas: dict, k: int) -> list:
     model = wheel_model(ekf.states)
     params = {"wheel_base": m[3]} if model is CURVED_WHEEL else {}
     return [ekf.block(model, m[1][k], m[2][k], **params)]
-
-
-def ekf_standstill(ekf, meas: dict, k: int) -> list:
-    m = meas.get("standstill")
-    return [ekf.block(STANDSTILL, 0.0, m[1])] if m is not None and m[0][k] else []
 
 
 def _graph_arguments(builder, node, scale: bool) -> tuple:
@@ -694,15 +709,6 @@ def graph_translation(builder, nf, node) -> None:
     node.heading = heading
 
 
-def graph_standstill(builder, nf, node) -> None:
-    """Both wheels at rest over the interval: the heading change is zero (``σ_still Δt``)."""
-    if not node.scratch.get("still"):
-        return
-    sigma = builder.config.wheel_model(builder.iv.twist)[0].standstill_yaw_rate * max(node.dt, 1e-3)
-    nf.factors.append(builder.model_factor(STANDSTILL, [0.0], [[sigma**2]], {"motion": (node.xi, node.xj)}, robust=False))
-    nf.sensors.append("standstill")
-
-
 def graph_heading(builder, nf, node) -> None:
     """The wheels' heading change through the wheel-base factor and the curvature bias, where estimated:
     ``W d_ψ + c d_x - m_ψ``."""
@@ -751,9 +757,9 @@ register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
     read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
     pick=_pick_ticks, config=("wheel", WheelNoise),
-    intervals=Step(20, add_intervals), ekf_measurements=ekf_measurements,
-    ekf_blocks=(Step(20, ekf_wheel), Step(40, ekf_standstill)),
-    graph_factors=(Step(10, graph_translation), Step(60, graph_standstill), Step(70, graph_heading)),
+    intervals=Step(20, add_intervals), ekf_measurements=ekf_measurements, readings=readings,
+    ekf_blocks=(Step(20, ekf_wheel),),
+    graph_factors=(Step(10, graph_translation), Step(70, graph_heading)),
     states=(CURVATURE,), live=Live(_live_ticks, _live_ticks_data),
 ))
 register(Sensor(

@@ -1,0 +1,183 @@
+"""The sensors' readings as factors: the one place the factor graph consumes a measurement model.
+
+A reading becomes a factor on the variables of its model's arguments (:mod:`fusion_vo.backends.factors`):
+
+* ``motion``: the two poses the reading relates, ``X_s`` and ``X_e`` (the frame poses ``F_s``, ``F_e`` when the
+  reading states its frames' errors, :mod:`fusion_vo.sensors.visual`);
+* ``heading``: the pose of its node;
+* a state: that state's variable in the calibration segment of the reading's (last) node
+  (:meth:`~fusion_vo.backends.graph.GraphBuilder.state_variable`); a state the graph does not estimate is held at its
+  initial value, as are the arguments the reading fixes.
+
+Where GTSAM has the factor itself, it is used: a model that is its ``motion`` argument itself with the values held
+(``MeasurementModel.identity``: a visual or wheel increment without calibration) is GTSAM's ``BetweenFactorPose2``,
+one that is its ``heading`` a ``PriorFactorPose2`` on the heading; a node reading of one scalar state that the model
+solves for it (``MeasurementModel.state_prior``: the range finder's height as a visual scale) is a linear prior on
+that state. A reading none of whose arguments is a variable of the graph measures nothing it estimates and is left
+out. Robust readings go inside the graph's robust kernel.
+
+When the graph keeps only every ``keyframe_every``-th node, the interval readings of one sensor between two
+keyframes are chained into one: relative poses composed (their covariances propagated to first order), other
+readings (a turn) summed with their variances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gtsam
+import numpy as np
+
+from fusion_vo.geometry import se2
+from fusion_vo.sensors.readings import Readings
+
+
+@dataclass
+class Span:
+    """An interval reading between two of the graph's nodes (a chain of readings between keyframes)."""
+
+    readings: Readings
+    index: int  # the (last) reading of the chain, for its parameters
+    start: int  # graph node
+    z: np.ndarray
+    cov: np.ndarray
+    frame_cov: np.ndarray | None
+    single: bool  # one reading over exactly the grid interval before the end node (its guess counts)
+
+
+def compose_with_covariance(a, cov_a, b, cov_b):
+    """``a ⊕ b`` and its covariance ``J_a Σ_a J_aᵀ + J_b Σ_b J_bᵀ`` (first order, vector form)."""
+    c, s = np.cos(a[2]), np.sin(a[2])
+    ja = np.array([[1.0, 0.0, -s * b[0] - c * b[1]], [0.0, 1.0, c * b[0] - s * b[1]], [0.0, 0.0, 1.0]])
+    jb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
+
+
+def _chain(a: Span, r: Readings, j: int):
+    """Chain the reading ``j`` of ``r`` onto the span ``a``."""
+    if r.model.increment:
+        z, cov = compose_with_covariance(a.z, a.cov, r.z[j], r.cov[j])
+    else:
+        z, cov = a.z + r.z[j], a.cov + r.cov[j]
+    return z, cov
+
+
+class GraphReadings:
+    """Every reading of a run placed on the graph's nodes (module docstring).
+
+    Parameters
+    ----------
+    readings : list of Readings
+    grid : ndarray (N,)
+        Grid index of each graph node.
+    """
+
+    def __init__(self, readings: list[Readings], grid: np.ndarray):
+        pos = {int(g): n for n, g in enumerate(grid)}
+        self.spans: dict[int, list[Span]] = {}
+        self.nodes: dict[int, list[tuple[Readings, int]]] = {}
+        for r in sorted(readings, key=lambda r: r.order):
+            if r.at_nodes:
+                for j, g in enumerate(r.i0):
+                    n = pos.get(int(g))
+                    if n is not None:
+                        self.nodes.setdefault(n, []).append((r, j))
+                continue
+            chain = None  # (span, end grid index)
+            for j in np.argsort(r.i1, kind="stable"):
+                i0, i1 = int(r.i0[j]), int(r.i1[j])
+                fc = None if r.frame_cov is None else r.frame_cov[j]
+                if chain is not None and chain[1] == i0:
+                    z, cov = _chain(chain[0], r, j)
+                    span = Span(r, int(j), chain[0].start, z, cov, fc, False)
+                elif i0 in pos:
+                    span = Span(r, int(j), pos[i0], r.z[j].copy(), r.cov[j].copy(), fc, i1 == i0 + 1)
+                else:
+                    chain = None
+                    continue
+                if i1 in pos:
+                    self.spans.setdefault(pos[i1], []).append(span)
+                    chain = None
+                else:
+                    chain = (span, i1)
+
+    def ending_at(self, n: int) -> list[Span]:
+        """The interval readings that end at node ``n``, in the readings' order."""
+        return self.spans.get(n, [])
+
+    def at(self, n: int) -> list[tuple[Readings, int]]:
+        """The node readings at node ``n`` (readings, index), in the readings' order."""
+        return self.nodes.get(n, [])
+
+
+def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[np.ndarray | None, float | None]:
+    """The interval's translation and heading change from the readings over exactly that interval, each from the
+    model of the lowest :attr:`~fusion_vo.sensors.model.MeasurementModel.guess_rank`."""
+    best_t = best_h = None
+    translation = heading = None
+    for span in spans:
+        if not span.single:
+            continue
+        rank_t, rank_h = span.readings.model.guess_rank
+        if rank_t is None and rank_h is None:
+            continue
+        t, h = span.readings.model.guess(span.z, estimate, dt)
+        if t is not None and rank_t is not None and (best_t is None or rank_t < best_t):
+            translation, best_t = t, rank_t
+        if h is not None and rank_h is not None and (best_h is None or rank_h < best_h):
+            heading, best_h = h, rank_h
+    return translation, heading
+
+
+def arguments(builder, r: Readings, segment: int) -> tuple[dict, dict]:
+    """The state arguments of ``r``'s model as graph keys (``{name: (key,)}``) and the arguments held at a value."""
+    keys, fixed = {}, dict(r.fixed)
+    for name in r.model.args:
+        if name in ("motion", "heading", "pose") or name in fixed:
+            continue
+        key = builder.state_variable(name, segment)
+        if key is None:
+            fixed[name] = builder.state_initial(name)
+        else:
+            keys[name] = (key,)
+    return keys, fixed
+
+
+def _params(r: Readings, j: int) -> dict:
+    return {name: r.param(name, j) for name in r.params}
+
+
+def interval_factor(builder, span: Span, xs: int, xe: int, segment: int, dt: float):
+    """The factor of an interval reading between the poses ``xs`` and ``xe``."""
+    r = span.readings
+    keys, fixed = arguments(builder, r, segment)
+    if r.rows is None and r.model.identity(fixed):
+        return gtsam.BetweenFactorPose2(xs, xe, gtsam.Pose2(*span.z), builder.noise(span.cov, robust=r.robust))
+    params = _params(r, span.index)
+    if r.model.uses_dt:
+        params["dt"] = dt
+    keys["motion"] = (xs, xe)
+    return builder.model_factor(r.model, span.z, span.cov, keys, fixed=fixed, params=params, rows=r.rows,
+                                robust=r.robust)
+
+
+def node_factor(builder, r: Readings, j: int, xn: int, segment: int):
+    """The factor of node reading ``j`` of ``r`` at the pose ``xn``, or None when it measures nothing the graph
+    estimates."""
+    keys, fixed = arguments(builder, r, segment)
+    pose_args = [a for a in r.model.args if a in ("heading", "pose")]
+    z, cov = r.z[j], r.cov[j]
+    params = _params(r, j)
+    if r.rows is None and "heading" in pose_args and r.model.identity(fixed):
+        nm = builder.noise(np.diag([1e6, 1e6, float(cov[0, 0])]), robust=r.robust, dof=1)
+        return gtsam.PriorFactorPose2(xn, gtsam.Pose2(0.0, 0.0, float(z[0])), nm)
+    if not pose_args:
+        if not keys:
+            return None
+        prior = r.model.state_prior(z, float(cov[0, 0]), params) if len(keys) == 1 and r.model.dim == 1 else None
+        if prior is not None and prior[0] in keys:
+            _, value, sigma = prior
+            return gtsam.PriorFactorDouble(keys[prior[0]][0], value, gtsam.noiseModel.Isotropic.Sigma(1, sigma))
+    for name in pose_args:
+        keys[name] = (xn,)
+    return builder.model_factor(r.model, z, cov, keys, fixed=fixed, params=params, rows=r.rows, robust=r.robust)
