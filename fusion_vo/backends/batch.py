@@ -30,6 +30,7 @@ from fusion_vo.backends.ekf import run_ekf
 from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.backends.world import align_world
 from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
@@ -117,7 +118,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     placed: list[bool] = []  # by the piece's own absolute measurements (GPS fixes)
     origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
     for piece in pieces:
-        absolute = any(s.world_frame is not None and s.available(s.data(piece)) for s in registry.sensors())
+        absolute = any(s.absolute_position and s.available(s.data(piece)) for s in registry.sensors())
         placed.append(absolute)
         if not spans_time(piece):
             results.append(None)
@@ -163,9 +164,8 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     result = FusionResult()
     t0 = time.process_time()
     iv = build_intervals(streams, config)
-    for sensor in registry.sensors():  # an absolute sensor (GPS) sets the world frame
-        if sensor.world_frame is not None and sensor.data(streams) is not None:
-            sensor.world_frame(iv, config)
+    if any(s.absolute_position and s.data(streams) is not None for s in registry.sensors()):
+        align_world(iv, config)  # an absolute sensor (GPS) sets the world frame
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
     result.timing["timeline"] = time.process_time() - t0

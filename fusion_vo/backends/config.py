@@ -20,6 +20,8 @@ from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
 from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
 from fusion_vo.sensors.visual_noise import VisualNoiseConfig
+from fusion_vo import schema
+from fusion_vo.sensors import registry
 
 ROBUST_KERNELS = ("huber", "cauchy", "none")
 
@@ -312,8 +314,6 @@ class FusionConfig:
         Unknown keys, values of the wrong type and values that cannot work raise :class:`InputError`
         naming ``path`` and the key path (``prefix`` is the mapping's own path, e.g. ``("fusion",)``).
         """
-        from fusion_vo import schema
-        from fusion_vo.sensors import registry
 
         data = dict(data or {})
         own = {f.name for f in dataclasses.fields(cls)}
@@ -340,8 +340,6 @@ class FusionConfig:
         if name in {f.name for f in dataclasses.fields(self)}:
             return getattr(self, name)
         if name not in self.sensors:
-            from fusion_vo.sensors import registry
-
             for sensor in registry.sensors():
                 if sensor.config is not None and sensor.config[0] == name:
                     self.sensors[name] = sensor.config[1]()
@@ -357,8 +355,6 @@ class FusionConfig:
 def _state_priors(data, path, prefix: tuple) -> dict:
     """The ``states:`` section: each registered state's :class:`~fusion_vo.sensors.registry.StatePrior`, its
     defaults the registered ones (every registered state when any is configured; none otherwise)."""
-    from fusion_vo import schema
-    from fusion_vo.sensors import registry
 
     data = {} if data is None else data
     where = ".".join(prefix)

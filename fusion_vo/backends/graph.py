@@ -133,6 +133,7 @@ from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors,
                                         pose_table)
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.wheel import arc_covariance, arc_increment, at_rest, gyro_turn
+from fusion_vo.sensors.visual import frame_covariances
 
 logger = logging.getLogger(__name__)
 
@@ -313,11 +314,18 @@ class GraphBuilder:
             return gtsam.noiseModel.Robust.Create(kernel[1], base)
         return base
 
+    @staticmethod
+    def robust_noise(cov: np.ndarray, kernel: str, width: float):
+        """GTSAM's noise model of ``cov`` inside the ``mEstimator`` ``kernel`` (``"huber"``, ``"cauchy"``; ``"none"``:
+        the Gaussian alone) of ``width`` on the whitened distance."""
+        base = covariance_noise(np.asarray(cov, dtype=np.float64))
+        robust = _robust_kernel(kernel, width)
+        return base if robust is None else gtsam.noiseModel.Robust.Create(robust, base)
+
     def _visual_spans(self) -> dict[int, list]:
         """Visual increments re-expressed between keyframes, keyed by their end node: (start node, delta,
         covariance, covariance of its frames' own errors or None, :func:`fusion_vo.sensors.visual.frame_covariances`;
         a composed span takes its last increment's, and keeps the inner frames' errors in its covariance)."""
-        from fusion_vo.sensors.visual import frame_covariances
 
         iv = self.iv
         pos = {int(g): n for n, g in enumerate(self.grid)}

@@ -26,6 +26,7 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.monitor import Episode, check_heading_sources, visual_heading_rows
 from fusion_vo.backends.timeline import Intervals
+from fusion_vo.sensors.wheel import arc_increment, at_rest
 
 logger = logging.getLogger(__name__)
 
@@ -275,7 +276,6 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     with wheels, gyro, AHRS and camera (``python benchmarks/monitor_false_alarms.py --seeds 1
     --durations 120 --biases 0``, NIS 18-26).
     """
-    from fusion_vo.sensors.wheel import arc_increment, at_rest
 
     if not iv.uses("gyro"):
         return None, False

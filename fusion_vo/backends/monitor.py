@@ -68,9 +68,10 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import chi2
 
 from fusion_vo.backends.config import FusionConfig
+from fusion_vo.sensors.imu import mounting_hint
+from fusion_vo.sensors.wheel import arc_increment, at_rest, travel_variances
 
 logger = logging.getLogger(__name__)
 
@@ -102,6 +103,8 @@ class Episode:
 @functools.lru_cache(maxsize=64)
 def _chi2_ppf(probability: float, dof: int) -> float:
     """Chi-square quantile (cached: the check asks for the same few many times)."""
+    from scipy.stats import chi2  # on first use: a camera-only run does not load scipy.stats
+
     return float(chi2.ppf(probability, dof))
 
 
@@ -131,8 +134,6 @@ def gyro_mounting_note(iv, imu) -> str | None:
     """When the check dropped the gyro's yaw rate for at least half of the recording: whether another axis of
     the gyro follows the camera's (else the wheels') yaw rate (:func:`fusion_vo.sensors.imu.mounting_hint`),
     i.e. whether ``imu0/sensor.yaml``'s ``T_BS`` is the likely cause. None otherwise."""
-    from fusion_vo.sensors.imu import mounting_hint
-    from fusion_vo.sensors.wheel import arc_increment
 
     T = iv.t
     dropped = sum(e.end - e.start for e in iv.episodes if e.component == "gyro yaw rate")
@@ -223,7 +224,6 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
 
     ``gyro_bias`` [rad/s] replaces the bias the check estimates itself (:func:`_gyro_bias`).
     """
-    from fusion_vo.sensors.wheel import arc_increment, at_rest
 
     cfg = config
     if not cfg.monitor or iv.n_steps < 2:
@@ -475,7 +475,6 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
 def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
     """Find the spans where the wheels' and the camera's distances disagree; drop the wheels' speed
     there (``Intervals.wheel_speed_ok``, in place) and return the episodes (see the module docstring)."""
-    from fusion_vo.sensors.wheel import travel_variances
 
     cfg = config
     if not cfg.monitor or iv.n_steps < 2 or not iv.uses("wheel") or not len(iv.vis_i0):

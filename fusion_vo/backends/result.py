@@ -8,35 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fusion_vo.measurements import PoseData
+from fusion_vo.measurements import PoseData, SensorCount
+from fusion_vo.outputs import write_atomic
 
-
-@dataclass
-class SensorCount:
-    """What happened to one sensor's measurements.
-
-    Attributes
-    ----------
-    used : int
-        Measurements (or node intervals) that entered the estimate.
-    gated : int
-        Rejected: non-finite, physically impossible (spikes, tick jumps) or outside the Mahalanobis gate.
-    late : int
-        Arrived after the reorder window had passed their time (streaming) and could not be applied.
-    reordered : int
-        Arrived out of order but within the window, and were applied in time order.
-    missing : int
-        Node intervals the sensor did not cover (stream stopped, gaps, failed frames).
-    """
-
-    used: int = 0
-    gated: int = 0
-    late: int = 0
-    reordered: int = 0
-    missing: int = 0
-
-    def as_dict(self) -> dict:
-        return dict(self.__dict__)
+__all__ = ["FusionResult", "SensorCount", "write_pose_covariances", "read_pose_covariances"]
 
 
 @dataclass
@@ -135,7 +110,6 @@ def write_pose_covariances(path: str | Path, t: np.ndarray, cov: np.ndarray) -> 
     data = np.column_stack([t, cov[:, iu[0], iu[1]]])
     import io
 
-    from fusion_vo.outputs import write_atomic
 
     buf = io.StringIO()
     buf.write(COV_HEADER + "\n")

@@ -120,6 +120,11 @@ from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
     WheelData, WheelTicks,
 )
+from fusion_vo.backends.ekf import YAW
+from fusion_vo.backends.world import prior_from_alignment
+from fusion_vo.geometry import se2
+from fusion_vo.sensors.gps import GpsModel, GpsReacquire, align_to_fixes, ekf_reacquire, ekf_update
+from fusion_vo.sensors.wheel import arc_increment, curvature_observable, curvature_states
 
 logger = logging.getLogger(__name__)
 
@@ -298,7 +303,6 @@ class StreamingFusion:
         #: the sensors' own state variables (registry.State) in both backends
         self._states = registry.states(self.sensors, self.config)
         if wheel_config is not None:  # the wheels' curvature bias and its prior, as in a batch run
-            from fusion_vo.sensors.wheel import curvature_observable, curvature_states
 
             # whether the IMU brings an AHRS heading is known only from its samples: a stream decides from the
             # camera and GPS declared (a batch run of wheels and an AHRS alone estimates the curvature)
@@ -318,7 +322,6 @@ class StreamingFusion:
                                "not used again as a height measurement")
         self._ekf: PlanarEkf | None = None
         self._graph = None
-        from fusion_vo.sensors.gps import GpsModel
 
         lever = np.zeros(3) if gps_lever_arm is None else np.asarray(gps_lever_arm, dtype=np.float64).ravel()
         self._gps_model = GpsModel(lever, self.config.gps)
@@ -658,7 +661,6 @@ class StreamingFusion:
         tail = self._sliver(inc.t1, t_b)
         if head is None or tail is None:
             return None
-        from fusion_vo.geometry import se2
 
         delta = se2.compose(se2.compose(head[0], np.asarray(inc.delta, dtype=np.float64)), tail[0])
         cov = np.asarray(inc.covariance, dtype=np.float64) + np.diag(head[1] + tail[1])
@@ -667,8 +669,6 @@ class StreamingFusion:
     def _sliver(self, x: float, y: float):
         """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
         (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
-        from fusion_vo.geometry import se2
-        from fusion_vo.sensors.wheel import arc_increment
 
         lo, hi = min(x, y), max(x, y)
         if hi - lo < 1e-9:
@@ -1052,10 +1052,6 @@ class StreamingFusion:
         self._record(ekf.x[:3], ekf.P[:3, :3])
 
     def _apply_gps(self, fix: GpsFix) -> None:
-        from fusion_vo.backends.ekf import YAW
-        from fusion_vo.sensors.gps import GpsReacquire, ekf_reacquire, ekf_update
-        from fusion_vo.backends.world import prior_from_alignment
-        from fusion_vo.sensors.gps import align_to_fixes
 
         ekf, model = self._ekf, self._gps_model
         if self._frame == "start":

@@ -32,6 +32,8 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.sensors.gps import align_to_fixes, fixes_in, predict, scatter_floor
+from fusion_vo.backends.ekf import run_ekf
+from fusion_vo.geometry import se2
 
 logger = logging.getLogger(__name__)
 
@@ -61,7 +63,6 @@ def fallback_prior(iv: Intervals, config: FusionConfig, fix_sigma: float) -> tup
 def rotate_ahrs(iv: Intervals, yaw: float) -> None:
     """AHRS headings re-expressed in the rotated world frame: they were aligned to the configured
     initial heading, which the world alignment turned by ``yaw``."""
-    from fusion_vo.geometry import se2
 
     if iv.ahrs_ok.any():
         iv.ahrs_yaw = se2.wrap_angle(iv.ahrs_yaw + yaw)
@@ -73,7 +74,6 @@ def align_world(iv: Intervals, config: FusionConfig) -> None:
     """Set ``iv.initial_pose`` / ``iv.initial_sigma`` in ENU from the fixes (module docstring); adds a note."""
     if iv.gps_ok is None or not iv.gps_ok.any():
         return
-    from fusion_vo.backends.ekf import run_ekf
 
     free = dataclasses.replace(iv, gps_ok=None, notes=[], initial_pose=None, initial_sigma=None)
     track = run_ekf(free, config)

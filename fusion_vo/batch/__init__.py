@@ -20,6 +20,7 @@ import lazy_loader
 # the submodules load on first use (the command line's --help needs only the metric names)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "grid": ["Grid", "ParameterSet", "load_grid", "parse_grid"],
-    "runner": ["best_sets", "plan_batch", "plan_sweep", "run_batch", "run_sweep"],
+    "ranking": ["best_sets", "describe_set"],
+    "runner": ["plan_batch", "plan_sweep", "run_batch", "run_sweep"],
     "tasks": ["COLUMNS", "METRICS", "Task", "run_task"],
 })

@@ -18,6 +18,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from fusion_vo.batch.grid import Grid
+from fusion_vo.batch.ranking import best_sets, describe_set
 from fusion_vo.batch.tasks import METRICS
 from fusion_vo.evaluation.io import write_atomic
 from fusion_vo.evaluation.plots import colour_of, label_of
@@ -139,7 +140,6 @@ def _summary_table(frame) -> tuple[list[str], list[list]]:
 
 def render(frame, title: str, grid: Grid | None = None, rank: tuple[str, str | None] = ("ate_m", None)) -> str:
     """The HTML text of the report, from the template ``fusion_vo/evaluation/templates/batch.html.j2``."""
-    from fusion_vo.batch.runner import best_sets, describe_set
 
     keys = grid.keys if grid else []
     tasks = frame.drop_duplicates(["recording", "parameter_set"] if keys else ["recording"])

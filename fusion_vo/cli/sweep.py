@@ -66,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _print_best(frame, metric: str, trajectory: str | None) -> str | None:
     """Print the best parameter set; returns why none can be ranked when that is the user's option's doing."""
-    from fusion_vo.batch.runner import best_sets, describe_set
+    from fusion_vo.batch.ranking import best_sets, describe_set
 
     ranked, used = best_sets(frame, metric, trajectory)
     if len(ranked) and ranked["recordings"].iloc[0] > 0 and ranked["mean"].notna().iloc[0]:

@@ -56,6 +56,8 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import time_order
 
 log = logging.getLogger(__name__)
 
@@ -255,24 +257,6 @@ class GpsModel:
         w = robust_weight(math.sqrt(d2), self.noise.kernel, self.noise.kernel_width)
         return GpsCheck(r, H, R / w, d2, w, True)
 
-    def noise_model(self, fix_covariance):
-        """GTSAM noise model of one fix: the Gaussian covariance inside the robust kernel."""
-        import gtsam
-
-        from fusion_vo.backends.factors import covariance_noise
-
-        base = covariance_noise(self.covariance(fix_covariance))
-        k = self.noise.kernel_width
-        if self.noise.kernel == "huber":
-            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(k), base)
-        if self.noise.kernel == "cauchy":
-            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(k), base)
-        return base
-
-    def factor(self, key: int, fix_enu, fix_covariance):
-        """A GTSAM unary factor of one fix on the ``Pose2`` at ``key`` (:func:`gps_factor`)."""
-        return gps_factor(key, fix_enu, self.lever_arm, self.noise_model(fix_covariance))
-
 
 # ---------------------------------------------------------------------- GTSAM
 def gps_factor(key: int, fix_enu, lever_arm, noise_model):
@@ -290,7 +274,8 @@ def gps_factor(key: int, fix_enu, lever_arm, noise_model):
     lever_arm : array_like (2,)
         Antenna in the body frame [m].
     noise_model : gtsam.noiseModel.Base
-        For example :meth:`GpsModel.noise_model`.
+        For example the fix's covariance inside its robust kernel (:meth:`GraphBuilder.robust_noise
+        <fusion_vo.backends.graph.GraphBuilder.robust_noise>`).
     """
     import gtsam
 
@@ -488,8 +473,6 @@ def node_times(gps: GpsData, nodes: np.ndarray, config) -> np.ndarray:
 def add_intervals(iv, streams, config, counts) -> None:
     """Each fix at the node of its time (:data:`GPS_SNAP`); fixes outside the node span are counted missing
     (``Intervals.gps_ok, gps_enu, gps_cov, gps``)."""
-    from fusion_vo.backends.result import SensorCount
-    from fusion_vo.backends.timeline import time_order
 
     gps = streams.gps
     count = counts.setdefault("gps", SensorCount())
@@ -607,7 +590,6 @@ class EkfFixes:
         self.reacquire(ekf, self.model, iv, k)
 
     def finish(self, ekf, result) -> None:
-        from fusion_vo.backends.result import SensorCount
 
         ekf.counts["gps"] = SensorCount(used=self.model.n_used, gated=self.model.n_rejected)
         result.notes.append(gps_note("ekf", self.model, self.iv, self.reacquire.times))
@@ -630,7 +612,6 @@ class GraphFixes:
 
     def add(self, nf, n: int, pose_cov) -> None:
         """Gate the fix at node ``n`` against its predicted pose; add the robust factor when accepted."""
-        from fusion_vo.backends.result import SensorCount
 
         iv, model, builder = self.iv, self.model, self.builder
         g = int(builder.grid[n])
@@ -649,7 +630,8 @@ class GraphFixes:
         else:
             builder.counts.setdefault("gps", SensorCount()).gated += 1
             return
-        nf.factors.append(model.factor(key, iv.gps_enu[g], iv.gps_cov[g]))
+        noise = builder.robust_noise(model.covariance(iv.gps_cov[g]), model.noise.kernel, model.noise.kernel_width)
+        nf.factors.append(gps_factor(key, iv.gps_enu[g], model.lever_arm, noise))
         nf.sensors.append("gps")
 
     def finish(self, result) -> None:
@@ -659,14 +641,6 @@ class GraphFixes:
 def _graph_run(builder):
     iv = builder.iv
     return GraphFixes(builder) if iv.gps_ok is not None and iv.gps is not None else None
-
-
-def _world_frame(iv, config) -> None:
-    """ENU at the datum, the first heading estimated from the fixes (:func:`fusion_vo.backends.world.align_world`)."""
-    if iv.gps_ok is not None:
-        from fusion_vo.backends.world import align_world
-
-        align_world(iv, config)
 
 
 def _keyframes(iv):
@@ -692,7 +666,7 @@ def _live_take(fusion, fix) -> None:
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
-    default=False, config=("gps", GpsNoise), world_frame=_world_frame, node_times=node_times, intervals=Step(50, add_intervals),
+    default=False, config=("gps", GpsNoise), absolute_position=True, node_times=node_times, intervals=Step(50, add_intervals),
     ekf_run=_ekf_run, graph_run=_graph_run, graph_keyframes=_keyframes,
     live=Live(_live_sample, values=_live_values, take=_live_take),
 ))

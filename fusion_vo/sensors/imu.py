@@ -48,6 +48,9 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import coverage, ordered_fields
+from fusion_vo.sensors.wheel import at_rest
 
 logger = logging.getLogger(__name__)
 
@@ -399,8 +402,6 @@ def add_intervals(iv, streams, config, counts) -> None:
     """The gyro's integrated angle per node interval (``Intervals.gyro_ok, gyro_angle``) and, with an AHRS
     orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw,
     heading_offset``) and the slope factors ``cx, cy``."""
-    from fusion_vo.backends.result import SensorCount
-    from fusion_vo.backends.timeline import coverage, ordered_fields
 
     imu = streams.imu
     count = counts.setdefault("gyro", SensorCount())
@@ -451,7 +452,6 @@ def add_intervals(iv, streams, config, counts) -> None:
 def ekf_measurements(iv, config) -> dict:
     """``gyro`` -> (ok, mean rate, σ_g²/Δt) per interval (``σ_rest`` where the wheels are at rest);
     ``ahrs`` -> (ok, heading, σ_ψ²) at the nodes."""
-    from fusion_vo.sensors.wheel import at_rest
 
     out = {}
     if iv.uses("gyro"):

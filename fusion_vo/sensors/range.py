@@ -22,6 +22,8 @@ from fusion_vo.measurements import RangeData
 from fusion_vo.sensors.imu import running_median
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import ordered_fields
 
 logger = logging.getLogger(__name__)
 
@@ -125,8 +127,6 @@ RANGE = RangeModel()
 def add_intervals(iv, streams, config, counts) -> None:
     """Camera heights at the nodes (``Intervals.range_ok, range_height``), within ``max_gap`` of a reading;
     nothing when the visual increments were already scaled with them (used once)."""
-    from fusion_vo.backends.result import SensorCount
-    from fusion_vo.backends.timeline import ordered_fields
 
     if streams.visual is not None and streams.range_in_visual:
         iv.notes.append("range finder: already in the visual increments (their per-frame height), "

@@ -42,6 +42,7 @@ from __future__ import annotations
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Callable
+from fusion_vo.sensors.model import ARGUMENT_SIZES
 
 #: the built-in sensor modules, imported (and so registered) on first use of the registry
 BUILTIN_MODULES = ("fusion_vo.sensors.visual", "fusion_vo.sensors.wheel", "fusion_vo.sensors.imu",
@@ -207,10 +208,11 @@ class Sensor:
         ``(section, dataclass)``: its configuration section. A section that is not a field of
         :class:`~fusion_vo.backends.config.FusionConfig` is read from the configuration's ``section:`` key
         into ``FusionConfig.sensors[section]`` through the same schema (unknown keys are errors).
-    world_frame : callable or None
-        ``world_frame(iv, config)``: for an absolute sensor, the world frame (``Intervals.initial_pose`` and
-        ``initial_sigma``) set from its measurements before the backends run (GPS: ENU at the datum); a piece
-        of a recording with such data is placed by it (:mod:`fusion_vo.backends.pauses`).
+    absolute_position : bool
+        The sensor measures the position in a world frame of its own (GPS: East-North-Up at its datum). When
+        its data is used, the backends estimate in that frame and start at the pose aligned to its first
+        measurements (:func:`fusion_vo.backends.world.align_world`: ``Intervals.initial_pose`` and
+        ``initial_sigma``); a piece of a recording with such data is placed by it (:mod:`fusion_vo.backends.pauses`).
     node_times : callable or None
         ``node_times(data, nodes, config) -> nodes``: node times the sensor needs besides the grid's.
     intervals : Step or None
@@ -268,7 +270,7 @@ class Sensor:
     pick: Callable | None = None
     also_available_as: tuple = ()
     config: tuple | None = None
-    world_frame: Callable | None = None
+    absolute_position: bool = False
     node_times: Callable | None = None
     intervals: Step | None = None
     ekf_measurements: Callable | None = None
@@ -330,7 +332,6 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
     """
     if sensor.name in _REGISTRY and not replace:
         raise ValueError(f"sensor '{sensor.name}' is already registered")
-    from fusion_vo.sensors.model import ARGUMENT_SIZES
 
     taken = set(ARGUMENT_SIZES) | {st.name for s in _REGISTRY.values() if s.name != sensor.name for st in s.states}
     for state in sensor.states:

@@ -31,6 +31,7 @@ import logging
 from dataclasses import dataclass, field
 
 import numpy as np
+from fusion_vo.sensors.imu import gated_yaw_rate
 
 logger = logging.getLogger(__name__)
 
@@ -171,7 +172,6 @@ class TwistDelay:
         lo = t - self.span
         self._odom = [s for s in self._odom if s[0] >= lo]
         self._gyro = [s for s in self._gyro if s[0] >= lo]
-        from fusion_vo.sensors.imu import gated_yaw_rate
 
         o = np.array(self._odom)
         g = np.array(self._gyro)

@@ -42,6 +42,8 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
 
 
 @dataclass(frozen=True)
@@ -71,8 +73,6 @@ def add_intervals(iv, streams, config, counts) -> None:
     covariances stacked once), not a loop of small numpy calls per increment: a 60 s drive at 20 Hz
     has 1200 of them.
     """
-    from fusion_vo.backends.result import SensorCount
-    from fusion_vo.backends.timeline import node_indices, uncovered_runs, when
 
     visual, notes = streams.visual, iv.notes
     count = counts.setdefault("camera", SensorCount())
@@ -239,8 +239,6 @@ def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | 
     frame pose does not exist and that node is not the previous one (whose current estimate starts it)."""
     import gtsam
 
-    from fusion_vo.backends.factors import covariance_noise
-
     a, b = builder.offset + start, builder.offset + node.n
     if a not in builder.frames:
         if start != node.n - 1 or node.previous_pose is None:
@@ -258,7 +256,7 @@ def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | 
                                                     "visual_scale": (builder.S(node.segment),)}, robust=False))
         else:
             nf.factors.append(gtsam.BetweenFactorPose2(builder.X(g), builder.F(g), gtsam.Pose2(),
-                                                       covariance_noise(frame_cov)))
+                                                       builder.noise(frame_cov, robust=False)))
         builder.frames.add(g)
     if b in new:  # starts at this node's initial pose (GraphBuilder.node)
         node.scratch.setdefault("new_frames", []).append(builder.F(b))

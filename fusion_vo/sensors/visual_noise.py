@@ -65,6 +65,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.errors import InputError
+from fusion_vo.sensors.imu import GYRO
+from fusion_vo.sensors.wheel import at_rest
 
 logger = logging.getLogger(__name__)
 
@@ -262,8 +264,6 @@ def apply(iv, config) -> VisualNoiseEstimate | None:
     """Estimate the camera's heading noise on the whole recording's grid ``iv`` and put what is resolved into
     it: the increments' heading (co)variances scaled, ``iv.visual_frame_error`` set. Returns the estimate
     (its note added to ``iv.notes``), or None when ``config.visual_noise.estimate`` is off."""
-    from fusion_vo.sensors.imu import GYRO
-    from fusion_vo.sensors.wheel import at_rest
 
     cfg = config.visual_noise
     if not cfg.estimate:

@@ -86,6 +86,8 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import coverage, ordered_fields
 
 logger = logging.getLogger(__name__)
 
@@ -515,8 +517,6 @@ _FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose 
 def add_intervals(iv, streams, config, counts) -> None:
     """Wheel travel (encoder ticks, else the odometry twist) interpolated at the node times:
     ``Intervals.wheel_ok, wheel_dl, wheel_dr, wheel_base, twist``."""
-    from fusion_vo.backends.result import SensorCount
-    from fusion_vo.backends.timeline import coverage, ordered_fields
 
     count = counts.setdefault("wheel", SensorCount())
     if streams.wheel is not None:

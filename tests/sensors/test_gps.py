@@ -11,6 +11,7 @@ import pytest
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors import gps
+from fusion_vo.backends.graph import GraphBuilder
 
 LEVER = np.array([-0.35, 0.12, 0.8])
 
@@ -116,7 +117,8 @@ def _graph_with_fixes(jump: float, kernel: str):
         z = gps.predict(truth[i], LEVER) + rng.normal(0, 0.1, 2)
         if i == 10:
             z = z + [0.0, jump]
-        graph.add(model.factor(i, z, cov))
+        noise = GraphBuilder.robust_noise(model.covariance(cov), kernel, model.noise.kernel_width)
+        graph.add(gps.gps_factor(i, z, LEVER, noise))
     result = gtsam.LevenbergMarquardtOptimizer(graph, values).optimize()
     return np.array([[result.atPose2(i).x(), result.atPose2(i).y()] for i in range(n)])
 
