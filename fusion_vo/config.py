@@ -13,8 +13,8 @@ A configuration file has one section per stage; any key left out keeps its defau
                              # section of each sensor registered outside the library, e.g. compass: {sigma: 0.02})
     evaluate: true           # compute metrics and plots when the recording has ground truth
 
-The schema is derived from those dataclasses by :mod:`fusion_vo.schema` (pydantic), so an option is
-defined once, where it is used. ``fusion-vo run --print-config`` prints every option with its default
+The schema is made of the frontends' own pydantic models and of models derived from the other stages'
+dataclasses (:mod:`fusion_vo.schema`), so an option is defined once, where it is used. ``fusion-vo run --print-config`` prints every option with its default
 and description; ``fusion-vo run --print-schema`` prints the JSON schema (for editors). A mistake names
 the file, the key path and what was expected::
 
@@ -47,7 +47,8 @@ _ODOMETRY_EXCLUDE = ("frontend", "frontend_options")
 
 
 def _sections() -> dict[str, tuple[type, tuple[str, ...]]]:
-    """The sections that are a stage's configuration dataclass: name -> (dataclass, fields not in the file)."""
+    """The sections that are a stage's configuration (a pydantic model or a dataclass): name -> (class, fields
+    not in the file)."""
     from frontends.direct import DirectConfig
     from frontends.features import FeatureConfig
     from frontends.klt import KltConfig
@@ -132,7 +133,7 @@ def _split_sensors(value):
 
 
 def run_model() -> type[BaseModel]:
-    """The pydantic model of the whole run configuration (sections built from their dataclasses): the sensor
+    """The pydantic model of the whole run configuration (sections from the stages' models): the sensor
     names are the registered ones, and the ``fusion`` section holds the registered sensors' sections
     (:mod:`fusion_vo.sensors.registry`), so the model follows the registry."""
     from fusion_vo.backends.config import FusionConfig

@@ -43,6 +43,7 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from fusion_vo import schema
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
@@ -264,8 +265,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
 
 def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
     """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
-    import dataclasses
-
     from frontends.features import FeatureConfig
     from frontends.klt import KltConfig
     from fusion_vo.odometry import OdometryConfig
@@ -274,9 +273,9 @@ def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
         values = getattr(config, section) or {}
         if not isinstance(values, dict):
             raise InputError(f"'{section}' must be a mapping of option: value", config_path)
-        defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+        defaults = {name: f.default for name, f in schema.model_of(cls).model_fields.items()}
         for key, value in values.items():
-            default = defaults.get(key, dataclasses.MISSING)
+            default = defaults.get(key)
             number = isinstance(default, (int, float)) and not isinstance(default, bool)
             if key == "height" and section == "odometry":
                 number = True
