@@ -1,6 +1,6 @@
-"""The plain OpenCV script that every frontend figure is compared with.
+"""The simple baselines that fusion-vo's figures are compared with: a plain OpenCV script, dead reckoning.
 
-This is what a robotics engineer writes in ten minutes: Shi-Tomasi corners in the previous frame,
+The plain OpenCV script is what a robotics engineer writes in ten minutes: Shi-Tomasi corners in the previous frame,
 pyramidal Lucas-Kanade into the current one, a partial affine (similarity) fitted with RANSAC. No
 prediction, no undistortion, no covariance, no threads: one frame at a time, as read from disk.
 
@@ -12,6 +12,14 @@ motion as fusion-vo does, so that its track can be scored the same way: through 
 (:class:`~fusion_vo.geometry.ground.GroundGeometry`) with a distortion-free pinhole of the recording's
 focal length (the script does not undistort), the same heights (range finder) and the same bridging of
 failed frames (:class:`~fusion_vo.odometry.VisualOdometry`).
+
+For logs without a camera, two filter-free tracks of a robot's odometry twist and IMU:
+
+* :func:`wheel_gyro`: each odometry interval's distance along the heading of the integrated body-z gyro rate,
+  less the gyro's median rate while the odometry reports standstill;
+* :func:`along_orientation`: the odometry's forward speed integrated along the body's x axis as the IMU's
+  3-D orientation gives it, ``p_{k+1} = p_k + v_k Δt_k R_WS(s_k) R_BSᵀ e_x`` with ``s_k`` the first IMU
+  sample at or after the odometry sample ``t_k`` (a few lines of numpy, no interpolation).
 """
 
 from __future__ import annotations
@@ -26,11 +34,16 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.geometry import se2
 from fusion_vo.geometry.ground import GroundGeometry
+from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import VisualOdometry, heights_for
 from fusion_vo.recording import Recording
+from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw
+from fusion_vo.sensors.wheel import twist_to_travel
 
 MAX_CORNERS = 200
 QUALITY = 0.01
@@ -138,6 +151,40 @@ def odometry(rec: Recording) -> tuple[VisualOdometry, list, list, float]:
         if inc is not None:
             increments.append(inc)
     return vo, increments, results, seconds
+
+
+def wheel_gyro(rec: Recording) -> PoseData:
+    """Wheel distance with the gyro's heading (module docstring): the odometry twist's travel per interval,
+    its heading change from the integrated body-z gyro rate less the median rate at standstill."""
+    odom, imu = rec.odom(), rec.imu()
+    gyro = gyro_yaw(imu, ImuNoise().with_sensor_keys(imu.noise))
+    still = (np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)
+    still_at_imu = np.interp(gyro.t, odom.t, still.astype(float)) > 0.999
+    bias = float(np.median(gyro.rate[still_at_imu])) if np.count_nonzero(still_at_imu) > 10 else 0.0
+    angle = cumulative_angle(gyro) - bias * (gyro.t - gyro.t[0])
+    travel = twist_to_travel(odom)
+    dist = np.diff(0.5 * (travel.left + travel.right))
+    dyaw = np.diff(np.interp(odom.t, gyro.t, angle))
+    poses = np.zeros((len(odom.t), 3))
+    for k in range(len(dist)):
+        poses[k + 1] = se2.compose(poses[k], se2.exp((dist[k], 0.0, dyaw[k])))
+    return PoseData(odom.t.copy(), poses)
+
+
+def along_orientation(rec: Recording) -> PoseData:
+    """The odometry's forward speed along the IMU's 3-D orientation (module docstring), in the IMU's world
+    frame; the heading is that of the body's x axis on the floor plane."""
+    odom, imu = rec.odom(), rec.imu()
+    if imu.orientation is None:
+        raise ValueError(f"{rec.path}: the IMU states no orientation")
+    t, v = odom.t, odom.vx
+    q = np.asarray(imu.orientation, dtype=np.float64)
+    sample = np.clip(np.searchsorted(imu.t, t), 0, len(imu.t) - 1)
+    world_imu = Rotation.from_quat(q[sample][:, [1, 2, 3, 0]])
+    axis = (world_imu * Rotation.from_matrix(np.asarray(imu.T_BS)[:3, :3]).inv()).apply([1.0, 0.0, 0.0])
+    steps = (v[:-1] * np.diff(t))[:, None] * axis[:-1]
+    xy = np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])[:, :2]
+    return PoseData(t.copy(), np.column_stack([xy, np.arctan2(axis[:, 1], axis[:, 0])]))
 
 
 def main(argv: list[str] | None = None) -> int:
