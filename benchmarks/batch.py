@@ -1,4 +1,4 @@
-"""Speed of ``fusion-vo batch`` on a local Dask cluster against a plain loop of ``fusion-vo run``.
+"""Speed of ``fusion-vo batch`` on a local Dask cluster beside a plain loop of ``fusion-vo run`` (the baseline).
 
 Generates ``--recordings`` (default 8) random drives of ``--seconds`` (default 8 s, 640 x 360 frames at
 20 Hz), then measures, in wall-clock time and interleaved ``--repeat`` times (loop, 1 worker,
@@ -18,12 +18,11 @@ the 1-worker batch minus the seconds spent inside its tasks), and the time to pl
 graph of 10,000 recordings to a scheduler (target < 10 s). Every batch writes into a new folder, so
 nothing is reused from an earlier one. Usage::
 
-    python benchmarks/bench_batch.py [--recordings 8] [--seconds 8] [--repeat 2] [--work DIR]
+    python benchmarks/batch.py [--recordings 8] [--seconds 8] [--repeat 2] [--work DIR]
 """
 
 from __future__ import annotations
 
-import argparse
 import shutil
 import statistics
 import subprocess
@@ -31,6 +30,11 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+
+from common import load, parser, recording
+
+from fusion_vo.batch import plan_batch, run_task
+from fusion_vo.config import RunConfig
 
 #: seeds of random drives that move from the start (a few seeds begin with a long stop)
 SEEDS = (3, 4, 6, 11, 13, 14, 15, 16, 17, 18, 19, 21)
@@ -48,23 +52,13 @@ def _timed(fn) -> float:
 
 
 def make_recordings(root: Path, n: int, seconds: float) -> list[Path]:
-    from fusion_vo.simulation import simulate
-
-    recordings = []
-    for seed in SEEDS[:n]:
-        path = root / f"drive{seed:02d}"
-        if not (path / "simulation.yaml").is_file():
-            simulate(path, profile="random", seed=seed, duration=seconds)
-        recordings.append(path)
-    return recordings
+    """The first ``n`` drives of :data:`SEEDS`, ``seconds`` long, generated in ``root`` unless already there."""
+    return [recording(root, f"drive{seed:02d}", "random", seed, {"duration": seconds}) for seed in SEEDS[:n]]
 
 
 def graph_seconds(root: Path, n: int = 10_000) -> tuple[float, float]:
     """Seconds to plan ``n`` tasks (folders checked, names made) and to submit them to a scheduler."""
-    from distributed import Client, LocalCluster
-
-    from fusion_vo.batch import plan_batch, run_task
-    from fusion_vo.config import RunConfig
+    from distributed import Client, LocalCluster  # the batch extra
 
     fleet = root / "fleet"
     paths = [fleet / f"{i // 100:03d}" / f"drive{i:05d}" for i in range(n)]
@@ -83,13 +77,16 @@ def graph_seconds(root: Path, n: int = 10_000) -> tuple[float, float]:
     return planned, submitted
 
 
-def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--recordings", type=int, default=8, help="number of generated recordings (at most 12)")
-    parser.add_argument("--seconds", type=float, default=8.0, help="length of each drive [s]")
-    parser.add_argument("--repeat", type=int, default=2, help="interleaved repetitions of the three measurements")
-    parser.add_argument("--work", help="folder for the recordings and outputs (default: a temporary folder)")
-    args = parser.parse_args()
+def main(argv: list[str] | None = None) -> int:
+    ap = parser(__doc__)
+    ap.add_argument("--recordings", type=int, default=8, help="number of generated recordings (at most 12)")
+    ap.add_argument("--seconds", type=float, default=8.0, help="length of each drive [s]")
+    ap.add_argument("--repeat", type=int, default=2, help="interleaved repetitions of the three measurements")
+    ap.add_argument("--work", help="folder for the recordings and outputs (default: a temporary folder)")
+    args = ap.parse_args(argv)
+    if not 1 <= args.recordings <= len(SEEDS) or args.repeat < 1:
+        ap.error(f"--recordings must be 1 to {len(SEEDS)} and --repeat at least 1")
+    print(f"load average {load()} before", flush=True)
     work = Path(args.work) if args.work else Path(tempfile.mkdtemp(prefix="bench-batch-"))
     recordings = make_recordings(work / "recordings", min(args.recordings, len(SEEDS)), args.seconds)
     shutil.rmtree(work / "out", ignore_errors=True)  # outputs of an earlier benchmark would be reused
@@ -111,7 +108,7 @@ def main() -> int:
 
     def batch(workers: int):
         def go() -> None:
-            import pandas as pd
+            import pandas as pd  # the batch extra
 
             folder = out()
             _fusion_vo("batch", *names, "--out", folder, "--workers", str(workers), "--no-dashboard")
@@ -144,6 +141,7 @@ def main() -> int:
     planned, submitted = graph_seconds(work)
     print(f"task graph of 10,000 recordings: planned in {planned:.2f} s, on the scheduler after {submitted:.2f} s "
           "(target < 10 s)")
+    print(f"load average {load()} after")
     if not args.work:
         shutil.rmtree(work, ignore_errors=True)
     return 0
