@@ -220,8 +220,9 @@ def mm(values: Sequence[float], fmt: str = ".3f") -> str:
 
 
 class Stages:
-    """Wall and CPU seconds of wrapped functions, summed per stage name; a stage's time excludes that of the
-    stages called inside it (the evaluation's metrics, figures and report inside the evaluation)."""
+    """Wall and CPU seconds of the functions :meth:`wrap` times, summed per stage name; a stage's time excludes
+    that of the stages called inside it (the evaluation's metrics inside the evaluation, say). :meth:`restore`
+    puts the functions back."""
 
     def __init__(self):
         self.wall: dict[str, float] = defaultdict(float)
