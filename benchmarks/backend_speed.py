@@ -13,11 +13,12 @@ offline   CPU time of the EKF (streams merged, filter, RTS smoother), GTSAM batc
           stages, wall beside CPU time. The EKF is the baseline of the graph (the same problem, the cheapest
           solver). Targets: EKF >= 150x real time, GTSAM batch >= 300x, iSAM2 < 0.5 ms per camera frame.
           ``--profile N`` adds the N costliest functions of one batch run (cProfile).
-solvers   the batch graph of the same drive solved by the graph's own Levenberg-Marquardt loop on GTSAM's
-          linearisation (``fusion_vo.backends.graph.levenberg_marquardt``) beside GTSAM's own
-          ``LevenbergMarquardtOptimizer``, ``GaussNewtonOptimizer`` and ``DoglegOptimizer`` given the same
-          factors as ``gtsam.CustomFactor`` s, the same iteration limit and tolerance: CPU time (range over
-          interleaved runs), iterations, final cost, largest position difference from the loop's solution.
+solvers   the batch problem of the same drive solved by the graph's own Levenberg-Marquardt loop, with its
+          block-tridiagonal solve (``fusion_vo.backends.chain``, what a run uses) and on GTSAM's elimination
+          (``fusion_vo.backends.graph.levenberg_marquardt``), beside GTSAM's own ``LevenbergMarquardtOptimizer``,
+          ``GaussNewtonOptimizer`` and ``DoglegOptimizer`` given the same factors as ``gtsam.CustomFactor`` s,
+          the same iteration limit and tolerance: CPU time (range over interleaved runs), iterations, final
+          cost, largest position difference from the first's solution.
 latency   ``StreamingFusion`` fed the drive in arrival order (the camera's increments ``--camera-delay`` late,
           as a frontend delivers them), ``current_estimate()`` after every sample: latency percentiles of one
           ``add_*()`` + ``current_estimate()`` call (wall clock, what the caller waits, and the caller's CPU
@@ -148,41 +149,51 @@ def offline(args) -> int:
 
 
 # ------------------------------------------------------------------------------------------- solvers
-def capture(seconds: float, fusion: dict):
-    """The batch graph, its start values and settings, as ``run_graph`` hands them to the loop."""
+def capture(seconds: float, fusion: dict) -> dict:
+    """The batch problem, its start values and settings, as ``run_graph`` hands them to its solver."""
     _, streams = drive(seconds)
     captured = {}
-    loop = graph.levenberg_marquardt
+    loop = chain.levenberg_marquardt
 
-    def grab(g, values, dims, max_iterations, tolerance, groups):
-        captured.update(graph=g, values=values, dims=dims, args=(max_iterations, tolerance), groups=groups)
-        return loop(g, values, dims, max_iterations, tolerance, groups)
+    def grab(problem, values, max_iterations=20, relative_tolerance=1e-3):
+        captured.update(problem=problem, values=values, args=(max_iterations, relative_tolerance))
+        return loop(problem, values, max_iterations, relative_tolerance)
 
-    graph.levenberg_marquardt = grab
+    chain.levenberg_marquardt = grab
     try:
-        fuse(streams, "gtsam", FusionConfig.from_dict(fusion))
+        fuse(streams, "gtsam", FusionConfig.from_dict(with_settings(fusion, ["graph.online=false"])))
     finally:
-        graph.levenberg_marquardt = loop
+        chain.levenberg_marquardt = loop
+    if not captured:
+        raise SystemExit("the batch graph of this drive is not a chain: nothing to compare")
     return captured
+
+
+#: the solvers compared, the graph's own first (the one ``run_graph`` uses on a chain-shaped graph)
+SOLVERS = ("block-tridiagonal loop (fusion-vo's)", "loop on GTSAM's elimination", "LevenbergMarquardt",
+           "GaussNewton", "Dogleg")
 
 
 def solvers(args) -> int:
     c = capture(args.seconds, fusion_settings(args))
-    g, v0, dims, groups = c["graph"], c["values"], c["dims"], c["groups"]
+    problem, v0 = c["problem"], c["values"]
     max_iterations, tolerance = c["args"]
-    full = gtsam.NonlinearFactorGraph(g)  # the same factors, the sensor models as CustomFactors
-    for group in groups:
+    full = gtsam.NonlinearFactorGraph(problem.graph)  # the same factors, the sensor models as CustomFactors
+    for group in problem.groups:
         for f in group.factors:
             full.add(f.custom_factor())
-    n = sum(1 for k in dims if chr(gtsam.Symbol(k).chr()) == "x")
+    n = len(problem.pose_keys)
 
     def positions(values):
         return np.array([[values.atPose2(graph.X(i)).x(), values.atPose2(graph.X(i)).y()] for i in range(n)])
 
     def run(name):
         t0 = time.process_time()
-        if name == "fusion-vo's loop":
-            solution, iterations, _ = graph.levenberg_marquardt(g, v0, dims, max_iterations, tolerance, groups)
+        if name == SOLVERS[0]:
+            solution, iterations, _ = chain.levenberg_marquardt(problem, v0, max_iterations, tolerance)
+        elif name == SOLVERS[1]:
+            solution, iterations, _ = graph.levenberg_marquardt(problem.graph, v0, problem.dims, max_iterations,
+                                                                tolerance, problem.groups)
         else:
             params = {"LevenbergMarquardt": gtsam.LevenbergMarquardtParams, "GaussNewton": gtsam.GaussNewtonParams,
                       "Dogleg": gtsam.DoglegParams}[name]()
@@ -194,22 +205,21 @@ def solvers(args) -> int:
             iterations = optimizer.iterations()
         return time.process_time() - t0, iterations, full.error(solution), positions(solution)
 
-    names = ["fusion-vo's loop", "LevenbergMarquardt", "GaussNewton", "Dogleg"]
-    rows = {name: [] for name in names}
+    rows = {name: [] for name in SOLVERS}
     for _ in range(args.repeat):
-        for name in names:
+        for name in SOLVERS:
             rows[name].append(run(name))
-    reference = rows[names[0]][0][3]
-    print(f"{args.seconds:.0f} s drive: {full.size()} factors ({sum(len(group) for group in groups)} sensor-model "
-          f"factors), start cost {full.error(v0):.6g}; CPU time over {args.repeat} interleaved runs; load {load()}")
+    reference = rows[SOLVERS[0]][0][3]
+    print(f"{args.seconds:.0f} s drive: {full.size()} factors ({sum(len(group) for group in problem.groups)} "
+          f"sensor-model factors), start cost {full.error(v0):.6g}; CPU time over {args.repeat} interleaved runs; "
+          f"load average {load()}")
     out = []
-    for name in names:
+    for name in SOLVERS:
         t = [r[0] for r in rows[name]]
         _, iterations, cost, p = rows[name][0]
         out.append([name, f"{1e3 * min(t):.1f}-{1e3 * max(t):.1f} ms", iterations, f"{cost:.6g}",
                     f"{np.abs(p - reference).max():.2e}"])
-    print(table(["solver", "CPU time", "iterations", "final cost", "largest position difference from the loop [m]"],
-                out))
+    print(table(["solver", "CPU time", "iterations", "final cost", "largest position difference [m]"], out))
     return 0
 
 

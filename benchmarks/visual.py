@@ -305,8 +305,8 @@ def lens(args) -> int:
                                                   "fitted model of sensor.yaml": fitted}), flush=True)
             for fe in args.frontends:
                 rows.append(frontend_row(rec, fe, odometry)[0])
-            mode = "board calibration" if args.calibrate else "--uncalibrated"
-            print_rows(f"{name} with the lens of the {mode}", rows)
+            mode = "calibrated from board views" if args.calibrate else "estimated from the frames (--uncalibrated)"
+            print_rows(f"{name}, the lens {mode}", rows)
     return 0
 
 
