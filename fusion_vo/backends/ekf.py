@@ -72,7 +72,8 @@ Each sensor's block is gated before the update by its squared Mahalanobis distan
 innovation squared, NIS) ``d² = yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``
 (:class:`~fusion_vo.sensors.model.Gate`); rejections are counted. A batch run records every block's
 ``(t, sensor, d², rows, used / down-weighted / rejected)`` (:class:`~fusion_vo.backends.result.Innovations`,
-``FusionResult.innovations["ekf"]``).
+``FusionResult.innovations["ekf"]``; a row the consistency monitor left out, with its vague variance, is not
+counted among the rows).
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
@@ -127,6 +128,9 @@ STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gy
                  "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
+#: a measurement row with at least this variance carries no information (a component the consistency monitor
+#: dropped gets 1e8, :mod:`fusion_vo.sensors.wheel`): it is not counted in the block's recorded rows
+_FREE_VAR = 1e6
 
 
 class PlanarEkf:
@@ -379,12 +383,13 @@ class PlanarEkf:
             d2 = float(y @ np.linalg.solve(S, y))
             count = self.counts.setdefault(sensor, SensorCount())
             factor = self.gate.inflation(d2, len(y))
+            rows = max(1, int(np.count_nonzero(np.diag(R) < _FREE_VAR))) if self.innovations is not None else 0
             if factor is None:
                 count.gated += 1
-                self.record(sensor, d2, len(y), "rejected")
+                self.record(sensor, d2, rows, "rejected")
                 continue
             count.used += 1
-            self.record(sensor, d2, len(y), "down-weighted" if factor > 1.0 else "used")
+            self.record(sensor, d2, rows, "down-weighted" if factor > 1.0 else "used")
             if factor > 1.0:
                 # outside the gate but not absurd: down-weighted so that it sits on the gate (the
                 # bounded influence of the graph's robust kernel) rather than dropped -- a robot that
