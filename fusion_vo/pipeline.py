@@ -429,12 +429,15 @@ def write_run_records(staging: Path, result, streams, config, influence: bool) -
 def _report(staging: Path, name: str, summary: RunSummary, accuracy: bool, evaluated: bool) -> None:
     """Write the run's report into ``staging`` (:func:`fusion_vo.evaluation.run_report.build_report`).
 
-    An error of the evaluation against ground truth or GPS fixes stops the run, as it always has; any other
-    failure to draw the report is a warning and a note (the run's files stand)."""
-    from fusion_vo.evaluation.run_report import build_report
+    An error of the evaluation against ground truth or GPS fixes stops the run, as it always has, and so does a
+    file that cannot be written (a full disk); any other failure to draw the report is a warning and a note (the
+    run's files stand)."""
+    from fusion_vo.evaluation import run_report
 
     try:
-        content, summary.metrics = build_report(staging, None, staging, name=name, accuracy=accuracy)
+        content, summary.metrics = run_report.build_report(staging, None, staging, name=name, accuracy=accuracy)
+    except OSError:
+        raise
     except InputError:
         if evaluated:
             raise

@@ -64,6 +64,13 @@ def run_labels(run_dirs: list[Path]) -> list[str]:
             depth[i] += 1
 
 
+def evaluate_trajectories(reference, files: dict[str, Path]) -> dict:
+    """:func:`fusion_vo.evaluation.evaluate.evaluate_trajectories` (evo, the ``eval`` extra: loaded on first use)."""
+    from fusion_vo.evaluation.evaluate import evaluate_trajectories as evaluate
+
+    return evaluate(reference, files)
+
+
 def run_verdict(folder: RunFolder) -> list[str]:
     """A run's verdict sentences (:func:`fusion_vo.evaluation.verdict.verdict`) over its fused span."""
     tracks = folder.tracks
@@ -104,16 +111,15 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     labels = run_labels(run_dirs)
     folders = [read_run_folder(d) for d in run_dirs]
     table: dict[str, dict[str, dict]] = {label: {name: {} for name in f.tracks} for label, f in zip(labels, folders)}
-    sequences, truths, anchored = [], [], {}
+    sequences, truths, anchored, missing = [], [], {}, {}
     for label, folder in zip(labels, folders):
         sequence, why = find_recording(folder, sequence_dir)
         if sequence is None:
-            logger.warning("%s: %s", folder.path, why)
+            missing[label] = why
         sequences.append(sequence.resolve() if sequence is not None else None)
         if sequence is None or not has_groundtruth(sequence) or not evo_available():
             continue
-        from fusion_vo.evaluation.evaluate import evaluate_trajectories  # evo: the ``eval`` extra
-        from fusion_vo.evaluation.io import read_groundtruth
+        from fusion_vo.evaluation.io import read_groundtruth  # evo: the ``eval`` extra
         from fusion_vo.evaluation.metrics import to_planar
 
         gt = read_groundtruth(sequence / GROUNDTRUTH_CSV)
@@ -139,7 +145,8 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
             how = "SE(2)-aligned where only one run fused GPS, else as estimated" if any(aligned) else "as estimated, not aligned"
             figures.plot_differences(differences, labels[0], staged.path / "compare_differences.png", start,
                                      title=f"Distance of each track from the same track of {labels[0]} ({how})")
-        text = "".join(f"{label}:\n" + "".join(f"  - {s}\n" for s in lines or ["(no verdict: no influence.json)"])
+        text = "".join(f"{label}:\n" + "".join(f"  - {s}\n" for s in (lines or ["(no verdict: no influence.json)"])
+                                               + ([missing[label]] if label in missing else []))
                        for label, lines in verdicts.items())
         write_atomic(staged.path / "compare_verdicts.txt", text)
         staged.commit()
