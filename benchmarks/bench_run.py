@@ -78,7 +78,7 @@ def in_process(seq: Path, evaluate: bool) -> tuple[Stages, dict, float, float]:
     """One run of the pipeline with its stages timed; returns the stages, the backends' CPU split and the
     whole run's wall and CPU seconds."""
     from fusion_vo import pipeline
-    from fusion_vo.evaluation import evaluate as ev, plots
+    from fusion_vo.evaluation import evaluate as ev, figures, influence, plots, run_report
     from fusion_vo.config import RunConfig
 
     stages = Stages()
@@ -88,11 +88,13 @@ def in_process(seq: Path, evaluate: bool) -> tuple[Stages, dict, float, float]:
     for name in ("write_tum", "write_pose_covariances", "write_velocities", "write_atomic"):
         stages.wrap(pipeline, name, "writing outputs")
     stages.wrap(ev, "evaluate_trajectories", "evaluation: metrics")
-    for name in dir(plots):
-        if name.startswith("plot_"):
-            stages.wrap(plots, name, "evaluation: figures")
-    stages.wrap(ev, "write_report", "evaluation: report")
-    stages.wrap(pipeline, "_evaluate", "evaluation: the rest (imports, reading)")
+    for module in (plots, figures):
+        for name in dir(module):
+            if name.startswith("plot_"):
+                stages.wrap(module, name, "evaluation: figures")
+    stages.wrap(influence, "leave_one_out", "report: influence (fused without each input)")
+    stages.wrap(run_report, "write_report", "evaluation: report")
+    stages.wrap(run_report, "build_report", "evaluation: the rest (imports, reading)")
     config = RunConfig(backend="all", evaluate=evaluate)
     try:
         with _out_dir() as out:

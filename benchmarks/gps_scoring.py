@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo.config import RunConfig
-from fusion_vo.evaluation.evaluate import evaluate_run
+from fusion_vo.evaluation import evaluate_run
 from fusion_vo.evaluation.io import read_tum
 from fusion_vo.geometry import se2
 from fusion_vo.pipeline import run_pipeline

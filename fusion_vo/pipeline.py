@@ -52,6 +52,10 @@ import yaml
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
+from fusion_vo.evaluation import run_report
+from fusion_vo.evaluation.headings import imu_headings, write_headings
+from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
+from fusion_vo.evaluation.innovations import from_residuals, write_innovations
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
 from fusion_vo.outputs import OutputFolder, check_replaceable, write_atomic
@@ -409,10 +413,6 @@ def _write_summary(staging: Path, summary: RunSummary) -> None:
 def write_run_records(staging: Path, result, streams, config, influence: bool) -> None:
     """The files the report reads besides the trajectories: ``innovations.csv`` (the EKF's and, when computed,
     the graph's NIS), ``headings.csv`` (the IMU's own headings) and, with ``influence``, ``influence.json``."""
-    from fusion_vo.evaluation.headings import imu_headings, write_headings
-    from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
-    from fusion_vo.evaluation.innovations import from_residuals, write_innovations
-
     tables = dict(result.innovations)
     tables.update({backend: from_residuals(residuals) for backend, residuals in (result.residuals or {}).items()})
     if any(len(table) for table in tables.values()):
@@ -432,8 +432,6 @@ def _report(staging: Path, name: str, summary: RunSummary, accuracy: bool, evalu
     An error of the evaluation against ground truth or GPS fixes stops the run, as it always has, and so does a
     file that cannot be written (a full disk); any other failure to draw the report is a warning and a note (the
     run's files stand)."""
-    from fusion_vo.evaluation import run_report
-
     try:
         content, summary.metrics = run_report.build_report(staging, None, staging, name=name, accuracy=accuracy)
     except OSError:

@@ -280,10 +280,11 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
         dropped: set[str] = set()  # hysteresis state at this scale
         for a, b in _windows(T, cfg.monitor_window * scale):
             theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
-            liar, nis, others = _find_liar(theta, var, threshold, cfg.monitor_probability)
+            liar, liar_nis, liar_others = _find_liar(theta, var, threshold, cfg.monitor_probability)
             for s in names:
                 if s == liar:
                     dropped.add(s)
+                    nis, others = liar_nis, liar_others
                 elif s in dropped:
                     # hysteresis: a dropped component comes back only once it agrees well again
                     n = _window_nis(s, theta, var)

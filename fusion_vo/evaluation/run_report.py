@@ -31,6 +31,7 @@ import numpy as np
 from fusion_vo.errors import InputError, check_folder
 from fusion_vo.evaluation import EVO_MISSING, evo_available
 from fusion_vo.evaluation import figures, plots
+from fusion_vo.evaluation.gps import evaluate_against_gps, gps_frame, gps_table, gps_was_fused
 from fusion_vo.evaluation.headings import HEADINGS_CSV, Headings, read_headings
 from fusion_vo.evaluation.influence import INFLUENCE_JSON, read_influence
 from fusion_vo.evaluation.innovations import INNOVATIONS_CSV, nis_table, read_innovations
@@ -41,6 +42,8 @@ from fusion_vo.evaluation.run_tables import calibration_table, dropped_table, ga
 from fusion_vo.evaluation.verdict import verdict
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
+from fusion_vo.recording import Recording
+from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
 
 logger = logging.getLogger(__name__)
 
@@ -194,9 +197,6 @@ def _groundtruth_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[
 
 
 def _gps_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[dict, dict[str, Path], list]:
-    from fusion_vo.evaluation.gps import evaluate_against_gps, gps_frame, gps_table
-    from fusion_vo.recording import Recording
-
     gps = Recording(sequence).gps()
     metrics, images = evaluate_against_gps(out, folder.files, gps, folder.config, sequence / "gps0" / "data.csv")
     headers, rows = gps_table(metrics)
@@ -210,10 +210,6 @@ def _gps_overlay(sequence: Path | None, folder: RunFolder, reference: str | None
     onto the reference track by the rigid fit of its antenna positions onto them. None without fixes."""
     if sequence is None or reference is None or not (sequence / "gps0" / "data.csv").is_file():
         return None
-    from fusion_vo.evaluation.gps import gps_was_fused
-    from fusion_vo.recording import Recording
-    from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
-
     gps = Recording(sequence).gps()
     if gps_was_fused(folder.config):
         return gps.enu[:, :2], f"GPS fixes ({len(gps)}, fused)"
@@ -356,7 +352,7 @@ def describe(content: ReportContent, folder: RunFolder, sequence: Path | None, o
     content.graph_nis_line = None if folder.innovations is None or any(b.startswith("gtsam") for b in folder.innovations) \
         else ("The factor graph's residuals at its solution are not shown: the run computes them with "
               "fusion.graph.residuals: true (it costs the graph's joint marginals).")
-    content.dropped = dropped_table(fusion.get("inconsistent") or [], t0, t1)
+    content.dropped = dropped_table(fusion.get("inconsistent") or [], t0, t1, "odom" in sensors)
     content.pauses = pauses_table(fusion.get("pauses") or [], start)
     content.calibration = calibration_table(fusion)
     content.counts = fusion.get("counts")

@@ -21,6 +21,29 @@ def length(value: float) -> str:
     return f"{value * 1e3:.3g} mm" if abs(value) < 0.1 else f"{value:.3g} m"
 
 
+def figure(value: float, signed: bool = False) -> str:
+    """Three significant digits; a magnitude below 5e-4 (rounding noise of a figure that is zero) as 0."""
+    if value is None or not math.isfinite(value):
+        return DASH
+    if abs(value) < 5e-4:
+        return "0"
+    return f"{value:+.3g}" if signed else f"{value:.3g}"
+
+
+#: the consistency check's names of the streams, in words
+STREAM_WORDS = {"gyro": "gyro", "ahrs": "AHRS", "wheel": "wheels", "camera": "camera", "imu": "IMU"}
+POSSESSIVE = {"wheel": "wheels'", "imu": "IMU's", "camera": "camera's"}
+
+
+def stream_words(names: str, twist: bool = False) -> str:
+    """``"gyro, ahrs"`` -> ``"gyro and AHRS"`` (the wheels are the odometry twist on a robot that has one)."""
+    words = [STREAM_WORDS.get(n.strip(), n.strip()) for n in str(names).split("(")[0].split(",") if n.strip()]
+    if twist:
+        words = ["odometry twist" if w == "wheels" else w for w in words]
+    tail = f" ({str(names).split('(', 1)[1]}" if "(" in str(names) else ""
+    return (" and ".join([", ".join(words[:-1]), words[-1]]) if len(words) > 1 else "".join(words)) + tail
+
+
 def seconds_in(t: float, t0: float) -> str:
     return f"{t - t0:.1f}"
 
@@ -42,7 +65,7 @@ STATES = {
 CALIBRATION_BACKENDS = ("ekf", "gtsam", "gtsam_online")
 
 
-def _value(key: str, mean, sigma, twist: bool) -> str:
+def _value(key: str, mean, sigma) -> str:
     if mean is None or not isinstance(mean, (int, float)) or not math.isfinite(mean):
         return DASH
     _, _, factor, unit, fmt = STATES.get(key, (key, "", 1.0, "", "{:.4g}"))
@@ -74,13 +97,13 @@ def calibration_table(fusion: dict) -> tuple[list[str], list[list[str]]]:
         if key == "wheel_base_factor" and twist:
             name, meaning = "odometry yaw-rate factor", "true over reported yaw rate of the odometry twist"
         prior = priors.get(key) or {}
-        row = [name, meaning, _value(key, prior.get("mean"), prior.get("sigma"), twist)]
+        row = [name, meaning, _value(key, prior.get("mean"), prior.get("sigma"))]
         for b in backends:
             est = calibration[b]
             sigma = est.get(f"{key}_sigma")
             if key == "camera_height" and "visual_scale_sigma" in est and est.get("visual_scale"):
                 sigma = est["camera_height"] * est["visual_scale_sigma"] / est["visual_scale"]
-            row.append(_value(key, est.get(key), sigma, twist))
+            row.append(_value(key, est.get(key), sigma))
         row.append(_informed(key, prior, calibration.get(backends[0], {})))
         rows.append(row)
     for key, value in (fusion.get("time_offsets") or {}).items():
@@ -103,20 +126,23 @@ def _informed(key: str, prior: dict, estimate: dict) -> str:
     moved = (mean - mean0) / sigma0
     if ratio > 0.9 and abs(moved) < 0.5:
         return f"no: the prior stands (\u03c3 {100 * ratio:.0f} % of the prior's)"
-    return f"yes: \u03c3 {100 * ratio:.0f} % of the prior's, moved {moved:+.1f} prior \u03c3"
+    return f"yes: \u03c3 {100 * ratio:.2g} % of the prior's, moved {moved:+.2g} prior \u03c3"
 
 
 # --------------------------------------------------------------------------- dropped and gated
-def dropped_table(episodes: list[dict], t0: float, t1: float) -> tuple[list[str], list[list[str]]]:
+def dropped_table(episodes: list[dict], t0: float, t1: float, twist: bool = False) -> tuple[list[str], list[list[str]]]:
     """The consistency check's episodes: which component, against what, when (seconds from the start), how
-    long, the largest NIS, and whether it was the whole recording."""
+    long, the largest NIS, and whether it was the whole recording (``twist``: the wheels are an odometry twist)."""
+
     headers = ["sensor", "component", "contradicted", "from [s in]", "to [s in]", "duration [s]", "largest NIS",
                "extent"]
     rows = []
     for e in episodes:
         start, end = float(e.get("start", math.nan)), float(e.get("end", math.nan))
         whole = start <= t0 + 1e-3 and end >= t1 - 1e-3
-        rows.append([str(e.get("sensor", "")), str(e.get("component", "")), str(e.get("against", "")),
+        sensor = str(e.get("sensor", ""))
+        rows.append(["odometry twist" if twist and sensor == "wheel" else sensor, str(e.get("component", "")),
+                     stream_words(str(e.get("against", "")), twist),
                      seconds_in(start, t0), seconds_in(end, t0), f"{end - start:.1f}", f"{e.get('max_nis', math.nan):.3g}",
                      "whole recording: not used at all" if whole else "not used in this span"])
     return headers, rows
@@ -165,6 +191,6 @@ def influence_table(influence: dict) -> tuple[list[str], list[list[str]]]:
                         + [f"{e.get('seconds', math.nan):.2f}"])
             continue
         rows.append([e["label"], length(e["rms_m"]), length(e["max_m"]), length(e["end_m"]),
-                     f"{e['heading_rms_deg']:.3g}", f"{e['heading_end_deg']:+.3g}", f"{e['distance_pct']:+.3g}",
+                     figure(e["heading_rms_deg"]), figure(e["heading_end_deg"], True), figure(e["distance_pct"], True),
                      "SE(2)-aligned" if e.get("aligned") else "as estimated", f"{e.get('seconds', math.nan):.2f}"])
     return headers, rows

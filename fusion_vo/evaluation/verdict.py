@@ -4,9 +4,9 @@ each input moved the result, and what was not used at all.
 The sentences are read off measured figures, never guessed:
 
 * each input's influence (:mod:`fusion_vo.evaluation.influence`): the input whose removal changes the distance
-  travelled most carries the **scale**, the one whose removal changes the heading most the **heading**, the one
-  whose removal moves the track most the **position** (GPS, when fused, fixes the position in the world frame
-  whatever the others do);
+  travelled most carries the **scale**, the heading depends most on the one whose removal turns it most, the
+  **position** on the one whose removal moves the track most (GPS, when fused, fixes the position in the world
+  frame whatever the others do); the other inputs' figures follow in brackets;
 * the calibration priors (``summary.json``): camera and wheels measure only the ratio of their scales, so when
   both are fused their common scale rests on the tighter of the two priors;
 * the consistency check's episodes: a component contradicted over the whole recording was not used at all.
@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from fusion_vo.evaluation.run_tables import length
+from fusion_vo.evaluation.run_tables import POSSESSIVE, STREAM_WORDS, figure, length, stream_words
 
 #: below these the influence of an input is not measurable (RMS of the position and heading differences)
 NEGLIGIBLE_M = 1e-4
@@ -30,58 +30,51 @@ def _usable(entries: list[dict], key: str) -> list[dict]:
     return [e for e in entries if not e.get("error") and math.isfinite(e.get(key, math.nan))]
 
 
+def _others(ranked: list[dict], text) -> str:
+    """``" (the IMU: 7.1 deg, ...)"`` for the inputs after the first, or nothing."""
+    rest = [f"the {e['label']}: {text(e)}" for e in ranked[1:]]
+    return f" ({'; '.join(rest)})" if rest else ""
+
+
 def carriers(influence: dict, sensors: list[str], priors: dict) -> list[str]:
-    """The sentences on scale, heading and position (module docstring); empty without an influence table."""
+    """The sentences on scale, heading and position (module docstring); empty without an influence table.
+
+    Each names the input the fused track depends on most for that quantity, with the figure, and the others'
+    figures after it: leaving an input out also changes what the consistency check can judge (without a third
+    heading source it cannot tell which of two disagreeing ones lies), so the ranking is of the whole effect."""
     entries = influence.get("inputs") or []
     out = []
-    fatal = [e for e in entries if e.get("error")]
-    for e in fatal:
+    for e in (e for e in entries if e.get("error")):
         out.append(f"Without the {e['label']} nothing can be fused ({e['error']}): it carries the whole estimate.")
-    scale = _usable(entries, "distance_pct")
+    scale = sorted(_usable(entries, "distance_pct"), key=lambda e: -abs(e["distance_pct"]))
     if scale:
-        top = max(scale, key=lambda e: abs(e["distance_pct"]))
-        text = (f"Scale: the {top['label']} carries it; leaving it out changes the distance travelled by "
-                f"{top['distance_pct']:+.3g} %.")
-        both = "visual_scale" in priors and "wheel_scale" in priors
-        if both:
+        text = (f"Scale: carried by the {scale[0]['label']}; leaving it out changes the distance travelled by "
+                f"{figure(scale[0]['distance_pct'], True)} %" + _others(scale, lambda e: f"{figure(e['distance_pct'], True)} %") + ".")
+        if "visual_scale" in priors and "wheel_scale" in priors:
             sv, sr = priors["visual_scale"]["sigma"], priors["wheel_scale"]["sigma"]
             text += (f" Camera and wheels measure only the ratio of their scales; their common scale rests on the "
                      f"tighter prior: the {'camera height' if sv < sr else 'wheel radius'} "
                      f"(\u03c3 {100 * min(sv, sr):.2g} % against {100 * max(sv, sr):.2g} %).")
         out.append(text)
-    heading = _usable(entries, "heading_rms_deg")
+    heading = sorted(_usable(entries, "heading_rms_deg"), key=lambda e: -e["heading_rms_deg"])
     if heading:
-        top = max(heading, key=lambda e: e["heading_rms_deg"])
-        out.append(f"Heading: the {top['label']} carries it; leaving it out turns the fused heading by "
-                   f"{top['heading_rms_deg']:.3g} deg RMS ({top['heading_end_deg']:+.3g} deg at the end).")
-    position = _usable(entries, "rms_m")
+        out.append(f"Heading: depends most on the {heading[0]['label']}; leaving it out turns the fused heading by "
+                   f"{figure(heading[0]['heading_rms_deg'])} deg RMS, {figure(heading[0]['heading_end_deg'], True)} deg at "
+                   "the end" + _others(heading, lambda e: f"{figure(e['heading_rms_deg'])} deg") + ".")
+    position = sorted(_usable(entries, "rms_m"), key=lambda e: -e["rms_m"])
     if "gps" in sensors:
         out.append("Position: the GPS fixes hold it in the world frame (East-North-Up at their datum); between fixes "
                    "the other inputs carry it.")
     elif position:
-        top = max(position, key=lambda e: e["rms_m"])
-        out.append(f"Position: dead reckoned, nothing in this run measures it; the {top['label']} moves it most: "
-                   f"without it the fused track is {length(top['rms_m'])} RMS from this one "
-                   f"({length(top['end_m'])} at the end).")
+        out.append(f"Position: dead reckoned, nothing in this run measures it; it depends most on the "
+                   f"{position[0]['label']}: without it the fused track is {length(position[0]['rms_m'])} RMS from this "
+                   f"one, {length(position[0]['end_m'])} at the end" + _others(position, lambda e: length(e["rms_m"]))
+                   + ".")
     quiet = [e["label"] for e in position if e["rms_m"] < NEGLIGIBLE_M and e.get("heading_rms_deg", 0.0) < NEGLIGIBLE_DEG]
     if quiet:
         out.append(f"No measurable influence ({length(NEGLIGIBLE_M)} and {NEGLIGIBLE_DEG:g} deg RMS): "
                    f"{', '.join(quiet)}; the other inputs already determine what {'it measures' if len(quiet) == 1 else 'they measure'}.")
     return out
-
-
-#: the consistency check's names of the streams, in words
-STREAM_WORDS = {"gyro": "gyro", "ahrs": "AHRS", "wheel": "wheels", "camera": "camera", "imu": "IMU"}
-POSSESSIVE = {"wheel": "wheels'", "imu": "IMU's", "camera": "camera's"}
-
-
-def stream_words(names: str, twist: bool = False) -> str:
-    """``"gyro, ahrs"`` -> ``"gyro and AHRS"`` (the wheels are the odometry twist on a robot that has one)."""
-    words = [STREAM_WORDS.get(n.strip(), n.strip()) for n in str(names).split("(")[0].split(",") if n.strip()]
-    if twist:
-        words = ["odometry twist" if w == "wheels" else w for w in words]
-    tail = f" ({str(names).split('(', 1)[1]}" if "(" in str(names) else ""
-    return (" and ".join([", ".join(words[:-1]), words[-1]]) if len(words) > 1 else "".join(words)) + tail
 
 
 def unused(episodes: list[dict], t0: float, t1: float, twist: bool = False) -> list[str]:

@@ -59,9 +59,9 @@ def test_a_run_without_ground_truth_has_a_report_with_every_section(jackal):
 def test_the_verdict_says_what_carries_the_estimate_and_what_was_left_out(jackal):
     _, out = jackal
     verdict = [unescape(v) for v in re.findall(r"<li>(.*?)</li>", section((out / "report.html").read_text(), "In short"))]
-    assert any(v.startswith("Scale: the odometry twist carries it; leaving it out changes the distance travelled "
+    assert any(v.startswith("Scale: carried by the odometry twist; leaving it out changes the distance travelled "
                             "by -100 %") for v in verdict), verdict
-    assert any(v.startswith("Heading: the IMU (gyro and AHRS) carries it") for v in verdict), verdict
+    assert any(v.startswith("Heading: depends most on the IMU (gyro and AHRS)") for v in verdict), verdict
     assert any(v.startswith("The odometry twist's yaw rate was not used at all: it contradicted the gyro and AHRS "
                             "over the whole recording") for v in verdict), verdict
     summary = json.loads((out / "summary.json").read_text())
@@ -122,7 +122,7 @@ def test_evaluate_rebuilds_the_same_report_from_the_folder(jackal, tmp_path, cap
     (copy / "report.html").unlink()
     assert main(["evaluate", str(copy)]) == 0
     printed = capsys.readouterr().out
-    assert "verdict: Scale: the odometry twist carries it" in printed and "no ground truth and no GPS fixes" in printed
+    assert "verdict: Scale: carried by the odometry twist" in printed and "no ground truth and no GPS fixes" in printed
     after = {p.name: p.read_bytes() for p in copy.iterdir() if p.suffix in (".html", ".png")}
     assert after == before
 
@@ -183,4 +183,4 @@ def test_compare_runs_without_ground_truth(jackal, tmp_path, capsys):
     assert table["moved"]["ekf_smoothed"]["diff_rms_m"] == pytest.approx(0.0, abs=1e-9)
     assert "ate_m" not in table["out"]["ekf"]
     assert (tmp_path / "cmp" / "compare_differences.png").read_bytes().startswith(b"\x89PNG")
-    assert "Distance from the same trajectory of out" in printed and printed.count("Scale: the odometry twist") == 2
+    assert "Distance from the same trajectory of out" in printed and printed.count("Scale: carried by the odometry twist") == 2
