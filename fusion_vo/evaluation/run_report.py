@@ -174,8 +174,8 @@ def title_of(folder: RunFolder, name: str) -> tuple[str, str]:
 
         try:
             sim = load_yaml(Path(str(named)) / "simulation.yaml")
-            described = (f"generated: {sim.get('profile')} drive, seed {sim.get('seed')}, "
-                         f"{(sim.get('summary') or {}).get('duration_s', '?')} s")
+            described = (f"a generated recording ({sim.get('profile')} drive, seed {sim.get('seed')}, "
+                         f"{(sim.get('summary') or {}).get('duration_s', '?')} s)")
         except InputError:
             described = ""
     sensors = sensors_of(folder)
