@@ -126,7 +126,7 @@ def _informed(key: str, prior: dict, estimate: dict) -> str:
     moved = (mean - mean0) / sigma0
     if ratio > 0.9 and abs(moved) < 0.5:
         return f"no: the prior stands (\u03c3 {100 * ratio:.0f} % of the prior's)"
-    return f"yes: \u03c3 {100 * ratio:.2g} % of the prior's, moved {moved:+.2g} prior \u03c3"
+    return f"yes: \u03c3 {100 * ratio:.2g} % of the prior's, moved {figure(moved, True)} prior \u03c3"
 
 
 # --------------------------------------------------------------------------- dropped and gated

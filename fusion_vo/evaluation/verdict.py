@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 
-from fusion_vo.evaluation.run_tables import POSSESSIVE, STREAM_WORDS, figure, length, stream_words
+from fusion_vo.evaluation.run_tables import POSSESSIVE, figure, length, stream_words
 
 #: below these the influence of an input is not measurable (RMS of the position and heading differences)
 NEGLIGIBLE_M = 1e-4
