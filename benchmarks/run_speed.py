@@ -52,7 +52,7 @@ from common import Stages, load, parser, standard, table, work_dir
 
 from fusion_vo import pipeline
 from fusion_vo.config import RunConfig
-from fusion_vo.evaluation import evaluate as ev, plots
+from fusion_vo.evaluation import evaluate as ev, figures, influence, plots, run_report
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording, write_tum
@@ -130,11 +130,13 @@ def in_process(seq: Path, evaluate: bool, out: Path) -> tuple[Stages, dict, floa
     for name in ("write_tum", "write_pose_covariances", "write_velocities", "write_atomic"):
         stages.wrap(pipeline, name, "writing outputs")
     stages.wrap(ev, "evaluate_trajectories", "evaluation: metrics")
-    for name in dir(plots):
-        if name.startswith("plot_"):
-            stages.wrap(plots, name, "evaluation: figures")
-    stages.wrap(ev, "write_report", "evaluation: report")
-    stages.wrap(pipeline, "_evaluate", "evaluation: the rest (imports, reading)")
+    for module in (plots, figures):
+        for name in dir(module):
+            if name.startswith("plot_"):
+                stages.wrap(module, name, "evaluation: figures")
+    stages.wrap(influence, "leave_one_out", "report: influence (fused without each input)")
+    stages.wrap(run_report, "write_report", "evaluation: report")
+    stages.wrap(run_report, "build_report", "evaluation: the rest (imports, reading)")
     try:
         w, c = time.perf_counter(), time.process_time()
         summary = pipeline.run_pipeline(seq, out, RunConfig(backend="all", evaluate=evaluate), force=True)

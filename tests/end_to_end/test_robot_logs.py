@@ -108,6 +108,13 @@ def test_husky_imu_imported_without_its_mounting_is_named(tmp_path):
     seq, out = tmp_path / "SEQ", tmp_path / "OUT"
     assert main(["import-bag", str(DATA / "test1.bag"), str(seq)]) == 0
     assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "ekf"]) == 0
-    notes = json.loads((out / "summary.json").read_text())["notes"]
+    summary = json.loads((out / "summary.json").read_text())
+    notes = summary["notes"]
     hints = [n for n in notes if "T_BS" in n]
     assert len(hints) == 1 and "gyro's +y axis follows the yaw rate of the wheels" in hints[0], notes
+    # each dropped span names the sources its own component contradicted (the AHRS's were labelled "wheel, ahrs",
+    # with the gyro's NIS, while the gyro stayed dropped)
+    own = {"gyro yaw rate": "gyro", "AHRS heading": "ahrs", "yaw rate": "wheel"}
+    episodes = summary["fusion"]["inconsistent"]
+    assert any(e["component"] == "AHRS heading" for e in episodes), episodes
+    assert all(own[e["component"]] not in e["against"].split(", ") for e in episodes), episodes
