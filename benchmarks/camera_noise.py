@@ -4,39 +4,36 @@ For each standard generated recording named (default: square, circle, random60, 
 this generates two calibration drives of the same profile and options with other seeds (``seed + 1000 i``),
 measures the KLT frontend's heading noise on them (:func:`fusion_vo.calibration.camera_noise.calibrate`, what
 ``fusion-vo calibrate camera-noise`` does), and then, on the recording itself and on ``--seeds`` more of its
-seeds (``seed + 100 i``, as ``fusion_vs_best.py --seeds`` uses), runs visual odometry once (default
+seeds (``seed + 100 i``, as ``fusion.py --seeds`` uses), runs visual odometry once (default
 configuration) and fuses its increments (all sensors but GPS, default configuration, every backend) twice:
 as the frontend states them (``default``) and with the calibrated model applied
 (:meth:`~fusion_vo.calibration.camera_noise.CameraNoise.apply`, what a run does when ``cam0/sensor.yaml``
 states it). It prints the ATE [mm] of visual odometry and of each fused track (EKF / RTS / GTSAM batch /
 iSAM2), and per recording, over its seeds (and over all the drives), each variant's mean ATE relative to
 visual odometry, on how many seeds each fused track is at most visual odometry's, and how often the RTS
-smoother is at most the EKF and the batch at most iSAM2.
+smoother is at most the EKF and the batch at most iSAM2. The baseline is visual odometry alone, the best
+single sensor on these drives, and the default fusion beside it.
 
-Run::
+Usage::
 
-    python benchmarks/camera_noise.py [--out DIR] [--only square,tilted] [--seeds N] [--calibration-drives K]
+    python benchmarks/camera_noise.py [--only square,tilted] [--seeds N] [--calibration-drives K] [--out DIR]
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from common import FUSED, add_out, ate_against, names, parser, standard, work_dir
 
 from fusion_vo import backends
 from fusion_vo.calibration.camera_noise import calibrate
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import STANDARD
-
-sys.path.insert(0, str(Path(__file__).parent))
-from fusion_vs_best import FUSED, ate_against, recording  # noqa: E402
 
 DEFAULT_SET = "square,circle,random60,gps_outage,tilted,short"
 
@@ -64,45 +61,41 @@ def summary(rows: list[dict]) -> list[str]:
         rts = int(np.sum(ate[:, 1] <= ate[:, 0]))
         batch = int(np.sum(ate[:, 2] <= ate[:, 3]))
         out.append(f"    {label:10s} mean vs visual odometry " + " / ".join(f"{v:+.1f} %" for v in rel)
-                   + f"; at most it on " + " / ".join(str(int(n)) for n in at_most) + f" of {len(rows)} seeds"
+                   + "; at most it on " + " / ".join(str(int(n)) for n in at_most) + f" of {len(rows)} seeds"
                    + f"; RTS <= EKF on {rts}, batch <= iSAM2 on {batch}")
     return out
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, help="keep the recordings here and reuse them (default: a temporary folder)")
-    parser.add_argument("--only", default=DEFAULT_SET, help=f"comma-separated standard recordings (default {DEFAULT_SET})")
-    parser.add_argument("--seeds", type=int, default=2, help="other seeds of each recording (default 2)")
-    parser.add_argument("--calibration-drives", type=int, default=2, help="drives to calibrate on (default 2)")
-    args = parser.parse_args(argv)
-    out = args.out or Path(tempfile.mkdtemp(prefix="camera_noise_"))
-    try:
-        print("ATE [mm]: visual odometry | default EKF / RTS / batch / iSAM2 | calibrated EKF / RTS / batch / iSAM2")
-        every = []
-        for name in args.only.split(","):
-            profile, seed, options, _ = STANDARD[name]
-            drives = [Recording(recording(out, f"{name}_calibration{i}", profile, seed + 1000 * i, options))
+    ap = parser(__doc__)
+    ap.add_argument("--only", help=f"comma-separated standard recordings (default {DEFAULT_SET})")
+    ap.add_argument("--seeds", type=int, default=2, help="other seeds of each recording (default 2)")
+    ap.add_argument("--calibration-drives", type=int, default=2, help="drives to calibrate on (default 2)")
+    add_out(ap)
+    args = ap.parse_args(argv)
+    chosen = names(args.only, DEFAULT_SET.split(","))
+    print("ATE [mm]: visual odometry | default EKF / RTS / batch / iSAM2 | calibrated EKF / RTS / batch / iSAM2")
+    every = []
+    with work_dir(args.out, "camera-noise-") as out:
+        for name in chosen:
+            drives = [Recording(standard(out, name, 1000 * i, f"_calibration{i}"))
                       for i in range(1, args.calibration_drives + 1)]
             noise = calibrate(drives)
             print(f"{name}: {noise.describe()}", flush=True)
             rows = []
             for i in range(args.seeds + 1):
-                seq = recording(out, name if i == 0 else f"{name}_seed{i}", profile, seed + 100 * i, options)
+                seq = standard(out, name, 100 * i, "" if i == 0 else f"_seed{STANDARD[name][1] + 100 * i}")
                 row = one_seed(seq, noise)
                 rows.append(row)
-                print(f"  seed {seed + 100 * i}: {row['vo']:.4f} | " + " / ".join(f"{v:.4f}" for v in row["default"])
+                print(f"  seed +{100 * i}: {row['vo']:.4f} | " + " / ".join(f"{v:.4f}" for v in row["default"])
                       + " | " + " / ".join(f"{v:.4f}" for v in row["calibrated"]), flush=True)
             print("\n".join(summary(rows)), flush=True)
             every.extend(rows)
-        if len(args.only.split(",")) > 1:
-            print(f"all {len(every)} drives:")
-            print("\n".join(summary(every)), flush=True)
-    finally:
-        if args.out is None:
-            shutil.rmtree(out, ignore_errors=True)
+    if len(chosen) > 1:
+        print(f"all {len(every)} drives:")
+        print("\n".join(summary(every)), flush=True)
     return 0
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(main())

@@ -1,236 +1,63 @@
-"""Monte-Carlo consistency of the fused covariances: average NEES of (x, y, yaw) against the truth.
+"""Monte-Carlo consistency of the fused covariances (NEES) and of each sensor's noise model (NIS).
 
-Each seed generates a drive with known sensor noise (:func:`fusion_vo.sensors.synthetic.synthetic_streams`:
-camera increments, wheel encoders, gyro; no images, so a seed takes a fraction of a second) and
-calibration errors drawn from the priors the backends are given (:func:`drawn_options`), fuses it
-with both backends (default configuration) and compares every fused pose with the truth, the track
-anchored at the start as the backends are::
+Each of ``--seeds`` seeds generates a ``--duration`` drive with known sensor noise (camera increments, wheel
+encoders, gyro; no images, so a seed takes a fraction of a second) and calibration errors drawn from the
+priors the backends are given, fuses it with every backend and compares every fused pose with the truth
+(``fusion_vo.evaluation.consistency``, whose docstring states the statistics). Printed per backend: the NEES of
+(x, y, yaw) averaged over the seeds and the poses (the first second skipped), its median, the share of times
+at which the seed-average lies inside the 95 % band of a consistent estimator (3 in expectation), and the
+verdict; then per sensor and backend the same for the NIS, against its own degrees of freedom (camera and
+wheels 3, gyro 1). The baseline is the chi-square band itself: where a consistent estimator's average lies.
 
-    e_k = (x̂_k - x_k, ŷ_k - y_k, wrap(ψ̂_k - ψ_k)),     NEES_k = e_kᵀ P_k⁻¹ e_k
-
-(``P_k`` the pose covariance the backend reports, the same numbers ``fusion-vo run`` writes to
-``NAME.cov.csv``). For a consistent estimator ``NEES_k`` is chi-square with 3 degrees of freedom: its
-average over ``N`` seeds at one time lies in the 95 % band ``[χ²₃ₙ(0.025), χ²₃ₙ(0.975)] / N``. The table
-prints, per backend, the NEES averaged over seeds and over the poses (the first second skipped: the
-anchored start has no error), the fraction of times at which the seed-average lies inside the band,
-and the band. A NEES above the band means the claimed uncertainty is too small (overconfident);
-below, too large.
-
-Beside the pose NEES the table prints a normalised innovation squared (NIS) per sensor, from the
-EKF's own measurement blocks (:func:`fusion_vo.backends.ekf.step_blocks`): each block of a step is
-tested against the state predicted *and updated with the other sensors of that step*,
-``r = y - H δx₋ᵢ``, ``NIS = rᵀ (H P₋ᵢ Hᵀ + R)⁻¹ r``. Against the prediction alone the innovation
-covariance of every sensor is dominated by the constant-twist model's process noise, so a sensor whose
-stated noise is ten times too small would not show; against the other sensors it does. For a
-consistent sensor model the NIS is chi-square with the block's size as degrees of freedom (camera and
-wheels 3, gyro 1) and its seed-average at one time lies in ``[χ²ₘₙ(0.025), χ²ₘₙ(0.975)] / N``. Above the
-band the sensor's stated noise is too small for what it measures; below, too large.
-
-The factor graph has no innovations; its NIS is each sensor's residual at the solution normalised by the
-residual's own covariance, ``rᵀ (R - H P Hᵀ)⁻¹ r`` (:mod:`fusion_vo.backends.residuals`; the same
-leave-one-out statistic, against every other measurement of the drive), for GTSAM batch at its solution
-and iSAM2 at its final estimate, every fifth node (``GraphConfig.residuals``, which changes no estimate).
+``--config`` and ``--set`` change the backends' configuration (its ``fusion`` section), e.g. ``--set
+fusion.visual_frame_error=0.5`` (a correlation the drives do not have: every backend should come out
+overconfident) or ``--set fusion.ekf.visual_scale_random_walk=1e-4``.
 
 Usage::
 
-    python benchmarks/consistency.py [--seeds 25] [--duration 30] [--visual-frame-error F] [--visual-noise]
-        [--visual-scale-random-walk Q]
+    python benchmarks/consistency.py [--seeds 25] [--duration 30] [--config FILE] [--set KEY=VALUE ...]
 """
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import sys
 import time
 
 import numpy as np
-from scipy.stats import chi2
 
-from fusion_vo.backends import FusionConfig, SensorStreams, fuse
-from fusion_vo.backends import ekf as ekf_mod
-from fusion_vo.backends.batch import with_recorded_noise
-from fusion_vo.backends.timeline import build_intervals
-from fusion_vo.geometry import se2
-from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+from common import add_settings, describe_settings, fusion_settings, parser, table
 
-FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
-
-
-def nees_track(track, cov: np.ndarray, truth) -> np.ndarray:
-    """NEES (N,) of each pose of ``track`` with covariances ``cov`` (N, 3, 3) against ``truth``."""
-    gt = np.stack([np.interp(track.t, truth.t, truth.xyyaw[:, i]) for i in range(2)], axis=1)
-    yaw = np.interp(track.t, truth.t, np.unwrap(truth.xyyaw[:, 2]))
-    e = np.column_stack([track.xyyaw[:, :2] - gt, se2.wrap_angle(track.xyyaw[:, 2] - yaw)])
-    out = np.full(len(e), np.nan)
-    for k in range(len(e)):
-        try:
-            out[k] = float(e[k] @ np.linalg.solve(cov[k], e[k]))
-        except np.linalg.LinAlgError:
-            pass
-    return out
-
-
-#: the calibration each seed's drive states ([m]: 1 mm of a 0.1 m camera height, 0.25 mm of a 5 cm wheel radius)
-HEIGHT_SIGMA = 1e-3
-RADIUS_SIGMA = 2.5e-4
-
-
-def drawn_options(duration: float, seed: int) -> SyntheticOptions:
-    """A drive whose calibration errors are drawn from the priors the backends are given: camera height
-    (``HEIGHT_SIGMA``), common wheel radius (``RADIUS_SIGMA``), wheel base (``wheel_base_sigma``) and gyro
-    bias (``imu.gyro_bias_sigma``). A Monte-Carlo NEES is only chi-square when every uncertain quantity the
-    covariance accounts for is drawn from its prior; with exact calibrations the claimed scale and bias
-    uncertainty would make every backend look pessimistic."""
-    base = SyntheticOptions(duration=duration)
-    cfg = FusionConfig()
-    rng = np.random.default_rng(10_000 + seed)
-    z = rng.standard_normal(4)
-    h_true = base.camera_height + HEIGHT_SIGMA * z[0]
-    return dataclasses.replace(base, visual_scale=base.camera_height / h_true,
-                               wheel_radius_factor=1.0 + RADIUS_SIGMA / base.wheel_radius * z[1],
-                               wheel_base_factor=1.0 + cfg.wheel_base_sigma * z[2],
-                               gyro_bias=cfg.imu.gyro_bias_sigma * z[3])
-
-
-def leave_one_out_nis(P: np.ndarray, blocks: list) -> list[tuple[str, int, float]]:
-    """``(sensor, dof, NIS)`` of each block of one EKF step against the prediction updated with the other blocks."""
-    rows = []
-    for sensor, z, h, H, R, angle in blocks:
-        y = np.asarray(z, dtype=float) - h
-        if angle is not None:
-            y[angle] = se2.wrap_angle(y[angle])
-        rows.append((sensor, y, H, R))
-    out = []
-    for i, (sensor, y, H, R) in enumerate(rows):
-        others = [r for j, r in enumerate(rows) if j != i]
-        dx, Pi = np.zeros(P.shape[0]), P
-        if others:
-            Ho = np.vstack([r[2] for r in others])
-            yo = np.concatenate([r[1] for r in others])
-            Ro = np.zeros((len(yo), len(yo)))
-            a = 0
-            for r in others:
-                m = len(r[1])
-                Ro[a:a + m, a:a + m] = r[3]
-                a += m
-            K = np.linalg.solve(Ho @ P @ Ho.T + Ro, Ho @ P).T
-            dx, Pi = K @ yo, P - K @ Ho @ P
-        r = y - H @ dx
-        out.append((sensor, len(y), float(r @ np.linalg.solve(H @ Pi @ H.T + R, r))))
-    return out
-
-
-def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int, np.ndarray]]:
-    """Sensor -> (dof, (M, 2) rows ``(t, NIS)``) over one EKF pass (:func:`leave_one_out_nis` at every step)."""
-    config = with_recorded_noise(config, streams)
-    iv = build_intervals(streams, config)
-    kv, kb = ekf_mod.calibration_observable(iv)
-    f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                          camera=len(iv.vis_i0) > 0, frame_error=iv.visual_frame_error)
-    meas = ekf_mod.interval_measurements(iv, config)
-    out: dict[str, tuple[int, list]] = {}
-    for k in range(iv.n_steps):
-        f.predict(iv.dt[k], ekf_mod.frame_error_cov(meas, k))
-        blocks = ekf_mod.step_blocks(f, meas, k)
-        for sensor, dof, value in leave_one_out_nis(f.P, blocks):
-            out.setdefault(sensor, (dof, []))[1].append((iv.t[k + 1], value))
-        f.update(blocks)
-    return {k: (m, np.array(v)) for k, (m, v) in out.items()}
-
-
-#: the backends whose per-sensor NIS is printed
-NIS_BACKENDS = ("ekf", "gtsam", "gtsam_online")
-
-
-def with_residuals(config: FusionConfig | None) -> FusionConfig:
-    """``config`` with the factor graph's per-sensor residuals on (no estimate changes)."""
-    config = config or FusionConfig()
-    return dataclasses.replace(config, graph=dataclasses.replace(config.graph, residuals=True))
-
-
-def run(seeds: int, duration: float, sensors=("camera", "wheel", "imu"), config: FusionConfig | None = None,
-        nis: dict | None = None) -> dict[str, np.ndarray]:
-    """Per backend, the NEES of every seed on a common time grid: (seeds, T).
-
-    ``nis``, when given, is filled with each backend's per-sensor NIS on the same grid: backend (``ekf``,
-    ``gtsam``, ``gtsam_online``) -> sensor -> ``(dof, (seeds, T) array)`` (the measurement tested at or just
-    before each grid time).
-    """
-    grid = np.arange(1.0, duration - 0.5, 0.25)
-    out: dict[str, list] = {name: [] for name in FUSED}
-    per_sensor: dict[tuple[str, str], tuple[int, list]] = {}
-    for seed in range(seeds):
-        s = synthetic_streams(drawn_options(duration, seed), seed=seed)
-        wheel = dataclasses.replace(s.wheel, config=dataclasses.replace(s.wheel.config, radius_sigma=RADIUS_SIGMA))
-        streams = SensorStreams(visual=s.visual, wheel=wheel, imu=s.imu, camera_height=s.camera_height,
-                                camera_height_sigma=HEIGHT_SIGMA)
-        result = fuse(streams.select(list(sensors)), "all", config if nis is None else with_residuals(config))
-        for name in FUSED:
-            track = result.trajectories[name]
-            nees = nees_track(track, result.covariances[name], s.truth)
-            out[name].append(np.interp(grid + track.t[0], track.t, nees))
-        if nis is None:
-            continue
-        found = {"ekf": ekf_nis(streams.select(list(sensors)), config or FusionConfig())}
-        found.update(result.residuals)
-        for backend, table in found.items():
-            for sensor, (dof, rows) in table.items():
-                if len(rows) < 2:
-                    continue
-                at = np.clip(np.searchsorted(rows[:, 0], grid + track.t[0], side="right") - 1, 0, len(rows) - 1)
-                per_sensor.setdefault((backend, sensor), (dof, []))[1].append(rows[at, 1])
-    if nis is not None:
-        for (backend, sensor), (m, v) in per_sensor.items():
-            if len(v) == seeds:
-                nis.setdefault(backend, {})[sensor] = (m, np.array(v))
-    return {k: np.array(v) for k, v in out.items()}
-
-
-def band(dof: int, n: int) -> tuple[float, float]:
-    """95 % band of the average of ``n`` chi-square variables with ``dof`` degrees of freedom."""
-    lo, hi = chi2.ppf([0.025, 0.975], dof * n) / n
-    return float(lo), float(hi)
+from fusion_vo.backends import FusionConfig
+from fusion_vo.evaluation.consistency import NIS_BACKENDS, band, run, verdict
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seeds", type=int, default=25)
-    parser.add_argument("--duration", type=float, default=30.0)
-    parser.add_argument("--visual-frame-error", type=float, default=0.0,
-                        help="fusion.visual_frame_error of the backends (the drives' camera errors are independent)")
-    parser.add_argument("--visual-noise", action="store_true",
-                        help="estimate the camera's heading noise from the gyro's (fusion.visual_noise.estimate)")
-    parser.add_argument("--visual-scale-random-walk", type=float, default=None,
-                        help="fusion.ekf.visual_scale_random_walk of the backends (the drives' camera height is "
-                             "constant; default: the configuration's default)")
-    args = parser.parse_args(argv)
+    ap = parser(__doc__)
+    ap.add_argument("--seeds", type=int, default=25)
+    ap.add_argument("--duration", type=float, default=30.0, help="length of each drive [s]")
+    add_settings(ap)
+    args = ap.parse_args(argv)
+    if args.seeds < 1 or args.duration < 3.0:
+        ap.error("--seeds must be at least 1 and --duration at least 3 s")
     t0 = time.process_time()
     nis: dict = {}
-    config = FusionConfig.from_dict({"visual_frame_error": args.visual_frame_error,
-                                     "visual_noise": {"estimate": args.visual_noise}})
-    if args.visual_scale_random_walk is not None:
-        config = dataclasses.replace(config, ekf=dataclasses.replace(
-            config.ekf, visual_scale_random_walk=args.visual_scale_random_walk))
-    nees = run(args.seeds, args.duration, config=config, nis=nis)
+    nees = run(args.seeds, args.duration, config=FusionConfig.from_dict(fusion_settings(args)), nis=nis)
     n = args.seeds
     lo, hi = band(3, n)
     print(f"NEES of (x, y, yaw), {n} seeds of a {args.duration:.0f} s generated drive (camera, wheels, gyro), "
-          f"{time.process_time() - t0:.1f} s CPU")
+          f"{describe_settings(args)}, {time.process_time() - t0:.1f} s CPU")
     print(f"consistent: 3; 95 % band of a {n}-seed average: [{lo:.2f}, {hi:.2f}]")
-    print(f"  {'backend':14s} {'mean NEES':>10s} {'median':>8s} {'in band':>8s}  verdict")
+    rows = []
     for name, v in nees.items():
         avg = np.nanmean(v, axis=0)
         mean = float(np.nanmean(avg))
-        inside = float(np.mean((avg >= lo) & (avg <= hi)))
-        verdict = "consistent" if lo <= mean <= hi else ("overconfident" if mean > hi else "pessimistic")
-        print(f"  {name:14s} {mean:10.2f} {float(np.nanmedian(avg)):8.2f} {100 * inside:7.0f} %  {verdict}")
-    print("NIS per sensor, seed-average against its 95 % band (EKF: each block against the prediction updated "
-          "with the other sensors; GTSAM batch and iSAM2: each sensor's residual at the solution, rᵀ(R - HPHᵀ)⁻¹r)")
-    print(f"  {'sensor':14s} {'backend':14s} {'dof':>4s} {'mean NIS':>9s} {'median':>8s} {'in band':>8s}  "
-          f"{'band':>14s}  verdict")
-    sensors = sorted({sensor for table in nis.values() for sensor in table})
-    for sensor in sensors:
+        rows.append([name, f"{mean:.2f}", f"{float(np.nanmedian(avg)):.2f}",
+                     f"{100 * float(np.mean((avg >= lo) & (avg <= hi))):.0f} %", verdict(mean, lo, hi)])
+    print(table(["backend", "mean NEES", "median", "times inside the band", "verdict"], rows))
+    print("\nNIS per sensor, seed-average against its 95 % band (EKF: each block against the prediction updated with "
+          "the other sensors; GTSAM batch and iSAM2: each sensor's residual at the solution, r'(R - HPH')^-1 r)")
+    rows = []
+    for sensor in sorted({sensor for t in nis.values() for sensor in t}):
         for backend in NIS_BACKENDS:
             if sensor not in nis.get(backend, {}):
                 continue
@@ -238,10 +65,10 @@ def main(argv=None) -> int:
             avg = np.nanmean(v, axis=0)
             mean = float(np.nanmean(avg))
             s_lo, s_hi = band(dof, n)
-            inside = float(np.mean((avg >= s_lo) & (avg <= s_hi)))
-            verdict = "consistent" if s_lo <= mean <= s_hi else ("overconfident" if mean > s_hi else "pessimistic")
-            print(f"  {sensor:14s} {backend:14s} {dof:4d} {mean:9.2f} {float(np.nanmedian(avg)):8.2f} "
-                  f"{100 * inside:7.0f} %  [{s_lo:5.2f}, {s_hi:5.2f}]  {verdict}")
+            rows.append([sensor, backend, dof, f"{mean:.2f}", f"{float(np.nanmedian(avg)):.2f}",
+                         f"{100 * float(np.mean((avg >= s_lo) & (avg <= s_hi))):.0f} %", f"[{s_lo:.2f}, {s_hi:.2f}]",
+                         verdict(mean, s_lo, s_hi)])
+    print(table(["sensor", "backend", "dof", "mean NIS", "median", "times inside the band", "band", "verdict"], rows))
     return 0
 
 

@@ -8,7 +8,8 @@ parking lot: IMU at 30 Hz, wheel odometry at 10 Hz, GPS at 2.5 Hz). The script
 2. dead-reckons the raw wheel odometry, and fuses wheel odometry with the IMU with the project's
    backends (``fusion_vo.backends.fuse``: EKF, RTS-smoothed EKF, GTSAM batch and iSAM2) with their
    default configuration, once with everything the IMU gives (gyro and its AHRS heading) and once
-   with the gyro only; a plain wheel + gyro dead reckoning is printed as a baseline;
+   with the gyro only; a plain wheel + gyro dead reckoning (``fusion_vo.baseline.wheel_gyro``: the gyro's
+   heading less its bias at standstill, the wheels' distance) is printed as a baseline;
 3. aligns each track to the GPS fixes in local East-North-Up with the least-squares rotation and
    translation on the plane (the odometry frame's heading relative to north is unknown), and prints the
    RMS and maximum horizontal distance to the fixes, the distance travelled, and the RMS error as a
@@ -45,14 +46,13 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo import baseline
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation.metrics import align_se2, associate, planar_trajectory
-from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
-from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw
 from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
 
 REPO = Path(__file__).resolve().parents[1]
@@ -76,27 +76,6 @@ def distance_travelled(rec: Recording) -> float:
 def wheel_odometry(rec: Recording) -> PoseData:
     """The robot's own wheel odometry (``odom0`` twist) dead-reckoned from the origin."""
     return wheel_track(twist_to_travel(rec.odom()))
-
-
-def wheel_gyro_dead_reckoning(rec: Recording) -> PoseData:
-    """Wheel distance with the gyro's heading: the fusion without a filter.
-
-    Each odometry interval keeps the wheels' travelled distance and takes its heading change from the
-    integrated body-z gyro rate, minus a bias measured while the odometry reports standstill.
-    """
-    odom, imu = rec.odom(), rec.imu()
-    gyro = gyro_yaw(imu, ImuNoise().with_sensor_keys(imu.noise))
-    still = (np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)
-    still_at_imu = np.interp(gyro.t, odom.t, still.astype(float)) > 0.999
-    bias = float(np.median(gyro.rate[still_at_imu])) if np.count_nonzero(still_at_imu) > 10 else 0.0
-    angle = cumulative_angle(gyro) - bias * (gyro.t - gyro.t[0])
-    travel = twist_to_travel(odom)
-    dist = np.diff(0.5 * (travel.left + travel.right))
-    dyaw = np.diff(np.interp(odom.t, gyro.t, angle))
-    poses = np.zeros((len(odom.t), 3))
-    for k in range(len(dist)):
-        poses[k + 1] = se2.compose(poses[k], se2.exp((dist[k], 0.0, dyaw[k])))
-    return PoseData(odom.t.copy(), poses)
 
 
 #: fusion variants (default configuration otherwise): name -> use the AHRS heading
@@ -164,7 +143,7 @@ def main(argv: list[str] | None = None) -> int:
             t_gps, enu = read_gps(seq)
             path = distance_travelled(rec)
             tracks = {"raw wheel odometry": wheel_odometry(rec),
-                      "wheel + gyro dead reckoning (no filter)": wheel_gyro_dead_reckoning(rec)}
+                      "wheel + gyro dead reckoning (no filter)": baseline.wheel_gyro(rec)}
             fused, notes = fused_tracks(rec, args.backend)
             tracks.update(fused)
     except InputError as exc:

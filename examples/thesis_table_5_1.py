@@ -26,9 +26,8 @@ interval. With ``e_k = |v_k - u_k|`` (Euclidean norm):
 * ``yaw-rate err %``: ``100 * mean|w_k - w_true,k| / mean|w_true,k|`` for the yaw rate;
 * ``failed``: frames the frontend could not use (no estimate; they are left out of the errors).
 
-Beside the frontends, each recording is run through the plain OpenCV script of
-``benchmarks/baseline_opencv.py`` (the baseline of ``benchmarks/bench_realistic.py``, rows ``plain
-script``), scored the same way.
+Beside the frontends, each recording is run through the plain OpenCV script of :mod:`fusion_vo.baseline`
+(the baseline of ``benchmarks/visual.py``, rows ``plain script``), scored the same way.
 
 Run::
 
@@ -41,15 +40,14 @@ blur, noise, auto-exposure); its renderer has no specular highlight, so the spot
 
 from __future__ import annotations
 
-import sys
 import time
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
 from common import (FRONTENDS, LIGHTING, example_parser, fmt, format_table, generate, output_dir, realistic_options,
                     true_twist)
+from fusion_vo import baseline
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
@@ -87,16 +85,11 @@ def velocity_errors(vo: OdometryResult, gt: PoseData) -> dict:
 
 
 def plain_script(rec: Recording) -> tuple[list, int]:
-    """The baseline: ``benchmarks/baseline_opencv.py`` (Shi-Tomasi corners, pyramidal LK, a RANSAC
-    similarity; no undistortion) on the same frames, its similarities turned into body increments through
-    the same ground geometry with a pinhole of the recording's focal length
-    (``bench_realistic.baseline_odometry``). Returns the increments and the frames it failed."""
-    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    if benchmarks not in sys.path:
-        sys.path.insert(0, benchmarks)
-    from bench_realistic import baseline_odometry
-
-    _, increments, results, _ = baseline_odometry(rec)
+    """The baseline: the plain OpenCV script of :mod:`fusion_vo.baseline` (Shi-Tomasi corners, pyramidal LK,
+    a RANSAC similarity; no undistortion) on the same frames, its similarities turned into body increments
+    through the same ground geometry with a pinhole of the recording's focal length
+    (:func:`fusion_vo.baseline.odometry`). Returns the increments and the frames it failed."""
+    _, increments, results, _ = baseline.odometry(rec)
     return increments, sum(m is None for _, _, m in results)
 
 

@@ -1,139 +1,193 @@
-"""Shared helpers for configuration dataclasses: ``from_dict``/``to_dict`` and the ranges of number fields."""
+"""Configuration models: pydantic models whose fields carry their default, range, unit and description.
+
+Every settings class of the frontends derives from :class:`Settings`, and each of its options is one
+field, defined once::
+
+    class Example(Settings):
+        window: Int = Field(13, ge=5, le=101, description="Tracking window side [px].")
+
+The unit is written in square brackets in the description. Checks that involve several fields (or
+one field beyond a range) are ``model_validator`` methods raising ``ValueError`` with a sentence that
+names the field. A model
+
+* is immutable (``frozen``), so one configuration can be shared by threads and frontends;
+* rejects unknown keys, non-finite numbers and ``true``/``false`` where a number belongs, and checks
+  its own defaults;
+* raises :class:`ConfigError` (a ``ValueError``) in one line naming the key when a value cannot work::
+
+      KltConfig: lk_iterations must be at least 1, not 0
+      KltConfig: max_tracks: expected an integer, got 'many'
+
+:func:`describe_error` words a pydantic error this way for any model, also when the model is a
+section of a larger one (the location is then its key path: ``klt: lk_iterations must be ...``).
+"""
 
 from __future__ import annotations
 
-import dataclasses
-import math
-import numbers
+import inspect
 from collections.abc import Mapping
-from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Annotated, Any, Self
 
-T = TypeVar("T", bound="ConfigMixin")
+from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
+from pydantic_core import ErrorDetails, PydanticCustomError
+
+#: pydantic error types -> the expected kind of value, in words
+EXPECTED = {
+    "float_parsing": "a number", "float_type": "a number",
+    "int_parsing": "an integer", "int_type": "an integer", "int_from_float": "an integer",
+    "bool_parsing": "true or false", "bool_type": "true or false",
+    "string_type": "a string", "list_type": "a list", "tuple_type": "a list", "set_type": "a list",
+    "dict_type": "a mapping of key: value", "model_type": "a mapping of key: value",
+    "model_attributes_type": "a mapping of key: value", "dataclass_type": "a mapping of key: value",
+}
 
 
-class ConfigMixin:
-    """Adds :meth:`from_dict` and :meth:`to_dict` to a configuration dataclass."""
+class ConfigError(ValueError):
+    """A configuration value that cannot work; the message is one line naming the key."""
+
+
+def not_a_bool(error_type: str) -> BeforeValidator:
+    """A validator refusing ``true``/``false`` where a number belongs (pydantic's lax mode reads them as 1
+    and 0); ``error_type`` is the pydantic error type reported (``"int_type"`` or ``"float_type"``)."""
+
+    def check(value: Any) -> Any:
+        if isinstance(value, bool):
+            raise PydanticCustomError(error_type, "Input should be a number, not true or false")
+        return value
+
+    return BeforeValidator(check)
+
+
+#: the validators of an integer and of a number option; a range given in the same ``Annotated`` goes before
+#: them (``Annotated[float, Field(gt=0), NUMBER]``), so that the JSON schema states it
+INTEGER = not_a_bool("int_type")
+NUMBER = not_a_bool("float_type")
+#: an integer option (not ``true``/``false``), its range given by its ``Field``
+Int = Annotated[int, INTEGER]
+#: a number option (not ``true``/``false``; finite, as every float of a :class:`Settings` model)
+Float = Annotated[float, NUMBER]
+
+
+class _OneLineErrors(type(BaseModel)):
+    """Building a model directly (``Model(**values)``) raises :class:`ConfigError` in one line instead of
+    pydantic's ``ValidationError``. (Not ``__init__``: pydantic also calls an overridden ``__init__`` when the
+    model is a section of a larger one, whose errors must keep their key path.)"""
+
+    def __call__(cls, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().__call__(*args, **kwargs)
+        except ValidationError as exc:
+            raise ConfigError(f"{cls.__name__}: {one_line(exc, cls)}") from None
+
+
+class Settings(BaseModel, metaclass=_OneLineErrors):
+    """Base of a configuration model (see the module description).
+
+    ``Settings(**values)`` and :meth:`from_dict` raise :class:`ConfigError` for a value that cannot
+    work; a model nested in a larger one reports its errors there, at their key path.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False, validate_default=True)
 
     @classmethod
-    def from_dict(cls: type[T], values: dict[str, Any] | None) -> T:
-        """Build the configuration from a plain mapping (e.g. a YAML section) through the package's one
-        configuration schema (:func:`fusion_vo.schema.build`), which also serves ``fusion-vo run``.
+    def from_dict(cls, values: Mapping[str, Any] | None) -> Self:
+        """The configuration from a plain mapping (e.g. a YAML section); keys left out keep their defaults.
 
         Raises
         ------
-        ValueError
-            For a key that is not a field, a value of the wrong type (the message names the key and the
-            expected type) or a value the configuration rejects.
+        ConfigError
+            For an unknown key, a value of the wrong type (the message names the key and the expected
+            type) or a value out of its range.
         """
-        from fusion_vo import schema  # the frontends themselves need nothing else of fusion_vo
-        from fusion_vo.errors import InputError
-
+        if values is not None and not isinstance(values, Mapping):
+            raise ConfigError(f"{cls.__name__}: expected a mapping of key: value, got {shown(values)}")
         try:
-            return schema.build(cls, values or {})
-        except InputError as exc:
-            raise ValueError(f"{cls.__name__}: {exc.message}") from None
+            return cls.model_validate(dict(values or {}))
+        except ValidationError as exc:
+            raise ConfigError(f"{cls.__name__}: {one_line(exc, cls)}") from None
 
     def to_dict(self) -> dict[str, Any]:
         """The configuration as a plain mapping (round-trips through :meth:`from_dict`)."""
-        return dataclasses.asdict(self)  # type: ignore[call-overload]
+        return self.model_dump()
 
 
-@dataclass(frozen=True)
-class Range:
-    """The values a number field can take: from ``low`` to ``high`` (either end open or left out).
-
-    A configuration dataclass lists its fields' ranges in a class-level table (``RANGES``, field name ->
-    :class:`Range`) that its ``__post_init__`` checks with :func:`check_ranges`, so that a value that
-    cannot work is an error naming the key rather than a silently wrong result.
-
-    Attributes
-    ----------
-    low, high : float or None
-        Smallest and largest value (``None``: no bound).
-    open_low, open_high : bool
-        Whether ``low`` (``high``) itself is excluded.
-    """
-
-    low: float | None = None
-    high: float | None = None
-    open_low: bool = False
-    open_high: bool = False
-
-    def contains(self, value: float) -> bool:
-        """Whether ``value`` (a finite number) lies in the range."""
-        if self.low is not None and (value <= self.low if self.open_low else value < self.low):
-            return False
-        return self.high is None or (value < self.high if self.open_high else value <= self.high)
-
-    def describe(self) -> str:
-        """The range in words: ``at least 1``, ``positive``, ``in [0, 1]`` ..."""
-        if self.high is None:
-            if self.low is None:
-                return "a finite number"
-            if self.open_low:
-                return "positive" if self.low == 0 else f"greater than {_number(self.low)}"
-            return f"at least {_number(self.low)}"
-        if self.low is None:
-            return f"below {_number(self.high)}" if self.open_high else f"at most {_number(self.high)}"
-        return (f"in {'(' if self.open_low else '['}{_number(self.low)}, {_number(self.high)}"
-                f"{')' if self.open_high else ']'}")
-
-    def json_schema(self) -> dict[str, float]:
-        """The range as JSON-schema keywords (``minimum``, ``exclusiveMaximum`` ...)."""
-        out = {}
-        if self.low is not None:
-            out["exclusiveMinimum" if self.open_low else "minimum"] = self.low
-        if self.high is not None:
-            out["exclusiveMaximum" if self.open_high else "maximum"] = self.high
-        return out
-
-    def error(self, key: str, value: Any) -> str | None:
-        """The one-line complaint about ``value`` of ``key``, or ``None`` when the value is fine."""
-        if isinstance(value, bool) or not isinstance(value, numbers.Real):
-            wanted = "a finite number" if self == ANY else f"a number {self.describe()}"
-            return f"{key} must be {wanted}, not {value!r}"
-        if not math.isfinite(value):
-            return f"{key} must be a finite number, not {value}"
-        if not self.contains(value):
-            return f"{key} must be {self.describe()}, not {value}"
-        return None
+def location(loc: tuple) -> str:
+    """A key path as written in messages: ``fusion.ekf.accel_sigma``, ``sensors[1]``."""
+    text = ""
+    for part in loc:
+        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
+    return text
 
 
-def _number(value: float) -> str:
+def shown(value: Any) -> str:
+    """A value as quoted in a message (its ``repr``, cut to 40 characters)."""
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def number_text(value: float) -> str:
+    """A bound as written in a message: ``1`` rather than ``1.0``, ``0.1``."""
     return str(int(value)) if float(value).is_integer() else str(value)
 
 
-#: the ranges most fields need
-AT_LEAST_0 = Range(0)
-AT_LEAST_1 = Range(1)
-AT_LEAST_2 = Range(2)
-POSITIVE = Range(0, open_low=True)
-FRACTION = Range(0, 1)
-PROBABILITY = Range(0, 1, open_low=True, open_high=True)
-ANY = Range()
+def _bound(kind: str, ctx: dict) -> str | None:
+    """The range a range error was checking, in words (``None``: not a range error)."""
+    if kind == "greater_than_equal":
+        return f"at least {number_text(ctx['ge'])}"
+    if kind == "greater_than":
+        return "positive" if ctx["gt"] == 0 else f"greater than {number_text(ctx['gt'])}"
+    if kind == "less_than_equal":
+        return f"at most {number_text(ctx['le'])}"
+    if kind == "less_than":
+        return f"below {number_text(ctx['lt'])}"
+    if kind == "finite_number":
+        return "a finite number"
+    return None
 
 
-def check_ranges(config: Any, ranges: Mapping[str, Range]) -> None:
-    """Raise ``ValueError`` for the first field of the dataclass ``config`` that cannot work.
+def _known_keys(model: type[BaseModel] | None, loc: tuple) -> list[str]:
+    """The keys of the (nested) model at ``loc`` (empty when ``loc`` is not a model)."""
+    for part in loc:
+        field = model.model_fields.get(part) if model is not None and isinstance(part, str) else None
+        sub = getattr(field, "annotation", None) if field else None
+        if not (inspect.isclass(sub) and issubclass(sub, BaseModel)):
+            return []
+        model = sub
+    return [] if model is None else list(model.model_fields)
 
-    A field listed in ``ranges`` must lie in its range (``None`` passes: it selects a default); any other
-    number field must be finite. The message names the field: ``lk_iterations must be at least 1, not 0``.
+
+def describe_error(error: ErrorDetails | dict, model: type[BaseModel] | None = None, prefix: tuple = ()) -> str:
+    """One line for one pydantic error of ``model`` (whose own key path is ``prefix``).
+
+    ``key.path: unknown key (known: ...)``, ``key.path: expected an integer, got 'many'``,
+    ``section: key must be at least 1, not 0`` (a value out of its range), ``section: <the message of
+    a model validator>``.
     """
-    for f in dataclasses.fields(config):
-        value = getattr(config, f.name)
-        if value is None:
-            continue
-        if f.name in ranges:
-            message = ranges[f.name].error(f.name, value)
-        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
-            message = ANY.error(f.name, value)
-        else:
-            continue
-        if message:
-            raise ValueError(message)
+    loc = tuple(error.get("loc", ()))
+    where = location(prefix + loc)
+    kind = error.get("type", "")
+    value = error.get("input")
+    bound = _bound(kind, error.get("ctx") or {})
+    if bound is not None:
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        text = f"must be {bound}, not {value if number else shown(value)}"
+        if loc and isinstance(loc[-1], str):  # a field: named in the sentence, after its section
+            parent = location(prefix + loc[:-1])
+            return f"{parent}: {loc[-1]} {text}" if parent else f"{loc[-1]} {text}"
+    elif kind == "extra_forbidden":
+        known = _known_keys(model, loc[:-1])
+        text = "unknown key" + (f" (known: {', '.join(known)})" if known else "")
+    elif kind in EXPECTED:
+        text = f"expected {EXPECTED[kind]}, got {shown(value)}"
+    elif kind == "literal_error":
+        text = f"expected one of {error['ctx']['expected']}, got {shown(value)}"
+    else:
+        text = str(error.get("msg", "invalid value")).removeprefix("Value error, ").removeprefix("Assertion failed, ")
+    return f"{where}: {text}" if where else text
 
 
-def shared_ranges(ranges: Mapping[str, Range], *names: str) -> dict[str, Range]:
-    """The entries ``names`` of another dataclass's table (fields that two configurations share)."""
-    return {name: ranges[name] for name in names}
+def one_line(exc: ValidationError, model: type[BaseModel] | None = None, prefix: tuple = ()) -> str:
+    """The first error of a validation in one line (:func:`describe_error`), and how many more there are."""
+    errors = exc.errors()
+    message = describe_error(errors[0], model, prefix)
+    return message + (f" (and {len(errors) - 1} more)" if len(errors) > 1 else "")

@@ -177,6 +177,62 @@ def spread_corners(image: np.ndarray, mask: np.ndarray, wanted: int, quality: fl
     return np.vstack([chosen[:keep], np.array(extra, np.float32)])
 
 
+def new_corners(image: np.ndarray, existing: np.ndarray, plan: CornerPlan, margin: int, quality: float,
+                min_quality: float, min_count: int, grid_cell: float) -> np.ndarray:
+    """New Shi-Tomasi corners of a full-resolution ``uint8`` ``image``, away from the ``existing`` points.
+
+    Corners are detected on the half-resolution image (``cv2.pyrDown``) by :func:`spread_corners`, inside
+    ``plan.region`` less ``margin`` half-resolution pixels, and not in the cells of a grid of side
+    ``plan.min_distance / 2`` that hold an existing point or neighbour one that does; up to
+    ``plan.max_corners`` points in all.
+
+    Parameters
+    ----------
+    image : ndarray
+    existing : ndarray, shape (n, 2)
+        Points already tracked [px of the full image].
+    plan : CornerPlan
+        The corner settings for this image size (:func:`plan_corners`).
+    margin : int
+        Margin kept inside the region [px of the half-resolution image].
+    quality, min_quality : float
+        First and lowest quality level (:func:`spread_corners`).
+    min_count : int
+        The quality level is lowered while fewer corners than this (or than wanted) come back.
+    grid_cell : float
+        Side of the cells over which the corners are spread [px of the full image] (0: no grid).
+
+    Returns
+    -------
+    ndarray, shape (k, 2), float32
+        The new corners [px of the full image].
+    """
+    half = cv2.pyrDown(image)
+    hh, hw = half.shape
+    x0, y0, x1, y1 = plan.region
+    mask = np.zeros((hh, hw), np.uint8)
+    mask[y0 // 2 + margin : (y1 + 1) // 2 - margin, x0 // 2 + margin : (x1 + 1) // 2 - margin] = 255
+    cell = max(int(plan.min_distance // 2), 1)
+    if len(existing):
+        # blank the grid cells (and their neighbours) holding an existing track
+        gi = np.clip((existing[:, 1] / 2) // cell, 0, (hh - 1) // cell).astype(int)
+        gj = np.clip((existing[:, 0] / 2) // cell, 0, (hw - 1) // cell).astype(int)
+        occ = np.zeros(((hh - 1) // cell + 3, (hw - 1) // cell + 3), bool)
+        for di in (0, 1, 2):
+            for dj in (0, 1, 2):
+                occ[gi + di, gj + dj] = True
+        occ = occ[1:-1, 1:-1]
+        big = np.repeat(np.repeat(occ, cell, axis=0), cell, axis=1)[:hh, :hw]
+        mask[big] = 0
+    wanted = plan.max_corners - len(existing)
+    if wanted <= 0:
+        return np.zeros((0, 2), np.float32)
+    grid = grid_shape((hh, hw), grid_cell / 2) if grid_cell > 0 else (1, 1)
+    corners = spread_corners(half, mask, wanted, quality, min_quality, plan.min_distance / 2, plan.block_size, grid,
+                             min(wanted, min_count))
+    return corners * 2.0
+
+
 #: spread of grey levels (95th minus 5th percentile) of the frames the FAST threshold was chosen on
 REFERENCE_CONTRAST = 120.0
 

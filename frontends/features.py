@@ -27,217 +27,24 @@ import dataclasses
 import threading
 from concurrent.futures import Executor
 from dataclasses import dataclass, field
-from typing import ClassVar
 
 import cv2
 import numpy as np
 
 from frontends.base import FrameMotion, IdentityMap, MotionStatus, PointMap
-from frontends.config import (AT_LEAST_0, AT_LEAST_1, FRACTION, POSITIVE, ConfigMixin, Range, check_ranges,
-                              shared_ranges)
-from frontends.descriptors import DESCRIPTORS, distance_matrix, orb_descriptors, patch_descriptors
-from frontends.direct import DenseFallback, DirectConfig
 from frontends.corners import scale_detector
-from frontends.detectors import DETECTORS, DetectorSettings, detect_corners
-from frontends.frame_check import check_frame, texture_measure
-from frontends.matching import MATCHERS, gate_distances, match_descriptors
+from frontends.descriptors import distance_matrix, orb_descriptors, patch_descriptors
+from frontends.detectors import detect_corners
+from frontends.direct import dense_fallback
+from frontends.features_config import FeatureConfig
+from frontends.frame_check import Prepared, check_frame, grey8, texture_measure
+from frontends.matching import gate_distances, match_descriptors
 from frontends.prediction import MotionHistory, failed_motion, timed_measurement
-from frontends.similarity import RobustOptions, apply_similarity, estimate_similarity, judge_fit
+from frontends.similarity import apply_similarity, estimate_similarity, judge_fit
 from frontends.tracking import (WARP_HERE, LkSettings, exposure_correction, fit_affine, reduce_for_exposure,
                                 track_points, warp_reference)
 
-_DEFAULT_MAX_DISTANCE = {"patch": 0.9, "orb": 80.0}
-
-
-@dataclass
-class FeatureConfig(ConfigMixin):
-    """Settings of :class:`FeatureFrontend` (every field has a working default).
-
-    Attributes
-    ----------
-    detector : str
-        ``"harris"``, ``"shi_tomasi"`` or ``"fast"``.
-    max_corners : int
-        Maximum number of corners kept per frame (thesis: 80).
-    min_quality : float
-        Corner response relative to the strongest one below which corners are dropped (0-1).
-    min_metric : float
-        Absolute minimum corner response (image scaled to [0, 1]; thesis: 0.001; 0 disables).
-    neighbourhood : tuple of int
-        Non-maximum-suppression neighbourhood ``(rows, cols)``, odd [px of the detection image].
-    detect_level : int
-        Corners are detected on the image reduced ``2^detect_level`` times (0: full resolution); the
-        descriptors and the refinement always use the full-resolution image.
-    harris_k : float
-        Harris sensitivity ``k`` in ``det M - k trace(M)^2`` (thesis: 0.001, usual: 0.04).
-    block_size : int
-        Structure tensor neighbourhood [px].
-    fast_threshold : int
-        FAST intensity difference threshold [grey levels].
-    descriptor : str
-        ``"patch"`` (normalised intensity patch) or ``"orb"``.
-    patch_radius : int
-        Half side of the normalised patch [px].
-    matcher : str
-        ``"threshold"``, ``"nearest"`` or ``"ratio"``.
-    max_distance : float or None
-        Largest accepted descriptor distance (``None``: 0.9 for patches, 80 bits for ORB).
-    ratio : float
-        Nearest-neighbour distance ratio limit.
-    mutual : bool
-        Keep only mutually nearest matches.
-    gate_radius : float
-        Matches must lie within this distance of the predicted position [px] (0 disables gating).
-    refine : str
-        ``"lk"``, ``"subpix"`` or ``"none"`` (see the module description).
-    window : int
-        Lucas-Kanade window for ``refine="lk"`` [px].
-    fb_threshold : float
-        Forward-backward limit of the Lucas-Kanade refinement [px].
-    method : str
-        Robust estimator, ``"ransac"`` or ``"lmeds"``.
-    threshold : float
-        Inlier distance for matched corner positions [rectified px].
-    refine_threshold : float
-        Inlier distance after the Lucas-Kanade refinement [rectified px].
-    confidence : float
-        RANSAC confidence.
-    max_iterations : int
-        Maximum number of robust-estimator hypotheses.
-    seed : int
-        Seed of the frontend's own random generator.
-    min_sigma : float
-        Floor of the residual standard deviation used for the covariance [px].
-    min_inliers : int
-        Fewer inliers give ``TOO_FEW_FEATURES``.
-    min_inlier_ratio : float
-        Fewer inliers than this fraction of the matches rejects the estimate.
-    max_abs_log_scale : float
-        Largest plausible ``|log s|`` between consecutive frames.
-    min_spread : float
-        Smallest spread of the inliers along their weakest axis [px] (``DEGENERATE`` below).
-    min_texture_ratio : float
-        A frame whose texture falls below this fraction of the reference frame's is featureless
-        (sudden blur, exposure loss).
-    min_texture : float
-        Smallest mean neighbour difference of a usable frame [grey levels].
-    max_prediction_gap : float
-        The prediction is continued over at most this many times the last interval.
-    max_failures : int
-        Consecutive failures after which the frontend restarts from the current frame.
-    dense_fallback : bool
-        When the corners cannot measure a frame that still has texture, align the whole frames
-        photometrically instead (:class:`frontends.direct.DenseFallback`).
-    verify_below : int
-        A corner estimate with fewer inliers than this is checked against a dense alignment started
-        from it, which replaces it when they disagree by more than ``verify_tolerance`` px (0: never).
-    verify_tolerance : float
-        See ``verify_below`` [px].
-    central_region : float or None
-        Fraction of the width and height, about the image centre, where corners are kept and whose
-        pixels the dense fallback uses (``None``: all, or the central half when the run is
-        ``--uncalibrated``: the distortion of a lens without a model grows with the distance from the
-        centre).
-    adaptive_detector : bool
-        Scale the detector settings, given for 640 x 360, to the frame's size and (FAST) contrast
-        (:func:`frontends.corners.scale_detector`).
-    """
-
-    detector: str = "shi_tomasi"
-    max_corners: int = 150
-    min_quality: float = 0.01
-    min_metric: float = 0.0
-    neighbourhood: tuple[int, int] = (9, 9)
-    detect_level: int = 1
-    harris_k: float = 0.04
-    block_size: int = 3
-    fast_threshold: int = 20
-    descriptor: str = "patch"
-    patch_radius: int = 5
-    matcher: str = "ratio"
-    max_distance: float | None = None
-    ratio: float = 0.8
-    mutual: bool = True
-    gate_radius: float = 40.0
-    refine: str = "lk"
-    window: int = 15
-    fb_threshold: float = 0.5
-    method: str = "ransac"
-    threshold: float = 2.0
-    refine_threshold: float = 1.0
-    confidence: float = 0.999
-    max_iterations: int = 256
-    seed: int = 0
-    min_sigma: float = 0.02
-    min_inliers: int = 10
-    min_inlier_ratio: float = 0.3
-    max_abs_log_scale: float = 0.1
-    min_spread: float = 20.0
-    min_texture: float = 2.0
-    min_texture_ratio: float = 0.35
-    max_prediction_gap: float = 4.0
-    max_failures: int = 3
-    dense_fallback: bool = True
-    verify_below: int = 30
-    verify_tolerance: float = 1.0
-    central_region: float | None = None
-    adaptive_detector: bool = True
-
-    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
-    RANGES: ClassVar[dict[str, Range]] = shared_ranges(RobustOptions.RANGES, "threshold", "confidence",
-                                                       "max_iterations", "min_sigma", "min_inliers",
-                                                       "max_abs_log_scale", "min_spread") | {
-        "max_corners": AT_LEAST_1, "min_quality": FRACTION, "min_metric": AT_LEAST_0, "detect_level": AT_LEAST_0,
-        "harris_k": AT_LEAST_0, "block_size": AT_LEAST_1, "fast_threshold": AT_LEAST_0, "patch_radius": AT_LEAST_1,
-        "max_distance": POSITIVE, "ratio": Range(0, 1, open_low=True), "gate_radius": AT_LEAST_0,
-        "window": Range(3), "fb_threshold": POSITIVE, "refine_threshold": POSITIVE, "seed": AT_LEAST_0,
-        "min_inlier_ratio": FRACTION, "min_texture": AT_LEAST_0, "min_texture_ratio": FRACTION,
-        "max_prediction_gap": AT_LEAST_0, "max_failures": AT_LEAST_1, "verify_below": AT_LEAST_0,
-        "verify_tolerance": AT_LEAST_0, "central_region": Range(0.1, 1),
-    }
-
-    def __post_init__(self) -> None:
-        check_ranges(self, self.RANGES)
-        self.neighbourhood = tuple(int(v) for v in np.broadcast_to(np.asarray(self.neighbourhood), (2,)))
-        if any(v < 1 or v % 2 == 0 for v in self.neighbourhood):
-            raise ValueError("neighbourhood must be two positive odd integers")
-        if self.detector not in DETECTORS:
-            raise ValueError(f"detector must be one of {', '.join(DETECTORS)}, not {self.detector!r}")
-        if self.descriptor not in DESCRIPTORS:
-            raise ValueError(f"descriptor must be one of {', '.join(DESCRIPTORS)}, not {self.descriptor!r}")
-        if self.matcher not in MATCHERS:
-            raise ValueError(f"matcher must be one of {', '.join(MATCHERS)}, not {self.matcher!r}")
-        if self.refine not in ("lk", "subpix", "none"):
-            raise ValueError(f"refine must be 'lk', 'subpix' or 'none', not {self.refine!r}")
-        if self.max_corners < self.min_inliers:
-            raise ValueError("max_corners must be at least min_inliers")
-        self.robust_options(self.threshold)  # validates method, threshold, confidence
-
-    @property
-    def region(self) -> float:
-        """``central_region`` in effect (1: the whole image)."""
-        return 1.0 if self.central_region is None else float(self.central_region)
-
-    @property
-    def distance_limit(self) -> float:
-        """The descriptor distance limit in effect."""
-        return _DEFAULT_MAX_DISTANCE[self.descriptor] if self.max_distance is None else float(self.max_distance)
-
-    def detector_settings(self) -> DetectorSettings:
-        border = max(self.patch_radius, 16 if self.descriptor == "orb" else 0, self.window // 2) + 2
-        return DetectorSettings(
-            method=self.detector, max_corners=self.max_corners, min_quality=self.min_quality,
-            min_metric=self.min_metric, neighbourhood=self.neighbourhood, harris_k=self.harris_k,
-            block_size=self.block_size, fast_threshold=self.fast_threshold, border=border,
-            subpixel=self.refine == "subpix", level=self.detect_level,
-        )
-
-    def robust_options(self, threshold: float) -> RobustOptions:
-        return RobustOptions(
-            method=self.method, threshold=threshold, confidence=self.confidence,
-            max_iterations=self.max_iterations, max_abs_log_scale=2.0 * self.max_abs_log_scale,
-            min_sigma=self.min_sigma, min_inliers=self.min_inliers, min_spread=self.min_spread,
-        )
+__all__ = ["FeatureConfig", "FeatureFrontend", "PreparedFrame"]
 
 
 @dataclass
@@ -252,21 +59,15 @@ class _Frame:
 
 
 @dataclass
-class PreparedFrame:
-    """A frame with its corners and descriptors, made ahead of :meth:`FeatureFrontend.process`.
+class PreparedFrame(Prepared):
+    """A frame prepared by :meth:`FeatureFrontend.prepare`.
 
     Attributes
     ----------
-    image : ndarray
-        The frame as given.
-    texture : float
-        :func:`frontends.frame_check.texture_measure` of its 8-bit version.
     described : _Frame
         Corners, descriptors, rectified positions and the exposure thumbnail (time not yet set).
     """
 
-    image: np.ndarray
-    texture: float
     described: _Frame
 
 
@@ -293,8 +94,7 @@ class FeatureFrontend:
         self._orb_local = threading.local()
         self._executor: Executor | None = None
         self._shape: tuple[int, int] | None = None
-        self._dense = DenseFallback(self.point_map, DirectConfig(central_region=cfg.central_region)) \
-            if cfg.dense_fallback else None
+        self._dense = dense_fallback(self.point_map, cfg)
         self.reset()
 
     def set_executor(self, executor: Executor | None) -> None:
@@ -323,10 +123,9 @@ class FeatureFrontend:
         is not a 2-D ``uint8``/``uint16`` array, or that OpenCV refuses, is returned as it is (the
         checks of :meth:`process` report it).
         """
-        if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
-                or min(image.shape) < 32:
+        grey = grey8(image, 32)
+        if grey is None:
             return image
-        grey = np.ascontiguousarray((image // 257).astype(np.uint8) if image.dtype == np.uint16 else image)
         try:
             return PreparedFrame(image, texture_measure(grey), self._describe(grey, float("nan")))
         except cv2.error:

@@ -47,6 +47,23 @@ class FrameCheck:
     reason: str = ""
 
 
+@dataclass
+class Prepared:
+    """A frame with the work on it that does not depend on earlier frames, made by a frontend's ``prepare``
+    (possibly in another thread, ahead of its ``process``).
+
+    Attributes
+    ----------
+    image : ndarray
+        The frame as given.
+    texture : float
+        :func:`texture_measure` of its 8-bit version.
+    """
+
+    image: np.ndarray
+    texture: float
+
+
 def texture_measure(image: np.ndarray) -> float:
     """Mean absolute difference between pixels two apart, on every other pixel (grey levels)."""
     sub = np.ascontiguousarray(image[::2, ::2])
@@ -55,6 +72,15 @@ def texture_measure(image: np.ndarray) -> float:
     dx = cv2.mean(cv2.absdiff(sub[:, 1:], sub[:, :-1]))[0]
     dy = cv2.mean(cv2.absdiff(sub[1:, :], sub[:-1, :]))[0]
     return 0.5 * float(dx + dy)
+
+
+def grey8(image, min_size: int) -> np.ndarray | None:
+    """``image`` as a contiguous ``uint8`` array (``uint16`` divided by 257), or ``None`` when it is not a 2-D
+    ``uint8``/``uint16`` array of at least ``min_size`` pixels a side."""
+    if not isinstance(image, np.ndarray) or image.ndim != 2 or image.dtype not in (np.uint8, np.uint16) \
+            or min(image.shape) < min_size:
+        return None
+    return np.ascontiguousarray((image // 257).astype(np.uint8) if image.dtype == np.uint16 else image)
 
 
 def check_frame(

@@ -37,73 +37,62 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import ClassVar
+from typing import Annotated, Literal
 
 import numpy as np
+from pydantic import Field
 
 from frontends.base import MotionStatus
-from frontends.config import AT_LEAST_0, AT_LEAST_1, AT_LEAST_2, POSITIVE, PROBABILITY, Range, check_ranges
+from frontends.config import INTEGER, NUMBER, Float, Int, Settings
 
 logger = logging.getLogger(__name__)
 
 _BATCH = 32  # hypotheses scored per vectorised batch
 _LOG_ONE_MINUS_EPS = math.log1p(-1e-12)
 
+#: the estimator's options, which the point-based frontends' settings share (each with its own default;
+#: see :mod:`frontends.options`)
+RobustMethod = Annotated[Literal["ransac", "lmeds"], Field(
+    description="Robust estimator: ``ransac`` or ``lmeds``. RANSAC scores hypotheses by MSAC and draws as many as "
+                "``confidence`` needs; LMedS keeps the one of least median squared residual.")]
+InlierDistance = Annotated[float, Field(
+    gt=0, description="Inlier distance of the robust estimator [rectified px]."), NUMBER]
+Confidence = Annotated[float, Field(
+    gt=0, lt=1, description="RANSAC confidence. The search ends when at least one all-inlier sample has been drawn "
+                            "with this probability."), NUMBER]
+Hypotheses = Annotated[int, Field(
+    ge=1, le=100_000, description="Maximum number of robust-estimator hypotheses."), INTEGER]
+ResidualFloor = Annotated[float, Field(
+    ge=0, description="Floor of the residual standard deviation used for the covariance [px]. 0: the residuals' "
+                      "own spread, however small."), NUMBER]
+MinInliers = Annotated[int, Field(
+    ge=2, le=10_000, description="Fewer inliers reject the frame (``TOO_FEW_FEATURES``). A similarity needs two "
+                                 "points."), INTEGER]
+MaxLogScale = Annotated[float, Field(
+    gt=0, le=10, description="Largest plausible ``|log s|`` between consecutive frames; a larger scale change "
+                             "is rejected."), NUMBER]
+MinSpread = Annotated[float, Field(
+    ge=0, description="Smallest standard deviation of the inliers along their weakest axis [px] (``DEGENERATE`` "
+                      "below). Below it the points are nearly collinear or clustered."), NUMBER]
 
-@dataclass
-class RobustOptions:
-    """Settings of the robust similarity estimator.
 
-    Attributes
-    ----------
-    method : str
-        ``"ransac"`` (MSAC scoring, adaptive number of hypotheses) or ``"lmeds"`` (least median of squares).
-    threshold : float
-        Inlier distance [rectified px] for RANSAC; also the upper bound of the LMedS inlier distance.
-    confidence : float
-        Probability that at least one all-inlier sample is drawn (stops the adaptive search).
-    max_iterations : int
-        Upper bound on the number of two-point hypotheses.
-    min_sample_distance : float
-        Two-point samples closer than this [px] are discarded (they fix the angle poorly).
-    max_abs_log_scale : float
-        Hypotheses with ``|log s|`` above this are discarded before scoring.
-    refine_iterations : int
-        Alternations of least-squares refit and inlier re-selection after the search.
-    min_sigma : float
-        Floor of the residual standard deviation used for the covariance [px].
-    min_inliers : int
-        Fewer inliers than this gives status ``"too_few"``.
-    min_spread : float
-        Smallest allowed standard deviation of the inlier points along their weakest axis [px];
-        below it the fit is ``"degenerate"`` (points nearly collinear or clustered).
-    """
+class RobustOptions(Settings):
+    """Settings of the robust similarity estimator (:func:`estimate_similarity`)."""
 
-    method: str = "ransac"
-    threshold: float = 1.0
-    confidence: float = 0.999
-    max_iterations: int = 256
-    min_sample_distance: float = 8.0
-    max_abs_log_scale: float = 0.2
-    refine_iterations: int = 3
-    min_sigma: float = 0.02
-    min_inliers: int = 6
-    min_spread: float = 10.0
-
-    #: the range of every number field (:func:`frontends.config.check_ranges`); the frontends' configurations
-    #: take the ranges of the fields they share from here
-    RANGES: ClassVar[dict[str, Range]] = {
-        "threshold": POSITIVE, "confidence": PROBABILITY, "max_iterations": AT_LEAST_1,
-        "min_sample_distance": AT_LEAST_0, "max_abs_log_scale": POSITIVE, "refine_iterations": AT_LEAST_0,
-        "min_sigma": AT_LEAST_0,  # 0: the residuals' own spread, however small
-        "min_inliers": AT_LEAST_2,  # a similarity needs two points
-        "min_spread": AT_LEAST_0,
-    }
-
-    def __post_init__(self) -> None:
-        if self.method not in ("ransac", "lmeds"):
-            raise ValueError(f"robust method must be 'ransac' or 'lmeds', not {self.method!r}")
-        check_ranges(self, self.RANGES)
+    method: RobustMethod = "ransac"
+    threshold: InlierDistance = Field(1.0, description=(
+        "Inlier distance [rectified px] for RANSAC; also the upper bound of the LMedS inlier distance."))
+    confidence: Confidence = 0.999
+    max_iterations: Hypotheses = 256
+    min_sample_distance: Float = Field(8.0, ge=0, description=(
+        "Two-point samples closer than this are discarded: they fix the angle poorly [px]."))
+    max_abs_log_scale: MaxLogScale = Field(0.2, description="Hypotheses with ``|log s|`` above this are discarded "
+                                                            "before scoring.")
+    refine_iterations: Int = Field(3, ge=0, le=100, description=(
+        "Alternations of least-squares refit and inlier re-selection after the search."))
+    min_sigma: ResidualFloor = 0.02
+    min_inliers: MinInliers = Field(6, description="Fewer inliers than this give the status ``too_few``.")
+    min_spread: MinSpread = 10.0
 
 
 @dataclass

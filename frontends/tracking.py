@@ -130,17 +130,9 @@ def warp_reference(ref_img: np.ndarray, affine: np.ndarray, tolerance: float) ->
 WARP_HERE = object()
 
 
-def track_forward(
-    ref_img: np.ndarray,
-    img: np.ndarray,
-    p0: np.ndarray,
-    affine: np.ndarray,
-    levels: int,
-    settings: LkSettings,
-    start: np.ndarray | None = None,
-    exposure: tuple[float, float] = (1.0, 0.0),
-    warped: np.ndarray | None | object = WARP_HERE,
-) -> ForwardTracks:
+def track_forward(ref_img: np.ndarray, img: np.ndarray, p0: np.ndarray, affine: np.ndarray, levels: int,
+                  settings: LkSettings, start: np.ndarray | None = None, exposure: tuple[float, float] = (1.0, 0.0),
+                  warped: np.ndarray | None | object = WARP_HERE) -> ForwardTracks:
     """The forward pass of :func:`track_points` (same parameters), without the backward check.
 
     ``warped`` is :func:`warp_reference` of ``ref_img`` by ``affine`` with ``settings.warp_tolerance``
@@ -186,17 +178,9 @@ def check_backward(forward: ForwardTracks, settings: LkSettings) -> TrackResult:
     return TrackResult(tr.points[good], tr.index[good], tr.n_tracked)
 
 
-def track_points(
-    ref_img: np.ndarray,
-    img: np.ndarray,
-    p0: np.ndarray,
-    affine: np.ndarray,
-    levels: int,
-    settings: LkSettings,
-    start: np.ndarray | None = None,
-    exposure: tuple[float, float] = (1.0, 0.0),
-    warped: np.ndarray | None | object = WARP_HERE,
-) -> TrackResult:
+def track_points(ref_img: np.ndarray, img: np.ndarray, p0: np.ndarray, affine: np.ndarray, levels: int,
+                 settings: LkSettings, start: np.ndarray | None = None, exposure: tuple[float, float] = (1.0, 0.0),
+                 warped: np.ndarray | None | object = WARP_HERE) -> TrackResult:
     """Track reference points ``p0`` into ``img`` given the expected image-space motion ``affine``.
 
     Parameters

@@ -2,7 +2,7 @@
 
 End to end (:func:`compare_end_to_end`): the wall time of :func:`fusion_vo.odometry.run_visual_odometry`
 over the whole recording, decoding included, with one thread and with all threads, and the wall time of
-the plain OpenCV script (``benchmarks/baseline_opencv.py``: Shi-Tomasi corners, pyramidal LK, RANSAC
+the plain OpenCV script (:mod:`fusion_vo.baseline`: Shi-Tomasi corners, pyramidal LK, RANSAC
 similarity, one frame at a time) over the same frames. The runs are interleaved and repeated, and each
 ratio is taken between runs made next to each other, so that a shared machine's changing speed
 affects both sides alike.
@@ -22,7 +22,6 @@ means the last quarter is no larger than the first.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import logging
 import os
@@ -38,6 +37,7 @@ from typing import Callable
 import cv2
 
 from frontends import make_frontend
+from fusion_vo import baseline as plain_script
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.odometry import OdometryConfig, available_cores, opencv_threads, run_visual_odometry
 from fusion_vo.recording import Recording
@@ -138,7 +138,7 @@ def summary_table(timings: list[FrontendTiming]) -> str:
 
 
 # ---------------------------------------------------------------------- end to end, beside the baseline
-#: ``run(seq) -> (results, wall seconds)`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``)
+#: ``run(seq) -> (results, wall seconds)`` of the plain OpenCV script (:func:`fusion_vo.baseline.run`)
 BaselineRun = Callable[[str | Path], tuple[list, float]]
 
 
@@ -265,7 +265,7 @@ def compare_end_to_end(sequence: str | Path, frontends: list[str], baseline: Bas
     sequence : path
     frontends : list of str
     baseline : callable
-        ``run`` of ``benchmarks/baseline_opencv.py``.
+        :func:`fusion_vo.baseline.run`, or another script's ``run``.
     thread_counts : list of int, optional
         Default ``[1, cores available]`` (just ``[1]`` on one core).
     repeats : int
@@ -395,31 +395,14 @@ def first_frames(sequence: str | Path, n: int, out: str | Path) -> Path:
     return out
 
 
-#: where the plain OpenCV script lives in a source checkout
-BASELINE_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "baseline_opencv.py"
-
-
-def load_baseline(path: str | Path = BASELINE_SCRIPT) -> BaselineRun | None:
-    """``run`` of the plain OpenCV script (``benchmarks/baseline_opencv.py``), or ``None`` when absent.
-
-    The script belongs to the source tree, not to the installed package.
-    """
-    path = Path(path)
-    if not path.is_file():
-        return None
-    spec = importlib.util.spec_from_file_location("baseline_opencv", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.run
-
-
-def run_benchmark(sequence: str | Path, frontends: list[str], baseline: BaselineRun | None,
+def run_benchmark(sequence: str | Path, frontends: list[str], baseline: BaselineRun | None = plain_script.run,
                   thread_counts: list[int] | None = None, repeats: int = 3, max_frames: int | None = None,
                   stages: bool = True, out: Callable[[str], None] = print) -> list[EndToEnd]:
-    """The whole benchmark of ``fusion-vo bench`` and ``benchmarks/bench_frontends.py``; prints as it goes.
+    """The whole benchmark of ``fusion-vo bench`` and ``benchmarks/frontend_speed.py end-to-end``; prints as
+    it goes.
 
     With ``max_frames`` both fusion-vo and the plain script run on the first ``max_frames`` frames.
-    Without a ``baseline``, the fusion-vo figures are printed without ratios.
+    With ``baseline=None`` the plain script is not run and the fusion-vo figures are printed without ratios.
     """
     with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
         seq = Path(sequence)
@@ -430,7 +413,7 @@ def run_benchmark(sequence: str | Path, frontends: list[str], baseline: Baseline
             f"{available_cores()} cores available; {repeats} interleaved repeats; load average "
             f"{os.getloadavg()[0]:.2f} before")
         if baseline is None:
-            out(f"note: {BASELINE_SCRIPT} not found (it is part of the source tree): no plain-script baseline")
+            out("no plain-script baseline: fusion-vo's figures without ratios")
             rows = [EndToEnd(fe, th, n) for fe in frontends for th in (thread_counts or sorted({1, available_cores()}))]
             for _ in range(repeats):
                 for row in rows:

@@ -50,7 +50,6 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
-from frontends.config import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
@@ -58,6 +57,7 @@ from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
+from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 
 log = logging.getLogger(__name__)
 
@@ -148,7 +148,7 @@ class OdometryConfig:
     handoff: bool = False
     camera_noise: bool = True
 
-    #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
+    #: the range of every number field (:func:`fusion_vo.schema.check_ranges`; ``None`` always passes)
     RANGES: ClassVar[dict[str, Range]] = {
         "height": POSITIVE, "min_sigma_xy": AT_LEAST_0, "min_sigma_yaw": AT_LEAST_0,  # 0: no floor
         "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0,

@@ -24,9 +24,15 @@ Outputs (in ``out_dir``):
 ``ekf.tum``, ``ekf_smoothed.tum``, ``gtsam.tum``, ``gtsam_online.tum``   fused trajectories
 ``NAME.cov.csv``      per pose of ``NAME.tum`` (same timestamps): ``# timestamp [s],xx,xy,xyaw,yy,yyaw,yawyaw``,
                       the upper triangle of the (x, y, yaw) covariance in m², m·rad, rad²
+``innovations.csv``   every measurement block the EKF tested: NIS and gate outcome (:mod:`fusion_vo.evaluation.innovations`)
+``headings.csv``      the IMU's own headings: gyro integrated, AHRS (:mod:`fusion_vo.evaluation.headings`)
+``influence.json``    how far the fused track moves with each input left out (:mod:`fusion_vo.evaluation.influence`;
+                      configuration ``influence``)
 ``run.yaml``          the configuration used and the recording's path
-``summary.json``      counts, timings and notes of the run
-``metrics.json``, figures, ``report.html``   the evaluation, when the recording has ground truth
+``summary.json``      counts, timings, notes, calibration (with priors) and the files the run wrote
+``report.html``, figures   the report (:mod:`fusion_vo.evaluation.run_report`; ``docs/report.md``), for every run;
+                      ``metrics.json`` with it when the recording has ground truth or GPS fixes. A report that
+                      cannot be drawn is a warning and a note, not a failed run.
 """
 
 from __future__ import annotations
@@ -43,10 +49,14 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from fusion_vo import schema
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation import EVO_MISSING
+from fusion_vo.evaluation import run_report
+from fusion_vo.evaluation.headings import imu_headings, write_headings
+from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
+from fusion_vo.evaluation.innovations import from_residuals, write_innovations
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
 from fusion_vo.outputs import OutputFolder, check_replaceable, write_atomic
@@ -72,7 +82,10 @@ class RunSummary:
     trajectories: list = field(default_factory=list)
     notes: list = field(default_factory=list)
     fusion: dict = field(default_factory=dict)
+    sensors: list = field(default_factory=list)
+    files: list = field(default_factory=list)
     metrics: dict | None = None
+    report: dict = field(default_factory=dict)
 
     def line(self) -> str:
         fails = sum(self.failures.values())
@@ -264,8 +277,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
 
 def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
     """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
-    import dataclasses
-
     from frontends.features import FeatureConfig
     from frontends.klt import KltConfig
     from fusion_vo.odometry import OdometryConfig
@@ -274,9 +285,9 @@ def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
         values = getattr(config, section) or {}
         if not isinstance(values, dict):
             raise InputError(f"'{section}' must be a mapping of option: value", config_path)
-        defaults = {f.name: f.default for f in dataclasses.fields(cls)}
+        defaults = {name: f.default for name, f in schema.model_of(cls).model_fields.items()}
         for key, value in values.items():
-            default = defaults.get(key, dataclasses.MISSING)
+            default = defaults.get(key)
             number = isinstance(default, (int, float)) and not isinstance(default, bool)
             if key == "height" and section == "odometry":
                 number = True
@@ -371,7 +382,8 @@ def run_pipeline(
             for a, b in vo.held:
                 summary.notes.append(f"visual track held its pose for {b - a:.2f} s from t={a:.2f}: no frame gave motion "
                                      "there and the gap is too long to bridge at constant velocity (odometry.max_bridge)")
-        fused, covariances = _run_backends(rec, vo, sensors, config, summary)
+        result, streams, fusion_config = _run_backends(rec, vo, sensors, config, summary)
+        fused, covariances = dict(result.trajectories), dict(result.covariances)
         trajectories.update(fused)
         for name, traj in trajectories.items():
             if len(traj) >= 2:  # a single pose is no trajectory (a camera that never measured a motion)
@@ -380,17 +392,71 @@ def run_pipeline(
                 cov = covariances.get(name)
                 if cov is not None and len(cov) == len(traj):
                     write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
+        write_run_records(staging, result, streams, fusion_config, config.influence and config.backend != "none")
         run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
         write_atomic(staging / "run.yaml", yaml.safe_dump(run_info, sort_keys=False))
-        fields = {k: v for k, v in summary.__dict__.items() if k != "metrics"}
-        write_atomic(staging / "summary.json", json.dumps(_finite(fields), indent=2, default=_json_default) + "\n")
-        if config.evaluate and (inputs.groundtruth is not None or rec.has_gps()):
-            summary.metrics = _evaluate(staging, rec.path)
-            if summary.metrics is None:
-                summary.notes.append(EVO_MISSING.replace("evaluation against ground truth needs",
-                                                         "no evaluation against ground truth: it needs"))
+        summary.sensors = list(sensors)
+        summary.files = sorted(p.name for p in staging.iterdir() if p.is_file() and not p.name.startswith("."))
+        _write_summary(staging, summary)
+        evaluated = config.evaluate and (inputs.groundtruth is not None or rec.has_gps())
+        _report(staging, out_dir.name, summary, config.evaluate, evaluated)
         folder.commit()
     return summary
+
+
+def _write_summary(staging: Path, summary: RunSummary) -> None:
+    fields = {k: v for k, v in summary.__dict__.items() if k not in ("metrics", "report")}
+    write_atomic(staging / "summary.json", json.dumps(_finite(fields), indent=2, default=_json_default) + "\n")
+
+
+def write_run_records(staging: Path, result, streams, config, influence: bool) -> None:
+    """The files the report reads besides the trajectories: ``innovations.csv`` (the EKF's and, when computed,
+    the graph's NIS), ``headings.csv`` (the IMU's own headings) and, with ``influence``, ``influence.json``."""
+    tables = dict(result.innovations)
+    tables.update({backend: from_residuals(residuals) for backend, residuals in (result.residuals or {}).items()})
+    if any(len(table) for table in tables.values()):
+        write_innovations(staging / "innovations.csv", tables)
+    if streams is not None and streams.imu is not None:
+        headings = imu_headings(streams.imu, config.imu, float(config.initial_pose[2]))
+        if headings is not None:
+            write_headings(staging / "headings.csv", headings)
+    if influence and streams is not None and len(influence_inputs(streams)) > 1:
+        name = "ekf_smoothed" if config.ekf.smoother else "ekf"
+        write_influence(staging / "influence.json", leave_one_out(streams, config, result.trajectories.get(name)))
+
+
+def _report(staging: Path, name: str, summary: RunSummary, accuracy: bool, evaluated: bool) -> None:
+    """Write the run's report into ``staging`` (:func:`fusion_vo.evaluation.run_report.build_report`).
+
+    An error of the evaluation against ground truth or GPS fixes stops the run, as it always has, and so does a
+    file that cannot be written (a full disk); any other failure to draw the report is a warning and a note (the
+    run's files stand)."""
+    try:
+        content, summary.metrics = run_report.build_report(staging, None, staging, name=name, accuracy=accuracy)
+    except OSError:
+        raise
+    except InputError:
+        if evaluated:
+            raise
+        content = None
+        problem = traceback_line()
+    except Exception:  # noqa: BLE001 -- a report that cannot be drawn must not fail a run that succeeded
+        content = None
+        problem = traceback_line()
+    if content is None:
+        log.warning("report.html not written: %s", problem)
+        summary.notes.append(f"report.html not written: {problem}")
+        _write_summary(staging, summary)
+        return
+    summary.report = {"path": "report.html", "verdict": list(content.verdict), "accuracy": content.accuracy_line}
+
+
+def traceback_line() -> str:
+    """The exception being handled, in one line."""
+    import sys
+
+    exc = sys.exc_info()[1]
+    return f"{type(exc).__name__}: {exc}" if not isinstance(exc, InputError) else str(exc)
 
 
 def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str], summary: RunSummary) -> None:
@@ -411,13 +477,15 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
 
 def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str], config: RunConfig,
                   summary: RunSummary
-                  ) -> tuple[dict[str, PoseData], dict[str, np.ndarray]]:
-    """Wheel dead reckoning and the fused backends; returns name -> trajectory and name -> (N, 3, 3)
-    pose covariances."""
+                  ):
+    """Wheel dead reckoning and the fused backends; returns the :class:`~fusion_vo.backends.FusionResult`, the
+    streams it fused and the fusion configuration."""
     from fusion_vo import backends
 
     t0 = time.perf_counter()
-    result = backends.run_backends(rec, vo, sensors=sensors, backend=config.backend, options=config.fusion_config())
+    fusion_config = config.fusion_config()
+    streams = backends.streams_from_recording(rec, vo, sensors, fusion_config)
+    result = backends.fuse(streams, config.backend, fusion_config)
     summary.backend_seconds.update(result.seconds or {})
     alone = not any(s in sensors for s in ("wheel", "odom", "imu"))
     for note in result.notes or []:
@@ -426,7 +494,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
     summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses",
-                                                                     "visual_noise")}
+                                                                     "visual_noise", "priors", "time_offsets")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates
@@ -435,16 +503,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
         if text:
             summary.notes.append(f"{backend_name} self-calibration: {text} (all estimates in summary.json)")
     log.debug("backends took %.2f s", time.perf_counter() - t0)
-    return dict(result.trajectories), dict(result.covariances)
-
-
-def _evaluate(out_dir: Path, seq: Path) -> dict | None:
-    """The run's metrics against ground truth, or ``None`` when evo (the ``eval`` extra) is not installed."""
-    from fusion_vo import evaluation
-
-    if not evaluation.evo_available():
-        return None
-    return evaluation.evaluate_run(out_dir, seq)
+    return result, streams, fusion_config
 
 
 def _finite(value):

@@ -1,20 +1,23 @@
-"""One configuration schema, derived from the configuration dataclasses.
+"""One configuration schema: pydantic models, and models derived from the configuration dataclasses.
 
-Every option is defined once, as a field of the dataclass that uses it (``KltConfig``, ``FeatureConfig``,
-``OdometryConfig``, ``FusionConfig`` and its noise models, ``SimulationOptions``), with its default in
-the field and its description and unit in the class's numpy-style ``Attributes`` docstring. This module
-turns such a dataclass into a pydantic model (:func:`model_of`) — a new field needs no change here — and
-uses it to
+Every option is defined once, where it is used. The frontends' settings (``KltConfig``, ``FeatureConfig``,
+``DirectConfig``) are pydantic models themselves (:mod:`frontends.config`): each field carries its default,
+range, unit and description. The other stages' options are fields of dataclasses (``OdometryConfig``,
+``FusionConfig`` and its noise models, ``SimulationOptions``), with the default in the field, the description
+and unit in the class's numpy-style ``Attributes`` docstring and the ranges of number fields in a ``RANGES``
+table (:class:`Range`, checked by :func:`check_ranges`); this module turns such a dataclass into a pydantic
+model (:func:`model_of`) — a new field needs no change here. Either kind is used to
 
-* validate a mapping read from YAML and build the dataclass (:func:`build`), with errors that name the
-  file, the key path and the expected type::
+* validate a mapping read from YAML and build the configuration (:func:`build`), with errors that name the
+  file, the key path and the expected type (:func:`frontends.config.describe_error`)::
 
       run.yaml: fusion.ekf.accel_sigma: expected a number, got 'abc'
+      run.yaml: klt: lk_iterations must be at least 1, not 0
 
 * print every option with its default and description as YAML (:func:`commented_yaml`), and
-* give the JSON schema for editors (``model.model_json_schema()``).
+* give the JSON schema for editors (:func:`json_schema`).
 
-The checks that involve several fields stay in the dataclasses' ``__post_init__``; their messages are
+The checks of a dataclass that involve several fields stay in its ``__post_init__``; their messages are
 reported at the key path of the section.
 """
 
@@ -22,28 +25,112 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
+import numbers
 import re
 import types
 import typing
+from collections.abc import Mapping
 from typing import Annotated, Any
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, create_model
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from pydantic.json_schema import GenerateJsonSchema
 
+from frontends.config import INTEGER, NUMBER, location, number_text, one_line, shown
 from fusion_vo.errors import InputError
 
 _UNIT = re.compile(r"\[([^\[\]]{1,32})\]")
 
-#: pydantic error types -> the expected kind of value, in words
-_EXPECTED = {
-    "float_parsing": "a number", "float_type": "a number", "finite_number": "a finite number",
-    "int_parsing": "an integer", "int_type": "an integer", "int_from_float": "an integer",
-    "bool_parsing": "true or false", "bool_type": "true or false",
-    "string_type": "a string", "list_type": "a list", "tuple_type": "a list", "set_type": "a list",
-    "dict_type": "a mapping of key: value", "model_type": "a mapping of key: value",
-    "model_attributes_type": "a mapping of key: value", "dataclass_type": "a mapping of key: value",
-}
+
+@dataclasses.dataclass(frozen=True)
+class Range:
+    """The values a number field of a configuration dataclass can take: from ``low`` to ``high`` (either end
+    open or left out).
+
+    A configuration dataclass lists its fields' ranges in a class-level table (``RANGES``, field name ->
+    :class:`Range`) that its ``__post_init__`` checks with :func:`check_ranges`, so that a value that
+    cannot work is an error naming the key rather than a silently wrong result.
+
+    Attributes
+    ----------
+    low, high : float or None
+        Smallest and largest value (``None``: no bound).
+    open_low, open_high : bool
+        Whether ``low`` (``high``) itself is excluded.
+    """
+
+    low: float | None = None
+    high: float | None = None
+    open_low: bool = False
+    open_high: bool = False
+
+    def contains(self, value: float) -> bool:
+        """Whether ``value`` (a finite number) lies in the range."""
+        if self.low is not None and (value <= self.low if self.open_low else value < self.low):
+            return False
+        return self.high is None or (value < self.high if self.open_high else value <= self.high)
+
+    def describe(self) -> str:
+        """The range in words: ``at least 1``, ``positive``, ``in [0, 1]`` ..."""
+        if self.high is None:
+            if self.low is None:
+                return "a finite number"
+            if self.open_low:
+                return "positive" if self.low == 0 else f"greater than {number_text(self.low)}"
+            return f"at least {number_text(self.low)}"
+        if self.low is None:
+            return f"below {number_text(self.high)}" if self.open_high else f"at most {number_text(self.high)}"
+        return (f"in {'(' if self.open_low else '['}{number_text(self.low)}, {number_text(self.high)}"
+                f"{')' if self.open_high else ']'}")
+
+    def json_schema(self) -> dict[str, float]:
+        """The range as JSON-schema keywords (``minimum``, ``exclusiveMaximum`` ...)."""
+        out = {}
+        if self.low is not None:
+            out["exclusiveMinimum" if self.open_low else "minimum"] = self.low
+        if self.high is not None:
+            out["exclusiveMaximum" if self.open_high else "maximum"] = self.high
+        return out
+
+    def error(self, key: str, value: Any) -> str | None:
+        """The one-line complaint about ``value`` of ``key``, or ``None`` when the value is fine."""
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            wanted = "a finite number" if self == ANY else f"a number {self.describe()}"
+            return f"{key} must be {wanted}, not {value!r}"
+        if not math.isfinite(value):
+            return f"{key} must be a finite number, not {value}"
+        if not self.contains(value):
+            return f"{key} must be {self.describe()}, not {value}"
+        return None
+
+
+#: the ranges most fields need
+AT_LEAST_0 = Range(0)
+AT_LEAST_1 = Range(1)
+POSITIVE = Range(0, open_low=True)
+FRACTION = Range(0, 1)
+ANY = Range()
+
+
+def check_ranges(config: Any, ranges: Mapping[str, Range]) -> None:
+    """Raise ``ValueError`` for the first field of the dataclass ``config`` that cannot work.
+
+    A field listed in ``ranges`` must lie in its range (``None`` passes: it selects a default); any other
+    number field must be finite. The message names the field: ``threads must be in [1, 256], not 0``.
+    """
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if value is None:
+            continue
+        if f.name in ranges:
+            message = ranges[f.name].error(f.name, value)
+        elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+            message = ANY.error(f.name, value)
+        else:
+            continue
+        if message:
+            raise ValueError(message)
 
 
 def field_docs(cls: type) -> dict[str, str]:
@@ -112,8 +199,15 @@ class _JsonSchema(GenerateJsonSchema):
 
 
 def json_schema(model: type[BaseModel]) -> dict:
-    """The JSON schema of a model (for editors)."""
-    return model.model_json_schema(schema_generator=_JsonSchema)
+    """The JSON schema of a model (for editors); a property whose description states a unit in square brackets
+    also has it as ``unit``."""
+    out = model.model_json_schema(schema_generator=_JsonSchema)
+    for definition in [out, *out.get("$defs", {}).values()]:
+        for prop in definition.get("properties", {}).values():
+            unit = _unit(prop.get("description", ""))
+            if unit and "unit" not in prop:
+                prop["unit"] = unit
+    return out
 
 
 def _first_sentence(text: str, limit: int = 110) -> str:
@@ -136,7 +230,7 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     Parameters
     ----------
     cls : type
-        A dataclass whose fields all have defaults.
+        A dataclass whose fields all have defaults, or a pydantic model (returned as it is).
     exclude : tuple of str
         Fields left out of the model.
     defaults : instance of ``cls``, optional
@@ -147,8 +241,12 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     -------
     type of BaseModel
         Unknown keys are rejected; nested dataclasses become nested models; each field carries the
-        description (and the unit found in square brackets) from the dataclass's docstring.
+        description from the dataclass's docstring and its range from the dataclass's ``RANGES``.
     """
+    if issubclass(cls, BaseModel):  # a pydantic model already: it is its own schema
+        if exclude or defaults is not None:
+            raise TypeError(f"{cls.__name__} is a pydantic model: its fields and defaults are its own")
+        return cls
     key = (cls, exclude, None if defaults is None else _defaults_key(defaults))
     if key in _MODELS:
         return _MODELS[key]
@@ -157,7 +255,7 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     except (NameError, TypeError):  # an annotation that cannot be resolved: such fields accept any value
         hints = {f.name: f.type for f in dataclasses.fields(cls) if not isinstance(f.type, str)}
     docs = field_docs(cls)
-    ranges = getattr(cls, "RANGES", {})  # frontends.config.Range of number fields
+    ranges = getattr(cls, "RANGES", {})  # Range of number fields
     fields: dict[str, Any] = {}
     own = cls() if defaults is not None else None  # the class's defaults, which its docstring states
     for f in dataclasses.fields(cls):
@@ -174,10 +272,8 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
         description = docs.get(f.name)
         if own is not None and description and default != getattr(own, f.name, default):
             description = without_default(description)  # the docstring's default is the class's, not this one
-        extra = {"unit": _unit(description)} if _unit(description) else {}
-        if f.name in ranges:  # the dataclass's table of ranges (checked by its __post_init__), for editors
-            extra.update(ranges[f.name].json_schema())
-        extra = extra or None
+        # the dataclass's table of ranges (checked by its __post_init__), for editors
+        extra = ranges[f.name].json_schema() if f.name in ranges else None
         if dataclasses.is_dataclass(default):
             nested = model_of(type(default), defaults=default)
             fields[f.name] = (nested, Field(default_factory=nested, description=description))
@@ -191,73 +287,22 @@ def model_of(cls: type, exclude: tuple[str, ...] = (), defaults: Any = None) -> 
     return model
 
 
-def _reject_bool(expected: str):
-    def check(value):
-        if isinstance(value, bool):
-            raise ValueError(f"expected {expected}, got {value!r}")
-        return value
-    return check
-
-
 def _no_bool_for_numbers(annotation):
     """A number field (``int``, ``float``, optionally ``None``) that rejects ``true``/``false`` (pydantic's
     lax mode would read them as 1 and 0)."""
     args = set(typing.get_args(annotation)) if typing.get_origin(annotation) in (typing.Union, types.UnionType) \
         else {annotation}
-    numbers = args - {type(None)}
-    if numbers == {int}:
-        return Annotated[annotation, BeforeValidator(_reject_bool("an integer"))]
-    if numbers and numbers <= {int, float}:
-        return Annotated[annotation, BeforeValidator(_reject_bool("a number"))]
+    kinds = args - {type(None)}
+    if kinds == {int}:
+        return Annotated[annotation, INTEGER]
+    if kinds and kinds <= {int, float}:
+        return Annotated[annotation, NUMBER]
     return annotation
-
-
-def _location(loc: tuple) -> str:
-    text = ""
-    for part in loc:
-        text += f"[{part}]" if isinstance(part, int) else (f".{part}" if text else str(part))
-    return text
-
-
-def _known_keys(model: type[BaseModel], loc: tuple) -> list[str]:
-    for part in loc:
-        field = model.model_fields.get(part) if isinstance(part, str) else None
-        sub = getattr(field, "annotation", None) if field else None
-        if not (inspect.isclass(sub) and issubclass(sub, BaseModel)):
-            return []
-        model = sub
-    return list(model.model_fields)
-
-
-def _shown(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 40 else text[:37] + "..."
-
-
-def describe_error(error: dict, model: type[BaseModel], prefix: tuple = ()) -> str:
-    """One line for one pydantic error: ``key.path: expected ..., got ...``."""
-    loc = tuple(error.get("loc", ()))
-    where = _location(prefix + loc) or "(top level)"
-    kind = error.get("type", "")
-    if kind == "extra_forbidden":
-        known = _known_keys(model, loc[:-1])
-        return f"{where}: unknown key" + (f" (known: {', '.join(known)})" if known else "")
-    if kind in _EXPECTED:
-        return f"{where}: expected {_EXPECTED[kind]}, got {_shown(error.get('input'))}"
-    if kind == "literal_error":
-        return f"{where}: expected one of {error['ctx']['expected']}, got {_shown(error.get('input'))}"
-    message = error.get("msg", "invalid value")
-    message = message.removeprefix("Value error, ").removeprefix("Assertion failed, ")
-    return f"{where}: {message}"
 
 
 def config_error(exc: ValidationError, model: type[BaseModel], path=None, prefix: tuple = ()) -> InputError:
     """The first error of a validation as an :class:`InputError` naming the file and the key path."""
-    errors = exc.errors()
-    message = describe_error(errors[0], model, prefix)
-    if len(errors) > 1:
-        message += f" (and {len(errors) - 1} more)"
-    return InputError(message, path)
+    return InputError(one_line(exc, model, prefix), path)
 
 
 def validate(model: type[BaseModel], data: Any, path=None, prefix: tuple = ()) -> BaseModel:
@@ -265,8 +310,8 @@ def validate(model: type[BaseModel], data: Any, path=None, prefix: tuple = ()) -
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        where = _location(prefix) or "the file"
-        raise InputError(f"{where}: expected a mapping of key: value, got {_shown(data)}", path)
+        where = location(prefix) or "the file"
+        raise InputError(f"{where}: expected a mapping of key: value, got {shown(data)}", path)
     try:
         return model.model_validate(_drop_empty_sections(model, data))
     except ValidationError as exc:
@@ -290,7 +335,13 @@ def _drop_empty_sections(model: type[BaseModel], data: dict) -> dict:
 
 
 def to_dataclass(cls: type, values: BaseModel, path=None, prefix: tuple = ()):
-    """Build the dataclass from validated values; its own checks (``__post_init__``) name the section."""
+    """Build the dataclass from validated values; its own checks (``__post_init__``) name the section.
+
+    When ``cls`` is a pydantic model, ``values`` is already an instance of it (checked when it was validated)
+    and is returned as it is.
+    """
+    if isinstance(values, cls) and issubclass(cls, BaseModel):
+        return values
     kwargs = {}
     for name in type(values).model_fields:
         value = getattr(values, name)
@@ -302,13 +353,14 @@ def to_dataclass(cls: type, values: BaseModel, path=None, prefix: tuple = ()):
     try:
         return cls(**kwargs)
     except InputError as exc:
-        raise InputError(f"{_location(prefix)}: {exc.message}" if prefix else exc.message, path) from None
+        raise InputError(f"{location(prefix)}: {exc.message}" if prefix else exc.message, path) from None
     except (ValueError, TypeError) as exc:
-        raise InputError(f"{_location(prefix)}: {exc}" if prefix else str(exc), path) from None
+        raise InputError(f"{location(prefix)}: {exc}" if prefix else str(exc), path) from None
 
 
 def build(cls: type, data: Any, path=None, prefix: tuple = (), exclude: tuple[str, ...] = ()):
-    """Validate a mapping (e.g. a YAML section) and build the dataclass ``cls`` from it.
+    """Validate a mapping (e.g. a YAML section) and build the configuration ``cls`` (a dataclass or a pydantic
+    model) from it.
 
     Raises
     ------

@@ -26,9 +26,9 @@ import time
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import run_ekf
+from fusion_vo.backends.ekf import calibration_priors, run_ekf
 from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
-from fusion_vo.backends.result import FusionResult, SensorCount
+from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
 from fusion_vo.errors import InputError
@@ -136,7 +136,12 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     result.pauses = sorted(bridged + joined, key=lambda entry: entry["start"])
     longest = max(used, key=lambda r: max((len(tr) for tr in r.trajectories.values()), default=0))
     result.calibration.update(longest.calibration)
+    result.priors.update(longest.priors)
+    result.time_offsets.update(longest.time_offsets)
     result.visual_noise = longest.visual_noise
+    for backend_name in {b for r in used for b in r.innovations}:
+        result.innovations[backend_name] = Innovations.concatenate([r.innovations[backend_name] for r in used
+                                                                    if backend_name in r.innovations])
     for r in used:
         for backend_name, counts in r.counts.items():
             total = result.counts.setdefault(backend_name, {})
@@ -168,6 +173,8 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
         align_world(iv, config)  # an absolute sensor (GPS) sets the world frame
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
+        result.time_offsets["odom_delay"] = float(delay)
+    result.priors = calibration_priors(iv, config)
     result.timing["timeline"] = time.process_time() - t0
     result.inconsistent = [ep.as_dict() for ep in iv.episodes]
     if iv.visual_noise is not None:

@@ -13,8 +13,8 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
-from frontends.config import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo.errors import InputError
+from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
@@ -379,7 +379,7 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
 
 
 #: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
-#: (:class:`frontends.config.Range`; every other number must not be negative)
+#: (:class:`fusion_vo.schema.Range`; every other number must not be negative)
 _RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
 
 #: upper bounds of the numbers that set how much work a run does (nodes, iterations, a search's width, a

@@ -68,9 +68,12 @@ AHRS corrects the heading's slow drift on time scales where the gyro's bias walk
 offset's walk, while a heading that strays from the gyro's integral moves ``o_ψ`` instead of the
 pose. A sudden jump (a magnetic disturbance) fails the gate and is counted.
 
-Each sensor's block is gated before the update by its squared Mahalanobis distance
-``yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``
-(:class:`~fusion_vo.sensors.model.Gate`); rejections are counted.
+Each sensor's block is gated before the update by its squared Mahalanobis distance (its normalised
+innovation squared, NIS) ``d² = yᵀ (H P Hᵀ + R)⁻¹ y`` against the chi-square quantile of ``gate_probability``
+(:class:`~fusion_vo.sensors.model.Gate`); rejections are counted. A batch run records every block's
+``(t, sensor, d², rows, used / down-weighted / rejected)`` (:class:`~fusion_vo.backends.result.Innovations`,
+``FusionResult.innovations["ekf"]``; a row the consistency monitor left out, with its vague variance, is not
+counted among the rows).
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
@@ -104,8 +107,8 @@ import time
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.ekf_adapter import EkfReadings
+from fusion_vo.backends.result import FusionResult, InnovationLog, SensorCount
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
@@ -126,6 +129,9 @@ STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gy
                  "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
+#: a measurement row with at least this variance carries no information (a component the consistency monitor
+#: dropped gets 1e8, :mod:`fusion_vo.sensors.wheel`): it is not counted in the block's recorded rows
+_FREE_VAR = 1e6
 
 
 class PlanarEkf:
@@ -210,6 +216,11 @@ class PlanarEkf:
         #: the last prediction's linearisation (pose, twist, ∂position/∂twist, Δt, remainder applied), for
         #: :meth:`_relinearise_pose`; None before the first prediction
         self.linearisation: tuple | None = None
+        #: every gated block's NIS and outcome (:meth:`record`), when a caller sets it (batch runs do;
+        #: streaming use leaves it None, so that nothing grows with the hours it runs)
+        self.innovations: InnovationLog | None = None
+        #: time of the node the next blocks are applied at, for :attr:`innovations` [s]
+        self.time = float("nan")
 
     # ------------------------------------------------------------------ state access
     @property
@@ -363,6 +374,11 @@ class PlanarEkf:
         self.kf.x[YAW, 0] = se2.wrap_angle(self.kf.x[YAW, 0])
         self._relinearise_pose()
 
+    def record(self, sensor: str, d2: float, dof: int, status: str) -> None:
+        """Add a block's NIS and outcome at :attr:`time` to :attr:`innovations` (nothing when it is None)."""
+        if self.innovations is not None:
+            self.innovations.add(self.time, sensor, d2, dof, status)
+
     # ------------------------------------------------------------------ update
     def update(self, blocks) -> None:
         """Gate each ``(sensor, z, h, H, R, angle_row)`` block, then apply the accepted ones together."""
@@ -378,11 +394,13 @@ class PlanarEkf:
             d2 = float(y @ np.linalg.solve(S, y))
             count = self.counts.setdefault(sensor, SensorCount())
             factor = self.gate.inflation(d2, len(y))
+            rows = max(1, int(np.count_nonzero(np.diag(R) < _FREE_VAR))) if self.innovations is not None else 0
             if factor is None:
                 count.gated += 1
-                logger.debug("ekf: %s gated (d²=%.1f)", sensor, d2)
+                self.record(sensor, d2, rows, "rejected")
                 continue
             count.used += 1
+            self.record(sensor, d2, rows, "down-weighted" if factor > 1.0 else "used")
             if factor > 1.0:
                 # outside the gate but not absurd: down-weighted so that it sits on the gate (the
                 # bounded influence of the graph's robust kernel) rather than dropped -- a robot that
@@ -432,6 +450,8 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
                     iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
                     frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
+    ekf.innovations = InnovationLog()
+    ekf.time = float(iv.t[0])
     meas = interval_measurements(iv, config)
     K = iv.n_steps
     dt = iv.dt
@@ -458,6 +478,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     for k in range(K):
         Fs[k + 1] = ekf.predict(dt[k], frame_error_cov(meas, k))
         x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
+        ekf.time = float(iv.t[k + 1])
         ekf.update(step_blocks(ekf, meas, k))
         for run in at_nodes:
             run.node(ekf, k + 1)
@@ -471,6 +492,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     counts = _merge_counts(iv.counts, ekf.counts)
     result.counts["ekf"] = counts
     result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
+    result.innovations["ekf"] = ekf.innovations.table()
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:
         t1 = time.process_time()
@@ -533,10 +555,43 @@ def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
         out["wheel_scale_sigma"] = float(np.sqrt(P[KR, KR]))
     if config.self_calibration and kb_ok:
         out["wheel_base_factor"] = float(x[KB])
-        out["wheel_base"] = float(iv.wheel_base * x[KB])
+        out["wheel_base_factor_sigma"] = float(np.sqrt(P[KB, KB]))
+        if not iv.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
+            out["wheel_base"] = float(iv.wheel_base * x[KB])
+    if iv.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
+        out["ahrs_offset"] = float(x[AO])
+        out["ahrs_offset_sigma"] = float(np.sqrt(P[AO, AO]))
     for i, state in enumerate(iv.states):  # the sensors' own states
         out[state.name] = float(x[DIM + i])
         out[f"{state.name}_sigma"] = float(np.sqrt(P[DIM + i, DIM + i]))
+    return out
+
+
+def calibration_priors(iv: Intervals, config: FusionConfig) -> dict[str, dict]:
+    """The prior ``{"mean": m, "sigma": s}`` of every calibration state the backends estimate on ``iv``, under
+    the keys of their calibration estimates (:func:`_calibration`): the values :class:`PlanarEkf` starts from
+    and the graph's prior factors hold. ``camera_height`` and ``wheel_base`` are the configured values with the
+    σ of their factor, ``h σ_kv`` and ``b σ_kb``."""
+    out = {}
+    if iv.uses("gyro"):
+        out["gyro_bias"] = {"mean": 0.0, "sigma": float(config.imu.gyro_bias_sigma)}
+    kv_ok, kb_ok = calibration_observable(iv)
+    if config.self_calibration and kv_ok:
+        out["visual_scale"] = {"mean": 1.0, "sigma": float(iv.visual_scale_sigma)}
+        if iv.camera_height:
+            out["camera_height"] = {"mean": float(iv.camera_height),
+                                    "sigma": float(iv.camera_height * iv.visual_scale_sigma)}
+    if config.self_calibration and kv_ok and kb_ok:
+        out["wheel_scale"] = {"mean": 1.0, "sigma": float(iv.wheel_scale_sigma)}
+    if config.self_calibration and kb_ok:
+        sigma = float(config.wheel_model(iv.twist)[1])
+        out["wheel_base_factor"] = {"mean": 1.0, "sigma": sigma}
+        if not iv.twist:
+            out["wheel_base"] = {"mean": float(iv.wheel_base), "sigma": float(iv.wheel_base * sigma)}
+    if iv.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
+        out["ahrs_offset"] = {"mean": 0.0, "sigma": float(config.imu.ahrs_yaw_sigma)}
+    for state in iv.states:
+        out[state.name] = {"mean": float(state.initial), "sigma": float(state.sigma)}
     return out
 
 

@@ -1171,7 +1171,8 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     if builder.kb_on:
         kb = float(values.atDouble(W(last)))
         out["wheel_base_factor"] = kb
-        out["wheel_base"] = float(iv.wheel_base * kb)
+        if not iv.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
+            out["wheel_base"] = float(iv.wheel_base * kb)
     if builder.kr_on:
         out["wheel_scale"] = float(values.atDouble(R(last)))
     for st in builder.states:  # the sensors' own states

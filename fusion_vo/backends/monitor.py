@@ -94,10 +94,18 @@ class Episode:
             del out["detail"]
         return out
 
-    def note(self, t0: float) -> str:
-        return (f"{self.sensor} {self.component} inconsistent with {self.against} from t={self.start:.2f} "
-                f"({self.start - t0:.1f} s in) to t={self.end:.2f} ({self.end - t0:.1f} s in), "
-                f"NIS up to {self.max_nis:.0f}{self.detail}: dropped there")
+    def note(self, t0: float, t1: float | None = None) -> str:
+        """The episode in plain words; ``t0`` and ``t1`` are the first and last node of the recording.
+
+        A span that covers the whole recording (``t1`` given) is said to be one: the component was not used
+        at all. Otherwise the span is given on the recording clock and in seconds from ``t0``."""
+        what = f"{self.sensor} {self.component} inconsistent with {self.against}"
+        nis = f"NIS up to {self.max_nis:.0f}{self.detail}"
+        if t1 is not None and self.start <= t0 + 1e-6 and self.end >= t1 - 1e-6:
+            return (f"{what} over the whole recording (t={self.start:.2f} to {self.end:.2f}, "
+                    f"{self.end - self.start:.1f} s), {nis}: not used at all")
+        return (f"{what} from t={self.start:.2f} ({self.start - t0:.1f} s in) to t={self.end:.2f} "
+                f"({self.end - t0:.1f} s in), {nis}: not used in these {self.end - self.start:.1f} s")
 
 
 @functools.lru_cache(maxsize=64)
@@ -272,10 +280,11 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
         dropped: set[str] = set()  # hysteresis state at this scale
         for a, b in _windows(T, cfg.monitor_window * scale):
             theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
-            liar, nis, others = _find_liar(theta, var, threshold, cfg.monitor_probability)
+            liar, liar_nis, liar_others = _find_liar(theta, var, threshold, cfg.monitor_probability)
             for s in names:
                 if s == liar:
                     dropped.add(s)
+                    nis, others = liar_nis, liar_others
                 elif s in dropped:
                     # hysteresis: a dropped component comes back only once it agrees well again
                     n = _window_nis(s, theta, var)

@@ -14,6 +14,75 @@ from fusion_vo.outputs import write_atomic
 __all__ = ["FusionResult", "SensorCount", "write_pose_covariances", "read_pose_covariances"]
 
 
+#: what a backend did with a measurement block, as :class:`Innovations` records it
+INNOVATION_STATUSES = ("used", "down-weighted", "rejected")
+
+
+@dataclass
+class Innovations:
+    """Each measurement block a filter tested against its prediction: when, which sensor, its normalised
+    innovation squared and what the gate did with it.
+
+    For a block with innovation ``y = z - h(x⁻)`` and innovation covariance ``S = H P⁻ Hᵀ + R``, the NIS is
+    ``d² = yᵀ S⁻¹ y``; with a right noise model it is chi-square distributed with ``dof`` (the block's rows)
+    degrees of freedom.
+
+    Attributes
+    ----------
+    t : ndarray (M,)
+        Time of the node the block was applied at [s, recording clock].
+    sensor : ndarray (M,) of str
+        The measurement model's name (``camera``, ``wheel``, ``gyro``, ``ahrs``, ``still``, ``range``,
+        ``gps``, or a registered sensor's).
+    d2 : ndarray (M,)
+        NIS ``d²`` before any down-weighting.
+    dof : ndarray (M,) of int
+        Rows of the block.
+    status : ndarray (M,) of str
+        ``used``, ``down-weighted`` (outside the gate, applied with its covariance inflated onto the gate) or
+        ``rejected`` (:data:`INNOVATION_STATUSES`).
+    """
+
+    t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    sensor: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
+    d2: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    dof: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=object))
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    @classmethod
+    def concatenate(cls, tables: list["Innovations"]) -> "Innovations":
+        """The rows of several tables (e.g. the pieces of a recording split at pauses), in time order."""
+        tables = [tb for tb in tables if len(tb)]
+        if not tables:
+            return cls()
+        out = cls(*(np.concatenate([getattr(tb, name) for tb in tables])
+                    for name in ("t", "sensor", "d2", "dof", "status")))
+        order = np.argsort(out.t, kind="stable")
+        return cls(out.t[order], out.sensor[order], out.d2[order], out.dof[order], out.status[order])
+
+
+class InnovationLog:
+    """Rows of :class:`Innovations` appended one at a time (plain list appends: cheap enough for every
+    block of a filter run); :meth:`table` turns them into arrays."""
+
+    def __init__(self) -> None:
+        self._rows: list[tuple[float, str, float, int, str]] = []
+
+    def add(self, t: float, sensor: str, d2: float, dof: int, status: str) -> None:
+        self._rows.append((t, sensor, d2, dof, status))
+
+    def table(self) -> Innovations:
+        if not self._rows:
+            return Innovations()
+        t, sensor, d2, dof, status = zip(*self._rows)
+        return Innovations(np.array(t, dtype=np.float64), np.array(sensor, dtype=object),
+                           np.array(d2, dtype=np.float64), np.array(dof, dtype=np.int64),
+                           np.array(status, dtype=object))
+
+
 @dataclass
 class FusionResult:
     """Trajectories and diagnostics of one fusion run.
@@ -48,6 +117,15 @@ class FusionResult:
     residuals : dict
         Backend -> sensor -> ``(dof, rows)``: the factor graph's per-sensor NIS at its solution, rows
         ``(t, NIS)`` (only with ``GraphConfig.residuals``; :mod:`fusion_vo.backends.residuals`).
+    innovations : dict[str, Innovations]
+        Backend -> every measurement block it tested, with its NIS and what the gate did (the EKF's filter
+        pass: ``"ekf"``; the smoother and the graph do not test innovations).
+    priors : dict[str, dict]
+        Calibration state (the keys of ``calibration``) -> ``{"mean": m, "sigma": s}``, the prior the
+        backends start from (:func:`fusion_vo.backends.ekf.calibration_priors`).
+    time_offsets : dict[str, float]
+        Clock offsets the run estimated and corrected [s]: ``odom_delay``, the odometry twist's delay behind
+        the gyro (:func:`fusion_vo.backends.batch.synchronise_odometry`).
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)
@@ -60,6 +138,9 @@ class FusionResult:
     pauses: list[dict] = field(default_factory=list)
     visual_noise: dict = field(default_factory=dict)
     residuals: dict = field(default_factory=dict)
+    innovations: dict[str, Innovations] = field(default_factory=dict)
+    priors: dict[str, dict] = field(default_factory=dict)
+    time_offsets: dict[str, float] = field(default_factory=dict)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -75,6 +156,9 @@ class FusionResult:
         self.notes.extend(n for n in other.notes if n not in self.notes)
         self.timing.update(other.timing)
         self.residuals.update(other.residuals)
+        self.innovations.update(other.innovations)
+        self.priors.update(other.priors)
+        self.time_offsets.update(other.time_offsets)
         return self
 
     def summary(self) -> dict:
@@ -88,6 +172,8 @@ class FusionResult:
             "inconsistent": list(self.inconsistent),
             "pauses": list(self.pauses),
             "visual_noise": dict(self.visual_noise),
+            "priors": dict(self.priors),
+            "time_offsets": dict(self.time_offsets),
         }
 
 

@@ -397,7 +397,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
-        notes.extend(ep.note(T[0]) for ep in iv.episodes)
+        notes.extend(ep.note(T[0], T[-1]) for ep in iv.episodes)
         hint = gyro_mounting_note(iv, streams.imu)
         if hint:
             notes.append(hint)

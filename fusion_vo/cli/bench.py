@@ -12,7 +12,7 @@ from fusion_vo.errors import InputError
 #: the frontends that can be measured
 FRONTENDS = ("klt", "features")
 
-#: the recording generated when none is given (the same as benchmarks/bench_frontends.py)
+#: the recording generated when none is given (the same as benchmarks/frontend_speed.py end-to-end)
 STANDARD = "random60"
 
 
@@ -39,13 +39,13 @@ def register(sub) -> None:
     p = sub.add_parser("bench", help="frames per second of visual odometry beside a plain OpenCV script",
                        description="Frames per second of visual odometry, end to end (decoding included), with "
                                    "one thread and with all threads, beside the plain OpenCV script "
-                                   "benchmarks/baseline_opencv.py run on the same frames in the same run; then "
+                                   "of fusion_vo.baseline run on the same frames in the same run; then "
                                    "the time per frame of decoding, frontend and ground geometry on one thread. "
                                    f"Default recording: the standard '{STANDARD}' drive (generated, 1201 frames "
-                                   "of 640x360), as benchmarks/bench_frontends.py. A run that tracks fewer than "
-                                   "half of the frame pairs (textureless or blurred frames) gets no rate: its rows "
-                                   "say 'not a speed' (and their ratios 'not comparable'), and the command ends "
-                                   "with an error naming those runs and exit status 2.")
+                                   "of 640x360), as benchmarks/frontend_speed.py end-to-end. A run that tracks "
+                                   "fewer than half of the frame pairs (textureless or blurred frames) gets no "
+                                   "rate: its rows say 'not a speed' (and their ratios 'not comparable'), and the "
+                                   "command ends with an error naming those runs and exit status 2.")
     p.add_argument("sequence", nargs="?", help=f"recording folder (default: generate the standard '{STANDARD}')")
     p.add_argument("--frontend", type=frontend_list, default=list(FRONTENDS),
                    help="comma-separated frontends (default: klt,features)")
@@ -57,7 +57,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fusion_vo.benchmark import MIN_TRACKED, load_baseline, not_comparable, run_benchmark
+    from fusion_vo.benchmark import MIN_TRACKED, not_comparable, run_benchmark
     from fusion_vo.recording import Recording
 
     with tempfile.TemporaryDirectory(prefix="fusion-vo-bench-") as tmp:
@@ -72,8 +72,8 @@ def run(args: argparse.Namespace) -> int:
             if not rec.has_camera():
                 raise InputError("this recording has no camera stream (cam0/data.csv is missing)", rec.path)
             rec.camera, rec.frame_times  # noqa: B018 -- a one-line error for a bad sensor.yaml or data.csv
-        rows = run_benchmark(seq, args.frontend, load_baseline(), args.threads, args.repeats, args.frames,
-                             out=lambda line: print(line, flush=True))
+        rows = run_benchmark(seq, args.frontend, thread_counts=args.threads, repeats=args.repeats,
+                             max_frames=args.frames, out=lambda line: print(line, flush=True))
     unmeasured = not_comparable(rows)
     if unmeasured:
         runs = "; ".join(f"{row.label} ({100 * row.tracked:.0f} %)" for row in unmeasured)

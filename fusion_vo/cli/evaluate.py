@@ -1,4 +1,5 @@
-"""``fusion-vo evaluate RUN_DIR [--gt SEQ]``: errors of a run's trajectories against ground truth."""
+"""``fusion-vo evaluate RUN_DIR [--gt SEQ]``: rebuild a run's report, with its accuracy where the recording has
+ground truth or GPS fixes."""
 
 from __future__ import annotations
 
@@ -8,10 +9,12 @@ import argparse
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
         "evaluate",
-        help="compare a run's trajectories with ground truth (metrics.json, plots, report.html)",
-        description="Compute ATE, RPE, drift, end-point, heading, velocity and per-leg errors for every "
-                    "trajectory (*.tum) in RUN_DIR, write metrics.json, PNG figures and a "
-                    "self-contained report.html into RUN_DIR and print the table.",
+        help="rebuild a run's report (report.html), with the errors against ground truth or GPS where there are any",
+        description="Rebuild the report of RUN_DIR from its files (report.html and PNG figures): every source's "
+                    "track beside the fused ones, the normalised innovations, what was dropped, the calibration and "
+                    "the verdict. Where the recording has ground truth (or GPS fixes), also compute ATE, RPE, drift, "
+                    "end-point, heading, velocity and per-leg errors for every trajectory (*.tum), write "
+                    "metrics.json and print the table.",
     )
     parser.add_argument("run_dir", metavar="RUN_DIR", help="folder written by 'fusion-vo run'")
     parser.add_argument("--gt", metavar="SEQ", default=None,
@@ -23,20 +26,29 @@ def register(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from fusion_vo.evaluation import evaluate_run
-    from fusion_vo.evaluation.evaluate import OUTPUTS
     from fusion_vo.evaluation.io import find_trajectories
+    from fusion_vo.evaluation.run_report import OUTPUTS, build_report
     from fusion_vo.outputs import StagedFiles
 
     run_dir = Path(args.run_dir)
     find_trajectories(run_dir)  # a missing folder or one without trajectories: an error before anything is locked
     # written into a staging folder and moved in only when all succeeded: a failure leaves the old results
     with StagedFiles(run_dir, replaces=OUTPUTS) as staged:
-        metrics = evaluate_run(run_dir, args.gt, out_dir=staged.path)
+        content, metrics = build_report(run_dir, args.gt, out_dir=staged.path, name=run_dir.resolve().name)
         staged.commit()
-    show_metrics(metrics, Path(args.run_dir).resolve().name)
-    print(f"report: {Path(args.run_dir) / 'report.html'}")
+    if metrics:
+        show_metrics(metrics, run_dir.resolve().name)
+    show_verdict(content.verdict, content.accuracy_line)
+    print(f"report: {run_dir / 'report.html'}")
     return 0
+
+
+def show_verdict(verdict: list[str], accuracy_line: str | None) -> None:
+    """Print a report's verdict and, where it has no accuracy figures, why."""
+    for sentence in verdict:
+        print(f"verdict: {sentence}")
+    if accuracy_line:
+        print(f"note: {accuracy_line}")
 
 
 def console():

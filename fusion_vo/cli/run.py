@@ -15,7 +15,8 @@ from fusion_vo.errors import InputError
 def register(sub) -> None:
     p = sub.add_parser("run", help="run visual odometry (and fusion) on a recording",
                        description="Run visual odometry on a recording folder, fuse it with the wheels and the IMU, "
-                                   "and evaluate against ground truth when the recording has it.")
+                                   "write a report (report.html) and evaluate against ground truth when the recording "
+                                   "has it.")
     p.add_argument("sequence", nargs="?", help="recording folder (EuRoC layout plus wheel0/, see datasets/README.md)")
     p.add_argument("--out", "-o", help="output folder: new, empty, or an earlier run's (replaced as a whole)")
     p.add_argument("--force", action="store_true",
@@ -101,9 +102,13 @@ def run(args: argparse.Namespace) -> int:
                                config_path=args.config)
     for note in summary.notes:
         print(f"note: {note}")
-    if summary.metrics:
-        from fusion_vo.cli.evaluate import show_metrics
+    from fusion_vo.cli.evaluate import show_metrics, show_verdict
 
+    if summary.metrics:
         show_metrics(summary.metrics, Path(args.out).resolve().name)
+    if summary.report:
+        show_verdict(summary.report["verdict"], summary.report["accuracy"])
     print(summary.line())
+    if summary.report:
+        print(f"report: {Path(args.out) / summary.report['path']}")
     return 0

@@ -1,12 +1,15 @@
-"""Accuracy of estimated trajectories against ground truth: figures, plots and reports.
+"""A run's report, its accuracy against ground truth or GPS fixes, and comparisons of runs.
 
-:func:`evaluate_run` evaluates a run folder (``metrics.json``, PNG figures, ``report.html``);
-:func:`compare_runs` puts several runs side by side. The figures themselves are computed in
+:func:`evaluate_run` writes the report of a run folder (``report.html``, PNG figures and, where the recording
+has ground truth or GPS fixes, ``metrics.json``), with or without ground truth; :func:`compare_runs` puts
+several runs side by side. The accuracy figures against ground truth are computed in
 :mod:`fusion_vo.evaluation.metrics` with evo.
 
 evo is GPL-3.0 and lives in the ``eval`` extra (``pip install 'fusion-vo[eval]'``), so that the rest of
-the library stays under permissive licences. This package imports it only when a function that needs it
-is used; :func:`require_evo` turns its absence into a one-line :class:`~fusion_vo.errors.InputError`.
+the library stays under permissive licences. Only the accuracy against ground truth needs it: the report,
+the scores against GPS fixes and the comparison of runs without ground truth do not, and the report says in
+one line when the accuracy was skipped for want of it. :func:`require_evo` turns its absence into a one-line
+:class:`~fusion_vo.errors.InputError` where a caller needs it.
 """
 
 from __future__ import annotations
@@ -18,8 +21,8 @@ from fusion_vo.errors import InputError
 
 __all__ = ["compare_runs", "evaluate_run", "has_groundtruth", "require_evo"]
 
-_LAZY = {"compare_runs": "fusion_vo.evaluation.compare", "evaluate_run": "fusion_vo.evaluation.evaluate",
-         "has_groundtruth": "fusion_vo.evaluation.evaluate"}
+_LAZY = {"compare_runs": "fusion_vo.evaluation.compare", "evaluate_run": "fusion_vo.evaluation.run_report",
+         "has_groundtruth": "fusion_vo.evaluation.run_report"}
 
 EVO_MISSING = ("evaluation against ground truth needs evo (GPL-3.0), which is not installed: "
                "pip install 'fusion-vo[eval]'")
@@ -41,6 +44,5 @@ def require_evo() -> None:
 
 def __getattr__(name: str):
     if name in _LAZY:
-        require_evo()
         return getattr(importlib.import_module(_LAZY[name]), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

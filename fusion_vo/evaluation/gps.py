@@ -1,4 +1,4 @@
-"""Scoring trajectories against GPS fixes, for recordings without ground truth.
+"""Scoring trajectories against GPS fixes, for recordings without ground truth (no evo needed).
 
 For each trajectory the antenna's position ``h(x(t_i)) = p(t_i) + R(ψ(t_i)) l`` (the lever arm ``l`` of
 ``gps0/sensor.yaml``, poses interpolated at the fix times ``t_i`` within the trajectory) is compared with
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.io import read_tum
+from fusion_vo.evaluation.io import read_tum_poses
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
@@ -116,17 +116,18 @@ def evaluate_against_gps(run_dir: Path, files: dict[str, Path], gps: GpsData, co
     """
     fused = gps_was_fused(config)
     scores: dict[str, GpsScore] = {}
+    spans = []
     for name, path in files.items():
-        traj = read_tum(path, name)
-        xyyaw = np.column_stack([traj.positions_xyz[:, :2], se2.yaw_of_quaternion(traj.orientations_quat_wxyz)])
-        score = score_track(np.asarray(traj.timestamps), xyyaw, gps, fused)
+        poses = read_tum_poses(path)
+        spans.append((float(poses.t[0]), float(poses.t[-1])))
+        xyyaw = np.column_stack([poses.xyz[:, :2], se2.yaw_of_quaternion(poses.quat_wxyz)])
+        score = score_track(poses.t, xyyaw, gps, fused)
         if score is None:
             logger.warning("%s: fewer than 3 GPS fixes within its time span, not scored", path)
             continue
         scores[name] = score
     if not scores:
-        spans = [read_tum(p).timestamps for p in files.values()]
-        lo, hi = min(float(t[0]) for t in spans), max(float(t[-1]) for t in spans)
+        lo, hi = min(a for a, _ in spans), max(b for _, b in spans)
         raise InputError(f"no trajectory has 3 GPS fixes within its time span (fixes {gps.t[0]:.3f} to {gps.t[-1]:.3f} s, "
                          f"trajectories {lo:.3f} to {hi:.3f} s): are the fixes on another clock?", source)
     metrics = {name: s.figures for name, s in scores.items()}

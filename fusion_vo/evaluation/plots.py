@@ -37,6 +37,9 @@ COLOURS = {
     "ekf_smoothed": "tab:olive",
     "gtsam": "tab:red",
     "gtsam_online": "tab:purple",
+    "gyro": "tab:cyan",
+    "ahrs": "tab:pink",
+    "gps": "0.45",
 }
 
 #: legend label of each source
@@ -48,9 +51,12 @@ LABELS = {
     "ekf_smoothed": "EKF smoothed",
     "gtsam": "GTSAM batch",
     "gtsam_online": "GTSAM online",
+    "gyro": "gyro (integrated)",
+    "ahrs": "AHRS",
+    "gps": "GPS fixes",
 }
 
-_SPARE_COLOURS = ("tab:brown", "tab:pink", "tab:cyan", "tab:gray", "gold", "navy")
+_SPARE_COLOURS = ("tab:brown", "tab:gray", "gold", "navy", "teal", "maroon")
 _RUN_COLOURS = ("tab:blue", "tab:red", "tab:green", "tab:orange", "tab:purple", "tab:brown",
                 "tab:pink", "tab:cyan", "tab:olive", "tab:gray")
 _STATUS_COLOURS = {"first": "tab:gray", "too_few_features": "tab:orange", "degenerate": "tab:purple",
@@ -69,21 +75,26 @@ def label_of(name: str) -> str:
     return LABELS.get(name, name)
 
 
-def _new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: bool = True):
+def new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: bool = True):
+    """A figure (Agg canvas, constrained layout) with ``rows`` axes stacked vertically; returns (figure, axes)."""
     fig = Figure(figsize=(width, height * rows), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(rows, 1, sharex=sharex, squeeze=False)[:, 0]
     return fig, axes
 
 
-def _save(fig: Figure, path: str | Path) -> Path:
+def save_figure(fig: Figure, path: str | Path) -> Path:
+    """Write ``fig`` as PNG to ``path`` atomically."""
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png")
     logger.debug("wrote %s", path)
     return write_atomic(path, buffer.getvalue())
 
 
-def _xy(trajectory: PoseTrajectory3D) -> np.ndarray:
+def _xy(trajectory) -> np.ndarray:
+    """Positions on the floor of an evo trajectory or of planar poses (:class:`~fusion_vo.measurements.PoseData`)."""
+    if hasattr(trajectory, "xyyaw"):
+        return np.asarray(trajectory.xyyaw)[:, :2]
     return trajectory.positions_xyz[:, :2]
 
 
@@ -100,7 +111,7 @@ def plot_trajectories(reference: PoseTrajectory3D | None, estimates: dict[str, P
     path : str or Path
         PNG to write.
     """
-    fig, (ax,) = _new_figure(height=6.5, width=7.5)
+    fig, (ax,) = new_figure(height=6.5, width=7.5)
     series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
     for name, trajectory in series:
         xy = _xy(trajectory)
@@ -117,7 +128,7 @@ def plot_trajectories(reference: PoseTrajectory3D | None, estimates: dict[str, P
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _start_time(stamps: list[np.ndarray], t0: float | None) -> float:
@@ -133,7 +144,7 @@ def plot_velocities(reference: Velocities | None, estimates: dict[str, Velocitie
 
     Time is shown from ``t0`` (default: the earliest sample).
     """
-    fig, axes = _new_figure(rows=3, height=2.6, width=9.0)
+    fig, axes = new_figure(rows=3, height=2.6, width=9.0)
     rows = (("vx", "$v_x$ [m/s]", 1.0), ("vy", "$v_y$ [m/s]", 1.0), ("yaw_rate", "yaw rate [deg/s]",
                                                                        180.0 / np.pi))
     series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
@@ -151,13 +162,13 @@ def plot_velocities(reference: Velocities | None, estimates: dict[str, Velocitie
         fig.legend(*axes[0].get_legend_handles_labels(), loc="outside lower center", ncol=len(series),
                    fontsize="small")
     axes[-1].set_xlabel("time [s]")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_heading(reference: PoseTrajectory3D | None, estimates: dict[str, PoseTrajectory3D],
                  path: str | Path, t0: float | None = None) -> Path:
     """Unwrapped heading (yaw) over time from ``t0`` (default: the earliest pose)."""
-    fig, (ax,) = _new_figure(height=4.0, width=9.0)
+    fig, (ax,) = new_figure(height=4.0, width=9.0)
     series = ([("groundtruth", reference)] if reference is not None else []) + list(estimates.items())
     t0 = _start_time([trajectory.timestamps for _, trajectory in series], t0)
     for name, trajectory in series:
@@ -169,12 +180,12 @@ def plot_heading(reference: PoseTrajectory3D | None, estimates: dict[str, PoseTr
     ax.set_title("Heading")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_error_vs_distance(results: dict[str, TrajectoryErrors], path: str | Path) -> Path:
     """Position error (estimate anchored at the start) against ground-truth distance travelled."""
-    fig, (ax,) = _new_figure(height=4.0, width=9.0)
+    fig, (ax,) = new_figure(height=4.0, width=9.0)
     for name, result in results.items():
         ax.plot(result.distance, result.error_m, color=colour_of(name), lw=1.4, label=label_of(name))
     ax.set_xlabel("distance travelled [m]")
@@ -183,12 +194,12 @@ def plot_error_vs_distance(results: dict[str, TrajectoryErrors], path: str | Pat
     ax.grid(True, alpha=0.3)
     if results:
         ax.legend(loc="upper left", fontsize="small")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_frontend(frames: FrameVelocities, path: str | Path) -> Path:
     """Inlier count per frame with the frames the frontend could not use marked by reason."""
-    fig, (ax,) = _new_figure(height=3.5, width=9.0)
+    fig, (ax,) = new_figure(height=3.5, width=9.0)
     t = frames.t - (frames.t[0] if frames.t.size else 0.0)
     ax.plot(t, frames.inliers, color=COLOURS["vo"], lw=1.0, label="inliers")
     status = np.array(frames.status)
@@ -204,14 +215,17 @@ def plot_frontend(frames: FrameVelocities, path: str | Path) -> Path:
     ax.set_ylabel("inliers")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper right", fontsize="small", ncol=3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def plot_compare(reference: PoseTrajectory3D | None, runs: dict[str, dict[str, PoseTrajectory3D]],
-                 path: str | Path) -> Path:
-    """Overlay the trajectories of several runs: one colour per run, one line style per source."""
+def plot_compare(reference: PoseTrajectory3D | None, runs: dict[str, dict], path: str | Path,
+                 anchored: bool = True) -> Path:
+    """Overlay the trajectories of several runs: one colour per run, one line style per source.
+
+    ``runs`` maps run label -> source -> trajectory (evo, anchored at the ground-truth start, or planar poses
+    as estimated: ``anchored`` False)."""
     styles = ("-", "--", "-.", ":")
-    fig, (ax,) = _new_figure(height=6.5, width=8.0)
+    fig, (ax,) = new_figure(height=6.5, width=8.0)
     if reference is not None:
         xy = _xy(reference)
         ax.plot(xy[:, 0], xy[:, 1], color="black", lw=2.2, label=label_of("groundtruth"))
@@ -227,11 +241,11 @@ def plot_compare(reference: PoseTrajectory3D | None, runs: dict[str, dict[str, P
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title("Runs compared (anchored at the ground-truth start)" if reference is not None
-                 else "Runs compared")
+    ax.set_title("Runs compared (anchored at the ground-truth start)" if anchored
+                 else "Runs compared (tracks as estimated)")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_matches(image: np.ndarray, matches, path: str | Path, title: str = "") -> Path:
@@ -271,4 +285,4 @@ def plot_matches(image: np.ndarray, matches, path: str | Path, title: str = "") 
         ax.legend(loc="upper right", fontsize="small", framealpha=0.8)
     ax.set_xlabel("u [px]")
     ax.set_ylabel("v [px]")
-    return _save(fig, path)
+    return save_figure(fig, path)

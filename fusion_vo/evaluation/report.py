@@ -1,9 +1,10 @@
 """A self-contained HTML report of one run.
 
-The page is the jinja2 template ``templates/report.html.j2`` (autoescaped); this module only gathers
-what it shows: the run's notes, the errors against ground truth, the measurements per sensor, the
-visual frontend's summary, the figures and the configuration. The report is a single file: styles
-inline, figures embedded as base64 PNG data URIs, no scripts and no external resources, so it opens from disk in any browser and can be mailed or archived as is.
+The page is the jinja2 template ``templates/report.html.j2`` (autoescaped); this module turns a
+:class:`ReportContent` (gathered by :mod:`fusion_vo.evaluation.run_report`) into the template's context.
+The report is a single file: styles inline, figures embedded as base64 PNG data URIs, no scripts and no
+external resources, so it opens from disk in any browser and can be mailed or archived as is. It holds no
+clock time, so the same run folder always gives the same page.
 """
 
 from __future__ import annotations
@@ -12,14 +13,15 @@ import base64
 import functools
 import logging
 import math
-from datetime import datetime, timezone
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import jinja2
 import yaml
 
+from fusion_vo.evaluation.innovations import BAND_PROBABILITY, NIS_HEADERS
 from fusion_vo.evaluation.io import write_atomic
-from fusion_vo.evaluation.table import KEY_COLUMNS
+from fusion_vo.evaluation.table import KEY_COLUMNS, readable_units
 
 logger = logging.getLogger(__name__)
 
@@ -52,71 +54,119 @@ def count_rows(counts: dict | None) -> tuple[list[str], list[list]]:
     return ["backend", "sensor"] + outcomes, rows
 
 
-def render_report(title: str, config: dict, metrics: dict[str, dict], images: dict[str, bytes],
-                  frontend: dict | None = None, notes: list[str] | None = None,
-                  counts: dict | None = None, sections: list | None = None) -> str:
-    """Build the HTML text of a report from the template ``templates/report.html.j2``.
+@dataclass
+class ReportContent:
+    """Everything a report shows; a section whose field is empty is left out (or replaced by its sentence).
 
-    Parameters
+    Attributes
     ----------
-    title : str
-        Heading of the page.
+    title, subtitle : str
+        Heading (from the recording) and the line under it (which run).
     config : dict
-        Configuration of the run (shown as YAML).
+        The run's configuration (folded away at the end of the page).
+    notes : list of str
+        The run's notes (``summary.json``).
+    absent : list of str
+        A sentence for each optional file the run folder lacks (its section is left out).
+    verdict : list of str
+        The plain-words verdict (:mod:`fusion_vo.evaluation.verdict`).
+    accuracy_line : str or None
+        Why there is no accuracy section (no ground truth, no evo, not asked for).
     metrics : dict
-        Trajectory name -> figures, as in ``metrics.json``.
-    images : dict
-        Caption -> PNG bytes, shown in this order.
-    frontend : dict, optional
-        Summary of the visual frontend (frame counts per status, mean inliers).
-    notes : list of str, optional
-        The run's notes (``summary.json``): camera loss, skipped frames, self-calibration, ...
-    counts : dict, optional
+        Trajectory -> figures against ground truth (``metrics.json``).
+    sections : list
+        Further accuracy tables ``(heading, headers, rows, notes)`` (errors against GPS fixes).
+    figures : list
+        ``(section, caption, PNG path)`` in order; sections ``accuracy``, ``tracks``, ``influence``, ``nis``,
+        ``frontend``.
+    influence, calibration, dropped, pauses : tuple or None
+        ``(headers, rows)`` of those tables (:mod:`fusion_vo.evaluation.run_tables`).
+    influence_reference : str
+        The fused track the influence is measured against.
+    nis : list or None
+        Rows of the NIS table (:data:`~fusion_vo.evaluation.innovations.NIS_HEADERS`).
+    graph_nis_line : str or None
+        Why the factor graph's NIS is not shown.
+    gated : tuple or None
+        ``(headers, rows, spans left out)`` of the EKF's gated spans.
+    counts : dict or None
         Measurements per backend and sensor (``summary.json``'s ``fusion.counts``).
-    sections : list, optional
-        Further tables ``(heading, headers, rows, notes)``, shown before the figures (e.g. errors against
-        another reference); the table of errors against ground truth is then shown only with ``metrics``.
-
-    Returns
-    -------
-    str
-        A complete HTML document.
+    frontend : dict or None
+        Summary of the visual frontend (frame counts per status, mean inliers).
+    span : tuple
+        First and last node [s, recording clock].
     """
-    count_headers, counts_table = count_rows(counts)
-    context = {
-        "title": title,
-        "generated": f"{datetime.now(timezone.utc):%Y-%m-%d %H:%M}",
-        "sequence": (config or {}).get("sequence"),
-        "notes": list(notes or []),
-        "show_metrics": bool(metrics) or not sections,
-        "sections": [{"heading": h, "headers": hs, "rows": rows, "notes": list(ns)} for h, hs, rows, ns in sections or []],
-        "metric_headers": ["trajectory"] + [c.header for c in KEY_COLUMNS],
-        "metric_rows": [[name] + [c.format(figures) for c in KEY_COLUMNS] for name, figures in metrics.items()],
+
+    title: str
+    subtitle: str = ""
+    config: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    absent: list = field(default_factory=list)
+    verdict: list = field(default_factory=list)
+    accuracy_line: str | None = None
+    metrics: dict = field(default_factory=dict)
+    sections: list = field(default_factory=list)
+    figures: list = field(default_factory=list)
+    influence: tuple | None = None
+    influence_reference: str = ""
+    calibration: tuple | None = None
+    dropped: tuple | None = None
+    pauses: tuple | None = None
+    nis: list | None = None
+    graph_nis_line: str | None = None
+    gated: tuple | None = None
+    counts: dict | None = None
+    frontend: dict | None = None
+    span: tuple = (math.nan, math.nan)
+
+    def figure(self, section: str, caption: str, path: str | Path) -> None:
+        """Add a figure (a PNG written into the run folder) to ``section``."""
+        self.figures.append((section, caption, Path(path)))
+
+
+def _accuracy_context(metrics: dict[str, dict]) -> dict:
+    columns = readable_units(metrics, KEY_COLUMNS)
+    return {
+        "metric_headers": ["trajectory"] + [c.header for c in columns],
+        "metric_rows": [[name] + [c.format(figures) for c in columns] for name, figures in metrics.items()],
         "drift_rows": [[name, _number(d["length_m"], "{:g}"), str(d["segments"]), _number(d["trans_pct"], "{:.2f}"),
                         _number(d["rot_deg_per_m"], "{:.2f}")]
                        for name, figures in metrics.items() for d in figures.get("drift", [])],
         "heading_rows": [[name, _number(f.get("heading_deg"), "{:.2f}"), _number(f.get("revolutions"), "{:.2f}"),
                           _number(f.get("heading_per_rev_deg"), "{:.2f}"),
-                          _number(f.get("heading_per_rev_pct"), "{:.3f}")] for name, f in metrics.items()],
+                          _number(f.get("heading_per_rev_pct"), "{:.3f}")] for name, f in metrics.items()
+                         if "heading_deg" in f],
         "leg_rows": [[name, str(leg["leg"]), "({:.3f}, {:.3f})".format(*leg["start"]),
                       "({:.3f}, {:.3f})".format(*leg["end"]), _number(leg["actual_m"]), _number(leg["estimated_m"]),
                       _number(leg["error_pct"], "{:.2f}"), _number(leg["relative_error_pct"], "{:.2f}")]
                      for name, figures in metrics.items() for leg in figures.get("legs", [])],
+    }
+
+
+def render_report(content: ReportContent) -> str:
+    """The HTML text of a report (template ``templates/report.html.j2``), the figures read from their files."""
+    count_headers, counts_table = count_rows(content.counts)
+    figures: dict[str, list] = {}
+    for section, caption, path in content.figures:
+        data = base64.b64encode(Path(path).read_bytes()).decode("ascii")
+        figures.setdefault(section, []).append({"caption": caption, "data": data})
+    context = {
+        "c": content,
+        "sequence": (content.config or {}).get("sequence"),
+        "figures": figures,
         "count_headers": count_headers,
         "count_rows": counts_table,
-        "frontend": [[k, str(v)] for k, v in (frontend or {}).items()],
-        "images": [{"caption": caption, "data": base64.b64encode(png).decode("ascii")}
-                   for caption, png in images.items()],
-        "config_yaml": yaml.safe_dump(config, sort_keys=False) if config else "(none)",
+        "nis_headers": NIS_HEADERS,
+        "band_percent": f"{100 * BAND_PROBABILITY:.0f}",
+        "frontend": [[k, str(v)] for k, v in (content.frontend or {}).items()],
+        "config_yaml": yaml.safe_dump(content.config, sort_keys=False) if content.config else "(none)",
+        **_accuracy_context(content.metrics),
     }
     return _environment().get_template("report.html.j2").render(**context)
 
 
-def write_report(path: str | Path, title: str, config: dict, metrics: dict[str, dict],
-                 images: dict[str, str | Path], frontend: dict | None = None, notes: list[str] | None = None,
-                 counts: dict | None = None, sections: list | None = None) -> Path:
-    """Render a report with the given PNG files embedded and write it atomically to ``path``."""
-    pngs = {caption: Path(p).read_bytes() for caption, p in images.items()}
-    text = render_report(title, config, metrics, pngs, frontend, notes, counts, sections)
+def write_report(path: str | Path, content: ReportContent) -> Path:
+    """Render a report with its figures embedded and write it atomically to ``path``."""
+    text = render_report(content)
     logger.debug("wrote %s", path)
     return write_atomic(path, text)

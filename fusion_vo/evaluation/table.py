@@ -58,6 +58,13 @@ VELOCITY_COLUMNS = (
 #: columns of every metrics table (report, comparison)
 KEY_COLUMNS = POSE_COLUMNS + VELOCITY_COLUMNS
 
+#: a later run's distance from the same trajectory of the first run (``fusion-vo compare``)
+DIFFERENCE_COLUMNS = (
+    Column("diff_rms_m", "RMS [m]", "RMS m", "{:.4f}"),
+    Column("diff_max_m", "largest [m]", "max m", "{:.4f}"),
+    Column("diff_end_m", "at the end [m]", "end m", "{:.4f}"),
+)
+
 
 def metrics_rows(metrics: dict[str, dict], columns: tuple[Column, ...] = KEY_COLUMNS) -> list[list[str]]:
     """Rows ``[name, value, ...]`` of ``columns`` for each trajectory in ``metrics``."""
@@ -96,6 +103,7 @@ def metrics_table(metrics: dict[str, dict], title: str = "Trajectory errors",
         Row label -> figures (as in ``metrics.json``).
     """
     caption = ("ATE0: anchored at the start; velocity errors are RMSE" if columns is VELOCITY_COLUMNS
+               else "horizontal distance at the first run's times" if columns is DIFFERENCE_COLUMNS
                else "ATE0: anchored at the start")
     columns = readable_units(metrics, columns)
     table = Table(title=title, box=box.SIMPLE_HEAD, caption=caption)

@@ -498,6 +498,7 @@ def add_intervals(iv, streams, config, counts) -> None:
 def ekf_update(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
     """Apply one fix to the EKF through ``model`` (gate, robust weight); returns whether it was accepted."""
     chk = model.check(ekf.x[:3], fix, covariance, ekf.P[:3, :3], t)
+    ekf.record("gps", chk.d2, 2, "rejected" if not chk.accepted else "down-weighted" if chk.weight < 1.0 else "used")
     if not chk.accepted:
         return False
     ekf.update_pose(chk.residual, chk.H, chk.R)

@@ -1,20 +1,14 @@
 """The reported pose covariances and the sensor noise models are honest: NEES of a few Monte-Carlo drives near 3
-and each sensor's NIS near its degrees of freedom (benchmarks/consistency.py runs 25 seeds against the
-chi-square bands)."""
-
-import sys
-from pathlib import Path
+and each sensor's NIS near its degrees of freedom (:mod:`fusion_vo.evaluation.consistency`;
+benchmarks/consistency.py runs 25 seeds against the chi-square bands)."""
 
 import numpy as np
 
 from fusion_vo.backends.graph import world_covariances
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+from fusion_vo.evaluation.consistency import band, ekf_nis, leave_one_out_nis, run, verdict
 
 
 def test_average_nees_of_every_backend_is_near_three_and_each_sensors_nis_near_its_dof():
-    from consistency import run
-
     nis: dict = {}
     nees = run(seeds=4, duration=20.0, nis=nis)
     for name, v in nees.items():
@@ -36,8 +30,6 @@ def _nis_ok(dof: int, mean: float) -> bool:
 def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound():
     """The NIS bound above catches a wheel noise stated ten times too small or too large, which the pose
     NEES alone barely shows (measured: wheel NIS 14 and 0.05 against 1.9; NEES of the EKF 6.2 and 2.5)."""
-    from consistency import ekf_nis
-
     from fusion_vo.backends import FusionConfig, SensorStreams
     from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
@@ -79,6 +71,31 @@ def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound_of_the_factor_gra
     for backend in ("gtsam", "gtsam_online"):  # the right noise model passes: the test above
         assert means["too small"][backend] > 2.0 * 3, means
         assert means["too large"][backend] < 0.4 * 3, means
+
+
+def test_leave_one_out_nis_is_the_block_against_the_prediction_updated_with_the_others():
+    """Two scalar sensors of one state: each one's NIS is its residual against the prediction updated with
+    the other alone, ``(y_i - K_j y_j)² / (P_j + R_i)`` with ``P_j = P R_j / (P + R_j)``; a block alone is
+    tested against the prediction, and an angle row is wrapped first."""
+    P = np.array([[4.0]])
+    blocks = [("a", [1.0], np.array([0.0]), np.array([[1.0]]), np.array([[1.0]]), None),
+              ("b", [3.0], np.array([0.0]), np.array([[1.0]]), np.array([[2.0]]), None)]
+    rows = leave_one_out_nis(P, blocks)
+    p_b, p_a = 4.0 * 2.0 / 6.0, 4.0 * 1.0 / 5.0  # the prediction updated with b alone, with a alone
+    assert rows[0][:2] == ("a", 1) and abs(rows[0][2] - (1.0 - 4.0 / 6.0 * 3.0) ** 2 / (p_b + 1.0)) < 1e-12
+    assert rows[1][:2] == ("b", 1) and abs(rows[1][2] - (3.0 - 4.0 / 5.0 * 1.0) ** 2 / (p_a + 2.0)) < 1e-12
+    (alone,) = leave_one_out_nis(P, blocks[:1])
+    assert abs(alone[2] - 1.0 / 5.0) < 1e-12
+    (turned,) = leave_one_out_nis(P, [("yaw", [2 * np.pi + 0.1], np.array([0.0]), np.array([[1.0]]),
+                                       np.array([[1.0]]), [0])])
+    assert abs(turned[2] - 0.01 / 5.0) < 1e-12
+
+
+def test_the_band_of_an_average_of_chi_squares_and_its_verdicts():
+    lo, hi = band(3, 25)
+    assert (round(lo, 2), round(hi, 2)) == (2.12, 4.03)  # the band the benchmark prints for 25 seeds
+    assert band(3, 1000)[1] - band(3, 1000)[0] < 0.5 * (hi - lo)  # narrower with more seeds
+    assert [verdict(m, lo, hi) for m in (3.0, 5.0, 1.0)] == ["consistent", "overconfident", "pessimistic"]
 
 
 def test_graph_covariances_are_rotated_into_the_world_frame():

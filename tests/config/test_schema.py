@@ -34,7 +34,9 @@ def _load(tmp_path, text):
     ("frontend: orb\n", "run.yaml: frontend: expected one of 'klt', 'features' or 'direct', got 'orb'"),
     ("sensors: camera,laser\n", "run.yaml: sensors[1]: expected one of 'camera', "),
     ("fusion: 3\n", "run.yaml: fusion: expected a mapping of key: value, got 3"),
-    ("klt:\n  window: 4\n", "run.yaml: klt: window must be an odd number"),
+    ("klt:\n  window: 6\n", "run.yaml: klt: window must be an odd number, not 6"),
+    ("klt:\n  window: 4\n", "run.yaml: klt: window must be at least 5, not 4"),
+    ("klt:\n  grid_cell: 1.0e-9\n", "run.yaml: klt: grid_cell must be 0 (no grid) or at least 16 px, not 1e-09"),
     ("fusion:\n  graph:\n    robust: tukey\n", "run.yaml: fusion: graph.robust must be one of huber"),
     ("odometry:\n  height: high\n", "run.yaml: odometry.height: expected a number, got 'high'"),
 ])
@@ -90,7 +92,7 @@ def test_print_config_lists_every_option_and_loads_back(tmp_path):
             # none by default
             continue
         assert lookup(data["fusion"], name) is not None or name == "camera_height"
-    assert set(data["klt"]) == {f.name for f in dataclasses.fields(KltConfig)}
+    assert set(data["klt"]) == set(KltConfig.model_fields)
     assert data["fusion"]["odom"]["yaw_scale"] == FusionConfig().odom.yaw_scale
     assert "# Forward acceleration noise of the constant-twist model [m/s²·√s]" in text
     path = tmp_path / "printed.yaml"
@@ -137,7 +139,7 @@ def test_new_dataclass_fields_are_picked_up():
                 raise ValueError("need lo <= hi")
 
     model = schema.model_of(Demo)
-    props = model.model_json_schema()["properties"]
+    props = schema.json_schema(model)["properties"]
     assert props["speed"]["description"] == "Top speed [m/s]." and props["speed"]["unit"] == "m/s"
     assert props["hi"]["description"] == "Bounds."
     assert schema.build(Demo, {"speed": 2}) == Demo(speed=2.0)

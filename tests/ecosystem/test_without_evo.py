@@ -1,11 +1,12 @@
-"""Without the eval extra (evo), run writes its trajectories and says the evaluation was skipped;
-evaluate stops with a one-line message naming the extra."""
+"""Without the eval extra (evo), run writes its trajectories and its report, which says in one line that the
+accuracy against ground truth was skipped and which extra it needs; evaluate rebuilds that report."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
 import textwrap
+from html import unescape
 from pathlib import Path
 
 from evo_blocker import BLOCK_EVO
@@ -30,11 +31,11 @@ def test_run_and_evaluate_without_evo(tmp_path):
     assert made.returncode == 0, made.stderr
     done = _cli("-q", "run", str(rec), "--out", str(out), "--backend", "ekf")
     assert done.returncode == 0, done.stderr
-    assert "note: no evaluation against ground truth: it needs evo (GPL-3.0)" in done.stdout
-    assert "pip install 'fusion-vo[eval]'" in done.stdout
+    line = "No evaluation against ground truth: it needs evo (GPL-3.0), which is not installed: pip install 'fusion-vo[eval]'"
+    assert f"note: {line}" in done.stdout
     assert (out / "ekf.tum").is_file() and (out / "vo.tum").is_file() and not (out / "metrics.json").exists()
-    failed = _cli("evaluate", str(out))
-    assert failed.returncode == 2
-    assert failed.stderr.strip().splitlines() == [
-        "fusion-vo: error: evaluation against ground truth needs evo (GPL-3.0), which is not installed: "
-        "pip install 'fusion-vo[eval]'"]
+    report = unescape((out / "report.html").read_text())
+    assert line in report and "<h2>Tracks</h2>" in report and "<h2>Influence of each input</h2>" in report
+    again = _cli("evaluate", str(out))
+    assert again.returncode == 0, again.stderr
+    assert f"note: {line}" in again.stdout and unescape((out / "report.html").read_text()) == report

@@ -116,13 +116,16 @@ def test_a_jump_in_the_fixes_shows_in_the_max_not_the_median(tmp_path):
     assert figures["gps_outliers"] == 1 and figures["gps_median_m"] < 3 * SIGMA
 
 
-def test_recording_with_neither_ground_truth_nor_gps_is_an_error(tmp_path, capsys):
+def test_recording_with_neither_ground_truth_nor_gps_gives_a_report_without_accuracy(tmp_path, capsys):
     seq = make_sequence(tmp_path)
     run = make_run(tmp_path, seq, ["wheel"])
     (seq / "gps0" / "data.csv").unlink()
-    assert main(["evaluate", str(run)]) == 2
+    assert main(["evaluate", str(run)]) == 0
+    assert "note: The recording has no ground truth and no GPS fixes: no accuracy figures" in capsys.readouterr().out
+    assert not (run / "metrics.json").exists() and (run / "report.html").is_file()
+    # asked for explicitly, such a recording is an error
+    assert main(["evaluate", str(run), "--gt", str(seq)]) == 2
     assert "no ground truth (and no GPS fixes" in capsys.readouterr().err
-    assert not (run / "metrics.json").exists()
 
 
 def test_fixes_on_another_clock_are_a_one_line_error(tmp_path, capsys):

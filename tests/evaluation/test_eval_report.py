@@ -43,7 +43,9 @@ def test_figures_and_a_self_contained_report(run):
         png = (run_dir / f"{name}.png").read_bytes()
         assert png.startswith(b"\x89PNG") and len(png) > 10_000
     text = (run_dir / "report.html").read_text()
-    assert text.count('src="data:image/png;base64,') == 5
+    # against ground truth: trajectories, velocities, heading, error growth; the sources' tracks, headings and
+    # differences; the frontend
+    assert text.count('src="data:image/png;base64,') == 8
     assert not re.search(r'(src|href)="(?!data:)', text)  # nothing outside the file
     assert "frontend: klt" in text and "<td>vo</td>" in text
 
@@ -66,12 +68,12 @@ def test_report_images_render_in_chromium(run, tmp_path):
     text = (run_dir / "report.html").read_text()
     page = tmp_path / "page.html"
     page.write_text(text.replace("</body>", PROBE))
-    assert render_count(page, tmp_path / "profile") == "5/5"
+    assert render_count(page, tmp_path / "profile") == "8/8"
     # the probe can tell: one corrupted image is not counted
     broken = tmp_path / "broken.html"
     broken.write_text(text.replace('src="data:image/png;base64,iVBOR', 'src="data:image/png;base64,AAAA', 1)
                       .replace("</body>", PROBE))
-    assert render_count(broken, tmp_path / "profile2") == "4/5"
+    assert render_count(broken, tmp_path / "profile2") == "7/8"
 
 
 def test_compare_two_runs(run, tmp_path):

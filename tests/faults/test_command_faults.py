@@ -5,6 +5,7 @@ status 2, and nothing written."""
 
 from __future__ import annotations
 
+import json
 import shutil
 import stat
 from pathlib import Path
@@ -100,17 +101,21 @@ def test_a_broken_run_folder_is_one_line_naming_the_file(fault, command, run_fol
 
 
 @pytest.mark.parametrize("command", [_evaluate, _compare], ids=["evaluate", "compare"])
-def test_a_run_yaml_naming_a_recording_that_is_gone_names_run_yaml_and_the_key(command, run_folder, tmp_path,
-                                                                                capsys):
-    """(export says so in a note and exports the trajectories: see test_export_says_when_the_ground_truth...)"""
+def test_a_run_yaml_naming_a_recording_that_is_gone_gives_the_rest(command, run_folder, tmp_path, capsys):
+    """The report and the comparison are built from the run folder's files: a recording moved away leaves out
+    the accuracy only, and says so (export too says so in a note: see test_export_says_when_the_ground_truth...)."""
     gone = tmp_path / "moved-away"
     p = run_folder / "run.yaml"
     p.write_text("".join(f"sequence: {gone}\n" if ln.startswith("sequence:") else ln
                          for ln in p.read_text().splitlines(keepends=True)))
-    before = _files(tmp_path)
-    status, _, err = cli(capsys, *command(run_folder, tmp_path))
-    assert_error(status, err, f"{run_folder}/run.yaml: sequence: recording folder {gone} not found")
-    assert _files(tmp_path) == before
+    status, out, err = cli(capsys, *command(run_folder, tmp_path))
+    assert status == 0, err
+    if command is _evaluate:
+        assert f"note: The recording {gone} named in run.yaml is not found: no accuracy figures" in out
+        assert not (run_folder / "metrics.json").exists()
+    else:
+        assert f"The recording {gone} named in run.yaml is not found" in out
+        assert "ate_m" not in json.loads((tmp_path / "cmp" / "compare.json").read_text())[run_folder.name]["ekf"]
 
 
 def test_compare_tells_apart_runs_of_the_same_name(pristine_run, tmp_path, capsys):
@@ -119,8 +124,6 @@ def test_compare_tells_apart_runs_of_the_same_name(pristine_run, tmp_path, capsy
     shutil.copytree(pristine_run, b)
     status, _, err = cli(capsys, "compare", a, b, "--out", tmp_path / "cmp")
     assert status == 0, err
-    import json
-
     assert sorted(json.loads((tmp_path / "cmp" / "compare.json").read_text())) == ["a/x/run", "b/x/run"]
 
 

@@ -11,6 +11,7 @@ from frontends.direct import DirectConfig
 from frontends.features import FeatureConfig
 from frontends.klt import KltConfig
 from frontends.similarity import RobustOptions
+from fusion_vo import schema
 from fusion_vo.config import validate_config
 from fusion_vo.errors import InputError
 from fusion_vo.odometry import OdometryConfig
@@ -30,6 +31,12 @@ BAD = {
     "not_a_mapping": ("- a\n- list", "mapping"),
     "invalid_yaml": ("klt: {window: [5\n", "not valid YAML"),
     "zero_lk_iterations": ("klt: {lk_iterations: 0}", "klt: lk_iterations must be at least 1, not 0"),
+    # a cell of 1e-9 px made a grid that OpenCV refused ("Maximum allowed dimension exceeded"), a traceback
+    "grid_cell_below_a_pixel": ("klt: {grid_cell: 1.0e-9}",
+                                "klt: grid_cell must be 0 (no grid) or at least 16 px, not 1e-09"),
+    # accepted, then every frame failed inside OpenCV and the run exited 0
+    "max_tracks_without_bound": ("klt: {max_tracks: 100000000000}",
+                                 "klt: max_tracks must be at most 10000, not 100000000000"),
     "negative_reweight_passes": ("fusion: {graph: {reweight_passes: -1}}",
                                  "fusion: 'graph.reweight_passes' must not be negative, not -1"),
     # PyYAML keeps the last of two equal keys: the first section's values were lost without a word
@@ -88,18 +95,35 @@ OUT_OF_RANGE = [
 _SECTIONS = {"klt": KltConfig, "features": FeatureConfig, "direct": DirectConfig, "odometry": OdometryConfig}
 
 
+def _number_schema(cls, name):
+    """The JSON schema of the number field ``name`` of ``cls`` (of its number branch when it may be null)."""
+    prop = schema.json_schema(schema.model_of(cls))["properties"][name]
+    return next((p for p in prop.get("anyOf", [prop]) if p.get("type") in ("number", "integer")), prop)
+
+
 def _outside(cls, name):
-    """Values of the field ``name`` of ``cls`` just outside each end of its range (``cls.RANGES``)."""
-    bound = cls.RANGES[name]
-    kind = float if "float" in next(f.type for f in dataclasses.fields(cls) if f.name == name) else int
-    if bound.low is not None:
-        yield kind(bound.low if bound.open_low else bound.low - 1)
-    if bound.high is not None:
-        yield kind(bound.high if bound.open_high else bound.high + 1)
+    """Values of the field ``name`` of ``cls`` just outside each end of its range (as its schema states it)."""
+    prop = _number_schema(cls, name)
+    kind = int if prop["type"] == "integer" else float
+    if "minimum" in prop:
+        yield kind(prop["minimum"] - 1)
+    if "exclusiveMinimum" in prop:
+        yield kind(prop["exclusiveMinimum"])
+    if "maximum" in prop:
+        yield kind(prop["maximum"] + 1)
+    if "exclusiveMaximum" in prop:
+        yield kind(prop["exclusiveMaximum"])
 
 
-#: besides, every field with a range in its dataclass's table, just outside it
-EVERY_RANGE = [(section, name, value) for section, cls in _SECTIONS.items() for name in cls.RANGES
+def _ranged(cls):
+    """The fields of ``cls`` whose schema states a range."""
+    props = schema.json_schema(schema.model_of(cls))["properties"]
+    return [name for name in props if {"minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum"}
+            & set(_number_schema(cls, name))]
+
+
+#: besides, every field with a range, just outside it
+EVERY_RANGE = [(section, name, value) for section, cls in _SECTIONS.items() for name in _ranged(cls)
                for value in _outside(cls, name)]
 
 
@@ -145,8 +169,10 @@ def test_a_value_that_cannot_work_is_one_line_naming_the_key(text, message, tmp_
 
 def test_every_default_is_in_range_and_every_range_names_a_field():
     for cls in (*_SECTIONS.values(), RobustOptions):
-        cls()
-        assert set(cls.RANGES) <= {f.name for f in dataclasses.fields(cls)}, cls
+        cls()  # the frontends' models check their defaults against their ranges too
+        if dataclasses.is_dataclass(cls):
+            assert set(cls.RANGES) <= {f.name for f in dataclasses.fields(cls)}, cls
+    assert len(EVERY_RANGE) > 100
     validate_config({})
 
 

@@ -82,11 +82,11 @@ def test_a_failure_in_the_evaluation_leaves_the_previous_run_untouched(recording
     assert status == 0, err
     before = snapshot(tmp_path)
 
-    def broken(run_dir, seq):
+    def broken(run_dir, *args, **kwargs):
         (Path(run_dir) / "metrics.json").write_text("{}")
         raise OSError(28, "No space left on device", str(Path(run_dir) / "trajectories.png"))
 
-    monkeypatch.setattr("fusion_vo.pipeline._evaluate", broken)
+    monkeypatch.setattr("fusion_vo.evaluation.run_report.build_report", broken)
     status, _, err = cli(capsys, "run", recording, "--out", out, "--backend", "ekf")
     assert_error(status, err, "No space left on device", str(out / "trajectories.png"))
     assert STAGING_PREFIX not in err

@@ -384,13 +384,14 @@ def test_klt_set_up_ahead_in_an_executor_gives_the_same_motions(monkeypatch):
     from concurrent.futures import ThreadPoolExecutor
 
     import frontends.klt as klt
+    import frontends.klt_setup as klt_setup
     import frontends.tracking as tracking
 
     motions = [similarity_about(WIDTH / 2, HEIGHT / 2 + 600.0, 0.0, 0.0, 2.5)] * 24  # turning: every frame warps
     frames = [f for f, _ in sequence(motions, "gravel", 1024 - WIDTH / 2, 424 - HEIGHT / 2)]
     times = [0.05 * k for k in range(len(frames))]
     warps: list[str] = []
-    for owner in (klt, tracking):
+    for owner in (klt_setup, tracking):  # the set-up made ahead, and the tracker's own
         original = owner.warp_reference
         monkeypatch.setattr(owner, "warp_reference", lambda *a, _f=original: warps.append(
             threading.current_thread().name) or _f(*a))

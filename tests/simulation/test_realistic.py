@@ -4,23 +4,19 @@ frontends that measure every frame the plain OpenCV script measures on its coars
 from __future__ import annotations
 
 import ast
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import fusion_vo.simulation.realistic as realistic
+from fusion_vo import baseline
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation import simulate
 from fusion_vo.simulation.realistic import RealisticCamera, RealisticRenderer
-
-ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "benchmarks"))
-import baseline_opencv  # noqa: E402
 
 
 def test_renderer_shares_nothing_with_the_estimators_geometry():
@@ -67,7 +63,7 @@ def coarse(tmp_path_factory):
 
 def test_every_frontend_measures_what_the_plain_script_measures(coarse):
     rec = Recording(coarse)
-    results, _ = baseline_opencv.run(coarse)
+    results, _ = baseline.run(coarse)
     plain = sum(m is not None for _, _, m in results)
     assert plain >= len(results) - 2
     gt = rec.groundtruth()
@@ -86,7 +82,7 @@ def test_uncalibrated_frontends_measure_what_the_plain_script_measures(coarse, l
     frontend still measures every frame the plain script measures: over the whole image with the lens
     estimated from the frames, or on the centre of the image without that estimate."""
     rec = Recording(coarse)
-    results, _ = baseline_opencv.run(coarse)
+    results, _ = baseline.run(coarse)
     plain = sum(m is not None for _, _, m in results)
     gt = rec.groundtruth()
     truth = float(np.linalg.norm(gt.xyyaw[-1, :2] - gt.xyyaw[0, :2]))

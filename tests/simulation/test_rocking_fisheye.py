@@ -3,20 +3,15 @@ and that the fusion can use (the independent renderer, 1.5 s of ``real_fisheye_c
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from fusion_vo import backends
+from fusion_vo.evaluation.increments import against_truth
 from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation import simulate
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
-from fusion_vs_best import inputs_against_truth  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -44,7 +39,7 @@ def test_derotated_increments_are_accurate_and_their_covariance_honest(rocking):
     honest). Fitted within 45 degrees of the axis, with its uncertainty in the covariance: 0.20 mm, 8.6."""
     rec, vo = rocking
     assert all(inc.ok for inc in vo.increments)
-    stats = inputs_against_truth(rec, vo)
+    stats = against_truth(rec, vo)
     assert stats["camera rms x [m]"] < 0.25e-3
     assert 1.0 < stats["camera mean NIS (3 if honest)"] < 15.0
 
