@@ -114,7 +114,6 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import Gate, MeasurementModel
-from fusion_vo.sensors.visual import frame_error_cov
 
 logger = logging.getLogger(__name__)
 
@@ -430,6 +429,13 @@ def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
             out.update(sensor.ekf_measurements(iv, config))
     out["readings"] = EkfReadings(sensor_readings(iv, config), iv.t)
     return out
+
+
+def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
+    """The camera's frame error over interval ``k`` for the prediction into node ``k + 1``
+    (:meth:`~fusion_vo.backends.ekf_adapter.EkfReadings.frame_cov`), or None."""
+    readings = meas.get("readings")
+    return None if readings is None else readings.frame_cov(k)
 
 
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:

@@ -126,7 +126,7 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.graph_adapter import GraphReadings, interval_factor, node_factor
+from fusion_vo.backends.graph_adapter import GraphReadings, frame_poses, interval_factor, node_factor
 from fusion_vo.backends.graph_adapter import guess as readings_guess
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
@@ -135,7 +135,6 @@ from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors,
                                         pose_table)
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.wheel import arc_covariance, arc_increment, at_rest, gyro_turn
-from fusion_vo.sensors.visual import frame_covariances
 
 logger = logging.getLogger(__name__)
 
@@ -196,6 +195,7 @@ class NodeFactors:
     values: dict = field(default_factory=dict)
     sensors: list = field(default_factory=list)
     guess: np.ndarray | None = None
+    new_frames: list = field(default_factory=list)  # frame poses made here, which start at the node's pose
 
 
 @dataclass(slots=True)
@@ -274,7 +274,6 @@ class GraphBuilder:
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
         for c in self.counts.values():
             c.used = 0
-        self.visual_spans = self._visual_spans()
         #: global nodes whose frame pose ``F`` exists (a stream built one interval at a time shares one set)
         self.frames: set[int] = set()
         if iv.uses("wheel"):  # per-interval arc increments, vectorised
@@ -324,31 +323,6 @@ class GraphBuilder:
         base = covariance_noise(np.asarray(cov, dtype=np.float64))
         robust = _robust_kernel(kernel, width)
         return base if robust is None else gtsam.noiseModel.Robust.Create(robust, base)
-
-    def _visual_spans(self) -> dict[int, list]:
-        """Visual increments re-expressed between keyframes, keyed by their end node: (start node, delta,
-        covariance, covariance of its frames' own errors or None, :func:`fusion_vo.sensors.visual.frame_covariances`;
-        a composed span takes its last increment's, and keeps the inner frames' errors in its covariance)."""
-
-        iv = self.iv
-        pos = {int(g): n for n, g in enumerate(self.grid)}
-        out: dict[int, list] = {}
-        chain = None  # (start node, delta, cov, end grid index)
-        fcs = frame_covariances(iv)
-        for m, (i0, i1, d, c) in enumerate(zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov)):
-            i0, i1 = int(i0), int(i1)
-            if chain is not None and chain[3] == i0:
-                delta, cov = _compose_with_covariance(chain[1], chain[2], d, c)
-                chain = (chain[0], delta, cov, i1)
-            elif i0 in pos:
-                chain = (pos[i0], d, c, i1)
-            else:
-                chain = None
-                continue
-            if i1 in pos:
-                out.setdefault(pos[i1], []).append((chain[0], chain[1], chain[2], None if fcs is None else fcs[m]))
-                chain = None
-        return out
 
     def initial_pose(self) -> np.ndarray:
         """The first pose: aligned to the GPS fixes when fused, else the configured one."""
@@ -415,10 +389,21 @@ class GraphBuilder:
                 break
             step.run(self, nf, node)
         spans = self.readings.ending_at(n)
-        r_translation, r_heading = readings_guess(spans, est, node.dt)
-        if r_translation is not None and node.translation is None:
+        for span in spans:  # the sensors' interval readings that end here
+            xs, xe, cov = X(self.offset + span.start), node.xj, None
+            if span.frame_cov is not None:
+                frames = frame_poses(self, nf, span, n, c, previous_pose)
+                if frames is not None:
+                    (xs, xe), cov = frames, span.cov - 2.0 * span.frame_cov
+            factor = interval_factor(self, span, xs, xe, c, self._times[g1] - self._times[self._grid[span.start]],
+                                     cov=cov)
+            nf.factors.append(factor)
+            nf.sensors.append(span.readings.sensor)
+        # the initial guess: the readings' by their models' ranks (a sensor's own step above ranks as the wheels, 1)
+        (r_translation, rank_t), (r_heading, rank_h) = readings_guess(spans, est, node.dt)
+        if r_translation is not None and (node.translation is None or rank_t < 1):
             node.translation = r_translation
-        if r_heading is not None:
+        if r_heading is not None and (node.heading is None or rank_h < 1):
             node.heading = r_heading
         last = est.get("last_increment", _NO_INCREMENT)
         translation, heading = node.translation, node.heading
@@ -431,17 +416,12 @@ class GraphBuilder:
             nf.factors.append(gtsam.BetweenFactorPose2(node.xi, node.xj, gtsam.Pose2(*guess), nm))
             nf.sensors.append("motion_model")
         nf.values[node.xj] = previous_pose.compose(gtsam.Pose2(*guess))
-        for key in node.scratch.pop("new_frames", ()):  # frame poses start at their node's pose
+        for key in [*node.scratch.pop("new_frames", ()), *nf.new_frames]:  # frame poses start at their node's pose
             nf.values[key] = nf.values[node.xj]
         nf.guess = guess
         for _, step in steps:  # (sorted by order)
             if step.order >= GUESS_ORDER:
                 step.run(self, nf, node)
-        for span in spans:  # the sensors' interval readings that end here
-            xs = X(self.offset + span.start)
-            factor = interval_factor(self, span, xs, node.xj, c, self._times[g1] - self._times[self._grid[span.start]])
-            nf.factors.append(factor)
-            nf.sensors.append(span.readings.sensor)
         self._unary(nf, n, node)
         return nf
 

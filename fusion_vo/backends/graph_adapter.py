@@ -110,9 +110,10 @@ class GraphReadings:
         return self.nodes.get(n, [])
 
 
-def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[np.ndarray | None, float | None]:
-    """The interval's translation and heading change from the readings over exactly that interval, each from the
-    model of the lowest :attr:`~fusion_vo.sensors.model.MeasurementModel.guess_rank`."""
+def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[tuple, tuple]:
+    """``((translation, rank), (heading change, rank))`` of the interval from the readings over exactly that interval,
+    each from the model of the lowest :attr:`~fusion_vo.sensors.model.MeasurementModel.guess_rank` (None, None where
+    none gives one)."""
     best_t = best_h = None
     translation = heading = None
     for span in spans:
@@ -126,7 +127,7 @@ def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[np.ndarray | No
             translation, best_t = t, rank_t
         if h is not None and rank_h is not None and (best_h is None or rank_h < best_h):
             heading, best_h = h, rank_h
-    return translation, heading
+    return (translation, best_t), (heading, best_h)
 
 
 def arguments(builder, r: Readings, segment: int) -> tuple[dict, dict]:
@@ -147,18 +148,44 @@ def _params(r: Readings, j: int) -> dict:
     return {name: r.param(name, j) for name in r.params}
 
 
-def interval_factor(builder, span: Span, xs: int, xe: int, segment: int, dt: float):
-    """The factor of an interval reading between the poses ``xs`` and ``xe``."""
+def interval_factor(builder, span: Span, xs: int, xe: int, segment: int, dt: float, robust: bool | None = None,
+                    cov: np.ndarray | None = None):
+    """The factor of an interval reading between the poses ``xs`` and ``xe`` (``cov`` replaces its covariance;
+    ``robust`` its robust flag)."""
     r = span.readings
+    robust = r.robust if robust is None else robust
+    cov = span.cov if cov is None else cov
     keys, fixed = arguments(builder, r, segment)
     if r.rows is None and r.model.identity(fixed):
-        return gtsam.BetweenFactorPose2(xs, xe, gtsam.Pose2(*span.z), builder.noise(span.cov, robust=r.robust))
+        return gtsam.BetweenFactorPose2(xs, xe, gtsam.Pose2(*span.z), builder.noise(cov, robust=robust))
     params = _params(r, span.index)
     if r.model.uses_dt:
         params["dt"] = dt
     keys["motion"] = (xs, xe)
-    return builder.model_factor(r.model, span.z, span.cov, keys, fixed=fixed, params=params, rows=r.rows,
-                                robust=r.robust)
+    return builder.model_factor(r.model, span.z, cov, keys, fixed=fixed, params=params, rows=r.rows, robust=robust)
+
+
+def frame_poses(builder, nf, span: Span, n: int, segment: int, previous_pose) -> tuple[int, int] | None:
+    """The frame poses ``F`` of a span's first and last node for a reading that states its frames' errors, each made
+    with its tie, the reading's own model between ``X`` and ``F`` with a zero reading and the frame error's
+    covariance, the first time a reading touches it (a frame's error is in the readings' units: with a scale
+    estimated the tie goes through it). None when the first node's frame pose does not exist and that node is not
+    the previous one (whose current estimate ``previous_pose`` starts it): the span then relates the poses ``X``.
+    A frame pose made at node ``n`` starts at its initial pose (listed in ``nf.new_frames``)."""
+    r = span.readings
+    a, b = builder.offset + span.start, builder.offset + n
+    if a not in builder.frames:
+        if span.start != n - 1 or previous_pose is None:
+            return None
+        nf.values[builder.F(a)] = previous_pose
+    new = [g for g in (a, b) if g not in builder.frames]
+    for g in new:
+        tie = Span(r, span.index, 0, np.zeros(3), span.frame_cov, None, False)
+        nf.factors.append(interval_factor(builder, tie, builder.X(g), builder.F(g), segment, 0.0, robust=False))
+        builder.frames.add(g)
+    if b in new:
+        nf.new_frames.append(builder.F(b))
+    return builder.F(a), builder.F(b)
 
 
 def node_factor(builder, r: Readings, j: int, xn: int, segment: int):

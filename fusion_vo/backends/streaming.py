@@ -108,8 +108,7 @@ import numpy as np
 
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import PlanarEkf, interval_measurements, step_blocks
-from fusion_vo.sensors.visual import frame_error_cov
+from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors

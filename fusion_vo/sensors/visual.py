@@ -41,6 +41,7 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
+from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
@@ -157,119 +158,13 @@ def frame_covariances(iv) -> np.ndarray | None:
     return 0.5 * f * iv.vis_cov if f > 0 else None
 
 
-def ekf_measurements(iv, config) -> dict:
-    """The increments as twists per node interval: ``visual`` -> (ok, u, R) (EKF module docstring); an increment
-    spanning ``n`` intervals is applied as its mean twist to each with covariance ``n R``."""
+def readings(iv, config) -> list[Readings]:
+    """The usable increments between their frames' nodes, with their frames' own errors when modelled
+    (:func:`frame_covariances`)."""
     if not len(iv.vis_i0):
-        return {}
-    K = iv.n_steps
-    vis_u = np.zeros((K, 3))
-    vis_R = np.zeros((K, 3, 3))
-    vis_ok = np.zeros(K, bool)
-    span = iv.t[iv.vis_i1] - iv.t[iv.vis_i0]
-    n = iv.vis_i1 - iv.vis_i0
-    for m in np.argsort(n, kind="stable"):  # single-interval increments first
-        steps = np.arange(iv.vis_i0[m], iv.vis_i1[m])
-        free = steps[~vis_ok[steps]]
-        if len(free) == 0:
-            continue
-        vis_u[free] = se2.log(iv.vis_delta[m]) / span[m]
-        vis_R[free] = iv.vis_cov[m] * (n[m] / span[m] ** 2)
-        vis_ok[free] = True
-    out = {"visual": (vis_ok, vis_u, vis_R)}
-    fc = frame_covariances(iv)
-    if fc is not None:  # single-interval increments: their frames' errors and the rest (module docstring)
-        single = np.zeros(K, bool)
-        frame_cov = np.full((K, 3, 3), np.nan)
-        rest_R = np.full((K, 3, 3), np.nan)
-        one = iv.vis_i1 - iv.vis_i0 == 1
-        k = iv.vis_i0[one]
-        single[k] = True
-        frame_cov[k] = fc[one]
-        rest_R[k] = (iv.vis_cov[one] - 2.0 * fc[one]) / (span[one] ** 2)[:, None, None]
-        out["visual_frames"] = (single, frame_cov, iv.dt.copy(), rest_R)
-    return out
-
-
-def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
-    """Covariance of the camera's error at the frame that ends interval ``k`` (``f/2 Σ_vis`` of the increment
-    over that interval), or None where no single-interval increment ends there (the EKF keeps the last)."""
-    m = meas.get("visual_frames")
-    return m[1][k] if m is not None and m[0][k] else None
-
-
-def ekf_blocks(ekf, meas: dict, k: int) -> list:
-    """The increment of interval ``k`` as a block; with frame errors in the state (module docstring) its noise
-    is ``(1 - f) R`` (``R - 2 Σ_e / Δt²`` with the increments' own frame covariances) and the two frames'
-    errors enter as ``(e_this - e_prev) / Δt``."""
-    m = meas.get("visual")
-    if m is None or not m[0][k]:
         return []
-    frames = meas.get("visual_frames")
-    if ekf.frame_errors is None or frames is None or not frames[0][k]:
-        return [ekf.block(VISUAL, m[1][k], m[2][k])]
-    name, z, h, H, R, angle = ekf.block(VISUAL, m[1][k], frames[3][k])
-    e0, e1 = ekf.frame_errors
-    x = ekf.x
-    inv_dt = 1.0 / frames[2][k]
-    H[:, e0] -= np.eye(3) * inv_dt
-    H[:, e1] += np.eye(3) * inv_dt
-    return [(name, z, h + (x[e1] - x[e0]) * inv_dt, H, R, angle)]
-
-
-def graph_factors(builder, nf, node) -> None:
-    """The increments ending at this node (re-expressed between keyframes): the model with the visual scale
-    when it is estimated, else GTSAM's ``BetweenFactorPose2``."""
-    import gtsam
-
-    est = node.estimate
-    for start, d, cov, fc in builder.visual_spans.get(node.n, []):
-        xs, xj = builder.X(builder.offset + start), node.xj
-        if fc is not None:
-            frames = _frame_poses(builder, nf, node, start, fc)
-            if frames is not None:
-                (xs, xj), cov = frames, cov - 2.0 * fc
-        if builder.kv_on:
-            nf.factors.append(builder.model_factor(VISUAL, d, cov, {"motion": (xs, xj),
-                                                                     "visual_scale": (builder.S(node.segment),)}))
-        else:
-            nf.factors.append(gtsam.BetweenFactorPose2(xs, xj, gtsam.Pose2(*d), builder.noise(cov)))
-        nf.sensors.append("camera")
-        if start == node.n - 1:
-            if node.translation is None:
-                node.translation = d[:2] / est.get("visual_scale", 1.0)
-            if node.heading is None:
-                node.heading = d[2]
-
-
-def _frame_poses(builder, nf, node, start: int, frame_cov) -> tuple[int, int] | None:
-    """The frame poses ``F`` of an increment's first and last node (module docstring), each made with its
-    tie ``X⁻¹ F ~ N(0, frame_cov)`` the first time an increment touches it; None when the first node's
-    frame pose does not exist and that node is not the previous one (whose current estimate starts it)."""
-    import gtsam
-
-    a, b = builder.offset + start, builder.offset + node.n
-    if a not in builder.frames:
-        if start != node.n - 1 or node.previous_pose is None:
-            return None
-        nf.values[builder.F(a)] = node.previous_pose
-    new = [g for g in (a, b) if g not in builder.frames]
-    frame_cov = np.asarray(frame_cov, dtype=np.float64)
-    for g in new:
-        # the frame's error is in the increments' units: with the visual scale estimated the tie is the same
-        # model (a tie in metres would shrink with the whole track, and pull the common scale of camera and
-        # wheels, which only the priors fix, away from them)
-        if builder.kv_on:
-            nf.factors.append(builder.model_factor(VISUAL, np.zeros(3), frame_cov,
-                                                   {"motion": (builder.X(g), builder.F(g)),
-                                                    "visual_scale": (builder.S(node.segment),)}, robust=False))
-        else:
-            nf.factors.append(gtsam.BetweenFactorPose2(builder.X(g), builder.F(g), gtsam.Pose2(),
-                                                       builder.noise(frame_cov, robust=False)))
-        builder.frames.add(g)
-    if b in new:  # starts at this node's initial pose (GraphBuilder.node)
-        node.scratch.setdefault("new_frames", []).append(builder.F(b))
-    return builder.F(a), builder.F(b)
+    return [Readings("camera", VISUAL, iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov, frame_cov=frame_covariances(iv),
+                     order=ORDER["camera"])]
 
 
 def _live_sample(inc) -> tuple:
@@ -289,7 +184,6 @@ def _live_take(fusion, inc) -> None:
 
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
-    intervals=Step(30, add_intervals), ekf_measurements=ekf_measurements, ekf_blocks=(Step(10, ekf_blocks),),
-    graph_factors=(Step(20, graph_factors),),
+    intervals=Step(30, add_intervals), readings=readings,
     live=Live(_live_sample, values=_live_values, take=_live_take),
 ))
