@@ -68,6 +68,22 @@ def _as_rates(r: Readings, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     return rate / span[:, None], cov, frame
 
 
+#: variance [per unit time] of a component the consistency monitor dropped (a block's rows above it are not counted)
+DROPPED_VAR = 1e8
+
+
+def _dropped(R: np.ndarray, dropped: tuple, ok: np.ndarray) -> np.ndarray:
+    """``R`` (K, 3, 3) of motion readings with the dropped components' rows and columns vague where ``ok``."""
+    R = R.copy()
+    rows = {"yaw": [2], "speed": [0, 1]}
+    for component in dropped:
+        for i in rows[component]:
+            R[ok, i, :] = R[ok, :, i] = 0.0
+        for i in rows[component]:
+            R[ok, i, i] = DROPPED_VAR
+    return R
+
+
 def interval_table(r: Readings, t: np.ndarray) -> _Table:
     """The interval readings ``r`` spread over the grid ``t`` (module docstring)."""
     K = len(t) - 1
@@ -88,6 +104,8 @@ def interval_table(r: Readings, t: np.ndarray) -> _Table:
         R[free] = cov[j] * (n[j] / span[j] ** 2)
         ok[free] = True
         index[free] = j
+    if r.dropped:
+        R = _dropped(R, r.dropped, ok)
     table = _Table(r, ok, z, R, index)
     if frame is not None:
         one = n == 1

@@ -134,7 +134,7 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, covariance_noise, group,
                                         pose_table)
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.wheel import arc_covariance, arc_increment, at_rest, gyro_turn
+from fusion_vo.sensors.wheel import arc_increment
 
 logger = logging.getLogger(__name__)
 
@@ -276,14 +276,6 @@ class GraphBuilder:
             c.used = 0
         #: global nodes whose frame pose ``F`` exists (a stream built one interval at a time shares one set)
         self.frames: set[int] = set()
-        if iv.uses("wheel"):  # per-interval arc increments, vectorised
-            self._wheel_inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
-            self._wheel_inc[:, 0] *= iv.cx
-            self._wheel_inc[:, 1] *= iv.cy
-            self._turn = gyro_turn(iv)
-            self._wheel_cov = arc_covariance(iv.wheel_dl, iv.wheel_dr, iv.wheel_base, config.wheel_model(iv.twist)[0],
-                                             np.diff(iv.t), self._turn)
-            self._still = at_rest(iv, config)
         self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
 
     # ------------------------------------------------------------------ helpers
@@ -424,24 +416,6 @@ class GraphBuilder:
                 step.run(self, nf, node)
         self._unary(nf, n, node)
         return nf
-
-    def wheel_increment(self, g0: int, g1: int) -> tuple[np.ndarray, np.ndarray]:
-        """Arc-model increment and covariance of the wheel travel between grid indices ``g0`` and ``g1``."""
-        iv = self.iv
-        if g1 == g0 + 1:
-            return self._wheel_inc[g0].copy(), self._wheel_cov[g0]
-        dl, dr = iv.wheel_dl[g0:g1].sum(), iv.wheel_dr[g0:g1].sum()
-        m = arc_increment(dl, dr, iv.wheel_base)[0]
-        m[0] *= iv.cx[g0:g1].mean()
-        m[1] *= iv.cy[g0:g1].mean()
-        turn = None if self._turn is None else self._turn[g0:g1].sum()
-        return m, arc_covariance(dl, dr, iv.wheel_base, self.config.wheel_model(iv.twist)[0], iv.t[g1] - iv.t[g0],
-                                 turn)[0]
-
-    def wheels_at_rest(self, g0: int, g1: int) -> bool:
-        """Both wheels at rest in every interval from grid index ``g0`` to ``g1``
-        (:func:`~fusion_vo.sensors.wheel.at_rest`, evaluated for all intervals at once)."""
-        return bool(self._still[g0:g1].all())
 
     def state_variable(self, name: str, segment: int) -> int | None:
         """The variable of state ``name`` in calibration ``segment``, or None when the graph does not estimate it."""

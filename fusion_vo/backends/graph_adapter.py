@@ -123,6 +123,8 @@ def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[tuple, tuple]:
         if rank_t is None and rank_h is None:
             continue
         t, h = span.readings.model.guess(span.z, estimate, dt)
+        if "speed" in span.readings.dropped:
+            t = None
         if t is not None and rank_t is not None and (best_t is None or rank_t < best_t):
             translation, best_t = t, rank_t
         if h is not None and rank_h is not None and (best_h is None or rank_h < best_h):
@@ -148,21 +150,39 @@ def _params(r: Readings, j: int) -> dict:
     return {name: r.param(name, j) for name in r.params}
 
 
+#: standard deviation [m] of the translation of a motion reading whose speed the consistency monitor dropped
+FREE_TRANSLATION_SIGMA = 100.0
+
+
+def _without_dropped(r: Readings, z: np.ndarray, cov: np.ndarray):
+    """A motion reading's ``(z, cov, rows)`` with its dropped components left out (``Readings.dropped``)."""
+    rows = r.rows
+    if "speed" in r.dropped:  # a free translation
+        cov = cov.copy()
+        cov[:2, :] = cov[:, :2] = 0.0
+        cov[0, 0] = cov[1, 1] = FREE_TRANSLATION_SIGMA**2
+    if "yaw" in r.dropped:  # the translation alone; the chord of a wrongly curved arc would drift sideways
+        z = z.copy()
+        z[1] = 0.0
+        rows, cov = (0, 1), cov[:2, :2]
+    return z, cov, rows
+
+
 def interval_factor(builder, span: Span, xs: int, xe: int, segment: int, dt: float, robust: bool | None = None,
                     cov: np.ndarray | None = None):
     """The factor of an interval reading between the poses ``xs`` and ``xe`` (``cov`` replaces its covariance;
     ``robust`` its robust flag)."""
     r = span.readings
     robust = r.robust if robust is None else robust
-    cov = span.cov if cov is None else cov
+    z, cov, rows = _without_dropped(r, span.z, span.cov if cov is None else cov)
     keys, fixed = arguments(builder, r, segment)
-    if r.rows is None and r.model.identity(fixed):
-        return gtsam.BetweenFactorPose2(xs, xe, gtsam.Pose2(*span.z), builder.noise(cov, robust=robust))
+    if rows is None and r.model.identity(fixed):
+        return gtsam.BetweenFactorPose2(xs, xe, gtsam.Pose2(*z), builder.noise(cov, robust=robust))
     params = _params(r, span.index)
     if r.model.uses_dt:
         params["dt"] = dt
     keys["motion"] = (xs, xe)
-    return builder.model_factor(r.model, span.z, cov, keys, fixed=fixed, params=params, rows=r.rows, robust=robust)
+    return builder.model_factor(r.model, z, cov, keys, fixed=fixed, params=params, rows=rows, robust=robust)
 
 
 def frame_poses(builder, nf, span: Span, n: int, segment: int, previous_pose) -> tuple[int, int] | None:

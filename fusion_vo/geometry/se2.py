@@ -128,6 +128,13 @@ def log(p) -> np.ndarray:
     return np.array([(a * x + b * y) / det, (-b * x + a * y) / det, th])
 
 
+def exp_many(twist) -> np.ndarray:
+    """:func:`exp` of twists (N, 3) at once (the heading not wrapped)."""
+    xi = np.asarray(twist, dtype=np.float64).reshape(-1, 3)
+    a, b = sinc_terms(xi[:, 2])
+    return np.stack([a * xi[:, 0] - b * xi[:, 1], b * xi[:, 0] + a * xi[:, 1], xi[:, 2]], axis=1)
+
+
 def log_many(p) -> np.ndarray:
     """:func:`log` of increments ``p`` (N, 3) at once."""
     p = np.asarray(p, dtype=np.float64).reshape(-1, 3)

@@ -66,6 +66,11 @@ class Readings:
         :mod:`fusion_vo.sensors.visual`); None: independent readings.
     order : float
         Place among the readings of the other sensors (:data:`ORDER`).
+    dropped : tuple of str
+        Components of these motion readings that the consistency monitor dropped
+        (:mod:`fusion_vo.backends.monitor`): ``"speed"`` (the translation rows) and ``"yaw"`` (the heading change).
+        The backends leave them out: the EKF with a vague variance in its twist coordinates, the graph with a free
+        translation or without the heading row (and the sideways chord its wrong heading made).
     """
 
     sensor: str
@@ -80,6 +85,7 @@ class Readings:
     robust: bool = True
     frame_cov: np.ndarray | None = None
     order: float = DEFAULT_ORDER
+    dropped: tuple = ()
 
     def __post_init__(self) -> None:
         self.i0 = np.asarray(self.i0, dtype=np.int64).reshape(-1)
@@ -110,4 +116,4 @@ class Readings:
         params = {k: (v[keep] if np.ndim(v) else v) for k, v in self.params.items()}
         return Readings(self.sensor, self.model, self.i0[keep], self.i1[keep], self.z[keep], self.cov[keep],
                         dict(self.fixed), params, self.rows, self.robust,
-                        None if self.frame_cov is None else self.frame_cov[keep], self.order)
+                        None if self.frame_cov is None else self.frame_cov[keep], self.order, self.dropped)

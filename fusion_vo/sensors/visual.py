@@ -39,7 +39,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusion_vo.geometry import se2
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register

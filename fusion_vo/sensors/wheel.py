@@ -521,9 +521,6 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- registration
-_DROPPED_VAR = 1e8  # EKF variance of a measurement row the consistency monitor dropped
-_FREE_HEADING_SIGMA = 10.0  # [rad] heading row of a wheel factor whose heading is a separate factor
-_FREE_TRANSLATION_SIGMA = 100.0  # [m] translation rows of a wheel factor whose speed the monitor dropped
 
 
 def add_intervals(iv, streams, config, counts) -> None:
@@ -579,145 +576,46 @@ def at_rest(iv, config) -> np.ndarray:
     return iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, iv.dt, config.wheel_model(iv.twist)[0])
 
 
-def ekf_measurements(iv, config) -> dict:
-    """``wheel`` -> (ok, u, R): the arc as a twist per interval (components the consistency monitor dropped
-    get a vague variance), and ``standstill`` -> (ok, σ²) where both wheels are at rest."""
-    if not iv.uses("wheel"):
-        return {}
-    out = {}
-    dt = iv.dt
-    u, R = arc_twist(iv.wheel_dl, iv.wheel_dr, dt, iv.wheel_base, config.wheel_model(iv.twist)[0], gyro_turn(iv))
-    u[:, 0] *= iv.cx
-    if iv.wheel_yaw_ok is not None and not iv.wheel_yaw_ok.all():
-        # yaw component dropped by the consistency monitor: the speed rows stay
-        drop = ~iv.wheel_yaw_ok
-        R = R.copy()
-        R[drop, 2, :] = R[drop, :, 2] = 0.0
-        R[drop, 2, 2] = _DROPPED_VAR
-    if iv.wheel_speed_ok is not None and not iv.wheel_speed_ok.all():
-        # speed dropped by the monitor (disagrees with the camera's): the yaw row stays
-        drop = ~iv.wheel_speed_ok
-        R = R.copy()
-        R[drop, :2, :] = R[drop, :, :2] = 0.0
-        R[drop, 0, 0] = R[drop, 1, 1] = _DROPPED_VAR
-    out["wheel"] = (iv.wheel_ok, u, R, iv.wheel_base)
-    return out
-
-
 def readings(iv, config) -> list[Readings]:
-    """Both wheels at rest over an interval: its heading change is zero (``σ_still Δt``; not robust)."""
+    """The arc over each node interval the wheels cover, and the standstills.
+
+    The arc's noise lives where the wheels make it: in its own coordinates ``(d, lateral, θ)`` (each wheel's travel,
+    the lateral slip, the skid; :func:`arc_twist`), carried to the increment's ``(d_x, d_y, d_ψ)`` by the exponential's
+    Jacobian (:func:`fusion_vo.geometry.se2.exp_jacobian`); the travel is projected to the horizontal by the forward
+    slope factor (``Intervals.cx``) before the arc is made. Intervals in which the consistency monitor dropped a component of the wheels
+    (``Intervals.wheel_yaw_ok``, ``wheel_speed_ok``) are readings with that component dropped. Both wheels at rest
+    over an interval: its heading change is zero (``σ_still Δt``; not robust)."""
+    out = []
+    if iv.uses("wheel") and iv.wheel_ok.any():
+        noise = config.wheel_model(iv.twist)[0]
+        k = np.flatnonzero(iv.wheel_ok)
+        dl, dr, dt = iv.wheel_dl[k], iv.wheel_dr[k], iv.dt[k]
+        turn = gyro_turn(iv)
+        _, rate_cov = arc_twist(dl, dr, dt, iv.wheel_base, noise, None if turn is None else turn[k])
+        # the arc's twist (d, 0, θ), its forward travel projected to the horizontal (Intervals.cx): the reading is its
+        # exponential, so that the EKF, which reads the logarithm, gets the twist itself
+        xi = np.stack([0.5 * (dl + dr) * iv.cx[k], np.zeros(len(k)), (dr - dl) / iv.wheel_base], axis=1)
+        J = se2.exp_jacobian(xi)
+        cov = J @ (rate_cov * (dt**2)[:, None, None]) @ np.transpose(J, (0, 2, 1))
+        z = se2.exp_many(xi)
+        model = wheel_model(iv.states)
+        params = {"wheel_base": iv.wheel_base} if model is CURVED_WHEEL else {}
+        yaw_ok = np.ones(len(k), bool) if iv.wheel_yaw_ok is None else iv.wheel_yaw_ok[k]
+        speed_ok = np.ones(len(k), bool) if iv.wheel_speed_ok is None else iv.wheel_speed_ok[k]
+        for yaw in (True, False):
+            for speed in (True, False):
+                sel = (yaw_ok == yaw) & (speed_ok == speed)
+                if sel.any():
+                    dropped = (() if yaw else ("yaw",)) + (() if speed else ("speed",))
+                    out.append(Readings("wheel", model, k[sel], k[sel] + 1, z[sel], cov[sel], params=params,
+                                        order=ORDER["wheel"], dropped=dropped))
     still = at_rest(iv, config)
-    if not still.any():
-        return []
-    k = np.flatnonzero(still)
-    sigma = config.wheel_model(iv.twist)[0].standstill_yaw_rate * np.maximum(iv.dt[k], 1e-3)
-    return [Readings("standstill", STANDSTILL, k, k + 1, np.zeros(len(k)), sigma**2, robust=False,
-                     order=ORDER["standstill"])]
-
-
-def ekf_wheel(ekf, meas: dict, k: int) -> list:
-    m = meas.get("wheel")
-    if m is None or not m[0][k]:
-        return []
-    model = wheel_model(ekf.states)
-    params = {"wheel_base": m[3]} if model is CURVED_WHEEL else {}
-    return [ekf.block(model, m[1][k], m[2][k], **params)]
-
-
-def _graph_arguments(builder, node, scale: bool) -> tuple:
-    """The run's wheel model (:func:`wheel_model`) and its arguments in a graph factor over ``node``'s
-    interval: ``(model, keys, fixed, params)``, with the radius factor (only if ``scale``) and the wheel-base
-    factor as variables where estimated, else fixed at 1, and with the curved model its curvature bias and
-    the configured wheel base."""
-    model = wheel_model(builder.states)
-    keys, fixed, params = {"motion": (node.xi, node.xj)}, {}, {}
-    for name, on, key in (("wheel_scale", scale and builder.kr_on, builder.R),
-                          ("wheel_base_factor", builder.kb_on, builder.W)):
-        if on:
-            keys[name] = (key(node.segment),)
-        else:
-            fixed[name] = 1.0
-    if model is CURVED_WHEEL:
-        keys["wheel_curvature"] = (builder.state_key(CURVATURE.name, node.segment),)
-        params["wheel_base"] = builder.iv.wheel_base
-    return model, keys, fixed, params
-
-
-def graph_translation(builder, nf, node) -> None:
-    """The arc increment over the node interval.
-
-    With the wheel-base factor estimated: the whole arc as one factor of :data:`WHEEL` (the EKF's wheel
-    measurement) with the arc covariance, translation scaled by the radius factor when estimated; with the
-    curvature bias estimated too, the whole arc of :class:`CurvedWheelModel` (its turn per metre and its
-    forward travel of a turn). Where the consistency monitor dropped the yaw or the speed: the translation
-    with a free heading, the heading change a factor of its own (:func:`graph_heading`) when the yaw is
-    kept. Without self-calibration GTSAM's ``BetweenFactorPose2`` with the whole arc.
-
-    Splitting the arc into a translation factor (the marginal of its rows) and an independent heading factor
-    drops their correlation: a slip of one wheel moves the distance by ``s/2`` and the heading change by
-    ``-s/b``, so with the gyro's heading the arc's covariance corrects the distance, as the EKF's update
-    does. Without it the graph's distance followed the wheels alone where nothing else measured it: on the
-    generated ``hard`` drive's featureless stretch (19.4-23.9 s) GTSAM batch's chord was 0.30 % long (1.9
-    mm), the EKF smoother's 0.08 %; with the whole arc 0.08 %.
-    """
-    import gtsam
-
-    iv, cfg = builder.iv, builder.config
-    g0, g1, xi, xj, est = node.g0, node.g1, node.xi, node.xj, node.estimate
-    if not (iv.uses("wheel") and iv.wheel_ok[g0:g1].all()):
-        return
-    node.scratch["still"] = builder.wheels_at_rest(g0, g1)
-    m, cov = builder.wheel_increment(g0, g1)
-    yaw_ok = iv.wheel_yaw_ok is None or bool(iv.wheel_yaw_ok[g0:g1].all())
-    speed_ok = iv.wheel_speed_ok is None or bool(iv.wheel_speed_ok[g0:g1].all())
-    if not speed_ok:  # speed dropped by the consistency monitor: a free translation
-        cov = cov.copy()
-        cov[:2, :] = cov[:, :2] = 0.0
-        cov[0, 0] = cov[1, 1] = _FREE_TRANSLATION_SIGMA**2
-    curved = wheel_model(builder.states) is CURVED_WHEEL
-    if yaw_ok and speed_ok and builder.kb_on:
-        # the whole arc in one factor, the EKF's measurement: its heading row through the wheel-base factor
-        # (and the curvature bias), its distance through the radius factor (when estimated), with the arc
-        # covariance's correlation of the translation and the heading change (one wheel's slip moves both,
-        # so a heading the gyro knows corrects the distance)
-        model, keys, fixed, params = _graph_arguments(builder, node, scale=True)
-        nf.factors.append(builder.model_factor(model, m, cov, keys, fixed=fixed, params=params))
-    elif not yaw_ok or builder.kb_on or curved:
-        # translation from the arc; the heading change goes through the wheel-base factor, or
-        # not at all where the consistency monitor dropped the wheels' yaw component
-        if not yaw_ok:
-            m[1] = 0.0  # the chord of a wrongly curved arc would drift sideways
-        cov_xy = cov.copy()
-        cov_xy[2, :] = cov_xy[:, 2] = 0.0
-        cov_xy[2, 2] = _FREE_HEADING_SIGMA**2
-        if curved:  # distance scaled by the radius factor, with the forward travel of the radius difference
-            model, keys, fixed, params = _graph_arguments(builder, node, scale=True)
-            nf.factors.append(builder.model_factor(model, m, cov[:2, :2], keys, fixed=fixed, params=params,
-                                                   rows=(0, 1)))
-        elif builder.kr_on:  # distance scaled by the wheels' radius factor
-            nf.factors.append(builder.model_factor(WHEEL, m, cov_xy, {"motion": (xi, xj), "wheel_scale": (builder.R(node.segment),)},
-                                                   fixed={"wheel_base_factor": 1.0}, dof=2))
-        else:
-            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov_xy, dof=2)))
-        if yaw_ok:
-            node.scratch["wheel_heading"] = (m, float(np.sqrt(cov[2, 2])))
-    else:
-        nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*m), builder.noise(cov)))
-    nf.sensors.append("wheel")
-    translation, heading = m[:2] / est.get("wheel_scale", 1.0), m[2] / est.get("wheel_base_factor", 1.0)
-    node.translation = translation if speed_ok else None
-    node.heading = heading
-
-
-def graph_heading(builder, nf, node) -> None:
-    """The wheels' heading change through the wheel-base factor and the curvature bias, where estimated:
-    ``W d_ψ + c d_x - m_ψ``."""
-    wheel_heading = node.scratch.get("wheel_heading")
-    if wheel_heading is None:
-        return
-    model, keys, fixed, params = _graph_arguments(builder, node, scale=False)
-    nf.factors.append(builder.model_factor(model, wheel_heading[0], [[wheel_heading[1] ** 2]], keys,
-                                           fixed=fixed, params=params, rows=(2,)))
+    if still.any():
+        k = np.flatnonzero(still)
+        sigma = config.wheel_model(iv.twist)[0].standstill_yaw_rate * np.maximum(iv.dt[k], 1e-3)
+        out.append(Readings("standstill", STANDSTILL, k, k + 1, np.zeros(len(k)), sigma**2, robust=False,
+                            order=ORDER["standstill"]))
+    return out
 
 
 def _pick_ticks(streams, selected):
@@ -757,9 +655,7 @@ register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
     read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
     pick=_pick_ticks, config=("wheel", WheelNoise),
-    intervals=Step(20, add_intervals), ekf_measurements=ekf_measurements, readings=readings,
-    ekf_blocks=(Step(20, ekf_wheel),),
-    graph_factors=(Step(10, graph_translation), Step(70, graph_heading)),
+    intervals=Step(20, add_intervals), readings=readings,
     states=(CURVATURE,), live=Live(_live_ticks, _live_ticks_data),
 ))
 register(Sensor(
