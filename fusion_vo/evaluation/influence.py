@@ -87,7 +87,7 @@ def inputs(streams: SensorStreams) -> list[tuple[str, SensorStreams, bool]]:
         name = sensor.name
         if name == "imu" and not _has_ahrs(data):
             name = "gyro"
-        out.append((name, without, sensor.world_frame is not None))
+        out.append((name, without, sensor.absolute_position))
         if name == "imu":
             out.append(("ahrs", dataclasses.replace(streams, imu=dataclasses.replace(data, orientation=None)), False))
     return out
