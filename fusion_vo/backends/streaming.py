@@ -523,6 +523,14 @@ class StreamingFusion:
             self._collect(wait=True)
             return PoseData(np.array(self._t_nodes[:self._graph.n + 1]), self._graph.poses())
 
+    def inconsistent(self) -> list[dict]:
+        """The heading-consistency monitor's spans so far (``finish().inconsistent`` of now: a span still open
+        ends at the last processed node)."""
+        with self._lock:
+            if not self._t_nodes:
+                return []
+            return [ep.as_dict() for ep in self._monitor.all_episodes(self._t_nodes[-1])]
+
     @property
     def counts(self) -> dict[str, SensorCount]:
         """Sensor name -> :class:`SensorCount` of everything added so far."""
