@@ -14,11 +14,11 @@ Topics (relative names: ``--ros-args -r imu/data:=/my/imu`` remaps them)::
 
 Only the inputs of the configured sensors are subscribed. Inputs use the sensor-data QoS (best effort,
 volatile, the last ``queue_depth`` messages), which takes both best-effort and reliable publishers; the
-outputs are reliable. The callbacks are short (a message's conversion and one call of the fusion, which
-takes one lock and keeps inputs in time order within its reorder window); they run on one executor thread,
+outputs are reliable. The callbacks are short (a message's conversion); they run on one executor thread,
 which takes the ready subscriptions in turn, so a burst on one topic waits in its own queue and a stalled
-topic holds up nothing. The camera's frontend, the one long piece of work, runs on a thread of its own
-behind a bounded queue (:mod:`.camera`). (rclpy's multi-threaded executor took about a sixth of the
+topic holds up nothing. The fusion is fed on a thread of its own, in stamp order across the inputs
+(:mod:`.intake`), and the camera's frontend on another behind a bounded queue (:mod:`.camera`); the fusion
+takes one lock per call and re-applies data that comes late within its history. (rclpy's multi-threaded executor took about a sixth of the
 messages per second its single-threaded one did on this 2-core machine, and lost the rest from the
 queues.)
 
@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import logging
 import math
+from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
@@ -46,8 +47,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import Image, Imu, NavSatFix, Range
 from std_msgs.msg import Int64MultiArray
 
+from fusion_vo.recording import write_tum
 from fusion_vo.ros2 import conversions as conv
 from fusion_vo.ros2.camera import CameraPipeline
+from fusion_vo.ros2.intake import Intake
 from fusion_vo.ros2.diagnostics import TopicStats, diagnostic_array, estimate_status, input_status
 from fusion_vo.ros2.sensors import sensor_setup, streaming_fusion, visual_odometry
 from fusion_vo.ros2.settings import load_settings
@@ -85,6 +88,7 @@ class FusionNode(Node):
         if "camera" in self.setup.sensors:
             self.camera = CameraPipeline(visual_odometry(self.settings, self.setup), self.fusion, node.image_queue,
                                          self.setup.camera_noise)
+        self.intake = Intake(self.fusion)
         self.gps = conv.GpsConverter(self.setup.gps) if self.setup.gps is not None else None
         self.frames = {"imu": conv.FrameCheck(node.imu_frame), "camera": conv.FrameCheck(node.camera_frame),
                        "gps": conv.FrameCheck(node.gps_frame), "range": conv.FrameCheck(node.range_frame)}
@@ -100,7 +104,7 @@ class FusionNode(Node):
                              durability=DurabilityPolicy.VOLATILE)
         handlers = {"camera": self._on_image, "imu": self._on_imu, "odom": self._on_odom, "wheel": self._on_wheel,
                     "gps": self._on_gps, "range": self._on_range}
-        image_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(node.image_queue, 5),
+        image_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=max(node.image_queue, 10),
                                reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
         for sensor in self.setup.sensors:
             topic, kind = INPUTS[sensor]
@@ -145,7 +149,7 @@ class FusionNode(Node):
             if sensor == "camera":
                 self.camera.put(t, sample.image)
             else:
-                self.fusion.add(sensor, sample)
+                self.intake.put(t, sensor, sample)
         except conv.Unusable as exc:
             stats.reject(str(exc))
         except conv.Skipped:
@@ -220,11 +224,14 @@ class FusionNode(Node):
 
     # ------------------------------------------------------------------ shutdown
     def close(self) -> list[str]:
-        """Stop the camera thread; lines summing up what each input brought."""
+        """Stop the camera and intake threads; lines summing up what each input brought."""
         if self.camera is not None:
             self.camera.stop()
-        counts = self.fusion.counts
+        self.intake.stop()
         lines = []
+        if self.settings.node.trajectory_file:
+            lines.append(self._write_track(Path(self.settings.node.trajectory_file)))
+        counts = self.fusion.counts
         for sensor, stats in self.stats.items():
             fused = "; ".join(f"{name} " + ", ".join(f"{k} {v}" for k, v in counts[name].as_dict().items() if v)
                               for name in COUNTED[sensor] if name in counts)
@@ -235,6 +242,15 @@ class FusionNode(Node):
                          (f"; fusion: {fused}" if fused else ""))
         lines.append(f"{self.published} poses published on {self.pub.topic_name}")
         return lines
+
+    def _write_track(self, path: Path) -> str:
+        result = self.fusion.finish()
+        name = "ekf" if self.settings.backend == "ekf" else "gtsam_online"
+        track = result.trajectories.get(name)
+        if track is None or not len(track):
+            return f"no pose to write to {path}"
+        write_tum(path, track.t, track.xyyaw)
+        return f"online track of {len(track)} poses written to {path}"
 
 
 class _Frame:

@@ -115,13 +115,19 @@ def _need(folder: Path | None, stream: str, what: str) -> Path:
 
 
 def streaming_fusion(settings: NodeSettings, setup: SensorSetup) -> StreamingFusion:
-    """The :class:`StreamingFusion` the node feeds (InputError for a combination it cannot run)."""
+    """The :class:`StreamingFusion` the node feeds (InputError for a combination it cannot run).
+
+    Every call processes all that is due (``steps_per_call=None``): the node calls it from its intake and
+    camera threads, never from a callback, so a call's length holds up no other input, and the state does
+    not stay behind when the inputs pause (work spread over later calls would wait for them).
+    """
     lever = None if setup.gps is None else setup.gps["lever_arm"]
     return StreamingFusion(settings.backend, as_config(settings.run.fusion), setup.sensors,
                            wheel_config=setup.wheel_config, imu_T_BS=setup.imu_T_BS, imu_noise=setup.imu_noise or None,
                            camera_height=setup.camera_height, camera_height_sigma=setup.camera_height_sigma,
                            camera_frame_errors=setup.camera_noise is not None, gps_lever_arm=lever,
-                           history=settings.node.history, horizon=NO_HORIZON)
+                           history=settings.node.history, horizon=NO_HORIZON,
+                           steps_per_call=None)
 
 
 def visual_odometry(settings: NodeSettings, setup: SensorSetup) -> VisualOdometry:

@@ -74,7 +74,11 @@ class NodeConfig:
         200 Hz IMU waits there for the executor).
     image_queue : int
         Camera frames waiting for the camera thread; when it is full the oldest waiting frame is dropped and
-        counted (default 2). The camera's subscription keeps ``max(image_queue, 5)`` messages.
+        counted (default 2). The camera's subscription keeps ``max(image_queue, 10)`` messages.
+    trajectory_file : str
+        When given, on shutdown the fusion's online track (each node's pose as filtered when it was processed:
+        ``StreamingFusion.finish()``) is written there as a TUM file (relative to the working folder), for
+        ``fusion-vo evaluate`` or a comparison with a batch run (default: none).
     history : float
         Seconds of samples kept to re-apply late measurements (``StreamingFusion.history``, default 2).
     horizon : float
@@ -95,6 +99,7 @@ class NodeConfig:
     range_frame: str = ""
     queue_depth: int = 1000
     image_queue: int = 2
+    trajectory_file: str = ""
     history: float = 2.0
     horizon: float = 1.0
 
