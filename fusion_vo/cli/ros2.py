@@ -8,6 +8,8 @@ Arguments after ``--ros-args`` go to ROS (remaps ``-r``, parameters ``-p``, ``--
 from __future__ import annotations
 
 import argparse
+import signal
+import threading
 from pathlib import Path
 
 from fusion_vo.cli.arguments import non_empty, non_negative_number, positive_number
@@ -62,12 +64,11 @@ def run_node(args: argparse.Namespace) -> int:
 
 
 def run_play(args: argparse.Namespace) -> int:
-    import threading
-
     play, run = _ros2()
     source = Path(args.source)
     summary = play.PlaySummary()
     topics = play.source_topics(source, summary)  # a bad source is an error before ROS starts
+    messages = play.messages_of(source, topics)
     stop = threading.Event()
     previous = run.stop_on_signals(stop)
     run.ros_context(_ros_args(args), "fusion-vo-ros2-play")
@@ -78,13 +79,11 @@ def run_play(args: argparse.Namespace) -> int:
         if missing:
             print(f"fusion-vo ros2-play: no subscriber after {args.wait:g} s on {', '.join(missing)}; playing anyway",
                   flush=True)
-        player.play(play.messages_of(source, topics), args.speed, args.clock_rate, args.tail, stop, summary)
+        player.play(messages, args.speed, args.clock_rate, args.tail, stop, summary)
     finally:
         if player is not None:
             player.destroy_node()
         run.rclpy.try_shutdown()
-        import signal
-
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     for topic, why in summary.left_out.items():

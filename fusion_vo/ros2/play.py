@@ -130,7 +130,8 @@ def bag_messages(path: Path, topics: dict[str, type]) -> Iterator[tuple[float, s
 
 
 def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
-    """``(time [s], topic, class, message)`` of a recording folder's streams, merged in time order."""
+    """``(time [s], topic, class, message)`` of a recording folder's streams, merged in time order (the streams
+    but the camera's are read, and checked, before this returns; frames are decoded as they are played)."""
     rec = Recording(path)
     streams = []
 
@@ -213,7 +214,7 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
         streams.append(gps())
     if not streams:
         raise InputError("the recording has none of cam0/, imu0/, wheel0/, odom0/, range0/, gps0/", path)
-    yield from heapq.merge(*streams, key=lambda m: m[0])
+    return heapq.merge(*streams, key=lambda m: m[0])
 
 
 class Player(Node):
@@ -293,8 +294,11 @@ def source_topics(source: Path, summary: PlaySummary) -> dict[str, type]:
         raise InputError("not found (give a ROS bag or a recording folder)", source)
     if is_bag(source):
         return bag_topics(source, summary)
-    rec = Recording(source)
-    return dict(RECORDING_TOPICS[s] for s in rec.streams() if s in RECORDING_TOPICS)
+    topics = dict(RECORDING_TOPICS[s] for s in Recording(source).streams() if s in RECORDING_TOPICS)
+    if not topics:
+        raise InputError("neither a ROS bag nor a recording with cam0/, imu0/, wheel0/, odom0/, range0/ or gps0/",
+                         source)
+    return topics
 
 
 def messages_of(source: Path, topics: dict[str, type]):

@@ -41,6 +41,7 @@ def camera_run(tmp_path_factory):
     reference = read_groundtruth(rec / "state_groundtruth_estimate0" / "data.csv")
     files = {"batch": batch / "ekf.tum", "wheel": batch / "wheel.tum", "node": track, "published": published}
     ate = {name: r.figures["ate_m"] for name, r in evaluate_trajectories(reference, files).items()}
+    print("ATE [mm]: " + ", ".join(f"{name} {1e3 * v:.4f}" for name, v in ate.items()))
     return out, ate
 
 
