@@ -71,12 +71,16 @@ def _seconds(stamp) -> float:
 
 
 def received(diagnostics) -> int:
-    return sum(int(s.get("received", 0)) for s in (diagnostics or {}).values())
+    """Messages the node took so far, or -1 while its camera still has frames waiting."""
+    statuses = (diagnostics or {}).values()
+    if any(s.get("queue", "0") != "0" for s in statuses):
+        return -1
+    return sum(int(s.get("received", 0)) for s in statuses)
 
 
 def until_quiet(peer: Recorder, quiet: float = 1.0, timeout: float = 90.0) -> float:
-    """Wait until the node has taken no message for ``quiet`` seconds (its diagnostics come on the steady
-    clock); while waiting, a simulated clock left by a player goes on at real speed, so that the node's
+    """Wait until the node has taken no message and its camera queue has been empty for ``quiet`` seconds
+    (its diagnostics come on the steady clock); while waiting, a simulated clock left by a player goes on at real speed, so that the node's
     timers fire while it catches up with a backlog. Returns the seconds waited."""
     start = last_change = time.time()
     count = received(peer.diagnostics)
@@ -214,7 +218,7 @@ def main() -> int:
         out["signal_sent"] = time.time()
         proc.send_signal(getattr(signal, spec.get("signal", "SIGINT")))
     try:
-        proc.wait(timeout=30)
+        proc.wait(timeout=spec.get("stop_timeout", 30))
     except subprocess.TimeoutExpired:
         proc.kill()
         proc.wait()

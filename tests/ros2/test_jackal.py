@@ -30,7 +30,7 @@ def jackal_run(tmp_path_factory):
                  "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
                      "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
-            "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "2"], "signal": "SIGINT"}
+            "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "3"], "signal": "SIGINT"}
     return calib, run_peer(tmp, spec)
 
 
