@@ -1,4 +1,4 @@
-"""The node's intake: samples from the subscription callbacks to the fusion, in time order, on one thread.
+"""The node's worker threads: samples to the fusion in time order, and the outputs the timers ask for.
 
 A callback only converts its message and :meth:`Intake.put` s the sample (a few tens of microseconds), so
 the executor drains every topic's queue promptly; the fusion's work (about half a millisecond a sample)
@@ -72,3 +72,48 @@ class Intake:
                     if self.errors == 1:
                         log.exception("a %s sample could not be added to the fusion", sensor)
             self.busy_s += time.perf_counter() - start
+
+
+class Outputs:
+    """One thread running the outputs' work (reading the fusion, publishing) when the timers ask for it.
+
+    A timer callback only calls :meth:`request`; the work, which waits for the fusion's lock while the intake
+    or the camera thread holds it, runs here, so the executor thread goes on taking messages meanwhile. A
+    task asked for again before it ran runs once.
+    """
+
+    def __init__(self, tasks: dict):
+        self.tasks = tasks
+        self._due: dict = {}
+        self._cond = threading.Condition()
+        self._stop = False
+        self.errors = 0
+        self._thread = threading.Thread(target=self._run, name="fusion-vo-outputs", daemon=True)
+        self._thread.start()
+
+    def request(self, name: str, *args) -> None:
+        with self._cond:
+            self._due[name] = args
+            self._cond.notify()
+
+    def stop(self, timeout: float = 1.0) -> None:
+        with self._cond:
+            self._stop = True
+            self._cond.notify()
+        self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._due and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                due, self._due = self._due, {}
+            for name, args in due.items():
+                try:
+                    self.tasks[name](*args)
+                except Exception:  # an output failing once must not end the thread: logged once, counted
+                    self.errors += 1
+                    if self.errors == 1:
+                        log.exception("the node's %s output failed", name)

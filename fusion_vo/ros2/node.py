@@ -18,7 +18,9 @@ outputs are reliable. The callbacks are short (a message's conversion); they run
 which takes the ready subscriptions in turn, so a burst on one topic waits in its own queue and a stalled
 topic holds up nothing. The fusion is fed on a thread of its own, in stamp order across the inputs
 (:mod:`.intake`), and the camera's frontend on another behind a bounded queue (:mod:`.camera`); the fusion
-takes one lock per call and re-applies data that comes late within its history. (rclpy's multi-threaded executor took about a sixth of the
+takes one lock per call and re-applies data that comes late within its history. The timers only ask a
+third thread for their output (:class:`~fusion_vo.ros2.intake.Outputs`), which waits for that lock, so
+the executor never does. (rclpy's multi-threaded executor took about a sixth of the
 messages per second its single-threaded one did on this 2-core machine, and lost the rest from the
 queues.)
 
@@ -50,7 +52,7 @@ from std_msgs.msg import Int64MultiArray
 from fusion_vo.recording import write_tum
 from fusion_vo.ros2 import conversions as conv
 from fusion_vo.ros2.camera import CameraPipeline
-from fusion_vo.ros2.intake import Intake
+from fusion_vo.ros2.intake import Intake, Outputs
 from fusion_vo.ros2.diagnostics import TopicStats, diagnostic_array, estimate_status, input_status
 from fusion_vo.ros2.sensors import sensor_setup, streaming_fusion, visual_odometry
 from fusion_vo.ros2.settings import load_settings
@@ -112,13 +114,16 @@ class FusionNode(Node):
             self.stats[sensor] = TopicStats(sensor, sub.topic_name)
         self.pub = self.create_publisher(Odometry, "odometry/filtered", out_qos)
         self.diag_pub = self.create_publisher(DiagnosticArray, "diagnostics", out_qos)
-        self.create_timer(1.0 / node.publish_rate, self._publish)
+        self.outputs = Outputs({"pose": self._publish, "diagnostics": self._diagnose,
+                                "smoothed": self._publish_smoothed})
+        self.create_timer(1.0 / node.publish_rate, lambda: self.outputs.request("pose", self._now()))
         # diagnostics on the steady clock: they go on while a played bag's /clock stands still
-        self.create_timer(node.diagnostics_period, self._diagnose, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.create_timer(node.diagnostics_period, lambda: self.outputs.request("diagnostics", self._now()),
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.smoothed_pub = None
         if node.smoothed_lag > 0:
             self.smoothed_pub = self.create_publisher(Odometry, "odometry/smoothed", out_qos)
-            self.create_timer(1.0 / node.smoothed_rate, self._publish_smoothed)
+            self.create_timer(1.0 / node.smoothed_rate, lambda: self.outputs.request("smoothed"))
 
     # ------------------------------------------------------------------ inputs
     def _now(self) -> float:
@@ -183,8 +188,7 @@ class FusionNode(Node):
         self._take("camera", lambda: _Frame(conv.grey_image(msg, cam.width, cam.height)), t, msg.header.frame_id)
 
     # ------------------------------------------------------------------ outputs
-    def _publish(self) -> None:
-        now = self._now()
+    def _publish(self, now: float) -> None:
         newest = self.fusion.current_estimate() if now > 0 else None
         if newest is None:
             return
@@ -208,14 +212,13 @@ class FusionNode(Node):
         self._last_smoothed = est.t
         self.smoothed_pub.publish(conv.odometry_message(est, self.settings.node.odom_frame, self.settings.node.base_frame))
 
-    def _diagnose(self) -> None:
+    def _diagnose(self, now: float) -> None:
         counts = self.fusion.counts
         statuses = []
         for sensor, stats in self.stats.items():
             fused = {name: counts[name].as_dict() for name in COUNTED[sensor] if name in counts}
             statuses.append(input_status(stats, fused, self.camera if sensor == "camera" else None))
         newest = self.fusion.current_estimate()
-        now = self._now()
         age = None if newest is None or now <= 0 else now - newest.t
         statuses.append(estimate_status(self.settings.backend, "none" if newest is None else newest.frame,
                                         self.published, age, self._predicted, self.fusion.rewinds,
@@ -228,6 +231,7 @@ class FusionNode(Node):
         if self.camera is not None:
             self.camera.stop()
         self.intake.stop()
+        self.outputs.stop()
         lines = []
         if self.settings.node.trajectory_file:
             lines.append(self._write_track(Path(self.settings.node.trajectory_file)))
