@@ -8,7 +8,6 @@ the drive's starts and stops (steps in speed) they are off by the speed times th
 are checked against a looser bound beside the in-process stream's.
 """
 
-import numpy as np
 import pytest
 
 from fusion_vo.cli.main import main
