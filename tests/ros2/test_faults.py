@@ -1,6 +1,7 @@
 """Bad input to the node over DDS: counted in diagnostics, reported once per topic, never stopping it.
 
-The peer publishes IMU and odometry at 100 Hz on the wall clock, then NaN values, far-future, late
+The node runs iSAM2 with a smoothed pose 1 s behind. The peer publishes IMU and odometry at 100 Hz on the
+wall clock, then NaN values, far-future, late
 (older than the history) and out-of-order stamps, messages in a frame the node cannot use, images of an
 unsupported encoding and of the wrong size, then good data again; it stops the node with SIGTERM. Start-up
 mistakes (an unknown parameter, a configuration the schema rejects, malformed ROS arguments) are one line
@@ -30,7 +31,8 @@ def faults(tmp_path_factory):
     (tmp / "calib" / "cam0").mkdir(parents=True)
     (tmp / "calib" / "cam0" / "sensor.yaml").write_text(CAM0)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={tmp / 'calib'}", "-p", "sensors:=[camera,imu,odom]",
-                     "-p", "diagnostics_period:=0.25"], "inject": True, "signal": "SIGTERM"}
+                     "-p", "diagnostics_period:=0.25", "-p", "backend:=gtsam", "-p", "smoothed_lag:=1.0"],
+            "inject": True, "signal": "SIGTERM"}
     return run_peer(tmp, spec)
 
 
@@ -47,6 +49,15 @@ def test_bad_messages_are_counted_and_the_node_goes_on(faults):
     assert imu["level"] == 1 and odom["level"] == 1 and cam["level"] == 1  # WARN
     after = [p for p in faults["poses"] if p["t"] > faults["bad_end"] + 0.5]
     assert len(after) > 20  # still publishing (50 Hz) after the bad messages
+
+
+def test_the_smoother_pose_a_lag_behind_is_published(faults):
+    """iSAM2 (``backend:=gtsam``) with ``smoothed_lag:=1.0``: odometry/smoothed trails the filtered pose."""
+    smoothed, filtered = faults["smoothed"], faults["poses"]
+    assert len(smoothed) > 5 and smoothed[-1]["frame"] == "odom"
+    lag = filtered[-1]["t"] - smoothed[-1]["t"]
+    assert 0.9 < lag < 2.5, lag  # 1 s behind the newest processed node, itself behind the clock
+    assert all(v > 0 for v in smoothed[-1]["var"])
 
 
 def test_an_unusable_topic_is_reported_once_not_per_message(faults):
