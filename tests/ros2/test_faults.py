@@ -8,6 +8,7 @@ mistakes (an unknown parameter, a configuration the schema rejects, malformed RO
 and exit status 2.
 """
 
+import numpy as np
 import pytest
 
 from conftest import run_peer
@@ -55,8 +56,10 @@ def test_the_smoother_pose_a_lag_behind_is_published(faults):
     """iSAM2 (``backend:=gtsam``) with ``smoothed_lag:=1.0``: odometry/smoothed trails the filtered pose."""
     smoothed, filtered = faults["smoothed"], faults["poses"]
     assert len(smoothed) > 5 and smoothed[-1]["frame"] == "odom"
-    lag = filtered[-1]["t"] - smoothed[-1]["t"]
-    assert 0.9 < lag < 2.5, lag  # 1 s behind the newest processed node, itself behind the clock
+    arrival = np.array([p["received"] for p in filtered])
+    # against the filtered pose that arrived with it: the lag plus the 0.3 s reorder window
+    behind = [filtered[int(np.argmin(abs(arrival - s["received"])))]["t"] - s["t"] for s in smoothed]
+    assert 1.0 <= np.median(behind) <= 1.6, behind
     assert all(v > 0 for v in smoothed[-1]["var"])
 
 
