@@ -1,6 +1,6 @@
 """The tests' ROS 2 peer: starts ``fusion-vo ros2`` in a subprocess, drives it, records what it publishes.
 
-Run only inside a loopback-only network namespace (``conftest.run_peer`` does that). Usage::
+Run only inside a loopback-only network namespace (``dds_namespace.run_peer`` does that). Usage::
 
     python peer.py SPEC_JSON OUT_JSON
 

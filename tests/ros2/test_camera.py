@@ -15,7 +15,7 @@ from fusion_vo.evaluation.evaluate import evaluate_trajectories
 from fusion_vo.evaluation.io import read_groundtruth
 from fusion_vo.recording import write_tum
 
-from conftest import run_peer
+from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
 

@@ -11,7 +11,7 @@ and exit status 2.
 import numpy as np
 import pytest
 
-from conftest import run_peer
+from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
 

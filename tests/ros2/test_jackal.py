@@ -16,7 +16,7 @@ from fusion_vo.cli.main import main
 from fusion_vo.geometry import se2
 from fusion_vo.recording import Recording
 
-from conftest import DATA, run_peer
+from dds_namespace import DATA, run_peer
 
 pytestmark = pytest.mark.ros2
 RL_FINAL = np.array([1.0206, 3.4292])
