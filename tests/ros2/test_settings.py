@@ -74,3 +74,11 @@ def test_importing_the_library_and_the_command_line_needs_no_ros():
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('rclpy', 'nav_msgs', 'sensor_msgs')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
+
+
+def test_without_the_extra_the_commands_say_what_to_install():
+    code = ("import sys; sys.modules['rclpy'] = None\n"
+            "from fusion_vo.cli.main import main\nsys.exit(main(['ros2-play', '.']))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 2 and out.stderr.count("\n") == 1
+    assert 'the ros2 commands need the ros2 extra: pip install "fusion-vo[ros2]"' in out.stderr
