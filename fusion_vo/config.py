@@ -257,3 +257,20 @@ def schema_text() -> str:
     from fusion_vo import schema
 
     return json.dumps(schema.json_schema(run_model()), indent=2) + "\n"
+
+
+#: the paragraph under the generated reference's heading (``docs/configuration-reference.md``)
+REFERENCE_INTRO = """Every option of the YAML file that `fusion-vo run --config FILE` reads, section by section, with its
+default, the values it accepts and its description (the dataclasses' docstrings, through the same schema that
+checks the file). Any key left out keeps its default. The numbers of `fusion` have no per-option range here:
+their rules (every `*sigma*` positive, every other number non-negative, a few counts, fractions and upper
+bounds) are listed in [configuration.md](configuration.md#ranges). Sensors registered by an installed package
+add their own sections to `fusion`."""
+
+
+def reference_text() -> str:
+    """The configuration reference as Markdown (for ``--print-reference``, ``docs/configuration-reference.md``)."""
+    from fusion_vo import schema
+
+    return schema.markdown_reference(run_model(), "Configuration reference", REFERENCE_INTRO,
+                                     "fusion-vo run --print-reference > docs/configuration-reference.md")

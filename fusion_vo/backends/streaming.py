@@ -134,7 +134,11 @@ class Estimate:
     """The current estimate: time [s], pose ``(x, y, yaw)`` of B in W, its 3x3 covariance.
 
     ``predicted`` is how far [s] the pose was predicted beyond the last processed node (0 for a
-    processed node).
+    processed node). ``twist`` is the body twist ``(v_x, v_y, ω)`` at ``t`` with its 3x3 covariance, for the
+    newest node and predictions from it (None for an older node): the EKF's twist state (the mean twist of
+    the node's interval, its covariance grown by the prediction); iSAM2, which has no twist variable, the
+    twist between the last two nodes with the constant-twist model's process noise over that interval
+    (``diag(σ_a², σ_lat², σ_α²) Δt``, a lower bound: it leaves out the nodes' own errors).
     """
 
     t: float
@@ -142,6 +146,8 @@ class Estimate:
     covariance: np.ndarray
     frame: str = "start"
     predicted: float = 0.0
+    twist: np.ndarray | None = None
+    twist_covariance: np.ndarray | None = None
 
 
 @dataclass
@@ -233,7 +239,7 @@ class StreamingFusion:
     A call's worst latency in a live process is often not this class's work but one of CPython's full
     garbage collections, which scan every object the process tracks (about 100 000 once numpy, scipy,
     GTSAM and filterpy are imported: some 40 ms). Call :func:`gc.freeze` once start-up is done, as
-    ``examples/ros2_node.py`` does; ``benchmarks/bench_latency.py --gc-freeze`` measures the difference.
+    the ROS 2 node (``fusion-vo ros2``, :mod:`fusion_vo.ros2.run`) does; ``benchmarks/bench_latency.py --gc-freeze`` measures the difference.
     The class changes no global state itself.
     """
 
@@ -481,9 +487,11 @@ class StreamingFusion:
             t_node = self._t_nodes[-1]
             if target <= t_node + 1e-9:
                 i = max(bisect.bisect_right(self._t_nodes, target + 1e-9) - 1, 0)
-                return Estimate(self._t_nodes[i], self._poses[i].copy(), self._covs[i].copy(), self._frame)
+                twist = self._twist(0.0) if i == len(self._t_nodes) - 1 else (None, None)
+                return Estimate(self._t_nodes[i], self._poses[i].copy(), self._covs[i].copy(), self._frame, 0.0,
+                                *twist)
             pose, cov = self._predict(target - t_node)
-            return Estimate(target, pose, cov, self._frame, target - t_node)
+            return Estimate(target, pose, cov, self._frame, target - t_node, *self._twist(target - t_node))
 
     def processed_estimate(self) -> Estimate | None:
         """The last processed node (held back by the reorder window), or None before the first node."""
@@ -491,7 +499,22 @@ class StreamingFusion:
             self._collect()
             if not self._t_nodes:
                 return None
-            return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame)
+            return Estimate(self._t_nodes[-1], self._poses[-1].copy(), self._covs[-1].copy(), self._frame, 0.0,
+                            *self._twist(0.0))
+
+    def smoothed_estimate(self, t: float) -> Estimate | None:
+        """iSAM2 only: its current estimate, given all data so far, of the last node at or before ``t`` (pose
+        and marginal covariance; a fixed-lag view of the smoother without computing every node as
+        :meth:`smoothed` does). None for the EKF, before the first node, or for a ``t`` before it."""
+        with self._lock:
+            if self._graph is None or not self._t_nodes:
+                return None
+            self._collect(wait=True)
+            i = min(bisect.bisect_right(self._t_nodes, float(t) + 1e-9) - 1, self._graph.last)
+            if i < 0:
+                return None
+            pose, cov = self._graph._pose_cov(i)
+            return Estimate(self._t_nodes[i], pose, cov, self._frame)
 
     def smoothed(self) -> PoseData | None:
         """iSAM2 only: its current estimate of every node so far (each pose given all data up to now),
@@ -501,6 +524,14 @@ class StreamingFusion:
                 return None
             self._collect(wait=True)
             return PoseData(np.array(self._t_nodes[:self._graph.n + 1]), self._graph.poses())
+
+    def inconsistent(self) -> list[dict]:
+        """The heading-consistency monitor's spans so far (``finish().inconsistent`` of now: a span still open
+        ends at the last processed node)."""
+        with self._lock:
+            if not self._t_nodes:
+                return []
+            return [ep.as_dict() for ep in self._monitor.all_episodes(self._t_nodes[-1])]
 
     @property
     def counts(self) -> dict[str, SensorCount]:
@@ -723,14 +754,15 @@ class StreamingFusion:
 
     # ------------------------------------------------------------------ history (EKF rewind)
     def _rewind_index(self, t: float, back: int) -> int | None:
-        """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history.
+        """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history (or
+        more than ``max_gap`` before the first node, even while the track is younger than the history).
 
         A sample at ``t`` changes the interval that contains it and, through interpolation at that
         interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
         increment is applied from its ``t0`` node (``back=0``).
         """
-        if self.history <= 0:
-            return None
+        if self.history <= 0 or t < self._t_nodes[0] - self.config.max_gap:
+            return None  # (a sample that far before the first node would be interpolated across the gap)
         i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
         if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
             return None
@@ -753,6 +785,31 @@ class StreamingFusion:
             self._monitor.restore(rec.monitor)
         del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
         self.rewinds += 1
+
+    def _twist(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Body twist of the newest node predicted ``dt`` seconds ahead and its covariance (:class:`Estimate`)."""
+        if self.backend == "ekf":
+            kf = self._ekf.kf
+            if dt <= 0:
+                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
+            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
+            try:
+                self._ekf.predict(dt)
+                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
+            finally:
+                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
+        T = self._t_nodes
+        q = np.array([self.config.ekf.accel_sigma, self.config.ekf.lateral_accel_sigma,
+                      self.config.ekf.yaw_accel_sigma]) ** 2
+        if len(T) < 2 or T[-1] - T[-2] <= 0:
+            return np.zeros(3), np.diag(q * max(dt, 1.0 / self.config.step_hz))
+        step = T[-1] - T[-2]
+        prev, pose = self._poses[-2], self._poses[-1]
+        c, s = np.cos(prev[2]), np.sin(prev[2])
+        d = pose[:2] - prev[:2]
+        dyaw = np.arctan2(np.sin(pose[2] - prev[2]), np.cos(pose[2] - prev[2]))
+        twist = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], dyaw]) / step
+        return twist, np.diag(q * (step + max(dt, 0.0)))
 
     def _predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """Pose and covariance of the last node predicted ``dt`` seconds ahead (constant twist)."""

@@ -29,6 +29,7 @@ COMMANDS = [
     "export",
     "show_matches",
     "import_bag",
+    "ros2",
     "calibrate",
     "bench",
 ]

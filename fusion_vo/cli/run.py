@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fusion_vo.cli.arguments import MAX_THREADS, non_empty, positive_number, thread_count
 from fusion_vo.cli.progress import progress_bar
-from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, schema_text
+from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, reference_text, schema_text
 from fusion_vo.errors import InputError
 
 
@@ -40,6 +40,8 @@ def register(sub) -> None:
                         "file's values) as YAML and exit")
     p.add_argument("--print-schema", action="store_true",
                    help="print the JSON schema of the configuration file (for editors) and exit")
+    p.add_argument("--print-reference", action="store_true",
+                   help="print every option of the configuration file as a Markdown reference and exit")
     p.set_defaults(func=run)
 
 
@@ -88,6 +90,9 @@ def apply_overrides(cfg, args):
 def run(args: argparse.Namespace) -> int:
     if args.print_schema:
         sys.stdout.write(schema_text())
+        return 0
+    if args.print_reference:
+        sys.stdout.write(reference_text())
         return 0
     if args.print_config:
         sys.stdout.write(default_config_text(load_config(args.config) if args.config else None))

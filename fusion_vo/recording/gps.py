@@ -69,7 +69,7 @@ def read_gps(folder: str | Path) -> GpsData:
     if len(tab) and width not in (6, 11):
         raise InputError("expected 6 GPS columns (latitude, longitude, altitude, e, n, u) or 11 (plus status, "
                          "covariance_type, cov_ee, cov_en, cov_nn)", path, int(tab.lines[0]))
-    meta, notes = _sensor_yaml(folder / "sensor.yaml")
+    meta, notes = gps_settings(folder / "sensor.yaml")
     v = tab.values
     n = len(tab)
     geo = v[:, 0:3]
@@ -110,8 +110,9 @@ def read_gps(folder: str | Path) -> GpsData:
                    notes=notes)
 
 
-def _sensor_yaml(path: Path) -> tuple[dict, list[str]]:
-    """Lever arm, default sigma and datum of ``gps0/sensor.yaml``, or the documented defaults."""
+def gps_settings(path: Path) -> tuple[dict, list[str]]:
+    """``lever_arm``, ``sigma`` (for fixes without a covariance) and ``datum`` (or None: the first fix) of
+    ``gps0/sensor.yaml``, or the documented defaults, with notes of the defaults taken."""
     if not path.is_file():
         note = (f"{path} not found: antenna at the body origin, horizontal sigma {DEFAULT_HORIZONTAL_SIGMA} m "
                 "for fixes without a covariance, datum at the first fix")
@@ -160,3 +161,6 @@ def format_rows(t_ns, geodetic, enu, status, cov_type, cov_en) -> list[str]:
         rows.append(f"{int(t)},{g[0]:.10f},{g[1]:.10f},{g[2]:.4f},{e[0]:.4f},{e[1]:.4f},{e[2]:.4f},"
                     f"{int(s)},{int(ct)},{c[0]:.6g},{c[1]:.6g},{c[2]:.6g}")
     return rows
+
+
+_sensor_yaml = gps_settings  # older name

@@ -279,6 +279,13 @@ class Recording:
         orient = None
         if tab.values.shape[1] == 10:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
+        T, noise, rate = self.imu_calibration()
+        return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
+
+    def imu_calibration(self) -> tuple[np.ndarray, dict, float | None]:
+        """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (required): the IMU's pose in the body frame
+        (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default taken is
+        warned about once, naming the file."""
         meta = self._yaml("imu0", required=True)  # the IMU's mounting and noise: never assumed without a word
         ypath = self.path / "imu0" / "sensor.yaml"
         T = parse_pose(meta["T_BS"], "T_BS", ypath) if "T_BS" in meta else np.eye(4)
@@ -290,7 +297,7 @@ class Recording:
         if defaults and "imu0" not in self._defaults_told:
             self._defaults_told.add("imu0")
             log.warning("%s: %s", ypath, "; ".join(defaults))
-        return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
+        return T, noise, rate
 
     def wheel(self) -> WheelData:
         """``wheel0``: cumulative encoder counts and the wheel calibration."""
@@ -305,6 +312,11 @@ class Recording:
             i = int(np.flatnonzero(out)[0])
             raise InputError(f"tick count {tab.values[i][np.argmax(np.abs(tab.values[i]))]:.0f} is not a 32-bit counter "
                              "(signed or unsigned)", path, int(tab.lines[i]))
+        counts = tab.values.astype(np.int64)
+        return WheelData(tab.t, counts[:, 0], counts[:, 1], self.wheel_config())
+
+    def wheel_config(self) -> WheelConfig:
+        """The wheel calibration of ``wheel0/sensor.yaml`` (required, as are its four keys)."""
         meta = self._yaml("wheel0", required=True)
         ypath = self.path / "wheel0" / "sensor.yaml"
         keys = ("ticks_per_revolution", "wheel_radius_left", "wheel_radius_right", "wheel_base")
@@ -316,8 +328,7 @@ class Recording:
             vals[k] = (sensor_number(meta, k, ypath, low=1, high=2.0**32) if k == "ticks_per_revolution" else
                        sensor_number(meta, k, ypath, low=MIN_LENGTH_M, high=MAX_LENGTH_M, unit=" m"))
         vals["radius_sigma"] = _optional_sigma(meta, "radius_sigma", ypath)
-        counts = tab.values.astype(np.int64)
-        return WheelData(tab.t, counts[:, 0], counts[:, 1], WheelConfig(**vals))
+        return WheelConfig(**vals)
 
     def camera_height_sigma(self) -> float | None:
         """``height_sigma`` of ``cam0/sensor.yaml``: standard deviation [m] of the camera height its

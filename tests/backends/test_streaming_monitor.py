@@ -87,3 +87,22 @@ def test_an_honest_gyro_is_not_dropped_in_the_first_seconds_with_a_camera(seed):
     streams = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
     result = _stream(streams, "ekf", FusionConfig())
     assert result.inconsistent == [], result.inconsistent
+
+
+def test_the_spans_found_so_far_are_readable_while_streaming():
+    """``inconsistent()`` gives, mid-stream, the spans ``finish()`` reports at the end (the open one ending at
+    the last node): a live node reports them in its diagnostics."""
+    odom, imu, _ = husky_like(duration=20.0, stop=(8.0, 12.0), yaw_scale=7.0, ahrs_drift=0.0, gyro_bias=0.002)
+    streams = SensorStreams(odom=odom, imu=imu)
+    fusion = streaming_for(streams, "ekf", FusionConfig())
+    msgs = time_ordered_messages(streams)
+    assert fusion.inconsistent() == []  # nothing processed yet
+    for _, kind, m in msgs[: len(msgs) // 2]:
+        getattr(fusion, f"add_{kind}")(m)
+    midway = fusion.inconsistent()
+    assert [e["component"] for e in midway] == ["yaw rate"] and midway[0]["sensor"] == "wheel", midway
+    assert midway[0]["end"] == pytest.approx(fusion.processed_estimate().t)
+    for _, kind, m in msgs[len(msgs) // 2:]:
+        getattr(fusion, f"add_{kind}")(m)
+    final = fusion.finish().inconsistent
+    assert final[0]["start"] == midway[0]["start"] and final[0]["end"] > midway[0]["end"]

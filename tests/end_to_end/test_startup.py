@@ -39,13 +39,16 @@ def test_camera_only_run_loads_no_backend_library(standard_recording, tmp_path):
     shutil.rmtree(seq / "state_groundtruth_estimate0")  # nothing to evaluate against
     got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out"), "--backend", "none"])
     assert got["code"] == 0 and (tmp_path / "out" / "vo.tum").is_file()
-    # the IMU's derotation uses scipy's Rotation, so scipy.spatial may load, nothing more of the backends
-    assert set(got["loaded"]) <= {"numpy", "cv2", "pydantic", "scipy", "scipy.spatial"}
+    # the IMU's derotation uses scipy's Rotation, so scipy.spatial may load, and every run draws its report
+    # (matplotlib): nothing more, none of the backends' libraries
+    assert set(got["loaded"]) <= {"numpy", "cv2", "pydantic", "scipy", "scipy.spatial", "matplotlib"}
+    assert (tmp_path / "out" / "report.html").is_file()
     assert {"numpy", "cv2"} <= set(got["loaded"])  # the probe does see what the run loads
-    # without an IMU (camera and wheels) scipy is not needed at all
+    # without an IMU (camera and wheels) scipy is needed only for the report to read its tracks' headings
     shutil.rmtree(seq / "imu0")
     got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out2"), "--backend", "none"])
-    assert got["code"] == 0 and set(got["loaded"]) == {"numpy", "cv2", "pydantic"}
+    assert got["code"] == 0 and set(got["loaded"]) == {"numpy", "cv2", "pydantic", "matplotlib", "scipy",
+                                                        "scipy.spatial"}
     # the same probe sees the EKF's and GTSAM's libraries when the run does fuse
     got = _loaded(["-q", "run", str(seq), "--out", str(tmp_path / "out3"), "--backend", "all"])
     assert got["code"] == 0 and {"gtsam", "filterpy", "scipy.stats"} <= set(got["loaded"])

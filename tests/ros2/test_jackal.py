@@ -1,0 +1,84 @@
+"""robot_localization's test2.bag (Jackal) played into the node over DDS, as a user would try it.
+
+The bag's IMU and wheel odometry go to the node by remapping; its calibration folder is the one
+``fusion-vo import-bag`` writes (the IMU's frame and the noise densities its messages state). The check is
+robot_localization's own: the final position within 0.138 m of (1.0206, 3.4292) in the frame of the IMU's
+absolute heading (the track's displacement rotated by the IMU's first yaw minus the track's first yaw),
+as ``tests/end_to_end/test_robot_logs.py`` checks ``fusion-vo run``.
+"""
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends.batch import streams_from_recording
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.cli.main import main
+from fusion_vo.geometry import se2
+from fusion_vo.recording import Recording
+
+from dds_namespace import DATA, run_peer
+
+pytestmark = pytest.mark.ros2
+RL_FINAL = np.array([1.0206, 3.4292])
+
+
+@pytest.fixture(scope="module")
+def jackal_run(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("jackal")
+    calib = tmp / "calib"
+    assert main(["import-bag", str(DATA / "test2.bag"), str(calib), "--imu-topic", "/imu/data",
+                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
+    spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
+                     "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
+            "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "3"], "signal": "SIGINT"}
+    return calib, run_peer(tmp, spec)
+
+
+def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jackal_run):
+    calib, out = jackal_run
+    assert out["player"]["code"] == 0, out["player"]
+    imu = np.loadtxt(calib / "imu0" / "data.csv", delimiter=",", comments="#", ndmin=2)
+    yaw0 = float(se2.yaw_of_quaternion(imu[:1, 7:11])[0])
+    t_end = imu[-1, 0] * 1e-9
+    poses = [p for p in out["poses"] if p["t"] <= t_end + 1e-6]
+    assert len(poses) > 1000 and poses[-1]["t"] > t_end - 0.1  # 50 Hz over the 61 s, up to the bag's end
+    first, last = poses[0], poses[-1]
+    d = yaw0 - first["yaw"]
+    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
+    final = rot @ (np.array([last["x"], last["y"]]) - np.array([first["x"], first["y"]]))
+    # beside it, the same fusion fed the same samples in-process (the baseline of docs/ros2.md)
+    streams = streams_from_recording(Recording(calib), None, ["imu", "odom"])
+    fusion = streaming_for(streams, "ekf")
+    for _, kind, m in time_ordered_messages(streams):
+        getattr(fusion, f"add_{kind}")(m)
+    xy = fusion.finish().trajectories["ekf"].xyyaw
+    d = yaw0 - xy[0, 2]
+    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
+    in_process = rot @ (xy[-1, :2] - xy[0, :2])
+    raw = np.loadtxt(calib / "odom0" / "pose.csv", delimiter=",", comments="#", ndmin=2)
+    print(f"final position off by: node {np.linalg.norm(final - RL_FINAL):.4f} m, in-process "
+          f"{np.linalg.norm(in_process - RL_FINAL):.4f} m, raw odometry {np.linalg.norm(raw[-1, 1:3] - RL_FINAL):.2f} m")
+    assert np.linalg.norm(final - RL_FINAL) < 0.138, final
+    assert np.linalg.norm(raw[-1, 1:3] - RL_FINAL) > 5.0  # the raw odometry is far off: the check can fail
+
+
+def test_the_node_publishes_odometry_with_covariances_and_reports_the_monitor(jackal_run):
+    _, out = jackal_run
+    last = out["poses"][-1]
+    assert last["frame"] == "odom" and last["child"] == "base_link"
+    assert all(v > 0 for v in last["var"] + last["twist_var"])
+    stamps = np.array([p["t"] for p in out["poses"]])
+    assert np.all(np.diff(stamps) > 0)  # each pose newer than the one before
+    diag = out["diagnostics"]
+    assert int(diag["fusion_vo: imu"]["received"]) > 2900 and int(diag["fusion_vo: odom"]["received"]) > 2900
+    assert int(diag["fusion_vo: imu"]["ahrs.used"]) > 1000
+    # the odometry's yaw rate is about seven times the gyro's: the monitor drops it, as in a batch run
+    assert diag["fusion_vo: estimate"]["monitor_drops"].startswith("wheel yaw rate from")
+
+
+def test_sigint_stops_the_node_cleanly_within_two_seconds(jackal_run):
+    _, out = jackal_run
+    assert out["code"] == 0, out["stderr"][-5:]
+    assert out["exited"] - out["signal_sent"] < 2.0
+    assert out["stdout"][-1].endswith("poses published on /odometry/filtered")
+    assert not [line for line in out["stderr"] if "Traceback" in line]
