@@ -108,6 +108,7 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf_adapter import EkfReadings
+from fusion_vo.backends.fixes import EkfFixes
 from fusion_vo.backends.result import FusionResult, InnovationLog, SensorCount
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
@@ -475,9 +476,8 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     blocks = meas["readings"].start(ekf)
     if blocks:
         ekf.update(blocks)
-    # sensors applied at the nodes on their own, after each step's update (GPS fixes)
-    at_nodes = [run for run in (s.ekf_run(iv, config) for s in registry.sensors() if s.ekf_run is not None)
-                if run is not None]
+    # absolute readings, applied at their nodes on their own after each step's update (GPS fixes)
+    at_nodes = [EkfFixes(r, iv.t) for r in meas["readings"].absolute]
     for run in at_nodes:
         run.node(ekf, 0)
     xs[0], Ps[0] = ekf.x, ekf.P

@@ -149,10 +149,14 @@ class EkfReadings:
         t = np.asarray(t, dtype=np.float64)
         self.intervals: list[_Table] = []
         self.nodes: list[_Table] = []
+        #: absolute readings of the pose, applied on their own (:mod:`fusion_vo.backends.fixes`)
+        self.absolute: list[Readings] = []
         for r in sorted(readings, key=lambda r: r.order):
             if not len(r):
                 continue
-            if r.at_nodes:
+            if r.absolute is not None:
+                self.absolute.append(r)
+            elif r.at_nodes:
                 self.nodes.append(node_table(r, t))
             else:
                 self.intervals.append(interval_table(r, t))

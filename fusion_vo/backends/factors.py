@@ -2,7 +2,7 @@
 
 A :class:`ModelFactor` is one measurement of a sensor model between graph variables: the model, its
 reading ``z``, the variable keys of each model argument (``motion``: the two poses ``X_i, X_j`` whose
-relative pose ``X_i⁻¹ X_j`` is the motion; ``heading``: one pose; the others: one scalar variable),
+relative pose ``X_i⁻¹ X_j`` is the motion; ``heading``, ``pose``: one pose; the others: one scalar variable),
 arguments held fixed, and the noise covariance (optionally inside the graph's robust kernel).
 
 The graph does not wrap these in Python factors that GTSAM calls back: :class:`ModelFactors`
@@ -18,7 +18,7 @@ perturbations ``X · Exp(ξ)``)::
 
     ∂δ/∂ξ_i = [[-1, 0, d_y], [0, -1, -d_x], [0, 0, -1]],     ∂δ/∂ξ_j = [[cos d_ψ, -sin d_ψ, 0], [sin d_ψ, cos d_ψ, 0], [0, 0, 1]]
 
-and of a pose's heading ``∂ψ/∂ξ = (0, 0, 1)``.
+of a pose's heading ``∂ψ/∂ξ = (0, 0, 1)``, and of a pose itself ``∂(x, y, ψ)/∂ξ = [[R(ψ), 0], [0, 1]]``.
 """
 
 from __future__ import annotations
@@ -120,6 +120,10 @@ class ModelFactor:
             elif name == "heading":
                 args[name] = np.array([current[keys[0]].theta()])
                 links.append((name, _HEADING[0], keys[0]))
+            elif name == "pose":
+                p = current[keys[0]]
+                args[name] = np.array([p.x(), p.y(), p.theta()])
+                links.append((name, _body(np.array([p.theta()]))[0], keys[0]))
             else:
                 args[name] = np.array([float(current[keys[0]])])
                 links.append((name, None, keys[0]))
@@ -230,6 +234,15 @@ def _relative(pi: np.ndarray, pj: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return d, d_i, d_j
 
 
+def _body(yaw: np.ndarray) -> np.ndarray:
+    """``∂x/∂ξ`` (N, 3, 3) of poses ``x = (x, y, ψ)`` (world frame) perturbed in GTSAM's tangent space
+    (``X · Exp(ξ)``, ``ξ`` in the body frame): ``[[R(ψ), 0], [0, 1]]``."""
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.zeros((len(yaw), 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1], out[:, 2, 2] = c, -s, s, c, 1.0
+    return out
+
+
 class ModelFactors:
     """Factors of one signature (:meth:`ModelFactor.signature`), evaluated and linearised together."""
 
@@ -268,6 +281,9 @@ class ModelFactors:
             elif name == "heading":
                 args[name] = _poses(values, keys[:, 0], poses)[:, 2:3]
                 chains.append((name, [_HEADING]))
+            elif name == "pose":
+                args[name] = _poses(values, keys[:, 0], poses)
+                chains.append((name, [_body(args[name][:, 2])]))
             else:
                 args[name] = _scalars(values, keys[:, 0], scalars)
                 chains.append((name, [None]))

@@ -126,7 +126,8 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.graph_adapter import GraphReadings, frame_poses, interval_factor, node_factor
+from fusion_vo.backends.fixes import GraphFixes
+from fusion_vo.backends.graph_adapter import GraphReadings, absolute_factor, frame_poses, interval_factor, node_factor
 from fusion_vo.backends.graph_adapter import guess as readings_guess
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
@@ -771,8 +772,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     estimate: dict = dict(builder.initial_estimate)
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     # sensors whose factors are gated against the online estimate (GPS fixes)
-    at_nodes = [run for run in (s.graph_run(builder) for s in registry.sensors() if s.graph_run is not None)
-                if run is not None]
+    at_nodes = [(GraphFixes(builder, r), absolute_factor(r)) for r in builder.readings.absolute]
     maker = ValuesMaker()
     batch_values: dict = {}
     # the sensors' residuals need every factor in iSAM2: nothing is marginalised then
@@ -787,8 +787,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 pose_cov = world_covariances(online_poses[n - 1:n, 2], online_cov[n - 1:n])[0]
             else:
                 pose_cov = None
-            for run in at_nodes:
-                run.add(nf, n, pose_cov)
+            for fixes, factor in at_nodes:
+                fixes.add(nf, n, pose_cov, factor)
         builder.count(nf)
         incremental = isam is not None or lag is not None
         new_values = maker.make(nf.values) if incremental else None
@@ -833,8 +833,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         values = ValuesMaker().make(batch_values)
     t_graph = time.process_time() - t_build - t_online
     counts = builder.counts
-    for run in at_nodes:
-        run.finish(result)
+    for fixes, _ in at_nodes:
+        fixes.finish(result)
     if isam is not None:
         result.trajectories["gtsam_online"] = PoseData(builder.t.copy(), online_poses)
         result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from fusion_vo.backends.factors import ModelFactor
 from fusion_vo.geometry import se2
 from fusion_vo.sensors.readings import Readings
 
@@ -76,7 +77,12 @@ class GraphReadings:
         pos = {int(g): n for n, g in enumerate(grid)}
         self.spans: dict[int, list[Span]] = {}
         self.nodes: dict[int, list[tuple[Readings, int]]] = {}
+        #: absolute readings of the pose, gated and added on their own (:mod:`fusion_vo.backends.fixes`)
+        self.absolute: list[Readings] = []
         for r in sorted(readings, key=lambda r: r.order):
+            if r.absolute is not None:
+                self.absolute.append(r)
+                continue
             if r.at_nodes:
                 for j, g in enumerate(r.i0):
                     n = pos.get(int(g))
@@ -206,6 +212,20 @@ def frame_poses(builder, nf, span: Span, n: int, segment: int, previous_pose) ->
     if b in new:
         nf.new_frames.append(builder.F(b))
     return builder.F(a), builder.F(b)
+
+
+def absolute_factor(r: Readings):
+    """``factor(key, z, covariance)``: an absolute reading of ``r`` on the pose at ``key``, inside its own robust
+    kernel, as the model's :class:`gtsam.CustomFactor` (its residual and body-frame Jacobian)."""
+    noise = r.absolute.noise
+    robust = None if noise.kernel == "none" else (noise.kernel, float(noise.kernel_width))
+    params = {name: np.asarray(value, dtype=np.float64) for name, value in r.params.items()}
+
+    def factor(key: int, z, covariance):
+        return ModelFactor(r.model, np.asarray(z, dtype=np.float64), {"pose": (key,)},
+                           np.asarray(covariance, dtype=np.float64), {}, params, None, robust).custom_factor()
+
+    return factor
 
 
 def node_factor(builder, r: Readings, j: int, xn: int, segment: int):

@@ -122,7 +122,8 @@ from fusion_vo.measurements import (
 from fusion_vo.backends.ekf import YAW
 from fusion_vo.backends.world import prior_from_alignment
 from fusion_vo.geometry import se2
-from fusion_vo.sensors.gps import GpsModel, GpsReacquire, align_to_fixes, ekf_reacquire, ekf_update
+from fusion_vo.backends.fixes import Reacquire, ekf_reacquire, ekf_update
+from fusion_vo.sensors.gps import GpsModel, align_to_fixes
 from fusion_vo.sensors.wheel import arc_increment, curvature_observable, curvature_states
 
 logger = logging.getLogger(__name__)
@@ -1139,7 +1140,7 @@ class StreamingFusion:
             self._frame = "enu"
             if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
                 self._heading_offset -= fit.yaw
-            self._gps_reacquire = GpsReacquire(self.config.gps_reacquire)
+            self._gps_reacquire = Reacquire(self.config.gps_reacquire)
             self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
                                f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)

@@ -55,6 +55,8 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
+from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.readings import ORDER, Absolute, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import time_order
@@ -219,6 +221,10 @@ class GpsModel:
     def __post_init__(self) -> None:
         self.lever_arm = np.asarray(self.lever_arm, dtype=np.float64).ravel()[:2]
 
+    def predict(self, pose) -> np.ndarray:
+        """The antenna's predicted position at ``pose`` (:func:`predict`)."""
+        return predict(pose, self.lever_arm)
+
     def covariance(self, fix_covariance) -> np.ndarray:
         """The fix's 2x2 covariance with the ``min_sigma`` floor applied."""
         cov = 0.5 * (np.asarray(fix_covariance, dtype=np.float64) + np.asarray(fix_covariance).T)
@@ -256,40 +262,6 @@ class GpsModel:
         self.n_used += 1
         w = robust_weight(math.sqrt(d2), self.noise.kernel, self.noise.kernel_width)
         return GpsCheck(r, H, R / w, d2, w, True)
-
-
-# ---------------------------------------------------------------------- GTSAM
-def gps_factor(key: int, fix_enu, lever_arm, noise_model):
-    """A ``gtsam.CustomFactor`` on one ``Pose2``: error ``h(x) - z`` with the body-frame Jacobian.
-
-    GTSAM's own ``GPSFactor`` constrains a ``Pose3`` (and ``PoseTranslationPrior2D`` a ``Pose2``
-    without lever arm), so the planar antenna model with a lever arm is written here once.
-
-    Parameters
-    ----------
-    key : int
-        Key of the ``Pose2`` variable.
-    fix_enu : array_like (2,)
-        The fix's east, north [m].
-    lever_arm : array_like (2,)
-        Antenna in the body frame [m].
-    noise_model : gtsam.noiseModel.Base
-        For example the fix's covariance inside its robust kernel (:meth:`GraphBuilder.robust_noise
-        <fusion_vo.backends.graph.GraphBuilder.robust_noise>`).
-    """
-    import gtsam
-
-    z = np.asarray(fix_enu, dtype=np.float64).ravel()[:2].copy()
-    lever = np.asarray(lever_arm, dtype=np.float64).ravel()[:2].copy()
-
-    def error(this, values, jacobians):
-        pose = values.atPose2(this.keys()[0])
-        p = np.array([pose.x(), pose.y(), pose.theta()])
-        if jacobians is not None:
-            jacobians[0] = body_jacobian(p, lever)
-        return predict(p, lever) - z
-
-    return gtsam.CustomFactor(noise_model, [key], error)
 
 
 # ---------------------------------------------------------------------- fixes in time
@@ -495,153 +467,42 @@ def add_intervals(iv, streams, config, counts) -> None:
         iv.gps_cov[k] = gps.covariance[i]
 
 
-def ekf_update(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-    """Apply one fix to the EKF through ``model`` (gate, robust weight); returns whether it was accepted."""
-    chk = model.check(ekf.x[:3], fix, covariance, ekf.P[:3, :3], t)
-    ekf.record("gps", chk.d2, 2, "rejected" if not chk.accepted else "down-weighted" if chk.weight < 1.0 else "used")
-    if not chk.accepted:
-        return False
-    ekf.update_pose(chk.residual, chk.H, chk.R)
-    return True
+@dataclass(frozen=True)
+class AntennaModel(MeasurementModel):
+    """A fix as a measurement of the pose (module docstring): ``h(x) = [x, y] + R(ψ) l`` with its world-frame
+    Jacobian ``∂h/∂(x, y, ψ)``; argument ``pose``, parameter ``lever_arm`` (the antenna in the body frame [m])."""
+
+    name: str = "gps"
+    args: tuple = ("pose",)
+    dim: int = 2
+
+    def evaluate(self, pose, lever_arm):
+        p = np.asarray(pose, dtype=np.float64)
+        lever = np.asarray(lever_arm, dtype=np.float64)
+        lx, ly = lever[..., 0], lever[..., 1]  # one lever arm, or one per pose
+        c, s = np.cos(p[..., 2]), np.sin(p[..., 2])
+        h = np.stack([p[..., 0] + c * lx - s * ly, p[..., 1] + s * lx + c * ly], axis=-1)
+        J = np.zeros(p.shape[:-1] + (2, 3))
+        J[..., 0, 0] = J[..., 1, 1] = 1.0
+        J[..., 0, 2] = -s * lx - c * ly
+        J[..., 1, 2] = c * lx - s * ly
+        return h, {"pose": J}
 
 
-def ekf_reacquire(ekf, model: GpsModel, fix, covariance, t: float | None = None) -> bool:
-    """Apply a fix that failed the gate after widening the EKF's position covariance by the squared
-    innovation (``FusionConfig.gps_reacquire``); the rejection just counted becomes a use."""
-    model.n_rejected -= 1
-    if model.rejected_t:
-        model.rejected_t.pop()
-    r = np.asarray(fix, dtype=np.float64)[:2] - predict(ekf.x[:3], model.lever_arm)
-    ekf.P[:2, :2] += np.eye(2) * float(r @ r)
-    return ekf_update(ekf, model, fix, covariance, t)
+ANTENNA = AntennaModel()
 
 
-class GpsReacquire:
-    """Fixes through the gate, and after ``after`` seconds of rejections one applied anyway
-    (``FusionConfig.gps_reacquire``); ``times`` holds when that happened."""
-
-    def __init__(self, after: float):
-        self.after = after
-        self.last_ok: float | None = None
-        self.times: list[float] = []
-
-    def __call__(self, ekf, model: GpsModel, iv, k: int) -> bool:
-        t = float(iv.t[k])
-        if ekf_update(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t):
-            self.last_ok = t
-            return True
-        if self.last_ok is None:
-            self.last_ok = t
-        if t - self.last_ok < self.after:
-            return False
-        self.times.append(t)
-        self.last_ok = t
-        return ekf_reacquire(ekf, model, iv.gps_enu[k], iv.gps_cov[k], t)
-
-    def due(self, t: float, accepted: bool) -> bool:
-        """For a backend that gates itself: whether a rejected fix at ``t`` is to be applied anyway."""
-        if accepted or self.last_ok is None:
-            self.last_ok = t
-            return False
-        if t - self.last_ok < self.after:
-            return False
-        self.times.append(t)
-        self.last_ok = t
-        return True
-
-
-def gps_note(backend: str, model: GpsModel, iv, reacquired: list | None = None) -> str:
-    """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the fixes skipped on reading."""
-    text = f"{backend}: gps {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
-    if model.rejected_t:
-        when = sorted(model.rejected_t)
-        text += f" (t={when[0]:.2f} to {when[-1]:.2f}, {when[0] - iv.t[0]:.2f} to {when[-1] - iv.t[0]:.2f} s in)"
-    if reacquired:
-        text += (f"; {len(reacquired)} times a fix was applied anyway after rejections for gps_reacquire seconds "
-                 f"(the estimate re-acquired the fixes; first at {reacquired[0] - iv.t[0]:.2f} s in)")
-    skipped = sum((iv.gps.skipped or {}).values()) if iv.gps is not None else 0
-    if skipped:
-        text += f"; {skipped} skipped on reading ({', '.join(f'{n} {k}' for k, n in iv.gps.skipped.items() if n)})"
-    return text
-
-
-class EkfFixes:
-    """The fixes applied by the EKF at their nodes after each step's update (gate, robust weight, re-acquisition
-    after ``gps_reacquire`` seconds of rejections); an outage of :data:`OUTAGE_NOTE_S` or more is reported with the
-    drift the first fix after it measures."""
-
-    def __init__(self, iv, config):
-        self.iv = iv
-        self.model = GpsModel(iv.gps.lever_arm, gps_noise(iv, config))
-        self.reacquire = GpsReacquire(config.gps_reacquire)
-        self.notes: list[str] = []
-        self.last_fix: float | None = None
-
-    def node(self, ekf, k: int) -> None:
-        iv = self.iv
-        if not iv.gps_ok[k]:
-            return
-        if k > 0 and self.last_fix is not None and iv.t[k] - self.last_fix >= OUTAGE_NOTE_S:
-            # the first fix after an outage measures how far the estimate drifted without GPS
-            drift = float(np.linalg.norm(iv.gps_enu[k] - predict(ekf.x[:3], self.model.lever_arm)))
-            sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
-            self.notes.append(f"ekf: gps outage from {self.last_fix - iv.t[0]:.2f} to {iv.t[k] - iv.t[0]:.2f} s in: "
-                              f"drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
-        self.last_fix = float(iv.t[k])
-        self.reacquire(ekf, self.model, iv, k)
-
-    def finish(self, ekf, result) -> None:
-
-        ekf.counts["gps"] = SensorCount(used=self.model.n_used, gated=self.model.n_rejected)
-        result.notes.append(gps_note("ekf", self.model, self.iv, self.reacquire.times))
-        result.notes.extend(self.notes)
-
-
-def _ekf_run(iv, config):
-    return EkfFixes(iv, config) if iv.gps_ok is not None and iv.gps is not None else None
-
-
-class GraphFixes:
-    """The fixes in the factor graph: each gated against its node's predicted pose (and the online marginal
-    covariance of the previous node when iSAM2 runs) and added as :func:`gps_factor` inside the robust kernel."""
-
-    def __init__(self, builder):
-        self.builder = builder
-        self.iv = builder.iv
-        self.model = GpsModel(self.iv.gps.lever_arm, gps_noise(self.iv, builder.config))
-        self.reacquire = GpsReacquire(builder.config.gps_reacquire)
-
-    def add(self, nf, n: int, pose_cov) -> None:
-        """Gate the fix at node ``n`` against its predicted pose; add the robust factor when accepted."""
-
-        iv, model, builder = self.iv, self.model, self.builder
-        g = int(builder.grid[n])
-        if not iv.gps_ok[g]:
-            return
-        key = builder.key(n)
-        guess = nf.values[key]
-        chk = model.check(np.array([guess.x(), guess.y(), guess.theta()]), iv.gps_enu[g], iv.gps_cov[g], pose_cov,
-                          float(iv.t[g]))
-        if not chk.accepted and self.reacquire.due(float(iv.t[g]), False):
-            model.n_rejected -= 1  # applied after all: a use, not a rejection
-            model.rejected_t.pop()
-            model.n_used += 1
-        elif chk.accepted:
-            self.reacquire.due(float(iv.t[g]), True)
-        else:
-            builder.counts.setdefault("gps", SensorCount()).gated += 1
-            return
-        noise = builder.robust_noise(model.covariance(iv.gps_cov[g]), model.noise.kernel, model.noise.kernel_width)
-        nf.factors.append(gps_factor(key, iv.gps_enu[g], model.lever_arm, noise))
-        nf.sensors.append("gps")
-
-    def finish(self, result) -> None:
-        result.notes.append(gps_note("gtsam", self.model, self.iv, self.reacquire.times))
-
-
-def _graph_run(builder):
-    iv = builder.iv
-    return GraphFixes(builder) if iv.gps_ok is not None and iv.gps is not None else None
+def readings(iv, config) -> list[Readings]:
+    """The fixes at their nodes, absolute readings of the pose (:class:`~fusion_vo.sensors.readings.Absolute`): each
+    gated against the prediction of its node, inside the GPS kernel, with the sigma floor of ``fusion.gps`` (raised
+    to the scatter the world-frame alignment measured, :func:`gps_noise`), re-acquired after ``gps_reacquire``
+    seconds of rejections."""
+    if iv.gps_ok is None or iv.gps is None or not iv.gps_ok.any():
+        return []
+    n = np.flatnonzero(iv.gps_ok)
+    policy = Absolute(gps_noise(iv, config), float(config.gps_reacquire), dict(iv.gps.skipped or {}))
+    return [Readings("gps", ANTENNA, n, n, iv.gps_enu[n], iv.gps_cov[n], params={"lever_arm": iv.gps.lever_arm[:2]},
+                     absolute=policy, order=ORDER["gps"])]
 
 
 def _keyframes(iv):
@@ -668,6 +529,6 @@ register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
     default=False, config=("gps", GpsNoise), absolute_position=True, node_times=node_times, intervals=Step(50, add_intervals),
-    ekf_run=_ekf_run, graph_run=_graph_run, graph_keyframes=_keyframes,
+    readings=readings, graph_keyframes=_keyframes,
     live=Live(_live_sample, values=_live_values, take=_live_take),
 ))

@@ -25,6 +25,7 @@ variables of its arguments.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -32,8 +33,24 @@ from fusion_vo.sensors.model import MeasurementModel
 
 #: the order the built-in sensors' readings keep among themselves in both backends (a new sensor's default is
 #: :data:`DEFAULT_ORDER`): the EKF stacks one interval's readings in this order, the graph adds its factors so
-ORDER = {"camera": 10.0, "wheel": 20.0, "gyro": 30.0, "standstill": 40.0, "ahrs": 50.0, "range": 60.0}
+ORDER = {"camera": 10.0, "wheel": 20.0, "gyro": 30.0, "standstill": 40.0, "ahrs": 50.0, "range": 60.0, "gps": 70.0}
 DEFAULT_ORDER = 100.0
+
+
+@dataclass(frozen=True)
+class Absolute:
+    """How the backends apply absolute readings of the pose (a GPS fix: :mod:`fusion_vo.backends.fixes`).
+
+    Each is applied on its own after its node's other readings, gated against the prediction of its node (the
+    innovation's squared Mahalanobis distance against ``noise.gate_chi2``) and down-weighted by ``noise.kernel``
+    of width ``noise.kernel_width`` on that distance; its covariance is floored at ``noise.min_sigma``; after
+    ``reacquire`` seconds of rejections one is applied anyway (the estimate re-acquires the readings).
+    ``skipped`` counts the readings left out on reading, for the notes.
+    """
+
+    noise: Any
+    reacquire: float
+    skipped: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -66,6 +83,9 @@ class Readings:
         :mod:`fusion_vo.sensors.visual`); None: independent readings.
     order : float
         Place among the readings of the other sensors (:data:`ORDER`).
+    absolute : Absolute or None
+        Node readings of the ``pose`` that the backends apply on their own with this policy (:class:`Absolute`);
+        None: readings like any other.
     dropped : tuple of str
         Components of these motion readings that the consistency monitor dropped
         (:mod:`fusion_vo.backends.monitor`): ``"speed"`` (the translation rows) and ``"yaw"`` (the heading change).
@@ -86,6 +106,7 @@ class Readings:
     frame_cov: np.ndarray | None = None
     order: float = DEFAULT_ORDER
     dropped: tuple = ()
+    absolute: Absolute | None = None
 
     def __post_init__(self) -> None:
         self.i0 = np.asarray(self.i0, dtype=np.int64).reshape(-1)
@@ -116,4 +137,5 @@ class Readings:
         params = {k: (v[keep] if np.ndim(v) else v) for k, v in self.params.items()}
         return Readings(self.sensor, self.model, self.i0[keep], self.i1[keep], self.z[keep], self.cov[keep],
                         dict(self.fixed), params, self.rows, self.robust,
-                        None if self.frame_cov is None else self.frame_cov[keep], self.order, self.dropped)
+                        None if self.frame_cov is None else self.frame_cov[keep], self.order, self.dropped,
+                        self.absolute)
