@@ -421,15 +421,9 @@ class PlanarEkf:
 
 # --------------------------------------------------------------------------- batch run over intervals
 def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
-    """Twist-space measurements per node interval, vectorised (see the module docstring): every registered
-    sensor's ``ekf_measurements`` (:mod:`fusion_vo.sensors.registry`), merged into one table, and the sensors'
-    readings on the filter's grid under ``"readings"`` (:class:`~fusion_vo.backends.ekf_adapter.EkfReadings`)."""
-    out: dict = {}
-    for sensor in registry.sensors():
-        if sensor.ekf_measurements is not None:
-            out.update(sensor.ekf_measurements(iv, config))
-    out["readings"] = EkfReadings(sensor_readings(iv, config), iv.t)
-    return out
+    """The sensors' readings on the filter's grid (:class:`~fusion_vo.backends.ekf_adapter.EkfReadings`), under
+    ``"readings"``."""
+    return {"readings": EkfReadings(sensor_readings(iv, config), iv.t)}
 
 
 def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
@@ -441,13 +435,8 @@ def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
 
 def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
     """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`:
-    every registered sensor's ``ekf_blocks`` and its readings, in their order."""
-    blocks = [(step.order, b) for _, step in registry.ordered("ekf_blocks") for b in step.run(ekf, meas, k)]
-    readings = meas.get("readings")
-    if readings is not None:
-        blocks += readings.blocks(ekf, k)
-        blocks.sort(key=lambda item: item[0])
-    return [b for _, b in blocks]
+    the sensors' readings over it and at its end, in their order."""
+    return [b for _, b in meas["readings"].blocks(ekf, k)]
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
@@ -468,11 +457,6 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     x_prior = np.zeros((K + 1, n))
     P_prior = np.zeros((K + 1, n, n))
     Fs = np.zeros((K + 1, n, n))
-    for sensor in registry.sensors():
-        if sensor.ekf_start is not None:
-            blocks = sensor.ekf_start(ekf, meas)
-            if blocks:
-                ekf.update(blocks)
     blocks = meas["readings"].start(ekf)
     if blocks:
         ekf.update(blocks)

@@ -180,11 +180,6 @@ _NO_INCREMENT.flags.writeable = False
 #: GTSAM symbol letters of the sensors' own state variables (the built-in ones use x, b, o, s, w, r)
 _STATE_LETTERS = "acdefghijklmnpqtuvyz"
 
-#: graph steps of the sensors ordered before this set the initial guess of a node; the builder then adds the
-#: motion model where none measured the translation (:meth:`GraphBuilder.node`)
-GUESS_ORDER = 40.0
-
-
 # --------------------------------------------------------------------------- graph construction
 @dataclass
 class NodeFactors:
@@ -197,33 +192,6 @@ class NodeFactors:
     sensors: list = field(default_factory=list)
     guess: np.ndarray | None = None
     new_frames: list = field(default_factory=list)  # frame poses made here, which start at the node's pose
-
-
-@dataclass(slots=True)
-class NodeContext:
-    """What a sensor's graph step (:mod:`fusion_vo.sensors.registry`) needs to know about the node it adds to.
-
-    ``n`` is the local node, ``g0, g1`` the interval-grid indices of the previous node and this one (equal at
-    a unary step), ``dt`` the time between them, ``segment`` the calibration segment of node ``n`` (the
-    variables ``B``, ``S``, ``W``, ``R``, ``O`` of it), ``xi, xj`` the pose keys of the previous node and this
-    one, ``estimate`` the running estimates for initial guesses. Steps before :data:`GUESS_ORDER` set
-    ``translation`` (2,) and ``heading`` (the interval's motion, for the initial guess) when they measure them;
-    ``previous_pose`` is the previous node's current estimate; ``scratch`` passes anything else between one
-    sensor's steps (``new_frames``: variables that start at this node's initial pose).
-    """
-
-    n: int
-    g0: int
-    g1: int
-    dt: float
-    segment: int
-    xi: int
-    xj: int
-    estimate: dict
-    previous_pose: gtsam.Pose2 | None = None
-    translation: np.ndarray | None = None
-    heading: float | None = None
-    scratch: dict = field(default_factory=dict)
 
 
 class GraphBuilder:
@@ -358,32 +326,26 @@ class GraphBuilder:
         """Factors that end at node ``n`` and an initial guess for its variables.
 
         ``estimate`` holds the running bias and calibration estimates (``gyro_bias``, ``visual_scale``,
-        ``wheel_base_factor``) and the previous increment, used only for initial guesses.
+        ``wheel_base_factor``, ...) and the previous increment, used only for initial guesses.
 
-        Every registered sensor's ``graph_factors`` steps (:mod:`fusion_vo.sensors.registry`) add their
-        factors in their order; those before :data:`GUESS_ORDER` may set the interval's translation and
-        heading change for the initial guess (``NodeContext.translation``, ``heading``). Where none measured
-        the translation a weak constant-twist factor keeps it determined. Then the unary steps
-        (``graph_unary``) of the node.
+        The sensors' interval readings that end at node ``n`` become factors (:mod:`fusion_vo.backends.graph_adapter`),
+        in their order; the new pose's initial value is the previous pose composed with the interval's motion as
+        the readings over exactly that interval give it (their models' guesses, by rank), else the previous
+        increment. Where none measured the translation a weak constant-twist factor keeps it determined. Then the
+        node readings at ``n``.
         """
         cfg = self.config
         est = estimate or {}
         g0, g1 = self._grid[n - 1], self._grid[n]
         c, previous = self._segment[n], self._segment[n - 1]
-        node = NodeContext(n=n, g0=g0, g1=g1, dt=self._times[g1] - self._times[g0], segment=c,
-                           xi=X(self.offset + n - 1), xj=X(self.offset + n), estimate=est,
-                           previous_pose=previous_pose)
+        dt = self._times[g1] - self._times[g0]
+        xi, xj = X(self.offset + n - 1), X(self.offset + n)
         nf = NodeFactors(n, self._times[g1])
         if c != previous:
             self._new_segment(nf, c, est, previous)
-        steps = registry.ordered("graph_factors")
-        for _, step in steps:
-            if step.order >= GUESS_ORDER:
-                break
-            step.run(self, nf, node)
         spans = self.readings.ending_at(n)
         for span in spans:  # the sensors' interval readings that end here
-            xs, xe, cov = X(self.offset + span.start), node.xj, None
+            xs, xe, cov = X(self.offset + span.start), xj, None
             if span.frame_cov is not None:
                 frames = frame_poses(self, nf, span, n, c, previous_pose)
                 if frames is not None:
@@ -392,30 +354,21 @@ class GraphBuilder:
                                      cov=cov)
             nf.factors.append(factor)
             nf.sensors.append(span.readings.sensor)
-        # the initial guess: the readings' by their models' ranks (a sensor's own step above ranks as the wheels, 1)
-        (r_translation, rank_t), (r_heading, rank_h) = readings_guess(spans, est, node.dt)
-        if r_translation is not None and (node.translation is None or rank_t < 1):
-            node.translation = r_translation
-        if r_heading is not None and (node.heading is None or rank_h < 1):
-            node.heading = r_heading
+        (translation, _), (heading, _) = readings_guess(spans, n, est, dt)
         last = est.get("last_increment", _NO_INCREMENT)
-        translation, heading = node.translation, node.heading
         guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
         if translation is None:
             # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
             e = cfg.ekf
-            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(node.dt, 1e-3) * 4.0 + 1e-3
+            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
             nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
-            nf.factors.append(gtsam.BetweenFactorPose2(node.xi, node.xj, gtsam.Pose2(*guess), nm))
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), nm))
             nf.sensors.append("motion_model")
-        nf.values[node.xj] = previous_pose.compose(gtsam.Pose2(*guess))
-        for key in [*node.scratch.pop("new_frames", ()), *nf.new_frames]:  # frame poses start at their node's pose
-            nf.values[key] = nf.values[node.xj]
+        nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
+        for key in nf.new_frames:  # frame poses start at their node's pose
+            nf.values[key] = nf.values[xj]
         nf.guess = guess
-        for _, step in steps:  # (sorted by order)
-            if step.order >= GUESS_ORDER:
-                step.run(self, nf, node)
-        self._unary(nf, n, node)
+        self._unary(nf, n)
         return nf
 
     def state_variable(self, name: str, segment: int) -> int | None:
@@ -480,17 +433,11 @@ class GraphBuilder:
         keys += ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
         return keys + [self.state_key(st.name, c) for st in self.states]
 
-    def _unary(self, nf: NodeFactors, n: int, node: NodeContext | None = None) -> None:
-        """The registered sensors' factors at node ``n`` alone (``graph_unary``, e.g. an absolute heading);
-        ``node`` is the context of the interval ending there (its ``g1``, ``xj`` and ``segment`` are the node's)."""
-        if node is None:
-            g = int(self.grid[n])
-            node = NodeContext(n=n, g0=g, g1=g, dt=0.0, segment=int(self.segment[n]), xi=X(self.offset + n),
-                               xj=X(self.offset + n), estimate={})
-        for _, step in registry.ordered("graph_unary"):
-            step.run(self, nf, node)
-        for r, j in self.readings.at(n):  # the sensors' readings at this node
-            factor = node_factor(self, r, j, node.xj, node.segment)
+    def _unary(self, nf: NodeFactors, n: int) -> None:
+        """The sensors' readings at node ``n`` (:func:`~fusion_vo.backends.graph_adapter.node_factor`)."""
+        xn, segment = X(self.offset + n), int(self._segment[n])
+        for r, j in self.readings.at(n):
+            factor = node_factor(self, r, j, xn, segment)
             if factor is not None:
                 nf.factors.append(factor)
                 nf.sensors.append(r.sensor)

@@ -43,7 +43,6 @@ class Span:
     z: np.ndarray
     cov: np.ndarray
     frame_cov: np.ndarray | None
-    single: bool  # one reading over exactly the grid interval before the end node (its guess counts)
 
 
 def compose_with_covariance(a, cov_a, b, cov_b):
@@ -95,9 +94,9 @@ class GraphReadings:
                 fc = None if r.frame_cov is None else r.frame_cov[j]
                 if chain is not None and chain[1] == i0:
                     z, cov = _chain(chain[0], r, j)
-                    span = Span(r, int(j), chain[0].start, z, cov, fc, False)
+                    span = Span(r, int(j), chain[0].start, z, cov, fc)
                 elif i0 in pos:
-                    span = Span(r, int(j), pos[i0], r.z[j].copy(), r.cov[j].copy(), fc, i1 == i0 + 1)
+                    span = Span(r, int(j), pos[i0], r.z[j].copy(), r.cov[j].copy(), fc)
                 else:
                     chain = None
                     continue
@@ -116,14 +115,14 @@ class GraphReadings:
         return self.nodes.get(n, [])
 
 
-def guess(spans: list[Span], estimate: dict, dt: float) -> tuple[tuple, tuple]:
-    """``((translation, rank), (heading change, rank))`` of the interval from the readings over exactly that interval,
-    each from the model of the lowest :attr:`~fusion_vo.sensors.model.MeasurementModel.guess_rank` (None, None where
-    none gives one)."""
+def guess(spans: list[Span], n: int, estimate: dict, dt: float) -> tuple[tuple, tuple]:
+    """``((translation, rank), (heading change, rank))`` of the interval ending at node ``n`` from the readings over
+    exactly that interval, each from the model of the lowest
+    :attr:`~fusion_vo.sensors.model.MeasurementModel.guess_rank` (None, None where none gives one)."""
     best_t = best_h = None
     translation = heading = None
     for span in spans:
-        if not span.single:
+        if span.start != n - 1:
             continue
         rank_t, rank_h = span.readings.model.guess_rank
         if rank_t is None and rank_h is None:
@@ -206,7 +205,7 @@ def frame_poses(builder, nf, span: Span, n: int, segment: int, previous_pose) ->
         nf.values[builder.F(a)] = previous_pose
     new = [g for g in (a, b) if g not in builder.frames]
     for g in new:
-        tie = Span(r, span.index, 0, np.zeros(3), span.frame_cov, None, False)
+        tie = Span(r, span.index, 0, np.zeros(3), span.frame_cov, None)
         nf.factors.append(interval_factor(builder, tie, builder.X(g), builder.F(g), segment, 0.0, robust=False))
         builder.frames.add(g)
     if b in new:

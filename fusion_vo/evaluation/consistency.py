@@ -113,7 +113,7 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     iv = build_intervals(streams, config)
     kv, kb = ekf_mod.calibration_observable(iv)
     f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                          camera=len(iv.vis_i0) > 0, frame_error=iv.visual_frame_error)
+                          states=iv.states, camera=len(iv.vis_i0) > 0, frame_error=iv.visual_frame_error)
     meas = ekf_mod.interval_measurements(iv, config)
     out: dict[str, tuple[int, list]] = {}
     for k in range(iv.n_steps):

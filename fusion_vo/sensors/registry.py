@@ -223,32 +223,9 @@ class Sensor:
         ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
         :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
         (:class:`~fusion_vo.sensors.readings.Readings`): what both backends consume, each through its one adapter.
-    ekf_measurements : callable or None
-        ``ekf_measurements(iv, config) -> dict``: its per-interval measurements, vectorised, merged into the
-        EKF's measurement table (:func:`~fusion_vo.backends.ekf.interval_measurements`).
-    ekf_blocks : tuple of Step
-        ``run(ekf, meas, k) -> list``: the EKF update blocks (:meth:`~fusion_vo.backends.ekf.PlanarEkf.block`)
-        of interval ``k`` (ending at node ``k + 1``).
-    ekf_start : callable or None
-        ``ekf_start(ekf, meas) -> list``: blocks applied at the first node.
-    ekf_run : callable or None
-        ``ekf_run(iv, config) -> object or None`` for a sensor applied at nodes on its own after each step's
-        update (GPS): the object's ``node(ekf, k)`` runs at node ``k`` (0 included) and ``finish(ekf, result)``
-        once at the end.
-    graph_factors : tuple of Step
-        ``run(builder, nf, node)``: its factors over the interval ending at a graph node
-        (:class:`~fusion_vo.backends.graph.GraphBuilder` ``builder``, :class:`~fusion_vo.backends.graph.NodeFactors`
-        ``nf``, :class:`~fusion_vo.backends.graph.NodeContext` ``node``); steps ordered before
-        :data:`~fusion_vo.backends.graph.GUESS_ORDER` give the node's initial guess.
-    graph_unary : tuple of Step
-        ``run(builder, nf, node)``: its factors on one node alone (every node, the first included), after the
-        interval factors.
     graph_keyframes : callable or None
         ``graph_keyframes(iv) -> indices``: grid nodes that must stay pose variables when the graph keeps only
         every ``keyframe_every``-th (a GPS fix's node).
-    graph_run : callable or None
-        ``graph_run(builder) -> object or None`` for a sensor whose factors depend on the online estimate (GPS):
-        ``add(nf, n, pose_covariance)`` at every node, ``finish(result)`` at the end.
     states : tuple of State
         State variables the sensor adds to both backends while its data is used (module docstring).
     absolute_heading : bool or callable
@@ -278,14 +255,7 @@ class Sensor:
     node_times: Callable | None = None
     intervals: Step | None = None
     readings: Callable | None = None
-    ekf_measurements: Callable | None = None
-    ekf_blocks: tuple = ()
-    ekf_start: Callable | None = None
-    ekf_run: Callable | None = None
-    graph_factors: tuple = ()
-    graph_unary: tuple = ()
     graph_keyframes: Callable | None = None
-    graph_run: Callable | None = None
     states: tuple = ()
     live: Live | None = None
     absolute_heading: Any = False

@@ -6,7 +6,7 @@ import numpy as np
 
 from fusion_vo.backends import FusionConfig, SensorStreams
 from fusion_vo.backends.timeline import build_intervals
-from fusion_vo.sensors.imu import ekf_measurements, gyro_yaw, rest_noise_density
+from fusion_vo.sensors.imu import gyro_yaw, readings, rest_noise_density
 from fusion_vo.sensors.wheel import at_rest
 
 from husky_like import husky_like
@@ -24,6 +24,8 @@ def test_rest_density_is_measured_and_used_at_rest_only():
         iv = build_intervals(streams, config)
         still = at_rest(iv, config)
         assert 150 < np.count_nonzero(still) < 210  # 10 s of 20 Hz nodes
-        _, _, var = ekf_measurements(iv, config)["gyro"]
-        np.testing.assert_allclose(var[still], expected**2 / iv.dt[still])
-        np.testing.assert_allclose(var[~still], 4e-3**2 / iv.dt[~still])
+        gyro = next(r for r in readings(iv, config) if r.sensor == "gyro")  # σ² Δt per interval
+        var = np.full(iv.n_steps, np.nan)
+        var[gyro.i0] = gyro.cov[:, 0, 0]
+        np.testing.assert_allclose(var[still], expected**2 * iv.dt[still])
+        np.testing.assert_allclose(var[~still], 4e-3**2 * iv.dt[~still])

@@ -21,6 +21,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors.registry import Live, Sensor, State, Step
 
 
@@ -100,39 +101,15 @@ def compass_intervals(iv, streams, config, counts):
     counts.setdefault("compass", SensorCount()).used += int(near.sum())
 
 
-def compass_measurements(iv, config):
-    if "compass" not in iv.extra:
-        return {}
-    ok, yaw = iv.extra["compass"]
-    return {"compass": (ok, yaw, config.section("compass").sigma ** 2)}
-
-
-def _ekf_block(model):
-    def block(ekf, meas, k):
-        m = meas.get("compass")
-        return [ekf.block(model, m[1][k + 1], m[2])] if m is not None and m[0][k + 1] else []
-    return block
-
-
-def compass_factor(builder, nf, node):
-    if "compass" not in builder.iv.extra:
-        return
-    ok, yaw = builder.iv.extra["compass"]
-    if ok[node.g1]:
-        var = builder.config.section("compass").sigma ** 2
-        nf.factors.append(builder.model_factor(COMPASS, [yaw[node.g1]], [[var]], {"heading": (node.xj,)}))
-        nf.sensors.append("compass")
-
-
-def offset_compass_factor(builder, nf, node):
-    if "compass" not in builder.iv.extra:
-        return
-    ok, yaw = builder.iv.extra["compass"]
-    if ok[node.g1]:
-        var = builder.config.section("compass").sigma ** 2
-        keys = {"heading": (node.xj,), "compass_offset": (builder.state_key("compass_offset", node.segment),)}
-        nf.factors.append(builder.model_factor(OFFSET_COMPASS, [yaw[node.g1]], [[var]], keys))
-        nf.sensors.append("compass")
+def compass_readings(model):
+    """The headings at the nodes as readings of ``model`` (``σ²`` of ``fusion: {compass: {sigma}}``)."""
+    def readings(iv, config):
+        if "compass" not in iv.extra:
+            return []
+        ok, yaw = iv.extra["compass"]
+        n = np.flatnonzero(ok)
+        return [Readings("compass", model, n, n, yaw[n], config.section("compass").sigma ** 2)]
+    return readings
 
 
 def read_compass(recording) -> CompassData:
@@ -152,14 +129,13 @@ def read_compass(recording) -> CompassData:
 
 
 COMPASS_SENSOR = Sensor(name="compass", where="compass0/", config=("compass", CompassNoise),
-                        intervals=Step(100, compass_intervals), ekf_measurements=compass_measurements,
-                        ekf_blocks=(Step(100, _ekf_block(COMPASS)),), graph_unary=(Step(100, compass_factor),))
+                        intervals=Step(100, compass_intervals), readings=compass_readings(COMPASS))
 
 #: the compass with an unknown constant offset, estimated by both backends (prior 0 ± 0.5 rad)
 OFFSET_COMPASS_SENSOR = dataclasses.replace(
     COMPASS_SENSOR, folder="compass0", read=read_compass,
     states=(State("compass_offset", initial=0.0, sigma=0.5),),
-    ekf_blocks=(Step(100, _ekf_block(OFFSET_COMPASS)),), graph_unary=(Step(100, offset_compass_factor),),
+    readings=compass_readings(OFFSET_COMPASS),
     live=Live(sample=lambda m: (m.t, float(m.yaw)),
               data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64)),
               samples=lambda data: ((t, CompassSample(t, y)) for t, y in zip(data.t, data.yaw))),

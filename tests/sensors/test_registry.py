@@ -112,7 +112,7 @@ def test_each_built_in_sensor_lives_in_its_own_module():
     assert [s.name for s in registry.sensors()[:6] if s.live is not None] == list(home)
     assert [s.name for s in registry.sensors()[:6] if s.live.take is not None] == ["camera", "gps"]
     gps = registry.get("gps")
-    assert gps.intervals is not None and gps.ekf_run is not None and gps.graph_run is not None
+    assert gps.intervals is not None and gps.readings is not None and gps.absolute_position
     assert gps.node_times is not None and not gps.by_default({})
 
 
