@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from frontends.config import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
+from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 from fusion_vo import schema
 from fusion_vo.config import RunConfig, run_model, validate_config
 from fusion_vo.errors import InputError

@@ -9,7 +9,7 @@ from typing import Literal
 
 import yaml
 
-from frontends.config import AT_LEAST_1, FRACTION, POSITIVE, Range
+from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo import schema
 from fusion_vo.cli.main import main
 from fusion_vo.config import default_config_text, reference_text
