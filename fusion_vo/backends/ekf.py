@@ -124,7 +124,8 @@ DIM = 11
 FRAME_ERRORS = 3
 #: state columns of each measurement-model argument (:mod:`fusion_vo.sensors.model`); the interval
 #: models are evaluated per unit time, on the twist state
-STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "gyro_bias": slice(BG, BG + 1),
+STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "pose": slice(PX, YAW + 1),
+                 "gyro_bias": slice(BG, BG + 1),
                  "visual_scale": slice(KV, KV + 1), "wheel_scale": slice(KR, KR + 1),
                  "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
 _FROZEN_VAR = 1e-12

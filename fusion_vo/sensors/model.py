@@ -18,6 +18,7 @@ A model names its arguments; the backends know how to supply each name:
                        which is the interval's motion per unit time (its interval models are evaluated
                        per unit time: readings and noise divided by the interval, ``dt = 1``);
 ``heading``            (1,) the pose's heading ``ψ`` at the measurement's time;
+``pose``               (3,) the pose ``(x, y, ψ)`` at the measurement's time (world frame);
 ``gyro_bias``          (1,) ``b_g`` [rad/s];
 ``visual_scale``       (1,) ``k_v = h_configured / h_true``;
 ``wheel_scale``        (1,) ``k_r = r_configured / r_true``;
@@ -37,7 +38,7 @@ import numpy as np
 
 from fusion_vo.geometry.se2 import wrap_angle
 
-ARGUMENT_SIZES = {"motion": 3, "heading": 1, "gyro_bias": 1, "visual_scale": 1, "wheel_scale": 1,
+ARGUMENT_SIZES = {"motion": 3, "heading": 1, "pose": 3, "gyro_bias": 1, "visual_scale": 1, "wheel_scale": 1,
                   "wheel_base_factor": 1, "ahrs_offset": 1}
 
 
