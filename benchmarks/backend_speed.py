@@ -57,7 +57,7 @@ import numpy as np
 
 from common import Stages, add_settings, cpu_seconds, fusion_settings, load, parser, table, with_settings
 
-from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, batch, chain, fuse, graph
+from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, batch, chain, fuse, graph, graph_builder
 from fusion_vo.backends.streaming import time_ordered_messages
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
@@ -185,7 +185,7 @@ def solvers(args) -> int:
     n = len(problem.pose_keys)
 
     def positions(values):
-        return np.array([[values.atPose2(graph.X(i)).x(), values.atPose2(graph.X(i)).y()] for i in range(n)])
+        return np.array([[values.atPose2(graph_builder.X(i)).x(), values.atPose2(graph_builder.X(i)).y()] for i in range(n)])
 
     def run(name):
         t0 = time.process_time()

@@ -74,7 +74,7 @@ class GraphConfig:
     robust_k : float
         Kernel width for a factor of one row, in standard deviations; a factor of ``m`` rows gets the width
         with the same tail probability on its whitened distance, ``sqrt(chi2.ppf(chi2.cdf(k², 1), m))``
-        (:func:`fusion_vo.backends.graph.kernel_width`). Default 3.2905: where the EKF's default gate
+        (:func:`fusion_vo.backends.graph_builder.kernel_width`). Default 3.2905: where the EKF's default gate
         (``gate_probability`` 0.999) starts, so that a measurement the filter takes at full weight keeps its
         full weight in the graph (1.345 is Huber's classic for one row, 2.3849 Cauchy's).
     keyframe_every : int
@@ -101,7 +101,7 @@ class GraphConfig:
     reweight_passes : int
         iSAM2 (and the streaming fusion's) linearises a node's sensor-model factors again at its updated
         estimate, at most this many times, when a robust weight there differs from the one at the
-        prediction (:func:`fusion_vo.backends.graph.update_reweighted`; default 2, 0: the weights at the
+        prediction (:func:`fusion_vo.backends.isam.update_reweighted`; default 2, 0: the weights at the
         prediction; at most 10: each pass is one more update of every node).
     """
 

@@ -451,7 +451,7 @@ def scalar_table(keys: np.ndarray, values: np.ndarray) -> dict:
 
 
 #: GTSAM symbol letters of the Pose2 variables: the poses and the camera's frame poses
-#: (:func:`fusion_vo.backends.graph.X`, :func:`~fusion_vo.backends.graph.F`)
+#: (:func:`fusion_vo.backends.graph_builder.X`, :func:`~fusion_vo.backends.graph_builder.F`)
 POSE_LETTERS = ("x", "F")
 
 

@@ -6,7 +6,7 @@ A reading becomes a factor on the variables of its model's arguments (:mod:`fusi
   reading states its frames' errors, :mod:`fusion_vo.sensors.visual`);
 * ``heading``: the pose of its node;
 * a state: that state's variable in the calibration segment of the reading's (last) node
-  (:meth:`~fusion_vo.backends.graph.GraphBuilder.state_variable`); a state the graph does not estimate is held at its
+  (:meth:`~fusion_vo.backends.graph_builder.GraphBuilder.state_variable`); a state the graph does not estimate is held at its
   initial value, as are the arguments the reading fixes.
 
 Where GTSAM has the factor itself, it is used: a model that is its ``motion`` argument itself with the values held

@@ -5,7 +5,7 @@ lives in a recording and how it is read, its field of :class:`~fusion_vo.backend
 its configuration section, how its samples become measurements on the node grid
 (:func:`~fusion_vo.backends.timeline.build_intervals`), and its contributions to the EKF
 (:func:`~fusion_vo.backends.ekf.step_blocks`) and to the factor graph
-(:class:`~fusion_vo.backends.graph.GraphBuilder`). The timeline, both backends, ``SensorStreams`` and
+(:class:`~fusion_vo.backends.graph_builder.GraphBuilder`). The timeline, both backends, ``SensorStreams`` and
 the recording reader iterate :func:`sensors` instead of naming sensors, so adding a sensor is one module
 plus one :func:`register` call (README, "Adding a sensor")::
 
@@ -25,7 +25,7 @@ prior and a random walk) becomes a measurement-model argument of that name, carr
 whenever the sensor's data is used: the EKF appends it to its state vector (the prior as its initial
 value and variance, the random walk as process noise; :class:`~fusion_vo.backends.ekf.PlanarEkf`), the
 factor graph makes it a variable per calibration segment tied by the random walk, like the gyro bias
-(:meth:`~fusion_vo.backends.graph.GraphBuilder.state_key`). Its prior and random walk are the registered ones
+(:meth:`~fusion_vo.backends.graph_builder.GraphBuilder.state_key`). Its prior and random walk are the registered ones
 unless the configuration sets them (``fusion: {states: {NAME: {initial, sigma, random_walk}}}``,
 :class:`StatePrior`). Its estimate at the end is reported in
 ``FusionResult.calibration`` under its name, with its standard deviation as ``NAME_sigma``. The built-in state (pose,

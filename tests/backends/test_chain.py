@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse
-from fusion_vo.backends import graph as G
+from fusion_vo.backends import isam as G
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 

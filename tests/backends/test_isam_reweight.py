@@ -1,11 +1,12 @@
-"""iSAM2's robust weights at the updated estimate (:func:`fusion_vo.backends.graph.update_reweighted`)."""
+"""iSAM2's robust weights at the updated estimate (:func:`fusion_vo.backends.isam.update_reweighted`)."""
 
 import gtsam
 import numpy as np
 
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.factors import ModelFactor
-from fusion_vo.backends.graph import X, freeze_custom_factors, isam_params, kernel_width, update_reweighted
+from fusion_vo.backends.graph_builder import X, kernel_width
+from fusion_vo.backends.isam import freeze_custom_factors, isam_params, update_reweighted
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import WHEEL
 

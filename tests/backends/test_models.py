@@ -9,7 +9,7 @@ import pytest
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.ekf import DIM, PlanarEkf
 from fusion_vo.backends.factors import ModelFactor, ModelFactors, covariance_noise, group, pose_table
-from fusion_vo.backends.graph import B, O, R, X, S, W
+from fusion_vo.backends.graph_builder import B, O, R, X, S, W
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import STANDSTILL, WHEEL
@@ -239,7 +239,7 @@ def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does(curvature):
     correlation is what lets a heading known from the gyro correct the wheels' distance. With the curvature
     bias (the default) the whole arc is the curved model's."""
     from fusion_vo.backends import SensorStreams
-    from fusion_vo.backends.graph import GraphBuilder
+    from fusion_vo.backends.graph_builder import GraphBuilder
     from fusion_vo.backends.timeline import build_intervals
     from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
     from fusion_vo.sensors.wheel import CURVED_WHEEL

@@ -4,7 +4,7 @@ problem the EKF solves (its chi-square gate) and the batch smoother is not worse
 GTSAM weighs a robust factor by the norm of its whole whitened residual; a width meant for one row (Huber's
 1.345) applied to the camera's three rows down-weighted 61 % of honest increments, and iSAM2, whose
 weights are fixed where a new pose is first predicted from the wheels, cut the camera's weight by a
-third on average (``fusion_vo.backends.graph.kernel_width``).
+third on average (``fusion_vo.backends.graph_builder.kernel_width``).
 """
 
 import numpy as np
@@ -21,7 +21,7 @@ def _rms(a, b) -> float:
 
 
 def test_kernel_width_keeps_the_tail_probability_of_every_factor_size():
-    from fusion_vo.backends.graph import kernel_width
+    from fusion_vo.backends.graph_builder import kernel_width
 
     gate = FusionConfig()
     # default: the EKF's gate at gate_probability 0.999 (chi-square quantiles 10.83, 13.82, 16.27)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, StreamingFusion
-from fusion_vo.backends.streaming import _OnlineGraph
+from fusion_vo.backends.online_graph import OnlineGraph
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import ImuSample, TwistSample, WheelTicks
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
@@ -305,7 +305,7 @@ def test_isam2_in_the_background_gives_the_same_track(drive):
     s = drive
     with pytest.raises(InputError, match="background"):
         _fusion(s, "ekf", background=True)
-    slow = _OnlineGraph._add_node
+    slow = OnlineGraph._add_node
 
     def delayed(self, *args):
         time.sleep(0.002)
@@ -319,7 +319,7 @@ def test_isam2_in_the_background_gives_the_same_track(drive):
         runs = [worker.finish()]
         lagging = _fusion(s, "gtsam", background=True)
         with pytest.MonkeyPatch.context() as mp:
-            mp.setattr(_OnlineGraph, "_add_node", delayed)
+            mp.setattr(OnlineGraph, "_add_node", delayed)
             _feed(lagging, msgs)
             runs.append(lagging.finish())
         a = sync.finish()

@@ -1,0 +1,425 @@
+"""The factor graph's variables and the factors that arrive with each node.
+
+Variables: ``X_k`` (:func:`X`) the Pose2 of B in W at graph node ``k`` (every ``keyframe_every``-th node of the
+grid, and every node with an absolute reading); ``F_k`` (:func:`F`) the camera's measured pose at node ``k`` when
+its readings state their frames' errors; per calibration segment ``c`` (``GraphConfig.calibration_interval``
+seconds of nodes) the gyro bias ``B_c``, the AHRS offset ``O_c``, the visual scale ``S_c``, the wheel-base factor
+``W_c``, the wheels' distance scale ``R_c`` (each while the run estimates it) and a variable of each state a
+sensor declares (:meth:`GraphBuilder.state_key`), tied between segments by their random walks.
+
+:class:`GraphBuilder` turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node batches
+(:class:`NodeFactors`): the priors of the first node, the random walks of a new segment, the sensors' readings as
+factors (:mod:`fusion_vo.backends.graph_adapter`), the initial value of the new pose, and a weak constant-twist
+factor where nothing measures an interval's translation. All three solvers of :mod:`fusion_vo.backends.graph`
+(batch, iSAM2, fixed lag) consume the same batches.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from fusion_vo.backends.config import FusionConfig
+from fusion_vo.backends.ekf import calibration_observable
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.backends.graph_adapter import GraphReadings, frame_poses, interval_factor, node_factor
+from fusion_vo.backends.graph_adapter import guess as readings_guess
+from fusion_vo.backends.timeline import Intervals, sensor_readings
+from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, covariance_noise
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.wheel import arc_increment
+
+
+logger = logging.getLogger(__name__)
+
+
+def X(k: int) -> int:
+    return gtsam.symbol("x", k)
+
+
+def B(k: int) -> int:
+    return gtsam.symbol("b", k)
+
+
+def O(k: int) -> int:  # noqa: E743 (the symbol's letter)
+    return gtsam.symbol("o", k)
+
+
+def S(k: int) -> int:
+    return gtsam.symbol("s", k)
+
+
+def W(k: int) -> int:
+    return gtsam.symbol("w", k)
+
+
+def R(k: int) -> int:
+    return gtsam.symbol("r", k)
+
+
+#: GTSAM symbol letter of the camera's frame poses (:func:`F`)
+FRAME_LETTER = POSE_LETTERS[1]
+
+
+def F(k: int) -> int:
+    """The camera's measured pose at node ``k`` (``X(k)`` with that frame's own error; ``visual_frame_error``,
+    :mod:`fusion_vo.sensors.visual`)."""
+    return gtsam.symbol(FRAME_LETTER, k)
+
+
+_NO_INCREMENT = np.zeros(3)
+_NO_INCREMENT.flags.writeable = False
+
+#: GTSAM symbol letters of the sensors' own state variables (the built-in ones use x, b, o, s, w, r)
+_STATE_LETTERS = "acdefghijklmnpqtuvyz"
+
+# --------------------------------------------------------------------------- graph construction
+@dataclass
+class NodeFactors:
+    """Factors and initial values that arrive with one node (used by all three solvers)."""
+
+    k: int
+    t: float
+    factors: list = field(default_factory=list)
+    values: dict = field(default_factory=dict)
+    sensors: list = field(default_factory=list)
+    guess: np.ndarray | None = None
+    new_frames: list = field(default_factory=list)  # frame poses made here, which start at the node's pose
+
+
+class GraphBuilder:
+    """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
+
+    #: the variables' keys, for the sensors' graph steps (pose, gyro bias, AHRS offset, visual scale, wheel base
+    #: and radius factors of a segment; module docstring)
+    X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
+    F = staticmethod(F)
+
+    def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
+                 calibrate: tuple[bool, bool] | None = None, states: tuple | None = None):
+        """``offset``, ``t_origin``, ``calibrate`` and ``states`` let a stream be built one interval at a time:
+        local node ``n`` is variable ``X(offset + n)``, segments count from ``t_origin``, ``calibrate``
+        says which calibration factors are estimated (default: where observable in ``iv``) and ``states``
+        which sensors' state variables exist (default: ``iv.states``)."""
+        self.iv = iv
+        self.states = tuple(iv.states if states is None else states)
+        # each state's variables: one letter of GTSAM's symbols per state, besides the built-in ones
+        self._state_letter = {st.name: _STATE_LETTERS[i] for i, st in enumerate(self.states)}
+        self.config = config
+        self.offset = offset
+        if calibrate is None:
+            calibrate = calibration_observable(iv)
+        self.kv_on, self.kb_on = calibrate if config.self_calibration else (False, False)
+        # the wheels' distance scale: with the visual scale, only their ratio is measured
+        self.kr_on = self.kv_on and self.kb_on
+        every = config.graph.keyframe_every
+        nodes = np.arange(0, len(iv.t), every)
+        if nodes[-1] != len(iv.t) - 1:
+            nodes = np.append(nodes, len(iv.t) - 1)
+        if every > 1:  # the nodes a sensor needs as keyframes (a GPS fix's)
+            for sensor in registry.sensors():
+                if sensor.graph_keyframes is not None:
+                    keep = sensor.graph_keyframes(iv)
+                    if keep is not None and len(keep):
+                        nodes = np.union1d(nodes, keep)
+        self.grid = nodes  # node index -> interval-grid index
+        self.readings = GraphReadings(sensor_readings(iv, config), nodes)  # the sensors' readings on these nodes
+        self.t = iv.t[nodes]
+        # bias and calibration variables: one per segment of `calibration_interval` seconds
+        origin = self.t[0] if t_origin is None else t_origin
+        self.segment = np.floor((self.t - origin) / config.graph.calibration_interval + 1e-9).astype(int)
+        # the same as Python lists: indexed once per node, faster than numpy scalars
+        self._grid, self._segment, self._times = self.grid.tolist(), self.segment.tolist(), iv.t.tolist()
+        self._kernels: dict[int, tuple] = {}  # rows -> ((name, width), GTSAM mEstimator) or None
+        # the AHRS offset variables exist with the IMU (an AHRS may report in any interval of a stream)
+        self.ahrs_offset_on = iv.uses("gyro") and config.imu.ahrs_offset_walk > 0
+        self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
+        for c in self.counts.values():
+            c.used = 0
+        #: global nodes whose frame pose ``F`` exists (a stream built one interval at a time shares one set)
+        self.frames: set[int] = set()
+        self.initial_estimate = initial_calibration(iv) if offset == 0 else {}
+
+    # ------------------------------------------------------------------ helpers
+    def kernel(self, dof: int):
+        """``((name, width), GTSAM mEstimator)`` of the robust kernel for a factor of ``dof`` measured rows
+        (:func:`kernel_width`), or None without one."""
+        if dof not in self._kernels:
+            width = kernel_width(self.config, dof)
+            self._kernels[dof] = None if width is None else (
+                (self.config.graph.robust, width), _robust_kernel(self.config.graph.robust, width))
+        return self._kernels[dof]
+
+    def model_factor(self, model, z, cov, keys: dict, fixed: dict | None = None, params: dict | None = None,
+                     rows: tuple | None = None, robust: bool = True, dof: int | None = None) -> ModelFactor:
+        """A measurement of a sensor model (:mod:`fusion_vo.backends.factors`), in the robust kernel unless
+        ``robust`` is False; ``dof``: the rows that measure something (default: all of ``cov``'s), for the
+        kernel's width."""
+        cov = np.asarray(cov, dtype=np.float64)
+        kernel = self.kernel(dof or len(np.atleast_2d(cov))) if robust else None
+        return ModelFactor(model, np.array(z, dtype=np.float64).reshape(-1), keys, cov,
+                           fixed or {}, params or {}, rows, None if kernel is None else kernel[0])
+
+    def noise(self, cov: np.ndarray, robust: bool = True, dof: int | None = None):
+        """GTSAM's noise model of ``cov``, in the robust kernel of ``dof`` rows (default: all) unless ``robust``
+        is False."""
+        cov = np.asarray(cov, dtype=np.float64)
+        base = covariance_noise(cov)
+        kernel = self.kernel(dof or len(cov)) if robust else None
+        if kernel is not None:
+            return gtsam.noiseModel.Robust.Create(kernel[1], base)
+        return base
+
+    @staticmethod
+    def robust_noise(cov: np.ndarray, kernel: str, width: float):
+        """GTSAM's noise model of ``cov`` inside the ``mEstimator`` ``kernel`` (``"huber"``, ``"cauchy"``; ``"none"``:
+        the Gaussian alone) of ``width`` on the whitened distance."""
+        base = covariance_noise(np.asarray(cov, dtype=np.float64))
+        robust = _robust_kernel(kernel, width)
+        return base if robust is None else gtsam.noiseModel.Robust.Create(robust, base)
+
+    def initial_pose(self) -> np.ndarray:
+        """The first pose: aligned to the GPS fixes when fused, else the configured one."""
+        if self.iv.initial_pose is not None:
+            return np.asarray(self.iv.initial_pose, dtype=np.float64)
+        return np.asarray(self.config.initial_pose, dtype=np.float64)
+
+    # ------------------------------------------------------------------ per node
+    def first_node(self, estimate: dict | None = None) -> NodeFactors:
+        """Priors on the first pose, bias and calibration (``estimate`` gives initial values)."""
+        cfg = self.config
+        est = estimate or {}
+        nf = NodeFactors(0, float(self.t[0]))
+        pose = gtsam.Pose2(*self.initial_pose())
+        sigma = 1e-4 if self.iv.initial_sigma is None else None
+        nm = (gtsam.noiseModel.Isotropic.Sigma(3, sigma) if sigma is not None
+              else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(self.iv.initial_sigma, dtype=np.float64)))
+        nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, nm))
+        nf.values[X(0)] = pose
+        priors = []  # (key, prior mean, prior sigma, initial value)
+        if self.iv.uses("gyro"):
+            priors.append((B(0), 0.0, cfg.imu.gyro_bias_sigma, est.get("gyro_bias", 0.0)))
+        if self.ahrs_offset_on:
+            priors.append((O(0), 0.0, cfg.imu.ahrs_yaw_sigma, est.get("ahrs_offset", 0.0)))
+        if self.kv_on:
+            priors.append((S(0), 1.0, self.iv.visual_scale_sigma, est.get("visual_scale", 1.0)))
+        if self.kb_on:
+            priors.append((W(0), 1.0, cfg.wheel_model(self.iv.twist)[1], est.get("wheel_base_factor", 1.0)))
+        if self.kr_on:
+            priors.append((R(0), 1.0, self.iv.wheel_scale_sigma, est.get("wheel_scale", 1.0)))
+        for st in self.states:
+            priors.append((self.state_key(st.name, 0), st.initial, st.sigma, est.get(st.name, st.initial)))
+        for key, mean, sigma, guess in priors:
+            nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
+            nf.values[key] = guess
+        self._unary(nf, 0)
+        return nf
+
+    def node(self, n: int, previous_pose: gtsam.Pose2, estimate: dict | None = None) -> NodeFactors:
+        """Factors that end at node ``n`` and an initial guess for its variables.
+
+        ``estimate`` holds the running bias and calibration estimates (``gyro_bias``, ``visual_scale``,
+        ``wheel_base_factor``, ...) and the previous increment, used only for initial guesses.
+
+        The sensors' interval readings that end at node ``n`` become factors (:mod:`fusion_vo.backends.graph_adapter`),
+        in their order; the new pose's initial value is the previous pose composed with the interval's motion as
+        the readings over exactly that interval give it (their models' guesses, by rank), else the previous
+        increment. Where none measured the translation a weak constant-twist factor keeps it determined. Then the
+        node readings at ``n``.
+        """
+        cfg = self.config
+        est = estimate or {}
+        g0, g1 = self._grid[n - 1], self._grid[n]
+        c, previous = self._segment[n], self._segment[n - 1]
+        dt = self._times[g1] - self._times[g0]
+        xi, xj = X(self.offset + n - 1), X(self.offset + n)
+        nf = NodeFactors(n, self._times[g1])
+        if c != previous:
+            self._new_segment(nf, c, est, previous)
+        spans = self.readings.ending_at(n)
+        for span in spans:  # the sensors' interval readings that end here
+            xs, xe, cov = X(self.offset + span.start), xj, None
+            if span.frame_cov is not None:
+                frames = frame_poses(self, nf, span, n, c, previous_pose)
+                if frames is not None:
+                    (xs, xe), cov = frames, span.cov - 2.0 * span.frame_cov
+            factor = interval_factor(self, span, xs, xe, c, self._times[g1] - self._times[self._grid[span.start]],
+                                     cov=cov)
+            nf.factors.append(factor)
+            nf.sensors.append(span.readings.sensor)
+        (translation, _), (heading, _) = readings_guess(spans, n, est, dt)
+        last = est.get("last_increment", _NO_INCREMENT)
+        guess = np.array([*(last[:2] if translation is None else translation), last[2] if heading is None else heading])
+        if translation is None:
+            # nothing measures this interval's translation: a weak constant-twist factor keeps it determined
+            e = cfg.ekf
+            sig = np.array([e.accel_sigma, e.accel_sigma, e.yaw_accel_sigma]) * max(dt, 1e-3) * 4.0 + 1e-3
+            nm = gtsam.noiseModel.Diagonal.Sigmas(sig)
+            nf.factors.append(gtsam.BetweenFactorPose2(xi, xj, gtsam.Pose2(*guess), nm))
+            nf.sensors.append("motion_model")
+        nf.values[xj] = previous_pose.compose(gtsam.Pose2(*guess))
+        for key in nf.new_frames:  # frame poses start at their node's pose
+            nf.values[key] = nf.values[xj]
+        nf.guess = guess
+        self._unary(nf, n)
+        return nf
+
+    def state_variable(self, name: str, segment: int) -> int | None:
+        """The variable of state ``name`` in calibration ``segment``, or None when the graph does not estimate it."""
+        builtin = {"gyro_bias": (self.iv.uses("gyro"), B), "ahrs_offset": (self.ahrs_offset_on, O),
+                   "visual_scale": (self.kv_on, S), "wheel_base_factor": (self.kb_on, W), "wheel_scale": (self.kr_on, R)}
+        if name in builtin:
+            on, letter = builtin[name]
+            return letter(segment) if on else None
+        if name in self._state_letter:
+            return self.state_key(name, segment)
+        return None
+
+    def state_initial(self, name: str) -> float:
+        """The value a state the graph does not estimate is held at: its initial value (scales 1, offsets 0)."""
+        if name in ("visual_scale", "wheel_base_factor", "wheel_scale"):
+            return 1.0
+        for st in registry.all_states():
+            if st.name == name:
+                return float(st.initial)
+        return 0.0
+
+    def key(self, n: int) -> int:
+        """The pose variable of local node ``n``."""
+        return X(self.offset + n)
+
+    def state_key(self, name: str, segment: int) -> int:
+        """The variable of a sensor's state ``name`` (:class:`fusion_vo.sensors.registry.State`) in ``segment``
+        (``NodeContext.segment``)."""
+        return gtsam.symbol(self._state_letter[name], segment)
+
+    def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:
+        """Bias and calibration variables of segment ``c``, tied to the ``previous`` segment (``c-1``, or an
+        earlier one across a stretch without nodes) by random walks over the time between them."""
+        cfg = self.config
+        span = float(cfg.graph.calibration_interval) * (c - previous)
+        walks = []
+        if self.iv.uses("gyro"):
+            walks.append((B, cfg.imu.gyro_random_walk, estimate.get("gyro_bias", 0.0)))
+        if self.ahrs_offset_on:
+            walks.append((O, cfg.imu.ahrs_offset_walk, estimate.get("ahrs_offset", 0.0)))
+        if self.kv_on:
+            walks.append((S, cfg.ekf.visual_scale_random_walk, estimate.get("visual_scale", 1.0)))
+        if self.kb_on:
+            walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
+        if self.kr_on:
+            walks.append((R, cfg.ekf.scale_random_walk, estimate.get("wheel_scale", 1.0)))
+        for st in self.states:
+            walks.append((lambda c, name=st.name: self.state_key(name, c), st.random_walk,
+                          estimate.get(st.name, st.initial)))
+        for key, q, guess in walks:
+            sigma = max(q * np.sqrt(span), 1e-7)
+            nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
+            nf.factors.append(gtsam.BetweenFactorDouble(key(previous), key(c), 0.0, nm))
+            nf.values[key(c)] = guess
+
+    def segment_keys(self, n: int) -> list[int]:
+        """Bias and calibration variables of node ``n``'s segment."""
+        c = int(self.segment[n])
+        keys = [B(c)] if self.iv.uses("gyro") else []
+        keys += [O(c)] if self.ahrs_offset_on else []
+        keys += ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
+        return keys + [self.state_key(st.name, c) for st in self.states]
+
+    def _unary(self, nf: NodeFactors, n: int) -> None:
+        """The sensors' readings at node ``n`` (:func:`~fusion_vo.backends.graph_adapter.node_factor`)."""
+        xn, segment = X(self.offset + n), int(self._segment[n])
+        for r, j in self.readings.at(n):
+            factor = node_factor(self, r, j, xn, segment)
+            if factor is not None:
+                nf.factors.append(factor)
+                nf.sensors.append(r.sensor)
+
+    def count(self, nf: NodeFactors) -> None:
+        counts = self.counts
+        for s in nf.sensors:
+            c = counts.get(s)
+            if c is None:
+                c = counts[s] = SensorCount()
+            c.used += 1
+
+
+def initial_calibration(iv: Intervals) -> dict:
+    """Closed-form first guesses of the gyro bias, visual scale and wheel-base factor.
+
+    Only initial values (the graph estimates them): without them a dead-reckoned initial trajectory
+    drifts with the uncorrected gyro bias and Levenberg–Marquardt needs many damped iterations.
+    The reference heading change is the camera's (independent of every calibration) where available.
+    """
+    out: dict = {}
+    dt = iv.dt
+    single = iv.vis_i1 == iv.vis_i0 + 1
+    vis_yaw = np.full(iv.n_steps, np.nan)
+    vis_xy = np.full(iv.n_steps, np.nan)
+    vis_yaw[iv.vis_i0[single]] = iv.vis_delta[single, 2]
+    vis_xy[iv.vis_i0[single]] = np.hypot(iv.vis_delta[single, 0], iv.vis_delta[single, 1])
+    wheel_yaw = wheel_xy = None
+    if iv.uses("wheel"):
+        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
+        yaw_ok = iv.wheel_ok if iv.wheel_yaw_ok is None else iv.wheel_ok & iv.wheel_yaw_ok
+        wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
+        wheel_xy = np.where(iv.wheel_ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
+    ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw
+    if iv.uses("gyro") and ref is not None:
+        ok = iv.gyro_ok & np.isfinite(ref)
+        if ok.sum() > 10:
+            out["gyro_bias"] = float(np.sum(iv.gyro_angle[ok] - ref[ok]) / np.sum(dt[ok]))
+    if wheel_xy is not None:
+        ok = np.isfinite(vis_xy) & np.isfinite(wheel_xy)
+        if ok.sum() > 10 and np.sum(wheel_xy[ok]) > 0:
+            out["visual_scale"] = float(np.sum(vis_xy[ok]) / np.sum(wheel_xy[ok]))
+        heading = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else None
+        if heading is None and "gyro_bias" in out:
+            heading = np.where(iv.gyro_ok, iv.gyro_angle - out["gyro_bias"] * dt, np.nan)
+        if heading is not None:
+            ok = np.isfinite(heading) & np.isfinite(wheel_yaw)
+            if ok.sum() > 10 and np.sum(heading[ok] ** 2) > 1e-6:
+                out["wheel_base_factor"] = float(np.sum(wheel_yaw[ok] * heading[ok]) / np.sum(heading[ok] ** 2))
+    for key, lo, hi in (("visual_scale", 0.8, 1.25), ("wheel_base_factor", 0.5, 2.0)):
+        if key in out and not lo < out[key] < hi:
+            del out[key]
+    return out
+
+
+def kernel_width(config: FusionConfig, dof: int) -> float | None:
+    """Width of the graph's robust kernel on the whitened distance ``‖W e‖`` of a factor of ``dof`` rows
+    (None: no kernel).
+
+    GTSAM's robust noise models weigh a factor by the norm of its whole whitened residual, which for an
+    honest measurement of ``m`` rows is chi-distributed with ``m`` degrees of freedom: a width meant for one
+    row (Huber's 1.345) down-weights 18 % of honest one-row residuals but 40 % of two-row and 61 % of
+    three-row ones (the camera's and the wheels' increments), and then the graph no longer solves the
+    problem the filter solves. The width therefore keeps the tail probability of ``GraphConfig.robust_k``
+    (a width for one row) for every ``m``. Its default, 3.2905, is the EKF's default gate (chi-square
+    0.999): a measurement inside the filter's gate keeps its full weight in the batch and iSAM2 alike,
+    and beyond it its influence is bounded, as the filter bounds it (:class:`~fusion_vo.sensors.model.Gate`).
+    """
+    from scipy.stats import chi2
+
+    g = config.graph
+    if g.robust == "none":
+        return None
+    if dof == 1:
+        return float(g.robust_k)
+    p = float(chi2.cdf(g.robust_k**2, 1))
+    if p >= 1.0:
+        return None
+    return float(np.sqrt(chi2.ppf(p, dof)))
+
+
+def _robust_kernel(name: str, width: float):
+    if name == "huber":
+        return gtsam.noiseModel.mEstimator.Huber.Create(width)
+    if name == "cauchy":
+        return gtsam.noiseModel.mEstimator.Cauchy.Create(width)
+    return None
+
+

@@ -1,0 +1,285 @@
+"""iSAM2 fed one node at a time: the sensor-model factors frozen at the prediction, their robust weights
+evaluated again where the update puts the node, the oldest nodes marginalised.
+
+The incremental solvers receive the sensor-model factors linearised at the prediction of the newest pose
+(:func:`freeze_custom_factors`); iSAM2 linearises them once more at its updated estimate when a robust weight
+there differs from the prediction's (:func:`update_reweighted`). iSAM2 marginalises the nodes more than
+:data:`ONLINE_HORIZON` behind the newest (:class:`Retired`), so that its cost per update does not grow with the
+drive. Used by the batch run's ``gtsam_online`` track (:func:`fusion_vo.backends.graph.run_graph`) and by
+:class:`~fusion_vo.backends.streaming.StreamingFusion`.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import gtsam
+import numpy as np
+
+from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, ValuesMaker
+from fusion_vo.backends.graph_builder import B, F, GraphBuilder, NodeFactors, O, R, S, W, X
+
+logger = logging.getLogger(__name__)
+
+
+def freeze_custom_factors(factors: list, lookup, maker: ValuesMaker | None = None,
+                          weights: list | None = None) -> list:
+    """Replace each sensor-model factor (:class:`~fusion_vo.backends.factors.ModelFactor`, or a
+    :class:`gtsam.CustomFactor`) by its linearisation at ``lookup(key)`` values.
+
+    Used for the incremental solvers, which relinearise only GTSAM's own nonlinear factors: they receive
+    the (robustly weighted) linearisation as a ``LinearContainerFactor``. The factors are relative
+    constraints between close nodes, linearised at the prediction of the newest pose, where they are
+    nearly linear (the gyro's and the standstill's are exactly linear in the headings); the robust
+    weight is fixed at that prediction, so a visual increment that disagrees with the wheels and the
+    gyro beyond the gate (:func:`kernel_width`) enters with a small weight. The batch solution
+    relinearises them and re-evaluates their weights at every iteration.
+
+    The prediction of the newest pose comes from the wheels, so a camera residual there carries the
+    wheels' error too: with a kernel one row wide on the camera's three rows, 76 % of the camera
+    increments of the generated ``square`` drive entered iSAM2 down-weighted (mean weight 0.64), and its
+    track (ATE 0.168 mm) fell behind the batch (0.085 mm) and the EKF (0.074 mm); with the gate's width
+    12 % are (mean weight 0.98), and iSAM2 scores 0.089 mm. iSAM2 therefore evaluates the weights again
+    where its update puts the node (:func:`update_reweighted`). ``weights``: the robust weight each
+    sensor-model factor gets at these values is appended to it (1 without a kernel).
+    """
+    out = []
+    keys = {key for f in factors if isinstance(f, ModelFactor) for key in f.all_keys()}
+    point = (maker or ValuesMaker()).make({key: lookup(key) for key in keys}) if keys else None
+    for f in factors:
+        if isinstance(f, ModelFactor):
+            out.append(f.linearized(lookup, point, weights))
+        elif isinstance(f, gtsam.CustomFactor):
+            lin = gtsam.Values()
+            insert_values(lin, {key: lookup(key) for key in f.keys()})
+            out.append(gtsam.LinearContainerFactor(f.linearize(lin), lin))
+        else:
+            out.append(f)
+    return out
+
+
+#: iSAM2 linearises a node's sensor-model factors again at its updated estimate when the robust weight of one
+#: of them there differs from the one it entered with by more than this (:func:`update_reweighted`)
+REWEIGHT_TOLERANCE = 1e-3
+
+
+def estimate_lookup(solver):
+    """``lookup(key)``: the incremental ``solver``'s current estimate of a variable (Pose2 or float)."""
+
+    def value(key: int):
+        if chr(gtsam.Symbol(key).chr()) in POSE_LETTERS:
+            return solver.calculateEstimatePose2(key)
+        return solver.calculateEstimateDouble(key)
+
+    return value
+
+
+def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, factors: list, weights: list,
+                      maker: ValuesMaker | None = None, passes: int = 2) -> tuple[list[int], int]:
+    """One iSAM2 update with a node's factors, the robust weights evaluated where the update puts the node.
+
+    ``graph`` holds ``factors`` (the node's, in order) as :func:`freeze_custom_factors` linearised them at
+    the prediction, and ``weights`` the robust weights it gave their sensor-model factors there. After the
+    update, each robust factor's weight is evaluated at the new estimate; where one differs (by more than
+    :data:`REWEIGHT_TOLERANCE`), all the node's sensor-model factors are linearised again at that estimate
+    and replace the ones that went in (an iterated update, as an iterated EKF's, and the batch solution's
+    reweighting at each iteration), at most ``passes`` times. Only a node with a weight below 1 at the
+    prediction is checked: with every factor inside its kernel there, the update moves the node by a
+    weighted mean of residuals inside their kernels (on the 16 generated drives of the measurement below,
+    1210 nodes were linearised again, every one of them with a weight below 1 at the prediction).
+
+    Why: the prediction of the newest pose comes from the wheels (translation) and the gyro (heading),
+    and the camera's residual there carries their error, which is far larger than the camera's own noise
+    (on the generated ``square`` drive the wheels' track is 600 times worse than the camera's). A kernel
+    evaluated there down-weights good camera increments that the filter, gating with the prediction's
+    uncertainty in the innovation covariance, takes at full weight; the update then pulls the pose most of
+    the way to the camera, where the increment is well inside the kernel. An increment that is still
+    beyond the kernel at the updated estimate (a wrong match, outvoted by the other sensors) keeps its
+    small weight. On the generated ``square`` drive (seed 101) iSAM2 scored 0.111 mm with the weights of
+    the prediction (``benchmarks/fusion_vs_best.py`` variant "iSAM2 weights at the prediction") and 0.102 mm
+    with these, as the EKF (over 4 seeds of four drives: benchmarks/findings/fusion.md "The graph's
+    covariances with all their correlations"). Returns the
+    indices of the factors in iSAM2 (in the order of ``factors``) and the number of passes made.
+    """
+    index = list(isam.update(graph, values).getNewFactorsIndices())
+    if passes <= 0 or min(weights, default=1.0) >= 1.0:
+        return index, 0
+    model = [i for i, f in enumerate(factors) if isinstance(f, ModelFactor)]
+    robust = [j for j, i in enumerate(model) if factors[i].robust is not None]
+    made = 0
+    for _ in range(passes):
+        estimate = estimate_lookup(isam)
+        lookup = {key: estimate(key) for j in robust for key in factors[model[j]].all_keys()}.__getitem__
+        if all(abs(factors[model[j]].weight(lookup) - weights[j]) <= REWEIGHT_TOLERANCE for j in robust):
+            break
+        lookup = estimate
+        weights = []
+        again = gtsam.NonlinearFactorGraph()
+        for f in freeze_custom_factors([factors[i] for i in model], lookup, maker, weights):
+            again.add(f)
+        new = list(isam.update(again, gtsam.Values(), [index[i] for i in model]).getNewFactorsIndices())
+        for i, k in zip(model, new):
+            index[i] = k
+        made += 1
+    return index, made
+
+
+def insert_values(values: gtsam.Values, items: dict) -> None:
+    """Insert ``key -> Pose2 or float`` items into ``values``."""
+    for key, v in items.items():
+        if isinstance(v, gtsam.Pose2):
+            values.insert(key, v)
+        else:
+            values.insert(key, float(v))
+
+
+
+
+#: iSAM2 keeps this many nodes (camera frames) behind the newest; older ones are marginalised
+ONLINE_HORIZON = 200
+
+
+class Retired:
+    """Marginalises the variables of iSAM2's oldest nodes, keeping its Bayes tree to the last
+    :data:`ONLINE_HORIZON` to :data:`2 ONLINE_HORIZON <ONLINE_HORIZON>` nodes, and remembers their estimates.
+
+    Why: the graph is a chain, so iSAM2's Bayes tree is a path as long as the drive, and GTSAM 4.3
+    destroys each update's temporary Bayes tree by visiting every clique below it (the breadth-first
+    ``BayesTree`` destructor that avoids deep recursion), which is the whole history: ``perf`` on a
+    400 s drive put 83 % of the update time there, and the cost per update grew from 0.3 ms at the
+    start of a 600 s drive to 4.8 ms at its end. No future factor touches a variable that old (a node's
+    factors reach its previous node and its segment's variables), and the marginal keeps the
+    information of the old factors on the variables that remain, linearised where they are. That is
+    exact for the newest pose unless iSAM2 would have relinearised the old variables later: on the
+    generated drives and robot_localization's Jackal log nothing changes; on its Husky log the
+    standstill at 236 s, which reveals the gyro bias, used to relinearise the history behind it, and
+    the online track now moves by up to 1.12 m (RMS error against the GPS 6.17 m before, 6.08 m now).
+    The old nodes' estimates are the ones at the time they leave (the batch solution starts from them).
+    """
+
+    def __init__(self, builder: GraphBuilder, horizon: int = ONLINE_HORIZON):
+        self.builder = builder
+        self.horizon = horizon
+        self.first = 0  # nodes before it are marginalised
+        self.values: dict = {}
+
+    def step(self, isam, n: int) -> None:
+        """Marginalise whole segments of nodes more than ``horizon`` behind node ``n`` (every ``horizon`` nodes)."""
+        if n - self.first < 2 * self.horizon:
+            return
+        b = self.builder
+        seg = np.asarray(b.segment)
+        end = int(np.searchsorted(seg, seg[n - self.horizon]))  # the first node of that node's segment
+        if end <= self.first:
+            return
+        keys = [X(b.offset + k) for k in range(self.first, end)]
+        keys += [F(b.offset + k) for k in range(self.first, end) if b.offset + k in b.frames]
+        seg_keys = []
+        for c in np.unique(seg[self.first:end]):
+            seg_keys += b.segment_keys(int(np.searchsorted(seg, c)))
+        leaves = gtsam.KeyList()
+        for key in keys + seg_keys:
+            leaves.push_back(key)
+        try:
+            estimates = {key: isam.calculateEstimatePose2(key) for key in keys}
+            estimates.update({key: isam.calculateEstimateDouble(key) for key in seg_keys})
+            self._make_leaves(isam, set(keys + seg_keys))
+            isam.marginalizeLeaves(leaves)
+        except RuntimeError as exc:  # not the leaves of the tree: keep them for now
+            logger.debug("iSAM2: nodes %d-%d not marginalised (%s)", self.first, end - 1, exc)
+            return
+        self.values.update(estimates)
+        self.first = end
+
+    @staticmethod
+    def _make_leaves(isam, old: set) -> None:
+        """Re-eliminate the Bayes tree with the ``old`` variables first, so that they are its leaves.
+
+        ``marginalizeLeaves`` needs them in leaf cliques and checks that only in part: on a 120 s
+        generated drive of wheels and gyro alone (no camera, no heading reference) it failed half-way
+        through the seventh marginalisation with "variables ... not unused" and left a tree that
+        crashed the process on the next update. GTSAM's IncrementalFixedLagSmoother orders the
+        variables it marginalises first for the same reason. Every variable is re-eliminated (at most
+        two horizons of nodes, once per horizon) at its current linearisation point: none is
+        relinearised by it. The online track is unchanged to 1e-9 (``tests/backends/test_chain.py``).
+        """
+        groups = gtsam.KeyGroupMap()
+        reelim = gtsam.KeyList()
+        for key in isam.getLinearizationPoint().keys():
+            groups.insert2(key, 0 if key in old else 1)
+            reelim.push_back(key)
+        params = gtsam.ISAM2UpdateParams()
+        params.constrainedKeys = groups
+        params.extraReelimKeys = reelim
+        params.noRelinKeys = reelim
+        isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(), params)
+
+    def complete(self, values: gtsam.Values) -> gtsam.Values:
+        """``values`` with the marginalised variables' estimates added."""
+        if self.values:
+            values = gtsam.Values(values)
+            insert_values(values, {k: v for k, v in self.values.items() if not values.exists(k)})
+        return values
+
+
+def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
+    """Current value of a key: new variables from ``new``, others from the incremental ``solver``."""
+
+    estimate = estimate_lookup(solver)
+
+    def value(key: int):
+        if key in new:
+            return new[key]
+        if key == X(prev):
+            return prev_pose
+        return estimate(key)
+
+    return value
+
+
+def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:
+    """Running estimates of the bias and calibration for initial guesses of the next node."""
+    if builder.iv.uses("gyro"):
+        estimate["gyro_bias"] = isam.calculateEstimateDouble(B(int(builder.segment[n])))
+    if builder.ahrs_offset_on:
+        estimate["ahrs_offset"] = isam.calculateEstimateDouble(O(int(builder.segment[n])))
+    if builder.kv_on:
+        estimate["visual_scale"] = isam.calculateEstimateDouble(S(int(builder.segment[n])))
+    if builder.kb_on:
+        estimate["wheel_base_factor"] = isam.calculateEstimateDouble(W(int(builder.segment[n])))
+    if builder.kr_on:
+        estimate["wheel_scale"] = isam.calculateEstimateDouble(R(int(builder.segment[n])))
+    for st in builder.states:
+        estimate[st.name] = isam.calculateEstimateDouble(builder.state_key(st.name, int(builder.segment[n])))
+    estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
+
+
+def isam_params() -> gtsam.ISAM2Params:
+    """iSAM2 settings that keep the cost per node nearly constant.
+
+    The gyro bias and the calibration couple every heading to the whole history: a small change of the
+    bias estimate moves old headings by ``δb · age``. Updating and relinearising all of them for such
+    changes would make each update O(N). Relinearisation is therefore checked only along the
+    re-eliminated part of the tree, every 10 updates, for changes above 0.1, and back-substitution
+    stops where changes fall under 1.0 (the wildfire threshold). The newest pose — the online estimate —
+    sits at the root and is always solved exactly; the batch solution refines the history. Tighter
+    settings (relinearisation threshold 0.001 every update, wildfire threshold 0) changed no online ATE
+    of the generated ``short``, ``square``, ``circle`` and ``random60`` drives in the fourth digit [mm]:
+    the sensor-model factors enter linearised (:func:`freeze_custom_factors`), so relinearisation
+    touches only GTSAM's own factors. Checked again with the camera and the gyro alone (threshold 0 at
+    every update, wildfire 0; ``square``, its seed 101 and ``random60``): the same ATEs to 1e-4 mm.
+
+    The factorisation is QR. Cholesky squares the condition number, and systems that are well posed
+    but badly conditioned are then reported as indeterminate: with GPS, a loose first-heading prior (from
+    the fixes) beside near-exact wheel heading changes at low speed; on a generated barrel-lens recording
+    (``real_barrel_fine``), a gyro-bias variable beside very precise camera increments, where Cholesky
+    stopped the whole run. QR costs 3-8 % more per node on the 60 s and 600 s drives of
+    benchmarks/bench_fusion.py (0.42-0.45 ms against 0.39-0.43 ms with Cholesky, interleaved runs).
+    """
+    params = gtsam.ISAM2Params()
+    params.setRelinearizeThreshold(0.1)
+    params.relinearizeSkip = 10
+    params.enablePartialRelinearizationCheck = True
+    params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(1.0))
+    params.setFactorization("QR")
+    return params
