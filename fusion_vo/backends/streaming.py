@@ -98,88 +98,36 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import logging
-import math
 import threading
-from dataclasses import dataclass, field
 
 import numpy as np
 
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
-from fusion_vo.backends.live_monitor import LiveHeadingMonitor, MonitorState
+from fusion_vo.backends.ekf import PlanarEkf
+from fusion_vo.backends.live_monitor import LiveHeadingMonitor
 from fusion_vo.backends.result import FusionResult, SensorCount
-from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors
+from fusion_vo.backends.timeline import SensorStreams, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
-    GpsData, GpsFix, ImuSample, PoseData, RangeSample, TwistSample, VisualIncrement, WheelConfig,
+    GpsFix, ImuSample, PoseData, RangeSample, TwistSample, VisualIncrement, WheelConfig,
     WheelTicks,
 )
-from fusion_vo.backends.ekf import YAW
-from fusion_vo.backends.world import prior_from_alignment
-from fusion_vo.geometry import se2
-from fusion_vo.backends.fixes import Reacquire, ekf_reacquire, ekf_update
-from fusion_vo.sensors.gps import GpsModel, align_to_fixes
-from fusion_vo.sensors.wheel import arc_increment, curvature_observable, curvature_states
+from fusion_vo.sensors.gps import GpsModel
+from fusion_vo.sensors.wheel import curvature_observable, curvature_states
+
+from fusion_vo.backends.stream_history import HistoryMixin
+from fusion_vo.backends.stream_intake import IntakeMixin
+from fusion_vo.backends.stream_nodes import NodesMixin
+from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge_counts, payload_values
 
 logger = logging.getLogger(__name__)
 
 
 
-@dataclass
-class Estimate:
-    """The current estimate: time [s], pose ``(x, y, yaw)`` of B in W, its 3x3 covariance.
-
-    ``predicted`` is how far [s] the pose was predicted beyond the last processed node (0 for a
-    processed node). ``twist`` is the body twist ``(v_x, v_y, ω)`` at ``t`` with its 3x3 covariance, for the
-    newest node and predictions from it (None for an older node): the EKF's twist state (the mean twist of
-    the node's interval, its covariance grown by the prediction); iSAM2, which has no twist variable, the
-    twist between the last two nodes with the constant-twist model's process noise over that interval
-    (``diag(σ_a², σ_lat², σ_α²) Δt``, a lower bound: it leaves out the nodes' own errors).
-    """
-
-    t: float
-    pose: np.ndarray
-    covariance: np.ndarray
-    frame: str = "start"
-    predicted: float = 0.0
-    twist: np.ndarray | None = None
-    twist_covariance: np.ndarray | None = None
-
-
-@dataclass
-class _Started:
-    """A node whose processing is under way across calls (see ``StreamingFusion._process``)."""
-
-    t0: float
-    t1: float
-    iv: object  # Intervals
-    step: dict  # sensor -> SensorCount of the node's step
-    consumed: list  # visual increments taken from the buffer
-    monitor: MonitorState  # the heading monitor before the node was added to it
-    reach: dict  # stream -> time of the last sample the interval read
-    dropped: frozenset | None = None  # the monitor's decisions, once applied to ``iv``
-    factors: list | None = None  # iSAM2: [builder, node factors, linearised factors] (background: None)
-    stage: int = 0  # iSAM2: 1 once the factors are built, 2 once linearised
-
-
-@dataclass
-class _NodeRecord:
-    """What processing one node changed, kept while the node is within the history (EKF rewind)."""
-
-    state: tuple | None  # EKF (x, P) after the node's update
-    heading_offset: float | None
-    counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
-    visual: list = field(default_factory=list)  # increments this node's step consumed
-    monitor: MonitorState | None = None  # the heading monitor after this node
-    fixes: list = field(default_factory=list)  # GPS fixes this node's step consumed
-    gps: tuple | None = None  # GPS bookkeeping after this node (_gps_state)
-    dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
-
-
-class StreamingFusion:
+class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
     """Incremental fusion for embedding in a larger localization stack.
 
     Parameters
@@ -293,7 +241,7 @@ class StreamingFusion:
         self._camera_frame_errors = bool(camera_frame_errors)
         self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
-        self._records: list[_NodeRecord | None] = []
+        self._records: list[NodeRecord | None] = []
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
         self.rewinds = 0
@@ -337,7 +285,7 @@ class StreamingFusion:
         self._frame = "start"
         self._gps_reacquire = None
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
-        self._pending: _Started | None = None  # a node started but not yet applied (_begin_step)
+        self._pending: Started | None = None  # a node started but not yet applied (_begin_step)
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
@@ -369,7 +317,7 @@ class StreamingFusion:
                 self._check(sensor)
             try:
                 t, payload = live.sample(sample)
-                values = None if live.take is None else _values(payload) if live.values is None else live.values(payload)
+                values = None if live.take is None else payload_values(payload) if live.values is None else live.values(payload)
             except (AttributeError, TypeError, ValueError, IndexError) as exc:
                 self._check(sensor)
                 self._count(self._counted[sensor]).gated += 1
@@ -379,32 +327,6 @@ class StreamingFusion:
                 self._add(sensor, self._synchronised(sensor, t, payload), payload)
             elif self._valid(self._counted[sensor], t, values):
                 live.take(self, payload)
-
-    def _synchronised(self, stream: str, t, payload):
-        """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
-        (:class:`~fusion_vo.sensors.sync.TwistDelay`, the rule of batch use); a gyro sample feeds that
-        estimate. Nodes are processed that much later (``_advance``), so the corrected twists are not late.
-        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged."""
-        tracker = self._twist_delay
-        if tracker is None or stream not in ("odom", "imu"):
-            return t
-        try:
-            t_f = float(t)
-            if stream == "imu":
-                rate = float(self.imu_T_BS[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
-                if np.isfinite(rate) and np.isfinite(t_f):
-                    tracker.gyro(t_f, rate)
-                return t
-            wz = float(payload[2])
-        except (TypeError, ValueError, IndexError):
-            return t
-        if not (np.isfinite(t_f) and np.isfinite(wz)):
-            return t
-        before = tracker.delay
-        t_f = tracker.twist(t_f, wz)
-        if tracker.delay != before:
-            self._shift_twists(before - tracker.delay)
-        return t_f
 
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame;
@@ -541,7 +463,7 @@ class StreamingFusion:
             total: dict[str, SensorCount] = {}
             parts = [self._input_counts, self._retired_counts] + [r.counts for r in self._records if r is not None]
             for part in parts:
-                _merge_into(total, part)
+                merge_counts(total, part)
             return total
 
     def finish(self) -> FusionResult:
@@ -588,636 +510,6 @@ class StreamingFusion:
             how = "rewinding the filter" if self.backend == "ekf" else "swapping iSAM2 factors"
             result.notes.append(f"late measurements re-applied by {how} {self.rewinds} times")
         return result
-
-    # ------------------------------------------------------------------ buffering
-    def _check(self, sensor: str) -> None:
-        if sensor not in self.sensors and not (sensor == "odom" and "wheel" in self.sensors):
-            raise InputError(f"sensor '{sensor}' was not declared (sensors={self.sensors})")
-
-    def _count(self, sensor: str) -> SensorCount:
-        return self._input_counts.setdefault(sensor, SensorCount())
-
-    def _valid(self, sensor: str, t, values) -> bool:
-        """Non-finite values and times beyond the horizon are counted as gated, never raised."""
-        try:
-            t = float(t)
-            parts = values if isinstance(values, (list, tuple)) else [values]
-            flat = [np.ravel(np.asarray(v, dtype=np.float64)) for v in parts]
-            finite = np.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in flat)
-        except (TypeError, ValueError):
-            finite = False
-        if not finite:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%s has a non-finite or malformed value; rejected", sensor, t)
-            return False
-        if np.isfinite(self._latest) and t > self._latest + self.horizon:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%.3f is more than %.3g s ahead of the newest (t=%.3f); rejected",
-                           sensor, t, self.horizon, self._latest)
-            return False
-        return True
-
-    def _late(self, sensor: str, t: float, back: int = 2) -> bool:
-        """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
-        if not self._t_nodes or t >= self._t_nodes[-1] - 1e-9:
-            return False
-        i = self._rewind_index(t, back)
-        if i is None:
-            self._count(sensor).late += 1
-            logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
-                           "history); not applied", sensor, t, self._t_nodes[-1], self.history)
-            return True
-        if self.backend == "ekf":
-            self._rewind(i)
-        return False  # iSAM2: the intervals the sample changes are marked once it is buffered (_mark)
-
-    def _mark(self, t_lo: float, t_hi: float) -> None:
-        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding."""
-        if self.backend == "ekf" or not self._t_nodes or t_lo >= self._t_nodes[-1]:
-            return
-        first = max(bisect.bisect_left(self._t_nodes, t_lo - 1e-9), 1)
-        last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
-        self._dirty.update(range(first, last + 1))
-
-    def _add(self, stream: str, t: float, payload) -> None:
-        self._check(stream)
-        sensor = self._counted[stream]  # the name its counts are reported under
-        if not self._valid(sensor, t, _values(payload)):
-            return
-        t = float(t)
-        self._touch(stream, t)
-        if self._late(sensor, t):
-            return
-        buf = self._buffers[stream]
-        if buf and t < buf[-1][0]:
-            self._count(sensor).reordered += 1
-        k = bisect.bisect_right(buf, t, key=lambda item: item[0])
-        buf.insert(k, (t, payload))
-        if self._t_nodes and t < self._t_nodes[-1]:
-            # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
-            self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
-        self._advance(t)
-
-    def _on_nodes(self, inc: VisualIncrement) -> VisualIncrement | None:
-        """iSAM2: a late increment moved onto the processed nodes nearest its frames (None: it cannot be).
-
-        iSAM2's nodes stay where they were processed (fill-in nodes when the camera was late), so the
-        increment is re-timed: the wheels' (and gyro's) motion over the slivers between each frame and its
-        nearest node is composed onto it, ``B(n_a)->B(t0)  (+)  delta  (+)  B(t1)->B(n_b)``, and its covariance
-        grows by 2 % of each sliver's motion (plus 0.1 mm / 0.1 mrad). Both nodes must be consecutive and
-        within the history, the slivers shorter than a node step, and no other increment on that interval.
-        """
-        T = self._t_nodes
-        a = min(range(max(bisect.bisect_left(T, inc.t0) - 1, 0), min(bisect.bisect_left(T, inc.t0) + 1, len(T))),
-                key=lambda k: abs(T[k] - inc.t0))
-        if inc.t1 > T[-1] + 1e-9:
-            b, t_b = None, inc.t1  # ends after the last node: the next node is its frame, only t0 moves
-            if a != len(T) - 1:
-                return None
-        else:
-            k = bisect.bisect_left(T, inc.t1)
-            b = min(range(max(k - 1, 0), min(k + 1, len(T))), key=lambda j: abs(T[j] - inc.t1))
-            t_b = T[b]
-            if b != a + 1:
-                return None
-        if abs(T[a] - inc.t0) < 1e-9 and abs(t_b - inc.t1) < 1e-9:
-            return inc
-        step = 1.0 / self.config.step_hz
-        if max(abs(T[a] - inc.t0), abs(t_b - inc.t1)) > step or self._records[a] is None:
-            return None
-        if b is not None and (self._records[b] is None or any(abs(v.t0 - T[a]) < 1e-9 for v in self._records[b].visual)
-                              or any(abs(v.t1 - t_b) < 1e-9 for v in self._visual)):
-            return None
-        head = self._sliver(T[a], inc.t0)
-        tail = self._sliver(inc.t1, t_b)
-        if head is None or tail is None:
-            return None
-
-        delta = se2.compose(se2.compose(head[0], np.asarray(inc.delta, dtype=np.float64)), tail[0])
-        cov = np.asarray(inc.covariance, dtype=np.float64) + np.diag(head[1] + tail[1])
-        return dataclasses.replace(inc, t0=float(T[a]), t1=float(t_b), delta=delta, covariance=cov)
-
-    def _sliver(self, x: float, y: float):
-        """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
-        (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
-
-        lo, hi = min(x, y), max(x, y)
-        if hi - lo < 1e-9:
-            return np.zeros(3), np.zeros(3)
-        iv = build_intervals(self._streams_between(lo, hi, self._heading_offset), self.config, np.array([lo, hi]),
-                             self._heading_offset)
-        if not iv.uses("wheel") or not iv.wheel_ok[0]:
-            return None
-        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[0]
-        if iv.uses("gyro") and iv.gyro_ok[0]:
-            inc[2] = iv.gyro_angle[0]
-        var = (0.02 * np.abs(inc)) ** 2 + np.array([1e-4, 1e-4, 1e-4]) ** 2
-        return (inc if y >= x else se2.inverse(inc)), var
-
-    def _insert_visual(self, inc: VisualIncrement) -> None:
-        if self._visual and inc.t1 < self._visual[-1].t1:
-            self._count("camera").reordered += 1
-        bisect.insort(self._visual, inc, key=lambda v: v.t1)
-
-    def _advance(self, t: float) -> None:
-        self._collect()
-        self._latest = max(self._latest, float(t))
-        lag = self._twist_delay.lag() if self._twist_delay is not None else 0.0
-        until = self._latest - self.config.reorder_window - lag
-        self._process(until, self._budget(until))
-
-    def _budget(self, until: float) -> int | None:
-        """Units of work for this call: ``steps_per_call``, more while the processed state is behind.
-
-        When the samples come in fewer calls than there are units to do (a 10 Hz odometry and a 30 Hz
-        IMU, 40 calls a second, against nodes at 20 Hz of two or three units each), a fixed budget falls
-        further behind with every second. Once the last node is more than two node steps behind what is
-        due, the budget grows with the backlog (one more ``steps_per_call`` for every two steps behind),
-        so the backlog stays bounded and the extra work per call stays small.
-        """
-        budget = self.steps_per_call
-        if budget is None or not self._t_nodes:
-            return budget
-        behind = (until - self._t_nodes[-1]) * self.config.step_hz
-        if behind > 2.0:
-            budget *= 1 + int(behind) // 2
-        return budget
-
-    def _shift_twists(self, dt: float) -> None:
-        """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
-        that land before the last processed node stay buffered for a rewind or rebuild, as late data)."""
-        buf = self._buffers.get("odom", [])
-        last = self._t_nodes[-1] if self._t_nodes else -np.inf
-        keep = [item for item in buf if item[0] <= last]
-        moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
-        if buf:
-            self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
-
-    # ------------------------------------------------------------------ history (EKF rewind)
-    def _rewind_index(self, t: float, back: int) -> int | None:
-        """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history (or
-        more than ``max_gap`` before the first node, even while the track is younger than the history).
-
-        A sample at ``t`` changes the interval that contains it and, through interpolation at that
-        interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
-        increment is applied from its ``t0`` node (``back=0``).
-        """
-        if self.history <= 0 or t < self._t_nodes[0] - self.config.max_gap:
-            return None  # (a sample that far before the first node would be interpolated across the gap)
-        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
-        if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
-            return None
-        return i
-
-    def _rewind(self, i: int) -> None:
-        """Restore the filter to node ``i`` and forget the nodes after it (their inputs stay buffered)."""
-        self._drop_pending()
-        rec = self._records[i]
-        for later in self._records[i + 1:]:
-            for v in later.visual:
-                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
-        self._rewind_gps(i, rec.gps)
-        x, P = rec.state
-        self._ekf.kf.x = x.reshape(-1, 1).copy()
-        self._ekf.kf.P = P.copy()
-        self._ekf.linearisation = None  # that node's prediction is not the last one made
-        self._heading_offset = rec.heading_offset
-        if rec.monitor is not None:
-            self._monitor.restore(rec.monitor)
-        del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
-        self.rewinds += 1
-
-    def _twist(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Body twist of the newest node predicted ``dt`` seconds ahead and its covariance (:class:`Estimate`)."""
-        if self.backend == "ekf":
-            kf = self._ekf.kf
-            if dt <= 0:
-                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
-            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
-            try:
-                self._ekf.predict(dt)
-                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
-            finally:
-                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
-        T = self._t_nodes
-        q = np.array([self.config.ekf.accel_sigma, self.config.ekf.lateral_accel_sigma,
-                      self.config.ekf.yaw_accel_sigma]) ** 2
-        if len(T) < 2 or T[-1] - T[-2] <= 0:
-            return np.zeros(3), np.diag(q * max(dt, 1.0 / self.config.step_hz))
-        step = T[-1] - T[-2]
-        prev, pose = self._poses[-2], self._poses[-1]
-        c, s = np.cos(prev[2]), np.sin(prev[2])
-        d = pose[:2] - prev[:2]
-        dyaw = np.arctan2(np.sin(pose[2] - prev[2]), np.cos(pose[2] - prev[2]))
-        twist = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], dyaw]) / step
-        return twist, np.diag(q * (step + max(dt, 0.0)))
-
-    def _predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        """Pose and covariance of the last node predicted ``dt`` seconds ahead (constant twist)."""
-        if self.backend == "ekf":
-            kf = self._ekf.kf
-            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
-            try:
-                self._ekf.predict(dt)
-                return self._ekf.x[:3].copy(), self._ekf.P[:3, :3].copy()
-            finally:
-                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
-        return _extrapolate(self._t_nodes, self._poses, self._covs, dt, self.config)
-
-    # ------------------------------------------------------------------ processing
-    def _next_node(self, after: float, until: float) -> float | None:
-        """The node after ``after``: the next frame if it comes within 1.5 steps, else a fill-in node."""
-        step = 1.0 / self.config.step_hz
-        frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
-        fixes = [f.t for f in self._gps if f.t > after + 1e-9]
-        if frames and frames[0] <= after + 1.5 * step:
-            nxt = frames[0]
-        else:
-            nxt = after + step
-        if fixes and fixes[0] < nxt - 1e-3:  # a fix is a node of its own (timeline.GPS_SNAP)
-            nxt = fixes[0]
-        return nxt if nxt <= until else None
-
-    def _start_time(self) -> float | None:
-        times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
-        return min(times) if times else None  # a fix alone does not start the track
-
-    def _process(self, until: float, budget: int | None = None) -> None:
-        """Process the nodes up to ``until``, at most ``budget`` units of work (None: all).
-
-        A node is two units (iSAM2: four), one more when the heading monitor's check is due at it:
-        building its interval from the buffers; the check; (iSAM2: the monitor's decisions and the node's
-        factors; their linearisation;) the backend's update. With iSAM2 in the background the worker
-        builds and linearises the factors, but the units are the same, so late data is swapped in at the
-        same points as on the caller's thread and the results agree. The operations and
-        their order are those of processing the node at once; only the call that runs each differs, so
-        no call pays for all of them.
-        """
-        if self._dirty and (budget is None or self._pending is not None
-                            or self._next_node(self._t_nodes[-1], until) is not None):
-            # late data is swapped in when the next node is due (several late samples, one update)
-            self._drop_pending()
-            dirty, self._dirty = sorted(self._dirty), set()
-            self._replace(dirty)
-        if not self._t_nodes:
-            start = self._start_time()
-            if start is None or start > until:
-                return
-            self._first_node(start)
-        done = 0
-        while budget is None or done < budget:
-            done += 1
-            started = self._pending
-            if started is None:
-                t0 = self._t_nodes[-1]
-                t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
-                if t1 is None:
-                    return
-                self._begin_step(t0, t1)
-            elif self._monitor.due():
-                self._monitor.check()
-            elif self._graph is not None and started.stage == 0:
-                self._decide(started)
-                started.factors = self._graph.prepare(started.iv)
-                started.stage = 1
-            elif self._graph is not None and started.stage == 1:
-                self._graph.freeze(started.factors)
-                started.stage = 2
-            else:
-                self._end_step()
-
-    def _last_time(self) -> float:
-        times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
-        return max(times) if times else -np.inf
-
-    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None,
-                         reach: dict | None = None) -> SensorStreams:
-        """The buffered samples an interval needs: those inside it, the ones bracketing it, and (IMU,
-        range finder) the neighbours the spike check's running median reads around those (the same values
-        as in batch use); until the AHRS offset is known (samples with an orientation), the IMU's first quarter second after
-        ``t0`` too."""
-        streams = SensorStreams(camera_height=self.camera_height)
-        for name, buf in self._buffers.items():
-            if name == "range" and self._range_in_visual:  # used once: already in the visual increments
-                continue
-            live = self._intake[name].live
-            more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
-            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
-            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
-            if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
-                hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
-            rows = buf[lo:hi]
-            if reach is not None:  # the time of the last sample read (any new one, if all were read)
-                reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
-            if len(rows) < live.min_rows:
-                continue
-            data = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)  # the sensor's own module
-            field_name = self._intake[name].field
-            if field_name is not None:
-                setattr(streams, field_name, data)
-            else:
-                streams.extra[name] = data
-        return streams
-
-    def _interval(self, t0: float, t1: float, heading_offset: float | None):
-        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
-        time of the last sample read per stream)``.
-
-        Consumes the buffered visual increments ending at or before ``t1``; those that do not span
-        exactly this interval cannot be applied and are counted as late.
-        """
-        step: dict[str, SensorCount] = {}
-        reach: dict[str, float] = {}
-        streams = self._streams_between(t0, t1, heading_offset, reach)
-        consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
-        usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
-        for v in consumed:
-            if v not in usable:
-                step.setdefault("camera", SensorCount()).late += 1
-        self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
-        if usable:
-            streams.visual = usable
-        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
-        iv.visual_scale_sigma = self._priors.visual_scale_sigma  # what the whole streams give (one interval's
-        iv.wheel_scale_sigma = self._priors.wheel_scale_sigma  # samples do not carry the sensors' files)
-        for sensor, c in iv.counts.items():
-            own = step.setdefault(sensor, SensorCount())
-            own.gated += c.gated
-            own.missing += c.missing
-        return iv, step, consumed, reach
-
-    def _begin_step(self, t0: float, t1: float) -> None:
-        """First unit of a node: its interval from the buffers, handed to the heading monitor."""
-        iv, step, consumed, reach = self._interval(t0, t1, self._heading_offset)
-        monitor = self._monitor.state()
-        self._monitor.add(iv)
-        self._pending = _Started(t0, t1, iv, step, consumed, monitor, reach)
-
-    def _decide(self, started: _Started) -> None:
-        """The monitor's current decisions, applied to the started node's interval."""
-        if started.dropped is None:
-            started.dropped = frozenset(self._monitor.dropped)
-            self._monitor.apply(started.iv)
-
-    def _end_step(self) -> None:
-        """Last unit: the monitor's decisions (after its check, if due), the backend's update, the record."""
-        started = self._pending
-        self._pending = None
-        self._monitor.check()  # (a no-op when it ran as a unit of its own)
-        self._decide(started)
-        iv, step = started.iv, started.step
-        self._step_counts = step
-        self._step_fixes = []
-        if iv.heading_offset is not None:
-            self._heading_offset = iv.heading_offset
-        if self.backend == "ekf":
-            self._ekf_step(iv)
-            state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
-        else:
-            self._graph_step(iv, started.factors)
-            state = None
-        t0 = self._t_nodes[-1]
-        self._t_nodes.append(started.t1)
-        keep = state is not None
-        self._records.append(_NodeRecord(state, self._heading_offset, step, started.consumed,
-                                         monitor=self._monitor.state() if keep else None, dropped=started.dropped,
-                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None))
-        self._retire()
-        self._prune(t0)
-
-    def _touch(self, stream: str, t: float) -> None:
-        """A measurement of ``stream`` at ``t`` arrived: a started node it would change is started again
-        (a sample among those its interval read, a frame that could be its node, a fix up to it)."""
-        started = self._pending
-        if started is None:
-            return
-        if stream == "visual":
-            changes = t <= max(started.t1, started.t0 + 1.5 / self.config.step_hz) + 1e-9
-        elif stream == "gps":
-            changes = t <= started.t1 + 1e-3
-        else:
-            changes = t <= started.reach.get(stream, np.inf)
-        if changes:
-            self._drop_pending()
-
-    def _drop_pending(self) -> None:
-        """Undo the started node (its increments go back to the buffer, the monitor to its state before)."""
-        started, self._pending = self._pending, None
-        if started is None:
-            return
-        for v in started.consumed:
-            bisect.insort(self._visual, v, key=lambda inc: inc.t1)
-        self._monitor.restore(started.monitor)
-
-    def _replace(self, nodes: list[int]) -> None:
-        """iSAM2: rebuild the intervals ending at ``nodes`` from the buffers (late data now in them) and
-        swap their factors in one update; their recorded poses become iSAM2's estimates after it."""
-        batches = []
-        for j in nodes:
-            rec = self._records[j]
-            if rec is None or self._records[j - 1] is None:  # left the history meanwhile
-                continue
-            for v in rec.visual:
-                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
-            prev = self._records[j - 1]
-            iv, step, consumed, _ = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
-            rec.counts, rec.visual = step, consumed
-            self._monitor.update(j - 1, iv)
-            self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
-            rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
-            batches.append((j, iv))
-        if not batches:
-            return
-        self._heading_offset = self._records[-1].heading_offset
-        for j, pose, cov, used in self._graph.replace(batches):
-            self._poses[j], self._covs[j] = pose, cov
-            self._count_used(j, used)
-        self.rewinds += 1
-
-    def _retire(self) -> None:
-        """Drop the rewind data of nodes older than the history (their counts are kept)."""
-        horizon = self._t_nodes[-1] - self.history - 1e-9
-        for j in range(len(self._records) - 1, -1, -1):  # the newest already-retired node ends the scan
-            if self._t_nodes[j] >= horizon:
-                continue
-            if self._records[j] is None:
-                break
-            if self._graph is not None and self._graph.has_jobs():
-                # a worker more than the history behind: wait for it (its results set the node's counts)
-                self._collect(wait=True)
-            rec = self._records[j]
-            _merge_into(self._retired_counts, rec.counts)
-            self._records[j] = None
-            if self._graph is not None:
-                self._graph.forget(j)
-
-    def _prune(self, t0: float) -> None:
-        keep_from = t0 - self.history - 2.0 * self.config.max_gap
-        for name, buf in self._buffers.items():
-            cut = bisect.bisect_left(buf, keep_from, key=lambda item: item[0]) - 2
-            if cut > 0:
-                del buf[:cut]
-
-    def _calibration_flags(self) -> tuple[bool, bool]:
-        s = set(self.sensors)
-        wheel = bool(s & {"wheel", "odom"})
-        heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)  # a heading reference
-        return "camera" in s and (wheel or "range" in s), wheel and heading
-
-    # ------------------------------------------------------------------ backends
-    def _first_node(self, t: float) -> None:
-        cfg = self.config
-        self._t_nodes.append(t)
-        kv, kb = self._calibration_flags()
-        if self.backend == "ekf":
-            twist = "odom" in self.sensors and "wheel" not in self.sensors
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, visual_scale_sigma=self._priors.visual_scale_sigma,
-                                  wheel_scale_sigma=self._priors.wheel_scale_sigma, states=self._states,
-                                  camera="camera" in self.sensors,
-                                  frame_error=1.0 if self._camera_frame_errors else None)
-            self._records.append(_NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
-                                             monitor=self._monitor.state(), gps=self._gps_state()))
-            self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
-        else:
-            self._records.append(_NodeRecord(None, None))
-            self._graph = self._online_graph(cfg, t, (kv, kb), self.background, self._states)
-            pose, cov = self._graph.start()
-            self._record(pose, cov)
-
-    def _record(self, pose, cov) -> None:
-        self._poses.append(np.asarray(pose, dtype=np.float64).copy())
-        self._covs.append(np.asarray(cov, dtype=np.float64).copy())
-
-    def _ekf_step(self, iv) -> None:
-        ekf = self._ekf
-        meas = interval_measurements(iv, self.config)
-        ekf.predict(float(iv.dt[0]), frame_error_cov(meas, 0))
-        ekf.update(step_blocks(ekf, meas, 0))
-        t1 = float(iv.t[-1])
-        for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
-            self._gps.remove(fix)
-            self._step_fixes.append(fix)
-            if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
-                self._step_counts.setdefault("gps", SensorCount()).late += 1
-            else:
-                self._apply_gps(fix)
-        for sensor, c in ekf.counts.items():
-            own = self._step_counts.setdefault(sensor, SensorCount())
-            own.used += c.used
-            own.gated += c.gated
-        ekf.counts = {}
-        self._record(ekf.x[:3], ekf.P[:3, :3])
-
-    def _apply_gps(self, fix: GpsFix) -> None:
-
-        ekf, model = self._ekf, self._gps_model
-        if self._frame == "start":
-            self._gps_seen.append(fix)
-            poses = np.array(self._poses + [ekf.x[:3]])
-            times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
-            seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
-                [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
-                np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
-                np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
-            fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
-            if fit is None:
-                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
-                return
-            sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
-            _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
-            c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
-            T = np.eye(ekf.kf.P.shape[0])
-            T[:2, :2] = [[c, -s_], [s_, c]]
-            ekf.kf.x[:3, 0] = fit.apply(ekf.x[:3])[0]
-            ekf.kf.P = T @ ekf.kf.P @ T.T
-            ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
-            ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
-            rot = np.eye(3)
-            rot[:2, :2] = T[:2, :2]
-            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
-            self._poses = [p for p in fit.apply(np.array(self._poses))]
-            self._covs = [rot @ cv @ rot.T for cv in self._covs]
-            self._frame = "enu"
-            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
-                self._heading_offset -= fit.yaw
-            self._gps_reacquire = Reacquire(self.config.gps_reacquire)
-            self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
-                               f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
-        accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
-        if not accepted and self._gps_reacquire.due(fix.t, False):
-            accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
-        elif accepted:
-            self._gps_reacquire.due(fix.t, True)
-        count = self._step_counts.setdefault("gps", SensorCount())
-        if accepted:
-            count.used += 1
-        else:
-            count.gated += 1
-
-    def _gps_state(self) -> tuple | None:
-        """What a rewind restores of the GPS bookkeeping (frame, fixes kept for the alignment, re-acquisition)."""
-        if "gps" not in self.sensors:
-            return None
-        re = self._gps_reacquire
-        return (self._frame, len(self._gps_seen), None if re is None else (re.last_ok, len(re.times)),
-                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)))
-
-    def _rewind_gps(self, i: int, state: tuple | None) -> None:
-        """Back to the GPS bookkeeping after node ``i``; undo the switch to ENU if it came after ``i``."""
-        for rec in self._records[i + 1:]:
-            for fix in rec.fixes:
-                bisect.insort(self._gps, fix, key=lambda f: f.t)
-        if state is None:
-            return
-        frame, n_seen, reacquire, model = state
-        if self._frame == "enu" and frame == "start":
-            _, poses, covs, n_notes = self._start_frame
-            self._poses[:i + 1] = [p.copy() for p in poses[:i + 1]]
-            self._covs[:i + 1] = [c.copy() for c in covs[:i + 1]]
-            del self._notes[n_notes:]
-            self._frame, self._gps_reacquire, self._start_frame = "start", None, None
-        del self._gps_seen[n_seen:]
-        if reacquire is not None:
-            self._gps_reacquire.last_ok = reacquire[0]
-            del self._gps_reacquire.times[reacquire[1]:]
-        m = self._gps_model
-        m.n_used, m.n_rejected = model[0], model[1]
-        del m.rejected_t[model[2]:]
-
-    def _graph_step(self, iv, prepared=None) -> None:
-        pose, cov, sensors = self._graph.step(iv, prepared)
-        if pose is None:  # background update under way: the last pose predicted meanwhile
-            pose, cov = _extrapolate(self._t_nodes, self._poses, self._covs, float(iv.t[-1]) - self._t_nodes[-1],
-                                     self.config)
-        for s in sensors or ():
-            self._step_counts.setdefault(s, SensorCount()).used += 1
-        self._record(pose, cov)
-
-    def _collect(self, wait: bool = False) -> None:
-        """Take in the results of finished background iSAM2 updates (all of them with ``wait``)."""
-        if self._graph is None or not self.background:
-            return
-        for n, pose, cov, sensors in self._graph.collect(wait):
-            if n < len(self._poses):
-                self._poses[n], self._covs[n] = pose, cov
-            self._count_used(n, sensors)
-
-    def _count_used(self, n: int, sensors) -> None:
-        """Node ``n``'s factors are now those of ``sensors`` (None: unchanged): its ``used`` counts follow."""
-        if sensors is None:
-            return
-        rec = self._records[n] if n < len(self._records) else None
-        if rec is None:  # left the history while its update ran: its counts were merged already
-            return
-        for c in rec.counts.values():
-            c.used = 0
-        for s in sensors:
-            rec.counts.setdefault(s, SensorCount()).used += 1
-
-
-def _values(payload):
-    """The numbers of a live sample's payload that must be finite: its entries that are not None."""
-    return [x for x in payload if x is not None] if isinstance(payload, tuple) else payload
 
 
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
@@ -1268,37 +560,3 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
                            **kwargs)
 
 
-def _merge_into(total: dict, part: dict) -> None:
-    for sensor, c in part.items():
-        own = total.setdefault(sensor, SensorCount())
-        for key, value in c.as_dict().items():
-            setattr(own, key, getattr(own, key) + value)
-
-
-def _extrapolate(t_nodes, poses, covs, dt: float, config: FusionConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Constant-twist prediction of the last pose by ``dt`` from the twist between the last two nodes.
-
-    The covariance is propagated through the motion (a world-frame pose error rotates the
-    displacement) and grown by the EKF's acceleration noise integrated over ``dt``.
-    """
-    pose = poses[-1]
-    if len(t_nodes) < 2 or t_nodes[-1] - t_nodes[-2] <= 0:
-        twist = np.zeros(3)
-    else:
-        prev = poses[-2]
-        c, s = np.cos(prev[2]), np.sin(prev[2])
-        d = pose[:2] - prev[:2]
-        dyaw = np.arctan2(np.sin(pose[2] - prev[2]), np.cos(pose[2] - prev[2]))
-        twist = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], dyaw]) / (t_nodes[-1] - t_nodes[-2])
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    step = twist * dt  # small steps: the body-frame displacement is the twist times dt to first order
-    dx = c * step[0] - s * step[1]
-    dy = s * step[0] + c * step[1]
-    out = np.array([pose[0] + dx, pose[1] + dy, np.arctan2(np.sin(pose[2] + step[2]), np.cos(pose[2] + step[2]))])
-    J = np.array([[1.0, 0.0, -dy], [0.0, 1.0, dx], [0.0, 0.0, 1.0]])
-    q = np.array([config.ekf.accel_sigma, config.ekf.lateral_accel_sigma, config.ekf.yaw_accel_sigma]) ** 2
-    rot = np.array([[c, -s], [s, c]])
-    Q = np.zeros((3, 3))
-    Q[:2, :2] = rot @ np.diag(q[:2]) @ rot.T * dt**3 / 3.0
-    Q[2, 2] = q[2] * dt**3 / 3.0
-    return out, J @ covs[-1] @ J.T + Q

@@ -1,0 +1,195 @@
+"""StreamingFusion's history: late data rewinds the EKF or rebuilds iSAM2's nodes, old nodes retire, GPS's
+switch to ENU is undone when a rewind goes back across it (:mod:`fusion_vo.backends.streaming`)."""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import math
+
+import numpy as np
+
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.measurements import (
+    GpsData, GpsFix,
+)
+from fusion_vo.backends.ekf import YAW
+from fusion_vo.backends.world import prior_from_alignment
+from fusion_vo.backends.fixes import Reacquire, ekf_reacquire, ekf_update
+from fusion_vo.sensors.gps import align_to_fixes
+
+from fusion_vo.backends.stream_state import merge_counts
+
+logger = logging.getLogger(__name__)
+
+
+class HistoryMixin:
+    """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
+
+    # ------------------------------------------------------------------ history (EKF rewind)
+    def _rewind_index(self, t: float, back: int) -> int | None:
+        """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history (or
+        more than ``max_gap`` before the first node, even while the track is younger than the history).
+
+        A sample at ``t`` changes the interval that contains it and, through interpolation at that
+        interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
+        increment is applied from its ``t0`` node (``back=0``).
+        """
+        if self.history <= 0 or t < self._t_nodes[0] - self.config.max_gap:
+            return None  # (a sample that far before the first node would be interpolated across the gap)
+        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
+        if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
+            return None
+        return i
+
+    def _rewind(self, i: int) -> None:
+        """Restore the filter to node ``i`` and forget the nodes after it (their inputs stay buffered)."""
+        self._drop_pending()
+        rec = self._records[i]
+        for later in self._records[i + 1:]:
+            for v in later.visual:
+                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        self._rewind_gps(i, rec.gps)
+        x, P = rec.state
+        self._ekf.kf.x = x.reshape(-1, 1).copy()
+        self._ekf.kf.P = P.copy()
+        self._ekf.linearisation = None  # that node's prediction is not the last one made
+        self._heading_offset = rec.heading_offset
+        if rec.monitor is not None:
+            self._monitor.restore(rec.monitor)
+        del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
+        self.rewinds += 1
+
+    def _drop_pending(self) -> None:
+        """Undo the started node (its increments go back to the buffer, the monitor to its state before)."""
+        started, self._pending = self._pending, None
+        if started is None:
+            return
+        for v in started.consumed:
+            bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+        self._monitor.restore(started.monitor)
+
+    def _replace(self, nodes: list[int]) -> None:
+        """iSAM2: rebuild the intervals ending at ``nodes`` from the buffers (late data now in them) and
+        swap their factors in one update; their recorded poses become iSAM2's estimates after it."""
+        batches = []
+        for j in nodes:
+            rec = self._records[j]
+            if rec is None or self._records[j - 1] is None:  # left the history meanwhile
+                continue
+            for v in rec.visual:
+                bisect.insort(self._visual, v, key=lambda inc: inc.t1)
+            prev = self._records[j - 1]
+            iv, step, consumed, _ = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            rec.counts, rec.visual = step, consumed
+            self._monitor.update(j - 1, iv)
+            self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
+            rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
+            batches.append((j, iv))
+        if not batches:
+            return
+        self._heading_offset = self._records[-1].heading_offset
+        for j, pose, cov, used in self._graph.replace(batches):
+            self._poses[j], self._covs[j] = pose, cov
+            self._count_used(j, used)
+        self.rewinds += 1
+
+    def _retire(self) -> None:
+        """Drop the rewind data of nodes older than the history (their counts are kept)."""
+        horizon = self._t_nodes[-1] - self.history - 1e-9
+        for j in range(len(self._records) - 1, -1, -1):  # the newest already-retired node ends the scan
+            if self._t_nodes[j] >= horizon:
+                continue
+            if self._records[j] is None:
+                break
+            if self._graph is not None and self._graph.has_jobs():
+                # a worker more than the history behind: wait for it (its results set the node's counts)
+                self._collect(wait=True)
+            rec = self._records[j]
+            merge_counts(self._retired_counts, rec.counts)
+            self._records[j] = None
+            if self._graph is not None:
+                self._graph.forget(j)
+
+    def _prune(self, t0: float) -> None:
+        keep_from = t0 - self.history - 2.0 * self.config.max_gap
+        for name, buf in self._buffers.items():
+            cut = bisect.bisect_left(buf, keep_from, key=lambda item: item[0]) - 2
+            if cut > 0:
+                del buf[:cut]
+
+    def _apply_gps(self, fix: GpsFix) -> None:
+
+        ekf, model = self._ekf, self._gps_model
+        if self._frame == "start":
+            self._gps_seen.append(fix)
+            poses = np.array(self._poses + [ekf.x[:3]])
+            times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
+            seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
+                [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
+                np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
+                np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
+            fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
+            if fit is None:
+                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+                return
+            sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
+            _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+            c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
+            T = np.eye(ekf.kf.P.shape[0])
+            T[:2, :2] = [[c, -s_], [s_, c]]
+            ekf.kf.x[:3, 0] = fit.apply(ekf.x[:3])[0]
+            ekf.kf.P = T @ ekf.kf.P @ T.T
+            ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
+            ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
+            rot = np.eye(3)
+            rot[:2, :2] = T[:2, :2]
+            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
+            self._poses = [p for p in fit.apply(np.array(self._poses))]
+            self._covs = [rot @ cv @ rot.T for cv in self._covs]
+            self._frame = "enu"
+            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
+                self._heading_offset -= fit.yaw
+            self._gps_reacquire = Reacquire(self.config.gps_reacquire)
+            self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
+                               f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
+        accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
+        if not accepted and self._gps_reacquire.due(fix.t, False):
+            accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
+        elif accepted:
+            self._gps_reacquire.due(fix.t, True)
+        count = self._step_counts.setdefault("gps", SensorCount())
+        if accepted:
+            count.used += 1
+        else:
+            count.gated += 1
+
+    def _gps_state(self) -> tuple | None:
+        """What a rewind restores of the GPS bookkeeping (frame, fixes kept for the alignment, re-acquisition)."""
+        if "gps" not in self.sensors:
+            return None
+        re = self._gps_reacquire
+        return (self._frame, len(self._gps_seen), None if re is None else (re.last_ok, len(re.times)),
+                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)))
+
+    def _rewind_gps(self, i: int, state: tuple | None) -> None:
+        """Back to the GPS bookkeeping after node ``i``; undo the switch to ENU if it came after ``i``."""
+        for rec in self._records[i + 1:]:
+            for fix in rec.fixes:
+                bisect.insort(self._gps, fix, key=lambda f: f.t)
+        if state is None:
+            return
+        frame, n_seen, reacquire, model = state
+        if self._frame == "enu" and frame == "start":
+            _, poses, covs, n_notes = self._start_frame
+            self._poses[:i + 1] = [p.copy() for p in poses[:i + 1]]
+            self._covs[:i + 1] = [c.copy() for c in covs[:i + 1]]
+            del self._notes[n_notes:]
+            self._frame, self._gps_reacquire, self._start_frame = "start", None, None
+        del self._gps_seen[n_seen:]
+        if reacquire is not None:
+            self._gps_reacquire.last_ok = reacquire[0]
+            del self._gps_reacquire.times[reacquire[1]:]
+        m = self._gps_model
+        m.n_used, m.n_rejected = model[0], model[1]
+        del m.rejected_t[model[2]:]

@@ -1,0 +1,208 @@
+"""StreamingFusion's intake: each sample checked, counted, put on its stream's clock and buffered; a late
+camera increment re-timed onto the nodes already processed (:mod:`fusion_vo.backends.streaming`)."""
+
+from __future__ import annotations
+
+import bisect
+import dataclasses
+import logging
+
+import numpy as np
+
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.backends.timeline import build_intervals
+from fusion_vo.errors import InputError
+from fusion_vo.measurements import (
+    VisualIncrement,
+)
+from fusion_vo.geometry import se2
+from fusion_vo.sensors.wheel import arc_increment
+
+from fusion_vo.backends.stream_state import payload_values
+
+logger = logging.getLogger(__name__)
+
+
+class IntakeMixin:
+    """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
+
+    def _synchronised(self, stream: str, t, payload):
+        """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
+        (:class:`~fusion_vo.sensors.sync.TwistDelay`, the rule of batch use); a gyro sample feeds that
+        estimate. Nodes are processed that much later (``_advance``), so the corrected twists are not late.
+        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged."""
+        tracker = self._twist_delay
+        if tracker is None or stream not in ("odom", "imu"):
+            return t
+        try:
+            t_f = float(t)
+            if stream == "imu":
+                rate = float(self.imu_T_BS[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
+                if np.isfinite(rate) and np.isfinite(t_f):
+                    tracker.gyro(t_f, rate)
+                return t
+            wz = float(payload[2])
+        except (TypeError, ValueError, IndexError):
+            return t
+        if not (np.isfinite(t_f) and np.isfinite(wz)):
+            return t
+        before = tracker.delay
+        t_f = tracker.twist(t_f, wz)
+        if tracker.delay != before:
+            self._shift_twists(before - tracker.delay)
+        return t_f
+
+    # ------------------------------------------------------------------ buffering
+    def _check(self, sensor: str) -> None:
+        if sensor not in self.sensors and not (sensor == "odom" and "wheel" in self.sensors):
+            raise InputError(f"sensor '{sensor}' was not declared (sensors={self.sensors})")
+
+    def _count(self, sensor: str) -> SensorCount:
+        return self._input_counts.setdefault(sensor, SensorCount())
+
+    def _valid(self, sensor: str, t, values) -> bool:
+        """Non-finite values and times beyond the horizon are counted as gated, never raised."""
+        try:
+            t = float(t)
+            parts = values if isinstance(values, (list, tuple)) else [values]
+            flat = [np.ravel(np.asarray(v, dtype=np.float64)) for v in parts]
+            finite = np.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in flat)
+        except (TypeError, ValueError):
+            finite = False
+        if not finite:
+            self._count(sensor).gated += 1
+            logger.warning("%s measurement at t=%s has a non-finite or malformed value; rejected", sensor, t)
+            return False
+        if np.isfinite(self._latest) and t > self._latest + self.horizon:
+            self._count(sensor).gated += 1
+            logger.warning("%s measurement at t=%.3f is more than %.3g s ahead of the newest (t=%.3f); rejected",
+                           sensor, t, self.horizon, self._latest)
+            return False
+        return True
+
+    def _late(self, sensor: str, t: float, back: int = 2) -> bool:
+        """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
+        if not self._t_nodes or t >= self._t_nodes[-1] - 1e-9:
+            return False
+        i = self._rewind_index(t, back)
+        if i is None:
+            self._count(sensor).late += 1
+            logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
+                           "history); not applied", sensor, t, self._t_nodes[-1], self.history)
+            return True
+        if self.backend == "ekf":
+            self._rewind(i)
+        return False  # iSAM2: the intervals the sample changes are marked once it is buffered (_mark)
+
+    def _mark(self, t_lo: float, t_hi: float) -> None:
+        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding."""
+        if self.backend == "ekf" or not self._t_nodes or t_lo >= self._t_nodes[-1]:
+            return
+        first = max(bisect.bisect_left(self._t_nodes, t_lo - 1e-9), 1)
+        last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
+        self._dirty.update(range(first, last + 1))
+
+    def _add(self, stream: str, t: float, payload) -> None:
+        self._check(stream)
+        sensor = self._counted[stream]  # the name its counts are reported under
+        if not self._valid(sensor, t, payload_values(payload)):
+            return
+        t = float(t)
+        self._touch(stream, t)
+        if self._late(sensor, t):
+            return
+        buf = self._buffers[stream]
+        if buf and t < buf[-1][0]:
+            self._count(sensor).reordered += 1
+        k = bisect.bisect_right(buf, t, key=lambda item: item[0])
+        buf.insert(k, (t, payload))
+        if self._t_nodes and t < self._t_nodes[-1]:
+            # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
+            self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
+        self._advance(t)
+
+    def _on_nodes(self, inc: VisualIncrement) -> VisualIncrement | None:
+        """iSAM2: a late increment moved onto the processed nodes nearest its frames (None: it cannot be).
+
+        iSAM2's nodes stay where they were processed (fill-in nodes when the camera was late), so the
+        increment is re-timed: the wheels' (and gyro's) motion over the slivers between each frame and its
+        nearest node is composed onto it, ``B(n_a)->B(t0)  (+)  delta  (+)  B(t1)->B(n_b)``, and its covariance
+        grows by 2 % of each sliver's motion (plus 0.1 mm / 0.1 mrad). Both nodes must be consecutive and
+        within the history, the slivers shorter than a node step, and no other increment on that interval.
+        """
+        T = self._t_nodes
+        a = min(range(max(bisect.bisect_left(T, inc.t0) - 1, 0), min(bisect.bisect_left(T, inc.t0) + 1, len(T))),
+                key=lambda k: abs(T[k] - inc.t0))
+        if inc.t1 > T[-1] + 1e-9:
+            b, t_b = None, inc.t1  # ends after the last node: the next node is its frame, only t0 moves
+            if a != len(T) - 1:
+                return None
+        else:
+            k = bisect.bisect_left(T, inc.t1)
+            b = min(range(max(k - 1, 0), min(k + 1, len(T))), key=lambda j: abs(T[j] - inc.t1))
+            t_b = T[b]
+            if b != a + 1:
+                return None
+        if abs(T[a] - inc.t0) < 1e-9 and abs(t_b - inc.t1) < 1e-9:
+            return inc
+        step = 1.0 / self.config.step_hz
+        if max(abs(T[a] - inc.t0), abs(t_b - inc.t1)) > step or self._records[a] is None:
+            return None
+        if b is not None and (self._records[b] is None or any(abs(v.t0 - T[a]) < 1e-9 for v in self._records[b].visual)
+                              or any(abs(v.t1 - t_b) < 1e-9 for v in self._visual)):
+            return None
+        head = self._sliver(T[a], inc.t0)
+        tail = self._sliver(inc.t1, t_b)
+        if head is None or tail is None:
+            return None
+
+        delta = se2.compose(se2.compose(head[0], np.asarray(inc.delta, dtype=np.float64)), tail[0])
+        cov = np.asarray(inc.covariance, dtype=np.float64) + np.diag(head[1] + tail[1])
+        return dataclasses.replace(inc, t0=float(T[a]), t1=float(t_b), delta=delta, covariance=cov)
+
+    def _sliver(self, x: float, y: float):
+        """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
+        (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
+
+        lo, hi = min(x, y), max(x, y)
+        if hi - lo < 1e-9:
+            return np.zeros(3), np.zeros(3)
+        iv = build_intervals(self._streams_between(lo, hi, self._heading_offset), self.config, np.array([lo, hi]),
+                             self._heading_offset)
+        if not iv.uses("wheel") or not iv.wheel_ok[0]:
+            return None
+        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[0]
+        if iv.uses("gyro") and iv.gyro_ok[0]:
+            inc[2] = iv.gyro_angle[0]
+        var = (0.02 * np.abs(inc)) ** 2 + np.array([1e-4, 1e-4, 1e-4]) ** 2
+        return (inc if y >= x else se2.inverse(inc)), var
+
+    def _insert_visual(self, inc: VisualIncrement) -> None:
+        if self._visual and inc.t1 < self._visual[-1].t1:
+            self._count("camera").reordered += 1
+        bisect.insort(self._visual, inc, key=lambda v: v.t1)
+
+    def _shift_twists(self, dt: float) -> None:
+        """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
+        that land before the last processed node stay buffered for a rewind or rebuild, as late data)."""
+        buf = self._buffers.get("odom", [])
+        last = self._t_nodes[-1] if self._t_nodes else -np.inf
+        keep = [item for item in buf if item[0] <= last]
+        moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
+        if buf:
+            self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
+
+    def _touch(self, stream: str, t: float) -> None:
+        """A measurement of ``stream`` at ``t`` arrived: a started node it would change is started again
+        (a sample among those its interval read, a frame that could be its node, a fix up to it)."""
+        started = self._pending
+        if started is None:
+            return
+        if stream == "visual":
+            changes = t <= max(started.t1, started.t0 + 1.5 / self.config.step_hz) + 1e-9
+        elif stream == "gps":
+            changes = t <= started.t1 + 1e-3
+        else:
+            changes = t <= started.reach.get(stream, np.inf)
+        if changes:
+            self._drop_pending()

@@ -1,0 +1,324 @@
+"""StreamingFusion's node scheduling: which node is due, its interval from the buffers, the heading monitor's
+decision, the backend's update, a bounded amount of work per call (:mod:`fusion_vo.backends.streaming`)."""
+
+from __future__ import annotations
+
+import bisect
+import logging
+
+import numpy as np
+
+from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
+from fusion_vo.backends.result import SensorCount
+from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.sensors import registry
+
+from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate
+
+logger = logging.getLogger(__name__)
+
+
+class NodesMixin:
+    """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
+
+    def _advance(self, t: float) -> None:
+        self._collect()
+        self._latest = max(self._latest, float(t))
+        lag = self._twist_delay.lag() if self._twist_delay is not None else 0.0
+        until = self._latest - self.config.reorder_window - lag
+        self._process(until, self._budget(until))
+
+    def _budget(self, until: float) -> int | None:
+        """Units of work for this call: ``steps_per_call``, more while the processed state is behind.
+
+        When the samples come in fewer calls than there are units to do (a 10 Hz odometry and a 30 Hz
+        IMU, 40 calls a second, against nodes at 20 Hz of two or three units each), a fixed budget falls
+        further behind with every second. Once the last node is more than two node steps behind what is
+        due, the budget grows with the backlog (one more ``steps_per_call`` for every two steps behind),
+        so the backlog stays bounded and the extra work per call stays small.
+        """
+        budget = self.steps_per_call
+        if budget is None or not self._t_nodes:
+            return budget
+        behind = (until - self._t_nodes[-1]) * self.config.step_hz
+        if behind > 2.0:
+            budget *= 1 + int(behind) // 2
+        return budget
+
+    def _twist(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Body twist of the newest node predicted ``dt`` seconds ahead and its covariance (:class:`Estimate`)."""
+        if self.backend == "ekf":
+            kf = self._ekf.kf
+            if dt <= 0:
+                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
+            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
+            try:
+                self._ekf.predict(dt)
+                return self._ekf.x[3:6].copy(), self._ekf.P[3:6, 3:6].copy()
+            finally:
+                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
+        T = self._t_nodes
+        q = np.array([self.config.ekf.accel_sigma, self.config.ekf.lateral_accel_sigma,
+                      self.config.ekf.yaw_accel_sigma]) ** 2
+        if len(T) < 2 or T[-1] - T[-2] <= 0:
+            return np.zeros(3), np.diag(q * max(dt, 1.0 / self.config.step_hz))
+        step = T[-1] - T[-2]
+        prev, pose = self._poses[-2], self._poses[-1]
+        c, s = np.cos(prev[2]), np.sin(prev[2])
+        d = pose[:2] - prev[:2]
+        dyaw = np.arctan2(np.sin(pose[2] - prev[2]), np.cos(pose[2] - prev[2]))
+        twist = np.array([c * d[0] + s * d[1], -s * d[0] + c * d[1], dyaw]) / step
+        return twist, np.diag(q * (step + max(dt, 0.0)))
+
+    def _predict(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """Pose and covariance of the last node predicted ``dt`` seconds ahead (constant twist)."""
+        if self.backend == "ekf":
+            kf = self._ekf.kf
+            saved = kf.x.copy(), kf.P.copy(), kf.x_prior.copy(), kf.P_prior.copy(), self._ekf.linearisation
+            try:
+                self._ekf.predict(dt)
+                return self._ekf.x[:3].copy(), self._ekf.P[:3, :3].copy()
+            finally:
+                kf.x, kf.P, kf.x_prior, kf.P_prior, self._ekf.linearisation = saved
+        return extrapolate(self._t_nodes, self._poses, self._covs, dt, self.config)
+
+    # ------------------------------------------------------------------ processing
+    def _next_node(self, after: float, until: float) -> float | None:
+        """The node after ``after``: the next frame if it comes within 1.5 steps, else a fill-in node."""
+        step = 1.0 / self.config.step_hz
+        frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
+        fixes = [f.t for f in self._gps if f.t > after + 1e-9]
+        if frames and frames[0] <= after + 1.5 * step:
+            nxt = frames[0]
+        else:
+            nxt = after + step
+        if fixes and fixes[0] < nxt - 1e-3:  # a fix is a node of its own (timeline.GPS_SNAP)
+            nxt = fixes[0]
+        return nxt if nxt <= until else None
+
+    def _start_time(self) -> float | None:
+        times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
+        return min(times) if times else None  # a fix alone does not start the track
+
+    def _process(self, until: float, budget: int | None = None) -> None:
+        """Process the nodes up to ``until``, at most ``budget`` units of work (None: all).
+
+        A node is two units (iSAM2: four), one more when the heading monitor's check is due at it:
+        building its interval from the buffers; the check; (iSAM2: the monitor's decisions and the node's
+        factors; their linearisation;) the backend's update. With iSAM2 in the background the worker
+        builds and linearises the factors, but the units are the same, so late data is swapped in at the
+        same points as on the caller's thread and the results agree. The operations and
+        their order are those of processing the node at once; only the call that runs each differs, so
+        no call pays for all of them.
+        """
+        if self._dirty and (budget is None or self._pending is not None
+                            or self._next_node(self._t_nodes[-1], until) is not None):
+            # late data is swapped in when the next node is due (several late samples, one update)
+            self._drop_pending()
+            dirty, self._dirty = sorted(self._dirty), set()
+            self._replace(dirty)
+        if not self._t_nodes:
+            start = self._start_time()
+            if start is None or start > until:
+                return
+            self._first_node(start)
+        done = 0
+        while budget is None or done < budget:
+            done += 1
+            started = self._pending
+            if started is None:
+                t0 = self._t_nodes[-1]
+                t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
+                if t1 is None:
+                    return
+                self._begin_step(t0, t1)
+            elif self._monitor.due():
+                self._monitor.check()
+            elif self._graph is not None and started.stage == 0:
+                self._decide(started)
+                started.factors = self._graph.prepare(started.iv)
+                started.stage = 1
+            elif self._graph is not None and started.stage == 1:
+                self._graph.freeze(started.factors)
+                started.stage = 2
+            else:
+                self._end_step()
+
+    def _last_time(self) -> float:
+        times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
+        return max(times) if times else -np.inf
+
+    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None,
+                         reach: dict | None = None) -> SensorStreams:
+        """The buffered samples an interval needs: those inside it, the ones bracketing it, and (IMU,
+        range finder) the neighbours the spike check's running median reads around those (the same values
+        as in batch use); until the AHRS offset is known (samples with an orientation), the IMU's first quarter second after
+        ``t0`` too."""
+        streams = SensorStreams(camera_height=self.camera_height)
+        for name, buf in self._buffers.items():
+            if name == "range" and self._range_in_visual:  # used once: already in the visual increments
+                continue
+            live = self._intake[name].live
+            more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
+            lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
+            hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
+            if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
+                hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
+            rows = buf[lo:hi]
+            if reach is not None:  # the time of the last sample read (any new one, if all were read)
+                reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
+            if len(rows) < live.min_rows:
+                continue
+            data = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)  # the sensor's own module
+            field_name = self._intake[name].field
+            if field_name is not None:
+                setattr(streams, field_name, data)
+            else:
+                streams.extra[name] = data
+        return streams
+
+    def _interval(self, t0: float, t1: float, heading_offset: float | None):
+        """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
+        time of the last sample read per stream)``.
+
+        Consumes the buffered visual increments ending at or before ``t1``; those that do not span
+        exactly this interval cannot be applied and are counted as late.
+        """
+        step: dict[str, SensorCount] = {}
+        reach: dict[str, float] = {}
+        streams = self._streams_between(t0, t1, heading_offset, reach)
+        consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
+        usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
+        for v in consumed:
+            if v not in usable:
+                step.setdefault("camera", SensorCount()).late += 1
+        self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
+        if usable:
+            streams.visual = usable
+        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
+        iv.visual_scale_sigma = self._priors.visual_scale_sigma  # what the whole streams give (one interval's
+        iv.wheel_scale_sigma = self._priors.wheel_scale_sigma  # samples do not carry the sensors' files)
+        for sensor, c in iv.counts.items():
+            own = step.setdefault(sensor, SensorCount())
+            own.gated += c.gated
+            own.missing += c.missing
+        return iv, step, consumed, reach
+
+    def _begin_step(self, t0: float, t1: float) -> None:
+        """First unit of a node: its interval from the buffers, handed to the heading monitor."""
+        iv, step, consumed, reach = self._interval(t0, t1, self._heading_offset)
+        monitor = self._monitor.state()
+        self._monitor.add(iv)
+        self._pending = Started(t0, t1, iv, step, consumed, monitor, reach)
+
+    def _decide(self, started: Started) -> None:
+        """The monitor's current decisions, applied to the started node's interval."""
+        if started.dropped is None:
+            started.dropped = frozenset(self._monitor.dropped)
+            self._monitor.apply(started.iv)
+
+    def _end_step(self) -> None:
+        """Last unit: the monitor's decisions (after its check, if due), the backend's update, the record."""
+        started = self._pending
+        self._pending = None
+        self._monitor.check()  # (a no-op when it ran as a unit of its own)
+        self._decide(started)
+        iv, step = started.iv, started.step
+        self._step_counts = step
+        self._step_fixes = []
+        if iv.heading_offset is not None:
+            self._heading_offset = iv.heading_offset
+        if self.backend == "ekf":
+            self._ekf_step(iv)
+            state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
+        else:
+            self._graph_step(iv, started.factors)
+            state = None
+        t0 = self._t_nodes[-1]
+        self._t_nodes.append(started.t1)
+        keep = state is not None
+        self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
+                                         monitor=self._monitor.state() if keep else None, dropped=started.dropped,
+                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None))
+        self._retire()
+        self._prune(t0)
+
+    # ------------------------------------------------------------------ backends
+    def _first_node(self, t: float) -> None:
+        cfg = self.config
+        self._t_nodes.append(t)
+        kv, kb = self._calibration_flags()
+        if self.backend == "ekf":
+            twist = "odom" in self.sensors and "wheel" not in self.sensors
+            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, visual_scale_sigma=self._priors.visual_scale_sigma,
+                                  wheel_scale_sigma=self._priors.wheel_scale_sigma, states=self._states,
+                                  camera="camera" in self.sensors,
+                                  frame_error=1.0 if self._camera_frame_errors else None)
+            self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
+                                             monitor=self._monitor.state(), gps=self._gps_state()))
+            self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
+        else:
+            self._records.append(NodeRecord(None, None))
+            self._graph = self._online_graph(cfg, t, (kv, kb), self.background, self._states)
+            pose, cov = self._graph.start()
+            self._record(pose, cov)
+
+    def _record(self, pose, cov) -> None:
+        self._poses.append(np.asarray(pose, dtype=np.float64).copy())
+        self._covs.append(np.asarray(cov, dtype=np.float64).copy())
+
+    def _ekf_step(self, iv) -> None:
+        ekf = self._ekf
+        meas = interval_measurements(iv, self.config)
+        ekf.predict(float(iv.dt[0]), frame_error_cov(meas, 0))
+        ekf.update(step_blocks(ekf, meas, 0))
+        t1 = float(iv.t[-1])
+        for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
+            self._gps.remove(fix)
+            self._step_fixes.append(fix)
+            if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
+                self._step_counts.setdefault("gps", SensorCount()).late += 1
+            else:
+                self._apply_gps(fix)
+        for sensor, c in ekf.counts.items():
+            own = self._step_counts.setdefault(sensor, SensorCount())
+            own.used += c.used
+            own.gated += c.gated
+        ekf.counts = {}
+        self._record(ekf.x[:3], ekf.P[:3, :3])
+
+    def _graph_step(self, iv, prepared=None) -> None:
+        pose, cov, sensors = self._graph.step(iv, prepared)
+        if pose is None:  # background update under way: the last pose predicted meanwhile
+            pose, cov = extrapolate(self._t_nodes, self._poses, self._covs, float(iv.t[-1]) - self._t_nodes[-1],
+                                     self.config)
+        for s in sensors or ():
+            self._step_counts.setdefault(s, SensorCount()).used += 1
+        self._record(pose, cov)
+
+    def _collect(self, wait: bool = False) -> None:
+        """Take in the results of finished background iSAM2 updates (all of them with ``wait``)."""
+        if self._graph is None or not self.background:
+            return
+        for n, pose, cov, sensors in self._graph.collect(wait):
+            if n < len(self._poses):
+                self._poses[n], self._covs[n] = pose, cov
+            self._count_used(n, sensors)
+
+    def _count_used(self, n: int, sensors) -> None:
+        """Node ``n``'s factors are now those of ``sensors`` (None: unchanged): its ``used`` counts follow."""
+        if sensors is None:
+            return
+        rec = self._records[n] if n < len(self._records) else None
+        if rec is None:  # left the history while its update ran: its counts were merged already
+            return
+        for c in rec.counts.values():
+            c.used = 0
+        for s in sensors:
+            rec.counts.setdefault(s, SensorCount()).used += 1
+
+    def _calibration_flags(self) -> tuple[bool, bool]:
+        s = set(self.sensors)
+        wheel = bool(s & {"wheel", "odom"})
+        heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)  # a heading reference
+        return "camera" in s and (wheel or "range" in s), wheel and heading
