@@ -23,7 +23,7 @@ derotation, ground geometry, the track) while the frontend measures the next fra
 frontend with a ``set_executor`` method gets one more thread for work it can hand off (KLT: the next
 frame's reference warped by the predicted motion; features: the reference warped for the refinement);
 it shortens the tracking thread but costs thread wake-ups, and on two idle cores it gave no wall-clock
-gain (``benchmarks/bench_handoff.py``), so it is off by default. OpenCV releases the
+gain (docs/decisions/0002-hand-off-thread-off-by-default.md), so it is off by default. OpenCV releases the
 GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in

@@ -132,9 +132,8 @@ class CameraModel:
 
         The polynomial of ``cv2.projectPoints`` with the same order of operations, so the results are
         the same to the last bit, without its Jacobians with respect to every parameter, which
-        ``projectPoints`` always computes from Python: several times faster on the dense fallback's
-        remap grid of a 640 x 360 frame (``benchmarks/bench_tracker.py`` times both), as fast on a few
-        points.
+        ``projectPoints`` always computes from Python (what the dense fallback's remap grid of a whole
+        frame would pay for nothing).
         """
         k1, k2, p1, p2 = self.distortion[:4]
         k3 = self.distortion[4] if len(self.distortion) > 4 else 0.0
