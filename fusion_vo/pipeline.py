@@ -361,7 +361,9 @@ def run_pipeline(
             summary.vo_fps = vo.fps
             summary.vo_seconds = vo.elapsed_s
             if vo.skipped:
-                summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
+                n = len(vo.skipped)
+                summary.notes.append(f"{n} frame{'s' if n != 1 else ''} could not be read and "
+                                     f"{'were' if n != 1 else 'was'} skipped")
             if vo.height_note:
                 summary.notes.append(vo.height_note)
             if vo.noise_note:

@@ -31,6 +31,7 @@ import io
 import logging
 import os
 import stat
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -416,8 +417,9 @@ def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tupl
     """Read and decode one frame file: ``(grey image, None)`` or ``(None, reason)``.
 
     The file is read as bytes and decoded in memory (any valid path works). ``size`` is ``(height,
-    width)`` to check, or ``None``; ``shift`` scales 16-bit frames holding fewer bits (see
-    :meth:`Recording.pixel_shift`).
+    width)`` to check, or ``None``; a PNG whose header states another size is not decoded (a corrupt header
+    may claim any size, and OpenCV would allocate it or stop at its pixel limit). ``shift`` scales 16-bit
+    frames holding fewer bits (see :meth:`Recording.pixel_shift`).
     """
     try:
         # opened without blocking and checked to be a regular file before reading: a FIFO (or a device)
@@ -433,13 +435,36 @@ def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tupl
         return None, f"cannot read image file ({exc.strerror})"
     if not data:
         return None, "empty image file"
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    header = png_size(data)
+    if size is not None and header is not None and header != size:  # not decoded: it may claim any size
+        return None, f"frame is {header[1]}x{header[0]} (its PNG header) but cam0/sensor.yaml says {size[1]}x{size[0]}"
+    img = decode_image(data)
     if img is None:
         return None, "unreadable or corrupt image"
     img, err = _to_grey(img, size)
     if img is not None and shift:
         img = scale_bits(img, shift)
     return img, err
+
+
+def decode_image(data: bytes | np.ndarray) -> np.ndarray | None:
+    """An encoded image (PNG, JPEG, ...) decoded unchanged by OpenCV, or ``None`` when it cannot be decoded
+    (corrupt data, or a header beyond OpenCV's pixel limit, which OpenCV raises as an error)."""
+    buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, bytes) else np.asarray(data, dtype=np.uint8)
+    if not buf.size:
+        return None
+    try:
+        return cv2.imdecode(buf.reshape(-1), cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        return None
+
+
+def png_size(data: bytes) -> tuple[int, int] | None:
+    """``(height, width)`` that a PNG file's IHDR chunk states, or ``None`` for data that is not a PNG."""
+    if len(data) >= 24 and data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
+        width, height = struct.unpack(">II", data[16:24])
+        return height, width
+    return None
 
 
 def scale_bits(image: np.ndarray, shift: int) -> np.ndarray:
