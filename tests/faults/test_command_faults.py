@@ -450,6 +450,61 @@ def test_a_sweep_grid_value_given_twice_names_the_file_line_and_key(text, line, 
     assert snapshot(tmp_path) == before
 
 
+# ------------------------------------------------------------------ sweep: list and mapping values
+#: a whole section swept as a mapping would replace the section (the base's other keys lost): refused before any run
+MAPPING_GRIDS = [("grid:\n  klt: [{max_tracks: 60}]\n", 2, "klt"),
+                 ("random: 3\nranges:\n  fusion.graph:\n    - {max_iterations: 5}\n", 4, "fusion.graph"),
+                 ("grid:\n  klt: {max_tracks: 60}\n", None, "klt")]
+
+
+@pytest.mark.parametrize("text, line, key", MAPPING_GRIDS, ids=["grid_list", "random_choice", "grid_single"])
+def test_a_sweep_over_a_whole_section_is_refused_before_any_run(text, line, key, pristine, tmp_path, capsys):
+    """It ran every task, then died with 'unhashable type', leaving results without report.html."""
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(text)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid)
+    assert_error(status, err, f"{grid}:{line}:" if line else f"{grid}:", f"grid key '{key}'", "is a mapping",
+                 f"'{key}.")
+    assert snapshot(tmp_path) == before
+
+
+def test_a_sweep_over_list_values_ranks_and_reports_them_as_json_text(tmp_path):
+    """Swept lists (``fusion.initial_pose``) are one column of canonical JSON text: grouped, ranked, plotted."""
+    import pandas as pd
+
+    from fusion_vo.batch.grid import Grid, ParameterSet
+    from fusion_vo.batch.runner import _frame, best_sets, describe_set, write_results
+    from fusion_vo.batch.tasks import COLUMNS
+
+    key = "fusion.initial_pose"
+    poses = {"p000": [0, 0, 0], "p001": [1.5, 0, 0.25]}
+    rows = []
+    for name, pose in poses.items():
+        for rec, ate in (("a", 0.1), ("b", 0.3)):
+            row = dict.fromkeys(COLUMNS, 0.0) | {"recording": rec, "trajectory": "vo", "status": "ok", "error": "",
+                                                 "ate_m": ate + (name == "p001"), "cached": False, "run_dir": ""}
+            rows.append(row | {"parameter_set": name, key: list(pose)})
+    frame = _frame(rows, [key])
+    grid = Grid([key], [ParameterSet(n, {key: p}) for n, p in poses.items()], [], None)
+    write_results(frame, tmp_path, "sweep", grid)
+    table = pd.read_csv(tmp_path / "results.csv")
+    assert sorted(set(table[key])) == ["[0, 0, 0]", "[1.5, 0, 0.25]"]
+    ranked, _ = best_sets(frame)
+    assert list(ranked["parameter_set"]) == ["p000", "p001"] and ranked["mean"].round(6).tolist() == [0.2, 1.2]
+    assert describe_set(frame, "p001") == f"{key}=[1.5, 0, 0.25]"
+    assert "[1.5, 0, 0.25]" in (tmp_path / "report.html").read_text()
+
+
+def test_optimize_refuses_list_choices_naming_the_key(pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("grid:\n  fusion.initial_pose: [[0, 0, 0], [1, 0, 0]]\n")
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--optimize",
+                         "ate_m")
+    assert_error(status, err, f"{grid}", "key 'fusion.initial_pose'", "--optimize chooses among")
+    assert not (tmp_path / "sweep").exists()
+
+
 # ------------------------------------------------------------------ bench: frames that measured nothing
 def test_bench_gives_no_rate_for_frames_that_measured_nothing(recording, pristine, capsys):
     """Textureless frames cost almost nothing: 2000+ frames/s beside 'ok 0.0 %' was printed as a speed."""
