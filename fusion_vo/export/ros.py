@@ -20,12 +20,13 @@ Covariance (ROS order ``x, y, z, rot x, rot y, rot z``, row-major 6 x 6):
 The ``rosbag2`` format writes a folder (``metadata.yaml`` and an SQLite ``.db3``) with the rosbags
 library; ``mcap`` writes one ``.mcap`` file (ROS 2 profile, CDR messages, ``ros2msg`` schemas) with
 the mcap library. Both open in Foxglove; the rosbag2 folder plays back with ``ros2 bag play`` for RViz.
-The output is written under a temporary name beside ``out`` and renamed only when complete; an existing
-``out`` is an error and is never overwritten.
+The output is written under a temporary name beside ``out`` and moved to ``out`` only when complete; an
+existing ``out`` is an error and is never overwritten, also when another command created it meanwhile.
 """
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import shutil
@@ -338,11 +339,38 @@ def export_trajectories(trajectories: list[ExportTrajectory], out: str | Path, f
             _write_rosbag2(target, items, topics, messages)
         else:
             _write_mcap(target, items, topics, messages)
-        os.rename(target, out)
+        _move_into_place(target, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     log.info("wrote %d messages on %d topics to %s", len(items), len(topics), out)
     return out
+
+
+def _move_into_place(target: Path, out: Path) -> None:
+    """Move the finished ``target`` to ``out``, only if nothing is at ``out``: of two exports to one name
+    started together, the second to finish fails naming ``out`` and the first's output stays.
+
+    A file is hard-linked (``link`` fails atomically when ``out`` exists; ``rename`` would replace it); a
+    folder is renamed, which fails when ``out`` is a file or a folder that is not empty.
+    """
+    taken = InputError("already exists (written meanwhile by another command?); choose another name or remove "
+                       "it first", out)
+    if not target.is_dir():
+        try:
+            os.link(target, out)
+            return
+        except FileExistsError:
+            raise taken from None
+        except OSError:  # a file system without hard links: checked, then renamed
+            pass
+    if out.exists() or out.is_symlink():
+        raise taken
+    try:
+        os.rename(target, out)
+    except OSError as exc:
+        if exc.errno in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR):
+            raise taken from None
+        raise
 
 
 def export_run(run_dir: str | Path, out: str | Path, fmt: str, names: list[str] | None = None,

@@ -267,6 +267,32 @@ def test_export_never_writes_into_the_run_or_its_recording(pristine, run_folder,
     assert status == 0, err
 
 
+@pytest.mark.parametrize("fmt, name", [("mcap", "same.mcap"), ("rosbag2", "same_bag")])
+def test_of_two_exports_to_one_name_the_second_fails_naming_it(fmt, name, run_folder, tmp_path, capsys,
+                                                              monkeypatch):
+    """Both exited 0 and the second silently replaced the first's MCAP file; the loser of two rosbag2
+    exports named a hidden temporary folder."""
+    from fusion_vo.export import ros
+
+    out = tmp_path / name
+    writer = getattr(ros, f"_write_{fmt}")
+
+    def rival_finishes_first(path, *args):  # the other export moves its output into place meanwhile
+        writer(path, *args)
+        if path.is_dir():
+            out.mkdir()
+            (out / "rival").write_text("rival")
+        else:
+            out.write_text("rival")
+
+    monkeypatch.setattr(ros, f"_write_{fmt}", rival_finishes_first)
+    status, _, err = cli(capsys, "export", run_folder, out, "--to", fmt)
+    assert_error(status, err, f"{out}: already exists")
+    assert ".partial" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["run", name])  # no staging folder left
+    assert (out / "rival" if fmt == "rosbag2" else out).read_text() == "rival"
+
+
 # ------------------------------------------------------------------ import-bag: a topic without messages
 BAGS = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
 
