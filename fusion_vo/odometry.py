@@ -50,13 +50,13 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
-from frontends.config import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
+from frontends.config import Range, check_ranges
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
 from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
-from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
+from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
 
 log = logging.getLogger(__name__)
@@ -150,8 +150,9 @@ class OdometryConfig:
 
     #: the range of every number field (:func:`frontends.config.check_ranges`; ``None`` always passes)
     RANGES: ClassVar[dict[str, Range]] = {
-        "height": POSITIVE, "min_sigma_xy": AT_LEAST_0, "min_sigma_yaw": AT_LEAST_0,  # 0: no floor
-        "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0,
+        "height": Range(0, MAX_CAMERA_HEIGHT_M, open_low=True), "min_sigma_xy": Range(0, 10),  # 0: no floor
+        "min_sigma_yaw": Range(0, math.pi), "max_bad_start_frames": Range(1, 1e6), "max_bridge": Range(0, 3600),
+        "focal_length": Range(0, 1e6, open_low=True),  # [px]; checked against the image size when it is used
         "threads": Range(1, 256),  # at most 256: 100000 started threads until the process limit was hit
     }
 

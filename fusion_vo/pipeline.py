@@ -185,7 +185,12 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         if odometry.uncalibrated:  # cam0/sensor.yaml may have no intrinsics (the run's own model is checked here)
             from fusion_vo.geometry.camera import uncalibrated_camera
 
-            cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
+            try:
+                cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
+            except InputError as exc:  # a configured focal length out of range for the file's resolution
+                if odometry.focal_length is None or "'focal_length'" not in exc.message:
+                    raise
+                raise _config_error(exc, config_path, "odometry") from None
         else:
             cam = rec.camera  # cam0/sensor.yaml
         if odometry.camera_noise:

@@ -110,6 +110,18 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
     return Table(np.array(ts, dtype=np.int64), values, np.array(lines, dtype=np.int64))
 
 
+def check_magnitude(tab: Table, path: str | Path, columns: slice, limit: float, what: str) -> None:
+    """An :class:`InputError` naming the line of the first row with a value in ``columns`` larger than
+    ``limit`` in magnitude (a physical range: beyond it a value is a corrupt row or a unit mix-up); NaN passes."""
+    block = np.abs(tab.values[:, columns])
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero((block > limit).any(axis=1))
+    if len(bad):
+        i = int(bad[0])
+        value = tab.values[i, columns][int(np.nanargmax(block[i]))]
+        raise InputError(f"{what} {value:g} is beyond ±{limit:g}: not a physical value", path, int(tab.lines[i]))
+
+
 def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Read ``cam0/data.csv``: ``timestamp [ns], filename`` rows; returns (t_ns, names, lines)."""
     path = check_file(path)

@@ -42,9 +42,10 @@ import numpy as np
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import SENSOR_KEYS, CameraModel, load_yaml, parse_pose, sensor_number, warn_unknown_keys
-from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED, GpsData,
+                                    ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData)
 from fusion_vo.outputs import make_folder, write_atomic
-from fusion_vo.recording.csvio import read_frame_list, read_table
+from fusion_vo.recording.csvio import check_magnitude, read_frame_list, read_table
 
 log = logging.getLogger(__name__)
 
@@ -277,6 +278,8 @@ class Recording:
         tab = _enough_rows(read_table(path, (6, 10), "IMU values"), path, 2, "IMU")
         if tab.values.shape[1] not in (6, 10):
             raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
+        check_magnitude(tab, path, slice(0, 3), MAX_ANGULAR_RATE, "angular rate [rad/s]")
+        check_magnitude(tab, path, slice(3, 6), MAX_ACCELERATION, "acceleration [m/s²]")
         orient = None
         if tab.values.shape[1] == 10:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
@@ -339,6 +342,8 @@ class Recording:
         """``odom0``: body-frame twist."""
         path = self._need("odometry", "odom0")
         tab = _enough_rows(read_table(path, 3, "twist values"), path, 1, "odometry")
+        check_magnitude(tab, path, slice(0, 2), MAX_SPEED, "speed [m/s]")
+        check_magnitude(tab, path, slice(2, 3), MAX_ANGULAR_RATE, "yaw rate [rad/s]")
         return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
 
     def range(self) -> RangeData:
@@ -348,6 +353,7 @@ class Recording:
         bad = np.flatnonzero(tab.values[:, 0] <= 0)
         if len(bad):
             raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
+        check_magnitude(tab, path, slice(0, 1), MAX_RANGE_M, "distance [m]")
         return RangeData(tab.t, tab.values[:, 0])
 
     def gps(self) -> GpsData:
@@ -399,13 +405,15 @@ def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
 
     Rules: rows ``timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z``, further columns ignored, as every
     stream of the layout; timestamps increase strictly (a repeated or earlier timestamp is an error naming
-    the line, as in every other stream); each quaternion's norm is within 0.05 of 1 (it is normalised); at
-    least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
+    the line, as in every other stream); each position within
+    :data:`~fusion_vo.measurements.MAX_POSITION_M`; each quaternion's norm is within 0.05 of 1 (it is
+    normalised); at least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
     """
     path = Path(path)
     tab = read_table(path, (7, 7), "pose values", ignore_extra=True)  # further columns are ignored
     if len(tab) < min_poses:
         raise InputError(f"ground truth needs at least {min_poses} poses, found {len(tab)}", path)
+    check_magnitude(tab, path, slice(0, 3), MAX_POSITION_M, "position [m]")
     q = unit_quaternions(tab.values[:, 3:7], tab.lines, path, "quaternion")
     yaw = se2.yaw_of_quaternion(q)
     xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
