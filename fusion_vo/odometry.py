@@ -200,6 +200,8 @@ class OdometryResult:
         Visual dead reckoning, one pose per measured frame.
     skipped : list of str
         Frames that could not be loaded (file and reason).
+    failure_reasons : Counter
+        Frames the frontend could not measure, by the frontend's reason (one line each).
     bridged_s : float
         Time spent bridging gaps at constant velocity [s].
     held : list of tuple
@@ -235,6 +237,7 @@ class OdometryResult:
     frame_height_sigma: np.ndarray | None = None
     height_note: str | None = None
     noise_note: str | None = None
+    failure_reasons: Counter = field(default_factory=Counter)
 
     @property
     def n_frames(self) -> int:
@@ -644,6 +647,7 @@ def run_visual_odometry(
     increments: list[VisualIncrement] = []
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
     skipped: list[str] = []
+    reasons: Counter = Counter()
     bad_run = 0
     threads = config.thread_count()
 
@@ -690,6 +694,8 @@ def run_visual_odometry(
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
+            if motion.status.value not in ("ok", "first"):
+                reasons[" ".join(str(motion.info.get("reason") or motion.status.value).split())] += 1
             inliers.append(motion.n_inliers)
             if post is None:
                 collect(vo.finish(motion, h, h_sigma))
@@ -738,6 +744,7 @@ def run_visual_odometry(
         frame_height_sigma=frame_height_sigma,
         height_note=height_note,
         noise_note=noise_note,
+        failure_reasons=reasons,
     )
 
 

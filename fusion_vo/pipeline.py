@@ -406,6 +406,10 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
     if ok:
         return
     why = ", ".join(f"{n} {k}" for k, n in sorted(vo.failures.items())) or "none could be read"
+    if vo.failure_reasons:  # the frontend's own reason, most often given (e.g. an OpenCV error on every frame)
+        reason, count = vo.failure_reasons.most_common(1)[0]
+        shown = reason if len(reason) <= 300 else reason[:297] + "..."
+        why += f"; {'every one' if count == sum(vo.failures.values()) else f'{count} of them'}: {shown}"
     others = [s for s in sensors if s in ("wheel", "odom", "imu")]
     if not others:
         first = f"; first unreadable frame: {vo.skipped[0]}" if vo.skipped else ""

@@ -146,6 +146,12 @@ OPTIONS = [
     (("batch", "{rec}", "--out", "{out}", "--sensors", "sonar", "--workers", "1"), ["--sensors sonar"]),
     (("export", "{run}", "{out}", "--to", "mcap", "--frame-id", ""), ["--frame-id"]),
     (("export", "{run}", "{out}", "--to", "mcap", "--trajectories", ""), ["--trajectories ''"]),
+    # work without an upper bound: 'replay --speed 0 --rate 1e9' was still busy after 100 s on a 12 s recording
+    (("replay", "{rec}", "--out", "{out}", "--speed", "0", "--rate", "1e9"), ["--rate", "at most 1000", "1e9"]),
+    (("replay", "{rec}", "--out", "{out}", "--speed", "1e-9"), ["--speed", "from 0.01 to 1e+06", "1e-9"]),
+    (("replay", "{rec}", "--out", "{out}", "--window", "1e300"), ["--window 1e+300", "'reorder_window' must be at most"]),
+    (("batch", "{rec}", "--out", "{out}", "--workers", "100000"), ["--workers", "at most 256", "100000"]),
+    (("bench", "{rec}", "--repeats", "1000000"), ["--repeats", "at most 100"]),
 ]
 
 

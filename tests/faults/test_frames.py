@@ -143,3 +143,18 @@ def test_an_image_beyond_opencvs_pixel_limit_is_unreadable_not_an_exception(tmp_
     assert read_image(p, None) == (None, "unreadable or corrupt image")
     with pytest.raises(InputError, match="not a readable image"):
         read_board_image(p)
+
+
+def test_a_run_whose_every_frame_failed_for_one_reason_names_it(recording, tmp_path, capsys, monkeypatch):
+    """(klt: {max_tracks: 1e11} made OpenCV refuse every frame; the run said only that no frame gave a motion)"""
+    def refuse(*args, **kwargs):
+        raise cv2.error("integer won't fit into a C int")
+
+    monkeypatch.setattr(cv2, "goodFeaturesToTrack", refuse)
+    status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    reason = "every one: OpenCV error: integer won't fit into a C int"
+    assert f"the camera gave no motion estimate in any of its 33 frames (33 bad_frame; {reason})" in out
+    assert any(reason in note for note in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"])
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "alone", "--sensors", "camera")
+    assert_error(status, err, "cam0/data.csv", f"no frame gave a motion estimate (33 frames: 33 bad_frame; {reason})")
