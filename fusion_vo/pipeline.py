@@ -49,7 +49,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.evaluation import EVO_MISSING
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
-from fusion_vo.outputs import OutputFolder, check_replaceable, write_atomic
+from fusion_vo.outputs import OutputFolder, check_outside, check_replaceable, write_atomic
 from fusion_vo.recording import Recording, write_tum
 from fusion_vo.recording.reader import STREAM_FOLDERS, read_groundtruth_csv
 
@@ -331,7 +331,8 @@ def run_pipeline(
     Parameters
     ----------
     sequence : the recording folder.
-    out_dir : the output folder, created or replaced as a whole (see the module's rules).
+    out_dir : the output folder, created or replaced as a whole (see the module's rules); never inside the
+        recording.
     config : the run's configuration (default: every default).
     progress : callable ``(done, total)`` called after every frame.
     force : replace an output folder that is not empty and was not written by ``fusion-vo run``.
@@ -347,6 +348,7 @@ def run_pipeline(
     out_dir = Path(out_dir)
     read = [Path(sequence)] + ([Path(config_path)] if config_path is not None else [])
     check_replaceable(out_dir, RUN_MARKER, force, read)  # the output folder first: it is quick
+    check_outside(out_dir, [Path(sequence)])  # not even a new folder inside the recording
     inputs = check_inputs(sequence, config, config_path)
     rec, sensors = inputs.recording, inputs.sensors
     summary = RunSummary(sequence=str(rec.path), out_dir=str(out_dir))

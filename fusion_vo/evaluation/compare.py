@@ -60,7 +60,8 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     run_dirs : list of str or Path
         Run folders written by ``fusion-vo run``.
     out_dir : str or Path
-        Folder for the outputs (created if missing).
+        Folder for the outputs (created if missing); neither a run folder compared or inside one, nor
+        inside a recording.
     sequence_dir : str or Path, optional
         Recording with the ground truth for all runs; by default each run's ``run.yaml`` names its own.
 
@@ -76,6 +77,8 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     """
     run_dirs = [Path(d) for d in run_dirs]
     out_dir = check_folder_target(out_dir)  # before the evaluation's work
+    # never into a run folder compared: a later 'fusion-vo run' into it replaces the folder, these files with it
+    check_outside(out_dir, run_dirs)
     table: dict[str, dict[str, dict]] = {}
     overlay: dict[str, dict[str, PoseTrajectory3D]] = {}
     sequences = []

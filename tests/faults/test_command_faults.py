@@ -262,6 +262,45 @@ def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, t
     assert snapshot(pristine) == before
 
 
+def test_compare_never_writes_into_a_run_folder_it_compares(pristine_run, run_folder, tmp_path, capsys,
+                                                           monkeypatch):
+    """'compare A B --out A' wrote into run folder A (and a later 'run --out A' deleted the files)."""
+    def no_evaluation(*args, **kwargs):
+        raise AssertionError("the runs were evaluated before the output folder was checked")
+
+    monkeypatch.setattr("fusion_vo.evaluation.compare.evaluate_trajectories", no_evaluation)
+    before = snapshot(tmp_path)
+    for out in (run_folder, run_folder / "cmp"):
+        status, _, err = cli(capsys, "compare", run_folder, pristine_run, "--out", out)
+        assert_error(status, err, str(out), "part of an input", str(run_folder))
+    assert snapshot(tmp_path) == before
+
+
+def test_run_never_makes_its_folder_inside_the_recording(recording, tmp_path, capsys):
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "run", recording, "--out", recording / "newsub")
+    assert_error(status, err, str(recording / "newsub"), "part of an input")
+    assert snapshot(tmp_path) == before
+
+
+def test_show_matches_replaces_only_a_picture_it_wrote(recording, tmp_path, capsys):
+    """'show-matches REC --frame 5 -o mine.png' overwrote the user's own picture."""
+    import cv2
+    import numpy as np
+
+    mine, ours = tmp_path / "mine.png", tmp_path / "ours.png"
+    cv2.imwrite(str(mine), np.zeros((8, 8), np.uint8))
+    (tmp_path / "folder.png").mkdir()
+    before = snapshot(tmp_path)
+    for out in (mine, tmp_path / "folder.png"):
+        status, _, err = cli(capsys, "show-matches", recording, "--frame", "3", "--out", out)
+        assert_error(status, err, str(out), "fusion-vo did not write it")
+    assert snapshot(tmp_path) == before
+    for frame in ("3", "4"):  # written, then replaced
+        status, out, err = cli(capsys, "show-matches", recording, "--frame", frame, "--out", ours)
+        assert status == 0 and f"frames {int(frame) - 1} -> {frame}" in out, err
+
+
 def test_export_never_writes_into_the_run_or_its_recording(pristine, run_folder, tmp_path, capsys):
     """A bag inside the run folder would go when the run is redone (run replaces its folder whole)."""
     before_rec, before_run = snapshot(pristine), snapshot(run_folder)
