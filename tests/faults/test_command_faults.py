@@ -338,6 +338,45 @@ def test_of_two_exports_to_one_name_the_second_fails_naming_it(fmt, name, run_fo
     assert (out / "rival" if fmt == "rosbag2" else out).read_text() == "rival"
 
 
+#: a ROS 2 topic or frame name: tokens of ASCII letters, digits and underscores, none starting with a digit, no "__"
+_ROS2_NAME = r"/?(?!.*__)[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*"
+
+
+def test_export_writes_trajectory_names_ros_2_accepts_and_says_so(run_folder, tmp_path, capsys):
+    """'my-traj.tum' was exported on /fusion_vo/my-traj/odometry, a name ROS 2 tools reject."""
+    import re
+
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    for name in ("my-traj", "2nd traj"):
+        shutil.copy(run_folder / "ekf.tum", run_folder / f"{name}.tum")
+    out = tmp_path / "x.mcap"
+    status, printed, err = cli(capsys, "export", run_folder, out, "--to", "mcap", "--no-groundtruth")
+    assert status == 0, err
+    assert "note: trajectory 'my-traj' exported as /fusion_vo/my_traj/odometry and frame my_traj/base_link" in printed
+    assert "note: trajectory '2nd traj' exported as /fusion_vo/t_2nd_traj/odometry" in printed
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    topics, frames = set(), set()
+    with open(out, "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages():
+            topics.add(channel.topic)
+            msg = store.deserialize_cdr(message.data, schema.name)
+            frames.update(tf.child_frame_id for tf in msg.transforms) if channel.topic == "/tf" else \
+                frames.add(msg.child_frame_id)
+    assert {"/fusion_vo/my_traj/odometry", "/fusion_vo/t_2nd_traj/odometry", "/fusion_vo/ekf/odometry"} <= topics
+    assert "t_2nd_traj/base_link" in frames
+    assert all(re.fullmatch(_ROS2_NAME, name) for name in topics | frames), topics | frames
+
+
+def test_export_of_two_names_ros_2_would_see_as_one_names_both(run_folder, tmp_path, capsys):
+    for name in ("my-traj", "my_traj"):
+        shutil.copy(run_folder / "ekf.tum", run_folder / f"{name}.tum")
+    status, _, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
+    assert_error(status, err, "'my-traj' and 'my_traj'", "/fusion_vo/my_traj/odometry")
+    assert not (tmp_path / "x.mcap").exists()
+
+
 # ------------------------------------------------------------------ import-bag: a topic without messages
 BAGS = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
 
