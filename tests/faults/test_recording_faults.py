@@ -583,3 +583,24 @@ def test_a_recorded_value_beyond_its_physical_range_names_the_file_and_line(reco
     with pytest.raises(InputError) as info:
         rec.odom() if stream == "odom0" else rec.gps()
     assert str(info.value).startswith(f"{path}:6: {expected}")
+
+
+def test_a_requested_sensor_whose_every_reading_is_gated_is_a_warning(recording, tmp_path, capsys, caplog):
+    """A range0/ all at 1000 m, asked for with --sensors: exit 0 without a word (only summary.json said
+    'used 0, gated 82')."""
+    import json
+    import logging
+
+    t = [int(_field(recording / "imu0" / "data.csv", i, 0)) for i in range(0, len(_rows(recording / "imu0" / "data.csv")) - 1, 2)]
+    (recording / "range0").mkdir()
+    (recording / "range0" / "data.csv").write_text("#timestamp [ns],distance [m]\n" +
+                                                   "".join(f"{ti},1000.0\n" for ti in t))
+    with caplog.at_level(logging.WARNING):
+        status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--sensors", "camera,wheel,imu,range",
+                               "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    note = "range contributed nothing to the ekf, ekf_smoothed estimate: none of its measurements was used ("
+    assert f"note: {note}" in out and "gated)" in out
+    assert any(note in n for n in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"])
+    assert any(note in r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
+    assert "contributed nothing" not in out.replace(note, "")  # the other sensors did contribute
