@@ -87,7 +87,7 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         files = find_trajectories(run_dir)
         sequence = resolve_sequence(run_dir, read_run_config(run_dir), sequence_dir)
         gt = read_groundtruth(sequence / GROUNDTRUTH_CSV)
-        results = evaluate_trajectories(gt, files)
+        results = evaluate_trajectories(gt, files, sequence / GROUNDTRUTH_CSV)
         table[label] = {name: r.figures for name, r in results.items()}
         overlay[label] = {name: r.anchored for name, r in results.items()}
         sequences.append(sequence.resolve())

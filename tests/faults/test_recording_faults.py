@@ -415,6 +415,25 @@ def wheel_yaml_integer_of_5001_digits(rec):
 FAULTS.append(wheel_yaml_integer_of_5001_digits)
 
 
+def latin_1_byte_in_the_imu_header(rec):
+    """'not a text CSV file' named no line."""
+    p = rec / "imu0" / "data.csv"
+    data = p.read_bytes()
+    p.write_bytes(data[:10] + b"\xe9" + data[11:])  # one byte of the header's first column name
+    return "imu0/data.csv:1: not a text CSV file: byte 0xe9 is not UTF-8", None
+
+
+def latin_1_byte_in_a_frame_name(rec):
+    p = rec / "cam0" / "data.csv"
+    lines = p.read_bytes().split(b"\n")
+    lines[4] = lines[4][:-5] + b"\xe9.png"
+    p.write_bytes(b"\n".join(lines))
+    return "cam0/data.csv:5: not a text CSV file: byte 0xe9", None
+
+
+FAULTS += [latin_1_byte_in_the_imu_header, latin_1_byte_in_a_frame_name]
+
+
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.__name__ for f in FAULTS])
 def test_broken_recording_is_one_line_naming_the_file_and_nothing_is_written(fault, recording, tmp_path, capsys,
                                                                              monkeypatch):
@@ -604,3 +623,17 @@ def test_a_requested_sensor_whose_every_reading_is_gated_is_a_warning(recording,
     assert any(note in n for n in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"])
     assert any(note in r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
     assert "contributed nothing" not in out.replace(note, "")  # the other sensors did contribute
+
+
+def test_ground_truth_with_two_poses_at_the_drive_s_end_names_it_not_the_clocks(recording, tmp_path, capsys):
+    """Two poses, the first at the drive's end: the run failed naming OUT/vo.tum (a file the failed run does
+    not keep) and asked whether the clocks differ."""
+    p = recording / "state_groundtruth_estimate0" / "data.csv"
+    lines = _rows(p)
+    last = lines[-1].split(",")
+    p.write_text("\n".join([lines[0], lines[-1], ",".join([str(int(last[0]) + 10**9)] + last[1:])]) + "\n")
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf")
+    assert_error(status, err, f"{p}: only 0 of its 2 poses lie within the time span of trajectory",
+                 "the evaluation needs two")
+    assert "clock" not in err and str(tmp_path / "out") not in err
+    assert not (tmp_path / "out").exists()
