@@ -51,6 +51,7 @@ from threadpoolctl import threadpool_limits
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
 from frontends.config import Range, check_ranges
+from fusion_vo.choices import FRONTENDS
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
@@ -73,7 +74,8 @@ class OdometryConfig:
     Attributes
     ----------
     frontend : str
-        ``"klt"`` (pyramidal Lucas-Kanade tracking) or ``"features"`` (corners, descriptors, matching).
+        ``"klt"`` (pyramidal Lucas-Kanade tracking), ``"features"`` (corners, descriptors, matching) or
+        ``"direct"`` (whole-image alignment).
     frontend_options : dict
         Options of the chosen frontend (see ``frontends.klt.KltConfig`` / ``frontends.features.FeatureConfig``).
     height : float or None
@@ -157,6 +159,8 @@ class OdometryConfig:
     }
 
     def __post_init__(self) -> None:
+        if self.frontend not in FRONTENDS:  # (a wrong name was accepted until the run built the frontend)
+            raise ValueError(f"frontend must be one of {', '.join(FRONTENDS)}, not {self.frontend!r}")
         check_ranges(self, self.RANGES)
         if self.threads is not None and not isinstance(self.threads, int):
             raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")

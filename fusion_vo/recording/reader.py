@@ -93,6 +93,8 @@ class Recording:
     """
 
     def __init__(self, path: str | Path):
+        if isinstance(path, (str, bytes)) and not path.strip():  # Path("") is the current folder
+            raise InputError(f"no recording folder given ({path!r}: an empty name would read the current folder)")
         self.path = Path(path)
         if not self.path.exists():
             raise InputError("recording folder not found", self.path)
