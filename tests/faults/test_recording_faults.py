@@ -579,14 +579,18 @@ def test_gps_yaml_pose_and_numbers_are_checked_like_every_sensor_yaml(tmp_path, 
     assert info.value.path == p
 
 
-@pytest.mark.parametrize("stream, header, row, expected", [
+#: values beyond their physical range in the streams a run reads only when asked for: (stream, header, row, message)
+PHYSICAL_RANGE_FAULTS = [
     ("odom0", "#timestamp [ns],vx [m/s],vy [m/s],wz [rad/s]", "{t},1e300,0,0", "speed [m/s] 1e+300 is beyond ±100"),
     ("odom0", "#timestamp [ns],vx [m/s],vy [m/s],wz [rad/s]", "{t},0.1,0,-500", "yaw rate [rad/s] -500 is beyond ±100"),
     ("gps0", "#timestamp [ns],latitude [deg],longitude [deg],altitude [m],e [m],n [m],u [m]",
      "{t},47.4,8.5,1e300,0,0,0", "altitude [m] 1e+300 is beyond ±100000"),
     ("gps0", "#timestamp [ns],latitude,longitude,altitude,e,n,u,status,covariance_type,cov_ee,cov_en,cov_nn",
      "{t},47.4,8.5,400,0,0,0,0,2,1e300,0,1", "covariance [m^2] 1e+300 is beyond ±1e+12"),
-])
+]
+
+
+@pytest.mark.parametrize("stream, header, row, expected", PHYSICAL_RANGE_FAULTS)
 def test_a_recorded_value_beyond_its_physical_range_names_the_file_and_line(recording, stream, header, row, expected):
     """The streams a run reads only when asked for (odometry twist, GPS): read here directly."""
     from fusion_vo.errors import InputError
