@@ -111,6 +111,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         result.notes[:0] = pause_notes(bridged, t_first)
         for text in result.notes:
             logger.info("%s", text)
+        _note_silent_sensors(result)
         return result
     # fuse the pieces between the pauses on their own and chain them
     pieces = split(streams, cut)
@@ -160,7 +161,24 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
                             "are those of the longest piece")
     for text in result.notes:
         logger.info("%s", text)
+    _note_silent_sensors(result)
     return result
+
+
+def _note_silent_sensors(result: FusionResult) -> None:
+    """A note and a warning for each sensor that had measurements but none entered a backend's estimate
+    (every reading gated, late or outside the fused span): asked for, it contributed nothing."""
+    silent: dict[str, tuple[list[str], SensorCount]] = {}
+    for backend_name, counts in result.counts.items():
+        for sensor, count in counts.items():
+            if sensor != "standstill" and count.used == 0 and count.gated + count.late + count.missing > 0:
+                silent.setdefault(sensor, ([], count))[0].append(backend_name)
+    for sensor, (names, count) in silent.items():
+        why = ", ".join(f"{n} {what}" for what, n in (("gated", count.gated), ("late", count.late),
+                                                       ("node intervals missing", count.missing)) if n)
+        text = f"{sensor} contributed nothing to the {', '.join(names)} estimate: none of its measurements was used ({why})"
+        result.notes.append(text)
+        logger.warning("%s", text)
 
 
 def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,

@@ -14,6 +14,7 @@ import numbers
 from dataclasses import dataclass, field
 
 from fusion_vo.errors import InputError
+from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, MAX_POSITION_M
 from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
@@ -191,9 +192,10 @@ class FusionConfig:
         (default 0.001; a median over many samples at rest).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
-        finder (default None: taken from the camera's ``T_BS`` by the caller; else positive).
+        finder (default None: taken from the camera's ``T_BS`` by the caller; else in (0, 100]).
     initial_pose : tuple
-        ``(x, y, yaw)`` of the first node, three finite numbers [m, m, rad] (default the origin).
+        ``(x, y, yaw)`` of the first node [m, m, rad]: x and y within 1e7 m, the yaw in [-2π, 2π] (default
+        the origin).
     initial_velocity_sigma : float
         Prior standard deviation of the initial speed [m/s] (default 0.5).
     wheel, odom, imu, range : WheelNoise, WheelNoise, ImuNoise, RangeNoise
@@ -217,6 +219,11 @@ class FusionConfig:
         Prior and random walk of the state variables registered sensors add, by state name (``initial``,
         ``sigma``, ``random_walk``: :class:`~fusion_vo.sensors.registry.StatePrior`), read from the configuration's
         ``states:`` key (default: as each sensor registers it, ``Sensor.states``).
+
+    Every number has a range (:meth:`validate`, the tables at the end of this module): standard deviations,
+    noise densities and random walks are positive (or not negative) and at most :data:`MAX_SIGMA`; the
+    numbers that set how much work a run does have their own upper bounds (``_AT_MOST``); any other number
+    lies in [0, :data:`MAX_NUMBER`].
     """
 
     step_hz: float = 20.0
@@ -286,7 +293,7 @@ class FusionConfig:
                 raise InputError(f"'{key}' must be positive, not {value}")
             if value < 0:
                 raise InputError(f"'{key}' must not be negative, not {value}")
-            problem = _AT_MOST[leaf].error(f"'{key}'", value) if leaf in _AT_MOST else None
+            problem = _upper_bound(leaf).error(f"'{key}'", value)
             if problem:
                 raise InputError(problem)
         if not self.range.min_range < self.range.max_range:
@@ -294,7 +301,7 @@ class FusionConfig:
                              f"not {self.range.min_range}")
         _check_pose(self.initial_pose)
         if self.camera_height is not None:
-            problem = POSITIVE.error("'camera_height'", self.camera_height)
+            problem = _CAMERA_HEIGHT.error("'camera_height'", self.camera_height)
             if problem:
                 raise InputError(problem)
         for name, prior in self.states.items():
@@ -388,6 +395,29 @@ _RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_
 _AT_MOST = {"step_hz": Range(high=1000), "max_iterations": Range(high=1000), "reweight_passes": Range(high=10),
             "max_odom_delay": Range(high=10), "spike_window": Range(high=50)}
 
+#: the upper bound of every standard deviation, noise density and random walk without one above (``*sigma*``,
+#: ``*_density``, ``*_walk``): its square is a variance (``initial_velocity_sigma: 1.0e300`` overflowed)
+MAX_SIGMA = 1e3
+
+#: the upper bound of every other number without one above, in whatever unit it has (m, s, Hz, rad/s, a
+#: factor, a count): beyond it a value is a typo, not a setting
+MAX_NUMBER = 1e6
+
+#: ``camera_height`` [m] (``odometry.height`` has the same range); ``initial_pose``: x, y [m] and yaw [rad]
+_CAMERA_HEIGHT = Range(0, MAX_CAMERA_HEIGHT_M, open_low=True)
+_POSE_RANGES = (Range(-MAX_POSITION_M, MAX_POSITION_M), Range(-MAX_POSITION_M, MAX_POSITION_M),
+                Range(-2 * math.pi, 2 * math.pi))
+
+
+def _upper_bound(leaf: str) -> Range:
+    """The upper bound of the number field named ``leaf`` (``_AT_MOST``, else :data:`MAX_SIGMA` or
+    :data:`MAX_NUMBER`)."""
+    if leaf in _AT_MOST:
+        return _AT_MOST[leaf]
+    if "sigma" in leaf or leaf.endswith(("_density", "_walk")):
+        return Range(high=MAX_SIGMA)
+    return Range(high=MAX_NUMBER)
+
 
 def _shown(value) -> str:
     text = repr(list(value) if isinstance(value, tuple) else value)
@@ -395,7 +425,8 @@ def _shown(value) -> str:
 
 
 def _check_pose(pose) -> None:
-    """``initial_pose`` must be three finite numbers ``(x, y, yaw)`` (a NaN one made every pose NaN)."""
+    """``initial_pose`` must be three finite numbers ``(x, y, yaw)`` (a NaN one made every pose NaN), x and y
+    within :data:`~fusion_vo.measurements.MAX_POSITION_M` and the yaw within a turn either way."""
     try:
         values = tuple(pose)
     except TypeError:
@@ -403,6 +434,10 @@ def _check_pose(pose) -> None:
     if values is None or len(values) != 3 or not all(
             not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v) for v in values):
         raise InputError(f"'initial_pose' must be three finite numbers (x, y, yaw), not {_shown(pose)}")
+    for name, value, bound in zip(("x", "y", "yaw"), values, _POSE_RANGES):
+        problem = bound.error(f"'initial_pose' {name}", value)
+        if problem:
+            raise InputError(problem)
 
 
 def _number_lists(obj, prefix: str = ""):

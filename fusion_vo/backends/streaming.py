@@ -64,7 +64,9 @@ Measurements older than the history are counted as ``late`` and reported by :met
 Bad input
 ---------
 A measurement with a non-finite time or value, or a time more than ``horizon`` seconds ahead of the
-newest one, is counted as ``gated`` and logged; no exception reaches the caller for bad data.
+newest one, is counted as ``gated``; no exception reaches the caller for bad data. The first of each
+sensor and reason is logged as a warning, then at most one every ``REJECT_LOG_INTERVAL`` seconds with the
+count so far, and :meth:`~StreamingFusion.finish` sums them up in a note.
 Undeclared sensors and bad construction arguments raise :class:`~fusion_vo.errors.InputError`
 (programming errors, not data).
 
@@ -100,6 +102,7 @@ import dataclasses
 import logging
 import math
 import threading
+import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -293,6 +296,7 @@ class StreamingFusion:
         self._camera_frame_errors = bool(camera_frame_errors)
         self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
+        self._rejected: dict[tuple[str, str], list] = {}  # (sensor, reason) -> [count, wall time last logged]
         self._records: list[_NodeRecord | None] = []
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
@@ -372,8 +376,7 @@ class StreamingFusion:
                 values = None if live.take is None else _values(payload) if live.values is None else live.values(payload)
             except (AttributeError, TypeError, ValueError, IndexError) as exc:
                 self._check(sensor)
-                self._count(self._counted[sensor]).gated += 1
-                logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
+                self._reject(self._counted[sensor], "a sample that cannot be read", f"{sample!r:.80}: {exc}")
                 return
             if live.take is None:
                 self._add(sensor, self._synchronised(sensor, t, payload), payload)
@@ -581,6 +584,9 @@ class StreamingFusion:
         if self.config.visual_noise.estimate and "camera" in self.sensors:
             result.notes.append("camera heading noise not estimated in streaming use (fusion.visual_noise.estimate is "
                                 "for batch runs): the stated noise and visual_frame_error were used")
+        if self._rejected:
+            result.notes.append("samples rejected (counted as gated): " + ", ".join(
+                f"{sensor} {n} ({reason})" for (sensor, reason), (n, _) in self._rejected.items()))
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))
@@ -607,15 +613,30 @@ class StreamingFusion:
         except (TypeError, ValueError):
             finite = False
         if not finite:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%s has a non-finite or malformed value; rejected", sensor, t)
+            self._reject(sensor, "a non-finite or malformed value", f"t={t}")
             return False
         if np.isfinite(self._latest) and t > self._latest + self.horizon:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%.3f is more than %.3g s ahead of the newest (t=%.3f); rejected",
-                           sensor, t, self.horizon, self._latest)
+            self._reject(sensor, f"more than {self.horizon:g} s ahead of the newest sample",
+                         f"t={t:.3f}, newest t={self._latest:.3f}")
             return False
         return True
+
+    #: wall-clock seconds between two warnings about samples of one sensor rejected for one reason
+    REJECT_LOG_INTERVAL = 10.0
+
+    def _reject(self, sensor: str, reason: str, detail: str) -> None:
+        """Count a rejected sample as gated and by its reason (summed up in :meth:`finish`'s notes); a warning
+        for the first of each sensor and reason, then at most one every :attr:`REJECT_LOG_INTERVAL` s with the
+        count so far (a stream of NaN gave one warning per sample)."""
+        self._count(sensor).gated += 1
+        entry = self._rejected.setdefault((sensor, reason), [0, -math.inf])
+        entry[0] += 1
+        now = time.monotonic()
+        if now - entry[1] >= self.REJECT_LOG_INTERVAL:
+            entry[1] = now
+            logger.warning("%s sample rejected: %s (%s); %d so far, counted as gated", sensor, reason, detail, entry[0])
+        else:
+            logger.debug("%s sample rejected: %s (%s)", sensor, reason, detail)
 
     def _late(self, sensor: str, t: float, back: int = 2) -> bool:
         """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
