@@ -45,9 +45,11 @@ class EkfConfig:
         height prior holds the common scale of camera and wheels. With a walk as large as the wheels'
         (1e-4), the wheels' slip, shared between the two scale factors, moved the camera's scale: at the
         generator's true noise the fused tracks on ``square`` and ``random60`` were 2 and 1.5 times worse
-        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). Not 0: the graph ties
-        each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too stiff for GTSAM's
-        elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
+        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). At the default priors the
+        walks no longer matter on clean drives: 1e-7 here, or 1e-3 for the wheels, moved no profile's mean ATE
+        ratio to visual odometry by more than 0.01 (docs/decisions/0001-visual-scale-model.md). Not 0: the graph
+        ties each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too
+        stiff for GTSAM's elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
     smoother : bool
         Run the Rauch–Tung–Striebel pass (default True).
     """
