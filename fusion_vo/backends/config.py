@@ -48,9 +48,11 @@ class EkfConfig:
         height prior holds the common scale of camera and wheels. With a walk as large as the wheels'
         (1e-4), the wheels' slip, shared between the two scale factors, moved the camera's scale: at the
         generator's true noise the fused tracks on ``square`` and ``random60`` were 2 and 1.5 times worse
-        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). Not 0: the graph ties
-        each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too stiff for GTSAM's
-        elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
+        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). At the default priors the
+        walks no longer matter on clean drives: 1e-7 here, or 1e-3 for the wheels, moved no profile's mean ATE
+        ratio to visual odometry by more than 0.01 (docs/decisions/0036-visual-scale-model.md). Not 0: the graph
+        ties each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too
+        stiff for GTSAM's elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
     smoother : bool
         Run the Rauch–Tung–Striebel pass (default True).
     """
@@ -139,10 +141,16 @@ class FusionConfig:
         quantile of this probability (degrees of freedom = measurement size) is rejected (default 0.999).
     self_calibration : bool
         Estimate the visual scale (camera height) and the wheel base (default True).
-    visual_scale_sigma, wheel_base_sigma : float
-        Prior standard deviations of those two factors around 1 (default 0.05 each). A
-        ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces ``visual_scale_sigma`` by
-        ``height_sigma / height``.
+    visual_scale_sigma : float
+        Prior standard deviation of the visual scale ``k_v = h_configured / h_true`` around 1 (default 0.002:
+        the camera height is a mounting dimension, measured once, that no tyre, load, slip or floor changes).
+        A ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces it by ``height_sigma / height``. Camera and
+        wheels measure only the ratio ``k_v / k_r``; with these two priors a disagreement ``ρ`` of their
+        distances moves the camera's scale by ``ρ σ_v² / (σ_v² + σ_r²)``: 1 % of it at the defaults (0.002
+        and 0.02), 96 % at the former 0.05 and 0.01, which on clean generated drives put the wheels' radius
+        error into the camera's scale (docs/decisions/0036-visual-scale-model.md).
+    wheel_base_sigma : float
+        Prior standard deviation of the wheel-base factor around 1 (default 0.05).
     visual_frame_error : float
         Fraction of each visual increment's stated variance that is the error of its two frames' own
         measurements rather than of the increment (default 0: independent increments). A frontend that
@@ -157,9 +165,11 @@ class FusionConfig:
         from the camera's and the gyro's heading changes over the recording, without ground truth
         (:mod:`fusion_vo.sensors.visual_noise`; ``estimate``, default False; batch runs only).
     wheel_scale_sigma : float
-        Prior standard deviation of the wheels' distance scale ``k_r`` (their common radius error)
-        around 1 (default 0.01); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml`` replaces it by
-        ``radius_sigma / radius``.
+        Prior standard deviation of the wheels' distance scale ``k_r = r_configured / r_true`` (their common
+        radius error) around 1 (default 0.02: a tyre's effective rolling radius differs from its nominal one
+        by a few per cent with pressure, load and floor); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml``
+        replaces it by ``radius_sigma / radius``. It also sets the prior of the wheels' curvature bias when
+        ``radius_sigma`` is not stated (:class:`~fusion_vo.sensors.wheel.CurvedWheelModel`).
     odom_base_sigma : float
         Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
         (default 0.3: the effective track width of a skid-steered base is known only roughly).
@@ -231,9 +241,9 @@ class FusionConfig:
     reorder_window: float = 0.3
     gate_probability: float = 0.999
     self_calibration: bool = True
-    visual_scale_sigma: float = 0.05
+    visual_scale_sigma: float = 0.002
     wheel_base_sigma: float = 0.05
-    wheel_scale_sigma: float = 0.01
+    wheel_scale_sigma: float = 0.02
     visual_frame_error: float = 0.0
     visual_noise: VisualNoiseConfig = field(default_factory=VisualNoiseConfig)
     odom_base_sigma: float = 0.3

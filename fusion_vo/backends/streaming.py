@@ -206,7 +206,8 @@ class StreamingFusion:
     camera_height_sigma : float, optional
         Its standard deviation [m] (``height_sigma`` of ``cam0/sensor.yaml``): the visual scale's prior,
         as in a batch run (:func:`~fusion_vo.backends.timeline.scale_priors`; default
-        ``config.visual_scale_sigma``).
+        ``config.visual_scale_sigma``, at least one range reading's ``config.range.sigma / camera_height`` when
+        ``range`` is fused).
     range_height_sigma : float, optional
         Given when the visual increments were already scaled with the range finder's heights (an
         offline visual odometry run's ``frame_height_sigma``, typical value): it bounds that prior as in a
@@ -292,7 +293,8 @@ class StreamingFusion:
         self.imu_noise = dict(imu_noise or {})
         self.camera_height = camera_height
         #: the two scales' priors, as a batch run of the same streams takes them
-        self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config)
+        self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config,
+                                    range_fused="range" in self.sensors and range_height_sigma is None)
         self._camera_frame_errors = bool(camera_frame_errors)
         self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
