@@ -14,6 +14,7 @@ import numbers
 from dataclasses import dataclass, field
 
 from frontends.config import AT_LEAST_1, FRACTION, POSITIVE, Range
+from fusion_vo.consistency.config import ConsistencyConfig
 from fusion_vo.errors import InputError
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
@@ -187,6 +188,11 @@ class FusionConfig:
     monitor_bias_sigma : float
         Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
         (default 0.001; a median over many samples at rest).
+    consistency : ConsistencyConfig
+        Before fusion, each stream's stated configuration is checked against the data (the IMU's mounting,
+        the encoders' signs, an odometry twist's sign and frame, the clocks, the camera's and the wheels'
+        scales) and corrected, left out or left as stated, with a sentence naming the file and key
+        (:mod:`fusion_vo.consistency`; ``check``, default True).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller; else positive).
@@ -236,6 +242,7 @@ class FusionConfig:
     monitor_bias_sigma: float = 0.001
     monitor_scale_sigma: float = 0.02
     monitor_whole_fraction: float = 0.5
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
@@ -384,7 +391,9 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
 
 #: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
 #: (:class:`frontends.config.Range`; every other number must not be negative)
-_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
+_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION,
+           "mounting_min_fit": FRACTION, "mounting_tolerance_deg": Range(high=90),
+           "mounting_agreement_deg": Range(high=90)}
 
 #: upper bounds of the numbers that set how much work a run does (nodes, iterations, a search's width, a
 #: window's memory), checked after the rules above, so that a typo (``step_hz: 1e9``, which never finished)

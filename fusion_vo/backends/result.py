@@ -70,6 +70,9 @@ class FusionResult:
     visual_noise : dict
         The camera's heading noise estimated from the gyro's (``fusion.visual_noise.estimate``,
         :class:`~fusion_vo.sensors.visual_noise.VisualNoiseEstimate`); empty when not estimated.
+    consistency : list[dict]
+        What the pre-fusion consistency checks found (:class:`fusion_vo.consistency.finding.Finding`: check,
+        sensor, decision, sentence, estimate), in the order they ran.
     residuals : dict
         Backend -> sensor -> ``(dof, rows)``: the factor graph's per-sensor NIS at its solution, rows
         ``(t, NIS)`` (only with ``GraphConfig.residuals``; :mod:`fusion_vo.backends.residuals`).
@@ -85,6 +88,7 @@ class FusionResult:
     pauses: list[dict] = field(default_factory=list)
     visual_noise: dict = field(default_factory=dict)
     residuals: dict = field(default_factory=dict)
+    consistency: list[dict] = field(default_factory=list)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -113,6 +117,7 @@ class FusionResult:
             "inconsistent": list(self.inconsistent),
             "pauses": list(self.pauses),
             "visual_noise": dict(self.visual_noise),
+            "consistency": list(self.consistency),
         }
 
 

@@ -408,16 +408,13 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     iv.wheel_yaw_ok = np.ones(K, bool)
     iv.wheel_speed_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
-        from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources, gyro_mounting_note
+        from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 
         iv.visual_noise = visual_noise.apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
         notes.extend(ep.note(T[0]) for ep in iv.episodes)
-        hint = gyro_mounting_note(iv, streams.imu)
-        if hint:
-            notes.append(hint)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):
