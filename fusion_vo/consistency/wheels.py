@@ -9,9 +9,9 @@ gyro) the wheels' turn under each of the four sign hypotheses ``(±left, ±right
 reference turn ``θ_ref`` (the gyro's about the body's up axis, else the camera's):
 ``θ_ref ≈ k θ_wheels + c Δt`` with the base factor ``k`` held within ``[1/3, 3]`` (a skid-steered base turns
 less than its wheels say; ``c`` is the gyro's bias). The mismatch of a hypothesis is its residual's norm over
-``‖θ_ref‖ + max_h ‖θ_h‖`` (the same for all four): close to 0 for the right signs, about 0.5 or more for a
-wrong one. The stated signs are contradicted when their mismatch exceeds ``MISMATCH_BAD`` and another
-hypothesis's is below ``MISMATCH_GOOD``; that hypothesis is then used (its counts negated) and the sentence
+``‖θ_ref‖ + max_h ‖θ_h‖`` (the same for all four): below 0.01 for the right signs on the generated drives,
+0.2 to 0.4 for a wrong one. The stated signs are contradicted when their mismatch exceeds ``MISMATCH_BAD``
+and another hypothesis's is below ``MISMATCH_GOOD`` and a third of the stated one's; that hypothesis is then used (its counts negated) and the sentence
 names the column of ``wheel0/data.csv``. When neither the reference nor any hypothesis turns by
 ``min_turn`` in all, there is nothing to compare and the wheels are used as stated, with a warning.
 
@@ -47,7 +47,7 @@ from fusion_vo.measurements import TwistData, WheelData
 
 logger = logging.getLogger(__name__)
 
-MISMATCH_BAD, MISMATCH_GOOD = 0.4, 0.2
+MISMATCH_BAD, MISMATCH_GOOD = 0.15, 0.05
 SIDEWAYS_BAD, SIDEWAYS_GOOD = 0.3, 0.1
 #: the base factor's range in the encoder hypotheses' fits
 BASE_FACTOR = (1.0 / 3.0, 3.0)
@@ -96,7 +96,8 @@ def check_encoder_signs(wheel: WheelData, reference: Cumulative | Steps, ref_nam
     best = min(mismatch, key=mismatch.get)
     figures["mismatch"] = {f"{'+' if h[0] > 0 else '-'}left {'+' if h[1] > 0 else '-'}right": round(m, 3)
                            for h, m in mismatch.items()}
-    if best == (1, 1) or mismatch[(1, 1)] <= MISMATCH_BAD or mismatch[best] >= MISMATCH_GOOD:
+    if (best == (1, 1) or mismatch[(1, 1)] <= MISMATCH_BAD or mismatch[best] >= MISMATCH_GOOD
+            or mismatch[best] > mismatch[(1, 1)] / 3):
         return Finding("wheel sign", "wheel", KEPT, "", figures), wheel
     columns = [c for c, s in zip(("left", "right"), best) if s < 0]
     which = " and ".join(columns)
