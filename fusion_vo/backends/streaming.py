@@ -115,6 +115,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
+from fusion_vo.consistency.live import LiveMounting
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
@@ -333,6 +334,11 @@ class StreamingFusion:
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
                              if self.config.sync_odometry and "imu" in self.sensors else None)
+        # the IMU's stated mounting checked against the data seen so far (fusion_vo.consistency.live)
+        self._mounting = (LiveMounting(self.imu_T_BS, self.config, wheel_config)
+                          if "imu" in self.sensors and self.config.consistency.check else None)
+        self._imu_refused = False
+        self._consistency: list[dict] = []
 
     # ------------------------------------------------------------------ input
     def add(self, sensor: str, sample) -> None:
@@ -366,10 +372,55 @@ class StreamingFusion:
                 self._count(self._counted[sensor]).gated += 1
                 logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
                 return
+            if self._mounting is not None:
+                self._check_mounting(sensor, t, payload)
+            if sensor == "imu" and self._imu_refused:
+                self._count("gyro").gated += 1  # the IMU contradicted its mounting: left out
+                return
             if live.take is None:
                 self._add(sensor, self._synchronised(sensor, t, payload), payload)
             elif self._valid(self._counted[sensor], t, values):
                 live.take(self, payload)
+
+    def _check_mounting(self, sensor: str, t, payload) -> None:
+        """Feed the live IMU mounting check; when it decides, read the IMU with the mounting it found (the
+        samples buffered, and the gyro rates the twist's delay estimate holds, too) or leave it out."""
+        decided = self._mounting.observe(sensor, t, payload)
+        if decided is None:
+            return
+        finding, T = decided
+        self._consistency.append(finding.as_dict())
+        if finding.sentence:
+            self._notes.append(f"live check from t={float(t):.2f}: {finding.sentence}")
+        if T is None:
+            self._imu_refused = True
+        elif finding.decision == "corrected":
+            self._drop_pending()  # a node started with the old mounting is started again with the new one
+            self.imu_T_BS = T
+            # the heading monitor starts again: its windows hold the gyro's and the AHRS's readings about the
+            # old axes (the spans it dropped so far stay in the notes, closed here)
+            episodes = self._monitor.all_episodes(self._t_nodes[-1] if self._t_nodes else float(t))
+            self._monitor = LiveHeadingMonitor(self.config)
+            self._monitor.episodes = episodes
+            if self._twist_delay is not None:
+                self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
+            self._reanchor_ahrs()
+        self._mounting = None
+
+    def _reanchor_ahrs(self) -> None:
+        """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again, to
+        the heading estimated at the last node, as the first heading is aligned to the initial one."""
+        from fusion_vo.sensors.imu import ahrs_heading
+
+        rows = [(t, p) for t, p in self._buffers.get("imu", []) if p[2] is not None]
+        if self._heading_offset is None or not rows or not self._t_nodes:
+            return
+        t_node = self._t_nodes[-1]
+        t, payload = min(rows, key=lambda row: abs(row[0] - t_node))
+        heading = ahrs_heading(ImuData(np.array([t]), np.zeros((1, 3)), np.zeros((1, 3)),
+                                       np.asarray(payload[2], dtype=np.float64).reshape(1, 4), self.imu_T_BS))
+        if heading is not None and heading.valid[0]:
+            self._heading_offset = float(math.remainder(heading.yaw[0] - self._poses[-1][2], 2.0 * math.pi))
 
     def _synchronised(self, stream: str, t, payload):
         """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
@@ -526,6 +577,7 @@ class StreamingFusion:
         counts = self.counts
         result.counts[name] = counts
         result.notes = list(self._notes)
+        result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
             result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "

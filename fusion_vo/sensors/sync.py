@@ -175,6 +175,11 @@ class TwistDelay:
         if not self._odom and t - self._gyro[0][0] > 2.0 * self.span:  # no twist yet: keep the last span only
             self._gyro = [s for s in self._gyro if s[0] >= t - self.span]
 
+    def replace_gyro(self, t, rates) -> None:
+        """Replace the gyro's yaw rates held so far (the IMU's mounting was corrected: they were read about
+        the wrong axis)."""
+        self._gyro = [(float(a), float(b)) for a, b in zip(t, rates)]
+
     def lag(self) -> float:
         """How long [s] after the other streams a twist sample arrives: the delay when positive, else 0."""
         return max(self.delay, 0.0)
