@@ -383,12 +383,13 @@ class StreamingFusion:
                 live.take(self, payload)
 
     def _check_mounting(self, sensor: str, t, payload) -> None:
-        """Feed the live IMU mounting check; when it decides, read the IMU with the mounting it found (the
-        samples buffered, and the gyro rates the twist's delay estimate holds, too) or leave it out."""
+        """Feed the live IMU mounting check (:class:`~fusion_vo.consistency.live.LiveMounting`); when it decides,
+        read the IMU with the mounting it found (the samples buffered, and the gyro rates the twist's delay
+        estimate holds, too) or leave it out."""
         decided = self._mounting.observe(sensor, t, payload)
         if decided is None:
             return
-        finding, T = decided
+        finding, T, final = decided
         self._consistency.append(finding.as_dict())
         if finding.sentence:
             self._notes.append(f"live check from t={float(t):.2f}: {finding.sentence}")
@@ -405,7 +406,8 @@ class StreamingFusion:
             if self._twist_delay is not None:
                 self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
             self._reanchor_ahrs()
-        self._mounting = None
+        if final:
+            self._mounting = None
 
     def _reanchor_ahrs(self) -> None:
         """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again, to

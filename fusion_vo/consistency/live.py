@@ -7,9 +7,11 @@ runs on the samples of the last ``SPAN`` seconds, and again every ``RETRY`` seco
 stated mounting agrees (nothing changes), the data say what it is (the IMU's samples from then on are read
 with the estimated ``T_BS``; so are those buffered and not yet fused), or they contradict it without saying
 what is right (the IMU's later samples are left out). A quarter of a second is enough for gravity, which
-decides alone while the drive has not yet turned: with an accelerometer that measures gravity, the decision
-comes before the first node is fused (they wait ``reorder_window``). Without one it waits for the turns the
-gyro's axis needs, and the IMU is fused as stated until then: the live heading monitor
+decides alone while the drive has not yet turned: with an accelerometer that measures gravity, a wrong
+mounting is corrected before the first node is fused (they wait ``reorder_window``). Such a decision is
+provisional: the check goes on (with the corrected mounting as the stated one) until the gyro's axis has
+been seen, which confirms it or, disagreeing with gravity, leaves the IMU out. Without gravity the check
+waits for the turns the gyro's axis needs, and the IMU is fused as stated until then: the live heading monitor
 (:mod:`fusion_vo.backends.live_monitor`) drops a gyro that contradicts the other heading sources meanwhile,
 but what the backends learned from it stays (robot_localization's Husky log imported without its IMU
 transform: deciding from gravity at 0.3 s, the streaming EKF and iSAM2 end 2.53 and 2.54 m RMS from the
@@ -28,7 +30,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from fusion_vo.consistency import mounting
-from fusion_vo.consistency.finding import CORRECTED, REFUSED, UNDECIDED, Finding
+from fusion_vo.consistency.finding import CORRECTED, KEPT, REFUSED, UNDECIDED, Finding
 from fusion_vo.consistency.signals import motion_reference
 from fusion_vo.measurements import ImuData, TwistData, WheelData
 
@@ -64,10 +66,11 @@ class LiveMounting:
         self._next: float | None = None
         self.finding: Finding | None = None
 
-    def observe(self, sensor: str, t: float, payload) -> tuple[Finding, np.ndarray | None] | None:
-        """Record one sample (as :meth:`StreamingFusion.add` reads it); returns ``(finding, T_BS)`` when the
-        check has just decided (``T_BS`` the mounting to use from now on, None to leave the IMU out when
-        refused, the stated one when kept), else None."""
+    def observe(self, sensor: str, t: float, payload) -> tuple[Finding, np.ndarray | None, bool] | None:
+        """Record one sample (as :meth:`StreamingFusion.add` reads it); returns ``(finding, T_BS, final)`` when
+        the check has just decided (``T_BS`` the mounting to use from now on, None to leave the IMU out when
+        refused, the stated one when kept; ``final`` when the gyro's axis was part of the decision, after which
+        nothing more is checked), else None."""
         try:
             t = float(t)
             if sensor == "imu":
@@ -122,15 +125,17 @@ class LiveMounting:
         except (ValueError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
             logger.info("live IMU mounting check not made at t=%.2f: %s", now, exc)
             return None
-        if finding.decision == UNDECIDED:
-            return None
+        final = est.gyro_z is not None and est.gyro_fit >= cfg.consistency.mounting_min_fit
+        if finding.decision == UNDECIDED or (finding.decision == KEPT and not final):
+            return None  # (gravity alone agreeing: the gyro's axis is still to be seen)
         self.finding = finding
         finding.estimate["decided_at"] = round(now, 3)
         if finding.decision == CORRECTED:
             T = self.T_BS.copy()
             T[:3, :3] = est.R_BS
-            return finding, T
-        return finding, (None if finding.decision == REFUSED else self.T_BS)
+            self.T_BS = T  # checked from now on as the mounting stated
+            return finding, T, final
+        return finding, (None if finding.decision == REFUSED else self.T_BS), final or finding.decision == REFUSED
 
     def body_rates(self, T_BS: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Times and body yaw rates of the IMU samples still held, read with ``T_BS``."""

@@ -169,8 +169,8 @@ def _gyro_axis(imu: ImuData, ref: Motion, config: ConsistencyConfig, max_gap: fl
         g, ok = axes.between(shifted.t0, shifted.t1, max_gap)
         turn = float(np.abs(ref.turn[ok]).sum())
         if np.count_nonzero(ok) < 10 or turn < config.min_turn:
-            est.why = (f"the {ref.name} turns {turn:.2f} rad in all where the IMU has samples (at least "
-                       f"{config.min_turn:g} needed)")
+            est.why = (f"the {ref.name} {'turn' if ref.name == 'wheels' else 'turns'} {turn:.2f} rad in all where the "
+                       f"IMU has samples, at least {config.min_turn:g} needed")
             return
         g, y, dt = g[ok], ref.turn[ok], shifted.dt[ok]
         axis = principal_axis(g)
@@ -305,8 +305,7 @@ def decide(imu: ImuData, est: MountingEstimate, config: ConsistencyConfig) -> Fi
     figures = est.as_dict()
     if not counted:
         why = est.why or f"the gyro's best axis explains {100 * est.gyro_fit:.0f} % of the {est.reference}'s turn"
-        gravity = ("" if est.gravity_norm == 0 else
-                   f"; the accelerometer's mean ({est.gravity_norm:.2f} m/s²) is not gravity")
+        gravity = f"; the accelerometer's mean ({est.gravity_norm:.2f} m/s²) is not gravity"
         return Finding("mounting", "imu", UNDECIDED,
                        f"imu0/sensor.yaml: T_BS not checked against the data ({why}{gravity}); the IMU is used as "
                        "stated", figures)

@@ -101,12 +101,14 @@ def check_encoder_signs(wheel: WheelData, reference: Cumulative | Steps, ref_nam
         return Finding("wheel sign", "wheel", KEPT, "", figures), wheel
     columns = [c for c, s in zip(("left", "right"), best) if s < 0]
     which = " and ".join(columns)
+    subject = f"the {which} encoder counts" if len(columns) == 1 else "both encoders count"
     fixed = dataclasses.replace(wheel, left=best[0] * np.asarray(wheel.left, dtype=np.int64),
                                 right=best[1] * np.asarray(wheel.right, dtype=np.int64))
     return (Finding("wheel sign", "wheel", CORRECTED,
-                    f"wheel0/data.csv: the {which} encoder counts backwards (with its counts negated the wheels' "
-                    f"turn follows the {ref_name}'s, mismatch {mismatch[best]:.2f}, as recorded {mismatch[(1, 1)]:.2f}); "
-                    f"this run negates the {which} column: fix the encoder's direction or negate the column", figures),
+                    f"wheel0/data.csv: {subject} backwards (negated, the wheels' turn follows the {ref_name}'s: "
+                    f"mismatch {mismatch[best]:.2f}, as recorded {mismatch[(1, 1)]:.2f}); this run negates the {which} "
+                    f"column{'s' if len(columns) > 1 else ''}: fix the encoder's direction or negate the column in the "
+                    "file", figures),
             fixed)
 
 
@@ -192,7 +194,9 @@ def check_twist_frame(odom: TwistData, camera: Steps | None, max_gap: float) -> 
         what = ("its velocity turns with the robot's heading: vx, vy are in the odometry frame, not the robot's "
                 "(child_frame_id)")
     else:
-        what = f"its axes are turned by {math.degrees(alpha) % 360:.0f}° from the robot's (vx, vy swapped or negated)"
+        deg = math.degrees(math.remainder(alpha, 2.0 * math.pi))
+        what = (f"its x axis points {abs(deg):.0f}° {'left' if deg > 0 else 'right'} of the robot's forward axis "
+                "(vx, vy swapped or negated)")
     return (Finding("twist frame", "odom", CORRECTED,
                     f"odom0/data.csv: {what} ({100 * stated:.0f} % of the velocity sideways as recorded, "
                     f"{100 * share:.1f} % in the robot's frame); this run turns vx, vy into the robot's frame: write "
