@@ -115,7 +115,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
-from fusion_vo.consistency.live import LiveMounting
+from fusion_vo.consistency.live import LiveMounting, aligned_offset
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
@@ -406,23 +406,22 @@ class StreamingFusion:
             if self._twist_delay is not None:
                 self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
             self._reanchor_ahrs()
+            if self._ekf is not None:  # the bias the readings about the wrong axis taught the filter, replaced
+                bias, sigma = self._mounting.gyro_bias or (0.0, self.config.imu.gyro_bias_sigma)
+                self._ekf.reset_state("gyro_bias", bias, max(sigma, self.config.monitor_bias_sigma))
         if final:
             self._mounting = None
 
     def _reanchor_ahrs(self) -> None:
-        """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again, to
-        the heading estimated at the last node, as the first heading is aligned to the initial one."""
-        from fusion_vo.sensors.imu import ahrs_heading
-
-        rows = [(t, p) for t, p in self._buffers.get("imu", []) if p[2] is not None]
-        if self._heading_offset is None or not rows or not self._t_nodes:
+        """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again as if
+        from the start: its first orientation gives the initial heading (the headings estimated since may carry
+        what the old mounting did to them; the AHRS, absolute, takes it out)."""
+        first = self._mounting.first_orientation
+        if self._heading_offset is None or first is None:
             return
-        t_node = self._t_nodes[-1]
-        t, payload = min(rows, key=lambda row: abs(row[0] - t_node))
-        heading = ahrs_heading(ImuData(np.array([t]), np.zeros((1, 3)), np.zeros((1, 3)),
-                                       np.asarray(payload[2], dtype=np.float64).reshape(1, 4), self.imu_T_BS))
-        if heading is not None and heading.valid[0]:
-            self._heading_offset = float(math.remainder(heading.yaw[0] - self._poses[-1][2], 2.0 * math.pi))
+        offset = aligned_offset(self.imu_T_BS, first, float(self.config.initial_pose[2]))
+        if offset is not None:
+            self._heading_offset = offset
 
     def _synchronised(self, stream: str, t, payload):
         """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far

@@ -59,7 +59,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from fusion_vo.consistency.config import ConsistencyConfig
 from fusion_vo.consistency.finding import CORRECTED, KEPT, REFUSED, UNDECIDED, Finding
@@ -90,7 +89,8 @@ class MountingEstimate:
     per radian of the gyro's; ``delay``: the reference's delay behind the gyro [s] (0 when none found);
     ``heading_sigma_deg``: standard error of the axes' heading about the vertical from the accelerations
     (inf when not estimated); ``R_BS``: the estimated rotation (None without an up axis); ``why``: why an
-    estimate from the gyro could not be made.
+    estimate from the gyro could not be made; ``gyro_bias``, ``gyro_bias_sigma``: the gyro's bias about its
+    axis [rad/s] from the same fit, and its standard error (None, inf without it).
     """
 
     reference: str
@@ -105,6 +105,8 @@ class MountingEstimate:
     heading_sigma_deg: float = math.inf
     R_BS: np.ndarray | None = None
     why: str = ""
+    gyro_bias: float | None = None
+    gyro_bias_sigma: float = math.inf
 
     def as_dict(self) -> dict:
         def vec(v):
@@ -190,6 +192,11 @@ def _gyro_axis(imu: ImuData, ref: Motion, config: ConsistencyConfig, max_gap: fl
         fit = explained(y, X @ b, base)
         if name == "gyro":
             est.gyro_z, est.gyro_fit, est.turn_scale = axis, fit, float(b[0])
+            if b[0] > 0:  # θ_ref = k (θ + b_g Δt) + c Δt: the gyro's bias about the axis is -c / k
+                res = y - X @ b
+                cov = float(res @ res) / max(len(y) - 2, 1) * np.linalg.inv(X.T @ X)
+                est.gyro_bias = -float(b[1] / b[0])
+                est.gyro_bias_sigma = float(np.sqrt(max(cov[1, 1], 0.0))) / float(b[0])
         else:
             est.stated_fit = fit
 
@@ -283,6 +290,8 @@ def rotation(up: np.ndarray, forward: np.ndarray | None, stated: np.ndarray) -> 
     ``align_vectors``, the up axis exactly), or, without ``forward``, the stated ``R_BS`` turned by the
     smallest rotation that takes its up axis to ``up``; snapped to an axis-aligned rotation within
     ``SNAP_DEG``."""
+    from scipy.spatial.transform import Rotation  # (scipy loads only when an IMU is checked)
+
     if forward is not None:
         r, _ = Rotation.align_vectors([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], [up, forward], weights=[np.inf, 1.0])
         R = r.as_matrix()
@@ -366,6 +375,8 @@ def yaml_rows(T: np.ndarray) -> str:
 def static_tf(T: np.ndarray, parent: str = "base_link", child: str = "imu_link") -> str:
     """``x y z yaw pitch roll parent child`` of ``T_BS`` (``static_transform_publisher``'s order,
     ``R = Rz(yaw) Ry(pitch) Rx(roll)``; the frame names are those of a usual bag: put the bag's own)."""
+    from scipy.spatial.transform import Rotation
+
     yaw, pitch, roll = Rotation.from_matrix(np.asarray(T, dtype=np.float64)[:3, :3]).as_euler("ZYX")
     x, y, z = np.asarray(T, dtype=np.float64)[:3, 3]
     return " ".join(_number(v) for v in (x, y, z, yaw, pitch, roll)) + f" {parent} {child}"
