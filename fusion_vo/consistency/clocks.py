@@ -97,9 +97,9 @@ def check_clocks(streams, max_delay: float):
 
     figures = {f"{a} behind {b}": None if d is None else round(d, 4) for (a, b), d in delays.items()}
     if all(d is None for d in delays.values()):
-        return [Finding("clock", "all", UNDECIDED,
-                        f"the clocks of {', '.join(FILES[n] for n in names)} not checked against each other (their "
-                        "yaw rates do not correlate: too little turning); the streams are used as stamped", figures)], streams
+        sentence = (f"the clocks of {', '.join(FILES[n] for n in names)} not checked against each other (their yaw "
+                    "rates do not correlate: too little turning); the streams are used as stamped")
+        return [Finding("clock", "all", UNDECIDED, sentence, figures)], streams
     shifts: dict[str, tuple[float, list[str]]] = {}
     ref = names[0]
     if len(names) == 3:

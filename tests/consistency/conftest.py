@@ -12,6 +12,7 @@ import pytest
 from fusion_vo.simulation import simulate
 
 sys.path.insert(0, str(Path(__file__).parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))  # broken_recordings
 
 #: a 30 s random drive whose camera is a token (64 x 36 at 5 Hz: the checks here use wheels, IMU, twist)
 TOKEN_CAMERA = {"width": 64, "height": 36, "fu": 42.0, "fv": 42.0, "cu": 31.5, "cv": 17.5, "camera_rate": 5.0,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import ate, read_tum
-from faults import flip_left_encoder, shift_clock, state_imu_mounting, turn_imu, twist_from_truth
+from broken_recordings import flip_left_encoder, shift_clock, state_imu_mounting, turn_imu, twist_from_truth
 
 from fusion_vo.cli.main import main
 
@@ -94,7 +94,7 @@ def test_twist_in_another_frame_is_turned_into_the_robots(drive, tmp_path, frame
 def test_twist_turning_the_wrong_way_is_negated(drive, tmp_path):
     import shutil
 
-    from faults import columns, write_csv
+    from broken_recordings import columns, write_csv
 
     tracks = {}
     for name in ("right", "negated"):
@@ -141,7 +141,7 @@ def test_drive_too_straight_to_decide_leaves_the_streams_as_stated(tmp_path):
     """A straight drive whose accelerometer has no gravity in it: nothing turns, so neither the clocks nor the
     gyro's axis can be estimated; the run says so and its track is the one without the checks. (The encoders'
     signs can: a wheel counting backwards would make a straight drive turn.)"""
-    from faults import columns, write_csv
+    from broken_recordings import columns, write_csv
 
     from fusion_vo.simulation import simulate
 

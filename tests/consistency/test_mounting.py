@@ -104,3 +104,12 @@ def test_valid_streams_are_fused_as_without_the_checks(streams):
     on = fuse(streams, "ekf", FusionConfig())
     assert {f["decision"] for f in on.consistency} == {"kept"}, on.consistency
     np.testing.assert_array_equal(on.trajectories["ekf"].xyyaw, fuse(streams, "ekf", off).trajectories["ekf"].xyyaw)
+
+
+def test_gravity_alone_disagreeing_leaves_the_imu_as_stated_with_a_warning(streams):
+    """The gyro turns about the stated axis (what the backends read); only the accelerometer's axes differ."""
+    broken = dataclasses.replace(streams, imu=dataclasses.replace(streams.imu, accel=streams.imu.accel @ ON_ITS_SIDE))
+    checked = check_streams(broken, FusionConfig())
+    found = findings(checked)["mounting"]
+    assert found.decision == "undecided" and "gravity lies 90° from it" in found.sentence, found
+    assert checked.streams.imu is broken.imu

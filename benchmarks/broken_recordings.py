@@ -1,4 +1,8 @@
-"""Edits that make a generated recording contradict itself, one stream at a time."""
+"""Edits that make a generated recording contradict itself, one stream at a time.
+
+Used by ``benchmarks/contradictions.py`` and ``tests/consistency``: each function rewrites one file of a
+recording folder (a copy: they edit in place).
+"""
 
 from __future__ import annotations
 
