@@ -1,10 +1,10 @@
 """The IMU mounting check in streaming use, on the samples seen so far.
 
 :class:`~fusion_vo.backends.streaming.StreamingFusion` hands every sample to :class:`LiveMounting` as it
-arrives. Once the IMU and a reference (the camera's increments, else the wheels' ticks, else the odometry
-twist) have both been seen for ``MIN_SPAN`` seconds, the batch check (:mod:`fusion_vo.consistency.mounting`)
-runs on the samples of the last ``SPAN`` seconds, and again every ``RETRY`` seconds until it decides: the
-stated mounting agrees (nothing changes), the data say what it is (the IMU's samples from then on are read
+arrives. Once the IMU has been seen for ``MIN_SPAN`` seconds, the batch check
+(:mod:`fusion_vo.consistency.mounting`) runs on the samples of the last ``SPAN`` seconds (the gyro against
+the camera's increments, else the wheels' ticks, else the odometry twist), and again every ``RETRY``
+seconds until it decides: the stated mounting agrees (nothing changes), the data say what it is (the IMU's samples from then on are read
 with the estimated ``T_BS``; so are those buffered and not yet fused), or they contradict it without saying
 what is right (the IMU's later samples are left out). A quarter of a second is enough for gravity, which
 decides alone while the drive has not yet turned: with an accelerometer that measures gravity, a wrong
@@ -102,7 +102,7 @@ class LiveMounting:
                 return None
         except (TypeError, ValueError, IndexError, AttributeError):
             return None
-        if not self.imu or not (self.camera or self.wheel or self.odom) or not np.isfinite(t):
+        if not self.imu or not np.isfinite(t):  # (gravity needs no reference; the gyro's axis does)
             return None
         if self._start is None:
             self._start = t
@@ -134,7 +134,7 @@ class LiveMounting:
             est = mounting.estimate(data, motion_reference(streams, cfg.max_gap), cfg.consistency, cfg.max_gap,
                                     cfg.max_odom_delay)
             finding = mounting.decide(data, est, cfg.consistency)
-        except (ValueError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        except (ValueError, ZeroDivisionError, IndexError, np.linalg.LinAlgError) as exc:
             logger.info("live IMU mounting check not made at t=%.2f: %s", now, exc)
             return None
         final = est.gyro_z is not None and est.gyro_fit >= cfg.consistency.mounting_min_fit

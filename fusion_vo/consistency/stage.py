@@ -57,7 +57,7 @@ def check_streams(streams, config) -> Checked:
     for step in (_mounting, _wheels, _clocks, _scale):
         try:
             step(out)
-        except (ValueError, ZeroDivisionError, np.linalg.LinAlgError) as exc:
+        except (ValueError, ZeroDivisionError, IndexError, np.linalg.LinAlgError) as exc:
             name = step.__name__.strip("_")
             logger.warning("consistency check of the %s could not be made: %s", name, exc)
             out.findings.append(Finding(name, "", UNDECIDED, f"the {name} check could not be made ({exc}); the "
