@@ -1,17 +1,18 @@
 """The IMU mounting check in streaming use, on the samples seen so far.
 
 :class:`~fusion_vo.backends.streaming.StreamingFusion` hands every sample to :class:`LiveMounting` as it
-arrives. Once the IMU has been seen for ``MIN_SPAN`` seconds, the batch check
-(:mod:`fusion_vo.consistency.mounting`) runs on the samples of the last ``SPAN`` seconds (the gyro against
-the camera's increments, else the wheels' ticks, else the odometry twist), and again every ``RETRY``
-seconds until it decides: the stated mounting agrees (nothing changes), the data say what it is (the IMU's samples from then on are read
-with the estimated ``T_BS``; so are those buffered and not yet fused), or they contradict it without saying
-what is right (the IMU's later samples are left out). A quarter of a second is enough for gravity, which
-decides alone while the drive has not yet turned: with an accelerometer that measures gravity, a wrong
-mounting is corrected before the first node is fused (they wait ``reorder_window``). Such a decision is
-provisional: the check goes on (with the corrected mounting as the stated one) until the gyro's axis has
-been seen, which confirms it or, disagreeing with gravity, leaves the IMU out. Without gravity the check
-waits for the turns the gyro's axis needs, and the IMU is fused as stated until then: the live heading monitor
+arrives. Once the IMU has been seen for ``MIN_SPAN`` seconds (and ``MIN_SAMPLES`` samples), the batch check
+(:mod:`fusion_vo.consistency.mounting`) runs on the samples of the last ``SPAN`` seconds (the gyro against the
+camera's increments, else the wheels' ticks, else the odometry twist), and again every ``RETRY`` seconds until
+it decides: the stated mounting agrees (nothing changes), the data say what it is (the IMU's samples from then
+on are read with the estimated ``T_BS``; so are those buffered and not yet fused), or they contradict it
+without saying what is right (the IMU's later samples are left out). A quarter of a second is enough for
+gravity, which decides alone while the drive has not yet turned: with an accelerometer that measures gravity,
+a wrong mounting is corrected within the first third of a second (ten samples at 30 Hz), before the filter has
+learned much from it. Such a decision is provisional: the check goes on (with the corrected mounting as the
+stated one) until the gyro's axis has been seen, which confirms it or, disagreeing with gravity, leaves the
+IMU out. Without gravity the check waits for the turns the gyro's axis needs, and the IMU is fused as stated
+until then: the live heading monitor
 (:mod:`fusion_vo.backends.live_monitor`) drops a gyro that contradicts the other heading sources meanwhile,
 but what the backends learned from it stays. At a correction the EKF's gyro bias is therefore replaced by
 the one the check's fit gives (``MountingEstimate.gyro_bias``), the AHRS heading aligned again as from its
@@ -45,6 +46,7 @@ logger = logging.getLogger(__name__)
 
 MIN_SPAN = 0.25  # [s]
 RETRY = 5.0  # [s]
+MIN_SAMPLES = 10  # IMU samples before the first check
 SPAN = 120.0  # [s]
 
 
@@ -107,7 +109,7 @@ class LiveMounting:
         if self._start is None:
             self._start = t
             self._next = t + MIN_SPAN
-        if t < self._next:
+        if t < self._next or len(self.imu) < MIN_SAMPLES:
             return None
         self._next = t + RETRY
         return self._check(t)
@@ -119,8 +121,6 @@ class LiveMounting:
         self.wheel = [r for r in self.wheel if r[0] >= lo]
         self.odom = [r for r in self.odom if r[0] >= lo]
         imu = np.array(sorted(self.imu))
-        if len(imu) < 10:
-            return None
         data = ImuData(imu[:, 0], imu[:, 1:4], imu[:, 4:7], None, self.T_BS)
         streams = SimpleNamespace(visual=sorted(self.camera, key=lambda v: v.t1) or None, wheel=None, odom=None)
         if len(self.wheel) >= 3:
