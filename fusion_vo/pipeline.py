@@ -507,7 +507,8 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
     summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses",
-                                                                     "visual_noise", "priors", "time_offsets")}
+                                                                     "visual_noise", "priors", "time_offsets",
+                                                                     "consistency")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates

@@ -9,6 +9,10 @@
 
 ``fuse`` does the same from :class:`~fusion_vo.backends.timeline.SensorStreams` already in memory.
 
+Before anything is fused, the streams pass the consistency checks (:mod:`fusion_vo.consistency`): a stated
+configuration the data contradict (the IMU's mounting, an encoder's sign, a twist's frame, a clock, the
+camera's or the wheels' scale) is corrected or the stream left out, with a sentence in the notes.
+
 Before the streams are merged, an odometry twist is put on the gyro's clock: its delay behind the
 gyro is estimated from the two yaw rates over the whole recording
 (:func:`~fusion_vo.sensors.sync.rate_delay`) and, when it exceeds the twist's sample period (the
@@ -31,6 +35,7 @@ from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sam
 from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
+from fusion_vo.consistency.stage import check_streams
 from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
@@ -89,6 +94,15 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     """
     config = with_recorded_noise(as_config(config), streams)
     names = backend_names(backend)
+    checked = check_streams(streams, config)  # inputs that contradict each other, before any backend
+    result = _fuse_checked(checked.streams, names, checked.config)
+    result.consistency = checked.as_dicts()
+    result.notes[:0] = [n for n in checked.notes if n not in result.notes]
+    return result
+
+
+def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig) -> FusionResult:
+    """:func:`fuse` of streams that passed the consistency checks."""
     result = FusionResult()
     wheel = wheel_dead_reckoning(streams, config)
     if wheel is not None:

@@ -13,6 +13,7 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
+from fusion_vo.consistency.config import ConsistencyConfig
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, MAX_POSITION_M
 from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
@@ -48,7 +49,7 @@ class EkfConfig:
         height prior holds the common scale of camera and wheels. With a walk as large as the wheels'
         (1e-4), the wheels' slip, shared between the two scale factors, moved the camera's scale: at the
         generator's true noise the fused tracks on ``square`` and ``random60`` were 2 and 1.5 times worse
-        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). At the default priors the
+        than with 1e-5. At the default priors the
         walks no longer matter on clean drives: 1e-7 here, or 1e-3 for the wheels, moved no profile's mean ATE
         ratio to visual odometry by more than 0.01 (docs/decisions/0036-visual-scale-model.md). Not 0: the graph
         ties each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too
@@ -200,6 +201,11 @@ class FusionConfig:
     monitor_bias_sigma : float
         Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
         (default 0.001; a median over many samples at rest).
+    consistency : ConsistencyConfig
+        Before fusion, each stream's stated configuration is checked against the data (the IMU's mounting,
+        the encoders' signs, an odometry twist's sign and frame, the clocks, the camera's and the wheels'
+        scales) and corrected, left out or left as stated, with a sentence naming the file and key
+        (:mod:`fusion_vo.consistency`; ``check``, default True).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
         finder (default None: taken from the camera's ``T_BS`` by the caller; else in (0, 100]).
@@ -255,6 +261,7 @@ class FusionConfig:
     monitor_bias_sigma: float = 0.001
     monitor_scale_sigma: float = 0.02
     monitor_whole_fraction: float = 0.5
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
@@ -397,7 +404,9 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
 
 #: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
 #: (:class:`fusion_vo.schema.Range`; every other number must not be negative)
-_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
+_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION,
+           "mounting_min_fit": FRACTION, "mounting_tolerance_deg": Range(high=90),
+           "mounting_agreement_deg": Range(high=90)}
 
 #: upper bounds of the numbers that set how much work a run does (nodes, iterations, a search's width, a
 #: window's memory), checked after the rules above, so that a typo (``step_hz: 1e9``, which never finished)

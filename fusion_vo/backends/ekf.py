@@ -231,6 +231,15 @@ class PlanarEkf:
         return self.kf.P
 
     # ------------------------------------------------------------------ prediction
+    def reset_state(self, name: str, value: float, sigma: float) -> None:
+        """Start the scalar state ``name`` (a column of :data:`STATE_COLUMNS`) again at ``value`` with standard
+        deviation ``sigma`` and no correlation with the others (what was learned of it is forgotten)."""
+        i = self.columns[name].start
+        self.kf.x[i, 0] = value
+        self.kf.P[i, :] = 0.0
+        self.kf.P[:, i] = 0.0
+        self.kf.P[i, i] = sigma**2
+
     def predict(self, dt: float, frame_cov: np.ndarray | None = None) -> np.ndarray:
         """Constant-twist prediction over ``dt``; returns the transition Jacobian ``F``.
 

@@ -118,6 +118,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
+from fusion_vo.consistency.live import LiveMounting, aligned_offset
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsData, GpsFix, ImuData, ImuSample, PoseData, RangeData, RangeSample, TwistData, TwistSample, VisualIncrement, WheelConfig,
@@ -348,6 +349,11 @@ class StreamingFusion:
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
                              if self.config.sync_odometry and "imu" in self.sensors else None)
+        # the IMU's stated mounting checked against the data seen so far (fusion_vo.consistency.live)
+        self._mounting = (LiveMounting(self.imu_T_BS, self.config, wheel_config)
+                          if "imu" in self.sensors and self.config.consistency.check else None)
+        self._imu_refused = False
+        self._consistency: list[dict] = []
 
     # ------------------------------------------------------------------ input
     def add(self, sensor: str, sample) -> None:
@@ -380,10 +386,56 @@ class StreamingFusion:
                 self._check(sensor)
                 self._reject(self._counted[sensor], "a sample that cannot be read", f"{sample!r:.80}: {exc}")
                 return
+            if self._mounting is not None:
+                self._check_mounting(sensor, t, payload)
+            if sensor == "imu" and self._imu_refused:
+                self._count("gyro").gated += 1  # the IMU contradicted its mounting: left out
+                return
             if live.take is None:
                 self._add(sensor, self._synchronised(sensor, t, payload), payload)
             elif self._valid(self._counted[sensor], t, values):
                 live.take(self, payload)
+
+    def _check_mounting(self, sensor: str, t, payload) -> None:
+        """Feed the live IMU mounting check (:class:`~fusion_vo.consistency.live.LiveMounting`); when it decides,
+        read the IMU with the mounting it found (the samples buffered, and the gyro rates the twist's delay
+        estimate holds, too) or leave it out."""
+        decided = self._mounting.observe(sensor, t, payload)
+        if decided is None:
+            return
+        finding, T, final = decided
+        self._consistency.append(finding.as_dict())
+        if finding.sentence:
+            self._notes.append(f"live check from t={float(t):.2f}: {finding.sentence}")
+        if T is None:
+            self._imu_refused = True
+        elif finding.decision == "corrected":
+            self._drop_pending()  # a node started with the old mounting is started again with the new one
+            self.imu_T_BS = T
+            # the heading monitor starts again: its windows hold the gyro's and the AHRS's readings about the
+            # old axes (the spans it dropped so far stay in the notes, closed here)
+            episodes = self._monitor.all_episodes(self._t_nodes[-1] if self._t_nodes else float(t))
+            self._monitor = LiveHeadingMonitor(self.config)
+            self._monitor.episodes = episodes
+            if self._twist_delay is not None:
+                self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
+            self._reanchor_ahrs()
+            if self._ekf is not None:  # the bias the readings about the wrong axis taught the filter, replaced
+                bias, sigma = self._mounting.gyro_bias or (0.0, self.config.imu.gyro_bias_sigma)
+                self._ekf.reset_state("gyro_bias", bias, max(sigma, self.config.monitor_bias_sigma))
+        if final:
+            self._mounting = None
+
+    def _reanchor_ahrs(self) -> None:
+        """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again as if
+        from the start: its first orientation gives the initial heading (the headings estimated since may carry
+        what the old mounting did to them; the AHRS, absolute, takes it out)."""
+        first = self._mounting.first_orientation
+        if self._heading_offset is None or first is None:
+            return
+        offset = aligned_offset(self.imu_T_BS, first, float(self.config.initial_pose[2]))
+        if offset is not None:
+            self._heading_offset = offset
 
     def _synchronised(self, stream: str, t, payload):
         """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
@@ -565,6 +617,7 @@ class StreamingFusion:
         counts = self.counts
         result.counts[name] = counts
         result.notes = list(self._notes)
+        result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
             result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "

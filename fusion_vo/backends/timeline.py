@@ -43,7 +43,7 @@ from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, Visua
 from fusion_vo.sensors import registry
 from fusion_vo.sensors import visual_noise
 from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
-from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources, gyro_mounting_note
+from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 from fusion_vo.sensors.gps import GPS_SNAP
 
 logger = logging.getLogger(__name__)
@@ -393,9 +393,6 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
         notes.extend(ep.note(T[0], T[-1]) for ep in iv.episodes)
-        hint = gyro_mounting_note(iv, streams.imu)
-        if hint:
-            notes.append(hint)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):
