@@ -43,20 +43,20 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "examples"))
+import common
+from common import HUSKY_BAG, HUSKY_IMU_TF
 
-from fusion_vo.simulation.faults import columns, flip_left_encoder, shift_clock, turn_imu, twist_from_truth, write_csv  # noqa: E402
-from husky_gps import HUSKY_IMU_TF, gps_errors, read_gps, wheel_odometry  # noqa: E402
+from fusion_vo import baseline
+from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.evaluation.metrics import gps_errors
+from fusion_vo.backends.batch import streams_from_recording
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.measurements import PoseData
+from fusion_vo.recording import Recording
+from fusion_vo.recording.rosbag import import_bag, parse_static_tf
+from fusion_vo.simulation.faults import columns, flip_left_encoder, shift_clock, turn_imu, twist_from_truth, write_csv
 
-from fusion_vo.backends import FusionConfig, fuse  # noqa: E402
-from fusion_vo.backends.batch import streams_from_recording  # noqa: E402
-from fusion_vo.backends.streaming import streaming_for, time_ordered_messages  # noqa: E402
-from fusion_vo.measurements import PoseData  # noqa: E402
-from fusion_vo.recording import Recording  # noqa: E402
-from fusion_vo.recording.rosbag import import_bag, parse_static_tf  # noqa: E402
-
-BAG = REPO / "tests" / "data" / "robot_localization" / "test1.bag"
+BAG = HUSKY_BAG
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 ON_ITS_SIDE = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
@@ -85,13 +85,13 @@ def husky(tmp: Path) -> None:
     header, t, values = columns(no_gravity / "imu0" / "data.csv")
     values[:, 3:6] = 0.0
     write_csv(no_gravity / "imu0" / "data.csv", header, t, values)
-    t_gps, enu = read_gps(plain)
+    gps = Recording(plain).gps()
 
     def rms(track: PoseData) -> str:
-        return f"{float(np.sqrt(np.mean(gps_errors(track, t_gps, enu) ** 2))):6.2f}"
+        return f"{float(np.sqrt(np.mean(gps_errors(track, gps) ** 2))):6.2f}"
 
     print("\n1. Husky test1.bag, wheel odometry + IMU: RMS distance to the GPS fixes [m] after SE(2) alignment")
-    print(f"   raw wheel odometry: {rms(wheel_odometry(Recording(plain)))}")
+    print(f"   raw wheel odometry: {rms(baseline.raw_odometry(Recording(plain)))}")
     print(f"   {'recording':38s} {'checks':7s} " + " ".join(f"{n:>12s}" for n in FUSED)
           + f" {'stream EKF':>11s} {'stream iSAM2':>12s}")
     for label, seq, checks in (("imported without the transform", plain, False),
@@ -204,7 +204,7 @@ def broken_drives(tmp: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--sections", default="1,2,3", help="which sections to run (default 1,2,3)")
     parser.add_argument("--full", action="store_true", help="section 2 also on hard and random60 (slow)")
     parser.add_argument("--keep", help="write the recordings to this folder and keep them")

@@ -62,6 +62,7 @@ import sys
 import time
 from pathlib import Path
 
+import common
 import numpy as np
 
 from threadpoolctl import threadpool_limits
@@ -247,7 +248,7 @@ def wrong_summary(name: str, rows: list[dict], configs) -> list[str]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = common.parser(__doc__)
     parser.add_argument("--cache", type=Path, required=True, help="folder of the generated drives (made if missing)")
     parser.add_argument("--seeds", type=int, default=10, help="seeds per clean profile (default 10)")
     parser.add_argument("--first-seed", type=int, default=101, help="first seed (default 101)")

@@ -115,11 +115,15 @@ class LiveMounting:
         return self._check(t)
 
     def _check(self, now: float) -> tuple[Finding, np.ndarray | None] | None:
-        lo = now - SPAN
+        # the window ends at the newest IMU sample: a sample of another sensor stamped far ahead (a clock an
+        # hour off, which the stream rejects) empties no window
+        lo = min(now, max(r[0] for r in self.imu)) - SPAN
         self.imu = [r for r in self.imu if r[0] >= lo]
         self.camera = [v for v in self.camera if v.t0 >= lo]
         self.wheel = [r for r in self.wheel if r[0] >= lo]
         self.odom = [r for r in self.odom if r[0] >= lo]
+        if len(self.imu) < MIN_SAMPLES:
+            return None
         imu = np.array(sorted(self.imu))
         data = ImuData(imu[:, 0], imu[:, 1:4], imu[:, 4:7], None, self.T_BS)
         streams = SimpleNamespace(visual=sorted(self.camera, key=lambda v: v.t1) or None, wheel=None, odom=None)

@@ -20,7 +20,9 @@ import pytest
 
 from fusion_vo.backends.result import COV_HEADER, read_pose_covariances
 from fusion_vo.cli.main import main
+from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
@@ -116,10 +118,6 @@ def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_pl
     (fused as stated, the tracks end 20.7 m RMS from the GPS). The consistency check finds the mounting from the
     gyro's turn axis, gravity and the accelerations, fuses the IMU with it and gives the transform to put in
     imu0/sensor.yaml or --static-tf; the tracks land where the right transform puts them (2.52 m)."""
-    from husky_gps import gps_errors, read_gps
-
-    from fusion_vo.measurements import PoseData
-
     seq, out = husky_plain, tmp_path / "OUT"
     assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "all"]) == 0
     summary = json.loads((out / "summary.json").read_text())
@@ -127,21 +125,18 @@ def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_pl
     assert sentence.startswith("imu0/sensor.yaml: T_BS contradicts the data (the body's up is the IMU's +y axis")
     assert "T_BS data: [0.0, 0.0, -1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]" in sentence
     assert '--static-tf "0.0 0.0 0.0 -1.5708 0.0 1.5708 base_link imu_link"' in sentence
-    t_gps, enu = read_gps(seq)
+    gps = Recording(seq).gps()
     for name in ("wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
         t, xy, yaw = _read_tum(out / f"{name}.tum")
-        rms = float(np.sqrt(np.mean(gps_errors(PoseData(t, np.column_stack([xy, yaw])), t_gps, enu) ** 2)))
+        rms = float(np.sqrt(np.mean(gps_errors(PoseData(t, np.column_stack([xy, yaw])), gps) ** 2)))
         assert (rms > 6.0) if name == "wheel" else (rms < 3.0), (name, rms)
 
 
 def test_husky_imu_imported_without_its_mounting_is_found_while_streaming(husky_plain):
     """The same log through streaming fusion: gravity gives the IMU's up axis within a third of a second and the
     streaming EKF lands where the right transform puts it (101 m with the IMU as stated)."""
-    from husky_gps import gps_errors, read_gps
-
     from fusion_vo.backends.batch import streams_from_recording
     from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-    from fusion_vo.recording import Recording
 
     streams = streams_from_recording(Recording(husky_plain), None, ["odom", "imu"])
     fusion = streaming_for(streams, "ekf")
@@ -150,6 +145,6 @@ def test_husky_imu_imported_without_its_mounting_is_found_while_streaming(husky_
     result = fusion.finish()
     (note,) = [n for n in result.notes if n.startswith("live check from")]
     assert float(note.split("t=")[1].split(":")[0]) - streams.imu.t[0] < 0.5, note
-    t_gps, enu = read_gps(husky_plain)
-    rms = float(np.sqrt(np.mean(gps_errors(result.trajectories["ekf"], t_gps, enu) ** 2)))
+    gps = Recording(husky_plain).gps()
+    rms = float(np.sqrt(np.mean(gps_errors(result.trajectories["ekf"], gps) ** 2)))
     assert rms < 3.0, rms

@@ -587,7 +587,8 @@ def test_a_sweep_over_list_values_ranks_and_reports_them_as_json_text(tmp_path):
     import pandas as pd
 
     from fusion_vo.batch.grid import Grid, ParameterSet
-    from fusion_vo.batch.runner import _frame, best_sets, describe_set, write_results
+    from fusion_vo.batch.ranking import best_sets, describe_set
+    from fusion_vo.batch.runner import _frame, write_results
     from fusion_vo.batch.tasks import COLUMNS
 
     key = "fusion.initial_pose"
