@@ -49,7 +49,7 @@ import numpy as np
 from fusion_vo import baseline
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.metrics import align_se2, associate, planar_trajectory
+from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
@@ -61,21 +61,10 @@ DEFAULT_BAG = REPO / "tests" / "data" / "robot_localization" / "test1.bag"
 HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 
-def read_gps(seq: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Times [s] and local ``(e, n)`` [m] of the usable fixes of ``gps0/``."""
-    gps = Recording(seq).gps()
-    return gps.t, gps.enu[:, :2]
-
-
 def distance_travelled(rec: Recording) -> float:
     """Path length of the wheel odometry: the integral of ``|v_x|`` [m]."""
     odom = rec.odom()
     return float(np.sum(np.abs(odom.vx[:-1]) * np.diff(odom.t)))
-
-
-def wheel_odometry(rec: Recording) -> PoseData:
-    """The robot's own wheel odometry (``odom0`` twist) dead-reckoned from the origin."""
-    return wheel_track(twist_to_travel(rec.odom()))
 
 
 #: fusion variants (default configuration otherwise): name -> use the AHRS heading
@@ -115,16 +104,6 @@ def fused_tracks(rec: Recording, backend: str) -> tuple[dict[str, PoseData], lis
     return tracks, notes
 
 
-def gps_errors(track: PoseData, t_gps: np.ndarray, enu: np.ndarray) -> np.ndarray:
-    """Horizontal distances [m] to the fixes after the least-squares SE(2) alignment to them."""
-    inside = (t_gps >= track.t[0]) & (t_gps <= track.t[-1])
-    reference = planar_trajectory(t_gps[inside], enu[inside, 0], enu[inside, 1], np.zeros(np.count_nonzero(inside)))
-    estimate = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
-    ref, est = associate(reference, estimate)
-    aligned = align_se2(ref, est)
-    return np.linalg.norm(aligned.positions_xyz[:, :2] - ref.positions_xyz[:, :2], axis=1)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("bag", nargs="?", default=str(DEFAULT_BAG), help="robot_localization's test1.bag")
@@ -140,20 +119,20 @@ def main(argv: list[str] | None = None) -> int:
             for s in summary.streams:
                 print(f"  {s.stream:6s} {s.topic:34s} {s.written:6d} rows  {s.rate_hz:6.2f} Hz  {s.duration_s:6.1f} s")
             rec = Recording(seq)
-            t_gps, enu = read_gps(seq)
+            gps = rec.gps()
             path = distance_travelled(rec)
-            tracks = {"raw wheel odometry": wheel_odometry(rec),
+            tracks = {"raw wheel odometry": baseline.raw_odometry(rec),
                       "wheel + gyro dead reckoning (no filter)": baseline.wheel_gyro(rec)}
             fused, notes = fused_tracks(rec, args.backend)
             tracks.update(fused)
     except InputError as exc:
         print(f"husky_gps: error: {exc}", file=sys.stderr)
         return 2
-    print(f"\ndistance travelled (wheel odometry): {path:.1f} m; GPS fixes: {len(t_gps)}")
+    print(f"\ndistance travelled (wheel odometry): {path:.1f} m; GPS fixes: {len(gps.t)}")
     print("errors against the GPS fixes after SE(2) alignment:")
     print(f"  {'track':48s} {'RMS m':>7s} {'max m':>7s} {'RMS % of path':>14s}")
     for name, track in tracks.items():
-        err = gps_errors(track, t_gps, enu)
+        err = gps_errors(track, gps)
         rms = float(np.sqrt(np.mean(err**2)))
         print(f"  {name:48s} {rms:7.2f} {err.max():7.2f} {100.0 * rms / path:14.2f}")
     print("\nfusion runs:")

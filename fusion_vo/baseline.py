@@ -43,7 +43,7 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import VisualOdometry, heights_for
 from fusion_vo.recording import Recording
 from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw
-from fusion_vo.sensors.wheel import twist_to_travel
+from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
 
 MAX_CORNERS = 200
 QUALITY = 0.01
@@ -151,6 +151,11 @@ def odometry(rec: Recording) -> tuple[VisualOdometry, list, list, float]:
         if inc is not None:
             increments.append(inc)
     return vo, increments, results, seconds
+
+
+def raw_odometry(rec: Recording) -> PoseData:
+    """The robot's own odometry twist (``odom0``) dead-reckoned from the origin."""
+    return wheel_track(twist_to_travel(rec.odom()))
 
 
 def wheel_gyro(rec: Recording) -> PoseData:

@@ -29,19 +29,14 @@ import functools
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
-from typing import TYPE_CHECKING
+from fusion_vo.choices import BACKENDS, FRONTENDS, SENSORS  # noqa: F401 (re-exported: the names of the choices)
 
 if TYPE_CHECKING:  # the stages, pydantic and OpenCV are loaded when a configuration is built, not for --help
     from pydantic import BaseModel
 
     from fusion_vo.odometry import OdometryConfig
-
-#: the built-in sensors; ``sensors`` and ``--sensors`` take any registered one (:mod:`fusion_vo.sensors.registry`)
-SENSORS = ("camera", "wheel", "imu", "odom", "range", "gps")
-BACKENDS = ("none", "ekf", "gtsam", "all")
-FRONTENDS = ("klt", "features", "direct")
 
 #: fields of OdometryConfig that the run sets itself (from ``frontend`` and the frontend's section)
 _ODOMETRY_EXCLUDE = ("frontend", "frontend_options")

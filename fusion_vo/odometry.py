@@ -23,7 +23,7 @@ derotation, ground geometry, the track) while the frontend measures the next fra
 frontend with a ``set_executor`` method gets one more thread for work it can hand off (KLT: the next
 frame's reference warped by the predicted motion; features: the reference warped for the refinement);
 it shortens the tracking thread but costs thread wake-ups, and on two idle cores it gave no wall-clock
-gain (``benchmarks/bench_handoff.py``), so it is off by default. OpenCV releases the
+gain (docs/decisions/0002-hand-off-thread-off-by-default.md), so it is off by default. OpenCV releases the
 GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
 small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
 flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
@@ -50,12 +50,13 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.choices import FRONTENDS
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
 from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
-from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
+from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
 from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 
@@ -73,7 +74,8 @@ class OdometryConfig:
     Attributes
     ----------
     frontend : str
-        ``"klt"`` (pyramidal Lucas-Kanade tracking) or ``"features"`` (corners, descriptors, matching).
+        ``"klt"`` (pyramidal Lucas-Kanade tracking), ``"features"`` (corners, descriptors, matching) or
+        ``"direct"`` (whole-image alignment).
     frontend_options : dict
         Options of the chosen frontend (see ``frontends.klt.KltConfig`` / ``frontends.features.FeatureConfig``).
     height : float or None
@@ -150,12 +152,15 @@ class OdometryConfig:
 
     #: the range of every number field (:func:`fusion_vo.schema.check_ranges`; ``None`` always passes)
     RANGES: ClassVar[dict[str, Range]] = {
-        "height": POSITIVE, "min_sigma_xy": AT_LEAST_0, "min_sigma_yaw": AT_LEAST_0,  # 0: no floor
-        "max_bad_start_frames": AT_LEAST_1, "focal_length": POSITIVE, "max_bridge": AT_LEAST_0,
+        "height": Range(0, MAX_CAMERA_HEIGHT_M, open_low=True), "min_sigma_xy": Range(0, 10),  # 0: no floor
+        "min_sigma_yaw": Range(0, math.pi), "max_bad_start_frames": Range(1, 1e6), "max_bridge": Range(0, 3600),
+        "focal_length": Range(0, 1e6, open_low=True),  # [px]; checked against the image size when it is used
         "threads": Range(1, 256),  # at most 256: 100000 started threads until the process limit was hit
     }
 
     def __post_init__(self) -> None:
+        if self.frontend not in FRONTENDS:  # (a wrong name was accepted until the run built the frontend)
+            raise ValueError(f"frontend must be one of {', '.join(FRONTENDS)}, not {self.frontend!r}")
         check_ranges(self, self.RANGES)
         if self.threads is not None and not isinstance(self.threads, int):
             raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
@@ -199,6 +204,8 @@ class OdometryResult:
         Visual dead reckoning, one pose per measured frame.
     skipped : list of str
         Frames that could not be loaded (file and reason).
+    failure_reasons : Counter
+        Frames the frontend could not measure, by the frontend's reason (one line each).
     bridged_s : float
         Time spent bridging gaps at constant velocity [s].
     held : list of tuple
@@ -234,6 +241,7 @@ class OdometryResult:
     frame_height_sigma: np.ndarray | None = None
     height_note: str | None = None
     noise_note: str | None = None
+    failure_reasons: Counter = field(default_factory=Counter)
 
     @property
     def n_frames(self) -> int:
@@ -643,6 +651,7 @@ def run_visual_odometry(
     increments: list[VisualIncrement] = []
     frame_t, status, inliers, vel, ratio = [], [], [], [], []
     skipped: list[str] = []
+    reasons: Counter = Counter()
     bad_run = 0
     threads = config.thread_count()
 
@@ -689,6 +698,8 @@ def run_visual_odometry(
             motion = frontend.process(image, frame.t)
             frame_t.append(frame.t)
             status.append(motion.status.value)
+            if motion.status.value not in ("ok", "first"):
+                reasons[" ".join(str(motion.info.get("reason") or motion.status.value).split())] += 1
             inliers.append(motion.n_inliers)
             if post is None:
                 collect(vo.finish(motion, h, h_sigma))
@@ -737,6 +748,7 @@ def run_visual_odometry(
         frame_height_sigma=frame_height_sigma,
         height_note=height_note,
         noise_note=noise_note,
+        failure_reasons=reasons,
     )
 
 

@@ -22,6 +22,10 @@ Every file and folder fusion-vo writes goes through this module, so every output
     next command writing that target moves the new one, complete, into place. While it is open the target
     is locked, so two commands writing the same folder at once fail cleanly instead of mixing their files.
 
+A single picture (``fusion-vo show-matches -o FILE.png``) carries the PNG text ``Software: fusion-vo``
+(:data:`PNG_SOFTWARE`, written by every plot); :func:`check_picture_target` lets a command replace only a
+picture that carries it.
+
 The folder rules (the reason of this module): an existing target is replaced only if it is empty or holds
 the marker file that fusion-vo writes into every output folder of that kind (``marker``); any other folder
 needs ``force=True``. Even with ``force``, the current folder, a folder above it, a folder that holds one
@@ -141,6 +145,42 @@ def write_atomic(path: str | Path, data: bytes | str) -> Path:
             raise OSError(exc.errno, exc.strerror, str(path)) from None
         raise
     return path
+
+
+#: the PNG ``Software`` text of every picture fusion-vo writes (how one it wrote is told from the user's own)
+PNG_SOFTWARE = "fusion-vo"
+
+
+def png_software(path: str | Path) -> str | None:
+    """The ``Software`` text of a PNG file's ``tEXt`` chunks, or ``None`` (no such text, not a PNG, unreadable)."""
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(1 << 20)  # the text chunks of a picture written by matplotlib come first
+    except OSError:
+        return None
+    if not data.startswith(b"\x89PNG\r\n\x1a\n"):
+        return None
+    pos = 8
+    while pos + 8 <= len(data):
+        length, kind = int.from_bytes(data[pos:pos + 4], "big"), data[pos + 4:pos + 8]
+        body = data[pos + 8:pos + 8 + length]
+        if kind == b"tEXt" and b"\0" in body:
+            key, text = body.split(b"\0", 1)
+            if key == b"Software":
+                return text.decode("latin-1")
+        if kind in (b"IDAT", b"IEND"):
+            return None
+        pos += 12 + length
+    return None
+
+
+def check_picture_target(path: str | Path, what: str = "output image") -> None:
+    """Raise :class:`InputError` when ``path`` exists and is not a picture fusion-vo wrote (a file without
+    the PNG text ``Software: fusion-vo``, a folder, a link): it is never overwritten."""
+    path = Path(path)
+    if os.path.lexists(path) and (path.is_symlink() or not path.is_file() or png_software(path) != PNG_SOFTWARE):
+        raise InputError(f"the {what} exists and fusion-vo did not write it; give another file name (or remove "
+                         "it first)", path)
 
 
 def _inside(path: Path, folder: Path) -> bool:

@@ -59,7 +59,7 @@ from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one
 from fusion_vo.evaluation.innovations import from_residuals, write_innovations
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryResult, run_visual_odometry
-from fusion_vo.outputs import OutputFolder, check_replaceable, write_atomic
+from fusion_vo.outputs import OutputFolder, check_outside, check_replaceable, write_atomic
 from fusion_vo.recording import Recording, write_tum
 from fusion_vo.recording.reader import STREAM_FOLDERS, read_groundtruth_csv
 
@@ -198,7 +198,12 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         if odometry.uncalibrated:  # cam0/sensor.yaml may have no intrinsics (the run's own model is checked here)
             from fusion_vo.geometry.camera import uncalibrated_camera
 
-            cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
+            try:
+                cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
+            except InputError as exc:  # a configured focal length out of range for the file's resolution
+                if odometry.focal_length is None or "'focal_length'" not in exc.message:
+                    raise
+                raise _config_error(exc, config_path, "odometry") from None
         else:
             cam = rec.camera  # cam0/sensor.yaml
         if odometry.camera_noise:
@@ -337,7 +342,8 @@ def run_pipeline(
     Parameters
     ----------
     sequence : the recording folder.
-    out_dir : the output folder, created or replaced as a whole (see the module's rules).
+    out_dir : the output folder, created or replaced as a whole (see the module's rules); never inside the
+        recording.
     config : the run's configuration (default: every default).
     progress : callable ``(done, total)`` called after every frame.
     force : replace an output folder that is not empty and was not written by ``fusion-vo run``.
@@ -353,6 +359,7 @@ def run_pipeline(
     out_dir = Path(out_dir)
     read = [Path(sequence)] + ([Path(config_path)] if config_path is not None else [])
     check_replaceable(out_dir, RUN_MARKER, force, read)  # the output folder first: it is quick
+    check_outside(out_dir, [Path(sequence)])  # not even a new folder inside the recording
     inputs = check_inputs(sequence, config, config_path)
     rec, sensors = inputs.recording, inputs.sensors
     summary = RunSummary(sequence=str(rec.path), out_dir=str(out_dir))
@@ -372,7 +379,9 @@ def run_pipeline(
             summary.vo_fps = vo.fps
             summary.vo_seconds = vo.elapsed_s
             if vo.skipped:
-                summary.notes.append(f"{len(vo.skipped)} frames could not be read and were skipped")
+                n = len(vo.skipped)
+                summary.notes.append(f"{n} frame{'s' if n != 1 else ''} could not be read and "
+                                     f"{'were' if n != 1 else 'was'} skipped")
             if vo.height_note:
                 summary.notes.append(vo.height_note)
             if vo.noise_note:
@@ -465,6 +474,10 @@ def _check_camera_result(vo: OdometryResult, rec: Recording, sensors: list[str],
     if ok:
         return
     why = ", ".join(f"{n} {k}" for k, n in sorted(vo.failures.items())) or "none could be read"
+    if vo.failure_reasons:  # the frontend's own reason, most often given (e.g. an OpenCV error on every frame)
+        reason, count = vo.failure_reasons.most_common(1)[0]
+        shown = reason if len(reason) <= 300 else reason[:297] + "..."
+        why += f"; {'every one' if count == sum(vo.failures.values()) else f'{count} of them'}: {shown}"
     others = [s for s in sensors if s in ("wheel", "odom", "imu")]
     if not others:
         first = f"; first unreadable frame: {vo.skipped[0]}" if vo.skipped else ""
@@ -494,7 +507,8 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
                                 "no other sensor: the estimate there is extrapolated")
         summary.notes.append(note)
     summary.fusion = {k: v for k, v in result.summary().items() if k in ("counts", "calibration", "inconsistent", "pauses",
-                                                                     "visual_noise", "priors", "time_offsets")}
+                                                                     "visual_noise", "priors", "time_offsets",
+                                                                     "consistency")}
     shown = {"camera_height": "camera height {:.4f} m", "wheel_base": "wheel base {:.4f} m",
              "gyro_bias": "gyro bias {:.5f} rad/s"}
     for backend_name in ("ekf", "gtsam"):  # the smoothed and online variants share these estimates

@@ -441,19 +441,39 @@ def _range_text(extra: dict | None) -> str:
     high = (")", extra["exclusiveMaximum"]) if "exclusiveMaximum" in extra else \
         ("]", extra["maximum"]) if "maximum" in extra else None
     if low and high:
-        return f"{low[0]}{low[1]:g}, {high[1]:g}{high[0]}"
+        return f"{low[0]}{number_text(low[1])}, {number_text(high[1])}{high[0]}"
     if low:
-        return f"{'>' if low[0] == '(' else '≥'} {low[1]:g}"
+        return f"{'>' if low[0] == '(' else '≥'} {number_text(low[1])}"
     if high:
-        return f"{'<' if high[0] == ')' else '≤'} {high[1]:g}"
+        return f"{'<' if high[0] == ')' else '≤'} {number_text(high[1])}"
     return ""
+
+
+#: the constraints of a pydantic field (``Field(ge=1, le=99)``) -> their JSON-schema keywords
+_BOUND_KEYWORDS = {"ge": "minimum", "gt": "exclusiveMinimum", "le": "maximum", "lt": "exclusiveMaximum"}
+
+
+def _bounds(extra: Any, constraints: typing.Iterable[Any]) -> dict:
+    """A range as JSON-schema keywords: those a configuration dataclass's ``RANGES`` put in a field's
+    ``json_schema_extra`` (:func:`model_of`), and the constraints of a pydantic field (``Field(gt=0, le=1)``:
+    ``annotated_types`` objects in the field's ``metadata``, or a ``FieldInfo`` within an ``Annotated`` type)."""
+    out = dict(extra) if isinstance(extra, dict) else {}
+    for constraint in constraints:
+        if hasattr(constraint, "metadata"):  # a FieldInfo inside Annotated[...]
+            out.update(_bounds(None, constraint.metadata))
+            continue
+        for name, keyword in _BOUND_KEYWORDS.items():
+            value = getattr(constraint, name, None)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                out[keyword] = value
+    return out
 
 
 def _values_text(annotation, extra: dict | None) -> str:
     """What a field accepts: its choices, its type and its range, in a few words."""
     origin, args = typing.get_origin(annotation), typing.get_args(annotation)
-    if origin is Annotated:
-        return _values_text(args[0], extra)
+    if origin is Annotated:  # its own range, if any, beside the field's
+        return _values_text(args[0], _bounds(extra, args[1:]))
     if origin in (typing.Union, types.UnionType):
         parts = [_values_text(a, extra) for a in args if a is not type(None)]
         return " or ".join(p for p in parts if p) + (", or null" if type(None) in args else "")
@@ -514,9 +534,9 @@ def markdown_reference(model: type[BaseModel], title: str, intro: str = "", comm
                 lines.append(f"| `{key}` | (section) | see [`{path}`](#{path.replace('.', '')}) | | "
                              f"{_markdown_text(field.description)} |")
                 continue
-            extra = field.json_schema_extra if isinstance(field.json_schema_extra, dict) else {}
+            extra = _bounds(field.json_schema_extra, field.metadata)
             lines.append(f"| `{key}` | `{_scalar(value)}` | {_values_text(field.annotation, extra)} | "
-                         f"{_markdown_text(extra.get('unit', ''))} | {_markdown_text(field.description)} |")
+                         f"{_markdown_text(_unit(field.description) or '')} | {_markdown_text(field.description)} |")
         lines.append("")
         for path, text, value in children:  # depth first: a section's own sections follow it
             table(path, text, type(value), value)

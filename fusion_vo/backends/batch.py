@@ -9,6 +9,10 @@
 
 ``fuse`` does the same from :class:`~fusion_vo.backends.timeline.SensorStreams` already in memory.
 
+Before anything is fused, the streams pass the consistency checks (:mod:`fusion_vo.consistency`): a stated
+configuration the data contradict (the IMU's mounting, an encoder's sign, a twist's frame, a clock, the
+camera's or the wheels' scale) is corrected or the stream left out, with a sentence in the notes.
+
 Before the streams are merged, an odometry twist is put on the gyro's clock: its delay behind the
 gyro is estimated from the two yaw rates over the whole recording
 (:func:`~fusion_vo.sensors.sync.rate_delay`) and, when it exceeds the twist's sample period (the
@@ -31,6 +35,7 @@ from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sam
 from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
+from fusion_vo.consistency.stage import check_streams
 from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
@@ -89,6 +94,15 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
     """
     config = with_recorded_noise(as_config(config), streams)
     names = backend_names(backend)
+    checked = check_streams(streams, config)  # inputs that contradict each other, before any backend
+    result = _fuse_checked(checked.streams, names, checked.config)
+    result.consistency = checked.as_dicts()
+    result.notes[:0] = [n for n in checked.notes if n not in result.notes]
+    return result
+
+
+def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig) -> FusionResult:
+    """:func:`fuse` of streams that passed the consistency checks."""
     result = FusionResult()
     wheel = wheel_dead_reckoning(streams, config)
     if wheel is not None:
@@ -111,6 +125,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
         result.notes[:0] = pause_notes(bridged, t_first)
         for text in result.notes:
             logger.info("%s", text)
+        _note_silent_sensors(result)
         return result
     # fuse the pieces between the pauses on their own and chain them
     pieces = split(streams, cut)
@@ -160,7 +175,24 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
                             "are those of the longest piece")
     for text in result.notes:
         logger.info("%s", text)
+    _note_silent_sensors(result)
     return result
+
+
+def _note_silent_sensors(result: FusionResult) -> None:
+    """A note and a warning for each sensor that had measurements but none entered a backend's estimate
+    (every reading gated, late or outside the fused span): asked for, it contributed nothing."""
+    silent: dict[str, tuple[list[str], SensorCount]] = {}
+    for backend_name, counts in result.counts.items():
+        for sensor, count in counts.items():
+            if sensor != "standstill" and count.used == 0 and count.gated + count.late + count.missing > 0:
+                silent.setdefault(sensor, ([], count))[0].append(backend_name)
+    for sensor, (names, count) in silent.items():
+        why = ", ".join(f"{n} {what}" for what, n in (("gated", count.gated), ("late", count.late),
+                                                       ("node intervals missing", count.missing)) if n)
+        text = f"{sensor} contributed nothing to the {', '.join(names)} estimate: none of its measurements was used ({why})"
+        result.notes.append(text)
+        logger.warning("%s", text)
 
 
 def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,

@@ -13,7 +13,9 @@ import math
 import numbers
 from dataclasses import dataclass, field
 
+from fusion_vo.consistency.config import ConsistencyConfig
 from fusion_vo.errors import InputError
+from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, MAX_POSITION_M
 from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
@@ -47,9 +49,11 @@ class EkfConfig:
         height prior holds the common scale of camera and wheels. With a walk as large as the wheels'
         (1e-4), the wheels' slip, shared between the two scale factors, moved the camera's scale: at the
         generator's true noise the fused tracks on ``square`` and ``random60`` were 2 and 1.5 times worse
-        than with 1e-5 (benchmarks/findings/fusion.md "Calibration random walks"). Not 0: the graph ties
-        each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too stiff for GTSAM's
-        elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
+        than with 1e-5. At the default priors the
+        walks no longer matter on clean drives: 1e-7 here, or 1e-3 for the wheels, moved no profile's mean ATE
+        ratio to visual odometry by more than 0.01 (docs/decisions/0036-visual-scale-model.md). Not 0: the graph
+        ties each calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too
+        stiff for GTSAM's elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``).
     smoother : bool
         Run the Rauch–Tung–Striebel pass (default True).
     """
@@ -138,10 +142,16 @@ class FusionConfig:
         quantile of this probability (degrees of freedom = measurement size) is rejected (default 0.999).
     self_calibration : bool
         Estimate the visual scale (camera height) and the wheel base (default True).
-    visual_scale_sigma, wheel_base_sigma : float
-        Prior standard deviations of those two factors around 1 (default 0.05 each). A
-        ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces ``visual_scale_sigma`` by
-        ``height_sigma / height``.
+    visual_scale_sigma : float
+        Prior standard deviation of the visual scale ``k_v = h_configured / h_true`` around 1 (default 0.002:
+        the camera height is a mounting dimension, measured once, that no tyre, load, slip or floor changes).
+        A ``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces it by ``height_sigma / height``. Camera and
+        wheels measure only the ratio ``k_v / k_r``; with these two priors a disagreement ``ρ`` of their
+        distances moves the camera's scale by ``ρ σ_v² / (σ_v² + σ_r²)``: 1 % of it at the defaults (0.002
+        and 0.02), 96 % at the former 0.05 and 0.01, which on clean generated drives put the wheels' radius
+        error into the camera's scale (docs/decisions/0036-visual-scale-model.md).
+    wheel_base_sigma : float
+        Prior standard deviation of the wheel-base factor around 1 (default 0.05).
     visual_frame_error : float
         Fraction of each visual increment's stated variance that is the error of its two frames' own
         measurements rather than of the increment (default 0: independent increments). A frontend that
@@ -156,9 +166,11 @@ class FusionConfig:
         from the camera's and the gyro's heading changes over the recording, without ground truth
         (:mod:`fusion_vo.sensors.visual_noise`; ``estimate``, default False; batch runs only).
     wheel_scale_sigma : float
-        Prior standard deviation of the wheels' distance scale ``k_r`` (their common radius error)
-        around 1 (default 0.01); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml`` replaces it by
-        ``radius_sigma / radius``.
+        Prior standard deviation of the wheels' distance scale ``k_r = r_configured / r_true`` (their common
+        radius error) around 1 (default 0.02: a tyre's effective rolling radius differs from its nominal one
+        by a few per cent with pressure, load and floor); a ``radius_sigma`` [m] in ``wheel0/sensor.yaml``
+        replaces it by ``radius_sigma / radius``. It also sets the prior of the wheels' curvature bias when
+        ``radius_sigma`` is not stated (:class:`~fusion_vo.sensors.wheel.CurvedWheelModel`).
     odom_base_sigma : float
         Prior standard deviation of the wheel-base factor when the wheels are an odometry twist
         (default 0.3: the effective track width of a skid-steered base is known only roughly).
@@ -189,11 +201,17 @@ class FusionConfig:
     monitor_bias_sigma : float
         Uncertainty [rad/s] of the gyro bias taken from the standstills (or the AHRS) in that check
         (default 0.001; a median over many samples at rest).
+    consistency : ConsistencyConfig
+        Before fusion, each stream's stated configuration is checked against the data (the IMU's mounting,
+        the encoders' signs, an odometry twist's sign and frame, the clocks, the camera's and the wheels'
+        scales) and corrected, left out or left as stated, with a sentence naming the file and key
+        (:mod:`fusion_vo.consistency`; ``check``, default True).
     camera_height : float or None
         Configured camera height [m] the visual increments were computed with; needed by the range
-        finder (default None: taken from the camera's ``T_BS`` by the caller; else positive).
+        finder (default None: taken from the camera's ``T_BS`` by the caller; else in (0, 100]).
     initial_pose : tuple
-        ``(x, y, yaw)`` of the first node, three finite numbers [m, m, rad] (default the origin).
+        ``(x, y, yaw)`` of the first node [m, m, rad]: x and y within 1e7 m, the yaw in [-2π, 2π] (default
+        the origin).
     initial_velocity_sigma : float
         Prior standard deviation of the initial speed [m/s] (default 0.5).
     wheel, odom, imu, range : WheelNoise, WheelNoise, ImuNoise, RangeNoise
@@ -217,6 +235,11 @@ class FusionConfig:
         Prior and random walk of the state variables registered sensors add, by state name (``initial``,
         ``sigma``, ``random_walk``: :class:`~fusion_vo.sensors.registry.StatePrior`), read from the configuration's
         ``states:`` key (default: as each sensor registers it, ``Sensor.states``).
+
+    Every number has a range (:meth:`validate`, the tables at the end of this module): standard deviations,
+    noise densities and random walks are positive (or not negative) and at most :data:`MAX_SIGMA`; the
+    numbers that set how much work a run does have their own upper bounds (``_AT_MOST``); any other number
+    lies in [0, :data:`MAX_NUMBER`].
     """
 
     step_hz: float = 20.0
@@ -224,9 +247,9 @@ class FusionConfig:
     reorder_window: float = 0.3
     gate_probability: float = 0.999
     self_calibration: bool = True
-    visual_scale_sigma: float = 0.05
+    visual_scale_sigma: float = 0.002
     wheel_base_sigma: float = 0.05
-    wheel_scale_sigma: float = 0.01
+    wheel_scale_sigma: float = 0.02
     visual_frame_error: float = 0.0
     visual_noise: VisualNoiseConfig = field(default_factory=VisualNoiseConfig)
     odom_base_sigma: float = 0.3
@@ -238,6 +261,7 @@ class FusionConfig:
     monitor_bias_sigma: float = 0.001
     monitor_scale_sigma: float = 0.02
     monitor_whole_fraction: float = 0.5
+    consistency: ConsistencyConfig = field(default_factory=ConsistencyConfig)
     camera_height: float | None = None
     initial_pose: tuple = (0.0, 0.0, 0.0)
     initial_velocity_sigma: float = 0.5
@@ -286,7 +310,7 @@ class FusionConfig:
                 raise InputError(f"'{key}' must be positive, not {value}")
             if value < 0:
                 raise InputError(f"'{key}' must not be negative, not {value}")
-            problem = _AT_MOST[leaf].error(f"'{key}'", value) if leaf in _AT_MOST else None
+            problem = _upper_bound(leaf).error(f"'{key}'", value)
             if problem:
                 raise InputError(problem)
         if not self.range.min_range < self.range.max_range:
@@ -294,7 +318,7 @@ class FusionConfig:
                              f"not {self.range.min_range}")
         _check_pose(self.initial_pose)
         if self.camera_height is not None:
-            problem = POSITIVE.error("'camera_height'", self.camera_height)
+            problem = _CAMERA_HEIGHT.error("'camera_height'", self.camera_height)
             if problem:
                 raise InputError(problem)
         for name, prior in self.states.items():
@@ -380,13 +404,38 @@ _POSITIVE = {"gyro_noise_density", "k", "sigma_floor", "max_speed", "max_rate", 
 
 #: ranges of number fields (by their last name) besides those rules: counts of at least 1, fractions ...
 #: (:class:`fusion_vo.schema.Range`; every other number must not be negative)
-_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION}
+_RANGES = {"keyframe_every": AT_LEAST_1, "max_iterations": AT_LEAST_1, "monitor_whole_fraction": FRACTION,
+           "mounting_min_fit": FRACTION, "mounting_tolerance_deg": Range(high=90),
+           "mounting_agreement_deg": Range(high=90)}
 
 #: upper bounds of the numbers that set how much work a run does (nodes, iterations, a search's width, a
 #: window's memory), checked after the rules above, so that a typo (``step_hz: 1e9``, which never finished)
 #: is an error rather than a run that does not end or exhausts the memory
 _AT_MOST = {"step_hz": Range(high=1000), "max_iterations": Range(high=1000), "reweight_passes": Range(high=10),
             "max_odom_delay": Range(high=10), "spike_window": Range(high=50)}
+
+#: the upper bound of every standard deviation, noise density and random walk without one above (``*sigma*``,
+#: ``*_density``, ``*_walk``): its square is a variance (``initial_velocity_sigma: 1.0e300`` overflowed)
+MAX_SIGMA = 1e3
+
+#: the upper bound of every other number without one above, in whatever unit it has (m, s, Hz, rad/s, a
+#: factor, a count): beyond it a value is a typo, not a setting
+MAX_NUMBER = 1e6
+
+#: ``camera_height`` [m] (``odometry.height`` has the same range); ``initial_pose``: x, y [m] and yaw [rad]
+_CAMERA_HEIGHT = Range(0, MAX_CAMERA_HEIGHT_M, open_low=True)
+_POSE_RANGES = (Range(-MAX_POSITION_M, MAX_POSITION_M), Range(-MAX_POSITION_M, MAX_POSITION_M),
+                Range(-2 * math.pi, 2 * math.pi))
+
+
+def _upper_bound(leaf: str) -> Range:
+    """The upper bound of the number field named ``leaf`` (``_AT_MOST``, else :data:`MAX_SIGMA` or
+    :data:`MAX_NUMBER`)."""
+    if leaf in _AT_MOST:
+        return _AT_MOST[leaf]
+    if "sigma" in leaf or leaf.endswith(("_density", "_walk")):
+        return Range(high=MAX_SIGMA)
+    return Range(high=MAX_NUMBER)
 
 
 def _shown(value) -> str:
@@ -395,7 +444,8 @@ def _shown(value) -> str:
 
 
 def _check_pose(pose) -> None:
-    """``initial_pose`` must be three finite numbers ``(x, y, yaw)`` (a NaN one made every pose NaN)."""
+    """``initial_pose`` must be three finite numbers ``(x, y, yaw)`` (a NaN one made every pose NaN), x and y
+    within :data:`~fusion_vo.measurements.MAX_POSITION_M` and the yaw within a turn either way."""
     try:
         values = tuple(pose)
     except TypeError:
@@ -403,6 +453,10 @@ def _check_pose(pose) -> None:
     if values is None or len(values) != 3 or not all(
             not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v) for v in values):
         raise InputError(f"'initial_pose' must be three finite numbers (x, y, yaw), not {_shown(pose)}")
+    for name, value, bound in zip(("x", "y", "yaw"), values, _POSE_RANGES):
+        problem = bound.error(f"'initial_pose' {name}", value)
+        if problem:
+            raise InputError(problem)
 
 
 def _number_lists(obj, prefix: str = ""):

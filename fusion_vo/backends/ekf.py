@@ -77,12 +77,11 @@ counted among the rows).
 The accepted blocks are stacked into one update with filterpy's
 :class:`~filterpy.kalman.ExtendedKalmanFilter` (Joseph-form covariance update).
 
-Each sensor's part (its measurement table, its blocks and their order) is registered by its own module
-(:mod:`fusion_vo.sensors.registry`): :func:`interval_measurements` and :func:`step_blocks` iterate the
-registered sensors. A sensor applied at its nodes on its own after each step's update registers an
-``ekf_run``: a GPS fix is applied at its own node (every fix time is one) with the one measurement model
-of :mod:`fusion_vo.sensors.gps` (:meth:`GpsModel.check <fusion_vo.sensors.gps.GpsModel.check>`: residual,
-Jacobian, its Mahalanobis gate with ``S = H P Hᵀ + Σ`` and the Huber/Cauchy weight) through
+Each sensor contributes :class:`~fusion_vo.sensors.readings.Readings` (its measurement model, the
+readings per interval, their noise); :mod:`fusion_vo.backends.ekf_adapter` turns any of them into the
+blocks of a step (:func:`interval_measurements`, :func:`step_blocks`). Absolute readings (a GPS fix) are
+applied at their own node after each step's update (:mod:`fusion_vo.backends.fixes`) with the same model's
+residual, Jacobian, Mahalanobis gate ``S = H P Hᵀ + Σ`` and robust weight, through
 :meth:`PlanarEkf.update_pose`; rejected fixes (a multipath jump) change nothing and are counted. The
 state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
 the fixes, with that alignment's uncertainty.
@@ -233,6 +232,15 @@ class PlanarEkf:
         return self.kf.P
 
     # ------------------------------------------------------------------ prediction
+    def reset_state(self, name: str, value: float, sigma: float) -> None:
+        """Start the scalar state ``name`` (a column of :data:`STATE_COLUMNS`) again at ``value`` with standard
+        deviation ``sigma`` and no correlation with the others (what was learned of it is forgotten)."""
+        i = self.columns[name].start
+        self.kf.x[i, 0] = value
+        self.kf.P[i, :] = 0.0
+        self.kf.P[:, i] = 0.0
+        self.kf.P[i, i] = sigma**2
+
     def predict(self, dt: float, frame_cov: np.ndarray | None = None) -> np.ndarray:
         """Constant-twist prediction over ``dt``; returns the transition Jacobian ``F``.
 

@@ -292,8 +292,8 @@ class GraphBuilder:
         return X(self.offset + n)
 
     def state_key(self, name: str, segment: int) -> int:
-        """The variable of a sensor's state ``name`` (:class:`fusion_vo.sensors.registry.State`) in ``segment``
-        (``NodeContext.segment``)."""
+        """The variable of a sensor's state ``name`` (:class:`fusion_vo.sensors.registry.State`) in calibration
+        ``segment``."""
         return gtsam.symbol(self._state_letter[name], segment)
 
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:

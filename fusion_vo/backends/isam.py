@@ -97,8 +97,7 @@ def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Val
     beyond the kernel at the updated estimate (a wrong match, outvoted by the other sensors) keeps its
     small weight. On the generated ``square`` drive (seed 101) iSAM2 scored 0.111 mm with the weights of
     the prediction (``benchmarks/fusion_vs_best.py`` variant "iSAM2 weights at the prediction") and 0.102 mm
-    with these, as the EKF (over 4 seeds of four drives: benchmarks/findings/fusion.md "The graph's
-    covariances with all their correlations"). Returns the
+    with these, as the EKF. Returns the
     indices of the factors in iSAM2 (in the order of ``factors``) and the number of passes made.
     """
     index = list(isam.update(graph, values).getNewFactorsIndices())

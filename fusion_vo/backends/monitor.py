@@ -70,7 +70,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.sensors.imu import mounting_hint
 from fusion_vo.sensors.wheel import arc_increment, at_rest, travel_variances
 
 logger = logging.getLogger(__name__)
@@ -136,24 +135,6 @@ def visual_heading_rows(iv, with_variance: bool = False):
     if with_variance:
         var[idx] = (np.asarray(iv.vis_cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
     return ok, ang, var
-
-
-def gyro_mounting_note(iv, imu) -> str | None:
-    """When the check dropped the gyro's yaw rate for at least half of the recording: whether another axis of
-    the gyro follows the camera's (else the wheels') yaw rate (:func:`fusion_vo.sensors.imu.mounting_hint`),
-    i.e. whether ``imu0/sensor.yaml``'s ``T_BS`` is the likely cause. None otherwise."""
-
-    T = iv.t
-    dropped = sum(e.end - e.start for e in iv.episodes if e.component == "gyro yaw rate")
-    if imu is None or len(T) < 2 or dropped < 0.5 * (T[-1] - T[0]):
-        return None
-    dt = np.diff(T)
-    ok, angle, _ = visual_heading_rows(iv)
-    against = "camera"
-    if np.count_nonzero(ok) < 20 and iv.uses("wheel"):
-        ok, angle, against = iv.wheel_ok.copy(), arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[:, 2], "wheels"
-    rate = np.where(ok & (dt > 0), angle / np.where(dt > 0, dt, 1.0), np.nan)
-    return mounting_hint(imu, 0.5 * (T[:-1] + T[1:]), rate, against)
 
 
 def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:

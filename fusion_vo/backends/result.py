@@ -114,6 +114,9 @@ class FusionResult:
     visual_noise : dict
         The camera's heading noise estimated from the gyro's (``fusion.visual_noise.estimate``,
         :class:`~fusion_vo.sensors.visual_noise.VisualNoiseEstimate`); empty when not estimated.
+    consistency : list[dict]
+        What the pre-fusion consistency checks found (:class:`fusion_vo.consistency.finding.Finding`: check,
+        sensor, decision, sentence, estimate), in the order they ran.
     residuals : dict
         Backend -> sensor -> ``(dof, rows)``: the factor graph's per-sensor NIS at its solution, rows
         ``(t, NIS)`` (only with ``GraphConfig.residuals``; :mod:`fusion_vo.backends.residuals`).
@@ -141,6 +144,7 @@ class FusionResult:
     innovations: dict[str, Innovations] = field(default_factory=dict)
     priors: dict[str, dict] = field(default_factory=dict)
     time_offsets: dict[str, float] = field(default_factory=dict)
+    consistency: list[dict] = field(default_factory=list)
 
     @property
     def seconds(self) -> dict[str, float]:
@@ -174,6 +178,7 @@ class FusionResult:
             "visual_noise": dict(self.visual_noise),
             "priors": dict(self.priors),
             "time_offsets": dict(self.time_offsets),
+            "consistency": list(self.consistency),
         }
 
 

@@ -6,6 +6,8 @@ from __future__ import annotations
 import bisect
 import dataclasses
 import logging
+import math
+import time
 
 import numpy as np
 
@@ -70,15 +72,30 @@ class IntakeMixin:
         except (TypeError, ValueError):
             finite = False
         if not finite:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%s has a non-finite or malformed value; rejected", sensor, t)
+            self._reject(sensor, "a non-finite or malformed value", f"t={t}")
             return False
         if np.isfinite(self._latest) and t > self._latest + self.horizon:
-            self._count(sensor).gated += 1
-            logger.warning("%s measurement at t=%.3f is more than %.3g s ahead of the newest (t=%.3f); rejected",
-                           sensor, t, self.horizon, self._latest)
+            self._reject(sensor, f"more than {self.horizon:g} s ahead of the newest sample",
+                         f"t={t:.3f}, newest t={self._latest:.3f}")
             return False
         return True
+
+    #: wall-clock seconds between two warnings about samples of one sensor rejected for one reason
+    REJECT_LOG_INTERVAL = 10.0
+
+    def _reject(self, sensor: str, reason: str, detail: str) -> None:
+        """Count a rejected sample as gated and by its reason (summed up in ``finish``'s notes); a warning for the
+        first of each sensor and reason, then at most one every :attr:`REJECT_LOG_INTERVAL` s with the count so
+        far."""
+        self._count(sensor).gated += 1
+        entry = self._rejected.setdefault((sensor, reason), [0, -math.inf])
+        entry[0] += 1
+        now = time.monotonic()
+        if now - entry[1] >= self.REJECT_LOG_INTERVAL:
+            entry[1] = now
+            logger.warning("%s sample rejected: %s (%s); %d so far, counted as gated", sensor, reason, detail, entry[0])
+        else:
+            logger.debug("%s sample rejected: %s (%s)", sensor, reason, detail)
 
     def _late(self, sensor: str, t: float, back: int = 2) -> bool:
         """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""

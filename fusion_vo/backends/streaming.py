@@ -64,7 +64,9 @@ Measurements older than the history are counted as ``late`` and reported by :met
 Bad input
 ---------
 A measurement with a non-finite time or value, or a time more than ``horizon`` seconds ahead of the
-newest one, is counted as ``gated`` and logged; no exception reaches the caller for bad data.
+newest one, is counted as ``gated``; no exception reaches the caller for bad data. The first of each
+sensor and reason is logged as a warning, then at most one every ``REJECT_LOG_INTERVAL`` seconds with the
+count so far, and :meth:`~StreamingFusion.finish` sums them up in a note.
 Undeclared sensors and bad construction arguments raise :class:`~fusion_vo.errors.InputError`
 (programming errors, not data).
 
@@ -110,6 +112,7 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.timeline import SensorStreams, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
+from fusion_vo.consistency.live import LiveMounting, aligned_offset
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
     GpsFix, ImuSample, PoseData, RangeSample, TwistSample, VisualIncrement, WheelConfig,
@@ -149,7 +152,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
     camera_height_sigma : float, optional
         Its standard deviation [m] (``height_sigma`` of ``cam0/sensor.yaml``): the visual scale's prior,
         as in a batch run (:func:`~fusion_vo.backends.timeline.scale_priors`; default
-        ``config.visual_scale_sigma``).
+        ``config.visual_scale_sigma``, at least one range reading's ``config.range.sigma / camera_height`` when
+        ``range`` is fused).
     range_height_sigma : float, optional
         Given when the visual increments were already scaled with the range finder's heights (an
         offline visual odometry run's ``frame_height_sigma``, typical value): it bounds that prior as in a
@@ -237,10 +241,12 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self.imu_noise = dict(imu_noise or {})
         self.camera_height = camera_height
         #: the two scales' priors, as a batch run of the same streams takes them
-        self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config)
+        self._priors = scale_priors(self.config, camera_height, camera_height_sigma, range_height_sigma, wheel_config,
+                                    range_fused="range" in self.sensors and range_height_sigma is None)
         self._camera_frame_errors = bool(camera_frame_errors)
         self._range_in_visual = range_height_sigma is not None
         self._input_counts: dict[str, SensorCount] = {}
+        self._rejected: dict[tuple[str, str], list] = {}  # (sensor, reason) -> [count, wall time last logged]
         self._records: list[NodeRecord | None] = []
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
@@ -290,6 +296,11 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
                              if self.config.sync_odometry and "imu" in self.sensors else None)
+        # the IMU's stated mounting checked against the data seen so far (fusion_vo.consistency.live)
+        self._mounting = (LiveMounting(self.imu_T_BS, self.config, wheel_config)
+                          if "imu" in self.sensors and self.config.consistency.check else None)
+        self._imu_refused = False
+        self._consistency: list[dict] = []
 
     # ------------------------------------------------------------------ input
     def add(self, sensor: str, sample) -> None:
@@ -320,13 +331,58 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                 values = None if live.take is None else payload_values(payload) if live.values is None else live.values(payload)
             except (AttributeError, TypeError, ValueError, IndexError) as exc:
                 self._check(sensor)
-                self._count(self._counted[sensor]).gated += 1
-                logger.warning("%s sample %r cannot be read (%s); rejected", sensor, sample, exc)
+                self._reject(self._counted[sensor], "a sample that cannot be read", f"{sample!r:.80}: {exc}")
+                return
+            if self._mounting is not None:
+                self._check_mounting(sensor, t, payload)
+            if sensor == "imu" and self._imu_refused:
+                self._count("gyro").gated += 1  # the IMU contradicted its mounting: left out
                 return
             if live.take is None:
                 self._add(sensor, self._synchronised(sensor, t, payload), payload)
             elif self._valid(self._counted[sensor], t, values):
                 live.take(self, payload)
+
+    def _check_mounting(self, sensor: str, t, payload) -> None:
+        """Feed the live IMU mounting check (:class:`~fusion_vo.consistency.live.LiveMounting`); when it decides,
+        read the IMU with the mounting it found (the samples buffered, and the gyro rates the twist's delay
+        estimate holds, too) or leave it out."""
+        decided = self._mounting.observe(sensor, t, payload)
+        if decided is None:
+            return
+        finding, T, final = decided
+        self._consistency.append(finding.as_dict())
+        if finding.sentence:
+            self._notes.append(f"live check from t={float(t):.2f}: {finding.sentence}")
+        if T is None:
+            self._imu_refused = True
+        elif finding.decision == "corrected":
+            self._drop_pending()  # a node started with the old mounting is started again with the new one
+            self.imu_T_BS = T
+            # the heading monitor starts again: its windows hold the gyro's and the AHRS's readings about the
+            # old axes (the spans it dropped so far stay in the notes, closed here)
+            episodes = self._monitor.all_episodes(self._t_nodes[-1] if self._t_nodes else float(t))
+            self._monitor = LiveHeadingMonitor(self.config)
+            self._monitor.episodes = episodes
+            if self._twist_delay is not None:
+                self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
+            self._reanchor_ahrs()
+            if self._ekf is not None:  # the bias the readings about the wrong axis taught the filter, replaced
+                bias, sigma = self._mounting.gyro_bias or (0.0, self.config.imu.gyro_bias_sigma)
+                self._ekf.reset_state("gyro_bias", bias, max(sigma, self.config.monitor_bias_sigma))
+        if final:
+            self._mounting = None
+
+    def _reanchor_ahrs(self) -> None:
+        """After the IMU's mounting changed, its AHRS heading (read through the new ``T_BS``) aligned again as if
+        from the start: its first orientation gives the initial heading (the headings estimated since may carry
+        what the old mounting did to them; the AHRS, absolute, takes it out)."""
+        first = self._mounting.first_orientation
+        if self._heading_offset is None or first is None:
+            return
+        offset = aligned_offset(self.imu_T_BS, first, float(self.config.initial_pose[2]))
+        if offset is not None:
+            self._heading_offset = offset
 
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame;
@@ -482,6 +538,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         counts = self.counts
         result.counts[name] = counts
         result.notes = list(self._notes)
+        result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
             result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
@@ -503,6 +560,9 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         if self.config.visual_noise.estimate and "camera" in self.sensors:
             result.notes.append("camera heading noise not estimated in streaming use (fusion.visual_noise.estimate is "
                                 "for batch runs): the stated noise and visual_frame_error were used")
+        if self._rejected:
+            result.notes.append("samples rejected (counted as gated): " + ", ".join(
+                f"{sensor} {n} ({reason})" for (sensor, reason), (n, _) in self._rejected.items()))
         late = {s: c.late for s, c in counts.items() if c.late}
         if late:
             result.notes.append("late measurements not applied: " + ", ".join(f"{s} {n}" for s, n in late.items()))

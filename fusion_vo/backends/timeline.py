@@ -44,7 +44,7 @@ from fusion_vo.sensors import registry
 from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors import visual_noise
 from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
-from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources, gyro_mounting_note
+from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 from fusion_vo.sensors.gps import GPS_SNAP
 
 logger = logging.getLogger(__name__)
@@ -234,8 +234,8 @@ class Intervals:
     wheel_yaw_ok: np.ndarray | None = None
     wheel_speed_ok: np.ndarray | None = None
     episodes: list = field(default_factory=list)
-    visual_scale_sigma: float = 0.05
-    wheel_scale_sigma: float = 0.01
+    visual_scale_sigma: float = FusionConfig.visual_scale_sigma
+    wheel_scale_sigma: float = FusionConfig.wheel_scale_sigma
     gps_ok: np.ndarray | None = None
     gps_enu: np.ndarray | None = None
     gps_cov: np.ndarray | None = None
@@ -324,18 +324,22 @@ class ScalePriors:
 
 
 def scale_priors(config: FusionConfig, camera_height: float | None, camera_height_sigma: float | None = None,
-                 range_height_sigma: float | None = None, wheel_config=None) -> ScalePriors:
+                 range_height_sigma: float | None = None, wheel_config=None, range_fused: bool = False) -> ScalePriors:
     """The priors of the two scales, the same for batch and streaming runs.
 
     The visual scale: ``camera_height_sigma / camera_height`` (``height_sigma`` of ``cam0/sensor.yaml``),
-    else ``config.visual_scale_sigma``; when the increments were scaled with the range finder's heights
-    (``range_height_sigma`` given: their typical standard deviation), at most ``range_height_sigma /
-    camera_height``. The wheels' distance scale: ``radius_sigma / radius`` of ``wheel_config``
-    (``wheel0/sensor.yaml``), else ``config.wheel_scale_sigma``.
+    else ``config.visual_scale_sigma`` (a mounting dimension that nothing measures during the run); when the
+    backends measure the height with the range finder (``range_fused``) and nothing states it, the readings
+    set it, not the mounting: at least one reading's ``config.range.sigma / camera_height``. When the
+    increments were scaled with the range finder's heights (``range_height_sigma`` given: their typical
+    standard deviation), at most ``range_height_sigma / camera_height``. The wheels' distance scale:
+    ``radius_sigma / radius`` of ``wheel_config`` (``wheel0/sensor.yaml``), else ``config.wheel_scale_sigma``.
     """
     visual, wheel, notes = config.visual_scale_sigma, config.wheel_scale_sigma, []
     if camera_height_sigma is not None and camera_height:
         visual = float(camera_height_sigma / camera_height)
+    elif range_fused and camera_height:
+        visual = max(visual, float(config.range.sigma / camera_height))
     if range_height_sigma and camera_height:
         ranged = float(range_height_sigma / camera_height)
         if ranged < visual:  # the range finder's heights set the increments' scale
@@ -379,9 +383,11 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma,
         visual_frame_error=config.visual_frame_error,
     )
+    range_in_visual = streams.visual is not None and streams.range_in_visual
     priors = scale_priors(config, streams.camera_height, streams.camera_height_sigma,
-                          streams.range_height_sigma if streams.visual is not None and streams.range_in_visual else None,
-                          None if streams.wheel is None else streams.wheel.config)
+                          streams.range_height_sigma if range_in_visual else None,
+                          None if streams.wheel is None else streams.wheel.config,
+                          range_fused=streams.range is not None and not range_in_visual)
     iv.visual_scale_sigma, iv.wheel_scale_sigma = priors.visual_scale_sigma, priors.wheel_scale_sigma
     notes.extend(priors.notes)
     iv.heading_offset = heading_offset
@@ -398,9 +404,6 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
         notes.extend(ep.note(T[0], T[-1]) for ep in iv.episodes)
-        hint = gyro_mounting_note(iv, streams.imu)
-        if hint:
-            notes.append(hint)
     for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):

@@ -28,11 +28,17 @@ it is an error naming the key and the frontend the runs use. When the grid also 
 set whose frontend does not use the key gets no value of it (empty in ``results.csv``; the set's
 configuration keeps the base's), and the sets that then coincide run once: only the sets whose frontend
 uses the key differ in it.
+
+A swept value may be a list (``fusion.initial_pose: [[0, 0, 0], [1, 0, 0]]``): ``results.csv``, the
+report and the ranking show it as its canonical JSON text (:func:`cell_value`). A mapping is no value to
+sweep (``klt: [{max_tracks: 60}]`` would replace the whole section, losing the base's other keys of it):
+it is an error naming the key, and its keys are swept one by one instead (``klt.max_tracks: [60]``).
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import math
 from dataclasses import dataclass
@@ -145,7 +151,7 @@ def apply_values(base: RunConfig, values: dict, path: Path | None = None) -> Run
 
 def describe(values: dict) -> str:
     """``key=value, ...`` of a parameter set."""
-    return ", ".join(f"{k}={v}" for k, v in values.items())
+    return ", ".join(f"{k}={cell_value(v)}" for k, v in values.items())
 
 
 def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
@@ -166,17 +172,40 @@ def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
             raise InputError(f"{section}: {str(exc).splitlines()[0]} (parameter set {keys})", path) from None
 
 
+def check_value(key: str, value, path: Path | None, line: int | None = None) -> None:
+    """Raise :class:`InputError` naming ``key`` for a swept value that is a mapping (module docstring)."""
+    if isinstance(value, dict):
+        inner = f"{key}.{next(iter(value))}" if value else f"{key}.KEY"
+        raise InputError(f"grid key '{key}': the value {value!r} is a mapping, which would replace the whole "
+                         f"section; sweep the keys inside it one by one (e.g. '{inner}')", path, line)
+
+
+def cell_value(value):
+    """A swept value as a table cell: a list as its canonical JSON text (hashable, one column), else as is."""
+    if isinstance(value, (list, tuple)):
+        return json.dumps(_plain_tree(value), sort_keys=True)
+    return _plain(value)
+
+
+def _plain_tree(value):
+    if isinstance(value, (list, tuple)):
+        return [_plain_tree(v) for v in value]
+    return _plain(value)
+
+
 def _as_list(key: str, values, path: Path | None) -> list:
     if isinstance(values, (list, tuple)):
         if not values:
             raise InputError(f"grid key '{key}' has no values to try", path)
         firsts: dict[str, int] = {}
         for i, value in enumerate(values):
+            check_value(key, value, path, _item_line(path, "grid", key, i))
             first = firsts.setdefault(yaml.safe_dump(_plain(value), sort_keys=True), i)
             if first != i:  # every combination would be run twice, or silently once
                 raise InputError(f"grid key '{key}': value {value!r} given twice (values {first + 1} and {i + 1})",
                                  path, _item_line(path, "grid", key, i))
         return list(values)
+    check_value(key, values, path)
     return [values]
 
 
@@ -199,6 +228,8 @@ def _draw(key: str, spec, rng: np.random.Generator, path: Path | None):
     if isinstance(spec, (list, tuple)):
         if not spec:
             raise InputError(f"range '{key}' has no choices", path)
+        for i, choice in enumerate(spec):
+            check_value(key, choice, path, _item_line(path, "ranges", key, i))
         return spec[int(rng.integers(len(spec)))]
     if isinstance(spec, dict):
         unknown = sorted(set(spec) - {"low", "high", "log"})

@@ -6,7 +6,8 @@ worker busy. A trial's value is the mean of ``METRIC`` over the recordings for o
 ``vo``); a trial where a recording fails, or whose figure is missing, is told to Optuna as failed.
 
 The search space is the grid file's ``ranges`` (``{low, high, log}`` or a list of choices) or its
-``grid`` (each list a set of choices); ``fixed`` keys apply to every trial. Trials are sampled with
+``grid`` (each list a set of choices, each choice a number, text or true/false: Optuna's categorical
+values); ``fixed`` keys apply to every trial. Trials are sampled with
 Optuna's TPE sampler seeded by the file's ``seed``. Run folders are ``DIR/<recording>/t000/`` ...
 """
 
@@ -67,6 +68,10 @@ def load_search(path: str | Path, base: RunConfig, trials: int) -> SearchSpace:
         if isinstance(spec, (list, tuple)):
             if not spec:
                 raise InputError(f"key '{key}' has no values to try", path)
+            for choice in spec:  # Optuna's categorical choices are single values
+                if choice is not None and not isinstance(choice, (bool, int, float, str)):
+                    raise InputError(f"key '{key}': --optimize chooses among numbers, text or true/false, not "
+                                     f"{choice!r} (run a sweep without --optimize to try lists)", path)
             params[key] = ("choice", list(spec))
         elif isinstance(spec, dict) and "low" in spec and "high" in spec and set(spec) <= {"low", "high", "log"}:
             low, high, use_log = spec["low"], spec["high"], bool(spec.get("log", False))

@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Callable
 
 from fusion_vo.batch.cluster import open_client, require_dask
+from fusion_vo.batch.grid import Grid, build_config, cell_value, config_data, load_grid, parse_grid
 from fusion_vo.batch.report import write_report
-from fusion_vo.batch.grid import Grid, build_config, config_data, load_grid, parse_grid
 from fusion_vo.batch.tasks import COLUMNS, RECORDS, Task, failed_rows, recording_labels, run_task
 from fusion_vo.config import RunConfig, load_config
 from fusion_vo.errors import InputError
@@ -130,6 +130,8 @@ def _frame(rows: list[dict], keys: list[str]):
 
     columns = list(COLUMNS) + (["parameter_set", *keys] if keys else [])
     frame = pd.DataFrame(rows, columns=columns)
+    for key in keys:  # list values as their JSON text: grouped, ranked and plotted like any value
+        frame[key] = frame[key].map(cell_value)
     return frame
 
 

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 
 from fusion_vo.errors import InputError, check_file
+from fusion_vo.recording.reader import decode_image
 
 logger = logging.getLogger(__name__)
 
@@ -136,7 +137,7 @@ def read_image(path: str | Path) -> np.ndarray:
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"cannot read image file ({exc.strerror})", path) from None
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    img = decode_image(data)
     if img is None or img.size == 0:
         raise InputError("not a readable image", path)
     return img

@@ -38,6 +38,10 @@ frame_count = whole_number(2, "one frame pair")
 MAX_THREADS = 256
 #: a number of threads (``--threads``)
 thread_count = whole_number(1, maximum=MAX_THREADS)
+#: a number of worker processes (``--workers``): one per core of a large machine at most
+worker_count = whole_number(1, "worker processes", maximum=MAX_THREADS)
+#: a number of interleaved repeats of a measurement (``bench --repeats``)
+repeat_count = whole_number(1, maximum=100)
 
 
 def non_empty(option: str) -> Callable[[str], str]:
@@ -84,4 +88,31 @@ def positive_number(text: str) -> float:
     value = non_negative_number(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
+    return value
+
+
+def number_up_to(maximum: float, reason: str) -> Callable[[str], float]:
+    """An ``argparse`` type: a finite number > 0 and at most ``maximum`` (``reason`` says why, in the error)."""
+
+    def parse(text: str) -> float:
+        value = positive_number(text)
+        if value > maximum:
+            raise argparse.ArgumentTypeError(f"must be at most {maximum:g} ({reason}), not {text}")
+        return value
+
+    parse.__name__ = f"number in (0, {maximum:g}]"
+    return parse
+
+
+#: slowest and fastest playback speeds other than 0 (as fast as possible): a hundredth of the recording's pace
+#: (12 s of recording then take 20 minutes) to a million times it
+MIN_SPEED, MAX_SPEED = 0.01, 1e6
+
+
+def playback_speed(text: str) -> float:
+    """An ``argparse`` type: 0 (as fast as possible) or a speed from :data:`MIN_SPEED` to :data:`MAX_SPEED`."""
+    value = non_negative_number(text)
+    if value != 0 and not MIN_SPEED <= value <= MAX_SPEED:
+        raise argparse.ArgumentTypeError(f"must be 0 (as fast as possible) or from {MIN_SPEED:g} to {MAX_SPEED:g} "
+                                         f"times the recording's pace, not {text}")
     return value

@@ -8,7 +8,7 @@ import time
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
-from fusion_vo.cli.arguments import non_empty
+from fusion_vo.cli.arguments import non_empty, worker_count
 from fusion_vo.config import BACKENDS, SENSORS
 
 
@@ -24,7 +24,7 @@ def add_common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sensors", help=f"comma-separated sensors to use, of {','.join(SENSORS)} or any registered sensor (default: what each recording has)")
     p.add_argument("--no-evaluate", action="store_true", help="skip the evaluation against ground truth")
     cluster = p.add_mutually_exclusive_group()
-    cluster.add_argument("--workers", "-j", type=int, metavar="N",
+    cluster.add_argument("--workers", "-j", type=worker_count, metavar="N",
                          help="worker processes of the local Dask cluster (default: one per core)")
     cluster.add_argument("--scheduler", metavar="ADDRESS", help="address of a running Dask scheduler, e.g. tcp://host:8786")
     p.add_argument("--no-dashboard", action="store_true", help="do not serve the Dask dashboard of the local cluster")

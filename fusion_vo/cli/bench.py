@@ -6,7 +6,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from fusion_vo.cli.arguments import frame_count, positive_int, thread_count
+from fusion_vo.cli.arguments import frame_count, repeat_count, thread_count
 from fusion_vo.errors import InputError
 
 #: the frontends that can be measured
@@ -52,7 +52,7 @@ def register(sub) -> None:
     p.add_argument("--frames", type=frame_count, default=None, help="use the first N frames only (N >= 2)")
     p.add_argument("--threads", type=thread_list, default=None,
                    help="comma-separated thread counts to measure (default: 1 and the cores available)")
-    p.add_argument("--repeats", type=positive_int, default=3, help="interleaved repeats (default: 3)")
+    p.add_argument("--repeats", type=repeat_count, default=3, help="interleaved repeats (default: 3, at most 100)")
     p.set_defaults(func=run)
 
 

@@ -68,6 +68,10 @@ def run(args: argparse.Namespace) -> int:
     for traj in trajectories:
         cov = "with covariance" if traj.covariance is not None else "covariance unknown"
         print(f"{traj.topic}: {len(traj.stamp_ns)} poses ({cov})")
+    for traj in trajectories:
+        if traj.ros_name != traj.name:
+            print(f"note: trajectory '{traj.name}' exported as {traj.topic} and frame {traj.ros_name}/base_link "
+                  "(ROS 2 names hold letters, digits and underscores only)")
     print(f"wrote {args.fmt} -> {out}")
     return 0
 

@@ -26,11 +26,15 @@ import json
 import time
 from pathlib import Path
 
-from fusion_vo.cli.arguments import non_empty, non_negative_number, positive_number
+from fusion_vo.cli.arguments import non_empty, non_negative_number, number_up_to, playback_speed
 from fusion_vo.outputs import StagedFiles, check_folder_target
 from fusion_vo.errors import InputError
 
 OUTPUTS = ("live_{b}.csv", "live_{b}.tum", "stream_{b}.tum", "replay.json")
+
+#: the highest ``--rate`` [Hz]: every query is a call of ``current_estimate()`` (1e9 Hz was still busy after
+#: 100 s on a 12 s recording), and a controller asks at most about once a millisecond
+MAX_RATE_HZ = 1000.0
 
 
 def register(sub) -> None:
@@ -41,9 +45,11 @@ def register(sub) -> None:
     p.add_argument("--backend", choices=["ekf", "gtsam"], default="ekf", help="streaming backend (default: ekf)")
     p.add_argument("--config", "-c", type=non_empty("a configuration file"), help="YAML configuration file (as for fusion-vo run)")
     p.add_argument("--sensors", help="comma-separated sensors to use (default: what the recording has)")
-    p.add_argument("--speed", type=non_negative_number, default=1.0,
-                   help="playback speed: 1 = the recording's own pace, N = N times faster, 0 = as fast as possible")
-    p.add_argument("--rate", type=positive_number, default=50.0, help="rate [Hz] at which live poses are read (default 50)")
+    p.add_argument("--speed", type=playback_speed, default=1.0,
+                   help="playback speed: 1 = the recording's own pace, N = N times faster (0.01 to 1e6), "
+                        "0 = as fast as possible")
+    p.add_argument("--rate", type=number_up_to(MAX_RATE_HZ, "a query per millisecond of the recording"), default=50.0,
+                   help=f"rate [Hz] at which live poses are read (default 50, at most {MAX_RATE_HZ:g})")
     p.add_argument("--camera-delay", type=non_negative_number, default=0.0,
                    help="seconds after its frame that a visual increment arrives (frontend latency, default 0)")
     p.add_argument("--window", type=non_negative_number,
@@ -73,7 +79,10 @@ def run(args: argparse.Namespace) -> int:
     sensors = [s for s in resolve_sensors(rec, cfg) if s != "gps"]
     fusion_cfg = as_config(cfg.fusion)
     if args.window is not None:
-        fusion_cfg = dataclasses.replace(fusion_cfg, reorder_window=args.window)
+        try:
+            fusion_cfg = dataclasses.replace(fusion_cfg, reorder_window=args.window)
+        except InputError as exc:
+            raise InputError(f"--window {args.window:g}: {exc.message}") from None
     out = check_folder_target(args.out)  # a file there, or in the way above it: before any work
     _check_output_folder(out, rec)
     _check_timing(args, rec, sensors)

@@ -21,7 +21,8 @@ def register(subparsers) -> None:
     parser.add_argument("--frontend", choices=("features", "klt"), default="features",
                         help="whose matching to show (default: features)")
     parser.add_argument("--out", "-o", metavar="FILE.png", default=None, type=non_empty("an image file name"),
-                        help="output image (default: matches_<N>.png in the current folder)")
+                        help="output image (default: matches_<N>.png in the current folder); an existing file is "
+                             "replaced only if fusion-vo wrote it")
     parser.set_defaults(func=run)
 
 
@@ -32,7 +33,7 @@ def run(args: argparse.Namespace) -> int:
     from fusion_vo.evaluation.matches import find_matches, to_grey8
     from fusion_vo.evaluation.plots import plot_matches
     from fusion_vo.geometry.ground import GroundRectifier
-    from fusion_vo.outputs import check_outside
+    from fusion_vo.outputs import check_outside, check_picture_target
     from fusion_vo.recording import Recording
 
     recording = Recording(args.sequence)
@@ -40,6 +41,7 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".png":
         raise InputError("the image is written as PNG: give a file name ending in .png", out)
     check_outside(out, [recording.path], "output image")
+    check_picture_target(out)  # only a picture fusion-vo wrote is replaced
     count = len(recording)
     if not 1 <= args.frame < count:
         raise InputError(f"--frame must lie between 1 and {count - 1} (the recording has {count} frames)",

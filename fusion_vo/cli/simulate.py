@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
     import yaml
 
     from fusion_vo import schema
-    from fusion_vo.geometry.camera import load_yaml
+    from fusion_vo.geometry.camera import load_yaml, load_yaml_text
     from fusion_vo.simulation import SimulationOptions, simulate
     from fusion_vo.simulation.robot import SHAPE_OPTIONS
     from fusion_vo.simulation.standard import STANDARD
@@ -90,9 +90,11 @@ def run(args: argparse.Namespace) -> int:
         if "=" not in item or not key.strip():
             raise InputError(f"--option needs KEY=VALUE, got '{item}'")
         try:
-            options[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError:
-            raise InputError(f"--option {key}: '{value}' is not a valid value") from None
+            options[key.strip()] = load_yaml_text(value)
+        except yaml.YAMLError as exc:
+            shown = value if len(value) <= 40 else value[:37] + "..."
+            raise InputError(f"--option {key}: '{shown}' is not a valid value ({getattr(exc, 'problem', None) or 'YAML'})"
+                             ) from None
     if args.duration is not None:
         options["duration"] = args.duration
     if args.texture:

@@ -64,11 +64,11 @@ def run_labels(run_dirs: list[Path]) -> list[str]:
             depth[i] += 1
 
 
-def evaluate_trajectories(reference, files: dict[str, Path]) -> dict:
+def evaluate_trajectories(reference, files: dict[str, Path], reference_path: Path | None = None) -> dict:
     """:func:`fusion_vo.evaluation.evaluate.evaluate_trajectories` (evo, the ``eval`` extra: loaded on first use)."""
     from fusion_vo.evaluation.evaluate import evaluate_trajectories as evaluate
 
-    return evaluate(reference, files)
+    return evaluate(reference, files, reference_path)
 
 
 def run_verdict(folder: RunFolder) -> list[str]:
@@ -90,7 +90,8 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     run_dirs : list of str or Path
         Run folders written by ``fusion-vo run``.
     out_dir : str or Path
-        Folder for the outputs (created if missing).
+        Folder for the outputs (created if missing); neither a run folder compared or inside one, nor
+        inside a recording.
     sequence_dir : str or Path, optional
         Recording with the ground truth (or GPS fixes) for all runs; by default each run's ``run.yaml`` names
         its own.
@@ -108,6 +109,8 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
     """
     run_dirs = [Path(d) for d in run_dirs]
     out_dir = check_folder_target(out_dir)  # before the evaluation's work
+    # never into a run folder compared: a later 'fusion-vo run' into it replaces the folder, these files with it
+    check_outside(out_dir, run_dirs)
     labels = run_labels(run_dirs)
     folders = [read_run_folder(d) for d in run_dirs]
     table: dict[str, dict[str, dict]] = {label: {name: {} for name in f.tracks} for label, f in zip(labels, folders)}
@@ -123,7 +126,7 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         from fusion_vo.evaluation.metrics import to_planar
 
         gt = read_groundtruth(sequence / GROUNDTRUTH_CSV)
-        results = evaluate_trajectories(gt, folder.files)
+        results = evaluate_trajectories(gt, folder.files, sequence / GROUNDTRUTH_CSV)
         for name, r in results.items():
             table[label][name].update(r.figures)
         anchored[label] = {name: r.anchored for name, r in results.items()}

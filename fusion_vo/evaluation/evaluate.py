@@ -31,9 +31,15 @@ FIGURES = {
 }
 
 
-def evaluate_trajectories(reference: PoseTrajectory3D,
-                          files: dict[str, Path]) -> dict[str, TrajectoryErrors]:
-    """Read and evaluate TUM files against a reference; errors name the file at fault."""
+def evaluate_trajectories(reference: PoseTrajectory3D, files: dict[str, Path],
+                          reference_path: Path | None = None) -> dict[str, TrajectoryErrors]:
+    """Read and evaluate TUM files against a reference; errors name the file at fault.
+
+    With ``reference_path`` (the ground truth's file), a trajectory that cannot be paired with the
+    reference is blamed on that file, which exists, and not on the trajectory (a run's own file, which a
+    run that fails here never keeps): a ground truth with fewer than two poses within the trajectory's time
+    span says so; otherwise the clocks are suspected.
+    """
     legs = detect_legs(reference)
     logger.info("ground truth has %d straight legs", len(legs))
     results = {}
@@ -42,12 +48,21 @@ def evaluate_trajectories(reference: PoseTrajectory3D,
         try:
             results[name] = evaluate_trajectory(reference, estimate, legs)
         except InputError as exc:
-            raise InputError(exc.message, path) from None
+            if reference_path is None:
+                raise InputError(exc.message, path) from None
+            t0, t1 = float(estimate.timestamps[0]), float(estimate.timestamps[-1])
+            inside = int(np.count_nonzero((reference.timestamps >= t0) & (reference.timestamps <= t1)))
+            if inside < 2:
+                raise InputError(f"only {inside} of its {reference.num_poses} poses lie within the time span of "
+                                 f"trajectory '{name}' ({t0:.3f} to {t1:.3f} s): the evaluation needs two",
+                                 reference_path) from None
+            raise InputError(f"trajectory '{name}': {exc.message}", reference_path) from None
         span = float(estimate.timestamps[-1] - estimate.timestamps[0])
         covered = results[name].figures["duration_s"]
         if span > 0 and covered < 0.9 * span:  # another clock, or a ground truth of part of the drive
-            logger.warning("%s: only %.3g s of its %.3g s lie within the ground truth's time span; its figures "
-                           "cover that part only", path, covered, span)
+            logger.warning("%s: only %.3g s of its %.3g s lie within the ground truth's time span%s; its figures "
+                           "cover that part only", path if reference_path is None else path.name, covered, span,
+                           f" ({reference_path})" if reference_path is not None else "")
     return results
 
 
@@ -79,7 +94,7 @@ def groundtruth_accuracy(sequence: Path, files: dict[str, Path], out: Path,
         Caption -> PNG path.
     """
     reference = read_groundtruth(sequence / GROUNDTRUTH_CSV)
-    results = evaluate_trajectories(reference, files)
+    results = evaluate_trajectories(reference, files, sequence / GROUNDTRUTH_CSV)
     metrics = {name: result.figures for name, result in results.items()}
     ref_planar = to_planar(reference)
     anchored = {name: r.anchored for name, r in results.items()}

@@ -51,6 +51,7 @@ from evo.core.trajectory import PoseTrajectory3D
 
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
+from fusion_vo.measurements import GpsData, PoseData
 
 logger = logging.getLogger(__name__)
 
@@ -217,6 +218,18 @@ def anchor(reference: PoseTrajectory3D, estimate: PoseTrajectory3D) -> PoseTraje
     moved = copy.deepcopy(estimate)
     moved.align_origin(reference)
     return moved
+
+
+def gps_errors(track: PoseData, gps: GpsData) -> np.ndarray:
+    """Horizontal distances [m] of a track to the GPS fixes within its time span, after the least-squares SE(2)
+    alignment to them (the fixes' local east and north, :attr:`fusion_vo.measurements.GpsData.enu`)."""
+    inside = (gps.t >= track.t[0]) & (gps.t <= track.t[-1])
+    enu = gps.enu[inside]
+    reference = planar_trajectory(gps.t[inside], enu[:, 0], enu[:, 1], np.zeros(len(enu)))
+    estimate = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
+    ref, est = associate(reference, estimate)
+    aligned = align_se2(ref, est)
+    return np.linalg.norm(aligned.positions_xyz[:, :2] - ref.positions_xyz[:, :2], axis=1)
 
 
 def ape_rmse(reference: PoseTrajectory3D, estimate: PoseTrajectory3D) -> float:

@@ -20,6 +20,7 @@ from matplotlib.figure import Figure
 
 from fusion_vo.geometry.se2 import yaw_of_quaternion
 from fusion_vo.evaluation.io import FRAME_STATUSES, FrameVelocities, write_atomic
+from fusion_vo.outputs import PNG_SOFTWARE
 
 if TYPE_CHECKING:  # evo (GPL-3.0, the ``eval`` extra) only for the trajectory plots, not for plot_matches
     from evo.core.trajectory import PoseTrajectory3D
@@ -86,7 +87,7 @@ def new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: b
 def save_figure(fig: Figure, path: str | Path) -> Path:
     """Write ``fig`` as PNG to ``path`` atomically."""
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
+    fig.savefig(buffer, format="png", metadata={"Software": PNG_SOFTWARE})  # (told from the user's pictures)
     logger.debug("wrote %s", path)
     return write_atomic(path, buffer.getvalue())
 

@@ -4,7 +4,9 @@ Every trajectory ``NAME.tum`` of a run folder becomes the topic ``/fusion_vo/NAM
 ``nav_msgs/msg/Odometry`` messages, one per pose, stamped with the pose's timestamp, which is on the
 recording's clock (the nanosecond timestamps of its ``data.csv`` files). Each pose is also broadcast on
 ``/tf`` (``tf2_msgs/msg/TFMessage``) as the transform from ``frame_id`` (default ``odom``) to
-``NAME/base_link``, so that RViz and Foxglove can show every trajectory at once.
+``NAME/base_link``, so that RViz and Foxglove can show every trajectory at once. A ``NAME`` that ROS 2 does
+not allow in a name (``my-traj``, ``2nd traj``) is written as :func:`ros_name` makes it (``my_traj``,
+``t_2nd_traj``); two trajectories that would share a topic are an error.
 
 Covariance (ROS order ``x, y, z, rot x, rot y, rot z``, row-major 6 x 6):
 
@@ -20,14 +22,16 @@ Covariance (ROS order ``x, y, z, rot x, rot y, rot z``, row-major 6 x 6):
 The ``rosbag2`` format writes a folder (``metadata.yaml`` and an SQLite ``.db3``) with the rosbags
 library; ``mcap`` writes one ``.mcap`` file (ROS 2 profile, CDR messages, ``ros2msg`` schemas) with
 the mcap library. Both open in Foxglove; the rosbag2 folder plays back with ``ros2 bag play`` for RViz.
-The output is written under a temporary name beside ``out`` and renamed only when complete; an existing
-``out`` is an error and is never overwritten.
+The output is written under a temporary name beside ``out`` and moved to ``out`` only when complete; an
+existing ``out`` is an error and is never overwritten, also when another command created it meanwhile.
 """
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
+import re
 import shutil
 import tempfile
 from dataclasses import dataclass
@@ -73,8 +77,22 @@ class ExportTrajectory:
     covariance: np.ndarray | None = None
 
     @property
+    def ros_name(self) -> str:
+        """The name as ROS 2 allows it in a topic or frame (:func:`ros_name`)."""
+        return ros_name(self.name)
+
+    @property
     def topic(self) -> str:
-        return f"/fusion_vo/{self.name}/odometry"
+        return f"/fusion_vo/{self.ros_name}/odometry"
+
+
+def ros_name(name: str) -> str:
+    """``name`` as one token of a ROS 2 name: ASCII letters, digits and single underscores, not starting with a
+    digit. Every other character (and a run of them) becomes one underscore, underscores at the ends go, and
+    a name that would start with a digit (or be empty) gets ``t_`` in front: ``my-traj`` -> ``my_traj``,
+    ``2nd traj`` -> ``t_2nd_traj``; a valid name is kept as it is."""
+    token = re.sub(r"_+", "_", re.sub(r"[^A-Za-z0-9_]", "_", name)).strip("_")
+    return token if token and not token[0].isdigit() else f"t_{token}".rstrip("_")
 
 
 def read_pose_covariances(path: str | Path, stamp_ns: np.ndarray) -> np.ndarray:
@@ -236,7 +254,7 @@ class _Messages:
                 linear=t["geometry_msgs/msg/Vector3"](x=float(twist[0]), y=float(twist[1]), z=0.0),
                 angular=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=float(twist[2]))),
             covariance=np.zeros(36))
-        msg = t[_ODOMETRY](header=self.header(traj.stamp_ns[i], frame_id), child_frame_id=f"{traj.name}/base_link",
+        msg = t[_ODOMETRY](header=self.header(traj.stamp_ns[i], frame_id), child_frame_id=f"{traj.ros_name}/base_link",
                            pose=pose, twist=vel)
         return bytes(self.store.serialize_cdr(msg, _ODOMETRY))
 
@@ -245,7 +263,7 @@ class _Messages:
         x, y, z = (float(v) for v in traj.xyz[i])
         w, qx, qy, qz = (float(v) for v in traj.quat_wxyz[i])
         stamped = t["geometry_msgs/msg/TransformStamped"](
-            header=self.header(traj.stamp_ns[i], frame_id), child_frame_id=f"{traj.name}/base_link",
+            header=self.header(traj.stamp_ns[i], frame_id), child_frame_id=f"{traj.ros_name}/base_link",
             transform=t["geometry_msgs/msg/Transform"](
                 translation=t["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
                 rotation=t["geometry_msgs/msg/Quaternion"](x=qx, y=qy, z=qz, w=w)))
@@ -325,6 +343,12 @@ def export_trajectories(trajectories: list[ExportTrajectory], out: str | Path, f
         raise InputError("already exists; choose another name or remove it first", out)
     if not trajectories:
         raise InputError("nothing to export")
+    topics_of: dict[str, str] = {}
+    for traj in trajectories:  # two names that ROS 2 would see as one (my-traj and my_traj)
+        first = topics_of.setdefault(traj.topic, traj.name)
+        if first != traj.name or sum(t.name == traj.name for t in trajectories) > 1:
+            raise InputError(f"trajectories '{first}' and '{traj.name}' would both be the topic {traj.topic} "
+                             "(ROS 2 names hold letters, digits and underscores only); rename one of them")
     if not out.parent.is_dir():
         raise InputError("folder not found", out.parent)
     messages = _Messages()
@@ -338,11 +362,38 @@ def export_trajectories(trajectories: list[ExportTrajectory], out: str | Path, f
             _write_rosbag2(target, items, topics, messages)
         else:
             _write_mcap(target, items, topics, messages)
-        os.rename(target, out)
+        _move_into_place(target, out)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     log.info("wrote %d messages on %d topics to %s", len(items), len(topics), out)
     return out
+
+
+def _move_into_place(target: Path, out: Path) -> None:
+    """Move the finished ``target`` to ``out``, only if nothing is at ``out``: of two exports to one name
+    started together, the second to finish fails naming ``out`` and the first's output stays.
+
+    A file is hard-linked (``link`` fails atomically when ``out`` exists; ``rename`` would replace it); a
+    folder is renamed, which fails when ``out`` is a file or a folder that is not empty.
+    """
+    taken = InputError("already exists (written meanwhile by another command?); choose another name or remove "
+                       "it first", out)
+    if not target.is_dir():
+        try:
+            os.link(target, out)
+            return
+        except FileExistsError:
+            raise taken from None
+        except OSError:  # a file system without hard links: checked, then renamed
+            pass
+    if out.exists() or out.is_symlink():
+        raise taken
+    try:
+        os.rename(target, out)
+    except OSError as exc:
+        if exc.errno in (errno.EEXIST, errno.ENOTEMPTY, errno.ENOTDIR, errno.EISDIR):
+            raise taken from None
+        raise
 
 
 def export_run(run_dir: str | Path, out: str | Path, fmt: str, names: list[str] | None = None,

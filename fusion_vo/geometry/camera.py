@@ -132,9 +132,8 @@ class CameraModel:
 
         The polynomial of ``cv2.projectPoints`` with the same order of operations, so the results are
         the same to the last bit, without its Jacobians with respect to every parameter, which
-        ``projectPoints`` always computes from Python: several times faster on the dense fallback's
-        remap grid of a 640 x 360 frame (``benchmarks/bench_tracker.py`` times both), as fast on a few
-        points.
+        ``projectPoints`` always computes from Python (what the dense fallback's remap grid of a whole
+        frame would pay for nothing).
         """
         k1, k2, p1, p2 = self.distortion[:4]
         k3 = self.distortion[4] if len(self.distortion) > 4 else 0.0
@@ -195,13 +194,13 @@ class CameraModel:
                 raise InputError(f"missing key '{key}'{hint}", path)
             return data[key]
 
+        res = resolution(need("resolution"), path)
         try:
-            res = [int(v) for v in need("resolution")]
             intr = [float(v) for v in need("intrinsics")]
-            if len(res) != 2 or len(intr) != 4:
+            if len(intr) != 4:
                 raise ValueError
         except (TypeError, ValueError):
-            raise InputError("'resolution' needs [width, height] and 'intrinsics' [fu, fv, cu, cv]", path) from None
+            raise InputError("'intrinsics' needs [fu, fv, cu, cv]", path) from None
         model = str(data.get("camera_model", "pinhole"))
         if model != "pinhole":
             raise InputError(f"camera_model '{model}' is not supported (only 'pinhole')", path)
@@ -222,8 +221,9 @@ class CameraModel:
                              "model they belong to (radial-tangential, equidistant, division) or set them to 0", path)
         T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
         values = np.array(intr + list(coeffs))
-        if not np.all(np.isfinite(values)) or min(res) <= 0 or intr[0] <= 0 or intr[1] <= 0:
-            raise InputError("calibration values must be finite and the focal lengths and resolution positive", path)
+        if not np.all(np.isfinite(values)) or intr[0] <= 0 or intr[1] <= 0:
+            raise InputError("calibration values must be finite and the focal lengths positive", path)
+        check_focal_lengths(intr[0], intr[1], res, path, "intrinsics")
         rate = sensor_number(data, "rate_hz", path, 20.0, high=1e6, unit=" Hz")
         return cls(
             width=res[0], height=res[1], fu=intr[0], fv=intr[1], cu=intr[2], cv=intr[3],
@@ -270,12 +270,9 @@ def uncalibrated_camera(path: str | Path, focal_length: float | None = None, qui
 
     path = Path(path)
     data = load_yaml(path)
-    try:
-        res = [int(v) for v in data["resolution"]]
-        if len(res) != 2 or min(res) <= 0:
-            raise ValueError
-    except (KeyError, TypeError, ValueError):
-        raise InputError("uncalibrated mode still needs 'resolution: [width, height]'", path) from None
+    if "resolution" not in data:
+        raise InputError("uncalibrated mode still needs 'resolution: [width, height]'", path)
+    res = resolution(data["resolution"], path)
     if focal_length is not None:
         fu = fv = float(focal_length)
     elif "intrinsics" in data:
@@ -288,6 +285,7 @@ def uncalibrated_camera(path: str | Path, focal_length: float | None = None, qui
                 "%s: no focal length given; assuming a 60 degree horizontal field of view (%.0f px)", path, fu)
     if not (np.isfinite(fu) and np.isfinite(fv) and fu > 0 and fv > 0):
         raise InputError("focal_length must be a positive number of pixels", path)
+    check_focal_lengths(fu, fv, res, path, "focal_length" if focal_length is not None else "intrinsics")
     T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
     return CameraModel(width=res[0], height=res[1], fu=fu, fv=fv, cu=(res[0] - 1) / 2.0, cv=(res[1] - 1) / 2.0,
                        distortion_model="none", T_BS=T, rate_hz=sensor_number(data, "rate_hz", path, 20.0, high=1e6,
@@ -303,6 +301,47 @@ def _default_T_BS() -> np.ndarray:
 
 #: largest translation [m] a sensor's ``T_BS`` may state: beyond it the number is a typo, not a lever arm
 MAX_LEVER_ARM_M = 1e3
+
+#: largest image side [px] a ``resolution`` may state (a frame of it is 10^10 pixels)
+MAX_IMAGE_SIDE = 100_000
+
+#: a focal length [px] lies within this factor of the image's larger side either way: from a field of view
+#: of 0.6 degrees to far beyond a fisheye's (fx = fy = 1e-9 ended a run 1.9e11 m away)
+FOCAL_FACTOR = 100.0
+
+
+def resolution(value, path: str | Path | None) -> tuple[int, int]:
+    """``resolution: [width, height]`` of a ``cam0/sensor.yaml``: two whole numbers of pixels from 1 to
+    :data:`MAX_IMAGE_SIDE` (a fractional one was cut to a whole one without a word), else an :class:`InputError`."""
+    try:
+        if isinstance(value, (str, bytes)) or len(value) != 2:
+            raise ValueError
+        pair = [float(v) if not isinstance(v, (bool, str)) else None for v in value]
+    except (TypeError, ValueError, OverflowError):
+        pair = None
+    if pair is None or any(v is None or not np.isfinite(v) or v != int(v) or not 1 <= v <= MAX_IMAGE_SIDE
+                           for v in pair):
+        raise InputError(f"'resolution' must be [width, height], two whole numbers of pixels from 1 to "
+                         f"{MAX_IMAGE_SIDE}, not {value!r}", path)
+    return int(pair[0]), int(pair[1])
+
+
+def focal_length_problem(fu: float, fv: float, size) -> str | None:
+    """What is wrong with focal lengths [px] that do not both lie within :data:`FOCAL_FACTOR` of the larger
+    side of ``size`` (width, height) either way, or ``None``."""
+    side = max(size)
+    low, high = side / FOCAL_FACTOR, side * FOCAL_FACTOR
+    if low <= fu <= high and low <= fv <= high:
+        return None
+    return (f"focal lengths {fu:g}, {fv:g} px are not a camera's for a {size[0]}x{size[1]} image (each must be "
+            f"between {low:g} and {high:g} px)")
+
+
+def check_focal_lengths(fu: float, fv: float, size, path: str | Path | None, key: str) -> None:
+    """An :class:`InputError` naming ``key`` for focal lengths :func:`focal_length_problem` refuses."""
+    problem = focal_length_problem(fu, fv, size)
+    if problem:
+        raise InputError(f"'{key}' {problem}", path)
 
 #: the keys of each ``sensor.yaml`` the library reads (with EuRoC's ``sensor_type`` and ``comment``), for the
 #: warning about a key that is close to one of them (:func:`warn_unknown_keys`)
@@ -362,10 +401,13 @@ def sensor_number(data: dict, key: str, path: str | Path | None, default: float 
 
 def parse_pose(entry, name: str, path: str | Path | None) -> np.ndarray:
     """A sensor's pose ``T_BS`` (:func:`parse_matrix`): finite numbers, a rotation (orthonormal, det +1,
-    no mirror) and a translation within :data:`MAX_LEVER_ARM_M`, else an :class:`InputError` naming ``name``."""
+    no mirror), a translation within :data:`MAX_LEVER_ARM_M` and the bottom row ``[0, 0, 0, 1]``, else an
+    :class:`InputError` naming ``name``."""
     m = parse_matrix(entry, name, path)
     if not np.all(np.isfinite(m)):
         raise InputError(f"'{name}' must hold finite numbers (NaN or inf found)", path)
+    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], rtol=0, atol=1e-6):  # a homogeneous transform (the row was ignored)
+        raise InputError(f"'{name}' bottom row must be [0, 0, 0, 1], not {[float(v) for v in m[3]]}", path)
     R = m[:3, :3]
     if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or abs(np.linalg.det(R) - 1) > 1e-5:
         raise InputError(f"{name} rotation part is not a rotation matrix", path)
@@ -412,7 +454,24 @@ def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool 
     return loader.construct_mapping(node, deep=deep)
 
 
+def _bounded_int(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int:
+    """A YAML integer; one beyond Python's limit on converting digits (4300) is an error at its line, not an
+    exception from deep inside the loader."""
+    try:
+        return loader.construct_yaml_int(node)
+    except ValueError:
+        raise yaml.constructor.ConstructorError(
+            None, None, f"an integer of {len(str(node.value))} characters is no setting", node.start_mark) from None
+
+
 _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
+_UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _bounded_int)
+
+
+def load_yaml_text(text: str):
+    """Load YAML text with the loader of :func:`load_yaml` (a key given twice and an integer too long to
+    convert are :class:`yaml.YAMLError`)."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
 
 
 def load_yaml(path: str | Path) -> dict:
@@ -424,7 +483,7 @@ def load_yaml(path: str | Path) -> dict:
         # EuRoC files start with a '%YAML:1.0' directive that PyYAML does not accept
         if text.startswith("%YAML:"):
             text = text.split("\n", 1)[1] if "\n" in text else ""
-        data = yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+        data = load_yaml_text(text)
     except yaml.YAMLError as exc:
         line = getattr(getattr(exc, "problem_mark", None), "line", None)
         raise InputError(f"not valid YAML ({getattr(exc, 'problem', exc)})", path, None if line is None else line + 1) from None

@@ -46,7 +46,7 @@ import numpy as np
 from frontends.base import FrameMotion
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import CameraModel
-from fusion_vo.measurements import VisualIncrement
+from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, VisualIncrement
 
 
 def _rot(a: float) -> np.ndarray:
@@ -151,7 +151,8 @@ class GroundGeometry:
     camera : CameraModel
         Intrinsics, distortion and ``T_BS`` (lever arm, height, tilt).
     height : float, optional
-        Camera height above the floor [m]; defaults to ``T_BS[2, 3]``.
+        Camera height above the floor [m], in (0, :data:`~fusion_vo.measurements.MAX_CAMERA_HEIGHT_M`];
+        defaults to ``T_BS[2, 3]``.
     min_sigma_xy : float
         Floor on the standard deviation of ``dx, dy`` [m] (unmodelled effects: floor relief, rolling).
     min_sigma_yaw : float
@@ -167,8 +168,9 @@ class GroundGeometry:
         self.rectifier = GroundRectifier(self.camera)
         if self.height is None:
             self.height = float(self.camera.t_BS[2])
-        if not self.height > 0:
-            raise ValueError("camera height must be positive (T_BS z translation, or set 'height')")
+        if not 0 < self.height <= MAX_CAMERA_HEIGHT_M:
+            raise ValueError(f"camera height must be in (0, {MAX_CAMERA_HEIGHT_M:g}] m, not {self.height:g} "
+                             "(T_BS z translation, or set 'height')")
         R2 = self.rectifier.R_BV[:2, :2]
         self._R2 = R2
         self._sigma = float(np.sign(np.linalg.det(R2)))

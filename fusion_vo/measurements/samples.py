@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 # --------------------------------------------------------------------------- per-sample
 @dataclass(frozen=True)
 class VisualIncrement:

@@ -104,10 +104,37 @@ def read_table(path: str | Path, columns: int | tuple[int, int], what: str = "va
                 rows.append(vals)
                 lines.append(lineno)
         except UnicodeDecodeError:
-            raise InputError("not a text CSV file", path) from None
+            raise _not_text(path) from None
     width = width if width is not None else lo
     values = np.array(rows, dtype=np.float64).reshape(len(rows), width)
     return Table(np.array(ts, dtype=np.int64), values, np.array(lines, dtype=np.int64))
+
+
+def _not_text(path: Path) -> InputError:
+    """The error for a file that is not UTF-8 text, naming the line of its first byte that is not (found
+    only on this path: reading decodes in blocks, ahead of the line being parsed)."""
+    try:
+        data = path.read_bytes()
+        data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        return InputError(f"not a text CSV file: byte 0x{data[exc.start]:02x} is not UTF-8 (save the file as UTF-8)",
+                          path, line)
+    except OSError:
+        pass
+    return InputError("not a text CSV file", path)
+
+
+def check_magnitude(tab: Table, path: str | Path, columns: slice, limit: float, what: str) -> None:
+    """An :class:`InputError` naming the line of the first row with a value in ``columns`` larger than
+    ``limit`` in magnitude (a physical range: beyond it a value is a corrupt row or a unit mix-up); NaN passes."""
+    block = np.abs(tab.values[:, columns])
+    with np.errstate(invalid="ignore"):
+        bad = np.flatnonzero((block > limit).any(axis=1))
+    if len(bad):
+        i = int(bad[0])
+        value = tab.values[i, columns][int(np.nanargmax(block[i]))]
+        raise InputError(f"{what} {value:g} is beyond ±{limit:g}: not a physical value", path, int(tab.lines[i]))
 
 
 def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
@@ -137,7 +164,7 @@ def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray
                 names.append(parts[1])
                 lines.append(lineno)
     except UnicodeDecodeError:
-        raise InputError("not a text CSV file", path) from None
+        raise _not_text(path) from None
     except OSError as exc:
         raise InputError(f"cannot read file ({exc.strerror})", path) from None
     return np.array(ts, dtype=np.int64), names, np.array(lines, dtype=np.int64)

@@ -12,7 +12,9 @@ the WGS-84 ellipsoid), so a configured datum moves the whole stream. ``status`` 
 ``covariance_type`` are those of ``sensor_msgs/NavSatFix``; ``cov_ee, cov_en, cov_nn`` the east-north
 block of its ``position_covariance``.
 
-Skipped and counted (with a note), never fatal: fixes with ``status < 0`` (no fix), a NaN in latitude,
+Latitude, longitude and altitude outside their ranges (90, 180 degrees, :data:`MAX_ALTITUDE_M`) and a
+covariance beyond :data:`MAX_SIGMA_M` squared are errors naming the line. Skipped and counted (with a
+note), never fatal: fixes with ``status < 0`` (no fix), a NaN in latitude,
 longitude, altitude or a given covariance, and a given covariance that is zero or not positive
 definite. A fix with ``covariance_type`` 0 (unknown) uses ``horizontal_sigma_m``.
 """
@@ -29,12 +31,16 @@ import pymap3d
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import SENSOR_KEYS, load_yaml, parse_pose, warn_unknown_keys
 from fusion_vo.measurements import GpsData
-from fusion_vo.recording.csvio import read_table
+from fusion_vo.recording.csvio import check_magnitude, read_table
 
 log = logging.getLogger(__name__)
 
 #: standard deviation [m] of a fix without a covariance when sensor.yaml gives none (single-point GNSS)
 DEFAULT_HORIZONTAL_SIGMA = 2.5
+#: the physical ranges of a fix: its altitude [m] (the deepest mine to far above any aircraft) and its
+#: standard deviations [m] (``horizontal_sigma_m``, the square root of a covariance)
+MAX_ALTITUDE_M = 1e5
+MAX_SIGMA_M = 1e6
 HEADER = ("#timestamp [ns],latitude [deg],longitude [deg],altitude [m],e [m],n [m],u [m],"
           "status [],covariance_type [],cov_ee [m^2],cov_en [m^2],cov_nn [m^2]")
 
@@ -90,6 +96,9 @@ def read_gps(folder: str | Path) -> GpsData:
     if np.any(out_of_range):
         i = int(np.flatnonzero(out_of_range)[0])
         raise InputError(f"latitude {geo[i, 0]} / longitude {geo[i, 1]} out of range", path, int(tab.lines[i]))
+    check_magnitude(tab, path, slice(2, 3), MAX_ALTITUDE_M, "altitude [m]")
+    if width == 11:
+        check_magnitude(tab, path, slice(8, 11), MAX_SIGMA_M**2, "covariance [m^2]")
     for reason, mask in (("no fix", no_fix), ("NaN", nan), ("zero covariance", bad_cov)):
         if np.any(mask):
             skipped[reason] = int(mask.sum())
@@ -126,8 +135,8 @@ def gps_settings(path: Path) -> tuple[dict, list[str]]:
         sigma = _number(meta["horizontal_sigma_m"], "horizontal_sigma_m", path)
         if sigma <= 0:
             raise InputError("'horizontal_sigma_m' must be positive", path)
-        if sigma > 1e6:  # a plain range: its square must not overflow
-            raise InputError(f"'horizontal_sigma_m' must be at most 1e+06 m, not {sigma:g}", path)
+        if sigma > MAX_SIGMA_M:  # a plain range: its square must not overflow
+            raise InputError(f"'horizontal_sigma_m' must be at most {MAX_SIGMA_M:g} m, not {sigma:g}", path)
     else:
         notes.append(f"{path}: no horizontal_sigma_m, fixes without a covariance get {sigma} m")
     datum = None
@@ -137,8 +146,9 @@ def gps_settings(path: Path) -> tuple[dict, list[str]]:
             raise InputError("'datum' must be a mapping with latitude, longitude [deg] and altitude [m]", path)
         datum = (_number(d["latitude"], "datum.latitude", path), _number(d["longitude"], "datum.longitude", path),
                  _number(d.get("altitude", 0.0), "datum.altitude", path))
-        if abs(datum[0]) > 90 or abs(datum[1]) > 180:
-            raise InputError("'datum' latitude or longitude out of range", path)
+        if abs(datum[0]) > 90 or abs(datum[1]) > 180 or abs(datum[2]) > MAX_ALTITUDE_M:
+            raise InputError(f"'datum' latitude, longitude or altitude out of range (at most 90, 180 degrees and "
+                             f"{MAX_ALTITUDE_M:g} m), not {list(datum)}", path)
     return {"lever_arm": lever, "sigma": sigma, "datum": datum}, notes
 
 

@@ -31,6 +31,7 @@ import io
 import logging
 import os
 import stat
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -41,9 +42,10 @@ import numpy as np
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import SENSOR_KEYS, CameraModel, load_yaml, parse_pose, sensor_number, warn_unknown_keys
-from fusion_vo.measurements import GpsData, ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData
+from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED, GpsData,
+                                    ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData)
 from fusion_vo.outputs import make_folder, write_atomic
-from fusion_vo.recording.csvio import read_frame_list, read_table
+from fusion_vo.recording.csvio import check_magnitude, read_frame_list, read_table
 
 log = logging.getLogger(__name__)
 
@@ -91,6 +93,8 @@ class Recording:
     """
 
     def __init__(self, path: str | Path):
+        if isinstance(path, (str, bytes)) and not path.strip():  # Path("") is the current folder
+            raise InputError(f"no recording folder given ({path!r}: an empty name would read the current folder)")
         self.path = Path(path)
         if not self.path.exists():
             raise InputError("recording folder not found", self.path)
@@ -276,6 +280,8 @@ class Recording:
         tab = _enough_rows(read_table(path, (6, 10), "IMU values"), path, 2, "IMU")
         if tab.values.shape[1] not in (6, 10):
             raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
+        check_magnitude(tab, path, slice(0, 3), MAX_ANGULAR_RATE, "angular rate [rad/s]")
+        check_magnitude(tab, path, slice(3, 6), MAX_ACCELERATION, "acceleration [m/s²]")
         orient = None
         if tab.values.shape[1] == 10:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
@@ -349,6 +355,8 @@ class Recording:
         """``odom0``: body-frame twist."""
         path = self._need("odometry", "odom0")
         tab = _enough_rows(read_table(path, 3, "twist values"), path, 1, "odometry")
+        check_magnitude(tab, path, slice(0, 2), MAX_SPEED, "speed [m/s]")
+        check_magnitude(tab, path, slice(2, 3), MAX_ANGULAR_RATE, "yaw rate [rad/s]")
         return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
 
     def range(self) -> RangeData:
@@ -358,6 +366,7 @@ class Recording:
         bad = np.flatnonzero(tab.values[:, 0] <= 0)
         if len(bad):
             raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
+        check_magnitude(tab, path, slice(0, 1), MAX_RANGE_M, "distance [m]")
         return RangeData(tab.t, tab.values[:, 0])
 
     def gps(self) -> GpsData:
@@ -409,13 +418,15 @@ def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
 
     Rules: rows ``timestamp [ns], p_x, p_y, p_z, q_w, q_x, q_y, q_z``, further columns ignored, as every
     stream of the layout; timestamps increase strictly (a repeated or earlier timestamp is an error naming
-    the line, as in every other stream); each quaternion's norm is within 0.05 of 1 (it is normalised); at
-    least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
+    the line, as in every other stream); each position within
+    :data:`~fusion_vo.measurements.MAX_POSITION_M`; each quaternion's norm is within 0.05 of 1 (it is
+    normalised); at least ``min_poses`` poses (the evaluation needs two). Returns the planar pose (x, y, yaw), the height z and the full quaternion (w, x, y, z).
     """
     path = Path(path)
     tab = read_table(path, (7, 7), "pose values", ignore_extra=True)  # further columns are ignored
     if len(tab) < min_poses:
         raise InputError(f"ground truth needs at least {min_poses} poses, found {len(tab)}", path)
+    check_magnitude(tab, path, slice(0, 3), MAX_POSITION_M, "position [m]")
     q = unit_quaternions(tab.values[:, 3:7], tab.lines, path, "quaternion")
     yaw = se2.yaw_of_quaternion(q)
     xyyaw = np.column_stack([tab.values[:, 0], tab.values[:, 1], yaw])
@@ -427,8 +438,9 @@ def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tupl
     """Read and decode one frame file: ``(grey image, None)`` or ``(None, reason)``.
 
     The file is read as bytes and decoded in memory (any valid path works). ``size`` is ``(height,
-    width)`` to check, or ``None``; ``shift`` scales 16-bit frames holding fewer bits (see
-    :meth:`Recording.pixel_shift`).
+    width)`` to check, or ``None``; a PNG whose header states another size is not decoded (a corrupt header
+    may claim any size, and OpenCV would allocate it or stop at its pixel limit). ``shift`` scales 16-bit
+    frames holding fewer bits (see :meth:`Recording.pixel_shift`).
     """
     try:
         # opened without blocking and checked to be a regular file before reading: a FIFO (or a device)
@@ -444,13 +456,36 @@ def read_image(path: Path, size: tuple[int, int] | None, shift: int = 0) -> tupl
         return None, f"cannot read image file ({exc.strerror})"
     if not data:
         return None, "empty image file"
-    img = cv2.imdecode(np.frombuffer(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    header = png_size(data)
+    if size is not None and header is not None and header != size:  # not decoded: it may claim any size
+        return None, f"frame is {header[1]}x{header[0]} (its PNG header) but cam0/sensor.yaml says {size[1]}x{size[0]}"
+    img = decode_image(data)
     if img is None:
         return None, "unreadable or corrupt image"
     img, err = _to_grey(img, size)
     if img is not None and shift:
         img = scale_bits(img, shift)
     return img, err
+
+
+def decode_image(data: bytes | np.ndarray) -> np.ndarray | None:
+    """An encoded image (PNG, JPEG, ...) decoded unchanged by OpenCV, or ``None`` when it cannot be decoded
+    (corrupt data, or a header beyond OpenCV's pixel limit, which OpenCV raises as an error)."""
+    buf = np.frombuffer(data, dtype=np.uint8) if isinstance(data, bytes) else np.asarray(data, dtype=np.uint8)
+    if not buf.size:
+        return None
+    try:
+        return cv2.imdecode(buf.reshape(-1), cv2.IMREAD_UNCHANGED)
+    except cv2.error:
+        return None
+
+
+def png_size(data: bytes) -> tuple[int, int] | None:
+    """``(height, width)`` that a PNG file's IHDR chunk states, or ``None`` for data that is not a PNG."""
+    if len(data) >= 24 and data[:8] == b"\x89PNG\r\n\x1a\n" and data[12:16] == b"IHDR":
+        width, height = struct.unpack(">II", data[16:24])
+        return height, width
+    return None
 
 
 def scale_bits(image: np.ndarray, shift: int) -> np.ndarray:

@@ -9,7 +9,8 @@ with status 2).
 
 After start-up the objects made so far leave the garbage collector's scans (:func:`gc.freeze`): CPython's
 full collections would otherwise scan the hundred thousand objects of the imported libraries and stall
-whichever callback they fall in by some 40 ms (``benchmarks/bench_latency.py --gc-freeze``).
+whichever callback they fall in by some 40 ms (``benchmarks/backend_speed.py latency`` with and without
+``--gc-freeze``; docs/decisions/0029-live-work-on-the-callers-thread.md).
 """
 
 from __future__ import annotations

@@ -27,11 +27,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
 
-from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 from fusion_vo import schema
 from fusion_vo.config import RunConfig, run_model, validate_config
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
+from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 
 #: ROS's own parameters, passed through without validation here
 ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")

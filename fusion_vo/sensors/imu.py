@@ -149,45 +149,6 @@ def body_yaw_rate(data: ImuData) -> np.ndarray:
     return np.asarray(data.gyro, dtype=np.float64) @ r_bs[2]
 
 
-#: :func:`mounting_hint` speaks when a gyro axis follows the reference yaw rate with a correlation of at least
-#: ``MOUNTING_GOOD`` while the body z rate that ``T_BS`` gives stays below ``MOUNTING_POOR``
-MOUNTING_GOOD, MOUNTING_POOR = 0.7, 0.3
-
-
-def mounting_hint(data: ImuData, t, rate, against: str) -> str | None:
-    """A sentence for a gyro whose mounting ``T_BS`` looks wrong, or None.
-
-    ``rate`` (N,) [rad/s] is a reference yaw rate at times ``t`` (N,) (the camera's or the wheels', NaN where
-    there is none). Each of the gyro's three sensor axes, and the body z rate ``(R_BS ω_S)_z`` the backends
-    use, is correlated with it. Where one axis follows it (``|r| >= MOUNTING_GOOD``) and the body z rate does
-    not (``r < MOUNTING_POOR``), the IMU is most likely mounted otherwise than ``imu0/sensor.yaml`` says, and
-    the sentence names the axis. On robot_localization's Husky log imported without its launch file's static
-    transform, the sensor's +y axis follows the odometry's yaw rate at 0.83 and the body z axis at 0.01 (on the node
-    intervals of the check).
-    """
-    t = np.asarray(t, dtype=np.float64)
-    rate = np.asarray(rate, dtype=np.float64)
-    gyro = np.asarray(data.gyro, dtype=np.float64)
-    ok = np.isfinite(rate) & np.isfinite(t)
-    finite = np.isfinite(gyro).all(axis=1)
-    if np.count_nonzero(ok) < 20 or np.count_nonzero(finite) < 2 or not np.std(rate[ok]) > 0:
-        return None
-    axes = np.stack([np.interp(t[ok], data.t[finite], gyro[finite, i]) for i in range(3)], axis=1)
-    body = np.interp(t[ok], data.t[finite], body_yaw_rate(data)[finite])
-
-    def corr(x: np.ndarray) -> float:
-        return float(np.corrcoef(x, rate[ok])[0, 1]) if np.std(x) > 0 else 0.0
-
-    r_body = corr(body)
-    r = [corr(axes[:, i]) for i in range(3)]
-    i = int(np.argmax(np.abs(r)))
-    if abs(r[i]) < MOUNTING_GOOD or r_body >= MOUNTING_POOR:
-        return None
-    return (f"imu0/sensor.yaml: the gyro's {'+' if r[i] > 0 else '-'}{'xyz'[i]} axis follows the yaw rate of the {against} "
-            f"(correlation {abs(r[i]):.2f}), the body z axis its T_BS gives does not ({r_body:.2f}): check T_BS, "
-            "the IMU may be mounted otherwise")
-
-
 def gyro_yaw(data: ImuData, noise: ImuNoise | None = None) -> GyroYaw:
     """Yaw rate in the body frame with spikes and non-finite samples gated (see the module docstring)."""
     return gated_yaw_rate(data.t, body_yaw_rate(data), noise)

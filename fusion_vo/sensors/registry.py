@@ -41,7 +41,8 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
+
 from fusion_vo.sensors.model import ARGUMENT_SIZES
 
 #: the built-in sensor modules, imported (and so registered) on first use of the registry
@@ -104,14 +105,18 @@ class StatePrior:
     initial : float
         Prior mean and initial value.
     sigma : float
-        Prior standard deviation (positive).
+        Prior standard deviation (positive, at most ``MAX_SIGMA``).
     random_walk : float
-        Random walk [unit/√s] (0: a constant, estimated from all the data).
+        Random walk [unit/√s] (0: a constant, estimated from all the data; at most ``MAX_SIGMA``).
     """
 
     initial: float = 0.0
     sigma: float = 1.0
     random_walk: float = 0.0
+
+    #: the ranges' upper ends: ``|initial|`` at most MAX_INITIAL; ``sigma`` and ``random_walk`` at most MAX_SIGMA
+    MAX_INITIAL: ClassVar[float] = 1e6
+    MAX_SIGMA: ClassVar[float] = 1e3
 
     def check(self, key: str) -> None:
         """Raise ``ValueError`` naming ``key`` (``states.NAME``) for a value that cannot work."""
@@ -125,6 +130,9 @@ class StatePrior:
             raise ValueError(f"'{key}.sigma' must be positive, not {self.sigma}")
         if self.random_walk < 0:
             raise ValueError(f"'{key}.random_walk' must not be negative, not {self.random_walk}")
+        for leaf, high in (("initial", self.MAX_INITIAL), ("sigma", self.MAX_SIGMA), ("random_walk", self.MAX_SIGMA)):
+            if abs(getattr(self, leaf)) > high:  # (a variance of 1e300 squared overflows)
+                raise ValueError(f"'{key}.{leaf}' must be at most {high:g} in magnitude, not {getattr(self, leaf):g}")
 
 
 @dataclass(frozen=True)

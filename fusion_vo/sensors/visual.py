@@ -19,12 +19,12 @@ increment from frame ``a`` to frame ``b`` is modelled as moving-average::
 
 so one increment's total covariance stays ``Σ_vis`` and consecutive ones correlate at ``-f/2``. The EKF
 carries the errors of the previous and the current frame in its state (:func:`frame_error_cov`,
-:func:`ekf_blocks`): each prediction shifts the current frame's error into the previous one's place
+:func:`readings`): each prediction shifts the current frame's error into the previous one's place
 (which marginalises the older one) and starts the new frame's at zero with covariance ``f/2 Σ_vis``;
 the update then has ``∓I/Δt`` in their columns. The factor graph gives each frame a pose ``F_k`` tied
 to the node's pose by this model with a zero reading and ``f/2 Σ_vis`` (in the increments' units, through
 the visual scale when it is estimated; else ``BetweenFactorPose2(X_k, F_k, identity, f/2 Σ_vis)``) and
-puts the increment between the frame poses with ``(1 - f) Σ_vis`` (:func:`graph_factors`).
+puts the increment between the frame poses with ``(1 - f) Σ_vis`` (:func:`readings`).
 
 An increment may instead state its frames' error itself
 (:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance` ``Σ_e``, e.g. from a noise calibration

@@ -129,10 +129,9 @@ class WheelNoise:
         encoder ticks only, an odometry twist has no radii). ``"auto"`` (default): when a camera, an AHRS
         heading or GPS is fused (:func:`curvature_observable`); on the generated drives, which all have a
         camera, it improves ``hard``, ``height_error``, ``tilted`` and ``gps_outage`` and costs
-        ``random60``'s EKF and iSAM2 4 % (benchmarks/findings/fusion.md "Unequal wheel radii"). With the wheels
+        ``random60``'s EKF and iSAM2 4 %. With the wheels
         and a gyro alone the curvature's turn and the gyro's bias are told apart only by changes of speed, and the
-        heading then follows the two priors' split (benchmarks/findings/fusion.md "Wheels and a gyro
-        alone").
+        heading then follows the two priors' split.
     """
 
     k: float = 0.01

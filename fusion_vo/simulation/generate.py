@@ -21,19 +21,24 @@ import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import ClassVar
 
 import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.geometry.camera import DISTORTION_MODELS, CameraModel
+from fusion_vo.schema import FRACTION, Range
+from fusion_vo.geometry.camera import (DISTORTION_MODELS, MAX_IMAGE_SIDE, MAX_LEVER_ARM_M, CameraModel,
+                                       focal_length_problem)
+from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_CAMERA_HEIGHT_M, MAX_POSITION_M,
+                                    MAX_SPEED)
 from fusion_vo.recording.writer import RecordingWriter, check_target
 from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
 from fusion_vo.simulation.photometry import Photometric, Photometry
 from fusion_vo.simulation.realistic import RealisticCamera, RealisticRenderer
 from fusion_vo.simulation.render import Renderer
-from fusion_vo.simulation.robot import PROFILES, Limits, Motion, make_motion
+from fusion_vo.simulation.robot import MAX_DURATION_S, PROFILES, Limits, Motion, make_motion
 from fusion_vo.simulation.sensors import (GpsSimulation, ImuNoise, WheelTruth, gps_fixes, imu_samples,
                                          odometry_twist, sample_times, wheel_ticks)
 
@@ -41,6 +46,14 @@ log = logging.getLogger(__name__)
 
 #: default speed limits per profile (max_speed [m/s], max_turn_rate [rad/s])
 PROFILE_SPEEDS = {"random": (0.3, 0.9), "square": (0.2, 1.0), "circle": (0.15, 0.6)}
+
+#: ranges that several options share (:attr:`SimulationOptions.RANGES`)
+_SHAPE = Range(0, 1e3, open_low=True)  # side, radius, length [m]
+_POSITIVE = Range(0, open_low=True)
+_RATE = Range(0, 1e4, open_low=True)  # [Hz]
+_LEVER_ARM = Range(-MAX_LEVER_ARM_M, MAX_LEVER_ARM_M)  # [m]
+_ERROR = Range(-1, 1, open_low=True, open_high=True)  # a relative calibration error
+_NOISE = Range(0, 1e3)  # a noise density or random walk
 
 
 @dataclass
@@ -275,30 +288,53 @@ class SimulationOptions:
     jitter: float = 0.0
     start_time_ns: int = 1_600_000_000_000_000_000
 
+    #: the range of every number option (of each number of a list option); beyond it an option is a typo, or
+    #: sets work without end (``duration``, the rates, the image size, ``supersample``, ``blur_samples``)
+    RANGES: ClassVar[dict[str, Range]] = {
+        "duration": Range(0, MAX_DURATION_S, open_low=True), "max_speed": Range(0, MAX_SPEED, open_low=True),
+        "max_turn_rate": Range(0, MAX_ANGULAR_RATE, open_low=True), "side": _SHAPE, "radius": _SHAPE,
+        "length": _SHAPE, "angle": Range(-100, 100),
+        "texel_size": Range(0, 1, open_low=True), "featureless": Range(-1e4, 1e4),
+        "featureless_time": Range(0, MAX_DURATION_S),
+        "width": Range(8, 4096), "height": Range(8, 4096), "fu": _POSITIVE, "fv": _POSITIVE,
+        "cu": Range(-MAX_IMAGE_SIDE, MAX_IMAGE_SIDE), "cv": Range(-MAX_IMAGE_SIDE, MAX_IMAGE_SIDE),
+        "distortion": Range(-1e3, 1e3), "camera_rate": _RATE, "camera_height": Range(0, MAX_CAMERA_HEIGHT_M, open_low=True),
+        "lever_arm": _LEVER_ARM, "lateral_offset": _LEVER_ARM,
+        "tilt_x_deg": Range(-90, 90, open_low=True, open_high=True),
+        "tilt_y_deg": Range(-90, 90, open_low=True, open_high=True),
+        "height_error": Range(-1, 1, open_low=True, open_high=True), "height_vibration": Range(0, 10),
+        "vibration_frequency": Range(0, 1000), "exposure_time": Range(0, 1), "blur_samples": Range(1, 100),
+        "supersample": Range(1, 16), "dropped_frames": Range(0, 1, open_high=True), "png_compression": Range(0, 9),
+        "gain": Range(0, 100, open_low=True), "exposure_drift": FRACTION, "exposure_period": Range(0, 1e6, open_low=True),
+        "vignetting": FRACTION, "highlight_radius": Range(0, MAX_IMAGE_SIDE), "highlight_center": Range(-10, 10),
+        "noise": Range(0, 65535), "shot_noise": Range(0, 100),
+        "wheel_rate": _RATE, "ticks_per_revolution": Range(1, 2**32), "wheel_radius": Range(1e-6, 1e3),
+        "wheel_base": Range(1e-6, 1e3), "radius_error_left": _ERROR, "radius_error_right": _ERROR, "base_error": _ERROR,
+        "slip": Range(0, 1), "wheel_start_count": Range(-(2**31), 2**32 - 1),
+        "imu_rate": _RATE, "gyro_bias": Range(-MAX_ANGULAR_RATE, MAX_ANGULAR_RATE),
+        "accel_bias": Range(-MAX_ACCELERATION, MAX_ACCELERATION), "gyro_noise_density": _NOISE,
+        "gyro_random_walk": _NOISE, "accel_noise_density": _NOISE, "accel_random_walk": _NOISE,
+        "gps_rate": Range(0, 100, open_low=True), "gps_noise": Range(0, 1e6, open_low=True),
+        "gps_lever_arm": _LEVER_ARM, "gps_outages": Range(0, MAX_DURATION_S), "gps_jumps": Range(-1e6, 1e6),
+        "gps_heading_deg": Range(-360, 360), "gps_origin": Range(-MAX_POSITION_M, MAX_POSITION_M),
+        "range_noise": Range(0, 1), "gt_rate": _RATE, "jitter": Range(0, 1),
+    }
+
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             _check_type(f.name, str(f.type), value)
             if str(f.type) == "int":  # 640.0 from a YAML file is fine, but stored as an int
                 setattr(self, f.name, int(value))
-        positive = ("duration", "max_speed", "max_turn_rate", "side", "radius", "length", "texel_size", "width",
-                    "height", "fu", "fv", "camera_rate", "camera_height", "blur_samples", "supersample",
-                    "exposure_period", "gain", "wheel_rate", "ticks_per_revolution", "wheel_radius", "wheel_base",
-                    "imu_rate", "gt_rate", "gps_rate", "gps_noise")
-        for name in positive:
+        for name, bound in self.RANGES.items():
             value = getattr(self, name)
-            if value is not None and not value > 0:
-                raise ValueError(f"option '{name}' must be positive, not {value}")
-        non_negative = ("exposure_time", "height_vibration", "highlight_radius", "noise", "shot_noise", "slip",
-                        "range_noise", "jitter", "gyro_noise_density", "gyro_random_walk", "accel_noise_density",
-                        "accel_random_walk")
-        for name in non_negative:
-            if getattr(self, name) < 0:
-                raise ValueError(f"option '{name}' must not be negative")
-        if not 0 <= self.dropped_frames < 1:
-            raise ValueError("option 'dropped_frames' is a fraction in [0, 1)")
-        if not 0 <= self.png_compression <= 9:
-            raise ValueError("option 'png_compression' must be 0..9")
+            for item in _numbers_of(value):
+                problem = bound.error(f"option '{name}'", item)
+                if problem:
+                    raise ValueError(problem)
+        problem = focal_length_problem(self.fu, self.fv, (self.width, self.height))
+        if problem:
+            raise ValueError(f"options 'fu', 'fv': {problem}")
         if self.texture not in TEXTURES:
             raise ValueError(f"option 'texture' must be one of {', '.join(TEXTURES)}, not {self.texture!r}")
         if self.distortion_model not in DISTORTION_MODELS:
@@ -341,6 +377,15 @@ class SimulationOptions:
             return schema.build(cls, d)
         except InputError as exc:
             raise ValueError(exc.message) from None
+
+
+def _numbers_of(value) -> list:
+    """The numbers of an option: itself, the items of a list, the items of a list of lists (none for None)."""
+    if value is None:
+        return []
+    if isinstance(value, (list, tuple)):
+        return [v for item in value for v in (item if isinstance(item, (list, tuple)) else [item])]
+    return [value]
 
 
 def _check_number(name: str, value, integer: bool) -> None:
@@ -441,6 +486,9 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
         exposure = f" exposed {o.exposure_time:g} s each" if o.exposure_time > 0.5 / o.camera_rate else ""
         raise ValueError(f"the '{profile}' drive lasts {t_end:.3g} s: too short for two camera frames at "
                          f"{o.camera_rate:g} Hz{exposure} (make it longer: duration, length, side, radius or angle)")
+    if t_end > MAX_DURATION_S:
+        raise ValueError(f"the '{profile}' drive lasts {t_end:.3g} s, longer than the {MAX_DURATION_S:g} s a generated "
+                         "recording may last (make it shorter: duration, length, side, radius or angle)")
     if o.start_time_ns + math.ceil(t_end * 1e9) + 10**9 >= 2**63:  # (a second's margin for the sensors' stamps)
         raise ValueError(f"option 'start_time_ns': the drive's {t_end:.3g} s would run past 2^63 ns, the last "
                          "timestamp a recording can hold")

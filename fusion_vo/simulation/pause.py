@@ -1,7 +1,7 @@
 """A logger that stopped for a while: shift the later rows of a recording's streams.
 
 Used to reproduce a pause in every stream (a robot's logger stopped, then resumed) on a generated
-recording, by the fault tests and by ``benchmarks/bench_pause.py``.
+recording, by the fault tests and by ``benchmarks/run_speed.py pause``.
 """
 
 from __future__ import annotations

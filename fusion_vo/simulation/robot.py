@@ -82,6 +82,10 @@ def integrate(v: np.ndarray, w: np.ndarray, dt: float, start=(0.0, 0.0, 0.0)) ->
 
 
 # ---------------------------------------------------------------------------- building blocks
+#: the longest drive a recording is generated for [s] (an hour: 72000 frames at 20 Hz)
+MAX_DURATION_S = 3600.0
+
+
 def _ramp_profile(distance: float, v_max: float, a_max: float, dt: float) -> np.ndarray:
     """Speed samples of a trapezoidal (or triangular) profile covering ``|distance|`` exactly."""
     d = abs(distance)
@@ -92,6 +96,9 @@ def _ramp_profile(distance: float, v_max: float, a_max: float, dt: float) -> np.
     d_acc = 0.5 * a_max * t_acc**2
     t_flat = (d - 2 * d_acc) / v_peak
     total = 2 * t_acc + t_flat
+    if total > MAX_DURATION_S:  # refused before its samples are made (a million per thousand seconds)
+        raise ValueError(f"the drive lasts {total:.3g} s or more, longer than the {MAX_DURATION_S:g} s a generated "
+                         "recording may last (make it shorter: duration, length, side, radius or angle)")
     n = max(int(math.ceil(total / dt)), 1)
     t = (np.arange(n) + 0.5) * (total / n)
     speed = np.minimum.reduce([a_max * t, np.full(n, v_peak), a_max * (total - t)])

@@ -67,7 +67,7 @@ STANDARD: dict[str, tuple[str, int, dict, str]] = {
         "only (no distortion), camera 0.09-0.11 m high"),
 }
 
-#: the recordings of the independent renderer (benchmarks/bench_realistic.py)
+#: the recordings of the independent renderer (``python benchmarks/visual.py independent``)
 REALISTIC = [name for name in STANDARD if name.startswith("real_")]
 
 

@@ -1,5 +1,7 @@
 """Helpers for the backend tests: errors against the truth, visual dead reckoning."""
 
+import dataclasses
+
 import numpy as np
 
 from fusion_vo.backends import SensorStreams
@@ -20,5 +22,20 @@ def visual_track(visual) -> PoseData:
     return PoseData(np.array([ok[0].t0] + [v.t1 for v in ok]), poses)
 
 
-def streams_of(s) -> SensorStreams:
-    return SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, range=s.range, camera_height=s.camera_height)
+def streams_of(s, stated_scale: float | None = None) -> SensorStreams:
+    """The synthetic drive's streams. With ``stated_scale`` (the drive's ``visual_scale``), the calibration
+    uncertainties stated as the simulator writes them into the sensors' files: the camera height's
+    (:func:`stated_height_sigma`) and the wheels' radius error (0 on these drives, so 0.1 mm)."""
+    if stated_scale is None:
+        return SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, range=s.range, camera_height=s.camera_height)
+    wheel = dataclasses.replace(s.wheel, config=dataclasses.replace(s.wheel.config, radius_sigma=1e-4))
+    return SensorStreams(visual=s.visual, wheel=wheel, imu=s.imu, range=s.range, camera_height=s.camera_height,
+                         camera_height_sigma=stated_height_sigma(s, stated_scale))
+
+
+def stated_height_sigma(s, visual_scale: float) -> float:
+    """``height_sigma`` [m] the simulator states for a camera height it wrote wrong by ``visual_scale``: the size
+    of the error (the true height is ``camera_height / visual_scale``), at least 0.1 mm. A drive whose camera
+    scale is wrong on purpose states it, as ``fusion-vo simulate`` does, or the default prior (the height known
+    to 0.2 %) keeps the wrong scale."""
+    return max(abs(s.camera_height - s.camera_height / visual_scale), 1e-4)

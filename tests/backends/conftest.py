@@ -9,9 +9,9 @@ from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 @pytest.fixture(scope="session")
 def calibrated_error():
-    """30 s with a 2 % camera-height error, fused by both backends."""
+    """30 s with a 2 % camera-height error, stated as the simulator states it (2 mm), fused by both backends."""
     s = synthetic_streams(SyntheticOptions(duration=30.0, visual_scale=1.02), seed=3)
-    result = fuse(streams_of(s).select(["camera", "wheel", "imu"]), "all", FusionConfig())
+    result = fuse(streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"]), "all", FusionConfig())
     return s, result
 
 

@@ -51,6 +51,16 @@ def test_well_known_radii_let_the_wheels_set_the_scale(drive, backend):
     assert kv1 - kv0 == pytest.approx(-0.005, abs=0.0015)
 
 
+@pytest.mark.parametrize("backend", ["ekf", "gtsam"])
+def test_default_priors_keep_the_camera_height(drive, backend):
+    # nothing states either uncertainty: the camera height (a mounting dimension, prior 0.2 %) keeps its
+    # scale and the wheels (prior 2 %) take a 0.5 % radius error; the former defaults (5 % and 1 %) moved
+    # the camera's scale by 96 % of it (-0.0048)
+    (kv0, kr0), (kv1, kr1) = _scales(drive, backend, None, None)
+    assert kv1 - kv0 == pytest.approx(0.0, abs=2e-4)
+    assert kr1 - kr0 == pytest.approx(0.005, abs=0.0015)
+
+
 def test_bad_sigma_in_sensor_yaml_names_the_key(tmp_path):
     from fusion_vo.errors import InputError
     from fusion_vo.recording.reader import Recording

@@ -21,14 +21,16 @@ def _messages(s, rng, delay):
 @pytest.fixture(scope="module")
 def drive():
     s = synthetic_streams(SyntheticOptions(duration=10.0, visual_scale=1.02), seed=11)
-    return s, fuse(streams_of(s).select(["camera", "wheel", "imu"]), "all")
+    return s, fuse(streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"]), "all")
 
 
 @pytest.mark.parametrize("backend, batch_name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
 def test_shuffled_arrivals_give_the_batch_online_estimate(drive, backend, batch_name):
     s, batch = drive
+    stated = streams_of(s, stated_scale=1.02)  # the calibrations' uncertainties, as the batch run has them
     fusion = StreamingFusion(backend, FusionConfig(reorder_window=0.2), ["camera", "wheel", "imu"],
-                             wheel_config=s.wheel.config, imu_noise=s.imu.noise)
+                             wheel_config=stated.wheel.config, imu_noise=s.imu.noise,
+                             camera_height=s.camera_height, camera_height_sigma=stated.camera_height_sigma)
     assert fusion.current_estimate() is None
     for _, kind, m in _messages(s, np.random.default_rng(1), 0.1):
         getattr(fusion, f"add_{kind}")(m)

@@ -9,10 +9,10 @@ from typing import Literal
 
 import yaml
 
-from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 from fusion_vo import schema
 from fusion_vo.cli.main import main
 from fusion_vo.config import default_config_text, reference_text
+from fusion_vo.schema import AT_LEAST_1, FRACTION, POSITIVE, Range
 
 REFERENCE = Path(__file__).resolve().parents[2] / "docs" / "configuration-reference.md"
 
@@ -63,8 +63,9 @@ def test_every_option_of_the_configuration_has_its_row_with_its_default():
 
 def test_rows_state_the_range_the_unit_and_the_choices():
     rows = _rows(reference_text())
-    assert rows["klt.lk_iterations"][:2] == ["`20`", "integer ≥ 1"]
+    assert rows["klt.lk_iterations"][:2] == ["`20`", "integer [1, 1000]"]  # Field(ge=1, le=1000) of KltConfig
     assert rows["klt.quality_level"][1] == "number (0, 1]"
+    assert rows["klt.fb_skip_ratio"][1] == "number (0, 1], or null"  # a range inside Annotated[...] | None
     assert rows["odometry.threads"][1] == "integer [1, 256], or null"
     assert rows["fusion.step_hz"][2] == "Hz"
     assert rows["frontend"][1] == "one of `klt`, `features`, `direct`"

@@ -11,9 +11,6 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "datasets").glob("*.md")])
 
-#: pages another part of the project adds (the live ROS 2 node's): a link to them may wait for them
-NOT_YET_HERE = {"docs/ros2.md"}
-
 _FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 _LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
 
@@ -62,8 +59,7 @@ def broken(page: Path, text: str | None = None) -> list[str]:
         if name is None:
             problems.append(f"{target}: outside the repository")
         elif not resolved.exists():
-            if name not in NOT_YET_HERE:
-                problems.append(f"{target}: no such file")
+            problems.append(f"{target}: no such file")
         elif fragment and resolved.suffix == ".md" and fragment not in anchors(resolved.read_text()):
             problems.append(f"{target}: no heading #{fragment} in {name}")
     return problems

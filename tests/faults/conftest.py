@@ -7,6 +7,7 @@ names the file (and line, or key), nothing half-written, and nothing outside the
 from __future__ import annotations
 
 import shutil
+import sys
 from pathlib import Path
 
 import pytest
@@ -44,3 +45,22 @@ def pristine_run(pristine, tmp_path_factory) -> Path:
 def run_folder(pristine_run, tmp_path) -> Path:
     """A fresh copy of the run folder in ``tmp_path/run`` to break."""
     return Path(shutil.copytree(pristine_run, tmp_path / "run", symlinks=True))
+
+
+def fault_kinds() -> dict[str, int] | None:
+    """The ways this suite breaks a recording or its configuration, by kind (the count README.md quotes), or
+    ``None`` when the modules that hold them were not collected."""
+    recording, config = sys.modules.get("test_recording_faults"), sys.modules.get("test_config_faults")
+    if recording is None or config is None:
+        return None
+    return {"recording faults": len(recording.FAULTS) + len(recording.PHYSICAL_RANGE_FAULTS),
+            "out-of-range": len(config.OUT_OF_RANGE), "further fusion values": len(config.FUSION_BAD)}
+
+
+def pytest_terminal_summary(terminalreporter) -> None:
+    """Print the count of fault kinds (README.md: "it breaks a small recording or its configuration in N ways")."""
+    kinds = fault_kinds()
+    if kinds:
+        parts = ", ".join(f"{n} {kind}" for kind, n in kinds.items())
+        terminalreporter.write_line(f"fault suite: a recording or its configuration broken in {sum(kinds.values())} "
+                                    f"ways ({parts}), and every configured number just outside each end of its range")

@@ -149,6 +149,12 @@ OPTIONS = [
     (("batch", "{rec}", "--out", "{out}", "--sensors", "sonar", "--workers", "1"), ["--sensors sonar"]),
     (("export", "{run}", "{out}", "--to", "mcap", "--frame-id", ""), ["--frame-id"]),
     (("export", "{run}", "{out}", "--to", "mcap", "--trajectories", ""), ["--trajectories ''"]),
+    # work without an upper bound: 'replay --speed 0 --rate 1e9' was still busy after 100 s on a 12 s recording
+    (("replay", "{rec}", "--out", "{out}", "--speed", "0", "--rate", "1e9"), ["--rate", "at most 1000", "1e9"]),
+    (("replay", "{rec}", "--out", "{out}", "--speed", "1e-9"), ["--speed", "from 0.01 to 1e+06", "1e-9"]),
+    (("replay", "{rec}", "--out", "{out}", "--window", "1e300"), ["--window 1e+300", "'reorder_window' must be at most"]),
+    (("batch", "{rec}", "--out", "{out}", "--workers", "100000"), ["--workers", "at most 256", "100000"]),
+    (("bench", "{rec}", "--repeats", "1000000"), ["--repeats", "at most 100"]),
 ]
 
 
@@ -259,6 +265,45 @@ def test_compare_never_writes_into_a_recording(pristine, pristine_run, capsys, t
     assert snapshot(pristine) == before
 
 
+def test_compare_never_writes_into_a_run_folder_it_compares(pristine_run, run_folder, tmp_path, capsys,
+                                                           monkeypatch):
+    """'compare A B --out A' wrote into run folder A (and a later 'run --out A' deleted the files)."""
+    def no_evaluation(*args, **kwargs):
+        raise AssertionError("the runs were evaluated before the output folder was checked")
+
+    monkeypatch.setattr("fusion_vo.evaluation.compare.evaluate_trajectories", no_evaluation)
+    before = snapshot(tmp_path)
+    for out in (run_folder, run_folder / "cmp"):
+        status, _, err = cli(capsys, "compare", run_folder, pristine_run, "--out", out)
+        assert_error(status, err, str(out), "part of an input", str(run_folder))
+    assert snapshot(tmp_path) == before
+
+
+def test_run_never_makes_its_folder_inside_the_recording(recording, tmp_path, capsys):
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "run", recording, "--out", recording / "newsub")
+    assert_error(status, err, str(recording / "newsub"), "part of an input")
+    assert snapshot(tmp_path) == before
+
+
+def test_show_matches_replaces_only_a_picture_it_wrote(recording, tmp_path, capsys):
+    """'show-matches REC --frame 5 -o mine.png' overwrote the user's own picture."""
+    import cv2
+    import numpy as np
+
+    mine, ours = tmp_path / "mine.png", tmp_path / "ours.png"
+    cv2.imwrite(str(mine), np.zeros((8, 8), np.uint8))
+    (tmp_path / "folder.png").mkdir()
+    before = snapshot(tmp_path)
+    for out in (mine, tmp_path / "folder.png"):
+        status, _, err = cli(capsys, "show-matches", recording, "--frame", "3", "--out", out)
+        assert_error(status, err, str(out), "fusion-vo did not write it")
+    assert snapshot(tmp_path) == before
+    for frame in ("3", "4"):  # written, then replaced
+        status, out, err = cli(capsys, "show-matches", recording, "--frame", frame, "--out", ours)
+        assert status == 0 and f"frames {int(frame) - 1} -> {frame}" in out, err
+
+
 def test_export_never_writes_into_the_run_or_its_recording(pristine, run_folder, tmp_path, capsys):
     """A bag inside the run folder would go when the run is redone (run replaces its folder whole)."""
     before_rec, before_run = snapshot(pristine), snapshot(run_folder)
@@ -268,6 +313,71 @@ def test_export_never_writes_into_the_run_or_its_recording(pristine, run_folder,
     assert snapshot(pristine) == before_rec and snapshot(run_folder) == before_run
     status, _, err = cli(capsys, "export", run_folder, tmp_path / "beside.mcap", "--to", "mcap")
     assert status == 0, err
+
+
+@pytest.mark.parametrize("fmt, name", [("mcap", "same.mcap"), ("rosbag2", "same_bag")])
+def test_of_two_exports_to_one_name_the_second_fails_naming_it(fmt, name, run_folder, tmp_path, capsys,
+                                                              monkeypatch):
+    """Both exited 0 and the second silently replaced the first's MCAP file; the loser of two rosbag2
+    exports named a hidden temporary folder."""
+    from fusion_vo.export import ros
+
+    out = tmp_path / name
+    writer = getattr(ros, f"_write_{fmt}")
+
+    def rival_finishes_first(path, *args):  # the other export moves its output into place meanwhile
+        writer(path, *args)
+        if path.is_dir():
+            out.mkdir()
+            (out / "rival").write_text("rival")
+        else:
+            out.write_text("rival")
+
+    monkeypatch.setattr(ros, f"_write_{fmt}", rival_finishes_first)
+    status, _, err = cli(capsys, "export", run_folder, out, "--to", fmt)
+    assert_error(status, err, f"{out}: already exists")
+    assert ".partial" not in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["run", name])  # no staging folder left
+    assert (out / "rival" if fmt == "rosbag2" else out).read_text() == "rival"
+
+
+#: a ROS 2 topic or frame name: tokens of ASCII letters, digits and underscores, none starting with a digit, no "__"
+_ROS2_NAME = r"/?(?!.*__)[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*"
+
+
+def test_export_writes_trajectory_names_ros_2_accepts_and_says_so(run_folder, tmp_path, capsys):
+    """'my-traj.tum' was exported on /fusion_vo/my-traj/odometry, a name ROS 2 tools reject."""
+    import re
+
+    from mcap.reader import make_reader
+    from rosbags.typesys import Stores, get_typestore
+
+    for name in ("my-traj", "2nd traj"):
+        shutil.copy(run_folder / "ekf.tum", run_folder / f"{name}.tum")
+    out = tmp_path / "x.mcap"
+    status, printed, err = cli(capsys, "export", run_folder, out, "--to", "mcap", "--no-groundtruth")
+    assert status == 0, err
+    assert "note: trajectory 'my-traj' exported as /fusion_vo/my_traj/odometry and frame my_traj/base_link" in printed
+    assert "note: trajectory '2nd traj' exported as /fusion_vo/t_2nd_traj/odometry" in printed
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    topics, frames = set(), set()
+    with open(out, "rb") as fh:
+        for schema, channel, message in make_reader(fh).iter_messages():
+            topics.add(channel.topic)
+            msg = store.deserialize_cdr(message.data, schema.name)
+            frames.update(tf.child_frame_id for tf in msg.transforms) if channel.topic == "/tf" else \
+                frames.add(msg.child_frame_id)
+    assert {"/fusion_vo/my_traj/odometry", "/fusion_vo/t_2nd_traj/odometry", "/fusion_vo/ekf/odometry"} <= topics
+    assert "t_2nd_traj/base_link" in frames
+    assert all(re.fullmatch(_ROS2_NAME, name) for name in topics | frames), topics | frames
+
+
+def test_export_of_two_names_ros_2_would_see_as_one_names_both(run_folder, tmp_path, capsys):
+    for name in ("my-traj", "my_traj"):
+        shutil.copy(run_folder / "ekf.tum", run_folder / f"{name}.tum")
+    status, _, err = cli(capsys, "export", run_folder, tmp_path / "x.mcap", "--to", "mcap")
+    assert_error(status, err, "'my-traj' and 'my_traj'", "/fusion_vo/my_traj/odometry")
+    assert not (tmp_path / "x.mcap").exists()
 
 
 # ------------------------------------------------------------------ import-bag: a topic without messages
@@ -451,6 +561,62 @@ def test_a_sweep_grid_value_given_twice_names_the_file_line_and_key(text, line, 
     key = text.split("\n")[1].strip().split(":")[0]
     assert_error(status, err, f"{grid}:{line}:", f"grid key '{key}'", "given twice")
     assert snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------ sweep: list and mapping values
+#: a whole section swept as a mapping would replace the section (the base's other keys lost): refused before any run
+MAPPING_GRIDS = [("grid:\n  klt: [{max_tracks: 60}]\n", 2, "klt"),
+                 ("random: 3\nranges:\n  fusion.graph:\n    - {max_iterations: 5}\n", 4, "fusion.graph"),
+                 ("grid:\n  klt: {max_tracks: 60}\n", None, "klt")]
+
+
+@pytest.mark.parametrize("text, line, key", MAPPING_GRIDS, ids=["grid_list", "random_choice", "grid_single"])
+def test_a_sweep_over_a_whole_section_is_refused_before_any_run(text, line, key, pristine, tmp_path, capsys):
+    """It ran every task, then died with 'unhashable type', leaving results without report.html."""
+    grid = tmp_path / "grid.yaml"
+    grid.write_text(text)
+    before = snapshot(tmp_path)
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid)
+    assert_error(status, err, f"{grid}:{line}:" if line else f"{grid}:", f"grid key '{key}'", "is a mapping",
+                 f"'{key}.")
+    assert snapshot(tmp_path) == before
+
+
+def test_a_sweep_over_list_values_ranks_and_reports_them_as_json_text(tmp_path):
+    """Swept lists (``fusion.initial_pose``) are one column of canonical JSON text: grouped, ranked, plotted."""
+    import pandas as pd
+
+    from fusion_vo.batch.grid import Grid, ParameterSet
+    from fusion_vo.batch.ranking import best_sets, describe_set
+    from fusion_vo.batch.runner import _frame, write_results
+    from fusion_vo.batch.tasks import COLUMNS
+
+    key = "fusion.initial_pose"
+    poses = {"p000": [0, 0, 0], "p001": [1.5, 0, 0.25]}
+    rows = []
+    for name, pose in poses.items():
+        for rec, ate in (("a", 0.1), ("b", 0.3)):
+            row = dict.fromkeys(COLUMNS, 0.0) | {"recording": rec, "trajectory": "vo", "status": "ok", "error": "",
+                                                 "ate_m": ate + (name == "p001"), "cached": False, "run_dir": ""}
+            rows.append(row | {"parameter_set": name, key: list(pose)})
+    frame = _frame(rows, [key])
+    grid = Grid([key], [ParameterSet(n, {key: p}) for n, p in poses.items()], [], None)
+    write_results(frame, tmp_path, "sweep", grid)
+    table = pd.read_csv(tmp_path / "results.csv")
+    assert sorted(set(table[key])) == ["[0, 0, 0]", "[1.5, 0, 0.25]"]
+    ranked, _ = best_sets(frame)
+    assert list(ranked["parameter_set"]) == ["p000", "p001"] and ranked["mean"].round(6).tolist() == [0.2, 1.2]
+    assert describe_set(frame, "p001") == f"{key}=[1.5, 0, 0.25]"
+    assert "[1.5, 0, 0.25]" in (tmp_path / "report.html").read_text()
+
+
+def test_optimize_refuses_list_choices_naming_the_key(pristine, tmp_path, capsys):
+    grid = tmp_path / "grid.yaml"
+    grid.write_text("grid:\n  fusion.initial_pose: [[0, 0, 0], [1, 0, 0]]\n")
+    status, _, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--optimize",
+                         "ate_m")
+    assert_error(status, err, f"{grid}", "key 'fusion.initial_pose'", "--optimize chooses among")
+    assert not (tmp_path / "sweep").exists()
 
 
 # ------------------------------------------------------------------ bench: frames that measured nothing

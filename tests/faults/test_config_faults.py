@@ -17,7 +17,7 @@ from fusion_vo.errors import InputError
 from fusion_vo.odometry import OdometryConfig
 
 BAD = {
-    "negative_height": ("odometry: {height: -0.1}", "odometry: height must be positive, not -0.1"),
+    "negative_height": ("odometry: {height: -0.1}", "odometry: height must be in (0, 100], not -0.1"),
     "text_height": ("odometry: {height: abc}", "odometry.height: expected a number"),
     "nan_height": ("odometry: {height: .nan}", "odometry: height must be a finite number, not nan"),
     "text_window": ("klt: {window: thirteen}", "klt.window: expected"),
@@ -43,6 +43,9 @@ BAD = {
     "section_twice": ("fusion:\n  max_gap: 1.0\nfusion:\n  reorder_window: 0.1",
                       "my-config.yaml:3: not valid YAML (key 'fusion' given twice (first on line 1))"),
     "key_twice": ("fusion:\n  max_gap: 1.0\n  max_gap: 2.0", "my-config.yaml:3: not valid YAML (key 'max_gap' given twice"),
+    # Python refuses to convert it ('Exceeds the limit (4300 digits)'): an internal error
+    "integer_of_5001_digits": ("odometry:\n  threads: " + "9" * 5001,
+                               "my-config.yaml:2: not valid YAML (an integer of 5001 characters is no setting)"),
 }
 
 
@@ -82,8 +85,8 @@ OUT_OF_RANGE = [
     ("klt: {global_downsample: 0}", "klt: global_downsample must be at least 1, not 0"),
     ("klt: {min_texture: .inf}", "klt: min_texture must be a finite number, not inf"),
     ("features: {ratio: .nan}", "features: ratio must be a finite number, not nan"),
-    ("odometry: {min_sigma_xy: -1}", "odometry: min_sigma_xy must be at least 0, not -1"),
-    ("odometry: {max_bad_start_frames: -3}", "odometry: max_bad_start_frames must be at least 1, not -3"),
+    ("odometry: {min_sigma_xy: -1}", "odometry: min_sigma_xy must be in [0, 10], not -1"),
+    ("odometry: {max_bad_start_frames: -3}", "odometry: max_bad_start_frames must be in [1, 1000000], not -3"),
     ("fusion: {graph: {reweight_passes: -1}}", "fusion: 'graph.reweight_passes' must not be negative, not -1"),
     ("fusion: {graph: {max_iterations: 0}}", "fusion: 'graph.max_iterations' must be at least 1, not 0"),
     ("fusion: {graph: {keyframe_every: 0}}", "fusion: 'graph.keyframe_every' must be at least 1, not 0"),
@@ -140,13 +143,23 @@ FUSION_BAD = [
     ("fusion: {initial_pose: [0, 0, null]}", "fusion: 'initial_pose' must be three finite numbers"),
     ("fusion: {initial_pose: [[0], 0, 0]}", "fusion: 'initial_pose' must be three finite numbers"),
     ("fusion: {camera_height: .nan}", "fusion: 'camera_height' must be a finite number, not nan"),
-    ("fusion: {camera_height: 0}", "fusion: 'camera_height' must be positive"),
+    ("fusion: {camera_height: 0}", "fusion: 'camera_height' must be in (0, 100], not 0"),
     ("fusion: {step_hz: 1.0e9}", "fusion: 'step_hz' must be at most 1000, not 1000000000.0"),
     ("fusion: {graph: {max_iterations: 100000}}", "fusion: 'graph.max_iterations' must be at most 1000"),
     ("fusion: {graph: {reweight_passes: 11}}", "fusion: 'graph.reweight_passes' must be at most 10"),
     ("fusion: {max_odom_delay: 1.0e6}", "fusion: 'max_odom_delay' must be at most 10"),
     ("fusion: {imu: {spike_window: 100000}}", "fusion: 'imu.spike_window' must be at most 50"),
     ("odometry: {threads: 100000}", "odometry: threads must be in [1, 256], not 100000"),
+    # finite but absurd: 1e300 overflowed once squared (OverflowError), or ended a track 1e306 m away
+    ("fusion: {initial_velocity_sigma: 1.0e300}", "fusion: 'initial_velocity_sigma' must be at most 1000, not 1e+300"),
+    ("fusion: {ekf: {accel_sigma: 1.0e300}}", "fusion: 'ekf.accel_sigma' must be at most 1000"),
+    ("fusion: {imu: {gyro_random_walk: 1.0e10}}", "fusion: 'imu.gyro_random_walk' must be at most 1000"),
+    ("fusion: {max_gap: 1.0e300}", "fusion: 'max_gap' must be at most 1000000, not 1e+300"),
+    ("fusion: {range: {max_range: 1.0e300}}", "fusion: 'range.max_range' must be at most 1000000"),
+    ("fusion: {camera_height: 1.0e300}", "fusion: 'camera_height' must be in (0, 100], not 1e+300"),
+    ("fusion: {initial_pose: [1.0e+300, 0, 0]}", "fusion: 'initial_pose' x must be in [-10000000, 10000000]"),
+    ("fusion: {initial_pose: [0, 0, 100]}", "fusion: 'initial_pose' yaw must be in [-6.28"),
+    ("odometry: {height: 1.0e300}", "odometry: height must be in (0, 100], not 1e+300"),
 ]
 
 
@@ -208,3 +221,26 @@ def test_run_stops_before_any_work_on_a_nan_pose_or_a_work_setting_too_large(tex
                          "--backend", "ekf")
     assert_error(status, err, f"{cfg}", key)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_configured_focal_length_out_of_range_for_the_image_names_the_key(pristine, tmp_path, capsys, monkeypatch):
+    """(1e-9 px, accepted, ended a run 1.9e11 m away)"""
+    cfg = tmp_path / "my-config.yaml"
+    cfg.write_text("odometry: {uncalibrated: true, focal_length: 1.0e-9}\n")
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("visual odometry started with a bad configuration")
+
+    monkeypatch.setattr("fusion_vo.pipeline.run_visual_odometry", no_work)
+    status, _, err = cli(capsys, "run", pristine, "--out", tmp_path / "out", "--config", cfg)
+    assert_error(status, err, f"{cfg}: odometry: 'focal_length' focal lengths 1e-09, 1e-09 px are not a camera's "
+                              "for a 160x120 image")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("leaf, value", [("initial", 1e300), ("sigma", 1e300), ("random_walk", 1e300)])
+def test_a_registered_state_s_prior_has_a_range(leaf, value):
+    from fusion_vo.sensors.registry import StatePrior
+
+    with pytest.raises(ValueError, match=f"'states.offset.{leaf}' must be at most"):
+        StatePrior(**{leaf: value}).check("states.offset")

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import cv2
+import pytest
 import numpy as np
 
 from fault_tools import assert_error, cli
@@ -104,3 +105,56 @@ def test_frames_of_the_wrong_size_stop_the_run_naming_the_frame(recording, tmp_p
     status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf")
     assert_error(status, err, "cam0/data/", "80x60", "160x120")
     assert not (tmp_path / "out").exists()
+
+
+def _png_claiming(width: int, height: int) -> bytes:
+    """A PNG file whose header states ``width`` x ``height`` pixels and whose data is far too short."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(b"\0" * 100)) + chunk(b"IEND", b""))
+
+
+def test_a_frame_whose_header_claims_100000_by_100000_pixels_is_skipped_and_counted(recording, tmp_path, capsys,
+                                                                                     caplog):
+    """OpenCV stops at its pixel limit with an exception: the whole run died with an internal error."""
+    frame = sorted((recording / "cam0" / "data").iterdir())[12]
+    frame.write_bytes(_png_claiming(100_000, 100_000))
+    status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf",
+                           "--no-evaluate")
+    assert status == 0, err
+    assert "1 frame could not be read and was skipped" in out
+    assert f"{frame.name}: frame is 100000x100000 (its PNG header)" in caplog.text
+    assert json.loads((tmp_path / "out" / "summary.json").read_text())["skipped_frames"] == 1
+
+
+def test_an_image_beyond_opencvs_pixel_limit_is_unreadable_not_an_exception(tmp_path):
+    from fusion_vo.errors import InputError
+    from fusion_vo.recording.reader import decode_image, read_image
+    from fusion_vo.calibration.chessboard import read_image as read_board_image
+
+    p = tmp_path / "big.png"
+    p.write_bytes(_png_claiming(100_000, 100_000))
+    assert decode_image(p.read_bytes()) is None
+    assert read_image(p, None) == (None, "unreadable or corrupt image")
+    with pytest.raises(InputError, match="not a readable image"):
+        read_board_image(p)
+
+
+def test_a_run_whose_every_frame_failed_for_one_reason_names_it(recording, tmp_path, capsys, monkeypatch):
+    """(klt: {max_tracks: 1e11} made OpenCV refuse every frame; the run said only that no frame gave a motion)"""
+    def refuse(*args, **kwargs):
+        raise cv2.error("integer won't fit into a C int")
+
+    monkeypatch.setattr(cv2, "goodFeaturesToTrack", refuse)
+    status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    reason = "every one: OpenCV error: integer won't fit into a C int"
+    assert f"the camera gave no motion estimate in any of its 33 frames (33 bad_frame; {reason})" in out
+    assert any(reason in note for note in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"])
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "alone", "--sensors", "camera")
+    assert_error(status, err, "cam0/data.csv", f"no frame gave a motion estimate (33 frames: 33 bad_frame; {reason})")

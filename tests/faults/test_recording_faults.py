@@ -279,6 +279,39 @@ def one_row_wheel(rec):
     return "wheel0/data.csv:2: only 1 data row", None
 
 
+def _set_value(path: Path, index: int, column: int, text: str) -> int:
+    """Replace field ``column`` (0 = the timestamp) of data row ``index``; returns its line number."""
+    row = _rows(path)[index + 1].split(",")
+    row[column] = text
+    return _set_row(path, index, ",".join(row))
+
+
+# finite but absurd numbers: each once gave exit status 0 and a silently wrong answer
+def ground_truth_x_1e300(rec):
+    """One ground-truth row with x = 1e300 scored the run 'end 0.00 %'."""
+    p = rec / "state_groundtruth_estimate0" / "data.csv"
+    return "state_groundtruth_estimate0/data.csv", _set_value(p, 4, 1, "1e300")
+
+
+def gyro_rate_1e300(rec):
+    p = rec / "imu0" / "data.csv"
+    return "imu0/data.csv", _set_value(p, 9, 3, "1e300")
+
+
+def acceleration_1e30(rec):
+    p = rec / "imu0" / "data.csv"
+    return "imu0/data.csv", _set_value(p, 3, 5, "-1e30")
+
+
+def range_of_1e300_m(rec):
+    """A range0/ is read with the camera (as its height) before any work."""
+    t = [int(_field(rec / "imu0" / "data.csv", i, 0)) for i in range(0, 40, 4)]
+    rows = [f"{ti},{1e300 if i == 6 else 0.1}" for i, ti in enumerate(t)]
+    (rec / "range0").mkdir()
+    (rec / "range0" / "data.csv").write_text("#timestamp [ns],distance [m]\n" + "\n".join(rows) + "\n")
+    return "range0/data.csv", 8
+
+
 FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time, frame_listed_twice,
           decreasing_wheel_time,
           negative_timestamp, absolute_frame_path, frame_path_leaving_the_recording, timestamp_near_2_63,
@@ -289,7 +322,8 @@ FAULTS = [nan_in_wheel, too_few_fields_in_imu, word_in_imu, duplicate_frame_time
           wheel_tick_beyond_2_53, imu_yaml_noise_not_a_number, imu_yaml_noise_nan,
           gps_folder_without_data, extra_field_in_wheel, trailing_comma_in_wheel, third_column_in_frame_list,
           float_timestamp_in_wheel, timestamp_with_decimal_point, timestamp_with_digit_separators,
-          header_only_imu, empty_imu, one_row_wheel]
+          header_only_imu, empty_imu, one_row_wheel,
+          ground_truth_x_1e300, gyro_rate_1e300, acceleration_1e30, range_of_1e300_m]
 
 
 # ---------------------------------------------------------------------- sensor.yaml values
@@ -340,7 +374,8 @@ SENSOR_YAML_FAULTS = [
                           ("imu0", "gyroscope_noise_density"), ("imu0", "rate_hz"), ("cam0", "rate_hz"))],
     _yaml_fault("camera_rate_a_word", "cam0", _set("rate_hz", "fast"), "'rate_hz' must be a number, not 'fast'"),
     _yaml_fault("camera_rate_negative", "cam0", _set("rate_hz", -20), "'rate_hz' must be positive"),
-    _yaml_fault("focal_length_1e308", "cam0", _set("intrinsics", [1e308, 1e308, 79.5, 59.5]), "the intrinsics"),
+    _yaml_fault("focal_length_1e308", "cam0", _set("intrinsics", [1e308, 1e308, 79.5, 59.5]),
+                "'intrinsics' focal lengths"),
     _yaml_fault("principal_point_far_outside", "cam0", _set("intrinsics", [200, 200, 5000, -3000]),
                 "the intrinsics"),
     _yaml_fault("distortion_1e300", "cam0", _set("distortion_coefficients", [1e300, 0, 0, 0]), "the intrinsics"),
@@ -353,8 +388,50 @@ SENSOR_YAML_FAULTS = [
     _yaml_fault("coefficients_with_model_none", "cam0", _set("distortion_model", "none"),
                 "distortion_coefficients are not all zero but distortion_model is 'none'"),
     imu_yaml_missing,
+    # finite but absurd: fx = fy = 1e-9 ended a run 1.9e11 m away; a fractional resolution was cut down silently
+    _yaml_fault("focal_length_1e-9", "cam0", _set("intrinsics", [1e-9, 1e-9, 79.5, 59.5]),
+                "'intrinsics' focal lengths 1e-09, 1e-09 px are not a camera's for a 160x120 image"),
+    _yaml_fault("focal_length_1e6", "cam0", _set("intrinsics", [1e6, 1e6, 79.5, 59.5]), "'intrinsics' focal lengths"),
+    _yaml_fault("resolution_fractional", "cam0", _set("resolution", [160.5, 120]),
+                "'resolution' must be [width, height], two whole numbers of pixels"),
+    _yaml_fault("resolution_1e9", "cam0", _set("resolution", [160, 10**9]), "'resolution' must be [width, height]"),
+    _yaml_fault("camera_500_m_high", "cam0", _pose_entry(11, 500.0), "camera height must be in (0, 100] m, not 500"),
+    _yaml_fault("T_BS_bottom_row", "imu0", _pose_entry(12, 0.5), "'T_BS' bottom row must be [0, 0, 0, 1]"),
+    _yaml_fault("camera_T_BS_bottom_row", "cam0", _pose_entry(15, 2.0), "'T_BS' bottom row must be [0, 0, 0, 1]"),
 ]
 FAULTS += SENSOR_YAML_FAULTS
+
+
+def wheel_yaml_integer_of_5001_digits(rec):
+    """Python refuses to convert it ('Exceeds the limit (4300 digits)'): an internal error."""
+    p = rec / "wheel0" / "sensor.yaml"
+    text = p.read_text()
+    assert "ticks_per_revolution: 4096" in text
+    p.write_text(text.replace("ticks_per_revolution: 4096", "ticks_per_revolution: " + "9" * 5001))
+    line = 1 + text[:text.index("ticks_per_revolution")].count("\n")
+    return "wheel0/sensor.yaml", line
+
+
+FAULTS.append(wheel_yaml_integer_of_5001_digits)
+
+
+def latin_1_byte_in_the_imu_header(rec):
+    """'not a text CSV file' named no line."""
+    p = rec / "imu0" / "data.csv"
+    data = p.read_bytes()
+    p.write_bytes(data[:10] + b"\xe9" + data[11:])  # one byte of the header's first column name
+    return "imu0/data.csv:1: not a text CSV file: byte 0xe9 is not UTF-8", None
+
+
+def latin_1_byte_in_a_frame_name(rec):
+    p = rec / "cam0" / "data.csv"
+    lines = p.read_bytes().split(b"\n")
+    lines[4] = lines[4][:-5] + b"\xe9.png"
+    p.write_bytes(b"\n".join(lines))
+    return "cam0/data.csv:5: not a text CSV file: byte 0xe9", None
+
+
+FAULTS += [latin_1_byte_in_the_imu_header, latin_1_byte_in_a_frame_name]
 
 
 @pytest.mark.parametrize("fault", FAULTS, ids=[f.__name__ for f in FAULTS])
@@ -500,3 +577,67 @@ def test_gps_yaml_pose_and_numbers_are_checked_like_every_sensor_yaml(tmp_path, 
     with pytest.raises(InputError, match=expected.replace("(", r"\(")) as info:
         _sensor_yaml(p)
     assert info.value.path == p
+
+
+#: values beyond their physical range in the streams a run reads only when asked for: (stream, header, row, message)
+PHYSICAL_RANGE_FAULTS = [
+    ("odom0", "#timestamp [ns],vx [m/s],vy [m/s],wz [rad/s]", "{t},1e300,0,0", "speed [m/s] 1e+300 is beyond ±100"),
+    ("odom0", "#timestamp [ns],vx [m/s],vy [m/s],wz [rad/s]", "{t},0.1,0,-500", "yaw rate [rad/s] -500 is beyond ±100"),
+    ("gps0", "#timestamp [ns],latitude [deg],longitude [deg],altitude [m],e [m],n [m],u [m]",
+     "{t},47.4,8.5,1e300,0,0,0", "altitude [m] 1e+300 is beyond ±100000"),
+    ("gps0", "#timestamp [ns],latitude,longitude,altitude,e,n,u,status,covariance_type,cov_ee,cov_en,cov_nn",
+     "{t},47.4,8.5,400,0,0,0,0,2,1e300,0,1", "covariance [m^2] 1e+300 is beyond ±1e+12"),
+]
+
+
+@pytest.mark.parametrize("stream, header, row, expected", PHYSICAL_RANGE_FAULTS)
+def test_a_recorded_value_beyond_its_physical_range_names_the_file_and_line(recording, stream, header, row, expected):
+    """The streams a run reads only when asked for (odometry twist, GPS): read here directly."""
+    from fusion_vo.errors import InputError
+    from fusion_vo.recording import Recording
+
+    t = [int(_field(recording / "imu0" / "data.csv", i, 0)) for i in range(0, 30, 3)]
+    good = row.replace("1e300", "1").replace("-500", "0.1")
+    rows = [(row if i == 4 else good).format(t=ti) for i, ti in enumerate(t)]
+    (recording / stream).mkdir()
+    path = recording / stream / "data.csv"
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    rec = Recording(recording)
+    with pytest.raises(InputError) as info:
+        rec.odom() if stream == "odom0" else rec.gps()
+    assert str(info.value).startswith(f"{path}:6: {expected}")
+
+
+def test_a_requested_sensor_whose_every_reading_is_gated_is_a_warning(recording, tmp_path, capsys, caplog):
+    """A range0/ all at 1000 m, asked for with --sensors: exit 0 without a word (only summary.json said
+    'used 0, gated 82')."""
+    import json
+    import logging
+
+    t = [int(_field(recording / "imu0" / "data.csv", i, 0)) for i in range(0, len(_rows(recording / "imu0" / "data.csv")) - 1, 2)]
+    (recording / "range0").mkdir()
+    (recording / "range0" / "data.csv").write_text("#timestamp [ns],distance [m]\n" +
+                                                   "".join(f"{ti},1000.0\n" for ti in t))
+    with caplog.at_level(logging.WARNING):
+        status, out, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--sensors", "camera,wheel,imu,range",
+                               "--backend", "ekf", "--no-evaluate")
+    assert status == 0, err
+    note = "range contributed nothing to the ekf, ekf_smoothed estimate: none of its measurements was used ("
+    assert f"note: {note}" in out and "gated)" in out
+    assert any(note in n for n in json.loads((tmp_path / "out" / "summary.json").read_text())["notes"])
+    assert any(note in r.getMessage() for r in caplog.records if r.levelno == logging.WARNING)
+    assert "contributed nothing" not in out.replace(note, "")  # the other sensors did contribute
+
+
+def test_ground_truth_with_two_poses_at_the_drive_s_end_names_it_not_the_clocks(recording, tmp_path, capsys):
+    """Two poses, the first at the drive's end: the run failed naming OUT/vo.tum (a file the failed run does
+    not keep) and asked whether the clocks differ."""
+    p = recording / "state_groundtruth_estimate0" / "data.csv"
+    lines = _rows(p)
+    last = lines[-1].split(",")
+    p.write_text("\n".join([lines[0], lines[-1], ",".join([str(int(last[0]) + 10**9)] + last[1:])]) + "\n")
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--backend", "ekf")
+    assert_error(status, err, f"{p}: only 0 of its 2 poses lie within the time span of trajectory",
+                 "the evaluation needs two")
+    assert "clock" not in err and str(tmp_path / "out") not in err
+    assert not (tmp_path / "out").exists()

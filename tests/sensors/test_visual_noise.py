@@ -76,7 +76,7 @@ def test_every_backend_fuses_the_estimate_as_if_configured():
     with its f and with the increments' heading variance scaled by it by hand."""
     _, streams = _drive(0.5, 4.0, duration=14.0)
     streams = streams.select(["camera", "imu", "wheel"])
-    forced = {"visual_noise": {"estimate": True, "scale_tolerance": 1e9, "frame_error_tolerance": 1e9}}
+    forced = {"visual_noise": {"estimate": True, "scale_tolerance": 1e6, "frame_error_tolerance": 1e6}}
     estimated = fuse(streams, "all", FusionConfig.from_dict(forced))
     e = estimated.visual_noise
     assert e["scale_applied"] and e["frame_error_applied"] and 0 < e["frame_error"] < 0.9

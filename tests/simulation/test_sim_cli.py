@@ -26,7 +26,7 @@ def test_simulate_writes_a_recording(tmp_path, capsys):
     ("camera_height=.nan", "option 'camera_height' must be finite"),
     ("distortion=[0.1, .nan, 0, 0]", "option 'distortion' must be finite"),
     ("noise=loud", "noise: expected a number, got 'loud'"),
-    ("dropped_frames=1.5", "option 'dropped_frames' is a fraction"),
+    ("dropped_frames=1.5", "option 'dropped_frames' must be in [0, 1), not 1.5"),
     ("texture=carpet", "option 'texture' must be one of gravel, grass, brick"),
 ])
 def test_bad_option_is_one_line_and_status_2(tmp_path, capsys, option, message):

@@ -11,6 +11,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from fusion_vo.recording.reader import decode_image
+
 
 #: sensor_msgs/Image encoding -> (numpy dtype, channels, OpenCV conversion to grey or None)
 IMAGE_ENCODINGS: dict[str, tuple[str, int, int | None]] = {
@@ -88,7 +90,7 @@ def compressed_to_grey(msg) -> np.ndarray:
     if "compresseddepth" in fmt:
         raise UnsupportedImage(f"compressed depth images ('{msg.format}') are not supported")
     data = np.asarray(msg.data, dtype=np.uint8).reshape(-1)
-    img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    img = decode_image(data)
     if img is None:
         raise ValueError(f"cannot decode compressed image (format '{msg.format}')")
     if img.ndim == 3:

@@ -48,6 +48,7 @@ from fusion_vo.recording.rosbag.summary import ImportSummary, StreamSummary
 from fusion_vo.recording.rosbag.transforms import (
     StaticTransform,
     chain_transform,
+    check_consistent,
     frame_name,
     quat_to_matrix,
 )
@@ -79,7 +80,8 @@ def import_bag(
     image_topic, imu_topic, odom_topic, gps_topic : topic of each stream; when ``None`` the single topic
         of the stream's message type is taken (none: the stream is left out; several: an error).
     camera_yaml : a ``cam0/sensor.yaml`` to use instead of the bag's ``CameraInfo``.
-    static_tfs : fixed transforms to add to the bag's ``/tf_static`` (see :func:`parse_static_tf`).
+    static_tfs : fixed transforms to add to the bag's ``/tf_static`` (see :func:`parse_static_tf`); two
+        between the same frames that disagree are an error.
     overwrite : replace ``out`` if it exists.
 
     Returns
@@ -93,6 +95,7 @@ def import_bag(
         without ``overwrite``, or a bag without any supported topic.
     """
     bag, out = Path(bag), Path(out)
+    check_consistent(static_tfs)  # two that disagree: which one holds?
     inputs = [bag] + ([Path(camera_yaml)] if camera_yaml is not None else [])
     check_target(out, overwrite, inputs)  # before reading the bag; again when the writer opens
     cam_yaml = load_yaml(camera_yaml) if camera_yaml is not None else None

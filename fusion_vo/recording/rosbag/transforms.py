@@ -76,6 +76,28 @@ def parse_static_tf(text: str) -> StaticTransform:
     return StaticTransform(frame_name(parts[-2]), frame_name(parts[-1]), T)
 
 
+def check_consistent(transforms: Iterable[StaticTransform], what: str = "--static-tf") -> None:
+    """:class:`InputError` for two transforms between the same two frames (either way round) that disagree
+    (by more than 1 µm or 1 µrad): the first one found would be used without a word. Repeating one is fine."""
+    seen: dict[tuple[str, str], StaticTransform] = {}
+    for tf in transforms:
+        key = (tf.parent, tf.child)
+        first = seen.get(key)
+        T = tf.T
+        if first is None and (tf.child, tf.parent) in seen:
+            first, T = seen[(tf.child, tf.parent)], _inverse(tf.T)
+        if first is None:
+            seen[key] = tf
+        elif not np.allclose(first.T, T, rtol=0, atol=1e-6):
+            raise InputError(f"two {what} transforms between '{tf.parent}' and '{tf.child}' disagree "
+                             f"(translations {_shown(first.T[:3, 3])} and {_shown(T[:3, 3])} m from "
+                             f"'{first.parent}'); give one")
+
+
+def _shown(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:g}" for x in v) + "]"
+
+
 def chain_transform(transforms: Iterable[StaticTransform], target: str, source: str) -> np.ndarray | None:
     """Pose of frame ``source`` in frame ``target`` from a set of fixed transforms, or ``None``.
 

@@ -1,6 +1,6 @@
 """Benchmark: the input rate the ROS 2 node sustains and the age of the pose it publishes.
 
-    python benchmarks/bench_ros2.py [--seconds 20] [--camera-hz 60] [--imu-hz 200] [--odom-hz 50]
+    python benchmarks/ros2_node.py [--seconds 20] [--camera-hz 60] [--imu-hz 200] [--odom-hz 50]
 
 Inputs, made here: a 640x360 mono8 camera looking at a random texture that slides 2 px per frame (the
 KLT frontend tracks it), an IMU and wheel odometry, all stamped with the wall clock and published at
@@ -33,6 +33,7 @@ import time
 from pathlib import Path
 
 import cv2
+import common
 import numpy as np
 
 from fusion_vo.measurements import ImuSample, TwistSample
@@ -98,7 +99,7 @@ def run_node(args, calib: Path) -> dict:
         if "running" in line:
             break
     rclpy.init()
-    peer = rclpy.create_node("bench_ros2")
+    peer = rclpy.create_node("ros2_node")
     poses, diags = [], []
     reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     peer.create_subscription(Odometry, "/odometry/filtered", lambda m: poses.append(
@@ -205,7 +206,7 @@ def run_in_process(args, calib: Path) -> dict:
 
 
 def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = common.parser(__doc__)
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--camera-hz", type=float, default=60.0)
     p.add_argument("--imu-hz", type=float, default=200.0)
@@ -225,7 +226,7 @@ def main() -> None:
         load = os.getloadavg()[0]
         base = run_in_process(args, calib)
         node = run_node(args, calib)
-    print(f"bench_ros2: {args.seconds:g} s of a 640x360 camera at {args.camera_hz:g} Hz, IMU {args.imu_hz:g} Hz, "
+    print(f"ros2_node: {args.seconds:g} s of a 640x360 camera at {args.camera_hz:g} Hz, IMU {args.imu_hz:g} Hz, "
           f"odometry {args.odom_hz:g} Hz on {os.cpu_count()} cores (load average {load:.1f} before, "
           f"{os.getloadavg()[0]:.1f} after)")
     print("| fed | messages/s offered / taken | camera frames/s processed (dropped) | pose age p50 / p99 "

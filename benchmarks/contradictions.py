@@ -1,0 +1,226 @@
+"""Inputs that contradict each other: what the pre-fusion checks (:mod:`fusion_vo.consistency`) do to the tracks.
+
+Three sections, each beside its baselines measured in the same run:
+
+1. **Husky, IMU mounting.** robot_localization's ``test1.bag`` (``tests/data/robot_localization``, 395 s,
+   359 m; wheel odometry, IMU with an AHRS orientation, GPS not fused) imported without the static
+   transform its launch file adds for the IMU (``T_BS`` the identity) and with it. Wheel odometry + IMU are
+   fused in batch (EKF, RTS, GTSAM batch, iSAM2) and streaming (EKF, iSAM2; every sample in time order
+   through :class:`~fusion_vo.backends.StreamingFusion`), with the checks (the default) and without
+   (``consistency.check: false``, the IMU fused as stated); also the log without the transform and with its
+   accelerometer's columns zeroed (no gravity: the gyro's axis alone decides). Figures: RMS horizontal
+   distance to the GPS fixes after the least-squares SE(2) alignment (``examples/husky_gps.py``), beside
+   the raw odometry dead-reckoned.
+2. **Wrong focal length.** A generated recording run with ``--uncalibrated --focal-length F`` at about half
+   its true focal length: the standard ``square`` (420 px; the README's demo with 220 and with 210) and,
+   with ``--full``, ``hard`` and ``random60`` (210). Visual odometry once per recording and focal length,
+   then fusion (all backends) with the checks (the camera's translation left out), without them (as
+   stated), with only the camera's scale prior released (``released_scale_sigma``, increments as
+   measured) and with the increments divided by the measured ratio with the lever arm's part undone
+   (:func:`rescaled`) and the prior released. Figures: ATE [mm], RMS position error after the least-squares
+   SE(2) alignment to the ground truth, beside visual odometry and the wheels alone.
+3. **Broken copies of a generated drive** (30 s random drive, wheels + IMU; a twist made from the ground
+   truth for the odometry cases), one fault each, as ``tests/consistency`` makes them: a left encoder
+   counting backwards, wheel timestamps 0.3 s late, a twist in the odometry frame, a twist with its axes
+   turned by 90°, an IMU on its side stated upright, an IMU whose gyro and accelerometer disagree
+   (:mod:`fusion_vo.simulation.faults`). Figures:
+   the check's decision and the EKF's ATE [mm] with and without the checks, beside the unbroken drive's.
+
+Usage::
+
+    python benchmarks/contradictions.py [--sections 1,2,3] [--full] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+import common
+from common import HUSKY_BAG, HUSKY_IMU_TF
+
+from fusion_vo import baseline
+from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.evaluation.metrics import gps_errors
+from fusion_vo.backends.batch import streams_from_recording
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.measurements import PoseData
+from fusion_vo.recording import Recording
+from fusion_vo.recording.rosbag import import_bag, parse_static_tf
+from fusion_vo.simulation.faults import columns, flip_left_encoder, shift_clock, turn_imu, twist_from_truth, write_csv
+
+BAG = HUSKY_BAG
+FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+ON_ITS_SIDE = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+def config(check: bool = True, **changes) -> FusionConfig:
+    c = FusionConfig(**changes)
+    c.consistency.check = check
+    return c
+
+
+def streamed(streams, backend: str, cfg: FusionConfig) -> PoseData:
+    fusion = streaming_for(streams, backend, cfg)
+    for _, kind, message in time_ordered_messages(streams):
+        getattr(fusion, f"add_{kind}")(message)
+    result = fusion.finish()
+    return result.trajectories["ekf" if backend == "ekf" else "gtsam_online"]
+
+
+# --------------------------------------------------------------------------- 1. Husky
+def husky(tmp: Path) -> None:
+    plain, mounted = tmp / "husky_plain", tmp / "husky"
+    import_bag(BAG, plain, overwrite=True)
+    import_bag(BAG, mounted, static_tfs=[parse_static_tf(HUSKY_IMU_TF)], overwrite=True)
+    no_gravity = tmp / "husky_no_gravity"
+    shutil.copytree(plain, no_gravity)
+    header, t, values = columns(no_gravity / "imu0" / "data.csv")
+    values[:, 3:6] = 0.0
+    write_csv(no_gravity / "imu0" / "data.csv", header, t, values)
+    gps = Recording(plain).gps()
+
+    def rms(track: PoseData) -> str:
+        return f"{float(np.sqrt(np.mean(gps_errors(track, gps) ** 2))):6.2f}"
+
+    print("\n1. Husky test1.bag, wheel odometry + IMU: RMS distance to the GPS fixes [m] after SE(2) alignment")
+    print(f"   raw wheel odometry: {rms(baseline.raw_odometry(Recording(plain)))}")
+    print(f"   {'recording':38s} {'checks':7s} " + " ".join(f"{n:>12s}" for n in FUSED)
+          + f" {'stream EKF':>11s} {'stream iSAM2':>12s}")
+    for label, seq, checks in (("imported without the transform", plain, False),
+                               ("imported without the transform", plain, True),
+                               ("without the transform, no gravity", no_gravity, False),
+                               ("without the transform, no gravity", no_gravity, True),
+                               ("imported with the launch file's transform", mounted, True)):
+        streams = streams_from_recording(Recording(seq), None, ["odom", "imu"])
+        t0 = time.process_time()
+        result = fuse(streams, "all", config(checks))
+        live = [streamed(streams, b, config(checks)) for b in ("ekf", "gtsam")]
+        print(f"   {label:38s} {'on' if checks else 'off':7s} "
+              + " ".join(f"{rms(result.trajectories[n]):>12s}" for n in FUSED)
+              + f" {rms(live[0]):>11s} {rms(live[1]):>12s}   ({time.process_time() - t0:.0f} CPU-s)")
+        for note in result.notes:
+            if note.startswith("imu0/"):
+                print(f"      {note}")
+
+
+# --------------------------------------------------------------------------- 2. wrong focal length
+def ate_mm(track: PoseData, truth: PoseData) -> float:
+    keep = (track.t >= truth.t[0]) & (track.t <= truth.t[-1])
+    p = track.xyyaw[keep, :2]
+    g = np.column_stack([np.interp(track.t[keep], truth.t, truth.xyyaw[:, i]) for i in range(2)])
+    pc, gc = p - p.mean(0), g - g.mean(0)
+    u, _, vt = np.linalg.svd(pc.T @ gc)
+    r = vt.T @ np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
+    return 1e3 * float(np.sqrt(np.mean(np.sum((pc @ r.T - gc) ** 2, axis=1))))
+
+
+def rescaled(streams, ratio: float, offset: np.ndarray):
+    """The alternative measured against leaving the translation out: each increment ``m`` of turn ``ψ`` made
+    ``m / ρ + (1 - 1/ρ)(I - R(ψ)) t`` (the camera at ``t`` in the body frame, :mod:`fusion_vo.geometry.ground`),
+    its translation covariance divided by ``ρ²``."""
+    f = 1.0 / ratio
+    S = np.diag([f, f, 1.0])
+
+    def one(v):
+        if not v.ok:
+            return v
+        d = np.asarray(v.delta, dtype=np.float64).copy()
+        c, s = np.cos(d[2]), np.sin(d[2])
+        d[:2] = f * d[:2] + (1.0 - f) * (offset - np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]))
+        return dataclasses.replace(v, delta=d, covariance=S @ np.asarray(v.covariance) @ S)
+
+    return dataclasses.replace(streams, visual=[one(v) for v in streams.visual], camera_height_sigma=None)
+
+
+def wrong_focal(tmp: Path, full: bool) -> None:
+    from fusion_vo.geometry.camera import uncalibrated_camera
+    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
+    from fusion_vo.simulation.standard import make_standard
+
+    cases = [("square", 220.0), ("square", 210.0)] + ([("hard", 210.0), ("random60", 210.0)] if full else [])
+    print("\n2. Wrong focal length (true 420 px), --uncalibrated --focal-length F: ATE [mm] after SE(2) alignment")
+    print(f"   {'recording':10s} {'F':>5s} {'fusion':34s} " + " ".join(f"{n:>12s}" for n in ("vo", "wheel") + FUSED))
+    for name, focal in cases:
+        seq = tmp / name
+        if not seq.exists():
+            make_standard(name, seq)
+        rec = Recording(seq)
+        vo = run_visual_odometry(rec, OdometryConfig(uncalibrated=True, focal_length=focal))
+        rec.camera = uncalibrated_camera(seq / "cam0" / "sensor.yaml", focal, quiet=True)
+        truth = rec.groundtruth()
+        streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"])
+        checked = fuse(streams, "none", config())
+        (scale,) = [f for f in checked.consistency if f["check"] == "scale"]
+        ratio = scale["estimate"]["ratio"]
+        released = config(False, visual_scale_sigma=config().consistency.released_scale_sigma)
+        no_height = dataclasses.replace(streams, camera_height_sigma=None)
+        variants = (("checks: translation left out", streams, config()),
+                    ("as stated (no checks)", streams, config(False)),
+                    ("scale prior released only", no_height, released),
+                    (f"divided by {ratio:.3f}, prior released", rescaled(streams, ratio, rec.camera.T_BS[:2, 3]),
+                     released))
+        for label, s, cfg in variants:
+            r = fuse(s, "all", cfg)
+            print(f"   {name:10s} {focal:5.0f} {label:34s} {ate_mm(vo.track, truth):12.1f} "
+                  + " ".join(f"{ate_mm(r.trajectories[n], truth):12.1f}" for n in ("wheel",) + FUSED))
+
+
+# --------------------------------------------------------------------------- 3. broken copies
+def broken_drives(tmp: Path) -> None:
+    from fusion_vo.simulation import simulate
+
+    drive = simulate(tmp / "drive", profile="random", seed=3, duration=30.0, width=64, height=36, fu=42.0, fv=42.0,
+                     cu=31.5, cv=17.5, camera_rate=5.0, supersample=1)
+    truth = Recording(drive).groundtruth()
+    faults = {
+        "unbroken (wheels + IMU)": (None, "wheel,imu"),
+        "left encoder counting backwards": (flip_left_encoder, "wheel,imu"),
+        "wheel timestamps 0.3 s late": (lambda r: shift_clock(r, "wheel0", 0.3), "wheel,imu"),
+        "IMU on its side, stated upright": (lambda r: turn_imu(r, ON_ITS_SIDE), "wheel,imu"),
+        "IMU gyro and accelerometer disagree": (lambda r: turn_imu(r, ON_ITS_SIDE, np.eye(3)), "wheel,imu"),
+        "unbroken twist (odometry + IMU)": (lambda r: twist_from_truth(r, "body"), "odom,imu"),
+        "twist in the odometry frame": (lambda r: twist_from_truth(r, "world"), "odom,imu"),
+        "twist axes turned by 90°": (lambda r: twist_from_truth(r, "turned"), "odom,imu"),
+    }
+    print("\n3. Broken copies of a generated 30 s drive: the checks' decisions and the EKF's ATE [mm]")
+    print(f"   {'fault':38s} {'checks on':>10s} {'checks off':>11s}   decisions")
+    for label, (edit, sensors) in faults.items():
+        rec = Path(shutil.copytree(drive, tmp / f"broken_{len(list(tmp.iterdir()))}"))
+        if edit is not None:
+            edit(rec)
+        streams = streams_from_recording(Recording(rec), None, sensors.split(","))
+        on, off = fuse(streams, "ekf", config()), fuse(streams, "ekf", config(False))
+        decided = ", ".join(f"{f['check']} {f['decision']}" for f in on.consistency if f["decision"] != "kept") or "all kept"
+        print(f"   {label:38s} {ate_mm(on.trajectories['ekf'], truth):10.1f} {ate_mm(off.trajectories['ekf'], truth):11.1f}"
+              f"   {decided}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = common.parser(__doc__)
+    parser.add_argument("--sections", default="1,2,3", help="which sections to run (default 1,2,3)")
+    parser.add_argument("--full", action="store_true", help="section 2 also on hard and random60 (slow)")
+    parser.add_argument("--keep", help="write the recordings to this folder and keep them")
+    args = parser.parse_args(argv)
+    sections = {s.strip() for s in args.sections.split(",")}
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = Path(args.keep) if args.keep else Path(scratch)
+        tmp.mkdir(parents=True, exist_ok=True)
+        if "1" in sections:
+            husky(tmp)
+        if "2" in sections:
+            wrong_focal(tmp, args.full)
+        if "3" in sections:
+            broken_drives(tmp)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,293 @@
+"""The scale priors' defaults on clean generated drives: fused tracks beside visual odometry, over seeds.
+
+Camera and wheels measure only the ratio of their distance scales (the visual scale ``k_v``, the camera
+height, and the wheels' ``k_r``, their common radius); the priors of the two decide who sets the common
+scale (``docs/decisions/0036-visual-scale-model.md``). This benchmark measures what that choice does when
+nothing states how well the camera height and the wheel radius are known, on drives where visual odometry
+is right.
+
+Drives
+------
+``--profiles`` (default: every generated motion profile that moves the camera over a distance: ``square``,
+``circle``, ``random`` (60 s), ``umbmark_cw``, ``umbmark_ccw``, ``straight``; ``turn_in_place`` and
+``standstill`` have no distance to scale) each with ``--seeds`` seeds (``--first-seed``, +1, ...: held out,
+the standard recordings use seeds 1-24), generated with the simulator's defaults: camera height exact, wheels
+with their default calibration errors (left radius +0.6 %, right -0.4 %, so a common radius error of +0.1 %
+and a curvature bias; wheel base +1.5 %; slip 0.0005 √m), gyro biases and noise.
+
+``--wrong`` (default ``height_error,hard,tilted``) adds the standard recordings whose camera is NOT right
+(:mod:`fusion_vo.simulation.standard`: a 2 % wrong height in ``sensor.yaml``; slip, dropped frames, blur and
+a featureless stretch; a tilted camera with a vibrating height and a range finder), with their options and
+``--wrong-seeds`` seeds each: there the figure is each fused track's ATE under a configuration divided by
+its ATE under the old defaults (how much worse the new defaults make a run whose camera is wrong).
+
+Each drive is generated once and its visual odometry run once (the default configuration of ``fusion-vo
+run``: KLT frontend); the sensor streams, the visual track and the ground truth are cached in ``--cache``
+(one pickle per drive; the rendered frames are deleted unless ``--keep-recordings``), so a second run only
+fuses. Then the same streams are fused (:func:`fusion_vo.backends.fuse`, every backend) under each
+configuration:
+
+``old``        the previous defaults (visual scale prior 5 %, wheels 1 %, walks 1e-5 and 1e-4 /√s),
+               nothing stated in the sensors' files;
+``new``        the library's defaults (:class:`fusion_vo.backends.FusionConfig`), nothing stated;
+``vs 0.002``   the old defaults with ``fusion.visual_scale_sigma: 0.002`` (the camera height stated as known
+               to 0.2 %), nothing else stated;
+``yaml``       the library's defaults with ``height_sigma`` and ``radius_sigma`` as the simulator writes them
+               (the size of its calibration error, at least 0.1 mm: 0.1 % of the height, 0.6 % of the radius);
+
+plus any ``--variant NAME:KEY=VALUE,...`` (fusion keys, ``ekf.`` / ``graph.`` prefixes for the nested ones;
+nothing stated). "Nothing stated" removes ``height_sigma`` and ``radius_sigma`` from the streams.
+
+Printed per profile: the mean ATE [mm] of visual odometry and of wheel dead reckoning; per configuration the
+mean and the worst (largest) ratio over the seeds of each fused track's ATE (EKF, RTS, GTSAM batch, iSAM2)
+to visual odometry's; how often the RTS smoother is at most the EKF and the batch at most iSAM2 (with the
+mean ratio); the mean ``|k_v - 1|`` of the smoothed EKF and the batch (the visual scale's error; the
+camera height is exact) and the mean over the seeds of the largest ``|k_v - 1|`` the EKF's filtered estimate
+reaches over the drive (its excursion, which shapes the filtered track). ATE is the RMS position error after an SE(2) alignment
+(:func:`fusion_vo.evaluation.metrics.align_se2`), in mm.
+
+Run (long: generation renders every frame; use ``nice``)::
+
+    nice -n 10 python benchmarks/scale_defaults.py --cache DIR [--seeds 10] [--profiles square,circle]
+        [--wrong height_error,hard,tilted] [--wrong-seeds 3] [--variant NAME:visual_scale_sigma=0.005,...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import pickle
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import common
+import numpy as np
+
+from threadpoolctl import threadpool_limits
+
+from fusion_vo.backends import ekf, fuse
+from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
+from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.config import RunConfig
+from fusion_vo.errors import InputError
+from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
+from fusion_vo.odometry import run_visual_odometry
+from fusion_vo.recording import Recording
+from fusion_vo.sensors import registry
+from fusion_vo.simulation.generate import simulate
+from fusion_vo.simulation.standard import STANDARD
+
+#: profile -> simulator options of the clean drives
+PROFILES = {"square": {}, "circle": {}, "random": {"duration": 60.0}, "umbmark_cw": {}, "umbmark_ccw": {},
+            "straight": {}}
+FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+LABELS = {"ekf": "EKF", "ekf_smoothed": "RTS", "gtsam": "batch", "gtsam_online": "iSAM2"}
+#: the defaults before this benchmark's decision (all four keys, so that they hold whatever the library's are)
+OLD = {"visual_scale_sigma": 0.05, "wheel_scale_sigma": 0.01,
+       "ekf": {"visual_scale_random_walk": 1e-5, "scale_random_walk": 1e-4}}
+#: name -> (fusion options, keep the sensors' stated height_sigma / radius_sigma)
+CONFIGS = {"old": (OLD, False), "new": ({}, False), "vs 0.002": ({**OLD, "visual_scale_sigma": 0.002}, False),
+           "yaml": ({}, True)}
+#: bump when the cached content changes
+CACHE_VERSION = 1
+
+
+@dataclasses.dataclass
+class Drive:
+    """What a drive leaves in the cache: the streams ``fusion-vo run`` fuses by default, the visual track and
+    the ground truth."""
+
+    name: str
+    streams: SensorStreams
+    vo_track: object
+    truth: object
+    version: int = CACHE_VERSION
+
+
+def log(text: str) -> None:
+    print(f"[{time.strftime('%H:%M:%S')}] {text}", file=sys.stderr, flush=True)
+
+
+def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict, keep: bool) -> Drive:
+    """The drive ``name`` from ``cache``, generated and run through visual odometry when not there yet."""
+    path = cache / f"{name}.pkl"
+    if path.exists():
+        try:
+            drive = pickle.loads(path.read_bytes())
+            if isinstance(drive, Drive) and drive.version == CACHE_VERSION:
+                return drive
+        except Exception as exc:  # an unreadable cache entry is made again
+            log(f"{path}: {exc}; generating again")
+    seq = cache / name
+    t0 = time.time()
+    if not (seq / "simulation.yaml").exists():
+        simulate(seq, profile=profile, seed=seed, **options)
+    rec = Recording(seq)
+    vo = run_visual_odometry(rec, RunConfig().odometry_config())
+    streams = streams_from_recording(rec, vo)
+    drive = Drive(name, streams, vo.track, rec.groundtruth())
+    tmp = path.with_suffix(".tmp")
+    tmp.write_bytes(pickle.dumps(drive))
+    tmp.replace(path)
+    if not keep:
+        shutil.rmtree(seq)
+    log(f"{name}: generated and visual odometry in {time.time() - t0:.0f} s")
+    return drive
+
+
+def ate_mm(truth, track) -> float:
+    """ATE [mm] of ``track`` against ``truth`` (PoseData both) after an SE(2) alignment."""
+    reference = planar_trajectory(truth.t, truth.xyyaw[:, 0], truth.xyyaw[:, 1], truth.xyyaw[:, 2])
+    est = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
+    ref, est = associate(reference, est)
+    return float(ape_rmse(ref, align_se2(ref, est)) * 1e3)
+
+
+def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
+    """The EKF's filtered visual scale ``k_v`` at every node (the loop of :func:`fusion_vo.backends.ekf.run_ekf`,
+    keeping the state; the streams have no GPS, so nothing is applied at the nodes on its own). Its last
+    value is the ``visual_scale`` of the EKF's calibration."""
+    config = with_recorded_noise(config, streams)
+    iv = build_intervals(streams, config)
+    kv_ok, kb_ok = ekf.calibration_observable(iv)
+    f = ekf.PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
+                      iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
+                      frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
+    meas = ekf.interval_measurements(iv, config)
+    for sensor in registry.sensors():
+        blocks = sensor.ekf_start(f, meas) if sensor.ekf_start is not None else None
+        if blocks:
+            f.update(blocks)
+    out = np.empty(iv.n_steps + 1)
+    out[0] = f.x[ekf.KV]
+    for k in range(iv.n_steps):
+        f.predict(iv.dt[k], ekf.frame_error_cov(meas, k))
+        f.update(ekf.step_blocks(f, meas, k))
+        out[k + 1] = f.x[ekf.KV]
+    return out
+
+
+def unstated(streams: SensorStreams) -> SensorStreams:
+    """``streams`` as if neither ``cam0/sensor.yaml`` stated ``height_sigma`` nor ``wheel0/sensor.yaml``
+    ``radius_sigma``."""
+    out = dataclasses.replace(streams, camera_height_sigma=None)
+    if out.wheel is not None:
+        out.wheel = dataclasses.replace(out.wheel, config=dataclasses.replace(out.wheel.config, radius_sigma=None))
+    return out
+
+
+def run_configs(drive: Drive, configs: dict) -> dict:
+    """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration."""
+    out = {"vo": ate_mm(drive.truth, drive.vo_track)}
+    for label, (options, stated) in configs.items():
+        try:
+            result = fuse(drive.streams if stated else unstated(drive.streams), "all", as_config(options))
+        except InputError as exc:  # e.g. a walk too stiff for GTSAM's elimination: the row says so
+            log(f"{drive.name} {label}: {exc}")
+            out[label] = {**{k: np.nan for k in FUSED}, "kv": {"ekf_smoothed": np.nan, "gtsam": np.nan},
+                          "kv_excursion": np.nan}
+            continue
+        out.setdefault("wheel", ate_mm(drive.truth, result.trajectories["wheel"]))
+        row = {k: ate_mm(drive.truth, result.trajectories[k]) for k in FUSED}
+        row["kv"] = {k: result.calibration.get(k, {}).get("visual_scale", np.nan) for k in ("ekf_smoothed", "gtsam")}
+        with threadpool_limits(limits=1, user_api="blas"):
+            row["kv_excursion"] = float(np.max(np.abs(filtered_visual_scale(
+                drive.streams if stated else unstated(drive.streams), as_config(options)) - 1.0)))
+        out[label] = row
+    return out
+
+
+def variant(text: str) -> tuple[str, tuple[dict, bool]]:
+    """``NAME:KEY=VALUE,...`` -> (name, (fusion options, False)); ``ekf.KEY`` and ``graph.KEY`` nest."""
+    name, _, items = text.partition(":")
+    options: dict = {}
+    for item in filter(None, items.split(",")):
+        key, _, value = item.partition("=")
+        section, _, leaf = key.rpartition(".")
+        (options.setdefault(section, {}) if section else options)[leaf] = float(value)
+    return name, (options, False)
+
+
+def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
+    vo = np.array([r["vo"] for r in rows])
+    lines = [f"{name} ({len(rows)} seeds): VO {vo.mean():.3f} mm, wheels {np.mean([r['wheel'] for r in rows]):.2f} mm"
+             f" (mean ATE)",
+             "  config       " + "".join(f"{LABELS[k] + ' /VO mean worst':>22s}" for k in FUSED)
+             + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]"]
+    for label in configs:
+        cells = []
+        for k in FUSED:
+            ratio = np.array([r[label][k] for r in rows]) / vo
+            cells.append(f"{ratio.mean():>14.2f} {ratio.max():>6.2f}")
+        smooth = []
+        for a, b in (("ekf_smoothed", "ekf"), ("gtsam", "gtsam_online")):
+            ratio = np.array([r[label][a] / r[label][b] for r in rows])
+            smooth.append(f"{int(np.sum(ratio <= 1.0)):>2d}/{len(rows)} ({ratio.mean():.2f})")
+        kv = [np.nanmean([abs(r[label]["kv"][k] - 1.0) * 1e4 for r in rows]) for k in ("ekf_smoothed", "gtsam")]
+        excursion = np.nanmean([r[label]["kv_excursion"] * 1e4 for r in rows])
+        lines.append(f"  {label:12s}" + "".join(f"{c:>22s}" for c in cells) + "   " + "   ".join(smooth)
+                     + f"   {kv[0]:6.2f} {kv[1]:6.2f} {excursion:6.1f}")
+    return lines
+
+
+def wrong_summary(name: str, rows: list[dict], configs) -> list[str]:
+    """Per configuration: mean ATE [mm] of each fused track, and the mean and worst ratio to the old defaults'."""
+    lines = [f"{name} ({len(rows)} seeds, camera not right): VO {np.mean([r['vo'] for r in rows]):.3f} mm, wheels "
+             f"{np.mean([r['wheel'] for r in rows]):.2f} mm (mean ATE)",
+             "  config       " + "".join(f"{LABELS[k] + ' mm /old mean worst':>28s}" for k in FUSED)]
+    for label in configs:
+        cells = []
+        for k in FUSED:
+            ate = np.array([r[label][k] for r in rows])
+            ratio = ate / np.array([r["old"][k] for r in rows])
+            cells.append(f"{ate.mean():>10.3f} {ratio.mean():>7.2f} {ratio.max():>6.2f}")
+        lines.append(f"  {label:12s}" + "".join(f"{c:>28s}" for c in cells))
+    return lines
+
+
+def main(argv=None) -> int:
+    parser = common.parser(__doc__)
+    parser.add_argument("--cache", type=Path, required=True, help="folder of the generated drives (made if missing)")
+    parser.add_argument("--seeds", type=int, default=10, help="seeds per clean profile (default 10)")
+    parser.add_argument("--first-seed", type=int, default=101, help="first seed (default 101)")
+    parser.add_argument("--profiles", default=",".join(PROFILES), help="clean profiles (default: %(default)s)")
+    parser.add_argument("--wrong", default="height_error,hard,tilted",
+                        help="standard recordings whose camera is not right, '' for none (default: %(default)s)")
+    parser.add_argument("--wrong-seeds", type=int, default=3, help="seeds per --wrong recording (default 3)")
+    parser.add_argument("--variant", action="append", default=[], type=variant, metavar="NAME:KEY=VALUE,...",
+                        help="another configuration to fuse with (nothing stated)")
+    parser.add_argument("--keep-recordings", action="store_true", help="keep the rendered recordings in --cache")
+    args = parser.parse_args(argv)
+    for p in filter(None, args.profiles.split(",")):
+        if p not in PROFILES:
+            parser.error(f"unknown profile {p!r} (choose from {', '.join(PROFILES)})")
+    wrong = [w for w in args.wrong.split(",") if w]
+    for w in wrong:
+        if w not in STANDARD:
+            parser.error(f"unknown standard recording {w!r}")
+    configs = dict(CONFIGS)
+    configs.update(dict(args.variant))
+    args.cache.mkdir(parents=True, exist_ok=True)
+    seeds = [args.first_seed + i for i in range(args.seeds)]
+    report: list[str] = []
+    groups = [(p, p, PROFILES[p], seeds, clean_summary) for p in filter(None, args.profiles.split(","))]
+    groups += [(w, STANDARD[w][0], STANDARD[w][2], seeds[:args.wrong_seeds], wrong_summary) for w in wrong]
+    for group, profile, options, group_seeds, summarise in groups:
+        rows = []
+        for seed in group_seeds:
+            drive = cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+            t0 = time.time()
+            rows.append(run_configs(drive, configs))
+            log(f"{drive.name}: fused {len(configs)} configurations in {time.time() - t0:.0f} s; VO {rows[-1]['vo']:.3f}"
+                + "".join(f", {c} EKF {rows[-1][c]['ekf']:.3f}" for c in configs))
+        lines = summarise(group, rows, configs)
+        print("\n".join(lines), flush=True)
+        report += lines
+    print("\n" + "\n".join(report))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,79 @@
+"""The camera's and the wheels' distances against each other: a wrong focal length, a wrong wheel radius."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from conftest import ate, read_tum
+
+from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.backends.batch import streams_from_recording
+from fusion_vo.cli.main import main
+
+
+@pytest.fixture(scope="module")
+def half_focal(square, tmp_path_factory):
+    """The small square run with ``--uncalibrated --focal-length`` at half its true 210 px."""
+    out = tmp_path_factory.mktemp("half_focal") / "run"
+    assert main(["-q", "run", str(square), "--out", str(out), "--uncalibrated", "--focal-length", "105",
+                 "--no-evaluate"]) == 0
+    return out, json.loads((out / "summary.json").read_text())
+
+
+def test_half_focal_length_is_named_and_kept_out_of_the_fused_tracks(square, half_focal):
+    out, summary = half_focal
+    (sentence,) = [n for n in summary["notes"] if n.startswith("cam0/sensor.yaml")]
+    assert "the camera's distances are 2.0" in sentence and "--focal-length" in sentence, sentence
+    assert "the accelerometer sides with the wheels" in sentence and "leaves the camera's translation out" in sentence
+    (found,) = [f for f in summary["fusion"]["consistency"] if f["check"] == "scale"]
+    assert found["decision"] == "corrected" and abs(found["estimate"]["ratio"] - 2.0) < 0.05
+    wheels = ate(read_tum(out / "wheel.tum"), square)
+    vo = ate(read_tum(out / "vo.tum"), square)
+    assert vo > 10 * wheels  # the camera's track is far off: the fused tracks could be too
+    for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
+        assert ate(read_tum(out / f"{name}.tum"), square) <= wheels, name
+
+
+def test_wheel_radius_given_as_a_diameter_is_named(square_vo):
+    """Radii twice the true ones: the accelerometer sides with the camera, the wheels' distances are scaled by
+    the ratio and the camera sets the scale."""
+    rec, vo = square_vo
+    streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"])
+    cfg = streams.wheel.config
+    wrong = dataclasses.replace(cfg, wheel_radius_left=2 * cfg.wheel_radius_left,
+                                wheel_radius_right=2 * cfg.wheel_radius_right)
+    broken = dataclasses.replace(streams, wheel=dataclasses.replace(streams.wheel, config=wrong))
+    result = fuse(broken, "ekf", FusionConfig())
+    (found,) = [f for f in result.consistency if f["check"] == "scale"]
+    assert found["decision"] == "corrected" and found["sensor"] == "wheels", found
+    assert abs(found["estimate"]["ratio"] - 0.5) < 0.02
+    assert "wheel_radius_left, wheel_radius_right" in found["sentence"] and "the accelerometer sides with the camera" in found["sentence"]
+    off = FusionConfig()
+    off.consistency.check = False
+    as_stated = fuse(broken, "ekf", off)
+    unbroken = fuse(streams, "ekf", FusionConfig())
+
+    def error(result, name):
+        track = result.trajectories[name]
+        return ate(np.column_stack([track.t, track.xyyaw[:, :2]]), rec.path)
+
+    for name in ("ekf", "wheel"):  # the wheels' own dead reckoning is read with the corrected radii too
+        assert error(result, name) < 1.5 * error(unbroken, name) + 1e-5, name
+        assert error(as_stated, name) > 5 * error(unbroken, name), name
+
+
+def test_imu_on_a_late_clock_is_the_odd_one_out(square_vo):
+    """Camera, wheels and gyro: the IMU's samples 0.2 s late disagree with both others, which agree: the IMU's
+    timestamps are the ones moved."""
+    rec, vo = square_vo
+    streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"])
+    late = dataclasses.replace(streams, imu=dataclasses.replace(streams.imu, t=streams.imu.t + 0.2))
+    result = fuse(late, "none", FusionConfig())
+    (found,) = [f for f in result.consistency if f["check"] == "clock"]
+    assert found["decision"] == "corrected" and found["sensor"] == "imu", found
+    assert abs(found["estimate"]["shift_s"] - 0.2) < 0.01
+    assert found["sentence"].startswith("imu0/data.csv: its timestamps are 0.2")
+    assert "behind the camera's and the wheels'" in found["sentence"]
