@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 import yaml
-from conftest import ate, read_tum
+from track_errors import ate, read_tum
 from fusion_vo.simulation.faults import flip_left_encoder, shift_clock, state_imu_mounting, turn_imu, twist_from_truth
 
 from fusion_vo.cli.main import main

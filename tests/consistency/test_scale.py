@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import ate, read_tum
+from track_errors import ate, read_tum
 
 from fusion_vo.backends import FusionConfig, fuse
 from fusion_vo.backends.batch import streams_from_recording
