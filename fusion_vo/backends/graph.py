@@ -131,6 +131,7 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, group,
                                         pose_table)
 from fusion_vo.backends.graph_builder import B, FRAME_LETTER, GraphBuilder, R, S, W, X
+from fusion_vo.backends.residuals import sensor_nis
 from fusion_vo.backends.isam import Retired, current_value_lookup, freeze_custom_factors, isam_params, track_estimate, update_reweighted
 
 logger = logging.getLogger(__name__)
@@ -374,8 +375,6 @@ def gtsam_linearization(graph: gtsam.NonlinearFactorGraph, groups: list[ModelFac
 def graph_residuals(factors: list[ModelFactor], values: gtsam.Values, marginals, builder: GraphBuilder,
                     stride: int = 5) -> dict:
     """Each sensor's NIS at a solution (:func:`fusion_vo.backends.residuals.sensor_nis`), every ``stride``-th node."""
-    from fusion_vo.backends.residuals import sensor_nis
-
     def node_of(key: int):
         n = int(gtsam.Symbol(key).index()) - builder.offset
         return n, float(builder.t[n])

@@ -104,6 +104,7 @@ import threading
 
 import numpy as np
 
+from fusion_vo import backends
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf
@@ -215,9 +216,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         #: iSAM2's side (GTSAM is imported here, about 0.1 s, not inside the first add() call that makes a node)
         self._online_graph = None
         if backend == "gtsam":
-            from fusion_vo.backends.online_graph import OnlineGraph  # GTSAM: only for an iSAM2 stream
-
-            self._online_graph = OnlineGraph
+            self._online_graph = backends.OnlineGraph  # GTSAM: loaded only for an iSAM2 stream
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
