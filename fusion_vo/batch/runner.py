@@ -9,9 +9,10 @@ from pathlib import Path
 from typing import Callable
 
 from fusion_vo.batch.cluster import open_client, require_dask
+from fusion_vo.batch.columns import COLUMNS
 from fusion_vo.batch.grid import Grid, build_config, cell_value, config_data, load_grid, parse_grid
 from fusion_vo.batch.report import write_report
-from fusion_vo.batch.tasks import COLUMNS, RECORDS, Task, failed_rows, recording_labels, run_task
+from fusion_vo.batch.tasks import RECORDS, Task, failed_rows, recording_labels, run_task
 from fusion_vo.config import RunConfig, load_config
 from fusion_vo.errors import InputError
 from fusion_vo.outputs import check_folder_target, check_outside

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fusion_vo import __version__
-from fusion_vo.batch.columns import COLUMNS, METRICS
+from fusion_vo.batch.columns import METRICS
 from fusion_vo.batch.grid import build_config
 from fusion_vo.errors import InputError, check_folder
 from fusion_vo.outputs import write_atomic
