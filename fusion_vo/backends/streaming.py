@@ -191,7 +191,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
     A call's worst latency in a live process is often not this class's work but one of CPython's full
     garbage collections, which scan every object the process tracks (about 100 000 once numpy, scipy,
     GTSAM and filterpy are imported: some 40 ms). Call :func:`gc.freeze` once start-up is done, as
-    the ROS 2 node (``fusion-vo ros2``, :mod:`fusion_vo.ros2.run`) does; ``benchmarks/bench_latency.py --gc-freeze`` measures the difference.
+    the ROS 2 node (``fusion-vo ros2``, :mod:`fusion_vo.ros2.run`) does
+    (``docs/decisions/0029-live-work-on-the-callers-thread.md``).
     The class changes no global state itself.
     """
 
