@@ -2,7 +2,7 @@
 
 For each standard generated recording named (default: square, circle, random60, gps_outage, tilted, short),
 this generates two calibration drives of the same profile and options with other seeds (``seed + 1000 i``),
-measures the KLT frontend's heading noise on them (:func:`fusion_vo.calibration.camera_noise.calibrate`, what
+measures the KLT frontend's heading noise on them (:func:`fusion_vo.calibration.camera_noise_drive.calibrate`, what
 ``fusion-vo calibrate camera-noise`` does), and then, on the recording itself and on ``--seeds`` more of its
 seeds (``seed + 100 i``, as ``fusion.py --seeds`` uses), runs visual odometry once (default
 configuration) and fuses its increments (all sensors but GPS, default configuration, every backend) twice:
@@ -30,7 +30,7 @@ import numpy as np
 from common import FUSED, add_out, ate_against, names, parser, standard, work_dir
 
 from fusion_vo import backends
-from fusion_vo.calibration.camera_noise import calibrate
+from fusion_vo.calibration.camera_noise_drive import calibrate
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import STANDARD

@@ -50,15 +50,18 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.calibration.lens_from_motion import check_stated_lens, lens_from_motion
 from fusion_vo.choices import FRONTENDS
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import uncalibrated_camera
 from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
+from fusion_vo.geometry.height import smooth_heights
 from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
 from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
+from fusion_vo.sensors.range import camera_height, reading_sigma
 
 log = logging.getLogger(__name__)
 
@@ -529,8 +532,6 @@ def range_readings(recording: Recording) -> RangeReadings | None:
     r: RangeData = recording.range()
     if len(r) == 0:
         return None
-    from fusion_vo.sensors.range import camera_height, reading_sigma
-
     gated = camera_height(r)
     if not gated.valid.any():
         return None
@@ -567,8 +568,6 @@ def smoothed_heights(readings: RangeReadings, motions: list[FrameMotion]):
     A motion's scale is used as the height ratio of its two frames when it is measured from the frame
     just before it in ``motions``.
     """
-    from fusion_vo.geometry.height import smooth_heights
-
     if readings.sigma is None or len(motions) < 2:
         return None
     t = np.array([m.timestamp for m in motions], dtype=np.float64)
@@ -615,15 +614,11 @@ def run_visual_odometry(
         cam = uncalibrated_camera(recording.path / "cam0" / "sensor.yaml", config.focal_length)
         recording.camera = cam  # the frames are read with this model's image size
         if config.lens_from_motion:
-            from fusion_vo.calibration.lens_from_motion import lens_from_motion  # scipy only when needed
-
             cam, _ = lens_from_motion(recording, cam)
         recording.camera = cam  # every later reader of this recording sees the same model
     else:
         cam = recording.camera
         if config.check_lens and not cam.has_distortion:
-            from fusion_vo.calibration.lens_from_motion import check_stated_lens  # scipy only when needed
-
             cam, _ = check_stated_lens(recording, cam)
             recording.camera = cam
     try:

@@ -49,7 +49,11 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from fusion_vo import schema
+from frontends import make_frontend
+from frontends.features import FeatureConfig
+from frontends.klt import KltConfig
+from fusion_vo import backends, schema
+from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
@@ -57,11 +61,15 @@ from fusion_vo.evaluation import run_report
 from fusion_vo.evaluation.headings import imu_headings, write_headings
 from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
 from fusion_vo.evaluation.innovations import from_residuals, write_innovations
+from fusion_vo.geometry.camera import uncalibrated_camera
+from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData
-from fusion_vo.odometry import OdometryResult, run_visual_odometry
+from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.outputs import OutputFolder, check_outside, check_replaceable, write_atomic
 from fusion_vo.recording import Recording, write_tum
+from fusion_vo.recording.csvio import read_table
 from fusion_vo.recording.reader import STREAM_FOLDERS, read_groundtruth_csv
+from fusion_vo.sensors import registry
 
 log = logging.getLogger(__name__)
 
@@ -116,8 +124,6 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     Any registered sensor (:mod:`fusion_vo.sensors.registry`) may be named; by default the camera, wheels
     (or odometry) and IMU are used, and a sensor registered outside the library when its folder is present
     (and its ``default`` allows)."""
-    from fusion_vo.sensors import registry
-
     known = registry.sensors()
     present = {s.name: s.present(rec) for s in known}
     present["camera"] = rec.has_camera()
@@ -168,8 +174,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         ``cam0/data/``, streams whose time spans do not overlap (different clocks), a timestamp that jumps by
         more than a day, or ground truth that cannot be used for the evaluation.
     """
-    from fusion_vo.backends.batch import as_config
-
     config_path = None if config_path is None else Path(config_path)
     _check_number_types(config, config_path)
     try:
@@ -196,8 +200,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
 
     if "camera" in sensors:
         if odometry.uncalibrated:  # cam0/sensor.yaml may have no intrinsics (the run's own model is checked here)
-            from fusion_vo.geometry.camera import uncalibrated_camera
-
             try:
                 cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
             except InputError as exc:  # a configured focal length out of range for the file's resolution
@@ -215,8 +217,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         if not (rec.path / "cam0" / "data").is_dir() and rec.video_path() is None:
             raise InputError("no frames: neither cam0/data/ nor cam0/video.<ext> exists", rec.path / "cam0")
         rec.pixel_shift()  # a bad bit_depth in cam0/sensor.yaml
-        from fusion_vo.geometry.ground import GroundGeometry
-
         try:
             geometry = GroundGeometry(cam, height=odometry.height, min_sigma_xy=odometry.min_sigma_xy,
                                       min_sigma_yaw=odometry.min_sigma_yaw)
@@ -224,8 +224,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             if odometry.height is not None:
                 raise _config_error(exc, config_path, "odometry.height") from None
             raise InputError(str(exc), rec.path / "cam0" / "sensor.yaml") from None
-        from frontends import make_frontend
-
         for name in ("klt", "features"):  # both sections, not only the frontend in use
             try:
                 make_frontend(name, getattr(config, name), point_map=geometry.rectifier)
@@ -240,8 +238,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         note("imu", rec.imu().t, "imu0")
     if rec.has_range() and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
         note("range", rec.range().t, "range0")
-    from fusion_vo.sensors import registry
-
     for name in sensors:  # a sensor registered outside the library: read by its own reader, now
         sensor = registry.get(name)
         if name not in registry.BUILTIN_ORDER and sensor.read is not None:
@@ -282,10 +278,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
 
 def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
     """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
-    from frontends.features import FeatureConfig
-    from frontends.klt import KltConfig
-    from fusion_vo.odometry import OdometryConfig
-
     for section, cls in (("odometry", OdometryConfig), ("klt", KltConfig), ("features", FeatureConfig)):
         values = getattr(config, section) or {}
         if not isinstance(values, dict):
@@ -306,10 +298,6 @@ def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
 def _line_of(rec: Recording, name: str, row: int) -> int | None:
     if name == "camera":
         return int(rec._frames_index()[2][row])
-    from fusion_vo.recording.csvio import read_table
-
-    from fusion_vo.sensors import registry
-
     folder = STREAM_FOLDERS.get(name) or registry.get(name).folder
     try:
         return int(read_table(rec.path / folder / "data.csv", (1, 64), "values").lines[row])
@@ -493,8 +481,6 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
                   ):
     """Wheel dead reckoning and the fused backends; returns the :class:`~fusion_vo.backends.FusionResult`, the
     streams it fused and the fusion configuration."""
-    from fusion_vo import backends
-
     t0 = time.perf_counter()
     fusion_config = config.fusion_config()
     streams = backends.streams_from_recording(rec, vo, sensors, fusion_config)

@@ -20,10 +20,13 @@ streaming  the incremental interface with a reorder buffer for late measurements
 import lazy_loader
 
 # the submodules load on first use: a camera-only run that only writes results (``result``) does not
-# pay for filterpy, scipy.stats or GTSAM
+# pay for filterpy, scipy.stats or GTSAM (``graph``, ``online_graph``: what the modules of this package reach
+# GTSAM through)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "batch": ["BACKENDS", "backend_names", "fuse", "run_backends", "streams_from_recording", "wheel_dead_reckoning"],
     "config": ["EkfConfig", "FusionConfig", "GraphConfig"],
+    "graph": ["run_graph"],
+    "online_graph": ["OnlineGraph"],
     "result": ["FusionResult", "SensorCount"],
     "streaming": ["Estimate", "StreamingFusion"],
     "timeline": ["SENSORS", "Intervals", "SensorStreams", "build_intervals"],

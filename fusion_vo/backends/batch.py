@@ -29,6 +29,7 @@ import time
 
 import numpy as np
 
+from fusion_vo import backends
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import calibration_priors, run_ekf
 from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
@@ -220,10 +221,8 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
         with threadpool_limits(limits=1, user_api="blas"):
             result.merge(run_ekf(iv, config))
     if "gtsam" in names:
-        from fusion_vo.backends.graph import run_graph  # GTSAM is imported only when used
-
         try:
-            result.merge(run_graph(iv, config))
+            result.merge(backends.run_graph(iv, config))  # GTSAM is loaded only when used
         except RuntimeError as exc:
             # GTSAM's IndeterminateSystemException: a variable the configuration leaves unconstrained
             where = " ".join(str(exc).split())

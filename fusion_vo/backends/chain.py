@@ -19,14 +19,10 @@ call on blocks of a few dozen columns, so the cost is linear in the length of th
 
 Why not GTSAM's own elimination here: the linearisation of the sensor-model factors is computed in
 numpy for all factors of a kind at once (:meth:`fusion_vo.backends.factors.ModelFactors.jacobian`);
-handing them to GTSAM means building one ``JacobianFactor`` per factor from Python at every iteration
-(about 3600 on the 60 s drive of ``benchmarks/bench_fusion.py``), and its marginal covariances one
-``Marginals.marginalCovariance`` call per pose (1201). Measured on that drive (``nice -n -15 python
-benchmarks/bench_fusion.py``, CPU time, two runs interleaved with the GTSAM version on a 2-core machine
-at load average 29–33): solving took 0.159–0.193 s with GTSAM's elimination and 0.107–0.119 s here
-(which includes grouping the factors and laying out the system), the marginal covariances 0.059 s and
-0.012–0.014 s; on a 600 s drive 1.96–2.06 s against 1.30–1.47 s, and 0.61–0.72 s against 0.13–0.14 s.
-GTSAM still linearises its own factors (priors, random walks, ``BetweenFactorPose2``:
+handing them to GTSAM means building one ``JacobianFactor`` per factor from Python at every iteration,
+and its marginal covariances one ``Marginals.marginalCovariance`` call per pose; the sweeps here take less
+time for both (``docs/decisions/0006-own-levenberg-marquardt-loop.md``). GTSAM still linearises its own
+factors (priors, random walks, ``BetweenFactorPose2``:
 ``NonlinearFactorGraph.linearize`` and ``GaussianFactorGraph.sparseJacobian_``), evaluates their
 error and retracts the values (``Values.retract``); the result is the same Gauss–Newton /
 Levenberg–Marquardt iteration as :func:`fusion_vo.backends.graph.levenberg_marquardt` to rounding

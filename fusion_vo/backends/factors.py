@@ -358,10 +358,9 @@ def covariance_noise(cov) -> gtsam.noiseModel.Gaussian:
     off-diagonal entries are all within 1e-9 of zero in absolute terms, whatever the diagonal: that drops
     the correlations of every covariance of small entries, e.g. a visual increment's (σ of 20 µm and
     20 µrad, variances 4e-10, correlation of its lateral and heading errors -0.15), which the EKF keeps.
-    The graph then solved another problem than the filter: where the gyro corrected the camera's heading
-    change, the translation did not move with it (``tests/backends/test_models.py``), and on the generated
-    ``square`` drive (seed 101) GTSAM batch scored 0.1142 mm against the RTS smoother's 0.1032 mm; with the
-    correlations 0.1025 mm (``tests/backends/test_online_vs_ekf.py``). Here the model is always the full
+    Without them the graph solves another problem than the filter: where the gyro corrects the camera's
+    heading change, the translation does not move with it (``tests/backends/test_models.py``,
+    ``docs/decisions/0009-graph-keeps-correlations-and-reweights.md``). Here the model is always the full
     Gaussian (for a diagonal covariance the same whitening).
     """
     return gtsam.noiseModel.Gaussian.Covariance(np.atleast_2d(np.asarray(cov, dtype=np.float64)), False)

@@ -92,20 +92,14 @@ that its cost per update does not grow with the drive.
 The batch Levenberg–Marquardt loop is written out, with the sensor-model factors evaluated in numpy,
 one array operation per sensor. Its linear systems are solved by :mod:`fusion_vo.backends.chain` (the
 block-tridiagonal normal equations of the chain-shaped graph, and the marginal covariances from the
-same factorisation; see there for why and what it measured), and by :func:`levenberg_marquardt` here,
+same factorisation; see there for why), and by :func:`levenberg_marquardt` here,
 on GTSAM's linearisation and sparse elimination (``NonlinearFactorGraph.linearize``,
 ``GaussianFactorGraph.optimize``) with the sensor-model factors handed to GTSAM as ``JacobianFactor`` s,
 when the graph is not such a chain. GTSAM's own optimizers need each of them as a :class:`gtsam.CustomFactor` that
-calls back into Python, and that is what costs: ``python benchmarks/bench_solvers.py`` (the batch graph
-of the 60 s drive of ``benchmarks/bench_fusion.py``, 5039 factors of which 4797 sensor-model factors,
-CPU time, 3 interleaved runs on a shared 2-core machine under heavy load) measured this loop at
-184–278 ms against 10.0–11.5 s for ``LevenbergMarquardtOptimizer``, 10.3–11.1 s for
-``GaussNewtonOptimizer`` and 13.6–15.2 s for ``DoglegOptimizer``, all reaching the same cost 1961.53 in
-3 iterations (Dogleg 4). With the earlier hand-written CustomFactors (no generic model layer in the
-callback) on a less loaded machine: loop 256–278 ms, LevenbergMarquardtOptimizer 3245–3378 ms,
-GaussNewtonOptimizer 3246–3452 ms, DoglegOptimizer 4287–4496 ms; with those factors frozen to linear
-ones GaussNewtonOptimizer took 85 ms and the loop 124 ms, so the cost is the callbacks, not GTSAM's
-solver. The algorithm is the standard one: try the Gauss–Newton step, and while the cost does not
+calls back into Python, and those callbacks, not GTSAM's solver, are what costs: the loop reaches the same
+cost in a small fraction of their time (``docs/decisions/0006-own-levenberg-marquardt-loop.md``,
+``python benchmarks/backend_speed.py solvers``). The algorithm is the standard one: try the Gauss–Newton
+step, and while the cost does not
 decrease (or the undamped system is too poorly conditioned to factorise), add ``λ I`` damping
 (λ × 10) and retry.
 """
@@ -131,6 +125,7 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, group,
                                         pose_table)
 from fusion_vo.backends.graph_builder import B, FRAME_LETTER, GraphBuilder, R, S, W, X
+from fusion_vo.backends.residuals import sensor_nis
 from fusion_vo.backends.isam import Retired, current_value_lookup, freeze_custom_factors, isam_params, track_estimate, update_reweighted
 
 logger = logging.getLogger(__name__)
@@ -374,8 +369,6 @@ def gtsam_linearization(graph: gtsam.NonlinearFactorGraph, groups: list[ModelFac
 def graph_residuals(factors: list[ModelFactor], values: gtsam.Values, marginals, builder: GraphBuilder,
                     stride: int = 5) -> dict:
     """Each sensor's NIS at a solution (:func:`fusion_vo.backends.residuals.sensor_nis`), every ``stride``-th node."""
-    from fusion_vo.backends.residuals import sensor_nis
-
     def node_of(key: int):
         n = int(gtsam.Symbol(key).index()) - builder.offset
         return n, float(builder.t[n])

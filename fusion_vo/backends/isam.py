@@ -36,11 +36,9 @@ def freeze_custom_factors(factors: list, lookup, maker: ValuesMaker | None = Non
     relinearises them and re-evaluates their weights at every iteration.
 
     The prediction of the newest pose comes from the wheels, so a camera residual there carries the
-    wheels' error too: with a kernel one row wide on the camera's three rows, 76 % of the camera
-    increments of the generated ``square`` drive entered iSAM2 down-weighted (mean weight 0.64), and its
-    track (ATE 0.168 mm) fell behind the batch (0.085 mm) and the EKF (0.074 mm); with the gate's width
-    12 % are (mean weight 0.98), and iSAM2 scores 0.089 mm. iSAM2 therefore evaluates the weights again
-    where its update puts the node (:func:`update_reweighted`). ``weights``: the robust weight each
+    wheels' error too: the kernel is as wide as the gate (:func:`kernel_width`), and iSAM2 evaluates the
+    weights again where its update puts the node (:func:`update_reweighted`;
+    ``docs/decisions/0009-graph-keeps-correlations-and-reweights.md``). ``weights``: the robust weight each
     sensor-model factor gets at these values is appended to it (1 without a kernel).
     """
     out = []
@@ -85,8 +83,7 @@ def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Val
     and replace the ones that went in (an iterated update, as an iterated EKF's, and the batch solution's
     reweighting at each iteration), at most ``passes`` times. Only a node with a weight below 1 at the
     prediction is checked: with every factor inside its kernel there, the update moves the node by a
-    weighted mean of residuals inside their kernels (on the 16 generated drives of the measurement below,
-    1210 nodes were linearised again, every one of them with a weight below 1 at the prediction).
+    weighted mean of residuals inside their kernels.
 
     Why: the prediction of the newest pose comes from the wheels (translation) and the gyro (heading),
     and the camera's residual there carries their error, which is far larger than the camera's own noise
@@ -95,9 +92,7 @@ def update_reweighted(isam, graph: gtsam.NonlinearFactorGraph, values: gtsam.Val
     uncertainty in the innovation covariance, takes at full weight; the update then pulls the pose most of
     the way to the camera, where the increment is well inside the kernel. An increment that is still
     beyond the kernel at the updated estimate (a wrong match, outvoted by the other sensors) keeps its
-    small weight. On the generated ``square`` drive (seed 101) iSAM2 scored 0.111 mm with the weights of
-    the prediction (``benchmarks/fusion_vs_best.py`` variant "iSAM2 weights at the prediction") and 0.102 mm
-    with these, as the EKF. Returns the
+    small weight (``docs/decisions/0009-graph-keeps-correlations-and-reweights.md``). Returns the
     indices of the factors in iSAM2 (in the order of ``factors``) and the number of passes made.
     """
     index = list(isam.update(graph, values).getNewFactorsIndices())
@@ -144,15 +139,14 @@ class Retired:
 
     Why: the graph is a chain, so iSAM2's Bayes tree is a path as long as the drive, and GTSAM 4.3
     destroys each update's temporary Bayes tree by visiting every clique below it (the breadth-first
-    ``BayesTree`` destructor that avoids deep recursion), which is the whole history: ``perf`` on a
-    400 s drive put 83 % of the update time there, and the cost per update grew from 0.3 ms at the
-    start of a 600 s drive to 4.8 ms at its end. No future factor touches a variable that old (a node's
-    factors reach its previous node and its segment's variables), and the marginal keeps the
+    ``BayesTree`` destructor that avoids deep recursion), which is the whole history, so the cost per
+    update would grow with the drive (``docs/decisions/0008-isam2-marginalises-old-nodes.md``). No future
+    factor touches a variable that old (a node's factors reach its previous node and its segment's
+    variables), and the marginal keeps the
     information of the old factors on the variables that remain, linearised where they are. That is
-    exact for the newest pose unless iSAM2 would have relinearised the old variables later: on the
-    generated drives and robot_localization's Jackal log nothing changes; on its Husky log the
-    standstill at 236 s, which reveals the gyro bias, used to relinearise the history behind it, and
-    the online track now moves by up to 1.12 m (RMS error against the GPS 6.17 m before, 6.08 m now).
+    exact for the newest pose unless iSAM2 would have relinearised the old variables later (a standstill
+    that reveals the gyro bias late in the drive, for instance): the nodes it has marginalised keep the
+    linearisation they left with.
     The old nodes' estimates are the ones at the time they leave (the batch solution starts from them).
     """
 
@@ -261,19 +255,15 @@ def isam_params() -> gtsam.ISAM2Params:
     changes would make each update O(N). Relinearisation is therefore checked only along the
     re-eliminated part of the tree, every 10 updates, for changes above 0.1, and back-substitution
     stops where changes fall under 1.0 (the wildfire threshold). The newest pose — the online estimate —
-    sits at the root and is always solved exactly; the batch solution refines the history. Tighter
-    settings (relinearisation threshold 0.001 every update, wildfire threshold 0) changed no online ATE
-    of the generated ``short``, ``square``, ``circle`` and ``random60`` drives in the fourth digit [mm]:
-    the sensor-model factors enter linearised (:func:`freeze_custom_factors`), so relinearisation
-    touches only GTSAM's own factors. Checked again with the camera and the gyro alone (threshold 0 at
-    every update, wildfire 0; ``square``, its seed 101 and ``random60``): the same ATEs to 1e-4 mm.
+    sits at the root and is always solved exactly; the batch solution refines the history. The
+    sensor-model factors enter linearised (:func:`freeze_custom_factors`), so relinearisation touches only
+    GTSAM's own factors, and tighter settings do not change the online estimate measurably.
 
     The factorisation is QR. Cholesky squares the condition number, and systems that are well posed
     but badly conditioned are then reported as indeterminate: with GPS, a loose first-heading prior (from
     the fixes) beside near-exact wheel heading changes at low speed; on a generated barrel-lens recording
     (``real_barrel_fine``), a gyro-bias variable beside very precise camera increments, where Cholesky
-    stopped the whole run. QR costs 3-8 % more per node on the 60 s and 600 s drives of
-    benchmarks/bench_fusion.py (0.42-0.45 ms against 0.39-0.43 ms with Cholesky, interleaved runs).
+    stopped the whole run (``docs/decisions/0031-incremental-solvers-factorise-with-qr.md``).
     """
     params = gtsam.ISAM2Params()
     params.setRelinearizeThreshold(0.1)

@@ -271,10 +271,8 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
 
     Why the smaller error: over the first seconds of a stream the AHRS's end points give the bias to
     ``√2 σ_ψ / T``, 0.028 rad/s after 1 s at σ_ψ 0.02 rad, twenty times ``monitor_bias_sigma``; the camera's
-    summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s. With the AHRS
-    taken first, the honest gyro was dropped for about a second 1-3 s into 3 of 4 streamed 120 s drives
-    with wheels, gyro, AHRS and camera (``python benchmarks/monitor_false_alarms.py --seeds 1
-    --durations 120 --biases 0``, NIS 18-26).
+    summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s
+    (``docs/decisions/0023-monitor-removes-the-gyro-bias-first.md``).
     """
 
     if not iv.uses("gyro"):

@@ -186,9 +186,7 @@ def reference_bias(T: np.ndarray, diff: np.ndarray, ok: np.ndarray, chunk: float
     chunk averages it over the chunk. A median of per-interval rate differences would not: an AHRS's
     heading noise ``σ_ψ`` over an interval ``dt`` is a rate error of ``√2 σ_ψ / dt`` (0.57 rad/s for
     0.02 rad at 20 Hz), and the median of 2400 of them has a standard error of about 0.015 rad/s, ten
-    times ``monitor_bias_sigma`` (measured on generated 120 s drives with wheels, gyro and AHRS, seeds 1
-    and 2: 0.0187 and 0.0200 rad/s for a bias of 0.01, and the honest gyro dropped for the whole drive;
-    the chunks' median gives 0.0102 for both, ``benchmarks/monitor_false_alarms.py``). The median over
+    times ``monitor_bias_sigma`` (``docs/decisions/0023-monitor-removes-the-gyro-bias-first.md``). The median over
     the chunks keeps a reference that lies in a minority of them (a drifting AHRS) from moving the bias.
     """
     dt = np.diff(T)
@@ -340,9 +338,8 @@ def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sour
     the heading offset); the variance is the AHRS's noise and offset
     walk plus the relative heading's noise and ``monitor_bias_sigma`` over the gap. A run is kept only
     below the 90 % quantile (``release``, as a dropped component's comeback elsewhere), and becomes
-    the new anchor; otherwise it is dropped too (measured on robot_localization's Husky log: the AHRS
-    departs from the gyro and from the GPS course by 20-40 degrees from 190 s on, and its heading
-    *changes* agree again in parts of that span).
+    the new anchor; otherwise it is dropped too (an AHRS that has departed from the true heading can
+    agree again in its heading *changes* while its heading stays off).
     """
     T = iv.t
     bad_a = bad["ahrs"]
@@ -391,8 +388,7 @@ def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sour
 def drop_visual_increments(iv, keep: np.ndarray) -> None:
     """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
     estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
-    frame too (measured on the ``hard`` recording: keeping the translation with a free heading made GTSAM
-    batch 8.4 mm instead of 1.5 mm). The other sensors carry the estimate there."""
+    frame too. The other sensors carry the estimate there."""
     if keep.all():
         return
     iv.vis_i0, iv.vis_i1 = iv.vis_i0[keep], iv.vis_i1[keep]

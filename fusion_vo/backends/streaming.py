@@ -104,6 +104,7 @@ import threading
 
 import numpy as np
 
+from fusion_vo import backends
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf
@@ -190,7 +191,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
     A call's worst latency in a live process is often not this class's work but one of CPython's full
     garbage collections, which scan every object the process tracks (about 100 000 once numpy, scipy,
     GTSAM and filterpy are imported: some 40 ms). Call :func:`gc.freeze` once start-up is done, as
-    the ROS 2 node (``fusion-vo ros2``, :mod:`fusion_vo.ros2.run`) does; ``benchmarks/bench_latency.py --gc-freeze`` measures the difference.
+    the ROS 2 node (``fusion-vo ros2``, :mod:`fusion_vo.ros2.run`) does
+    (``docs/decisions/0029-live-work-on-the-callers-thread.md``).
     The class changes no global state itself.
     """
 
@@ -215,9 +217,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         #: iSAM2's side (GTSAM is imported here, about 0.1 s, not inside the first add() call that makes a node)
         self._online_graph = None
         if backend == "gtsam":
-            from fusion_vo.backends.online_graph import OnlineGraph  # GTSAM: only for an iSAM2 stream
-
-            self._online_graph = OnlineGraph
+            self._online_graph = backends.OnlineGraph  # GTSAM: loaded only for an iSAM2 stream
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:

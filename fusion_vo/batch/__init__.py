@@ -22,5 +22,6 @@ __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
     "grid": ["Grid", "ParameterSet", "load_grid", "parse_grid"],
     "ranking": ["best_sets", "describe_set"],
     "runner": ["plan_batch", "plan_sweep", "run_batch", "run_sweep"],
-    "tasks": ["COLUMNS", "METRICS", "Task", "run_task"],
+    "columns": ["COLUMNS", "METRICS"],
+    "tasks": ["Task", "run_task"],
 })

@@ -47,6 +47,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from frontends.features import FeatureConfig
+from frontends.klt import KltConfig
+from fusion_vo.backends.batch import as_config
 from fusion_vo.config import FRONTENDS, RunConfig, default_config_text
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml
@@ -157,10 +160,6 @@ def describe(values: dict) -> str:
 def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
     """Build the options of both frontends and of the backends, so that a misspelt option of a section the
     run would not otherwise check (the frontend that is not selected, ``fusion``) is an error here."""
-    from frontends.features import FeatureConfig
-    from frontends.klt import KltConfig
-    from fusion_vo.backends.batch import as_config
-
     checks = {"klt": lambda: KltConfig.from_dict(config.klt), "features": lambda: FeatureConfig.from_dict(config.features),
               "fusion": lambda: as_config(config.fusion)}
     for section, check in checks.items():

@@ -18,10 +18,11 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fusion_vo.batch.columns import METRICS
 from fusion_vo.batch.grid import (GRID_SECTIONS, MAX_SETS, Grid, ParameterSet, _schema, apply_values,
                                   check_frontend_keys, check_key, config_data)
 from fusion_vo.batch.runner import Progress, _check_out, _frame, _labels, write_results
-from fusion_vo.batch.tasks import METRICS, RECORDS, Task, failed_rows, run_task
+from fusion_vo.batch.tasks import RECORDS, Task, failed_rows, run_task
 from fusion_vo.config import FRONTENDS, RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import load_yaml

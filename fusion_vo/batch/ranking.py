@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fusion_vo.batch.tasks import COLUMNS
+from fusion_vo.batch.columns import COLUMNS
 
 
 def best_sets(frame, metric: str = "ate_m", trajectory: str | None = None):

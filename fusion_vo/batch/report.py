@@ -19,7 +19,7 @@ from matplotlib.figure import Figure
 
 from fusion_vo.batch.grid import Grid
 from fusion_vo.batch.ranking import best_sets, describe_set
-from fusion_vo.batch.tasks import METRICS
+from fusion_vo.batch.columns import METRICS
 from fusion_vo.evaluation.io import write_atomic
 from fusion_vo.evaluation.plots import colour_of, label_of
 from fusion_vo.evaluation.report import _environment, _number

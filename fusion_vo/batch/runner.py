@@ -9,11 +9,13 @@ from pathlib import Path
 from typing import Callable
 
 from fusion_vo.batch.cluster import open_client, require_dask
+from fusion_vo.batch.columns import COLUMNS
 from fusion_vo.batch.grid import Grid, build_config, cell_value, config_data, load_grid, parse_grid
 from fusion_vo.batch.report import write_report
-from fusion_vo.batch.tasks import COLUMNS, RECORDS, Task, failed_rows, recording_labels, run_task
+from fusion_vo.batch.tasks import RECORDS, Task, failed_rows, recording_labels, run_task
 from fusion_vo.config import RunConfig, load_config
 from fusion_vo.errors import InputError
+from fusion_vo.outputs import check_folder_target, check_outside
 
 log = logging.getLogger(__name__)
 
@@ -31,16 +33,12 @@ def _as_config(config: RunConfig | str | Path | None) -> RunConfig:
 
 
 def _check_out(out: str | Path) -> Path:
-    from fusion_vo.outputs import check_folder_target
-
     return check_folder_target(out)  # a file there, or in the way above it
 
 
 def _check_inputs(out: Path, labelled: list[tuple[Path, str]]) -> None:
     """Before any cluster starts: the batch folder is not inside a recording, and no task's run folder
     (``out/<label>``) is or holds a recording (``fusion-vo run`` would refuse each task only on its worker)."""
-    from fusion_vo.outputs import check_outside
-
     check_outside(out, [path for path, _ in labelled])
     target = out.resolve()
     for path, label in labelled:

@@ -23,15 +23,15 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from fusion_vo import __version__
+from fusion_vo.batch.columns import METRICS
+from fusion_vo.batch.grid import build_config
 from fusion_vo.errors import InputError, check_folder
+from fusion_vo.outputs import write_atomic
+from fusion_vo.pipeline import run_pipeline
 
 log = logging.getLogger(__name__)
 
-#: metric columns of the results table, taken from the run's ``metrics.json`` figures
-METRICS = ("ate_m", "end_pct", "heading_deg", "rpe_1m_pct")
-#: every column of the results table before the swept keys
-COLUMNS = ("recording", "trajectory", "status", "error", *METRICS, "frames", "failed_frames", "seconds",
-           "cached", "run_dir")
 #: the folder of task records inside the batch output folder
 RECORDS = "tasks"
 
@@ -116,8 +116,6 @@ def recording_fingerprint(path: str | Path) -> str:
 
 def cache_key(task: Task) -> str:
     """The key under which a task's result is reused: recording files, configuration, version."""
-    from fusion_vo import __version__
-
     digest = hashlib.sha256()
     digest.update(recording_fingerprint(task.recording).encode())
     digest.update(json.dumps(task.config, sort_keys=True, default=str).encode())
@@ -161,8 +159,6 @@ def _read_record(path: Path) -> dict | None:
 
 
 def _write_record(path: Path, record: dict) -> None:
-    from fusion_vo.evaluation.io import write_atomic
-
     path.parent.mkdir(parents=True, exist_ok=True)
     write_atomic(path, json.dumps(record, indent=1, default=str))
 
@@ -201,9 +197,6 @@ def run_task(task: Task) -> list[dict]:
     running. Otherwise the run folder is written by :func:`fusion_vo.pipeline.run_pipeline`, the
     call ``fusion-vo run`` makes, and the record is written last.
     """
-    from fusion_vo.batch.grid import build_config
-    from fusion_vo.pipeline import run_pipeline
-
     start = time.perf_counter()
     record_path, run_dir = Path(task.record), Path(task.run_dir)
     try:

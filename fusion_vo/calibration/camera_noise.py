@@ -30,7 +30,8 @@ scaled, so that the frontend's correlations with the translation stay) and the f
 (:mod:`fusion_vo.sensors.visual`). The translation keeps the frontend's covariance: camera and wheels are
 its only sensors, so a calibration against the truth is the only way to tell their errors apart, and that
 is left to the wheels' own calibration. The model is stated under ``camera_noise`` in ``cam0/sensor.yaml``
-(``fusion-vo calibrate camera-noise``, ``datasets/README.md``) and used by runs of the same frontend.
+(``fusion-vo calibrate camera-noise``: :func:`fusion_vo.calibration.camera_noise_drive.calibrate`,
+``datasets/README.md``) and used by runs of the same frontend.
 """
 
 from __future__ import annotations
@@ -220,43 +221,3 @@ def measure(errors: np.ndarray, turns: np.ndarray, chained: np.ndarray, frontend
              for b in range(len(edges))]
     return CameraNoise(frontend, tuple(float(e) for e in edges), tuple(sigma), float(np.sqrt(frame_var)),
                        int(len(errors)))
-
-
-def heading_errors(recording, increments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Heading errors [rad] of the usable ``increments`` against ``recording``'s ground truth, their
-    measured turns [rad], and whether each starts where the previous one ended."""
-    from fusion_vo.geometry import se2
-
-    gt = recording.groundtruth()
-    yaw = np.unwrap(gt.xyyaw[:, 2])
-    used = [inc for inc in increments if inc.ok]
-    t0 = np.array([inc.t0 for inc in used])
-    t1 = np.array([inc.t1 for inc in used])
-    turns = np.array([float(inc.delta[2]) for inc in used])
-    inside = (t0 >= gt.t[0]) & (t1 <= gt.t[-1])
-    true = np.interp(t1, gt.t, yaw) - np.interp(t0, gt.t, yaw)
-    errors = se2.wrap_angle(turns - true)
-    chained = np.array([k > 0 and used[k].t0 == used[k - 1].t1 for k in range(len(used))], dtype=bool)
-    chained[1:] &= inside[:-1]
-    return errors[inside], turns[inside], chained[inside]
-
-
-def calibrate(recordings: list, config=None) -> CameraNoise:
-    """Run visual odometry (``config``: an :class:`~fusion_vo.odometry.OdometryConfig`) on each recording,
-    which must have ground truth, and measure the camera's heading noise over all their increments."""
-    from fusion_vo.odometry import OdometryConfig, run_visual_odometry
-
-    config = config or OdometryConfig()
-    for rec in recordings:  # all of them before any work
-        if not rec.has_groundtruth():
-            raise InputError("a calibration drive needs ground truth (state_groundtruth_estimate0/)", rec.path)
-    errors, turns, chained = [], [], []
-    for rec in recordings:
-        vo = run_visual_odometry(rec, replace(config, camera_noise=False))
-        e, t, c = heading_errors(rec, vo.increments)
-        if len(c):
-            c[0] = False
-        errors.append(e)
-        turns.append(t)
-        chained.append(c)
-    return measure(np.concatenate(errors), np.concatenate(turns), np.concatenate(chained), config.frontend)

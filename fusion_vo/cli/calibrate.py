@@ -206,7 +206,7 @@ def _check_turn_in_place(rec) -> None:
 def run_camera_noise(args: argparse.Namespace) -> int:
     import dataclasses
 
-    from fusion_vo.calibration.camera_noise import calibrate
+    from fusion_vo.calibration.camera_noise_drive import calibrate
     from fusion_vo.config import load_config
     from fusion_vo.geometry.camera import load_yaml, write_yaml_atomic
     from fusion_vo.recording import Recording

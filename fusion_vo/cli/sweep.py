@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from fusion_vo.batch.tasks import METRICS
+from fusion_vo.batch.columns import METRICS
 from fusion_vo.errors import InputError
 from fusion_vo.cli.batch import (add_common, announce, batch_progress, client_options, finish, load_run_config,
                                   quiet_dask)

@@ -22,7 +22,10 @@ from fusion_vo.errors import InputError
 __all__ = ["compare_runs", "evaluate_run", "has_groundtruth", "require_evo"]
 
 _LAZY = {"compare_runs": "fusion_vo.evaluation.compare", "evaluate_run": "fusion_vo.evaluation.run_report",
-         "has_groundtruth": "fusion_vo.evaluation.run_report"}
+         "has_groundtruth": "fusion_vo.evaluation.run_report",
+         # evo (GPL-3.0, the ``eval`` extra): what the report and the comparison reach it through
+         "evaluate_trajectories": "fusion_vo.evaluation.evaluate",
+         "groundtruth_accuracy": "fusion_vo.evaluation.evaluate", "to_planar": "fusion_vo.evaluation.metrics"}
 
 EVO_MISSING = ("evaluation against ground truth needs evo (GPL-3.0), which is not installed: "
                "pip install 'fusion-vo[eval]'")

@@ -22,10 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo import evaluation
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation import evo_available, figures
 from fusion_vo.evaluation.gps import gps_was_fused
-from fusion_vo.evaluation.io import GROUNDTRUTH_CSV, write_metrics
+from fusion_vo.evaluation.io import GROUNDTRUTH_CSV, read_groundtruth, write_metrics
 from fusion_vo.evaluation.plots import plot_compare
 from fusion_vo.evaluation.run_report import RunFolder, find_recording, has_groundtruth, read_run_folder, sensors_of
 from fusion_vo.evaluation.verdict import verdict
@@ -66,9 +67,7 @@ def run_labels(run_dirs: list[Path]) -> list[str]:
 
 def evaluate_trajectories(reference, files: dict[str, Path], reference_path: Path | None = None) -> dict:
     """:func:`fusion_vo.evaluation.evaluate.evaluate_trajectories` (evo, the ``eval`` extra: loaded on first use)."""
-    from fusion_vo.evaluation.evaluate import evaluate_trajectories as evaluate
-
-    return evaluate(reference, files, reference_path)
+    return evaluation.evaluate_trajectories(reference, files, reference_path)
 
 
 def run_verdict(folder: RunFolder) -> list[str]:
@@ -122,15 +121,12 @@ def compare_runs(run_dirs: list[str | Path], out_dir: str | Path,
         sequences.append(sequence.resolve() if sequence is not None else None)
         if sequence is None or not has_groundtruth(sequence) or not evo_available():
             continue
-        from fusion_vo.evaluation.io import read_groundtruth  # evo: the ``eval`` extra
-        from fusion_vo.evaluation.metrics import to_planar
-
         gt = read_groundtruth(sequence / GROUNDTRUTH_CSV)
         results = evaluate_trajectories(gt, folder.files, sequence / GROUNDTRUTH_CSV)
         for name, r in results.items():
             table[label][name].update(r.figures)
         anchored[label] = {name: r.anchored for name, r in results.items()}
-        truths.append(to_planar(gt))
+        truths.append(evaluation.to_planar(gt))
     check_outside(out_dir, sorted({s for s in sequences if s is not None}))
     differences, aligned = _differences(labels, folders, table)
     everyone = len(anchored) == len(folders)

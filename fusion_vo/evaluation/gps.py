@@ -19,15 +19,19 @@ given without them.
 
 from __future__ import annotations
 
+import io
 import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.io import read_tum_poses
+from fusion_vo.evaluation.io import read_tum_poses, write_atomic
+from fusion_vo.evaluation.plots import colour_of, label_of
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
@@ -139,14 +143,6 @@ def evaluate_against_gps(run_dir: Path, files: dict[str, Path], gps: GpsData, co
 
 def plot_fixes(gps: GpsData, scores: dict[str, GpsScore], path: Path) -> Path:
     """Plan view of the fixes (grey dots) and the scored antenna tracks, in ENU metres."""
-    import io
-
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    from fusion_vo.evaluation.io import write_atomic
-    from fusion_vo.evaluation.plots import colour_of, label_of
-
     fig = Figure(figsize=(8, 7), dpi=100, layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()

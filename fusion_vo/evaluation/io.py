@@ -29,7 +29,9 @@ import numpy as np
 
 from frontends.base import MotionStatus
 from fusion_vo.errors import InputError, check_file, check_folder
+from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.outputs import write_atomic  # noqa: F401  (the one atomic writer, used by plots and report)
+from fusion_vo.recording.reader import read_groundtruth_csv, unit_quaternions
 
 if TYPE_CHECKING:  # evo is the GPL-3.0 ``eval`` extra: imported where a trajectory is built
     from evo.core.trajectory import PoseTrajectory3D
@@ -164,8 +166,6 @@ def read_tum_poses(path: str | Path) -> TumPoses:
     data = np.array(rows)
     keep = _increasing_rows(data[:, 0], line_numbers, path)
     data = data[keep]
-    from fusion_vo.recording.reader import unit_quaternions
-
     # the ground truth's rule: a norm more than 0.05 from 1 is an error (normalising a quaternion of
     # norm 1e-6 would turn rounding noise into an arbitrary rotation)
     quat_wxyz = unit_quaternions(data[:, [7, 4, 5, 6]], np.asarray(line_numbers)[keep], path, "quaternion")
@@ -214,8 +214,6 @@ def read_groundtruth(path: str | Path) -> PoseTrajectory3D:
     InputError
         Naming the file and line of any row that breaks the rules.
     """
-    from fusion_vo.recording.reader import read_groundtruth_csv
-
     path = Path(path)
     if path.is_dir():
         path = path / GROUNDTRUTH_CSV
@@ -308,8 +306,6 @@ def read_run_config(run_dir: str | Path) -> dict:
         :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line), or its
         ``sequence`` (the recording's folder) is given but is not a path.
     """
-    from fusion_vo.geometry.camera import load_yaml
-
     path = Path(run_dir) / "run.yaml"
     if not os.path.lexists(path):
         return {}

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo import evaluation
 from fusion_vo.errors import InputError, check_folder
 from fusion_vo.evaluation import EVO_MISSING, evo_available
 from fusion_vo.evaluation import figures, plots
@@ -41,6 +42,7 @@ from fusion_vo.evaluation.report import ReportContent, write_report
 from fusion_vo.evaluation.run_tables import calibration_table, dropped_table, gated_spans, influence_table, pauses_table
 from fusion_vo.evaluation.verdict import verdict
 from fusion_vo.geometry import se2
+from fusion_vo.geometry.camera import load_yaml
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
@@ -170,8 +172,6 @@ def title_of(folder: RunFolder, name: str) -> tuple[str, str]:
     title = Path(str(named)).name if named else name
     described = ""
     if named and (Path(str(named)) / "simulation.yaml").is_file():
-        from fusion_vo.geometry.camera import load_yaml
-
         try:
             sim = load_yaml(Path(str(named)) / "simulation.yaml")
             described = (f"a generated recording ({sim.get('profile')} drive, seed {sim.get('seed')}, "
@@ -191,9 +191,8 @@ def sensors_of(folder: RunFolder) -> list[str]:
 
 
 def _groundtruth_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[dict, dict[str, Path]]:
-    from fusion_vo.evaluation.evaluate import groundtruth_accuracy  # evo (GPL-3.0): only when it is installed
-
-    return groundtruth_accuracy(sequence, folder.files, out, folder.frames)
+    # evo (GPL-3.0): loaded only here, when it is installed
+    return evaluation.groundtruth_accuracy(sequence, folder.files, out, folder.frames)
 
 
 def _gps_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[dict, dict[str, Path], list]:

@@ -41,7 +41,9 @@ import numpy as np
 
 from fusion_vo.backends.result import COV_HEADER  # noqa: F401  (the format read here, written by the backends)
 from fusion_vo.errors import InputError
+from fusion_vo.evaluation.io import find_trajectories, read_run_config, read_tum_poses
 from fusion_vo.geometry import se2
+from fusion_vo.recording import Recording
 
 log = logging.getLogger(__name__)
 
@@ -161,8 +163,6 @@ def load_run_trajectories(run_dir: str | Path, names: list[str] | None = None) -
     InputError
         If the folder has no trajectory, a requested name is not in it, or a file is malformed.
     """
-    from fusion_vo.evaluation.io import find_trajectories, read_tum_poses
-
     files = find_trajectories(run_dir)
     if names:
         missing = [n for n in names if n not in files]
@@ -183,9 +183,6 @@ def load_run_trajectories(run_dir: str | Path, names: list[str] | None = None) -
 def groundtruth_of_run(run_dir: str | Path) -> ExportTrajectory | None:
     """The ground truth of the recording named by ``run.yaml`` (as ``groundtruth``), or ``None`` when the
     run names no recording, it is not there or has no ground truth."""
-    from fusion_vo.evaluation.io import read_run_config
-    from fusion_vo.recording import Recording
-
     named = read_run_config(run_dir).get("sequence")
     if not named or not Path(str(named)).is_dir():
         return None

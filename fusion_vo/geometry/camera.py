@@ -28,6 +28,7 @@ import numpy as np
 import yaml
 
 from fusion_vo.errors import InputError, check_file
+from fusion_vo.outputs import make_folder, write_atomic
 
 DISTORTION_MODELS = ("radial-tangential", "equidistant", "division", "none")
 
@@ -498,8 +499,6 @@ def load_yaml(path: str | Path) -> dict:
 
 def write_yaml_atomic(path: str | Path, data: dict) -> None:
     """Write a YAML file under a temporary name, then rename it into place (mode from the umask)."""
-    from fusion_vo.outputs import make_folder, write_atomic
-
     path = Path(path)
     make_folder(path.parent)
     write_atomic(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

@@ -30,10 +30,8 @@ best similarity of ``H^{-1}`` depends on which points it is fitted to. The front
 similarity robustly, which leaves out the far field where a tilt is least like a similarity; the
 correction is therefore fitted on the points within ``max_off_axis`` (the tangent of the angle off the
 virtual camera's axis, 1: 45 degrees). For an ordinary lens that is the whole image; for a fisheye it
-leaves out the rim, where the rectified image is stretched most. On ``real_fisheye_checker`` (3 degrees
-of rocking through an equisolid fisheye, 68 degrees off the axis at the rectified image's edge) fitting
-on the whole image over-corrected by about 20 % of the rotation's image motion: the visual increments'
-RMS errors against the truth were 0.27 / 0.35 mm (x / y) against 0.14 / 0.25 mm with 45 degrees.
+leaves out the rim, where the rectified image is stretched most and a fit over the whole image
+over-corrects the tilt (``docs/decisions/0032-derotation-within-45-degrees.md``).
 
 What is left is not known to better than a fraction of the rotation's image motion (where the frontend's
 points were, rolling shutter, the lens model), so :meth:`GyroDerotation.derotate` adds

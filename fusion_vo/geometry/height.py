@@ -34,12 +34,10 @@ settles. On ``tilted`` it stays 1; on the independent renders (rocking, a lens m
 it comes to 50-80, and the stated heights' errors then cover the actual ones.
 
 Each frame's height then carries the noise of about ``σ_r / √n`` for the ``n`` readings within the span
-over which the ratios stay precise, instead of one reading's ``σ_r``: on ``tilted`` visual odometry's ATE
-falls from 0.49 mm (the readings interpolated at the frame times) to 0.18 mm (``python
-benchmarks/fusion.py --only tilted`` beside the same with ``--set odometry.range_smoothing=false``;
-docs/decisions/0020-camera-height-from-all-range-readings.md). The smoothed errors are
-correlated from frame to frame over that span; each increment's covariance takes its frame's standard
-deviation (:meth:`fusion_vo.geometry.ground.GroundGeometry.body_increment`) as before.
+over which the ratios stay precise, instead of one reading's ``σ_r``
+(``docs/decisions/0020-camera-height-from-all-range-readings.md``). The smoothed errors are correlated
+from frame to frame over that span; each increment's covariance takes its frame's standard deviation
+(:meth:`fusion_vo.geometry.ground.GroundGeometry.body_increment`).
 
 This uses every reading, also those after the frame: it is for offline runs
 (:func:`fusion_vo.odometry.run_visual_odometry`, ``odometry: {range_smoothing: true}``, the default).

@@ -39,6 +39,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
+from fusion_vo.calibration.camera_noise import CameraNoise
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import SENSOR_KEYS, CameraModel, load_yaml, parse_pose, sensor_number, warn_unknown_keys
@@ -46,6 +47,7 @@ from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_POSI
                                     ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData)
 from fusion_vo.outputs import make_folder, write_atomic
 from fusion_vo.recording.csvio import check_magnitude, read_frame_list, read_table
+from fusion_vo.recording.gps import read_gps
 
 log = logging.getLogger(__name__)
 
@@ -347,8 +349,6 @@ class Recording:
         meta = self._yaml("cam0", required=False)
         if meta.get("camera_noise") is None:
             return None
-        from fusion_vo.calibration.camera_noise import CameraNoise
-
         return CameraNoise.from_dict(meta["camera_noise"], self.path / "cam0" / "sensor.yaml")
 
     def odom(self) -> TwistData:
@@ -371,8 +371,6 @@ class Recording:
 
     def gps(self) -> GpsData:
         """``gps0``: fixes in local ENU at the datum, unusable fixes skipped and counted (:mod:`.gps`)."""
-        from fusion_vo.recording.gps import read_gps
-
         self._need("GPS", "gps0")
         return read_gps(self.path / "gps0")
 

@@ -15,9 +15,8 @@ At rest the gyro measures only its own noise: no driving vibration, no true rate
 (e.g. from a ROS message's covariance) that includes the vibration, or is merely conservative, makes
 the zero-velocity update (:mod:`fusion_vo.sensors.wheel`) fix the bias less than the samples at rest
 allow; ``gyro_rest_noise_density``, when set, is used instead for the intervals in which the wheels
-report rest (:func:`rest_noise_density` measures it from such samples). It is not measured by default:
-on robot_localization's Husky log the bias it pins at the one standstill is not the bias that serves
-the drive best (``benchmarks/husky_diagnosis.py``, section 8).
+report rest (:func:`rest_noise_density` measures it from such samples). It is not measured by default
+(``docs/decisions/0025-gyro-rest-noise-density-off.md``).
 
 Spikes (an impossible sample) are found against a running median: a sample further than ``spike_threshold``
 from the median of its ``2w+1`` neighbours, or above ``max_rate``, or not finite, is gated (counted) and

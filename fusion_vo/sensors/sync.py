@@ -133,14 +133,12 @@ class TwistDelay:
     Feed every twist sample (``twist``, which returns its time on the gyro's clock) and every gyro
     yaw rate (``gyro``). Once both streams cover ``min_span`` seconds the delay is estimated, every
     ``retry`` seconds of new data until two successive estimates agree within the twist's sample period
-    (a short window of gentle curves can give a spurious peak: on a generated drive, 0.45 s from its
-    first 15 s, none from 20 s on, for a twist on time), then again after every ``refresh`` seconds,
+    (a short window of gentle curves can give a spurious peak), then again after every ``refresh`` seconds,
     over the last ``span`` seconds (a bounded cost: about 20 ms of CPU for 120 s of
     a 10 Hz twist and a 30 Hz gyro). Until the first estimate, and whenever an estimate finds no delay,
     twist times are taken as they come. The sooner the better: a filter that fused a late twist's turns
-    and stops for a while keeps the gyro bias it learned from them (measured on a generated skid-steered
-    drive with a 0.4 s delay: corrected after 15 / 20 / 30 s, streaming EKF RMS 0.58 / 1.10 / 1.55 m,
-    1.83 m uncorrected, 0.13 m for the same drive on time). ``history`` lists
+    and stops for a while keeps the gyro bias it learned from them
+    (``docs/decisions/0035-twist-delay-from-the-yaw-rates.md``). ``history`` lists
     ``(time, delay)`` of every change, for the run's notes.
 
     Parameters

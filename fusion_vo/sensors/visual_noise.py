@@ -32,10 +32,7 @@ Both are estimated robustly, from medians, each term weighted by its own stated 
 
 Their standard errors are the scatter of the same estimates over :data:`DRAWS` drives simulated from the
 estimate (Gaussian errors of the estimated size and correlation on the recording's own intervals, with
-their stated variances; a fixed seed). The scatter over eight consecutive blocks of the recording was
-tried first: it understated the correlation's scatter by half (100 simulated drives of 1200 intervals
-with white camera errors: scatter 0.52, stated 0.26), because the blocks' estimates pile up at the ends
-of their range. Either is applied only when resolved: ``s`` when its standard error is below
+their stated variances; a fixed seed). Either is applied only when resolved: ``s`` when its standard error is below
 ``scale_tolerance`` times it, ``f`` when its standard error is below ``frame_error_tolerance``. The camera
 then enters both backends with its heading variance times ``s`` (its heading covariances with the
 translation times ``√s``; possibly below the frontend's floor ``odometry.min_sigma_yaw``) and with

@@ -469,11 +469,8 @@ def curvature_observable(camera: bool, ahrs: bool, gps: bool) -> bool:
 
     The wheels' turn carries ``c`` per metre driven, the gyro's its bias ``b`` per second; with nothing else,
     only their difference ``c v - b`` is measured, and the two separate only through changes of speed ``v``.
-    The estimate of that split then leans on the two priors, and the heading drifts at the split's error:
-    on generated 120 s wheel + gyro drives (4 seeds, ``python benchmarks/curvature_without_heading.py``)
-    with equal radii the fused tracks were 4.9-5.8 m off against 1.2 m for the wheels alone and
-    0.5-0.7 m without the state; only with a 1 % radius difference each way (1.4 prior sigma) did the state
-    pay (6.1-6.7 m against 8.9-9.1 m).
+    The estimate of that split then leans on the two priors, and the heading drifts at the split's error
+    (``docs/decisions/0013-no-curvature-without-a-heading-reference.md``).
     """
     return camera or ahrs or gps
 

@@ -32,6 +32,7 @@ from fusion_vo.geometry.camera import (DISTORTION_MODELS, MAX_IMAGE_SIDE, MAX_LE
                                        focal_length_problem)
 from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_CAMERA_HEIGHT_M, MAX_POSITION_M,
                                     MAX_SPEED)
+from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
 from fusion_vo.recording.writer import RecordingWriter, check_target
 from fusion_vo.simulation.floor import TEXTURES, Floor, Rectangle
 from fusion_vo.simulation.mount import body_pose, camera_mount
@@ -626,8 +627,6 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
 
 def _write_gps(writer: RecordingWriter, motion: Motion, o: SimulationOptions, t_end: float, ns, rng) -> dict:
     """``gps0/data.csv`` and ``sensor.yaml`` of simulated fixes; returns the truth for simulation.yaml."""
-    from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
-
     sim = GpsSimulation(o.gps_rate, o.gps_noise, tuple(o.gps_lever_arm), o.gps_outages, o.gps_jumps,
                         math.radians(o.gps_heading_deg), tuple(o.gps_origin))
     t, enu, jumped = gps_fixes(motion, sim, t_end, rng)

@@ -40,6 +40,8 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from fusion_vo.simulation.floor import load_texture, mirror_tile
+
 LENSES = ("polynomial", "equisolid")
 CALIBRATIONS = ("fitted", "focal", "none")
 
@@ -282,8 +284,6 @@ class RealisticRenderer:
         self._gain = 1.0
         self._texture: np.ndarray | None = None
         if cam.checker_size == 0 or cam.grain > 0:
-            from fusion_vo.simulation.floor import load_texture, mirror_tile
-
             self._texture = mirror_tile(load_texture(cam.texture)).astype(np.float32) / 255.0
 
     def sensor_calibration(self) -> dict:

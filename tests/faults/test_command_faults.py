@@ -586,10 +586,10 @@ def test_a_sweep_over_list_values_ranks_and_reports_them_as_json_text(tmp_path):
     """Swept lists (``fusion.initial_pose``) are one column of canonical JSON text: grouped, ranked, plotted."""
     import pandas as pd
 
+    from fusion_vo.batch.columns import COLUMNS
     from fusion_vo.batch.grid import Grid, ParameterSet
     from fusion_vo.batch.ranking import best_sets, describe_set
     from fusion_vo.batch.runner import _frame, write_results
-    from fusion_vo.batch.tasks import COLUMNS
 
     key = "fusion.initial_pose"
     poses = {"p000": [0, 0, 0], "p001": [1.5, 0, 0.25]}
