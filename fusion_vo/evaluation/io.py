@@ -308,7 +308,7 @@ def read_run_config(run_dir: str | Path) -> dict:
         :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line), or its
         ``sequence`` (the recording's folder) is given but is not a path.
     """
-    from fusion_vo.geometry.camera import load_yaml
+    from fusion_vo.config.files import load_yaml
 
     path = Path(run_dir) / "run.yaml"
     if not os.path.lexists(path):

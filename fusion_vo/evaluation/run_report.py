@@ -170,7 +170,7 @@ def title_of(folder: RunFolder, name: str) -> tuple[str, str]:
     title = Path(str(named)).name if named else name
     described = ""
     if named and (Path(str(named)) / "simulation.yaml").is_file():
-        from fusion_vo.geometry.camera import load_yaml
+        from fusion_vo.config.files import load_yaml
 
         try:
             sim = load_yaml(Path(str(named)) / "simulation.yaml")

@@ -27,7 +27,7 @@ def test_parameters_override_the_file_key_by_key(tmp_path):
     s = load_settings(cfg, {"backend": "gtsam", "fusion.ekf.accel_sigma": 0.4, "smoothed_lag": 1.5,
                             "use_sim_time": True})
     assert s.backend == "gtsam" and s.node.publish_rate == 30.0 and s.node.smoothed_lag == 1.5
-    assert s.run.fusion["ekf"]["accel_sigma"] == 0.4 and s.run.fusion["reorder_window"] == 0.1
+    assert s.run.fusion.ekf.accel_sigma == 0.4 and s.run.fusion.reorder_window == 0.1
     assert s.calibration == tmp_path / "calib"  # relative to the file
     setup = sensor_setup(s)
     assert setup.sensors == ["imu", "odom"]  # those the calibration folder holds, as fusion-vo run does
