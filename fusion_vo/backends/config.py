@@ -212,7 +212,8 @@ class FusionConfig(Section):
         if values is None or len(values) != 3 or not all(
                 not isinstance(v, bool) and isinstance(v, numbers.Real) and math.isfinite(v) for v in values):
             shown = repr(list(value) if isinstance(value, tuple) else value)
-            raise ValueError(f"must be three finite numbers (x, y, yaw), not {shown if len(shown) <= 60 else shown[:57] + '...'}")
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
+            raise ValueError(f"must be three finite numbers (x, y, yaw), not {shown}")
         return tuple(float(v) for v in values)
 
     @model_validator(mode="wrap")

@@ -74,8 +74,8 @@ class RunConfig(Section):
     backend: Literal[BACKENDS] = Field("all", description=(
         "``none`` (visual and wheel dead reckoning only), ``ekf``, ``gtsam`` or ``all``."))
     odometry: OdometrySettings = Field(default_factory=OdometrySettings, description=(
-        "Visual odometry options: the fields of ``fusion_vo.odometry.OdometryConfig`` except the frontend and its "
-        "options."))
+        "Visual odometry options: the fields of ``fusion_vo.config.odometry.OdometryConfig`` except the frontend "
+        "and its options."))
     klt: KltConfig = Field(default_factory=KltConfig, description="Options of the KLT frontend "
                                                                    "(``frontends.klt.KltConfig``).")
     features: FeatureConfig = Field(default_factory=FeatureConfig, description=(

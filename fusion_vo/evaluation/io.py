@@ -305,7 +305,7 @@ def read_run_config(run_dir: str | Path) -> dict:
     ------
     InputError
         If the file exists but is not a YAML mapping (read by the one YAML reader,
-        :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line), or its
+        :func:`fusion_vo.config.files.load_yaml`: a one-line message naming the line), or its
         ``sequence`` (the recording's folder) is given but is not a path.
     """
     from fusion_vo.config.files import load_yaml
