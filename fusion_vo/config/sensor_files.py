@@ -309,7 +309,11 @@ def uncalibrated_camera(path: str | Path, focal_length: float | None = None, qui
     data = load_yaml(path)
     if "resolution" not in data:
         raise InputError("uncalibrated mode still needs 'resolution: [width, height]'", path)
-    cam = validate(CameraFile, {**data, "distortion_model": "none", "distortion_coefficients": []}, path)
+    # the file's lens is not used, nor its intrinsics when a focal length is given
+    unused = {"distortion_model": "none", "distortion_coefficients": []}
+    if focal_length is not None:
+        unused["intrinsics"] = None
+    cam = validate(CameraFile, {**data, **unused}, path)
     width, height = cam.resolution
     if focal_length is not None:
         fu = fv = float(focal_length)
