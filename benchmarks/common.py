@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import os
 import shutil
 import statistics
@@ -101,8 +100,9 @@ def run_config(args: argparse.Namespace, **fixed) -> RunConfig:
 
 
 def fusion_settings(args: argparse.Namespace) -> dict:
-    """The ``fusion`` section of ``--config`` and ``--set`` (for benchmarks that fuse streams directly)."""
-    return run_config(args).fusion
+    """The ``fusion`` section of ``--config`` and ``--set`` as a mapping (for benchmarks that fuse streams
+    directly, and change it with :func:`with_settings`)."""
+    return run_config(args).fusion.to_dict()
 
 
 def describe_settings(args: argparse.Namespace) -> str:
@@ -132,7 +132,7 @@ def recording(root: Path, folder: str, profile: str, seed: int, options: dict) -
     info = seq / "simulation.yaml"
     if info.exists():
         stored = yaml.safe_load(info.read_text())
-        wanted = yaml.safe_load(yaml.safe_dump(dataclasses.asdict(dataclasses.replace(SimulationOptions(), **options))))
+        wanted = SimulationOptions.from_dict({**SimulationOptions().model_dump(), **options}).model_dump(mode="json")
         if stored.get("profile") == profile and stored.get("seed") == seed and stored.get("options") == wanted:
             return seq
     print(f"generating {folder} ...", flush=True)

@@ -62,9 +62,7 @@ ON_ITS_SIDE = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def config(check: bool = True, **changes) -> FusionConfig:
-    c = FusionConfig(**changes)
-    c.consistency.check = check
-    return c
+    return FusionConfig(**changes).merged({"consistency": {"check": check}})
 
 
 def streamed(streams, backend: str, cfg: FusionConfig) -> PoseData:
@@ -141,7 +139,7 @@ def rescaled(streams, ratio: float, offset: np.ndarray):
 
 
 def wrong_focal(tmp: Path, full: bool) -> None:
-    from fusion_vo.geometry.camera import uncalibrated_camera
+    from fusion_vo.config.sensor_files import uncalibrated_camera
     from fusion_vo.odometry import OdometryConfig, run_visual_odometry
     from fusion_vo.simulation.standard import make_standard
 

@@ -67,7 +67,8 @@ from fusion_vo.evaluation.increments import against_truth
 from fusion_vo.evaluation.io import GROUNDTRUTH_CSV, read_groundtruth
 from fusion_vo.evaluation.metrics import evaluate_trajectory, planar_trajectory
 from fusion_vo.geometry import se2
-from fusion_vo.geometry.camera import CameraModel, uncalibrated_camera
+from fusion_vo.config.sensor_files import uncalibrated_camera
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.pipeline import run_pipeline

@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Mapping
-from typing import Annotated, Any, Self
+from types import UnionType
+from typing import Annotated, Any, Self, Union, get_args, get_origin
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, ValidationError
 from pydantic_core import ErrorDetails, PydanticCustomError
@@ -146,10 +147,13 @@ def _bound(kind: str, ctx: dict) -> str | None:
 
 
 def _known_keys(model: type[BaseModel] | None, loc: tuple) -> list[str]:
-    """The keys of the (nested) model at ``loc`` (empty when ``loc`` is not a model)."""
+    """The keys of the (nested) model at ``loc`` (empty when ``loc`` is not a model; a section that may be null
+    is its model)."""
     for part in loc:
         field = model.model_fields.get(part) if model is not None and isinstance(part, str) else None
         sub = getattr(field, "annotation", None) if field else None
+        if get_origin(sub) in (Union, UnionType):
+            sub = next((a for a in get_args(sub) if inspect.isclass(a) and issubclass(a, BaseModel)), None)
         if not (inspect.isclass(sub) and issubclass(sub, BaseModel)):
             return []
         model = sub
@@ -160,8 +164,8 @@ def describe_error(error: ErrorDetails | dict, model: type[BaseModel] | None = N
     """One line for one pydantic error of ``model`` (whose own key path is ``prefix``).
 
     ``key.path: unknown key (known: ...)``, ``key.path: expected an integer, got 'many'``,
-    ``section: key must be at least 1, not 0`` (a value out of its range), ``section: <the message of
-    a model validator>``.
+    ``section: key must be at least 1, not 0`` (a value out of its range, or a field validator's message that
+    starts with "must"), ``section: <the message of a model validator>``.
     """
     loc = tuple(error.get("loc", ()))
     where = location(prefix + loc)
@@ -181,8 +185,13 @@ def describe_error(error: ErrorDetails | dict, model: type[BaseModel] | None = N
         text = f"expected {EXPECTED[kind]}, got {shown(value)}"
     elif kind == "literal_error":
         text = f"expected one of {error['ctx']['expected']}, got {shown(value)}"
+    elif kind == "missing":
+        return f"missing key '{where}'"
     else:
         text = str(error.get("msg", "invalid value")).removeprefix("Value error, ").removeprefix("Assertion failed, ")
+        if text.startswith("must ") and loc and isinstance(loc[-1], str):  # a field's own check: named like a range
+            parent = location(prefix + loc[:-1])
+            return f"{parent}: {loc[-1]} {text}" if parent else f"{loc[-1]} {text}"
     return f"{where}: {text}" if where else text
 
 

@@ -39,7 +39,8 @@ import cv2
 from frontends import make_frontend
 from fusion_vo import baseline as plain_script
 from fusion_vo.geometry.ground import GroundGeometry
-from fusion_vo.odometry import OdometryConfig, available_cores, opencv_threads, run_visual_odometry
+from fusion_vo.config.odometry import available_cores
+from fusion_vo.odometry import OdometryConfig, opencv_threads, run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.recording.csvio import read_frame_list
 

@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
 import queue
 import threading
 import time
@@ -42,7 +41,7 @@ from collections import Counter, deque
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import closing, contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, ClassVar, Iterable, Iterator, TypeVar
+from typing import Callable, Iterable, Iterator, TypeVar
 
 import cv2
 import numpy as np
@@ -50,17 +49,16 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.config.odometry import OdometryConfig
+from fusion_vo.config.sensor_files import uncalibrated_camera
 from fusion_vo.calibration.lens_from_motion import check_stated_lens, lens_from_motion
-from fusion_vo.choices import FRONTENDS
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.geometry.camera import uncalibrated_camera
 from fusion_vo.geometry.derotation import GyroDerotation
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.geometry.height import smooth_heights
-from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, PoseData, RangeData, VisualIncrement
+from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
-from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 from fusion_vo.sensors.range import camera_height, reading_sigma
 
 log = logging.getLogger(__name__)
@@ -68,120 +66,6 @@ log = logging.getLogger(__name__)
 #: fraction of the width and height, about the centre, that the frontends use without a lens model: the
 #: distortion left out grows with the distance from the centre (``central_region`` of every frontend)
 UNCALIBRATED_CENTRAL_REGION = 0.5
-
-
-@dataclass
-class OdometryConfig:
-    """Visual odometry settings.
-
-    Attributes
-    ----------
-    frontend : str
-        ``"klt"`` (pyramidal Lucas-Kanade tracking), ``"features"`` (corners, descriptors, matching) or
-        ``"direct"`` (whole-image alignment).
-    frontend_options : dict
-        Options of the chosen frontend (see ``frontends.klt.KltConfig`` / ``frontends.features.FeatureConfig``).
-    height : float or None
-        Camera height above the floor [m]; ``None`` takes it from ``T_BS`` of ``cam0/sensor.yaml``.
-    use_range : bool
-        Use the downward range finder (``range0``), when the recording has one, as the camera height.
-    range_smoothing : bool
-        With ``use_range``: estimate the height at every frame from all the readings together with the
-        frames' own change of scale (:mod:`fusion_vo.geometry.height`), instead of from the one or two
-        readings around the frame (default true).
-    min_sigma_xy, min_sigma_yaw : float
-        Floors on the standard deviation of a visual increment [m], [rad].
-    max_bad_start_frames : int
-        If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an
-        error instead of skipping them one by one.
-    gyro_derotation : bool
-        When the recording has an IMU, remove the image motion of the camera's roll and pitch from
-        every similarity before it becomes body motion (:mod:`fusion_vo.geometry.derotation`).
-    uncalibrated : bool
-        Run without the intrinsics of ``cam0/sensor.yaml``: a pinhole without distortion, principal
-        point at the image centre, focal length ``focal_length`` (or the file's, or a 60 degree
-        horizontal field of view). With ``lens_from_motion`` the lens distortion is then estimated from
-        the frames themselves (:mod:`fusion_vo.calibration.lens_from_motion`); when the frames do not
-        allow it, or without ``lens_from_motion``, the frontends use only the central half of the width
-        and height (``UNCALIBRATED_CENTRAL_REGION``, unless ``frontend_options`` sets
-        ``central_region``), where the distortion left out is smallest. Without ``uncalibrated``, a
-        ``sensor.yaml`` without intrinsics is an error.
-    focal_length : float or None
-        Approximate focal length [px] for ``uncalibrated``.
-    lens_from_motion : bool
-        With ``uncalibrated``: estimate a one-parameter (division-model) lens distortion from tracks in
-        40 frame pairs spread over the recording before the run (default true).
-    check_lens : bool
-        Without ``uncalibrated``, when ``cam0/sensor.yaml`` states no lens distortion: check that against
-        the frames (about 1.5 s of CPU) and, where a lens explains their tracks clearly better, use that
-        lens with a warning naming the file (:func:`fusion_vo.calibration.lens_from_motion.check_stated_lens`;
-        default true).
-    max_bridge : float
-        Longest gap [s] between the last measured frame and a restart of the frontend that the visual
-        track bridges at constant velocity (default 1); across a longer gap it holds its last pose.
-    threads : int or None
-        Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV
-        single-threaded; ``N >= 2`` decodes and prepares frames ahead of the tracker in other threads
-        (:func:`prepared_frames`) and lets OpenCV use ``N`` threads. ``None`` (the default) uses the
-        cores available to the process; at most 256. The results do not depend on it.
-    handoff : bool
-        With ``threads >= 2``, give a frontend that can hand work off (KLT, features) one more thread
-        for it (default false: on two idle cores it saved the tracking thread 0.5-0.6 ms per frame but
-        the wall time did not fall). The results do not depend on it.
-    camera_noise : bool
-        Use the heading noise model that ``cam0/sensor.yaml`` states under ``camera_noise`` for this
-        frontend (``fusion-vo calibrate camera-noise``, :mod:`fusion_vo.calibration.camera_noise`): each
-        increment's heading variance by its turn and each frame's own error, in place of the frontend's
-        heading variance and the ``min_sigma_yaw`` floor (default true; without the key nothing changes).
-    """
-
-    frontend: str = "klt"
-    frontend_options: dict = field(default_factory=dict)
-    height: float | None = None
-    use_range: bool = True
-    range_smoothing: bool = True
-    min_sigma_xy: float = 2e-5
-    min_sigma_yaw: float = 2e-5
-    max_bad_start_frames: int = 5
-    gyro_derotation: bool = True
-    uncalibrated: bool = False
-    focal_length: float | None = None
-    lens_from_motion: bool = True
-    check_lens: bool = True
-    max_bridge: float = 1.0
-    threads: int | None = None
-    handoff: bool = False
-    camera_noise: bool = True
-
-    #: the range of every number field (:func:`fusion_vo.schema.check_ranges`; ``None`` always passes)
-    RANGES: ClassVar[dict[str, Range]] = {
-        "height": Range(0, MAX_CAMERA_HEIGHT_M, open_low=True), "min_sigma_xy": Range(0, 10),  # 0: no floor
-        "min_sigma_yaw": Range(0, math.pi), "max_bad_start_frames": Range(1, 1e6), "max_bridge": Range(0, 3600),
-        "focal_length": Range(0, 1e6, open_low=True),  # [px]; checked against the image size when it is used
-        "threads": Range(1, 256),  # at most 256: 100000 started threads until the process limit was hit
-    }
-
-    def __post_init__(self) -> None:
-        if self.frontend not in FRONTENDS:  # (a wrong name was accepted until the run built the frontend)
-            raise ValueError(f"frontend must be one of {', '.join(FRONTENDS)}, not {self.frontend!r}")
-        check_ranges(self, self.RANGES)
-        if self.threads is not None and not isinstance(self.threads, int):
-            raise ValueError(f"threads must be a whole number of at least 1, not {self.threads!r}")
-
-    def thread_count(self) -> int:
-        """The number of threads to use (``threads``, or the cores available when it is ``None``)."""
-        return self.threads if self.threads is not None else available_cores()
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "OdometryConfig":
-        """Build from a mapping through the configuration schema (:func:`fusion_vo.schema.build`);
-        unknown keys and values of the wrong type raise ``ValueError`` naming the key."""
-        from fusion_vo import schema
-
-        try:
-            return schema.build(cls, d)
-        except InputError as exc:
-            raise ValueError(exc.message) from None
 
 
 @dataclass
@@ -383,14 +267,6 @@ class VisualOdometry:
 
     def track(self) -> PoseData:
         return PoseData(np.asarray(self.t, dtype=np.float64), np.asarray(self.poses, dtype=np.float64).reshape(-1, 3))
-
-
-def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity where the system reports it)."""
-    try:
-        return max(len(os.sched_getaffinity(0)), 1)
-    except AttributeError:  # not Linux
-        return max(os.cpu_count() or 1, 1)
 
 
 T = TypeVar("T")

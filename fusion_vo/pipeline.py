@@ -49,11 +49,6 @@ from typing import Callable
 import numpy as np
 import yaml
 
-from frontends import make_frontend
-from frontends.features import FeatureConfig
-from frontends.klt import KltConfig
-from fusion_vo import backends, schema
-from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
@@ -61,7 +56,7 @@ from fusion_vo.evaluation import run_report
 from fusion_vo.evaluation.headings import imu_headings, write_headings
 from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
 from fusion_vo.evaluation.innovations import from_residuals, write_innovations
-from fusion_vo.geometry.camera import uncalibrated_camera
+from fusion_vo.config.sensor_files import uncalibrated_camera
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
@@ -164,26 +159,18 @@ def _config_error(exc: Exception, config_path: Path | None, key: str) -> InputEr
 
 
 def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Path | None = None) -> RunInputs:
-    """Validate the whole configuration and read every input the run will use, before any work.
+    """Check the configuration against the recording and read every input the run will use, before any work
+    (the configuration's own values were checked when it was made, :class:`~fusion_vo.config.run.RunConfig`).
 
     Raises
     ------
     InputError
         Naming the configuration file and key, or the recording's file and line, of the first problem
-        found: any option, a stream that is malformed, broken or missing, frame names outside
+        found: an option that does not fit the recording (a camera height, a frontend's setting), a stream that is malformed, broken or missing, frame names outside
         ``cam0/data/``, streams whose time spans do not overlap (different clocks), a timestamp that jumps by
         more than a day, or ground truth that cannot be used for the evaluation.
     """
     config_path = None if config_path is None else Path(config_path)
-    _check_number_types(config, config_path)
-    try:
-        config.validate(config_path)
-    except InputError as exc:
-        raise InputError(exc.message, exc.path or config_path, exc.line) from None
-    try:
-        as_config(config.fusion)
-    except (InputError, TypeError, ValueError) as exc:
-        raise _config_error(exc, config_path, "fusion") from None
     odometry = config.odometry_config()
 
     rec = Recording(sequence)
@@ -203,7 +190,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             try:
                 cam = uncalibrated_camera(rec.path / "cam0" / "sensor.yaml", odometry.focal_length, quiet=True)
             except InputError as exc:  # a configured focal length out of range for the file's resolution
-                if odometry.focal_length is None or "'focal_length'" not in exc.message:
+                if odometry.focal_length is None or not exc.message.startswith("focal_length:"):
                     raise
                 raise _config_error(exc, config_path, "odometry") from None
         else:
@@ -226,7 +213,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             raise InputError(str(exc), rec.path / "cam0" / "sensor.yaml") from None
         for name in ("klt", "features"):  # both sections, not only the frontend in use
             try:
-                make_frontend(name, getattr(config, name), point_map=geometry.rectifier)
+                make_frontend(name, getattr(config, name).to_dict(), point_map=geometry.rectifier)
             except (InputError, TypeError, ValueError) as exc:
                 raise _config_error(exc, config_path, name) from None
         note("camera", t_ns * 1e-9, "cam0")
@@ -274,25 +261,6 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     if config.evaluate and groundtruth is None and rec.has_gps():
         rec.gps()  # the fixes the evaluation scores against: a malformed file stops the run before any work
     return RunInputs(rec, sensors, spans, groundtruth, times)
-
-
-def _check_number_types(config: RunConfig, config_path: Path | None) -> None:
-    """A text where a number belongs (``height: abc``) in the odometry or frontend sections, named by key."""
-    for section, cls in (("odometry", OdometryConfig), ("klt", KltConfig), ("features", FeatureConfig)):
-        values = getattr(config, section) or {}
-        if not isinstance(values, dict):
-            raise InputError(f"'{section}' must be a mapping of option: value", config_path)
-        defaults = {name: f.default for name, f in schema.model_of(cls).model_fields.items()}
-        for key, value in values.items():
-            default = defaults.get(key)
-            number = isinstance(default, (int, float)) and not isinstance(default, bool)
-            if key == "height" and section == "odometry":
-                number = True
-            if number and value is not None and (isinstance(value, (bool, str)) or
-                                                 not isinstance(value, (int, float))):
-                raise InputError(f"{section}.{key} must be a number, not {value!r}", config_path)
-            if number and isinstance(value, float) and not math.isfinite(value):
-                raise InputError(f"{section}.{key} must be finite, not {value}", config_path)
 
 
 def _line_of(rec: Recording, name: str, row: int) -> int | None:
@@ -390,7 +358,7 @@ def run_pipeline(
                 if cov is not None and len(cov) == len(traj):
                     write_pose_covariances(staging / f"{name}.cov.csv", traj.t, cov)
         write_run_records(staging, result, streams, fusion_config, config.influence and config.backend != "none")
-        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.resolved().to_dict()}
+        run_info = {"sequence": str(rec.path.resolve()), "sensors": sensors, **config.to_dict()}
         write_atomic(staging / "run.yaml", yaml.safe_dump(run_info, sort_keys=False))
         summary.sensors = list(sensors)
         summary.files = sorted(p.name for p in staging.iterdir() if p.is_file() and not p.name.startswith("."))
@@ -482,7 +450,7 @@ def _run_backends(rec: Recording, vo: OdometryResult | None, sensors: list[str],
     """Wheel dead reckoning and the fused backends; returns the :class:`~fusion_vo.backends.FusionResult`, the
     streams it fused and the fusion configuration."""
     t0 = time.perf_counter()
-    fusion_config = config.fusion_config()
+    fusion_config = config.fusion
     streams = backends.streams_from_recording(rec, vo, sensors, fusion_config)
     result = backends.fuse(streams, config.backend, fusion_config)
     summary.backend_seconds.update(result.seconds or {})

@@ -132,7 +132,7 @@ def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig
     pieces = split(streams, cut)
     results: list[FusionResult | None] = []
     placed: list[bool] = []  # by the piece's own absolute measurements (GPS fixes)
-    origin = dataclasses.replace(config, initial_pose=(0.0, 0.0, 0.0))
+    origin = config.model_copy(update={"initial_pose": (0.0, 0.0, 0.0)})
     for piece in pieces:
         absolute = any(s.absolute_position and s.available(s.data(piece)) for s in registry.sensors())
         placed.append(absolute)
@@ -254,7 +254,7 @@ def with_recorded_noise(config: FusionConfig, streams: SensorStreams) -> FusionC
     """``config`` with the gyro noise keys of the recording's ``imu0/sensor.yaml`` where given."""
     if streams.imu is None or not streams.imu.noise:
         return config
-    return dataclasses.replace(config, imu=config.imu.with_sensor_keys(streams.imu.noise))
+    return config.model_copy(update={"imu": config.imu.with_sensor_keys(streams.imu.noise)})
 
 
 def run_backends(recording, visual=None, sensors=None, backend="all", options=None) -> FusionResult:

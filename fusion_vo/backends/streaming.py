@@ -221,7 +221,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:
-            self.config = dataclasses.replace(self.config, imu=self.config.imu.with_sensor_keys(imu_noise))
+            self.config = self.config.model_copy(update={"imu": self.config.imu.with_sensor_keys(imu_noise)})
         if self.config.imu.gyro_rest_noise_density > 0:
             logger.warning("imu.gyro_rest_noise_density is not used by streaming fusion: the gyro keeps its "
                            "noise density at rest too")

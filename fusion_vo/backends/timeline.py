@@ -234,8 +234,8 @@ class Intervals:
     wheel_yaw_ok: np.ndarray | None = None
     wheel_speed_ok: np.ndarray | None = None
     episodes: list = field(default_factory=list)
-    visual_scale_sigma: float = FusionConfig.visual_scale_sigma
-    wheel_scale_sigma: float = FusionConfig.wheel_scale_sigma
+    visual_scale_sigma: float = FusionConfig.model_fields["visual_scale_sigma"].default
+    wheel_scale_sigma: float = FusionConfig.model_fields["wheel_scale_sigma"].default
     gps_ok: np.ndarray | None = None
     gps_enu: np.ndarray | None = None
     gps_cov: np.ndarray | None = None

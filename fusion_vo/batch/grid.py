@@ -47,12 +47,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from frontends.features import FeatureConfig
-from frontends.klt import KltConfig
-from fusion_vo.backends.batch import as_config
-from fusion_vo.config import FRONTENDS, RunConfig, default_config_text
+from fusion_vo.config import FRONTENDS
+from fusion_vo.config.files import load_yaml
+from fusion_vo.config.run import RunConfig, default_config_text, validate_config
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import load_yaml
 
 log = logging.getLogger(__name__)
 
@@ -114,10 +112,9 @@ def config_data(config: RunConfig) -> dict:
 
 
 def build_config(data: dict, path: Path | None = None) -> RunConfig:
-    """A validated :class:`RunConfig` from plain data (the inverse of :func:`config_data`)."""
-    config = RunConfig(**data)
-    config.validate(path)
-    return config
+    """A validated :class:`RunConfig` from plain data (the inverse of :func:`config_data`): every section, the
+    frontend that is not selected included, is checked."""
+    return validate_config(data, path)
 
 
 def _set_dotted(config: dict, key: str, value) -> None:
@@ -148,27 +145,12 @@ def apply_values(base: RunConfig, values: dict, path: Path | None = None) -> Run
         raise InputError(f"{exc.message} (parameter set {keys})", path) from None
     except (TypeError, ValueError) as exc:
         raise InputError(f"{str(exc).splitlines()[0]} (parameter set {keys})", path) from None
-    _check_sections(config, keys, path)
     return config
 
 
 def describe(values: dict) -> str:
     """``key=value, ...`` of a parameter set."""
     return ", ".join(f"{k}={cell_value(v)}" for k, v in values.items())
-
-
-def _check_sections(config: RunConfig, keys: str, path: Path | None) -> None:
-    """Build the options of both frontends and of the backends, so that a misspelt option of a section the
-    run would not otherwise check (the frontend that is not selected, ``fusion``) is an error here."""
-    checks = {"klt": lambda: KltConfig.from_dict(config.klt), "features": lambda: FeatureConfig.from_dict(config.features),
-              "fusion": lambda: as_config(config.fusion)}
-    for section, check in checks.items():
-        try:
-            check()
-        except InputError as exc:
-            raise InputError(f"{section}: {exc.message} (parameter set {keys})", path) from None
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"{section}: {str(exc).splitlines()[0]} (parameter set {keys})", path) from None
 
 
 def check_value(key: str, value, path: Path | None, line: int | None = None) -> None:

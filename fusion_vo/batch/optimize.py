@@ -25,7 +25,7 @@ from fusion_vo.batch.runner import Progress, _check_out, _frame, _labels, write_
 from fusion_vo.batch.tasks import RECORDS, Task, failed_rows, run_task
 from fusion_vo.config import FRONTENDS, RunConfig
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import load_yaml
+from fusion_vo.config.files import load_yaml
 
 log = logging.getLogger(__name__)
 

@@ -30,8 +30,7 @@ scaled, so that the frontend's correlations with the translation stay) and the f
 (:mod:`fusion_vo.sensors.visual`). The translation keeps the frontend's covariance: camera and wheels are
 its only sensors, so a calibration against the truth is the only way to tell their errors apart, and that
 is left to the wheels' own calibration. The model is stated under ``camera_noise`` in ``cam0/sensor.yaml``
-(``fusion-vo calibrate camera-noise``: :func:`fusion_vo.calibration.camera_noise_drive.calibrate`,
-``datasets/README.md``) and used by runs of the same frontend.
+(``fusion-vo calibrate camera-noise``, ``datasets/README.md``) and used by runs of the same frontend.
 """
 
 from __future__ import annotations
@@ -42,6 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
+from fusion_vo.config.files import validate
+from fusion_vo.config.sensor_files import CameraNoiseFile
 from fusion_vo.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -121,48 +122,17 @@ class CameraNoise:
                 "increments": int(self.increments)}
 
     @classmethod
-    def from_dict(cls, data, path: str | Path | None = None) -> "CameraNoise":
-        """From the ``camera_noise`` mapping of a ``sensor.yaml``; a bad value is an InputError naming its key."""
-        key = "camera_noise"
-        if not isinstance(data, dict):
-            raise InputError(f"'{key}' must be a mapping (frontend, edges, heading_sigma, frame_sigma)", path)
-        unknown = sorted(set(data) - {"frontend", "edges", "heading_sigma", "frame_sigma", "increments"})
-        if unknown:
-            raise InputError(f"'{key}.{unknown[0]}': unknown key (known: frontend, edges, heading_sigma, "
-                             "frame_sigma, increments)", path)
-        for name in ("frontend", "edges", "heading_sigma", "frame_sigma"):
-            if name not in data:
-                raise InputError(f"missing key '{key}.{name}'", path)
+    def from_file(cls, stated: CameraNoiseFile) -> CameraNoise:
+        """The model ``camera_noise`` of a ``cam0/sensor.yaml`` states (checked when the file was read)."""
+        return cls(stated.frontend, tuple(float(e) for e in stated.edges),
+                   tuple(float(s) for s in stated.heading_sigma), float(stated.frame_sigma), int(stated.increments))
 
-        def numbers(name):
-            try:
-                values = np.asarray(data[name], dtype=np.float64).reshape(-1)
-            except (TypeError, ValueError):
-                raise InputError(f"'{key}.{name}' must be a list of numbers, not {data[name]!r}", path) from None
-            if not len(values) or not np.all(np.isfinite(values)) or np.any(values < 0):
-                raise InputError(f"'{key}.{name}' must be non-negative finite numbers, not {data[name]!r}", path)
-            return values
-
-        edges, sigma = numbers("edges"), numbers("heading_sigma")
-        if edges[0] != 0 or np.any(np.diff(edges) <= 0):
-            raise InputError(f"'{key}.edges' must rise from 0, not {data['edges']!r}", path)
-        if len(sigma) != len(edges) or np.any(sigma <= 0):
-            raise InputError(f"'{key}.heading_sigma' needs one positive number per edge ({len(edges)}), "
-                             f"not {data['heading_sigma']!r}", path)
-        try:
-            frame = float(data["frame_sigma"])
-        except (TypeError, ValueError):
-            raise InputError(f"'{key}.frame_sigma' must be a number, not {data['frame_sigma']!r}", path) from None
-        if not np.isfinite(frame) or frame < 0:
-            raise InputError(f"'{key}.frame_sigma' must be a non-negative number, not {data['frame_sigma']!r}", path)
-        frontend = data["frontend"]
-        if not isinstance(frontend, str) or not frontend:
-            raise InputError(f"'{key}.frontend' must name a frontend, not {frontend!r}", path)
-        try:
-            count = int(data.get("increments", 0) or 0)
-        except (TypeError, ValueError):
-            raise InputError(f"'{key}.increments' must be a whole number, not {data['increments']!r}", path) from None
-        return cls(frontend, tuple(float(e) for e in edges), tuple(float(s) for s in sigma), frame, count)
+    @classmethod
+    def from_dict(cls, data, path: str | Path | None = None) -> CameraNoise:
+        """From the ``camera_noise`` mapping of a ``sensor.yaml`` read from ``path``
+        (:class:`~fusion_vo.config.sensor_files.CameraNoiseFile`); a bad value is an :class:`InputError` naming
+        its key."""
+        return cls.from_file(validate(CameraNoiseFile, data, path, ("camera_noise",)))
 
 
 def measure(errors: np.ndarray, turns: np.ndarray, chained: np.ndarray, frontend: str,

@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
@@ -42,7 +41,7 @@ def calibrate(recordings: list, config=None) -> CameraNoise:
             raise InputError("a calibration drive needs ground truth (state_groundtruth_estimate0/)", rec.path)
     errors, turns, chained = [], [], []
     for rec in recordings:
-        vo = run_visual_odometry(rec, replace(config, camera_noise=False))
+        vo = run_visual_odometry(rec, config.model_copy(update={"camera_noise": False}))
         e, t, c = heading_errors(rec, vo.increments)
         if len(c):
             c[0] = False

@@ -33,8 +33,8 @@ random_seed = whole_number(0, "a random seed")
 positive_int = whole_number(1)
 #: a number of frames: at least one frame pair
 frame_count = whole_number(2, "one frame pair")
-#: most threads a run may use (``odometry.threads``: ``fusion_vo.odometry.OdometryConfig.RANGES``, not imported
-#: here so that ``--help`` stays fast; ``tests/faults/test_command_faults.py`` checks that the two agree)
+#: most threads a run may use (``odometry.threads`` of ``fusion_vo.config.odometry.OdometryConfig``, not imported here
+#: so that ``--help`` stays fast; ``tests/faults/test_command_faults.py`` checks that the two agree)
 MAX_THREADS = 256
 #: a number of threads (``--threads``)
 thread_count = whole_number(1, maximum=MAX_THREADS)

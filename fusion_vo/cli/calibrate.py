@@ -104,12 +104,12 @@ def _pair(text: str, name: str) -> tuple[float, float]:
 def run_intrinsics(args: argparse.Namespace) -> int:
     from fusion_vo.calibration.chessboard import Board
     from fusion_vo.calibration.intrinsics import calibrate_images
-    from fusion_vo.geometry.camera import CameraModel
+    from fusion_vo.config.sensor_files import read_camera
 
     board = Board.parse(args.board, args.square)
     result = calibrate_images(args.images, board, args.model, radial_terms=args.radial_terms)
     out = Path(args.out)
-    base = CameraModel.from_yaml(out) if out.is_file() else None
+    base = read_camera(out) if out.is_file() else None
     print(result.summary())
     result.to_camera(base).write_yaml(out)
     print(f"-> {out}" + (" (T_BS and rate kept)" if base is not None else ""))
@@ -119,10 +119,10 @@ def run_intrinsics(args: argparse.Namespace) -> int:
 def run_floor(args: argparse.Namespace) -> int:
     from fusion_vo.calibration.chessboard import Board, detect_corners, read_image
     from fusion_vo.calibration.floor import floor_pose
-    from fusion_vo.geometry.camera import CameraModel
+    from fusion_vo.config.sensor_files import read_camera
 
     board = Board.parse(args.board, args.square)
-    camera = CameraModel.from_yaml(args.intrinsics)
+    camera = read_camera(args.intrinsics)
     img = read_image(args.image)
     if (img.shape[1], img.shape[0]) != (camera.width, camera.height):
         raise InputError(f"image is {img.shape[1]}x{img.shape[0]} but {args.intrinsics} is for "
@@ -204,16 +204,14 @@ def _check_turn_in_place(rec) -> None:
 
 
 def run_camera_noise(args: argparse.Namespace) -> int:
-    import dataclasses
-
     from fusion_vo.calibration.camera_noise_drive import calibrate
     from fusion_vo.config import load_config
-    from fusion_vo.geometry.camera import load_yaml, write_yaml_atomic
+    from fusion_vo.config.files import load_yaml, write_yaml_atomic
     from fusion_vo.recording import Recording
 
     config = load_config(args.config)
     if args.frontend:
-        config = dataclasses.replace(config, frontend=args.frontend)
+        config = config.model_copy(update={"frontend": args.frontend})  # (one of argparse's choices)
     try:
         odometry = config.odometry_config()
     except ValueError as exc:
@@ -236,7 +234,7 @@ def run_camera_noise(args: argparse.Namespace) -> int:
 
 def run_wheels(args: argparse.Namespace) -> int:
     from fusion_vo.calibration.wheels import umbmark, wheels_from_groundtruth
-    from fusion_vo.geometry.camera import write_yaml_atomic
+    from fusion_vo.config.files import write_yaml_atomic
     from fusion_vo.recording import Recording
 
     rec = Recording(args.seq)

@@ -8,7 +8,6 @@ import time
 from pathlib import Path
 
 from fusion_vo.cli.progress import progress_bar
-from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.cli.arguments import random_seed
 
@@ -28,6 +27,7 @@ def register(sub) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion_vo.config.run import RunConfig
     from fusion_vo.outputs import check_replaceable
     from fusion_vo.pipeline import RUN_MARKER, run_pipeline
     from fusion_vo.recording.writer import MARKER as RECORDING_MARKER

@@ -21,7 +21,6 @@ Files appear only when the replay finished (written to a staging folder, then mo
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import time
 from pathlib import Path
@@ -63,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from fusion_vo.backends import batch
-    from fusion_vo.backends.batch import as_config, fuse
+    from fusion_vo.backends.batch import fuse
     from fusion_vo.backends.result import write_pose_covariances
     from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
     from fusion_vo.cli.progress import progress_bar
@@ -77,12 +76,12 @@ def run(args: argparse.Namespace) -> int:
     cfg = apply_overrides(load_config(args.config), argparse.Namespace(sensors=args.sensors))  # --backend: its own
     rec = Recording(args.sequence)
     sensors = [s for s in resolve_sensors(rec, cfg) if s != "gps"]
-    fusion_cfg = as_config(cfg.fusion)
+    fusion_cfg = cfg.fusion
     if args.window is not None:
         try:
-            fusion_cfg = dataclasses.replace(fusion_cfg, reorder_window=args.window)
-        except InputError as exc:
-            raise InputError(f"--window {args.window:g}: {exc.message}") from None
+            fusion_cfg = fusion_cfg.merged({"reorder_window": args.window})
+        except ValueError as exc:
+            raise InputError(f"--window {args.window:g}: {str(exc).removeprefix('FusionConfig: ')}") from None
     out = check_folder_target(args.out)  # a file there, or in the way above it: before any work
     _check_output_folder(out, rec)
     _check_timing(args, rec, sensors)

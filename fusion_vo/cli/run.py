@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fusion_vo.cli.arguments import MAX_THREADS, non_empty, positive_number, thread_count
 from fusion_vo.cli.progress import progress_bar
-from fusion_vo.config import BACKENDS, SENSORS, default_config_text, load_config, reference_text, schema_text
+from fusion_vo.config import BACKENDS, SENSORS
 from fusion_vo.errors import InputError
 
 
@@ -54,40 +54,37 @@ def _sensor_list(text: str) -> list[str]:
 
 def apply_overrides(cfg, args):
     """The command-line options over the configuration file's values (``run``, ``replay``, ``batch``,
-    ``sweep``): each is checked by the configuration's own schema, and a value it rejects is an error
+    ``sweep``): each is checked by the configuration's own model, and a value it rejects is an error
     naming the option rather than the configuration key."""
-    def odometry(**values):
-        return lambda c: setattr(c, "odometry", {**c.odometry, **values})
-
-    overrides = []  # (option as typed, setter)
+    overrides = []  # (option as typed, the values it sets)
     if getattr(args, "frontend", None):
-        overrides.append((f"--frontend {args.frontend}", lambda c: setattr(c, "frontend", args.frontend)))
+        overrides.append((f"--frontend {args.frontend}", {"frontend": args.frontend}))
     if getattr(args, "backend", None):
-        overrides.append((f"--backend {args.backend}", lambda c: setattr(c, "backend", args.backend)))
+        overrides.append((f"--backend {args.backend}", {"backend": args.backend}))
     if getattr(args, "sensors", None) is not None:
-        names = _sensor_list(args.sensors)
-        overrides.append((f"--sensors {args.sensors}", lambda c: setattr(c, "sensors", names)))
+        overrides.append((f"--sensors {args.sensors}", {"sensors": _sensor_list(args.sensors)}))
     if getattr(args, "threads", None) is not None:
-        overrides.append((f"--threads {args.threads}", odometry(threads=args.threads)))
+        overrides.append((f"--threads {args.threads}", {"odometry": {"threads": args.threads}}))
     if getattr(args, "no_evaluate", False):
-        overrides.append(("--no-evaluate", lambda c: setattr(c, "evaluate", False)))
+        overrides.append(("--no-evaluate", {"evaluate": False}))
     if getattr(args, "uncalibrated", False):
-        overrides.append(("--uncalibrated", odometry(uncalibrated=True)))
+        overrides.append(("--uncalibrated", {"odometry": {"uncalibrated": True}}))
     if getattr(args, "focal_length", None) is not None:
-        overrides.append((f"--focal-length {args.focal_length:g}", odometry(focal_length=args.focal_length)))
-    for option, apply in overrides:
-        apply(cfg)
+        overrides.append((f"--focal-length {args.focal_length:g}", {"odometry": {"focal_length": args.focal_length}}))
+    for option, values in overrides:
         try:
-            cfg.validate()
-        except InputError as exc:
-            raise InputError(f"{option}: {exc.message}") from None
-    if getattr(args, "focal_length", None) is not None and not cfg.odometry.get("uncalibrated"):
+            cfg = cfg.merged(values)
+        except ValueError as exc:
+            raise InputError(f"{option}: {str(exc).removeprefix('RunConfig: ')}") from None
+    if getattr(args, "focal_length", None) is not None and not cfg.odometry.uncalibrated:
         raise InputError("--focal-length is used only with --uncalibrated (a calibrated camera keeps the focal "
                          "length of cam0/sensor.yaml)")
     return cfg
 
 
 def run(args: argparse.Namespace) -> int:
+    from fusion_vo.config.run import default_config_text, load_config, reference_text, schema_text
+
     if args.print_schema:
         sys.stdout.write(schema_text())
         return 0

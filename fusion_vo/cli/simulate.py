@@ -59,8 +59,8 @@ def register(sub) -> None:
 def run(args: argparse.Namespace) -> int:
     import yaml
 
-    from fusion_vo import schema
-    from fusion_vo.geometry.camera import load_yaml, load_yaml_text
+    from fusion_vo.config.files import load_yaml, load_yaml_text, validate
+    from fusion_vo.config.render import commented_yaml, section_view
     from fusion_vo.simulation import SimulationOptions, simulate
     from fusion_vo.simulation.robot import SHAPE_OPTIONS
     from fusion_vo.simulation.standard import STANDARD
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         options["duration"] = args.duration
     if args.texture:
         options["texture"] = args.texture
-    opts = schema.build(SimulationOptions, options, args.config)
+    opts = validate(SimulationOptions, options, args.config)
     # a shape option given on the command line that the profile ignores would be silently lost (a --config
     # file may hold them all: --print-config writes every option, and its output is meant to be read back)
     for key, profiles in SHAPE_OPTIONS.items():
@@ -109,10 +109,9 @@ def run(args: argparse.Namespace) -> int:
             if given:
                 raise InputError(f"{given}: not used by the '{profile}' profile (only by {', '.join(profiles)})")
     if args.print_config:
-        model = schema.model_of(SimulationOptions)
         header = ["# fusion-vo simulate options: --config reads them back", f"profile: {profile}  # driving profile",
                   f"seed: {seed}  # random seed"]
-        print("\n".join(header + schema.commented_yaml(model, schema.validate(model, schema.plain(opts)))))
+        print("\n".join(header + commented_yaml(section_view(SimulationOptions), opts.model_dump(mode="json"))))
         return 0
     if not args.out:
         raise InputError("simulate needs an output folder (see fusion-vo simulate --help)")

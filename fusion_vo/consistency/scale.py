@@ -189,14 +189,14 @@ def check_scale(streams, config, max_gap: float):
     released = cc.released_scale_sigma
     if wrong == "camera":
         streams = _without_translation(streams)
-        config = dataclasses.replace(config, visual_scale_sigma=max(released, config.visual_scale_sigma))
+        config = config.model_copy(update={"visual_scale_sigma": max(released, config.visual_scale_sigma)})
         fix = ("the camera's scale is wrong: check the focal length (cam0/sensor.yaml intrinsics, or --focal-length "
                "with --uncalibrated) and the camera height (cam0/sensor.yaml T_BS)")
         done = (f"this run leaves the camera's translation out (its heading is kept) and lets the {wheel_word} set "
                 "the distances")
     else:
         streams = _scaled_wheels(streams, rho)
-        config = dataclasses.replace(config, wheel_scale_sigma=max(released, config.wheel_scale_sigma))
+        config = config.model_copy(update={"wheel_scale_sigma": max(released, config.wheel_scale_sigma)})
         fix = ("the wheels' scale is wrong: check wheel_radius_left, wheel_radius_right and ticks_per_revolution in "
                "wheel0/sensor.yaml" if streams.wheel is not None else "the odometry's speeds (odom0/data.csv vx) are wrong")
         done = f"this run multiplies the {wheel_word} distances by {rho:.3f} and lets the camera set the scale"

@@ -128,7 +128,7 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
 def with_residuals(config: FusionConfig | None) -> FusionConfig:
     """``config`` with the factor graph's per-sensor residuals on (no estimate changes)."""
     config = config or FusionConfig()
-    return dataclasses.replace(config, graph=dataclasses.replace(config.graph, residuals=True))
+    return config.model_copy(update={"graph": config.graph.model_copy(update={"residuals": True})})
 
 
 def run(seeds: int, duration: float, sensors=("camera", "wheel", "imu"), config: FusionConfig | None = None,

@@ -29,7 +29,7 @@ import numpy as np
 
 from frontends.base import MotionStatus
 from fusion_vo.errors import InputError, check_file, check_folder
-from fusion_vo.geometry.camera import load_yaml
+from fusion_vo.config.files import load_yaml
 from fusion_vo.outputs import write_atomic  # noqa: F401  (the one atomic writer, used by plots and report)
 from fusion_vo.recording.reader import read_groundtruth_csv, unit_quaternions
 
@@ -303,7 +303,7 @@ def read_run_config(run_dir: str | Path) -> dict:
     ------
     InputError
         If the file exists but is not a YAML mapping (read by the one YAML reader,
-        :func:`fusion_vo.geometry.camera.load_yaml`: a one-line message naming the line), or its
+        :func:`fusion_vo.config.files.load_yaml`: a one-line message naming the line), or its
         ``sequence`` (the recording's folder) is given but is not a path.
     """
     path = Path(run_dir) / "run.yaml"

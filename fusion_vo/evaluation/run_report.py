@@ -42,7 +42,7 @@ from fusion_vo.evaluation.report import ReportContent, write_report
 from fusion_vo.evaluation.run_tables import calibration_table, dropped_table, gated_spans, influence_table, pauses_table
 from fusion_vo.evaluation.verdict import verdict
 from fusion_vo.geometry import se2
-from fusion_vo.geometry.camera import load_yaml
+from fusion_vo.config.files import load_yaml
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d

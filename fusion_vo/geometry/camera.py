@@ -25,10 +25,9 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import yaml
 
-from fusion_vo.errors import InputError, check_file
-from fusion_vo.outputs import make_folder, write_atomic
+from fusion_vo.config.files import load_yaml, write_yaml_atomic
+from fusion_vo.errors import InputError
 
 DISTORTION_MODELS = ("radial-tangential", "equidistant", "division", "none")
 
@@ -64,7 +63,7 @@ class CameraModel:
     cv: float
     distortion_model: str = "none"
     distortion: np.ndarray = field(default_factory=lambda: np.zeros(4))
-    T_BS: np.ndarray = field(default_factory=lambda: _default_T_BS())
+    T_BS: np.ndarray = field(default_factory=lambda: default_T_BS())
     rate_hz: float = 20.0
 
     def __post_init__(self) -> None:
@@ -133,8 +132,9 @@ class CameraModel:
 
         The polynomial of ``cv2.projectPoints`` with the same order of operations, so the results are
         the same to the last bit, without its Jacobians with respect to every parameter, which
-        ``projectPoints`` always computes from Python (what the dense fallback's remap grid of a whole
-        frame would pay for nothing).
+        ``projectPoints`` always computes from Python: several times faster on the dense fallback's
+        remap grid of a 640 x 360 frame (``benchmarks/bench_tracker.py`` times both), as fast on a few
+        points.
         """
         k1, k2, p1, p2 = self.distortion[:4]
         k3 = self.distortion[4] if len(self.distortion) > 4 else 0.0
@@ -179,59 +179,6 @@ class CameraModel:
         return self.normalize(np.column_stack([uu.ravel(), vv.ravel()])).reshape(len(vs), len(us), 2)
 
     # ------------------------------------------------------------------ files
-    @classmethod
-    def from_yaml(cls, path: str | Path) -> "CameraModel":
-        """Read a ``cam0/sensor.yaml`` file (see ``datasets/README.md``)."""
-        path = Path(path)
-        data = load_yaml(path)
-        return cls.from_dict(data, path)
-
-    @classmethod
-    def from_dict(cls, data: dict, path: str | Path | None = None) -> "CameraModel":
-        def need(key):
-            if key not in data:
-                hint = (" (a camera without calibration: run with --uncalibrated [--focal-length PX], or 'uncalibrated: true'"
-                        " under 'odometry' in the configuration)") if key == "intrinsics" else ""
-                raise InputError(f"missing key '{key}'{hint}", path)
-            return data[key]
-
-        res = resolution(need("resolution"), path)
-        try:
-            intr = [float(v) for v in need("intrinsics")]
-            if len(intr) != 4:
-                raise ValueError
-        except (TypeError, ValueError):
-            raise InputError("'intrinsics' needs [fu, fv, cu, cv]", path) from None
-        model = str(data.get("camera_model", "pinhole"))
-        if model != "pinhole":
-            raise InputError(f"camera_model '{model}' is not supported (only 'pinhole')", path)
-        dmodel = str(data.get("distortion_model", "none"))
-        aliases = {"radtan": "radial-tangential", "plumb_bob": "radial-tangential", "fisheye": "equidistant"}
-        dmodel = aliases.get(dmodel, dmodel)
-        if dmodel not in DISTORTION_MODELS:
-            raise InputError(f"unknown distortion_model '{dmodel}' (use one of {', '.join(DISTORTION_MODELS)})", path)
-        try:
-            coeffs = np.asarray(data.get("distortion_coefficients", [0.0] * 4), dtype=np.float64).ravel()
-        except (TypeError, ValueError):
-            raise InputError("'distortion_coefficients' must be a list of numbers", path) from None
-        expected = {"radial-tangential": (4, 5), "equidistant": (4,), "division": (1,), "none": (0, 4, 5)}[dmodel]
-        if len(coeffs) not in expected:
-            raise InputError(f"distortion_coefficients: {dmodel} needs {' or '.join(map(str, expected))} numbers", path)
-        if dmodel == "none" and np.any(coeffs != 0):
-            raise InputError("distortion_coefficients are not all zero but distortion_model is 'none': name the "
-                             "model they belong to (radial-tangential, equidistant, division) or set them to 0", path)
-        T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
-        values = np.array(intr + list(coeffs))
-        if not np.all(np.isfinite(values)) or intr[0] <= 0 or intr[1] <= 0:
-            raise InputError("calibration values must be finite and the focal lengths positive", path)
-        check_focal_lengths(intr[0], intr[1], res, path, "intrinsics")
-        rate = sensor_number(data, "rate_hz", path, 20.0, high=1e6, unit=" Hz")
-        return cls(
-            width=res[0], height=res[1], fu=intr[0], fv=intr[1], cu=intr[2], cv=intr[3],
-            distortion_model=dmodel, distortion=coeffs if len(coeffs) else np.zeros(4), T_BS=T,
-            rate_hz=rate,
-        )
-
     def to_dict(self) -> dict:
         return {
             "sensor_type": "camera",
@@ -257,248 +204,10 @@ class CameraModel:
         write_yaml_atomic(path, data)
 
 
-def uncalibrated_camera(path: str | Path, focal_length: float | None = None, quiet: bool = False) -> CameraModel:
-    """A pinhole model for a camera without a calibration (``cam0/sensor.yaml`` without intrinsics).
-
-    The resolution, rate and ``T_BS`` are read from the file; the lens is taken as distortion-free
-    with its principal point at the image centre. The focal length is ``focal_length`` when given,
-    else the file's ``fu, fv`` when it has intrinsics, else that of a 60 degree horizontal field of
-    view (``0.866 * width``): the metric scale is then only as good as that guess (a fused run can
-    re-estimate it as the camera height, whose ratio to the focal length is all that matters), with a
-    warning unless ``quiet`` (a check of the inputs before the run).
-    """
-    import logging
-
-    path = Path(path)
-    data = load_yaml(path)
-    if "resolution" not in data:
-        raise InputError("uncalibrated mode still needs 'resolution: [width, height]'", path)
-    res = resolution(data["resolution"], path)
-    if focal_length is not None:
-        fu = fv = float(focal_length)
-    elif "intrinsics" in data:
-        intr = [float(v) for v in data["intrinsics"]][:2]
-        fu, fv = intr[0], intr[1]
-    else:
-        fu = fv = res[0] / (2.0 * np.tan(np.radians(30.0)))
-        if not quiet:
-            logging.getLogger(__name__).warning(
-                "%s: no focal length given; assuming a 60 degree horizontal field of view (%.0f px)", path, fu)
-    if not (np.isfinite(fu) and np.isfinite(fv) and fu > 0 and fv > 0):
-        raise InputError("focal_length must be a positive number of pixels", path)
-    check_focal_lengths(fu, fv, res, path, "focal_length" if focal_length is not None else "intrinsics")
-    T = parse_pose(data["T_BS"], "T_BS", path) if "T_BS" in data else _default_T_BS()
-    return CameraModel(width=res[0], height=res[1], fu=fu, fv=fv, cu=(res[0] - 1) / 2.0, cv=(res[1] - 1) / 2.0,
-                       distortion_model="none", T_BS=T, rate_hz=sensor_number(data, "rate_hz", path, 20.0, high=1e6,
-                                                                              unit=" Hz"))
-
-
-def _default_T_BS() -> np.ndarray:
+def default_T_BS() -> np.ndarray:
+    """The pose of a camera that ``cam0/sensor.yaml`` does not mount: 0.25 m ahead of the axle, 0.1 m above the
+    floor, looking straight down with image-up forward (:data:`R_BS_DOWN_FORWARD`)."""
     T = np.eye(4)
     T[:3, :3] = R_BS_DOWN_FORWARD
     T[:3, 3] = [0.25, 0.0, 0.1]
     return T
-
-
-#: largest translation [m] a sensor's ``T_BS`` may state: beyond it the number is a typo, not a lever arm
-MAX_LEVER_ARM_M = 1e3
-
-#: largest image side [px] a ``resolution`` may state (a frame of it is 10^10 pixels)
-MAX_IMAGE_SIDE = 100_000
-
-#: a focal length [px] lies within this factor of the image's larger side either way: from a field of view
-#: of 0.6 degrees to far beyond a fisheye's (fx = fy = 1e-9 ended a run 1.9e11 m away)
-FOCAL_FACTOR = 100.0
-
-
-def resolution(value, path: str | Path | None) -> tuple[int, int]:
-    """``resolution: [width, height]`` of a ``cam0/sensor.yaml``: two whole numbers of pixels from 1 to
-    :data:`MAX_IMAGE_SIDE` (a fractional one was cut to a whole one without a word), else an :class:`InputError`."""
-    try:
-        if isinstance(value, (str, bytes)) or len(value) != 2:
-            raise ValueError
-        pair = [float(v) if not isinstance(v, (bool, str)) else None for v in value]
-    except (TypeError, ValueError, OverflowError):
-        pair = None
-    if pair is None or any(v is None or not np.isfinite(v) or v != int(v) or not 1 <= v <= MAX_IMAGE_SIDE
-                           for v in pair):
-        raise InputError(f"'resolution' must be [width, height], two whole numbers of pixels from 1 to "
-                         f"{MAX_IMAGE_SIDE}, not {value!r}", path)
-    return int(pair[0]), int(pair[1])
-
-
-def focal_length_problem(fu: float, fv: float, size) -> str | None:
-    """What is wrong with focal lengths [px] that do not both lie within :data:`FOCAL_FACTOR` of the larger
-    side of ``size`` (width, height) either way, or ``None``."""
-    side = max(size)
-    low, high = side / FOCAL_FACTOR, side * FOCAL_FACTOR
-    if low <= fu <= high and low <= fv <= high:
-        return None
-    return (f"focal lengths {fu:g}, {fv:g} px are not a camera's for a {size[0]}x{size[1]} image (each must be "
-            f"between {low:g} and {high:g} px)")
-
-
-def check_focal_lengths(fu: float, fv: float, size, path: str | Path | None, key: str) -> None:
-    """An :class:`InputError` naming ``key`` for focal lengths :func:`focal_length_problem` refuses."""
-    problem = focal_length_problem(fu, fv, size)
-    if problem:
-        raise InputError(f"'{key}' {problem}", path)
-
-#: the keys of each ``sensor.yaml`` the library reads (with EuRoC's ``sensor_type`` and ``comment``), for the
-#: warning about a key that is close to one of them (:func:`warn_unknown_keys`)
-SENSOR_KEYS = {
-    "cam0": ("sensor_type", "comment", "rate_hz", "resolution", "camera_model", "intrinsics", "distortion_model",
-             "distortion_coefficients", "T_BS", "height_sigma", "bit_depth", "camera_noise"),
-    "imu0": ("sensor_type", "comment", "rate_hz", "T_BS", "gyroscope_noise_density", "gyroscope_random_walk",
-             "accelerometer_noise_density", "accelerometer_random_walk"),
-    "wheel0": ("sensor_type", "comment", "rate_hz", "ticks_per_revolution", "wheel_radius_left", "wheel_radius_right",
-               "wheel_base", "radius_sigma"),
-    "gps0": ("sensor_type", "comment", "rate_hz", "T_BS", "horizontal_sigma_m", "datum"),
-}
-
-
-def warn_unknown_keys(data: dict, known, path: str | Path) -> list[str]:
-    """Log a warning for each key of ``data`` that is not in ``known`` but close to one of them (a misspelt
-    optional key would otherwise be ignored without a word); other keys (EuRoC's ``comment``, a tool's own
-    keys) are left alone. Returns the warnings."""
-    import difflib
-    import logging
-
-    known = list(known)
-    out = []
-    for key in data:
-        if not isinstance(key, str) or key in known:
-            continue
-        close = difflib.get_close_matches(key, known, n=1, cutoff=0.8)
-        if close:
-            out.append(f"{path}: unknown key '{key}' (did you mean '{close[0]}'?)")
-            logging.getLogger(__name__).warning("%s", out[-1])
-    return out
-
-
-def sensor_number(data: dict, key: str, path: str | Path | None, default: float | None = None, *,
-                  zero: bool = False, low: float | None = None, high: float | None = None,
-                  unit: str = "") -> float | None:
-    """The number ``key`` of a ``sensor.yaml`` (``default`` when absent or null): a YAML boolean, a text that
-    is no number, NaN, inf, a negative value (or zero unless ``zero``) or a value outside ``[low, high]``
-    is an :class:`InputError` naming the key."""
-    value = data.get(key)
-    if value is None:
-        return default
-    try:
-        if isinstance(value, bool):
-            raise TypeError
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be a number, not {value!r}", path) from None
-    if not np.isfinite(x) or x < 0 or (x == 0 and not zero):
-        raise InputError(f"'{key}' must be {'non-negative' if zero else 'positive'}, not {x}", path)
-    if (low is not None and x < low) or (high is not None and x > high):
-        span = f"between {low:g} and {high:g}" if low is not None and high is not None else (
-            f"at least {low:g}" if low is not None else f"at most {high:g}")
-        raise InputError(f"'{key}' must be {span}{unit}, not {x:g}", path)
-    return x
-
-
-def parse_pose(entry, name: str, path: str | Path | None) -> np.ndarray:
-    """A sensor's pose ``T_BS`` (:func:`parse_matrix`): finite numbers, a rotation (orthonormal, det +1,
-    no mirror), a translation within :data:`MAX_LEVER_ARM_M` and the bottom row ``[0, 0, 0, 1]``, else an
-    :class:`InputError` naming ``name``."""
-    m = parse_matrix(entry, name, path)
-    if not np.all(np.isfinite(m)):
-        raise InputError(f"'{name}' must hold finite numbers (NaN or inf found)", path)
-    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0], rtol=0, atol=1e-6):  # a homogeneous transform (the row was ignored)
-        raise InputError(f"'{name}' bottom row must be [0, 0, 0, 1], not {[float(v) for v in m[3]]}", path)
-    R = m[:3, :3]
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or abs(np.linalg.det(R) - 1) > 1e-5:
-        raise InputError(f"{name} rotation part is not a rotation matrix", path)
-    if np.max(np.abs(m[:3, 3])) > MAX_LEVER_ARM_M:
-        raise InputError(f"'{name}' translation {np.max(np.abs(m[:3, 3])):g} m is beyond {MAX_LEVER_ARM_M:g} m: "
-                         "not a lever arm", path)
-    return m
-
-
-def parse_matrix(entry, name: str, path: str | Path | None) -> np.ndarray:
-    """Read a 4x4 matrix given as ``{cols, rows, data}`` (EuRoC) or a nested list."""
-    try:
-        if isinstance(entry, dict):
-            data = np.asarray(entry["data"], dtype=np.float64)
-            rows, cols = int(entry.get("rows", 4)), int(entry.get("cols", 4))
-            m = data.reshape(rows, cols)
-        else:
-            m = np.asarray(entry, dtype=np.float64)
-        if m.shape != (4, 4):
-            raise ValueError
-    except (KeyError, TypeError, ValueError):
-        raise InputError(f"'{name}' must be a 4x4 matrix (cols: 4, rows: 4, data: [16 numbers])", path) from None
-    return m
-
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, but a key given twice in one mapping is an error (PyYAML keeps the last one:
-    a section written twice in a configuration would silently lose the first one's values)."""
-
-
-def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False):
-    seen: dict = {}
-    for key_node, _ in node.value:
-        if key_node.tag == "tag:yaml.org,2002:merge":
-            continue
-        key = loader.construct_object(key_node, deep=True)
-        try:
-            first = seen.setdefault(key, key_node.start_mark.line)
-        except TypeError:  # an unhashable key: PyYAML's own error follows
-            continue
-        if first != key_node.start_mark.line:
-            raise yaml.constructor.ConstructorError(
-                None, None, f"key '{key}' given twice (first on line {first + 1})", key_node.start_mark)
-    return loader.construct_mapping(node, deep=deep)
-
-
-def _bounded_int(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int:
-    """A YAML integer; one beyond Python's limit on converting digits (4300) is an error at its line, not an
-    exception from deep inside the loader."""
-    try:
-        return loader.construct_yaml_int(node)
-    except ValueError:
-        raise yaml.constructor.ConstructorError(
-            None, None, f"an integer of {len(str(node.value))} characters is no setting", node.start_mark) from None
-
-
-_UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _unique_mapping)
-_UniqueKeyLoader.add_constructor("tag:yaml.org,2002:int", _bounded_int)
-
-
-def load_yaml_text(text: str):
-    """Load YAML text with the loader of :func:`load_yaml` (a key given twice and an integer too long to
-    convert are :class:`yaml.YAMLError`)."""
-    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
-
-
-def load_yaml(path: str | Path) -> dict:
-    """Load a YAML mapping, with :class:`InputError` for a missing, unreadable or malformed file."""
-    path = check_file(path)
-    try:
-        with open(path, encoding="utf-8") as f:
-            text = f.read()
-        # EuRoC files start with a '%YAML:1.0' directive that PyYAML does not accept
-        if text.startswith("%YAML:"):
-            text = text.split("\n", 1)[1] if "\n" in text else ""
-        data = load_yaml_text(text)
-    except yaml.YAMLError as exc:
-        line = getattr(getattr(exc, "problem_mark", None), "line", None)
-        raise InputError(f"not valid YAML ({getattr(exc, 'problem', exc)})", path, None if line is None else line + 1) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file ({exc})", path) from None
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise InputError("expected a YAML mapping of keys to values", path)
-    return data
-
-
-def write_yaml_atomic(path: str | Path, data: dict) -> None:
-    """Write a YAML file under a temporary name, then rename it into place (mode from the umask)."""
-    path = Path(path)
-    make_folder(path.parent)
-    write_atomic(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))

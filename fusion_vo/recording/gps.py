@@ -22,14 +22,13 @@ definite. A fix with ``covariance_type`` 0 (unknown) uses ``horizontal_sigma_m``
 from __future__ import annotations
 
 import logging
-import math
 from pathlib import Path
 
 import numpy as np
 import pymap3d
 
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import SENSOR_KEYS, load_yaml, parse_pose, warn_unknown_keys
+from fusion_vo.config.sensor_files import GpsFile
 from fusion_vo.measurements import GpsData
 from fusion_vo.recording.csvio import check_magnitude, read_table
 
@@ -121,47 +120,19 @@ def read_gps(folder: str | Path) -> GpsData:
 
 def gps_settings(path: Path) -> tuple[dict, list[str]]:
     """``lever_arm``, ``sigma`` (for fixes without a covariance) and ``datum`` (or None: the first fix) of
-    ``gps0/sensor.yaml``, or the documented defaults, with notes of the defaults taken."""
+    ``gps0/sensor.yaml`` (:class:`~fusion_vo.config.sensor_files.GpsFile`), or the documented defaults, with notes
+    of the defaults taken."""
     if not path.is_file():
         note = (f"{path} not found: antenna at the body origin, horizontal sigma {DEFAULT_HORIZONTAL_SIGMA} m "
                 "for fixes without a covariance, datum at the first fix")
         return {"lever_arm": np.zeros(3), "sigma": DEFAULT_HORIZONTAL_SIGMA, "datum": None}, [note]
-    meta = load_yaml(path)
-    warn_unknown_keys(meta, SENSOR_KEYS["gps0"], path)
-    lever = parse_pose(meta["T_BS"], "T_BS", path)[:3, 3].copy() if "T_BS" in meta else np.zeros(3)
-    sigma = DEFAULT_HORIZONTAL_SIGMA
-    notes = []
-    if "horizontal_sigma_m" in meta:
-        sigma = _number(meta["horizontal_sigma_m"], "horizontal_sigma_m", path)
-        if sigma <= 0:
-            raise InputError("'horizontal_sigma_m' must be positive", path)
-        if sigma > MAX_SIGMA_M:  # a plain range: its square must not overflow
-            raise InputError(f"'horizontal_sigma_m' must be at most {MAX_SIGMA_M:g} m, not {sigma:g}", path)
-    else:
-        notes.append(f"{path}: no horizontal_sigma_m, fixes without a covariance get {sigma} m")
-    datum = None
-    if "datum" in meta:
-        d = meta["datum"]
-        if not isinstance(d, dict) or any(k not in d for k in ("latitude", "longitude")):
-            raise InputError("'datum' must be a mapping with latitude, longitude [deg] and altitude [m]", path)
-        datum = (_number(d["latitude"], "datum.latitude", path), _number(d["longitude"], "datum.longitude", path),
-                 _number(d.get("altitude", 0.0), "datum.altitude", path))
-        if abs(datum[0]) > 90 or abs(datum[1]) > 180 or abs(datum[2]) > MAX_ALTITUDE_M:
-            raise InputError(f"'datum' latitude, longitude or altitude out of range (at most 90, 180 degrees and "
-                             f"{MAX_ALTITUDE_M:g} m), not {list(datum)}", path)
+    gps = GpsFile.read(path)
+    lever = gps.pose(np.eye(4))[:3, 3].copy()
+    sigma = DEFAULT_HORIZONTAL_SIGMA if gps.horizontal_sigma_m is None else gps.horizontal_sigma_m
+    notes = [] if gps.horizontal_sigma_m is not None else [
+        f"{path}: no horizontal_sigma_m, fixes without a covariance get {sigma} m"]
+    datum = None if gps.datum is None else (gps.datum.latitude, gps.datum.longitude, gps.datum.altitude)
     return {"lever_arm": lever, "sigma": sigma, "datum": datum}, notes
-
-
-def _number(value, key: str, path: Path) -> float:
-    try:
-        if isinstance(value, bool):  # YAML's true / false are no numbers
-            raise TypeError
-        x = float(value)
-    except (TypeError, ValueError):
-        raise InputError(f"'{key}' must be a number, not {value!r}", path) from None
-    if not math.isfinite(x):
-        raise InputError(f"'{key}' must be finite", path)
-    return x
 
 
 def format_rows(t_ns, geodetic, enu, status, cov_type, cov_en) -> list[str]:

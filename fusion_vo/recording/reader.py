@@ -34,7 +34,7 @@ import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Iterator, TypeVar
 
 import cv2
 import numpy as np
@@ -42,7 +42,8 @@ import numpy as np
 from fusion_vo.calibration.camera_noise import CameraNoise
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
-from fusion_vo.geometry.camera import SENSOR_KEYS, CameraModel, load_yaml, parse_pose, sensor_number, warn_unknown_keys
+from fusion_vo.config.sensor_files import CameraFile, ImuFile, SensorFile, WheelFile
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED, GpsData,
                                     ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData)
 from fusion_vo.outputs import make_folder, write_atomic
@@ -51,20 +52,13 @@ from fusion_vo.recording.gps import read_gps
 
 log = logging.getLogger(__name__)
 
+F = TypeVar("F", bound=SensorFile)
+
 VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
 
 #: stream folders of the layout, by the name :meth:`Recording.streams` uses
 STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "odom0", "range": "range0",
                   "gps": "gps0", "groundtruth": "state_groundtruth_estimate0"}
-
-#: the EuRoC noise keys of ``imu0/sensor.yaml``
-IMU_NOISE_KEYS = ("gyroscope_noise_density", "gyroscope_random_walk", "accelerometer_noise_density",
-                  "accelerometer_random_walk")
-
-#: plain ranges of ``sensor.yaml`` numbers: beyond them a value is a typo (and overflows once squared)
-MAX_SIGMA = 1e3  # a standard deviation [m] or noise density
-MIN_LENGTH_M, MAX_LENGTH_M = 1e-6, 1e3  # a wheel radius or wheel base [m]
-MAX_RATE_HZ = 1e6
 
 #: bit depths a 16-bit frame may hold
 BIT_DEPTHS = (10, 12, 14, 16)
@@ -156,12 +150,11 @@ class Recording:
     # ------------------------------------------------------------------ camera
     @property
     def camera(self) -> CameraModel:
-        """The camera model of ``cam0/sensor.yaml``."""
+        """The camera model of ``cam0/sensor.yaml`` (every key of the file is checked with it,
+        :class:`~fusion_vo.config.sensor_files.CameraFile`)."""
         if self._camera is None:
             self._need("camera", "cam0")
-            camera = CameraModel.from_yaml(self.path / "cam0" / "sensor.yaml")
-            self.camera_height_sigma()  # the file's other numbers, checked with the model (before any work)
-            self._camera = camera
+            self._camera = self._file("cam0", CameraFile, required=True).camera(self.path / "cam0" / "sensor.yaml")
         return self._camera
 
     @camera.setter
@@ -234,11 +227,8 @@ class Recording:
         (``image``), and ``None`` until then.
         """
         if self._shift is None:
-            depth = self._yaml("cam0", required=False).get("bit_depth")
+            depth = self._file("cam0", CameraFile, required=False).bit_depth
             if depth is not None:
-                if depth not in (8, *BIT_DEPTHS):
-                    raise InputError(f"'bit_depth' must be one of 8, {', '.join(map(str, BIT_DEPTHS))}, "
-                                     f"not {depth}", self.path / "cam0" / "sensor.yaml")
                 self._shift = 16 - depth if depth > 8 else 0
             elif image is not None:
                 self._shift = 0
@@ -294,13 +284,10 @@ class Recording:
         """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (required): the IMU's pose in the body frame
         (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default taken is
         warned about once, naming the file."""
-        meta = self._yaml("imu0", required=True)  # the IMU's mounting and noise: never assumed without a word
+        imu = self._file("imu0", ImuFile, required=True)  # the IMU's mounting and noise: never assumed without a word
         ypath = self.path / "imu0" / "sensor.yaml"
-        T = parse_pose(meta["T_BS"], "T_BS", ypath) if "T_BS" in meta else np.eye(4)
-        noise = {k: _optional_sigma(meta, k, ypath, zero=k.endswith("random_walk")) for k in IMU_NOISE_KEYS
-                 if meta.get(k) is not None}
-        rate = sensor_number(meta, "rate_hz", ypath, high=MAX_RATE_HZ, unit=" Hz")
-        defaults = ([] if "T_BS" in meta else ["no T_BS: the IMU is taken as aligned with the body (identity)"]) + (
+        T, noise, rate = imu.pose(np.eye(4)), imu.noise(), imu.rate_hz
+        defaults = ([] if imu.T_BS is not None else ["no T_BS: the IMU is taken as aligned with the body (identity)"]) + (
             [] if noise else ["no noise keys: the configuration's IMU noise is used"])
         if defaults and "imu0" not in self._defaults_told:
             self._defaults_told.add("imu0")
@@ -324,32 +311,24 @@ class Recording:
         return WheelData(tab.t, counts[:, 0], counts[:, 1], self.wheel_config())
 
     def wheel_config(self) -> WheelConfig:
-        """The wheel calibration of ``wheel0/sensor.yaml`` (required, as are its four keys)."""
-        meta = self._yaml("wheel0", required=True)
-        ypath = self.path / "wheel0" / "sensor.yaml"
-        keys = ("ticks_per_revolution", "wheel_radius_left", "wheel_radius_right", "wheel_base")
-        vals = {}
-        for k in keys:
-            if meta.get(k) is None:
-                raise InputError(f"missing key '{k}'", ypath)
-            # a plain range: a count of at least one tick, lengths from a micrometre to a kilometre
-            vals[k] = (sensor_number(meta, k, ypath, low=1, high=2.0**32) if k == "ticks_per_revolution" else
-                       sensor_number(meta, k, ypath, low=MIN_LENGTH_M, high=MAX_LENGTH_M, unit=" m"))
-        vals["radius_sigma"] = _optional_sigma(meta, "radius_sigma", ypath)
-        return WheelConfig(**vals)
+        """The wheel calibration of ``wheel0/sensor.yaml`` (required, as are its four keys:
+        :class:`~fusion_vo.config.sensor_files.WheelFile`)."""
+        wheel = self._file("wheel0", WheelFile, required=True)
+        return WheelConfig(wheel.ticks_per_revolution, wheel.wheel_radius_left, wheel.wheel_radius_right,
+                           wheel.wheel_base, wheel.radius_sigma)
 
     def camera_height_sigma(self) -> float | None:
         """``height_sigma`` of ``cam0/sensor.yaml``: standard deviation [m] of the camera height its
         ``T_BS`` states, or None when the file does not state it."""
-        return _optional_sigma(self._yaml("cam0", required=False), "height_sigma", self.path / "cam0" / "sensor.yaml")
+        return self._file("cam0", CameraFile, required=False).height_sigma
 
     def camera_noise(self):
         """``camera_noise`` of ``cam0/sensor.yaml``: the camera's heading noise model
         (:class:`fusion_vo.calibration.camera_noise.CameraNoise`), or None when the file does not state it."""
-        meta = self._yaml("cam0", required=False)
-        if meta.get("camera_noise") is None:
+        stated = self._file("cam0", CameraFile, required=False).camera_noise
+        if stated is None:
             return None
-        return CameraNoise.from_dict(meta["camera_noise"], self.path / "cam0" / "sensor.yaml")
+        return CameraNoise.from_file(stated)
 
     def odom(self) -> TwistData:
         """``odom0``: body-frame twist."""
@@ -378,15 +357,12 @@ class Recording:
         """``state_groundtruth_estimate0``: pose of B in W; see :func:`read_groundtruth_csv` for the rules."""
         return read_groundtruth_csv(self._need("ground truth", "state_groundtruth_estimate0"))
 
-    def _yaml(self, folder: str, required: bool) -> dict:
-        p = self.path / folder / "sensor.yaml"
-        if not os.path.lexists(p) and not required:
-            return {}
-        data = load_yaml(p)
-        if folder in SENSOR_KEYS and folder not in self._keys_told:  # a misspelt optional key: warned once
-            self._keys_told.add(folder)
-            warn_unknown_keys(data, SENSOR_KEYS[folder], p)
-        return data
+    def _file(self, folder: str, model: type[F], required: bool) -> F:
+        """``FOLDER/sensor.yaml`` read and checked by ``model`` (a key close to one it reads is warned about once
+        per folder)."""
+        warn = folder not in self._keys_told
+        self._keys_told.add(folder)
+        return model.read(self.path / folder / "sensor.yaml", required=required, warn=warn)
 
 
 def _enough_rows(tab, path: Path, need: int, stream: str):
@@ -526,10 +502,3 @@ def write_tum(path: str | Path, t: np.ndarray, xyyaw: np.ndarray) -> None:
     np.savetxt(buf, data, fmt=["%.9f"] + ["%.9f"] * 7)
     make_folder(path.parent)
     write_atomic(path, buf.getvalue())
-
-
-def _optional_sigma(meta: dict, key: str, path: Path, zero: bool = False) -> float | None:
-    """An optional positive number of a ``sensor.yaml`` (a standard deviation or a noise density; with
-    ``zero`` also 0, e.g. a random walk that is not there), at most :data:`MAX_SIGMA` (its square must not
-    overflow); a bad value (a YAML boolean too) is an InputError naming the key."""
-    return sensor_number(meta, key, path, zero=zero, high=MAX_SIGMA)

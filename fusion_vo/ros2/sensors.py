@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from frontends import make_frontend
-from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.streaming import StreamingFusion
+from fusion_vo.config.sensor_files import read_camera
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.geometry.ground import GroundGeometry
@@ -74,16 +74,16 @@ def sensor_setup(settings: NodeSettings) -> SensorSetup:
     if unknown:
         raise InputError(f"sensors: the node has no input for '{unknown[0]}' (it takes {', '.join(NODE_SENSORS)})")
     setup = SensorSetup(sensors)
-    fusion = as_config(run.fusion)
+    fusion = run.fusion
     if "camera" in sensors:
         yaml_path = _need(folder, "cam0", "the camera")
-        setup.camera = CameraModel.from_yaml(yaml_path)
+        setup.camera = read_camera(yaml_path)
         setup.camera_height_sigma = rec.camera_height_sigma()
         setup.camera_noise = rec.camera_noise() if run.odometry_config().camera_noise else None
     if fusion.camera_height is not None:
         setup.camera_height = fusion.camera_height
     elif setup.camera is not None:
-        setup.camera_height = float(run.odometry.get("height") or setup.camera.T_BS[2, 3])
+        setup.camera_height = float(run.odometry.height or setup.camera.T_BS[2, 3])
     if "imu" in sensors:
         if rec is not None and os.path.lexists(folder / "imu0" / "sensor.yaml"):
             setup.imu_T_BS, setup.imu_noise, _ = rec.imu_calibration()
@@ -122,7 +122,7 @@ def streaming_fusion(settings: NodeSettings, setup: SensorSetup) -> StreamingFus
     not stay behind when the inputs pause (work spread over later calls would wait for them).
     """
     lever = None if setup.gps is None else setup.gps["lever_arm"]
-    return StreamingFusion(settings.backend, as_config(settings.run.fusion), setup.sensors,
+    return StreamingFusion(settings.backend, settings.run.fusion, setup.sensors,
                            wheel_config=setup.wheel_config, imu_T_BS=setup.imu_T_BS, imu_noise=setup.imu_noise or None,
                            camera_height=setup.camera_height, camera_height_sigma=setup.camera_height_sigma,
                            camera_frame_errors=setup.camera_noise is not None, gps_lever_arm=lever,

@@ -12,7 +12,7 @@ A node configuration file is a ``fusion-vo run`` configuration (:mod:`fusion_vo.
 ROS parameters (``--ros-args -p NAME:=VALUE`` or a ``--params-file``) override it key by key: a
 :class:`NodeConfig` field by its own name (``publish_rate``), a run configuration key by its dotted path
 (``backend``, ``fusion.ekf.accel_sigma``, ``odometry.min_sigma_xy``). Both go through the same validation
-as ``fusion-vo run`` (:func:`fusion_vo.config.validate_config`, :func:`fusion_vo.schema.build`), so a
+as ``fusion-vo run`` (:func:`fusion_vo.config.validate_config`, :func:`fusion_vo.config.files.validate`), so a
 misspelt name or a bad value is one :class:`~fusion_vo.errors.InputError` naming it. ROS's own parameters
 (``use_sim_time``, ``start_type_description_service``) pass through.
 
@@ -22,16 +22,16 @@ configuration's default ``all`` names several backends and is refused, as is ``n
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
-from fusion_vo import schema
-from fusion_vo.config import RunConfig, run_model, validate_config
+from pydantic import Field, model_validator
+
+from fusion_vo.config.base import Float, Int, NonNegative, Positive, Section
+from fusion_vo.config.files import load_yaml, validate
+from fusion_vo.config.run import RunConfig, validate_config
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import load_yaml
-from fusion_vo.schema import AT_LEAST_0, AT_LEAST_1, POSITIVE, Range, check_ranges
 
 #: ROS's own parameters, passed through without validation here
 ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
@@ -39,80 +39,54 @@ ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
 SECTION = "ros2"
 
 
-@dataclass
-class NodeConfig:
-    """Settings of the ``fusion_vo`` node (section ``ros2`` of its configuration, or ROS parameters).
+class NodeConfig(Section):
+    """Settings of the ``fusion_vo`` node (section ``ros2`` of its configuration, or ROS parameters)."""
 
-    Attributes
-    ----------
-    calibration : str or None
-        Folder holding the sensors' calibrations in the recording layout: ``cam0/sensor.yaml`` (intrinsics,
-        distortion, resolution, ``T_BS`` mounting, ``height_sigma``, ``camera_noise``), ``imu0/sensor.yaml``
-        (``T_BS``, noise densities), ``wheel0/sensor.yaml`` (ticks per revolution, radii, wheel base),
-        ``gps0/sensor.yaml`` (antenna ``T_BS``, ``horizontal_sigma_m``, ``datum``); a recording folder or one
-        written by ``fusion-vo import-bag`` will do. Relative to the configuration file. Without
-        ``sensors``, the sensors whose folders it holds are used, as ``fusion-vo run`` does with a recording.
-    publish_rate : float
-        Rate [Hz] of ``odometry/filtered``: the pose predicted to the time of publication (default 50).
-    diagnostics_period : float
-        Seconds between two ``diagnostics`` messages (default 1).
-    smoothed_lag : float
-        Lag [s] of ``odometry/smoothed``, the iSAM2 smoother's pose of the node that far behind the newest
-        measurement (backend ``gtsam``); 0 (the default) publishes no smoothed pose.
-    smoothed_rate : float
-        Rate [Hz] of ``odometry/smoothed`` (default 5).
-    odom_frame : str
-        ``header.frame_id`` of the published poses (default ``odom``).
-    base_frame : str
-        ``child_frame_id`` of the published poses, and the frame an input odometry's twist must be in
-        (default ``base_link``).
-    imu_frame, camera_frame, gps_frame, range_frame : str
-        The frame each sensor's messages must name; empty (the default) takes the frame of the first message
-        of the topic, and a message in another frame is then unusable (counted, reported once).
-    queue_depth : int
-        History depth of each input subscription but the camera's (default 1000 messages: a 5 s burst of a
-        200 Hz IMU waits there for the executor).
-    image_queue : int
-        Camera frames waiting for the camera thread; when it is full the oldest waiting frame is dropped and
-        counted (default 2). The camera's subscription keeps ``max(image_queue, 10)`` messages.
-    trajectory_file : str
-        When given, on shutdown the fusion's online track (each node's pose as filtered when it was processed:
-        ``StreamingFusion.finish()``) is written there as a TUM file (relative to the working folder), for
-        ``fusion-vo evaluate`` or a comparison with a batch run (default: none).
-    history : float
-        Seconds of samples kept to re-apply late measurements (``StreamingFusion.history``, default 2).
-    horizon : float
-        How far [s] ahead of the node's clock a message may be stamped before it is dropped (``future``), and
-        the largest prediction of a published pose beyond the newest measurement (default 1).
-    """
+    calibration: str | None = Field(None, description=(
+        "Folder holding the sensors' calibrations in the recording layout: ``cam0/sensor.yaml`` (intrinsics, "
+        "distortion, resolution, ``T_BS`` mounting, ``height_sigma``, ``camera_noise``), ``imu0/sensor.yaml`` "
+        "(``T_BS``, noise densities), ``wheel0/sensor.yaml`` (ticks per revolution, radii, wheel base), "
+        "``gps0/sensor.yaml`` (antenna ``T_BS``, ``horizontal_sigma_m``, ``datum``); a recording folder or one "
+        "written by ``fusion-vo import-bag`` will do. Relative to the configuration file. Without ``sensors``, the "
+        "sensors whose folders it holds are used, as ``fusion-vo run`` does with a recording."))
+    publish_rate: Float = Field(50.0, ge=1e-3, le=1e3, description=(
+        "Rate [Hz] of ``odometry/filtered``: the pose predicted to the time of publication."))
+    diagnostics_period: Float = Field(1.0, ge=1e-2, le=3600.0, description="Seconds between two ``diagnostics`` "
+                                                                          "messages.")
+    smoothed_lag: NonNegative = Field(0.0, description=(
+        "Lag [s] of ``odometry/smoothed``, the iSAM2 smoother's pose of the node that far behind the newest "
+        "measurement (backend ``gtsam``); 0 publishes no smoothed pose."))
+    smoothed_rate: Float = Field(5.0, ge=1e-3, le=1e3, description="Rate [Hz] of ``odometry/smoothed``.")
+    odom_frame: str = Field("odom", description="``header.frame_id`` of the published poses.")
+    base_frame: str = Field("base_link", description=(
+        "``child_frame_id`` of the published poses, and the frame an input odometry's twist must be in."))
+    imu_frame: str = Field("", description=(
+        "The frame the IMU's messages must name; empty takes the frame of the first message of the topic, and a "
+        "message in another frame is then unusable (counted, reported once)."))
+    camera_frame: str = Field("", description="The frame the camera's messages must name (as ``imu_frame``).")
+    gps_frame: str = Field("", description="The frame the GPS receiver's messages must name (as ``imu_frame``).")
+    range_frame: str = Field("", description="The frame the range finder's messages must name (as ``imu_frame``).")
+    queue_depth: Int = Field(1000, ge=1, le=100_000, description=(
+        "History depth of each input subscription but the camera's (1000 messages: a 5 s burst of a 200 Hz IMU "
+        "waits there for the executor)."))
+    image_queue: Int = Field(2, ge=1, le=10_000, description=(
+        "Camera frames waiting for the camera thread; when it is full the oldest waiting frame is dropped and "
+        "counted. The camera's subscription keeps ``max(image_queue, 10)`` messages."))
+    trajectory_file: str = Field("", description=(
+        "When given, on shutdown the fusion's online track (each node's pose as filtered when it was processed: "
+        "``StreamingFusion.finish()``) is written there as a TUM file (relative to the working folder), for "
+        "``fusion-vo evaluate`` or a comparison with a batch run (empty: none)."))
+    history: NonNegative = Field(2.0, description=(
+        "Seconds of samples kept to re-apply late measurements (``StreamingFusion.history``)."))
+    horizon: Positive = Field(1.0, description=(
+        "How far [s] ahead of the node's clock a message may be stamped before it is dropped (``future``), and the "
+        "largest prediction of a published pose beyond the newest measurement."))
 
-    calibration: str | None = None
-    publish_rate: float = 50.0
-    diagnostics_period: float = 1.0
-    smoothed_lag: float = 0.0
-    smoothed_rate: float = 5.0
-    odom_frame: str = "odom"
-    base_frame: str = "base_link"
-    imu_frame: str = ""
-    camera_frame: str = ""
-    gps_frame: str = ""
-    range_frame: str = ""
-    queue_depth: int = 1000
-    image_queue: int = 2
-    trajectory_file: str = ""
-    history: float = 2.0
-    horizon: float = 1.0
-
-    RANGES: ClassVar[dict[str, Range]] = {
-        "publish_rate": Range(1e-3, 1e3), "diagnostics_period": Range(1e-2, 3600.0), "smoothed_lag": AT_LEAST_0,
-        "smoothed_rate": Range(1e-3, 1e3), "queue_depth": Range(1, 100_000), "image_queue": AT_LEAST_1,
-        "history": AT_LEAST_0, "horizon": POSITIVE,
-    }
-
-    def __post_init__(self) -> None:
-        check_ranges(self, self.RANGES)
+    @model_validator(mode="after")
+    def _frames(self) -> NodeConfig:
         if not self.odom_frame or not self.base_frame:
             raise ValueError("odom_frame and base_frame must be frame names, not empty")
+        return self
 
 
 @dataclass
@@ -127,7 +101,7 @@ class NodeSettings:
 
 
 def node_fields() -> list[str]:
-    return [f.name for f in dataclasses.fields(NodeConfig)]
+    return list(NodeConfig.model_fields)
 
 
 def load_settings(path: str | Path | None, parameters: dict[str, Any] | None = None) -> NodeSettings:
@@ -151,7 +125,7 @@ def load_settings(path: str | Path | None, parameters: dict[str, Any] | None = N
     for name, value in (parameters or {}).items():
         _apply_parameter(data, node_data, name, value)
     run = validate_config(data, source)
-    node = schema.build(NodeConfig, node_data, source, (SECTION,))
+    node = validate(NodeConfig, node_data, source, (SECTION,))
     backend = data.get("backend") or "ekf"
     if backend not in ("ekf", "gtsam"):
         raise InputError(f"backend: the node runs one streaming backend, 'ekf' or 'gtsam', not '{backend}'", source)
@@ -181,9 +155,9 @@ def _apply_parameter(data: dict, node_data: dict, name: str, value) -> None:
     if parts[0] == SECTION and len(parts) == 2 and parts[1] in node_fields():
         node_data[parts[1]] = value
         return
-    if parts[0] not in run_model().model_fields:
+    if parts[0] not in RunConfig.model_fields:
         raise InputError(f"unknown parameter '{name}' (the node's: {', '.join(node_fields())}; the run "
-                         f"configuration's: {', '.join(run_model().model_fields)} and their dotted keys, "
+                         f"configuration's: {', '.join(RunConfig.model_fields)} and their dotted keys, "
                          "e.g. fusion.ekf.accel_sigma)")
     target = data
     for part in parts[:-1]:

@@ -50,9 +50,12 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
+from pydantic import Field
 
+from fusion_vo.config.base import Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors.model import MeasurementModel
@@ -73,45 +76,26 @@ ROBUST_KERNELS = ("huber", "cauchy", "none")
 
 
 # ---------------------------------------------------------------------- configuration
-@dataclass
-class GpsNoise:
-    """Gating and robust weighting of GPS fixes.
+class GpsNoise(Section):
+    """Gating and robust weighting of GPS fixes (the fixes carry their own covariance)."""
 
-    Attributes
-    ----------
-    gate_chi2 : float
-        Squared Mahalanobis distance above which a fix is rejected (default: 99.9 % of χ²(2)).
-    kernel : str
-        ``"huber"``, ``"cauchy"`` or ``"none"``.
-    kernel_width : float
-        ``k`` of the kernel, in units of the Mahalanobis distance (default 2.0).
-    min_sigma : float
-        Floor on the horizontal standard deviation [m] so that an optimistic receiver cannot pin the
-        estimate (default 0.01).
-    estimate_sigma : bool
-        Measure the fixes' scatter about the GPS-free track in the world-frame alignment and, when it is
-        significantly larger than the receiver's stated sigma, raise ``min_sigma`` to it for the run
-        (:func:`scatter_floor`; batch backends only, ``StreamingFusion`` keeps the stated sigma). Default
-        False, as measured by ``python benchmarks/gps_fusion.py``: on the Husky bag (stated 0.80 m) it
-        measures 1.51 m, the gate then rejects no fix of the first half (EKF 39, graph 209 with the stated
-        sigma), yet the withheld second half gets worse in every backend (RMS EKF 4.69 -> 4.86 m, EKF + RTS
-        4.61 -> 4.82, GTSAM batch 4.52 -> 4.97, iSAM2 4.19 -> 4.69); with the first third or two thirds
-        fused (``--husky-split 0.33 / 0.67``) the EKF gains (5.10 -> 4.47, 8.14 -> 6.69 m) and the graph
-        loses once and gains once (4.36 -> 4.63, 7.53 -> 7.34 m): no consistent gain. On ``gps_outage``
-        (honest 5 cm) the test does not fire and nothing changes.
-    """
-
-    gate_chi2: float = CHI2_2DOF_999
-    kernel: str = "cauchy"
-    kernel_width: float = 2.0
-    min_sigma: float = 0.01
-    estimate_sigma: bool = False
-
-    def __post_init__(self) -> None:
-        if self.kernel not in ROBUST_KERNELS:
-            raise ValueError(f"GPS kernel must be one of {', '.join(ROBUST_KERNELS)}, not {self.kernel!r}")
-        if not self.gate_chi2 > 0 or not self.kernel_width > 0 or not self.min_sigma >= 0:
-            raise ValueError("GPS gate_chi2 and kernel_width must be positive, min_sigma not negative")
+    gate_chi2: Positive = Field(CHI2_2DOF_999, description=(
+        "Squared Mahalanobis distance above which a fix is rejected (default: 99.9 % of χ²(2))."))
+    kernel: Literal[ROBUST_KERNELS] = Field("cauchy", description="Robust kernel: ``huber``, ``cauchy`` or ``none``.")
+    kernel_width: Positive = Field(2.0, description="``k`` of the kernel, in units of the Mahalanobis distance.")
+    min_sigma: Sigma = Field(0.01, description=(
+        "Floor on the horizontal standard deviation [m] so that an optimistic receiver cannot pin the estimate."))
+    estimate_sigma: bool = Field(False, description=(
+        "Measure the fixes' scatter about the GPS-free track in the world-frame alignment and, when it is "
+        "significantly larger than the receiver's stated sigma, raise ``min_sigma`` to it for the run "
+        "(:func:`scatter_floor`; batch backends only, ``StreamingFusion`` keeps the stated sigma). Off by default, "
+        "as measured by ``python benchmarks/gps_fusion.py``: on the Husky bag (stated 0.80 m) it measures 1.51 m, "
+        "the gate then rejects no fix of the first half (EKF 39, graph 209 with the stated sigma), yet the "
+        "withheld second half gets worse in every backend (RMS EKF 4.69 -> 4.86 m, EKF + RTS 4.61 -> 4.82, GTSAM "
+        "batch 4.52 -> 4.97, iSAM2 4.19 -> 4.69); with the first third or two thirds fused (``--husky-split 0.33 "
+        "/ 0.67``) the EKF gains (5.10 -> 4.47, 8.14 -> 6.69 m) and the graph loses once and gains once (4.36 -> "
+        "4.63, 7.53 -> 7.34 m): no consistent gain. On ``gps_outage`` (honest 5 cm) the test does not fire and "
+        "nothing changes."))
 
 
 # ---------------------------------------------------------------------- model
@@ -425,9 +409,7 @@ def gps_noise(iv, config) -> GpsNoise:
     floor = getattr(iv, "gps_min_sigma", None)
     if floor is None or not floor > config.gps.min_sigma:
         return config.gps
-    import dataclasses
-
-    return dataclasses.replace(config.gps, min_sigma=float(floor))
+    return config.gps.model_copy(update={"min_sigma": float(floor)})
 
 
 # ---------------------------------------------------------------------- registration

@@ -42,7 +42,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
+from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.model import MeasurementModel
@@ -55,56 +57,38 @@ from fusion_vo.sensors.readings import ORDER, Readings
 logger = logging.getLogger(__name__)
 
 
-@dataclass
-class ImuNoise:
+class ImuNoise(Section):
     """Gyro noise, bias and gating parameters.
 
-    ``gyroscope_noise_density`` and ``gyroscope_random_walk`` of the recording's ``imu0/sensor.yaml``
-    replace the two noise defaults below when present (:meth:`with_sensor_keys`).
-
-    Attributes
-    ----------
-    gyro_noise_density : float
-        ``σ_g`` [rad/s/√Hz] (default 1.7e-3, a MEMS gyro).
-    gyro_random_walk : float
-        ``σ_bw`` [rad/s²/√Hz] (default 2e-5).
-    gyro_bias_sigma : float
-        Prior standard deviation of the initial bias [rad/s] (default 0.02, an uncalibrated MEMS
-        gyro). A filter that has not yet seen the robot at rest learns the bias only from the other
-        heading sources; with a factory-calibrated gyro, a prior of its specified turn-on bias (e.g.
-        0.002) keeps the wheels' turn-correlated yaw errors from dragging it (on robot_localization's
-        Husky log the filtered track's RMS against GPS goes from 5.7 m to 3.4 m).
-    ahrs_yaw_sigma : float
-        Standard deviation of an AHRS heading's white noise [rad] (default 0.02).
-    ahrs_offset_walk : float
-        Random walk ``σ_ow`` [rad/√s] of the AHRS heading's offset from the true heading (default 0:
-        the AHRS heading is absolute, as robot_localization treats an IMU's orientation, and the world
-        frame follows it; an AHRS whose heading strays from the gyro's and the wheels' by more than
-        their noise allows is dropped by the consistency monitor, :mod:`fusion_vo.backends.monitor`.
-        A positive value, e.g. 0.02 for a magnetometer that may stray by about 10° in a minute or two,
-        lets the backends estimate a wandering offset instead).
-    gyro_rest_noise_density : float
-        ``σ_rest`` [rad/s/√Hz]: the gyro's white noise density at rest, used instead of ``σ_g`` (when
-        lower) for the intervals in which the wheels report a standstill (default 0: ``σ_g`` everywhere).
-        Used by ``fusion-vo run`` (EKF, RTS, GTSAM batch, iSAM2); streaming fusion (``replay``,
-        :class:`~fusion_vo.backends.streaming.StreamingFusion`) keeps ``σ_g`` and logs a warning.
-    spike_threshold : float
-        Distance from the running median that marks a spike [rad/s] (default 1.0).
-    spike_window : int
-        Half width ``w`` of the running median (default 2; at most 50).
-    max_rate : float
-        Largest believable yaw rate [rad/s] (default 10).
+    ``gyroscope_noise_density`` and ``gyroscope_random_walk`` of the recording's ``imu0/sensor.yaml`` replace the
+    two noise defaults when present (:meth:`with_sensor_keys`).
     """
 
-    gyro_noise_density: float = 1.7e-3
-    gyro_random_walk: float = 2e-5
-    gyro_bias_sigma: float = 0.02
-    ahrs_yaw_sigma: float = 0.02
-    ahrs_offset_walk: float = 0.0
-    gyro_rest_noise_density: float = 0.0
-    spike_threshold: float = 1.0
-    spike_window: int = 2
-    max_rate: float = 10.0
+    gyro_noise_density: Sigma = Field(1.7e-3, description="``σ_g`` [rad/s/√Hz] (a MEMS gyro).")
+    gyro_random_walk: Walk = Field(2e-5, description="``σ_bw`` [rad/s²/√Hz].")
+    gyro_bias_sigma: Sigma = Field(0.02, description=(
+        "Prior standard deviation of the initial bias [rad/s] (0.02: an uncalibrated MEMS gyro). A filter that has "
+        "not yet seen the robot at rest learns the bias only from the other heading sources; with a "
+        "factory-calibrated gyro, a prior of its specified turn-on bias (e.g. 0.002) keeps the wheels' "
+        "turn-correlated yaw errors from dragging it (on robot_localization's Husky log the filtered track's RMS "
+        "against GPS goes from 5.7 m to 3.4 m)."))
+    ahrs_yaw_sigma: Sigma = Field(0.02, description="Standard deviation of an AHRS heading's white noise [rad].")
+    ahrs_offset_walk: Walk = Field(0.0, description=(
+        "Random walk ``σ_ow`` [rad/√s] of the AHRS heading's offset from the true heading (0: the AHRS heading is "
+        "absolute, as robot_localization treats an IMU's orientation, and the world frame follows it; an AHRS "
+        "whose heading strays from the gyro's and the wheels' by more than their noise allows is dropped by the "
+        "consistency monitor, :mod:`fusion_vo.backends.monitor`. A positive value, e.g. 0.02 for a magnetometer "
+        "that may stray by about 10° in a minute or two, lets the backends estimate a wandering offset "
+        "instead)."))
+    gyro_rest_noise_density: Walk = Field(0.0, description=(
+        "``σ_rest`` [rad/s/√Hz]: the gyro's white noise density at rest, used instead of ``σ_g`` (when lower) for "
+        "the intervals in which the wheels report a standstill (0: ``σ_g`` everywhere). Used by ``fusion-vo run`` "
+        "(EKF, RTS, GTSAM batch, iSAM2); streaming fusion (``replay``, "
+        ":class:`~fusion_vo.backends.streaming.StreamingFusion`) keeps ``σ_g`` and logs a warning."))
+    spike_threshold: Positive = Field(1.0, description="Distance from the running median that marks a spike "
+                                                       "[rad/s].")
+    spike_window: Int = Field(2, ge=0, le=50, description="Half width ``w`` of the running median.")
+    max_rate: Positive = Field(10.0, description="Largest believable yaw rate [rad/s].")
 
     def density(self, at_rest) -> np.ndarray:
         """``σ_g`` per interval, ``min(σ_g, σ_rest)`` where ``at_rest`` (bool or bool array) when ``σ_rest`` is set."""
@@ -112,16 +96,17 @@ class ImuNoise:
         rest = min(rest, self.gyro_noise_density) if rest > 0 else self.gyro_noise_density
         return np.where(at_rest, rest, self.gyro_noise_density)
 
-    def with_sensor_keys(self, keys: dict) -> "ImuNoise":
-        """Copy with the EuRoC keys of ``imu0/sensor.yaml`` applied where present and positive."""
-        out = ImuNoise(**self.__dict__)
+    def with_sensor_keys(self, keys: dict) -> ImuNoise:
+        """Copy with the EuRoC keys of ``imu0/sensor.yaml`` applied where present and positive (the file's values
+        are checked when it is read, :class:`fusion_vo.config.sensor_files.ImuFile`)."""
+        changes = {}
         nd = keys.get("gyroscope_noise_density")
         rw = keys.get("gyroscope_random_walk")
         if nd is not None and float(nd) > 0:
-            out.gyro_noise_density = float(nd)
+            changes["gyro_noise_density"] = float(nd)
         if rw is not None and float(rw) > 0:
-            out.gyro_random_walk = float(rw)
-        return out
+            changes["gyro_random_walk"] = float(rw)
+        return self.model_copy(update=changes) if changes else self
 
 
 def discrete_sigma(noise_density: float, rate_hz: float) -> float:

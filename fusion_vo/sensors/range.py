@@ -16,7 +16,9 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field, model_validator
 
+from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import RangeData
 from fusion_vo.sensors.imu import running_median
@@ -29,24 +31,20 @@ from fusion_vo.sensors.readings import ORDER, Readings
 logger = logging.getLogger(__name__)
 
 
-@dataclass
-class RangeNoise:
-    """Range-finder noise and gating.
+class RangeNoise(Section):
+    """Range-finder noise and gating (``min_range`` below ``max_range``)."""
 
-    Attributes
-    ----------
-    sigma : float
-        Standard deviation of one reading [m] (default 0.003).
-    min_range, max_range : float
-        Plausible readings [m] (defaults 0.01 and 2.0).
-    spike_threshold : float
-        Distance from the running median of 5 readings that marks a spike [m] (default 0.02).
-    """
+    sigma: Sigma = Field(0.003, description="Standard deviation of one reading [m].")
+    min_range: NonNegative = Field(0.01, description="Smallest plausible reading [m].")
+    max_range: NonNegative = Field(2.0, description="Largest plausible reading [m].")
+    spike_threshold: Positive = Field(0.02, description=(
+        "Distance from the running median of 5 readings that marks a spike [m]."))
 
-    sigma: float = 0.003
-    min_range: float = 0.01
-    max_range: float = 2.0
-    spike_threshold: float = 0.02
+    @model_validator(mode="after")
+    def _ordered(self) -> RangeNoise:
+        if not self.min_range < self.max_range:
+            raise ValueError(f"min_range must be below max_range ({self.max_range:g}), not {self.min_range:g}")
+        return self
 
 
 @dataclass

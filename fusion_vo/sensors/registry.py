@@ -41,8 +41,10 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable
+from pydantic import Field
 
+from fusion_vo.config.base import MAX_NUMBER, ConfigError, Float, Section, Sigma, Walk
 from fusion_vo.sensors.model import ARGUMENT_SIZES
 
 #: the built-in sensor modules, imported (and so registered) on first use of the registry
@@ -81,11 +83,14 @@ class State:
     random_walk: float = 0.0
 
     def __post_init__(self) -> None:
-        self.prior().check(f"state {self.name}")
+        try:
+            self.prior()
+        except ConfigError as exc:
+            raise ValueError(f"state {self.name}: {str(exc).removeprefix('StatePrior: ')}") from None
 
     def prior(self) -> StatePrior:
         """Its prior and random walk as a configuration section (the defaults of ``fusion: {states: {NAME: ...}}``)."""
-        return StatePrior(self.initial, self.sigma, self.random_walk)
+        return StatePrior(initial=self.initial, sigma=self.sigma, random_walk=self.random_walk)
 
     def configured(self, prior: StatePrior | None) -> State:
         """This state with the prior and random walk of ``prior`` (itself when None)."""
@@ -94,45 +99,15 @@ class State:
         return State(self.name, prior.initial, prior.sigma, prior.random_walk)
 
 
-@dataclass
-class StatePrior:
+class StatePrior(Section):
     """Prior and random walk of a sensor's state variable, as configured (``fusion: {states: {NAME: ...}}``).
 
     Its defaults are those the sensor registers (:class:`State`); a configuration replaces them.
-
-    Attributes
-    ----------
-    initial : float
-        Prior mean and initial value.
-    sigma : float
-        Prior standard deviation (positive, at most ``MAX_SIGMA``).
-    random_walk : float
-        Random walk [unit/√s] (0: a constant, estimated from all the data; at most ``MAX_SIGMA``).
     """
 
-    initial: float = 0.0
-    sigma: float = 1.0
-    random_walk: float = 0.0
-
-    #: the ranges' upper ends: ``|initial|`` at most MAX_INITIAL; ``sigma`` and ``random_walk`` at most MAX_SIGMA
-    MAX_INITIAL: ClassVar[float] = 1e6
-    MAX_SIGMA: ClassVar[float] = 1e3
-
-    def check(self, key: str) -> None:
-        """Raise ``ValueError`` naming ``key`` (``states.NAME``) for a value that cannot work."""
-        import math
-
-        for leaf in ("initial", "sigma", "random_walk"):
-            value = getattr(self, leaf)
-            if not math.isfinite(value):
-                raise ValueError(f"'{key}.{leaf}' must be a finite number, not {value}")
-        if self.sigma <= 0:
-            raise ValueError(f"'{key}.sigma' must be positive, not {self.sigma}")
-        if self.random_walk < 0:
-            raise ValueError(f"'{key}.random_walk' must not be negative, not {self.random_walk}")
-        for leaf, high in (("initial", self.MAX_INITIAL), ("sigma", self.MAX_SIGMA), ("random_walk", self.MAX_SIGMA)):
-            if abs(getattr(self, leaf)) > high:  # (a variance of 1e300 squared overflows)
-                raise ValueError(f"'{key}.{leaf}' must be at most {high:g} in magnitude, not {getattr(self, leaf):g}")
+    initial: Float = Field(0.0, ge=-MAX_NUMBER, le=MAX_NUMBER, description="Prior mean and initial value.")
+    sigma: Sigma = Field(1.0, description="Prior standard deviation.")
+    random_walk: Walk = Field(0.0, description="Random walk [unit/√s] (0: a constant, estimated from all the data).")
 
 
 @dataclass(frozen=True)
@@ -213,9 +188,10 @@ class Sensor:
     also_available_as : tuple of str
         Names this sensor's data also answers to in ``select`` (odometry twist data for ``wheel``).
     config : tuple (str, type) or None
-        ``(section, dataclass)``: its configuration section. A section that is not a field of
-        :class:`~fusion_vo.backends.config.FusionConfig` is read from the configuration's ``section:`` key
-        into ``FusionConfig.sensors[section]`` through the same schema (unknown keys are errors).
+        ``(section, model)``: its configuration section, a :class:`~fusion_vo.config.base.Section` whose fields
+        carry their defaults, ranges and descriptions. A section that is not a field of
+        :class:`~fusion_vo.backends.config.FusionConfig` is read from the configuration's ``fusion: {section: ...}``
+        key into ``FusionConfig.sensors[section]`` and checked like any other (unknown keys are errors).
     absolute_position : bool
         The sensor measures the position in a world frame of its own (GPS: East-North-Up at its datum). When
         its data is used, the backends estimate in that frame and start at the pose aligned to its first
@@ -315,6 +291,9 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
     """
     if sensor.name in _REGISTRY and not replace:
         raise ValueError(f"sensor '{sensor.name}' is already registered")
+    if sensor.config is not None and not (isinstance(sensor.config[1], type) and issubclass(sensor.config[1], Section)):
+        raise ValueError(f"sensor '{sensor.name}': its configuration section must be a fusion_vo.config.base.Section "
+                         f"(a pydantic model of its options), not {sensor.config[1]!r}")
 
     taken = set(ARGUMENT_SIZES) | {st.name for s in _REGISTRY.values() if s.name != sensor.name for st in s.states}
     for state in sensor.states:

@@ -60,8 +60,9 @@ import logging
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
-from fusion_vo.errors import InputError
+from fusion_vo.config.base import MAX_NUMBER, Int, Positive, Section
 from fusion_vo.sensors.imu import GYRO
 from fusion_vo.sensors.wheel import at_rest
 
@@ -79,32 +80,19 @@ _F_RANGE = (-1.9, 1.9)
 _MAX_F = 0.9
 
 
-@dataclass
-class VisualNoiseConfig:
-    """The camera's heading noise estimated from the gyro's (:mod:`fusion_vo.sensors.visual_noise`).
+class VisualNoiseConfig(Section):
+    """The camera's heading noise estimated from the gyro's (:mod:`fusion_vo.sensors.visual_noise`)."""
 
-    Attributes
-    ----------
-    estimate : bool
-        Estimate the scale of the camera's stated heading variance and its frames' share ``f``
-        (``visual_frame_error``) from the camera's and the gyro's heading changes, and use them where
-        resolved (default False). Needs a camera and a gyro; batch runs only.
-    min_intervals : int
-        Fewest node intervals with both a camera increment and a gyro angle to estimate from (default 200).
-    scale_tolerance : float
-        The scale is applied when its standard error is at most this fraction of it (default 0.25).
-    frame_error_tolerance : float
-        ``f`` is applied when its standard error is at most this (default 0.15).
-    """
-
-    estimate: bool = False
-    min_intervals: int = 200
-    scale_tolerance: float = 0.25
-    frame_error_tolerance: float = 0.15
-
-    def __post_init__(self) -> None:
-        if self.min_intervals < 100:
-            raise InputError(f"'min_intervals' must be at least 100, not {self.min_intervals}")
+    estimate: bool = Field(False, description=(
+        "Estimate the scale of the camera's stated heading variance and its frames' share ``f`` "
+        "(``visual_frame_error``) from the camera's and the gyro's heading changes, and use them where resolved. "
+        "Needs a camera and a gyro; batch runs only."))
+    min_intervals: Int = Field(200, ge=100, le=int(MAX_NUMBER), description=(
+        "Fewest node intervals with both a camera increment and a gyro angle to estimate from."))
+    scale_tolerance: Positive = Field(0.25, description=(
+        "The scale is applied when its standard error is at most this fraction of it."))
+    frame_error_tolerance: Positive = Field(0.15, description="``f`` is applied when its standard error is at most "
+                                                              "this.")
 
 
 @dataclass

@@ -78,10 +78,12 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
+from pydantic import Field, field_validator
 
+from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
@@ -96,54 +98,43 @@ _WRAP = 2**32
 _HALF = 2**31
 
 
-@dataclass
-class WheelNoise:
-    """Wheel-odometry noise and gating parameters.
+class WheelNoise(Section):
+    """Wheel-odometry noise and gating parameters (``fusion: {wheel: ...}`` for encoder ticks, ``odom`` for an
+    odometry twist, :func:`odom_twist_noise`)."""
 
-    Attributes
-    ----------
-    k : float
-        Per-wheel travel noise [m^½]: variance ``k² |d|`` per metre rolled (default 0.01, i.e. 1 cm
-        standard deviation after 1 m).
-    sigma_floor : float
-        Standard deviation added to every travel [m] (quantisation; default 1e-4).
-    k_lateral : float
-        Lateral slip [m^½]: variance ``k_lateral² |d|`` on the sideways motion (default 0.005).
-    k_yaw : float
-        Skid on turning [rad^½]: variance ``k_yaw² |θ|`` on the heading change (default 0.01).
-    yaw_scale : float
-        ``s_ψ``: relative standard deviation of the reported heading change (skid steering;
-        default 0, an ideal differential drive).
-    max_speed : float
-        Wheel speeds above this [m/s] are encoder glitches and gated (default 5).
-    yaw_scale_time : float
-        ``τ_ψ``: correlation time [s] of the ``s_ψ`` heading error (default 0: white).
-    standstill_speed : float
-        Both wheels slower than this [m/s] over an interval is a standstill (default 1e-3; 0 disables
-        the zero-velocity update).
-    standstill_yaw_rate : float
-        Standard deviation [rad/s] of the zero yaw rate at a standstill (default 1e-2: vibration of
-        a robot at rest).
-    estimate_curvature : bool or "auto"
-        Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`;
-        encoder ticks only, an odometry twist has no radii). ``"auto"`` (default): when a camera, an AHRS
-        heading or GPS is fused (:func:`curvature_observable`); on the generated drives, which all have a
-        camera, it improves ``hard``, ``height_error``, ``tilted`` and ``gps_outage`` and costs
-        ``random60``'s EKF and iSAM2 4 %. With the wheels
-        and a gyro alone the curvature's turn and the gyro's bias are told apart only by changes of speed, and the
-        heading then follows the two priors' split.
-    """
+    k: Positive = Field(0.01, description=(
+        "Per-wheel travel noise [m^½]: variance ``k² |d|`` per metre rolled (0.01: 1 cm standard deviation after "
+        "1 m)."))
+    sigma_floor: Sigma = Field(1e-4, description="Standard deviation added to every travel [m] (quantisation).")
+    k_lateral: NonNegative = Field(0.005, description=(
+        "Lateral slip [m^½]: variance ``k_lateral² |d|`` on the sideways motion."))
+    k_yaw: NonNegative = Field(0.01, description="Skid on turning [rad^½]: variance ``k_yaw² |θ|`` on the heading "
+                                                 "change.")
+    yaw_scale: NonNegative = Field(0.0, description=(
+        "``s_ψ``: relative standard deviation of the reported heading change (skid steering; 0: an ideal "
+        "differential drive)."))
+    max_speed: Positive = Field(5.0, description="Wheel speeds above this [m/s] are encoder glitches and gated.")
+    yaw_scale_time: NonNegative = Field(0.0, description=(
+        "``τ_ψ``: correlation time [s] of the ``s_ψ`` heading error (0: white)."))
+    standstill_speed: NonNegative = Field(1e-3, description=(
+        "Both wheels slower than this [m/s] over an interval is a standstill (0 disables the zero-velocity "
+        "update)."))
+    standstill_yaw_rate: NonNegative = Field(1e-2, description=(
+        "Standard deviation [rad/s] of the zero yaw rate at a standstill (vibration of a robot at rest)."))
+    estimate_curvature: bool | Literal["auto"] = Field("auto", description=(
+        "Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`; encoder "
+        "ticks only, an odometry twist has no radii). ``auto``: when a camera, an AHRS heading or GPS is fused "
+        "(:func:`curvature_observable`); on the generated drives, which all have a camera, it improves ``hard``, "
+        "``height_error``, ``tilted`` and ``gps_outage`` and costs ``random60``'s EKF and iSAM2 4 %. With the "
+        "wheels and a gyro alone the curvature's turn and the gyro's bias are told apart only by changes of speed, "
+        "and the heading then follows the two priors' split."))
 
-    k: float = 0.01
-    sigma_floor: float = 1e-4
-    k_lateral: float = 0.005
-    k_yaw: float = 0.01
-    yaw_scale: float = 0.0
-    max_speed: float = 5.0
-    yaw_scale_time: float = 0.0
-    standstill_speed: float = 1e-3
-    standstill_yaw_rate: float = 1e-2
-    estimate_curvature: bool | Literal["auto"] = "auto"
+    @field_validator("estimate_curvature", mode="before")
+    @classmethod
+    def _true_false_or_auto(cls, value: Any) -> Any:
+        if value is True or value is False or value == "auto":
+            return value
+        raise ValueError(f"must be true, false or 'auto', not {value!r}")
 
 
 def odom_twist_noise() -> WheelNoise:

@@ -19,17 +19,15 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import ClassVar
+from typing import Annotated, Literal
 
 import cv2
 import numpy as np
-import yaml
+from pydantic import Field, model_validator
 
-from fusion_vo.schema import FRACTION, Range
-from fusion_vo.geometry.camera import (DISTORTION_MODELS, MAX_IMAGE_SIDE, MAX_LEVER_ARM_M, CameraModel,
-                                       focal_length_problem)
+from fusion_vo.config.base import NUMBER, Float, Fraction, Int, Positive, Section
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_CAMERA_HEIGHT_M, MAX_POSITION_M,
                                     MAX_SPEED)
 from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
@@ -48,379 +46,163 @@ log = logging.getLogger(__name__)
 #: default speed limits per profile (max_speed [m/s], max_turn_rate [rad/s])
 PROFILE_SPEEDS = {"random": (0.3, 0.9), "square": (0.2, 1.0), "circle": (0.15, 0.6)}
 
-#: ranges that several options share (:attr:`SimulationOptions.RANGES`)
-_SHAPE = Range(0, 1e3, open_low=True)  # side, radius, length [m]
-_POSITIVE = Range(0, open_low=True)
-_RATE = Range(0, 1e4, open_low=True)  # [Hz]
-_LEVER_ARM = Range(-MAX_LEVER_ARM_M, MAX_LEVER_ARM_M)  # [m]
-_ERROR = Range(-1, 1, open_low=True, open_high=True)  # a relative calibration error
-_NOISE = Range(0, 1e3)  # a noise density or random walk
+#: a focal length [px] lies within this factor of the image's larger side either way
+FOCAL_FACTOR = 100.0
+
+#: ranges that several options share
+_Rate = Annotated[float, Field(gt=0, le=1e4), NUMBER]  # [Hz]
+_Shape = Annotated[float, Field(gt=0, le=1e3), NUMBER]  # a side, radius or length [m]
+_LeverArm = Annotated[float, Field(ge=-1e3, le=1e3), NUMBER]  # [m]
+_Error = Annotated[float, Field(gt=-1, lt=1), NUMBER]  # a relative calibration error
+_Noise = Annotated[float, Field(ge=0, le=1e3), NUMBER]  # a noise density or random walk
+_Time = Annotated[float, Field(ge=0, le=MAX_DURATION_S), NUMBER]  # a time in the drive [s]
+_Floor = Annotated[float, Field(ge=-1e4, le=1e4), NUMBER]  # a position on the floor [m]
+_Offset = Annotated[float, Field(ge=-1e6, le=1e6), NUMBER]  # a time [s] or an offset [m] of a GPS jump
+_Position = Annotated[float, Field(ge=-MAX_POSITION_M, le=MAX_POSITION_M), NUMBER]  # [m]
+_AngularRate = Annotated[float, Field(ge=-MAX_ANGULAR_RATE, le=MAX_ANGULAR_RATE), NUMBER]  # [rad/s]
+_Acceleration = Annotated[float, Field(ge=-MAX_ACCELERATION, le=MAX_ACCELERATION), NUMBER]  # [m/s²]
+#: the distortion coefficients each model takes
+_COEFFICIENTS = {"radial-tangential": (4, 5), "equidistant": (4,), "none": (0, 4)}
 
 
-@dataclass
-class SimulationOptions:
+class SimulationOptions(Section):
     """Everything a generated recording depends on (with the seed).
 
-    Attributes
-    ----------
-    duration : float or None
-        Length of the drive [s] (random, standstill; None: the profile's default).
-    max_speed : float or None
-        Top speed [m/s] (None: the profile's default).
-    max_turn_rate : float or None
-        Top turn rate [rad/s] (None: the profile's default).
-    side : float or None
-        Side of the square (square, umbmark) [m].
-    radius : float or None
-        Radius of the circle [m].
-    length : float or None
-        Length of the straight drive [m].
-    angle : float or None
-        Angle of a turn in place [rad].
-    texture : str
-        Floor photograph: gravel, grass or brick (scikit-image's CC0 images).
-    texel_size : float
-        Size on the floor of one pixel of the texture [m].
-    featureless : list
-        Rectangles of flat grey floor [m], each as x_min, y_min, x_max, y_max.
-    featureless_time : list or None
-        A time span [s] (t0, t1) in which the floor the camera sees is flat grey.
-    width, height : int
-        Image size [px].
-    fu, fv : float
-        Focal lengths [px].
-    cu, cv : float
-        Principal point [px].
-    distortion_model : str
-        radial-tangential, equidistant or none.
-    distortion : list
-        Distortion coefficients of that model.
-    camera_rate : float
-        Frame rate [Hz].
-    camera_height : float
-        Height of the camera above the floor [m].
-    lever_arm : float
-        Camera ahead of the wheel axle [m].
-    lateral_offset : float
-        Camera to the left of the centre line [m].
-    tilt_x_deg, tilt_y_deg : float
-        Camera tilt about the body's x and y axes [deg].
-    height_error : float
-        Fraction: the sensor.yaml height is the true one times 1 + height_error (``height_sigma`` states
-        that error, at least 0.1 mm).
-    height_vibration : float
-        Amplitude of the camera's vertical vibration [m].
-    vibration_frequency : float
-        Frequency of that vibration [Hz].
-    exposure_time : float
-        Exposure [s] (motion blur; 0: none).
-    blur_samples : int
-        Sub-frames rendered for motion blur.
-    supersample : int
-        Rendering supersampling factor per axis.
-    dropped_frames : float
-        Fraction of frames missing from the recording, in [0, 1).
-    png_compression : int
-        PNG compression level, 0-9.
-    gain : float
-        Image gain.
-    exposure_drift : float
-        Amplitude of the slow exposure change (fraction).
-    exposure_period : float
-        Period of that change [s].
-    vignetting : float
-        Brightness lost at the image corners (fraction).
-    highlight_radius : float
-        Radius of a specular highlight [px] (0: none).
-    highlight_center : list
-        Centre of the highlight (fractions of width and height).
-    noise : float
-        Image noise [grey levels].
-    shot_noise : float
-        Signal-dependent noise factor.
-    wheel_rate : float
-        Encoder sample rate [Hz].
-    ticks_per_revolution : int
-        Encoder ticks per wheel revolution.
-    wheel_radius : float
-        Nominal wheel radius [m].
-    wheel_base : float
-        Nominal wheel base [m].
-    radius_error_left, radius_error_right : float
-        Fractions: true radius = nominal · (1 + error); ``radius_sigma`` of wheel0/sensor.yaml states the
-        larger one.
-    base_error : float
-        Fraction: true wheel base = nominal · (1 + error).
-    slip : float
-        Wheel slip noise [sqrt(m)].
-    wheel_start_count : int
-        First encoder count (near 2**31 to make the counters wrap).
-    imu_rate : float
-        IMU sample rate [Hz].
-    gyro_bias : list
-        Gyro bias [rad/s] about x, y, z.
-    accel_bias : list
-        Accelerometer bias [m/s²] along x, y, z.
-    gyro_noise_density : float
-        Gyro white noise [rad/s/√Hz].
-    gyro_random_walk : float
-        Gyro bias random walk [rad/s²/√Hz].
-    accel_noise_density : float
-        Accelerometer white noise [m/s²/√Hz].
-    accel_random_walk : float
-        Accelerometer bias random walk [m/s³/√Hz].
-    realistic : dict or None
-        Options of :class:`fusion_vo.simulation.realistic.RealisticCamera`; when given, frames are rendered
-        through that module's own lens, optics and sensor instead of the estimator's camera model (the
-        photometry options and fu .. distortion are then unused).
-    gps : bool
-        Write gps0.
-    gps_rate : float
-        GPS fix rate [Hz].
-    gps_noise : float
-        GPS noise [m] per horizontal axis.
-    gps_lever_arm : list
-        Antenna position [m] in the body frame (x, y, z).
-    gps_outages : list
-        Time spans [s] without fixes, each as t0, t1.
-    gps_jumps : list
-        Time spans [s] whose fixes are offset east and north by de, dn metres (multipath), each as
-        t0, t1, de, dn.
-    gps_heading_deg : float
-        Heading of the world x axis in ENU [deg], counter-clockwise from east.
-    gps_origin : list
-        ENU position of the world origin [m].
-    gps_datum : list
-        Latitude [deg], longitude [deg] and altitude [m] of the ENU datum.
-    range_finder : bool
-        Write range0 (a downward range finder).
-    range_noise : float
-        Range finder noise [m].
-    odometry : bool
-        Write odom0 (an odometry twist).
-    gt_rate : float
-        Ground-truth rate [Hz].
-    jitter : float
-        Timestamp jitter of wheel and IMU samples [s].
-    start_time_ns : int
-        First timestamp [ns].
+    Besides the ranges of the fields: ``distortion`` has the number of coefficients its model takes, the focal
+    lengths are within :data:`FOCAL_FACTOR` of the image's larger side, and every time span ``[t0, t1]`` has
+    ``t0 <= t1``.
     """
 
     # motion
-    duration: float | None = None
-    max_speed: float | None = None
-    max_turn_rate: float | None = None
-    side: float | None = None
-    radius: float | None = None
-    length: float | None = None
-    angle: float | None = None
+    duration: Annotated[float, Field(gt=0, le=MAX_DURATION_S), NUMBER] | None = Field(None, description=(
+        "Length of the drive [s] (random, standstill; null: the profile's default)."))
+    max_speed: Annotated[float, Field(gt=0, le=MAX_SPEED), NUMBER] | None = Field(None, description=(
+        "Top speed [m/s] (null: the profile's default)."))
+    max_turn_rate: Annotated[float, Field(gt=0, le=MAX_ANGULAR_RATE), NUMBER] | None = Field(None, description=(
+        "Top turn rate [rad/s] (null: the profile's default)."))
+    side: _Shape | None = Field(None, description="Side of the square (square, umbmark) [m].")
+    radius: _Shape | None = Field(None, description="Radius of the circle [m].")
+    length: _Shape | None = Field(None, description="Length of the straight drive [m].")
+    angle: Annotated[float, Field(ge=-100, le=100), NUMBER] | None = Field(None, description="Angle of a turn in place [rad].")
     # floor
-    texture: str = "gravel"
-    texel_size: float = 0.00025
-    featureless: list = field(default_factory=list)
-    featureless_time: list | None = None
+    texture: Literal[TEXTURES] = Field("gravel", description=(
+        "Floor photograph: gravel, grass or brick (scikit-image's CC0 images)."))
+    texel_size: Float = Field(0.00025, gt=0, le=1, description="Size on the floor of one pixel of the texture [m].")
+    featureless: list[tuple[_Floor, _Floor, _Floor, _Floor]] = Field(default_factory=list, description=(
+        "Rectangles of flat grey floor [m], each as x_min, y_min, x_max, y_max."))
+    featureless_time: tuple[_Time, _Time] | None = Field(None, description=(
+        "A time span [s] (t0, t1) in which the floor the camera sees is flat grey."))
     # camera
-    width: int = 640
-    height: int = 360
-    fu: float = 420.0
-    fv: float = 420.0
-    cu: float = 319.5
-    cv: float = 179.5
-    distortion_model: str = "radial-tangential"
-    distortion: list = field(default_factory=lambda: [-0.03, 0.01, 0.0005, -0.0003])
-    camera_rate: float = 20.0
-    camera_height: float = 0.10
-    lever_arm: float = 0.25
-    lateral_offset: float = 0.0
-    tilt_x_deg: float = 0.0
-    tilt_y_deg: float = 0.0
-    height_error: float = 0.0
-    height_vibration: float = 0.0
-    vibration_frequency: float = 3.0
-    exposure_time: float = 0.0
-    blur_samples: int = 5
-    supersample: int = 2
-    dropped_frames: float = 0.0
-    png_compression: int = 0
+    width: Int = Field(640, ge=8, le=4096, description="Image width [px].")
+    height: Int = Field(360, ge=8, le=4096, description="Image height [px].")
+    fu: Positive = Field(420.0, description="Horizontal focal length [px].")
+    fv: Positive = Field(420.0, description="Vertical focal length [px].")
+    cu: Float = Field(319.5, ge=-1e5, le=1e5, description="Principal point, horizontal [px].")
+    cv: Float = Field(179.5, ge=-1e5, le=1e5, description="Principal point, vertical [px].")
+    distortion_model: Literal["radial-tangential", "equidistant", "none"] = Field(
+        "radial-tangential", description="radial-tangential, equidistant or none.")
+    distortion: list[Annotated[float, Field(ge=-1e3, le=1e3), NUMBER]] = Field(
+        default_factory=lambda: [-0.03, 0.01, 0.0005, -0.0003], description="Distortion coefficients of that model.")
+    camera_rate: _Rate = Field(20.0, description="Frame rate [Hz].")
+    camera_height: Float = Field(0.10, gt=0, le=MAX_CAMERA_HEIGHT_M, description=(
+        "Height of the camera above the floor [m]."))
+    lever_arm: _LeverArm = Field(0.25, description="Camera ahead of the wheel axle [m].")
+    lateral_offset: _LeverArm = Field(0.0, description="Camera to the left of the centre line [m].")
+    tilt_x_deg: Float = Field(0.0, gt=-90, lt=90, description="Camera tilt about the body's x axis [deg].")
+    tilt_y_deg: Float = Field(0.0, gt=-90, lt=90, description="Camera tilt about the body's y axis [deg].")
+    height_error: Float = Field(0.0, gt=-1, lt=1, description=(
+        "Fraction: the sensor.yaml height is the true one times 1 + height_error (``height_sigma`` states that "
+        "error, at least 0.1 mm)."))
+    height_vibration: Float = Field(0.0, ge=0, le=10, description="Amplitude of the camera's vertical vibration [m].")
+    vibration_frequency: Float = Field(3.0, ge=0, le=1000, description="Frequency of that vibration [Hz].")
+    exposure_time: Float = Field(0.0, ge=0, le=1, description="Exposure [s] (motion blur; 0: none).")
+    blur_samples: Int = Field(5, ge=1, le=100, description="Sub-frames rendered for motion blur.")
+    supersample: Int = Field(2, ge=1, le=16, description="Rendering supersampling factor per axis.")
+    dropped_frames: Float = Field(0.0, ge=0, lt=1, description="Fraction of frames missing from the recording.")
+    png_compression: Int = Field(0, ge=0, le=9, description="PNG compression level.")
     # photometry
-    gain: float = 1.0
-    exposure_drift: float = 0.0
-    exposure_period: float = 10.0
-    vignetting: float = 0.0
-    highlight_radius: float = 0.0
-    highlight_center: list = field(default_factory=lambda: [0.55, 0.45])
-    noise: float = 1.0
-    shot_noise: float = 0.0
+    gain: Float = Field(1.0, gt=0, le=100, description="Image gain.")
+    exposure_drift: Fraction = Field(0.0, description="Amplitude of the slow exposure change (fraction).")
+    exposure_period: Float = Field(10.0, gt=0, le=1e6, description="Period of that change [s].")
+    vignetting: Fraction = Field(0.0, description="Brightness lost at the image corners (fraction).")
+    highlight_radius: Float = Field(0.0, ge=0, le=1e5, description="Radius of a specular highlight [px] (0: none).")
+    highlight_center: tuple[Annotated[float, Field(ge=-10, le=10)], Annotated[float, Field(ge=-10, le=10)]] = Field(
+        (0.55, 0.45), description="Centre of the highlight (fractions of width and height).")
+    noise: Float = Field(1.0, ge=0, le=65535, description="Image noise [grey levels].")
+    shot_noise: Float = Field(0.0, ge=0, le=100, description="Signal-dependent noise factor.")
     # wheels
-    wheel_rate: float = 50.0
-    ticks_per_revolution: int = 4096
-    wheel_radius: float = 0.05
-    wheel_base: float = 0.30
-    radius_error_left: float = 0.006
-    radius_error_right: float = -0.004
-    base_error: float = 0.015
-    slip: float = 0.0005
-    wheel_start_count: int = 0
+    wheel_rate: _Rate = Field(50.0, description="Encoder sample rate [Hz].")
+    ticks_per_revolution: Int = Field(4096, ge=1, le=2**32, description="Encoder ticks per wheel revolution.")
+    wheel_radius: Float = Field(0.05, ge=1e-6, le=1e3, description="Nominal wheel radius [m].")
+    wheel_base: Float = Field(0.30, ge=1e-6, le=1e3, description="Nominal wheel base [m].")
+    radius_error_left: _Error = Field(0.006, description=(
+        "Fraction: true left radius = nominal · (1 + error); ``radius_sigma`` of wheel0/sensor.yaml states the "
+        "larger of the two."))
+    radius_error_right: _Error = Field(-0.004, description=(
+        "Fraction: true right radius = nominal · (1 + error); ``radius_sigma`` of wheel0/sensor.yaml states the "
+        "larger of the two."))
+    base_error: _Error = Field(0.015, description="Fraction: true wheel base = nominal · (1 + error).")
+    slip: Float = Field(0.0005, ge=0, le=1, description="Wheel slip noise [sqrt(m)].")
+    wheel_start_count: Int = Field(0, ge=-(2**31), le=2**32 - 1, description=(
+        "First encoder count (near 2**31 to make the counters wrap)."))
     # imu
-    imu_rate: float = 200.0
-    gyro_bias: list = field(default_factory=lambda: [0.002, -0.001, 0.005])
-    accel_bias: list = field(default_factory=lambda: [0.02, -0.01, 0.03])
-    gyro_noise_density: float = 1.7e-4
-    gyro_random_walk: float = 2.0e-5
-    accel_noise_density: float = 2.0e-3
-    accel_random_walk: float = 3.0e-3
+    imu_rate: _Rate = Field(200.0, description="IMU sample rate [Hz].")
+    gyro_bias: tuple[_AngularRate, _AngularRate, _AngularRate] = Field((0.002, -0.001, 0.005), description=(
+        "Gyro bias [rad/s] about x, y, z."))
+    accel_bias: tuple[_Acceleration, _Acceleration, _Acceleration] = Field((0.02, -0.01, 0.03), description=(
+        "Accelerometer bias [m/s²] along x, y, z."))
+    gyro_noise_density: _Noise = Field(1.7e-4, description="Gyro white noise [rad/s/√Hz].")
+    gyro_random_walk: _Noise = Field(2.0e-5, description="Gyro bias random walk [rad/s²/√Hz].")
+    accel_noise_density: _Noise = Field(2.0e-3, description="Accelerometer white noise [m/s²/√Hz].")
+    accel_random_walk: _Noise = Field(3.0e-3, description="Accelerometer bias random walk [m/s³/√Hz].")
     # independent camera
-    realistic: dict | None = None
+    realistic: RealisticCamera | None = Field(None, description=(
+        "Options of :class:`fusion_vo.simulation.realistic.RealisticCamera`; when given, frames are rendered "
+        "through that module's own lens, optics and sensor instead of the estimator's camera model (the "
+        "photometry options and fu .. distortion are then unused)."))
     # gps
-    gps: bool = False
-    gps_rate: float = 5.0
-    gps_noise: float = 0.05
-    gps_lever_arm: list = field(default_factory=lambda: [-0.10, 0.0, 0.40])
-    gps_outages: list = field(default_factory=list)
-    gps_jumps: list = field(default_factory=list)
-    gps_heading_deg: float = 30.0
-    gps_origin: list = field(default_factory=lambda: [0.0, 0.0])
-    gps_datum: list = field(default_factory=lambda: [47.3977, 8.5456, 488.0])
+    gps: bool = Field(False, description="Write gps0.")
+    gps_rate: Float = Field(5.0, gt=0, le=100, description="GPS fix rate [Hz].")
+    gps_noise: Positive = Field(0.05, description="GPS noise [m] per horizontal axis.")
+    gps_lever_arm: tuple[_LeverArm, _LeverArm, _LeverArm] = Field((-0.10, 0.0, 0.40), description=(
+        "Antenna position [m] in the body frame (x, y, z)."))
+    gps_outages: list[tuple[_Time, _Time]] = Field(default_factory=list, description=(
+        "Time spans [s] without fixes, each as t0, t1."))
+    gps_jumps: list[tuple[_Offset, _Offset, _Offset, _Offset]] = Field(default_factory=list, description=(
+        "Time spans [s] whose fixes are offset east and north by de, dn metres (multipath), each as t0, t1, de, "
+        "dn."))
+    gps_heading_deg: Float = Field(30.0, ge=-360, le=360, description=(
+        "Heading of the world x axis in ENU [deg], counter-clockwise from east."))
+    gps_origin: tuple[_Position, _Position] = Field((0.0, 0.0), description="ENU position of the world origin [m].")
+    gps_datum: tuple[Annotated[float, Field(ge=-90, le=90)], Annotated[float, Field(ge=-180, le=180)],
+                     Annotated[float, Field(ge=-1e6, le=1e6)]] = Field((47.3977, 8.5456, 488.0), description=(
+                         "Latitude [deg], longitude [deg] and altitude [m] of the ENU datum."))
     # other
-    range_finder: bool = False
-    range_noise: float = 0.0005
-    odometry: bool = False
-    gt_rate: float = 200.0
-    jitter: float = 0.0
-    start_time_ns: int = 1_600_000_000_000_000_000
+    range_finder: bool = Field(False, description="Write range0 (a downward range finder).")
+    range_noise: Float = Field(0.0005, ge=0, le=1, description="Range finder noise [m].")
+    odometry: bool = Field(False, description="Write odom0 (an odometry twist).")
+    gt_rate: _Rate = Field(200.0, description="Ground-truth rate [Hz].")
+    jitter: Float = Field(0.0, ge=0, le=1, description="Timestamp jitter of wheel and IMU samples [s].")
+    start_time_ns: Int = Field(1_600_000_000_000_000_000, ge=0, lt=2**63, description="First timestamp [ns].")
 
-    #: the range of every number option (of each number of a list option); beyond it an option is a typo, or
-    #: sets work without end (``duration``, the rates, the image size, ``supersample``, ``blur_samples``)
-    RANGES: ClassVar[dict[str, Range]] = {
-        "duration": Range(0, MAX_DURATION_S, open_low=True), "max_speed": Range(0, MAX_SPEED, open_low=True),
-        "max_turn_rate": Range(0, MAX_ANGULAR_RATE, open_low=True), "side": _SHAPE, "radius": _SHAPE,
-        "length": _SHAPE, "angle": Range(-100, 100),
-        "texel_size": Range(0, 1, open_low=True), "featureless": Range(-1e4, 1e4),
-        "featureless_time": Range(0, MAX_DURATION_S),
-        "width": Range(8, 4096), "height": Range(8, 4096), "fu": _POSITIVE, "fv": _POSITIVE,
-        "cu": Range(-MAX_IMAGE_SIDE, MAX_IMAGE_SIDE), "cv": Range(-MAX_IMAGE_SIDE, MAX_IMAGE_SIDE),
-        "distortion": Range(-1e3, 1e3), "camera_rate": _RATE, "camera_height": Range(0, MAX_CAMERA_HEIGHT_M, open_low=True),
-        "lever_arm": _LEVER_ARM, "lateral_offset": _LEVER_ARM,
-        "tilt_x_deg": Range(-90, 90, open_low=True, open_high=True),
-        "tilt_y_deg": Range(-90, 90, open_low=True, open_high=True),
-        "height_error": Range(-1, 1, open_low=True, open_high=True), "height_vibration": Range(0, 10),
-        "vibration_frequency": Range(0, 1000), "exposure_time": Range(0, 1), "blur_samples": Range(1, 100),
-        "supersample": Range(1, 16), "dropped_frames": Range(0, 1, open_high=True), "png_compression": Range(0, 9),
-        "gain": Range(0, 100, open_low=True), "exposure_drift": FRACTION, "exposure_period": Range(0, 1e6, open_low=True),
-        "vignetting": FRACTION, "highlight_radius": Range(0, MAX_IMAGE_SIDE), "highlight_center": Range(-10, 10),
-        "noise": Range(0, 65535), "shot_noise": Range(0, 100),
-        "wheel_rate": _RATE, "ticks_per_revolution": Range(1, 2**32), "wheel_radius": Range(1e-6, 1e3),
-        "wheel_base": Range(1e-6, 1e3), "radius_error_left": _ERROR, "radius_error_right": _ERROR, "base_error": _ERROR,
-        "slip": Range(0, 1), "wheel_start_count": Range(-(2**31), 2**32 - 1),
-        "imu_rate": _RATE, "gyro_bias": Range(-MAX_ANGULAR_RATE, MAX_ANGULAR_RATE),
-        "accel_bias": Range(-MAX_ACCELERATION, MAX_ACCELERATION), "gyro_noise_density": _NOISE,
-        "gyro_random_walk": _NOISE, "accel_noise_density": _NOISE, "accel_random_walk": _NOISE,
-        "gps_rate": Range(0, 100, open_low=True), "gps_noise": Range(0, 1e6, open_low=True),
-        "gps_lever_arm": _LEVER_ARM, "gps_outages": Range(0, MAX_DURATION_S), "gps_jumps": Range(-1e6, 1e6),
-        "gps_heading_deg": Range(-360, 360), "gps_origin": Range(-MAX_POSITION_M, MAX_POSITION_M),
-        "range_noise": Range(0, 1), "gt_rate": _RATE, "jitter": Range(0, 1),
-    }
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            _check_type(f.name, str(f.type), value)
-            if str(f.type) == "int":  # 640.0 from a YAML file is fine, but stored as an int
-                setattr(self, f.name, int(value))
-        for name, bound in self.RANGES.items():
-            value = getattr(self, name)
-            for item in _numbers_of(value):
-                problem = bound.error(f"option '{name}'", item)
-                if problem:
-                    raise ValueError(problem)
-        problem = focal_length_problem(self.fu, self.fv, (self.width, self.height))
-        if problem:
-            raise ValueError(f"options 'fu', 'fv': {problem}")
-        if self.texture not in TEXTURES:
-            raise ValueError(f"option 'texture' must be one of {', '.join(TEXTURES)}, not {self.texture!r}")
-        if self.distortion_model not in DISTORTION_MODELS:
-            raise ValueError(f"option 'distortion_model' must be one of {', '.join(DISTORTION_MODELS)}")
-        n_coeffs = {"radial-tangential": (4, 5), "equidistant": (4,), "none": (0, 4)}[self.distortion_model]
-        if len(self.distortion) not in n_coeffs:
-            raise ValueError(f"option 'distortion': {self.distortion_model} takes "
-                             f"{' or '.join(map(str, n_coeffs))} coefficients")
-        for name, n in (("gyro_bias", 3), ("accel_bias", 3), ("highlight_center", 2), ("featureless_time", 2),
-                        ("gps_lever_arm", 3), ("gps_origin", 2), ("gps_datum", 3)):
-            value = getattr(self, name)
-            if value is not None and len(value) != n:
-                raise ValueError(f"option '{name}' needs {n} numbers")
-        if self.realistic is not None:
-            if not isinstance(self.realistic, dict):
-                raise ValueError("option 'realistic' must be a mapping of option: value")
-            RealisticCamera.from_dict(self.realistic)
-        for name, n, what in (("gps_outages", 2, "[t0, t1]"), ("gps_jumps", 4, "[t0, t1, de, dn]")):
-            for item in getattr(self, name):
-                if not isinstance(item, (list, tuple)) or len(item) != n or item[1] < item[0]:
-                    raise ValueError(f"option '{name}' is a list of {what} with t0 <= t1")
-        if abs(self.gps_datum[0]) > 90 or abs(self.gps_datum[1]) > 180:
-            raise ValueError("option 'gps_datum' is [latitude, longitude, altitude] in degrees and metres")
-        for rect in self.featureless:
-            if not isinstance(rect, (list, tuple)) or len(rect) != 4:
-                raise ValueError("option 'featureless' is a list of [x_min, y_min, x_max, y_max] rectangles")
-        if self.featureless_time is not None and self.featureless_time[1] < self.featureless_time[0]:
-            raise ValueError("option 'featureless_time' is [t0, t1] with t0 <= t1")
-        if not 0 <= self.start_time_ns < 2**63:  # the recording's timestamps are nanoseconds in 0 .. 2^63
-            raise ValueError(f"option 'start_time_ns' must lie in 0 .. 2^63 - 1, not {self.start_time_ns}")
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "SimulationOptions":
-        """Options from a mapping (a YAML file) through the configuration schema
-        (:func:`fusion_vo.schema.build`); unknown keys and bad values raise ``ValueError``."""
-        from fusion_vo import schema
-        from fusion_vo.errors import InputError
-
-        try:
-            return schema.build(cls, d)
-        except InputError as exc:
-            raise ValueError(exc.message) from None
-
-
-def _numbers_of(value) -> list:
-    """The numbers of an option: itself, the items of a list, the items of a list of lists (none for None)."""
-    if value is None:
-        return []
-    if isinstance(value, (list, tuple)):
-        return [v for item in value for v in (item if isinstance(item, (list, tuple)) else [item])]
-    return [value]
-
-
-def _check_number(name: str, value, integer: bool) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"option '{name}' must be a number, not {value!r}")
-    if not math.isfinite(value):
-        raise ValueError(f"option '{name}' must be finite, not {value}")
-    if integer and value != int(value):
-        raise ValueError(f"option '{name}' must be a whole number, not {value}")
-
-
-def _check_type(name: str, annotation: str, value) -> None:
-    """Check one option against its annotation (``float``, ``int``, ``bool``, ``str``, ``list``, ``| None``)."""
-    if value is None:
-        if "None" not in annotation:
-            raise ValueError(f"option '{name}' needs a value")
-        return
-    kind = annotation.split("|")[0].strip()
-    if kind == "dict":
-        return
-    if kind in ("float", "int"):
-        _check_number(name, value, kind == "int")
-    elif kind == "bool":
-        if not isinstance(value, bool):
-            raise ValueError(f"option '{name}' must be true or false, not {value!r}")
-    elif kind == "str":
-        if not isinstance(value, str):
-            raise ValueError(f"option '{name}' must be a name, not {value!r}")
-    elif kind == "list":
-        if not isinstance(value, (list, tuple)):
-            raise ValueError(f"option '{name}' must be a list, not {value!r}")
-        for item in value:
-            for v in item if isinstance(item, (list, tuple)) else [item]:
-                _check_number(name, v, False)
+    @model_validator(mode="after")
+    def _consistent(self) -> SimulationOptions:
+        counts = _COEFFICIENTS[self.distortion_model]
+        if len(self.distortion) not in counts:
+            raise ValueError(f"distortion: {self.distortion_model} takes {' or '.join(map(str, counts))} "
+                             f"coefficients, not {len(self.distortion)}")
+        side = max(self.width, self.height)
+        low, high = side / FOCAL_FACTOR, side * FOCAL_FACTOR
+        if not (low <= self.fu <= high and low <= self.fv <= high):
+            raise ValueError(f"focal lengths fu, fv {self.fu:g}, {self.fv:g} px are not a camera's for a "
+                             f"{self.width}x{self.height} image (each must be between {low:g} and {high:g} px)")
+        spans = [("featureless_time", self.featureless_time)] if self.featureless_time is not None else []
+        spans += [("gps_outages", span) for span in self.gps_outages]
+        spans += [("gps_jumps", span) for span in self.gps_jumps]
+        for name, span in spans:
+            if span[1] < span[0]:
+                raise ValueError(f"{name}: a time span [t0, t1] needs t0 <= t1, not {list(span[:2])}")
+        return self
 
 
 def _motion_for(profile: str, o: SimulationOptions, rng: np.random.Generator) -> Motion:
@@ -469,7 +251,9 @@ def simulate(out_dir: str | Path, profile: str = "square", seed: int = 0,
     """
     if profile not in PROFILES:
         raise ValueError(f"unknown profile '{profile}' (choose one of {', '.join(PROFILES)})")
-    o = dataclasses.replace(options or SimulationOptions(), **overrides) if overrides else (options or SimulationOptions())
+    o = options or SimulationOptions()
+    if overrides:
+        o = SimulationOptions.from_dict({**o.model_dump(), **overrides})
     rng = np.random.default_rng(seed)
     out_dir = Path(out_dir)
     check_target(out_dir, force)
@@ -499,7 +283,7 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
     # ---- camera frames
     cam = CameraModel(o.width, o.height, o.fu, o.fv, o.cu, o.cv, o.distortion_model, np.array(o.distortion, float),
                       T_BS, o.camera_rate)
-    real_cam = RealisticCamera.from_dict(o.realistic) if o.realistic is not None else None
+    real_cam = o.realistic
     if real_cam is not None:
         real = RealisticRenderer(real_cam, o.width, o.height, o.exposure_time, o.blur_samples)
     else:
@@ -615,7 +399,7 @@ def _generate(writer: RecordingWriter, profile: str, seed: int, o: SimulationOpt
 
     info = {"frames": int(keep.sum()), "duration_s": float(t_end), "path_length_m": motion.path_length}
     writer.yaml("simulation.yaml", {
-        "profile": profile, "seed": int(seed), "options": dataclasses.asdict(o), "summary": info,
+        "profile": profile, "seed": int(seed), "options": o.model_dump(mode="json"), "summary": info,
         "truth": {"camera_height": o.camera_height, "lever_arm": o.lever_arm, "lateral_offset": o.lateral_offset,
                   "tilt_x_deg": o.tilt_x_deg, "tilt_y_deg": o.tilt_y_deg,
                   "T_BS": [float(v) for v in T_BS.ravel()],

@@ -32,13 +32,15 @@ box-filtered down.
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from dataclasses import dataclass, field
-from typing import Callable
+from typing import Annotated, Callable, Literal
 
 import cv2
 import numpy as np
+from pydantic import Field, model_validator
+
+from fusion_vo.config.base import INTEGER, NUMBER, Float, Fraction, Int, NonNegative, Positive, Section
+from fusion_vo.simulation.floor import TEXTURES, load_texture, mirror_tile
 
 from fusion_vo.simulation.floor import load_texture, mirror_tile
 
@@ -46,119 +48,69 @@ LENSES = ("polynomial", "equisolid")
 CALIBRATIONS = ("fitted", "focal", "none")
 
 
-@dataclass
-class RealisticCamera:
-    """Options of the independent renderer (the ``realistic`` mapping of a simulation).
+#: a lens coefficient or offset (of a normalised radius, or in pixels): beyond it no lens
+_Coefficient = Annotated[float, Field(ge=-1e3, le=1e3), NUMBER]
 
-    Attributes
-    ----------
-    lens : str
-        ``"polynomial"`` (barrel, four radial terms) or ``"equisolid"`` (fisheye).
-    focal : float
-        Focal length [px] (both axes; the principal point is the image centre plus ``centre_offset``).
-    centre_offset : list of float
-        Principal point offset from the image centre [px].
-    coefficients : list of float
-        ``k1..k4`` of the polynomial lens (ignored by the equisolid lens).
-    tangential : list of float
-        Decentering ``(p1, p2)`` of a lens element slightly off axis, applied (Brown's form) to the
-        *distorted* normalised coordinates of either lens: the estimator's models apply it before the
-        radial term (radial-tangential) or not at all (equidistant).
-    calibration : str
-        What ``cam0/sensor.yaml`` states: ``"fitted"`` (the estimator's closest model, fitted),
-        ``"focal"`` (the focal length only, no distortion), ``"none"`` (no intrinsics).
-    defocus : float
-        Gaussian blur at the focus height [px].
-    defocus_per_metre : float
-        Additional blur per metre of height away from ``focus_height`` [px / m].
-    focus_height : float
-        Height at which the lens is focused [m].
-    rolling_shutter : float
-        Time from the first to the last image row [s] (0: global shutter).
-    bands : int
-        Row bands rendered with their own pose under a rolling shutter.
-    vignetting : float
-        Relative brightness loss at the image corners.
-    read_noise : float
-        Read noise [grey levels].
-    shot_noise : float
-        Shot noise: standard deviation ``shot_noise * sqrt(grey)`` [grey levels].
-    auto_exposure : float
-        Fraction of the log-error to the target grey corrected per frame (0: fixed exposure).
-    target_grey : float
-        Auto-exposure target mean [grey levels].
-    brightness : float
-        Grey level of a white floor at the initial exposure.
-    checker_size : float
-        Side of a checkerboard square [m] (0: the photographed ``texture`` instead).
-    checker_contrast : float
-        Difference between white and black squares (fraction of white).
-    grain : float
-        Contrast of the gravel photograph under the checkerboard (0: clean print).
-    checker_squares : list of int
-        ``[columns, rows]`` of a finite calibration board from the floor origin along x and y, white
-        around it; empty (the default): the checkerboard covers the whole floor.
-    texture : str
-        Photograph used as the floor or grain (scikit-image's ``gravel``, ``grass`` or ``brick``).
-    texel_size : float
-        Size of one texel of the photograph on the floor [m].
-    rocking_deg : float
-        Amplitude of the camera's roll and pitch oscillation about its optical centre [deg].
-    rocking_period : float
-        Period of the roll oscillation [s] (pitch: 1.37 times as long).
-    supersample : int
-        Rays per pixel along each axis.
-    """
 
-    lens: str = "polynomial"
-    focal: float = 420.0
-    centre_offset: list = field(default_factory=lambda: [1.5, -2.0])
-    coefficients: list = field(default_factory=lambda: [-0.28, 0.09, -0.02, 0.004])
-    tangential: list = field(default_factory=lambda: [4e-4, -3e-4])
-    calibration: str = "fitted"
-    defocus: float = 0.8
-    defocus_per_metre: float = 10.0
-    focus_height: float = 0.1
-    rolling_shutter: float = 0.0
-    bands: int = 12
-    vignetting: float = 0.25
-    read_noise: float = 1.5
-    shot_noise: float = 0.25
-    auto_exposure: float = 0.3
-    target_grey: float = 110.0
-    brightness: float = 170.0
-    checker_size: float = 0.0
-    checker_contrast: float = 0.7
-    grain: float = 0.06
-    checker_squares: list = field(default_factory=list)
-    texture: str = "gravel"
-    texel_size: float = 0.00025
-    rocking_deg: float = 0.0
-    rocking_period: float = 1.3
-    supersample: int = 2
+class RealisticCamera(Section):
+    """Options of the independent renderer (the ``realistic`` mapping of a simulation)."""
 
-    def __post_init__(self) -> None:
-        if self.lens not in LENSES:
-            raise ValueError(f"realistic option 'lens' must be one of {', '.join(LENSES)}, not {self.lens!r}")
-        if self.calibration not in CALIBRATIONS:
-            raise ValueError(f"realistic option 'calibration' must be one of {', '.join(CALIBRATIONS)}")
-        if len(self.coefficients) != 4 or len(self.centre_offset) != 2 or len(self.tangential) != 2:
-            raise ValueError("realistic options 'coefficients', 'centre_offset' and 'tangential' need 4, 2 and 2 numbers")
-        for name in ("focal", "supersample", "bands", "focus_height", "texel_size", "rocking_period"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"realistic option '{name}' must be positive")
-        for name in ("defocus", "defocus_per_metre", "rolling_shutter", "read_noise", "shot_noise", "checker_size",
-                     "grain", "rocking_deg"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"realistic option '{name}' must not be negative")
+    lens: Literal[LENSES] = Field("polynomial", description=(
+        "``polynomial`` (barrel, four radial terms) or ``equisolid`` (fisheye)."))
+    focal: Positive = Field(420.0, description=(
+        "Focal length [px] (both axes; the principal point is the image centre plus ``centre_offset``)."))
+    centre_offset: tuple[_Coefficient, _Coefficient] = Field((1.5, -2.0), description=(
+        "Principal point offset from the image centre [px]."))
+    coefficients: tuple[_Coefficient, _Coefficient, _Coefficient, _Coefficient] = Field(
+        (-0.28, 0.09, -0.02, 0.004), description="``k1..k4`` of the polynomial lens (ignored by the equisolid lens).")
+    tangential: tuple[_Coefficient, _Coefficient] = Field((4e-4, -3e-4), description=(
+        "Decentering ``(p1, p2)`` of a lens element slightly off axis, applied (Brown's form) to the *distorted* "
+        "normalised coordinates of either lens: the estimator's models apply it before the radial term "
+        "(radial-tangential) or not at all (equidistant)."))
+    calibration: Literal[CALIBRATIONS] = Field("fitted", description=(
+        "What ``cam0/sensor.yaml`` states: ``fitted`` (the estimator's closest model, fitted), ``focal`` (the "
+        "focal length only, no distortion), ``none`` (no intrinsics)."))
+    defocus: NonNegative = Field(0.8, description="Gaussian blur at the focus height [px].")
+    defocus_per_metre: NonNegative = Field(10.0, description=(
+        "Additional blur per metre of height away from ``focus_height`` [px / m]."))
+    focus_height: Float = Field(0.1, gt=0, le=100, description="Height at which the lens is focused [m].")
+    rolling_shutter: Float = Field(0.0, ge=0, le=1, description=(
+        "Time from the first to the last image row [s] (0: global shutter)."))
+    bands: Int = Field(12, ge=1, le=4096, description="Row bands rendered with their own pose under a rolling "
+                                                      "shutter.")
+    vignetting: Fraction = Field(0.25, description="Relative brightness loss at the image corners.")
+    read_noise: Float = Field(1.5, ge=0, le=255, description="Read noise [grey levels].")
+    shot_noise: Float = Field(0.25, ge=0, le=100, description=(
+        "Shot noise: standard deviation ``shot_noise * sqrt(grey)`` [grey levels]."))
+    auto_exposure: Fraction = Field(0.3, description=(
+        "Fraction of the log-error to the target grey corrected per frame (0: fixed exposure)."))
+    target_grey: Float = Field(110.0, gt=0, le=255, description="Auto-exposure target mean [grey levels].")
+    brightness: Float = Field(170.0, gt=0, le=255, description="Grey level of a white floor at the initial "
+                                                               "exposure.")
+    checker_size: Float = Field(0.0, ge=0, le=100, description=(
+        "Side of a checkerboard square [m] (0: the photographed ``texture`` instead)."))
+    checker_contrast: Fraction = Field(0.7, description=(
+        "Difference between white and black squares (fraction of white)."))
+    grain: Float = Field(0.06, ge=0, le=10, description=(
+        "Contrast of the gravel photograph under the checkerboard (0: clean print)."))
+    checker_squares: list[Annotated[int, Field(ge=1, le=10_000), INTEGER]] = Field(default_factory=list, description=(
+        "``[columns, rows]`` of a finite calibration board from the floor origin along x and y, white around it; "
+        "empty (the default): the checkerboard covers the whole floor."))
+    texture: Literal[TEXTURES] = Field("gravel", description=(
+        "Photograph used as the floor or grain (scikit-image's ``gravel``, ``grass`` or ``brick``)."))
+    texel_size: Float = Field(0.00025, gt=0, le=1, description="Size of one texel of the photograph on the floor "
+                                                               "[m].")
+    rocking_deg: Float = Field(0.0, ge=0, le=90, description=(
+        "Amplitude of the camera's roll and pitch oscillation about its optical centre [deg]."))
+    rocking_period: Positive = Field(1.3, description="Period of the roll oscillation [s] (pitch: 1.37 times as "
+                                                      "long).")
+    supersample: Int = Field(2, ge=1, le=16, description="Rays per pixel along each axis.")
 
-    @classmethod
-    def from_dict(cls, d: dict | None) -> "RealisticCamera":
-        known = {f.name for f in dataclasses.fields(cls)}
-        for k in d or {}:
-            if k not in known:
-                raise ValueError(f"unknown realistic option '{k}' (known: {', '.join(sorted(known))})")
-        return cls(**(d or {}))
+    @model_validator(mode="after")
+    def _board(self) -> RealisticCamera:
+        if len(self.checker_squares) not in (0, 2):
+            raise ValueError(f"checker_squares must be [columns, rows] or empty, not {self.checker_squares}")
+        return self
 
     # ---------------------------------------------------------------- rocking
     def rocking(self, t: float) -> tuple[np.ndarray, np.ndarray]:

@@ -6,23 +6,28 @@ import pytest
 
 from fusion_vo.backends import FusionConfig
 from fusion_vo.cli.main import main
+from fusion_vo.config.files import validate
 from fusion_vo.errors import InputError
 
 
-@pytest.mark.parametrize("options, key", [
-    ({"imu": {"gyro_noise_density": 0.0}}, "imu.gyro_noise_density"),
-    ({"odom": {"k": float("nan")}}, "odom.k"),
-    ({"visual_scale_sigma": -0.01}, "visual_scale_sigma"),
-    ({"range": {"sigma": 0.0}}, "range.sigma"),
-    ({"imu": {"ahrs_offset_walk": -0.1}}, "imu.ahrs_offset_walk"),
-    ({"visual_frame_error": -0.1}, "visual_frame_error"),
-    ({"visual_frame_error": 1.0}, "visual_frame_error"),
-    ({"visual_frame_error": float("nan")}, "visual_frame_error"),
+@pytest.mark.parametrize("options, message", [
+    ({"imu": {"gyro_noise_density": 0.0}}, "imu: gyro_noise_density must be positive, not 0.0"),
+    ({"odom": {"k": float("nan")}}, "odom: k must be a finite number, not nan"),
+    ({"visual_scale_sigma": -0.01}, "visual_scale_sigma must be positive, not -0.01"),
+    ({"range": {"sigma": 0.0}}, "range: sigma must be positive, not 0.0"),
+    ({"imu": {"ahrs_offset_walk": -0.1}}, "imu: ahrs_offset_walk must be at least 0, not -0.1"),
+    ({"visual_frame_error": -0.1}, "visual_frame_error must be at least 0, not -0.1"),
+    ({"visual_frame_error": 1.0}, "visual_frame_error must be below 1, not 1.0"),
+    ({"visual_frame_error": float("nan")}, "visual_frame_error must be a finite number, not nan"),
 ])
-def test_bad_sigma_names_the_key(options, key):
-    with pytest.raises(InputError) as exc:
+def test_bad_sigma_names_the_key(options, message):
+    with pytest.raises(ValueError) as exc:  # (ConfigError)
         FusionConfig.from_dict(options)
-    assert f"'{key}'" in str(exc.value) and "\n" not in str(exc.value)
+    assert str(exc.value) == f"FusionConfig: {message}"
+    with pytest.raises(InputError) as exc:  # read from a file: the file and the key path
+        validate(FusionConfig, options, "run.yaml", ("fusion",))
+    section, _, rest = message.partition(": ")
+    assert str(exc.value) == (f"run.yaml: fusion.{section}: {rest}" if rest else f"run.yaml: fusion: {message}")
 
 
 def test_zero_offset_walk_and_yaw_scale_are_allowed():
@@ -40,6 +45,6 @@ def test_cli_exits_2_on_a_bad_sigma(tmp_path, capsys):
     capsys.readouterr()
     code = main(["run", str(seq), "--out", str(tmp_path / "out"), "--config", str(cfg)])
     err = capsys.readouterr().err
-    assert code == 2 and "imu.gyro_noise_density" in err, err
+    assert code == 2 and f"{cfg}: fusion.imu: gyro_noise_density must be a finite number, not nan" in err, err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out" / "ekf.tum").exists()

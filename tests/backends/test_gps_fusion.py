@@ -155,7 +155,7 @@ def test_bad_gps_option_is_a_one_line_error():
     from fusion_vo.backends import FusionConfig
     from fusion_vo.errors import InputError
 
-    with pytest.raises(InputError, match="gps"):
+    with pytest.raises(ValueError, match=r"gps\.kernel: expected one of 'huber', 'cauchy' or 'none', got 'tukey'"):
         FusionConfig.from_dict({"gps": {"kernel": "tukey"}})
     with pytest.raises(InputError, match="backend 'ekf'"):
         StreamingFusion("gtsam", sensors=["imu", "gps"])

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
-from fusion_vo.errors import InputError
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 from backend_synth import position_errors
@@ -96,8 +95,8 @@ def test_monitor_options_are_checked():
     for bad in ({"monitor_window": 0.0}, {"monitor_probability": 1.0}, {"monitor_bias_sigma": -1.0}):
         try:
             FusionConfig.from_dict(bad)
-        except InputError as exc:
-            assert "monitor" in str(exc)
+        except ValueError as exc:  # (ConfigError)
+            assert f"{next(iter(bad))} must be" in str(exc)
         else:
             raise AssertionError(bad)
 

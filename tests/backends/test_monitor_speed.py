@@ -103,7 +103,5 @@ def test_a_constant_scale_ratio_is_calibration_not_a_lie():
 
 
 def test_monitor_scale_sigma_is_checked():
-    from fusion_vo.errors import InputError
-
-    with pytest.raises(InputError, match="monitor_scale_sigma"):
+    with pytest.raises(ValueError, match="monitor_scale_sigma must be positive"):
         FusionConfig.from_dict({"monitor_scale_sigma": 0.0})

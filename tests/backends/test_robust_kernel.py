@@ -12,7 +12,6 @@ import pytest
 
 from backend_synth import streams_of
 from fusion_vo.backends import FusionConfig, fuse
-from fusion_vo.errors import InputError
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
@@ -31,7 +30,7 @@ def test_kernel_width_keeps_the_tail_probability_of_every_factor_size():
     assert kernel_width(huber, 3) == pytest.approx(2.2155, abs=1e-4)
     assert kernel_width(FusionConfig.from_dict({"graph": {"robust": "none"}}), 3) is None
     for bad in (0.0, -1.0, float("nan")):
-        with pytest.raises(InputError, match="robust_k"):
+        with pytest.raises(ValueError, match="robust_k must be"):
             FusionConfig.from_dict({"graph": {"robust_k": bad}})
 
 

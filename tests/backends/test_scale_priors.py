@@ -92,7 +92,7 @@ def test_camera_height_uncertainty_grows_only_by_its_small_walk(drive):
     for walk in (None, 1e-3):
         config = FusionConfig()
         if walk is not None:
-            config = dataclasses.replace(config, ekf=dataclasses.replace(config.ekf, visual_scale_random_walk=walk))
+            config = config.merged({"ekf": {"visual_scale_random_walk": walk}})
         sigmas.append(fuse(streams, "ekf", config).calibration["ekf"]["visual_scale_sigma"])
     assert sigmas[0] <= math.sqrt(prior**2 + default**2 * duration) * 1.0001
     assert sigmas[0] <= 1.001 * prior

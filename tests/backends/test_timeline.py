@@ -80,11 +80,11 @@ def test_missing_or_unknown_sensor_is_an_input_error():
 def test_config_rejects_unknown_keys_and_bad_values():
     cfg = FusionConfig.from_dict({"gate_probability": 0.99, "graph": {"robust": "cauchy"}, "wheel": {"k": 0.02}})
     assert cfg.gate_probability == 0.99 and cfg.graph.robust == "cauchy" and cfg.wheel.k == 0.02
-    with pytest.raises(InputError, match=r"graph\.robustness: unknown key"):
+    with pytest.raises(ValueError, match=r"graph\.robustness: unknown key"):
         FusionConfig.from_dict({"graph": {"robustness": "huber"}})
-    with pytest.raises(InputError, match="step_hz: expected a number, got 'fast'"):
+    with pytest.raises(ValueError, match="step_hz: expected a number, got 'fast'"):
         FusionConfig.from_dict({"step_hz": "fast"})
-    with pytest.raises(InputError, match="robust must be one of"):
+    with pytest.raises(ValueError, match=r"graph\.robust: expected one of 'huber', 'cauchy' or 'none'"):
         FusionConfig.from_dict({"graph": {"robust": "tukey"}})
 
 

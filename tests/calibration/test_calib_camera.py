@@ -13,6 +13,7 @@ from fusion_vo.calibration.chessboard import Board, detect_corners
 from fusion_vo.calibration.floor import floor_pose
 from fusion_vo.calibration.intrinsics import calibrate_images
 from fusion_vo.cli.main import main
+from fusion_vo.config.sensor_files import read_camera
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.simulation.mount import camera_mount
@@ -68,7 +69,7 @@ def test_three_radial_terms(views, tmp_path):
     assert abs(r.distortion[4]) < 3.0 * r.std["k3"], (r.distortion[4], r.std["k3"])
     out = tmp_path / "sensor.yaml"
     r.to_camera().write_yaml(out)
-    assert len(CameraModel.from_yaml(out).distortion) == 5
+    assert len(read_camera(out).distortion) == 5
     with pytest.raises(InputError, match="radial terms"):
         calibrate_images(paths, BOARD, model="fisheye", radial_terms=3)
 
@@ -80,7 +81,7 @@ def test_cli_intrinsics_keeps_mounting(views, tmp_path, capsys):
     base.write_yaml(out)
     code = main(["calibrate", "intrinsics", *map(str, paths[:6]), "--board", "9x6", "--square", "0.03", "--out", str(out)])
     assert code == 0
-    cam = CameraModel.from_yaml(out)
+    cam = read_camera(out)
     assert abs(cam.fu / TRUE.fu - 1) < 0.01
     assert np.allclose(cam.T_BS, base.T_BS) and cam.rate_hz == 30.0
     assert "Principal point" in capsys.readouterr().out
@@ -145,6 +146,6 @@ def test_cli_floor_writes_mount(tmp_path, capsys):
             "--board-origin", "0.23,0.032", "--board-yaw", "-90", "--out", str(out)]
     assert main(args) == 0
     assert "Height" in capsys.readouterr().out
-    assert np.allclose(CameraModel.from_yaml(out).T_BS, T_BS, atol=2e-3)
+    assert np.allclose(read_camera(out).T_BS, T_BS, atol=2e-3)
     assert main(args[:-4] + ["--board-origin", "0.23", "--out", str(out)]) == 2
     assert "--board-origin" in capsys.readouterr().err

@@ -11,7 +11,7 @@ from fusion_vo.calibration.motion import frame_motions
 from fusion_vo.calibration.wheels import umbmark, wheels_from_groundtruth
 from fusion_vo.cli.main import main
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import load_yaml
+from fusion_vo.config.files import load_yaml
 from fusion_vo.recording import Recording
 from fusion_vo.simulation import simulate
 

@@ -78,15 +78,18 @@ def test_the_model_reads_back_and_a_bad_value_names_its_key(tmp_path):
     noise = CameraNoise("klt", EDGES, (10e-6, 20e-6, 30e-6, 40e-6, 50e-6), 5e-6, 100)
     assert CameraNoise.from_dict(yaml.safe_load(yaml.safe_dump(noise.to_dict()))) == noise
     path = tmp_path / "sensor.yaml"
-    for change, key in (({"frame_sigma": "x"}, "camera_noise.frame_sigma"),
-                        ({"heading_sigma": [1e-5, 2e-5]}, "camera_noise.heading_sigma"),
-                        ({"edges": [0.01, 0.002, 0.008, 0.015, 0.03]}, "camera_noise.edges"),
-                        ({"heading_sigma": [1e-5, float("nan"), 1e-5, 1e-5, 1e-5]}, "camera_noise.heading_sigma"),
-                        ({"frontend": 3}, "camera_noise.frontend"),
-                        ({"sigma": 1}, "camera_noise.sigma")):
-        with pytest.raises(InputError, match=key.replace(".", r"\.")) as info:
+    for change, message in (({"frame_sigma": "x"}, "camera_noise.frame_sigma: expected a number, got 'x'"),
+                            ({"heading_sigma": [1e-5, 2e-5]}, "camera_noise: heading_sigma needs one number per edge "
+                                                              "(5), not 2"),
+                            ({"edges": [0.01, 0.002, 0.008, 0.015, 0.03]}, "camera_noise: edges must rise from 0"),
+                            ({"heading_sigma": [1e-5, float("nan"), 1e-5, 1e-5, 1e-5]},
+                             "camera_noise.heading_sigma[1]: must be a finite number, not nan"),
+                            ({"frame_sigma": 1e300}, "camera_noise: frame_sigma must be at most 10, not 1e+300"),
+                            ({"frontend": 3}, "camera_noise.frontend: expected a string, got 3"),
+                            ({"sigma": 1}, "camera_noise.sigma: unknown key (known: frontend, edges")):
+        with pytest.raises(InputError) as info:
             CameraNoise.from_dict({**noise.to_dict(), **change}, path)
-        assert info.value.path == path
+        assert str(info.value).startswith(f"{path}: {message}") and info.value.path == path
     with pytest.raises(InputError, match="missing key 'camera_noise.frame_sigma'"):
         CameraNoise.from_dict({k: v for k, v in noise.to_dict().items() if k != "frame_sigma"}, path)
 

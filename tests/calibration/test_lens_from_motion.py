@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fusion_vo.calibration.lens_from_motion import estimate_division, lens_from_motion
+from fusion_vo.config.sensor_files import camera_model
 from fusion_vo.geometry.camera import CameraModel
 
 
@@ -14,7 +15,7 @@ def _pinhole() -> CameraModel:
 
 
 def test_division_model_round_trips_and_reads_from_sensor_yaml():
-    cam = CameraModel.from_dict({"resolution": [640, 360], "intrinsics": [420.0, 420.0, 319.5, 179.5],
+    cam = camera_model({"resolution": [640, 360], "intrinsics": [420.0, 420.0, 319.5, 179.5],
                                  "distortion_model": "division", "distortion_coefficients": [-0.3]})
     assert cam.has_distortion
     pix = np.array([[0.0, 0.0], [639.0, 359.0], [319.5, 179.5], [100.0, 300.0]])

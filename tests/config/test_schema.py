@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
-from dataclasses import dataclass
 
 import pytest
 import yaml
+from pydantic import BaseModel, Field, model_validator
 
 from frontends.klt import KltConfig
-from fusion_vo import schema
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.cli.main import main
 from fusion_vo.config import RunConfig, default_config_text, load_config, run_model, schema_text
+from fusion_vo.config.base import ConfigError, Section
+from fusion_vo.config.files import validate
+from fusion_vo.config.render import json_schema, section_view
 from fusion_vo.errors import InputError
 
 
@@ -37,7 +38,9 @@ def _load(tmp_path, text):
     ("klt:\n  window: 6\n", "run.yaml: klt: window must be an odd number, not 6"),
     ("klt:\n  window: 4\n", "run.yaml: klt: window must be at least 5, not 4"),
     ("klt:\n  grid_cell: 1.0e-9\n", "run.yaml: klt: grid_cell must be 0 (no grid) or at least 16 px, not 1e-09"),
-    ("fusion:\n  graph:\n    robust: tukey\n", "run.yaml: fusion: graph.robust must be one of huber"),
+    ("fusion:\n  graph:\n    robust: tukey\n",
+     "run.yaml: fusion.graph.robust: expected one of 'huber', 'cauchy' or 'none', got 'tukey'"),
+    ("fusion:\n  graph:\n    reweight_passes: 11\n", "run.yaml: fusion.graph: reweight_passes must be at most 10, not 11"),
     ("odometry:\n  height: high\n", "run.yaml: odometry.height: expected a number, got 'high'"),
 ])
 def test_errors_name_file_key_path_and_expected_type(tmp_path, text, message):
@@ -62,7 +65,7 @@ def test_values_reach_the_stages(tmp_path):
     assert cfg.sensors == ["camera", "wheel"]
     odo = cfg.odometry_config()
     assert odo.frontend == "features" and odo.frontend_options["max_corners"] == 90
-    fusion = cfg.fusion_config()
+    fusion = cfg.fusion
     assert isinstance(fusion, FusionConfig) and fusion.ekf.accel_sigma == 2.0
     # a partial section keeps the defaults of that section, not of its class
     default_odom = FusionConfig().odom
@@ -75,12 +78,11 @@ def test_print_config_lists_every_option_and_loads_back(tmp_path):
     data = yaml.safe_load(text)
 
     def names(cls, prefix=""):
-        for f in dataclasses.fields(cls):
-            value = getattr(cls(), f.name)
-            if dataclasses.is_dataclass(value):
-                yield from names(type(value), f"{prefix}{f.name}.")
+        for name, field in cls.model_fields.items():
+            if isinstance(field.annotation, type) and issubclass(field.annotation, BaseModel):
+                yield from names(field.annotation, f"{prefix}{name}.")
             else:
-                yield prefix + f.name
+                yield prefix + name
 
     def lookup(d, dotted):
         for part in dotted.split("."):
@@ -88,10 +90,8 @@ def test_print_config_lists_every_option_and_loads_back(tmp_path):
         return d
 
     for name in names(FusionConfig):
-        if name in ("sensors", "states"):  # the sections and states of sensors registered outside the library,
-            # none by default
-            continue
         assert lookup(data["fusion"], name) is not None or name == "camera_height"
+    assert data["fusion"]["states"]["wheel_curvature"]["sigma"] == 0.05  # a registered sensor's state, its prior
     assert set(data["klt"]) == set(KltConfig.model_fields)
     assert data["fusion"]["odom"]["yaw_scale"] == FusionConfig().odom.yaw_scale
     assert "# Forward acceleration noise of the constant-twist model [m/s²·√s]" in text
@@ -100,7 +100,7 @@ def test_print_config_lists_every_option_and_loads_back(tmp_path):
     empty = tmp_path / "empty.yaml"
     empty.write_text("")
     assert load_config(path) == load_config(empty)
-    assert load_config(empty).fusion["ekf"]["accel_sigma"] == 0.5
+    assert load_config(empty).fusion.ekf.accel_sigma == 0.5
 
 
 def test_print_config_and_schema_commands(tmp_path, capsys):
@@ -117,64 +117,47 @@ def test_print_config_and_schema_commands(tmp_path, capsys):
     assert printed["fusion"]["ekf"]["accel_sigma"] == 2.5 and printed["fusion"]["ekf"]["smoother"] is True
 
 
-def test_new_dataclass_fields_are_picked_up():
-    @dataclass
-    class Demo:
-        """A stage's options.
+class _Demo(Section):
+    """A stage's options."""
 
-        Attributes
-        ----------
-        speed : float
-            Top speed [m/s].
-        lo, hi : int
-            Bounds.
-        """
+    speed: float = Field(1.0, gt=0, description="Top speed [m/s].")
+    lo: int = Field(0, description="Lower bound.")
+    hi: int = Field(3, description="Upper bound.")
 
-        speed: float = 1.0
-        lo: int = 0
-        hi: int = 3
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.lo > self.hi:
+            raise ValueError("need lo <= hi")
+        return self
 
-        def __post_init__(self):
-            if self.lo > self.hi:
-                raise ValueError("need lo <= hi")
 
-    model = schema.model_of(Demo)
-    props = schema.json_schema(model)["properties"]
+def test_a_section_states_its_fields_and_names_the_key_of_a_mistake(tmp_path):
+    props = json_schema(_Demo)["properties"]
     assert props["speed"]["description"] == "Top speed [m/s]." and props["speed"]["unit"] == "m/s"
-    assert props["hi"]["description"] == "Bounds."
-    assert schema.build(Demo, {"speed": 2}) == Demo(speed=2.0)
-    with pytest.raises(InputError, match=r"^stage: need lo <= hi$"):
-        schema.build(Demo, {"lo": 5}, prefix=("stage",))
+    assert props["speed"]["exclusiveMinimum"] == 0
+    assert validate(_Demo, {"speed": 2}) == _Demo(speed=2.0)
+    path = tmp_path / "f.yaml"
+    with pytest.raises(InputError, match=r"f\.yaml: stage: need lo <= hi$"):
+        validate(_Demo, {"lo": 5}, path, prefix=("stage",))
     with pytest.raises(InputError, match=r"^stage\.speed: expected a number, got \[1\]$"):
-        schema.build(Demo, {"speed": [1]}, prefix=("stage",))
+        validate(_Demo, {"speed": [1]}, prefix=("stage",))
+    with pytest.raises(InputError, match=r"^stage: speed must be positive, not 0$"):
+        validate(_Demo, {"speed": 0}, prefix=("stage",))
+    with pytest.raises(ConfigError, match=r"^_Demo: need lo <= hi$"):  # built in Python: the class names it
+        _Demo(lo=5)
+    assert _Demo().merged({"hi": 7}) == _Demo(hi=7)
+    with pytest.raises(ConfigError, match=r"^_Demo: fast: unknown key \(known: speed, lo, hi\)$"):
+        _Demo().merged({"fast": 1})
 
 
-def test_run_config_validate_checks_programmatic_values():
-    RunConfig(fusion={"ekf": {"accel_sigma": 1.0}}).validate()
-    with pytest.raises(InputError, match=r"fusion\.ekf\.accel_sigma: expected a number"):
-        RunConfig(fusion={"ekf": {"accel_sigma": "fast"}}).validate()
-    assert set(run_model().model_fields) == {f.name for f in dataclasses.fields(RunConfig)}
-
-
-def test_fields_of_any_type_still_print():
-    import numpy as np
-
-    @dataclass
-    class Odd:
-        """Options.
-
-        Attributes
-        ----------
-        gains : ndarray
-            Per-axis gains.
-        """
-
-        gains: np.ndarray = dataclasses.field(default_factory=lambda: np.array([1.0, 2.0]))
-
-    model = schema.model_of(Odd)
-    assert "gains: [1.0, 2.0]  # Per-axis gains" in schema.commented_yaml(model)
-    gains = schema.json_schema(model)["properties"]["gains"]
-    assert gains["description"] == "Per-axis gains." and gains["default"] == [1.0, 2.0]
+def test_run_config_checks_programmatic_values():
+    RunConfig(fusion={"ekf": {"accel_sigma": 1.0}})
+    with pytest.raises(ValueError, match=r"^RunConfig: fusion\.ekf\.accel_sigma: expected a number, got 'fast'$"):
+        RunConfig(fusion={"ekf": {"accel_sigma": "fast"}})
+    assert set(run_model().model_fields) == set(RunConfig.model_fields)
+    config = RunConfig(sensors="camera, wheel")  # one string names several, as on the command line
+    assert config.sensors == ["camera", "wheel"]
+    assert RunConfig.from_dict(config.to_dict()) == config  # run.yaml reads back as the configuration
 
 
 def test_simulate_prints_its_options_and_reads_them_back(tmp_path, capsys):
@@ -196,20 +179,24 @@ def test_simulate_prints_its_options_and_reads_them_back(tmp_path, capsys):
 def test_empty_sections_keep_their_defaults(tmp_path):
     _, cfg = _load(tmp_path, "frontend:\nfusion:\n  ekf:\n  graph: {batch: false}\nklt:\nodometry: {height: null}\n")
     assert cfg == _load(tmp_path, "fusion: {graph: {batch: false}}\n")[1]
-    assert cfg.fusion_config().graph.batch is False and cfg.odometry["height"] is None
+    assert cfg.fusion.graph.batch is False and cfg.odometry.height is None
 
 
 def test_every_option_has_a_description_and_every_parser_is_the_schema():
     from frontends.features import FeatureConfig
     from fusion_vo.simulation.generate import SimulationOptions
 
-    for cls in (SimulationOptions, FusionConfig, KltConfig, FeatureConfig):
-        props = schema.json_schema(schema.model_of(cls))["properties"]
-        assert [name for name, p in props.items() if not p.get("description")] == [], cls.__name__
-    sim = schema.json_schema(schema.model_of(SimulationOptions))["properties"]
+    for cls in (SimulationOptions, FusionConfig, KltConfig, FeatureConfig, RunConfig):
+        schema = json_schema(section_view(cls))
+        for definition in [schema, *schema.get("$defs", {}).values()]:
+            assert [name for name, p in definition["properties"].items() if not p.get("description")] == [], \
+                definition["title"]
+    sim = json_schema(section_view(SimulationOptions))["properties"]
     assert sim["camera_rate"]["unit"] == "Hz" and sim["gps_outages"]["unit"] == "s"
-    # the dataclasses' own from_dict give the schema's messages (key path and expected type)
+    # the models' own from_dict give the same messages (key path and expected type), naming the class
     with pytest.raises(InputError, match=r"^fusion\.ekf\.accel_sigma: expected a number, got 'abc'$"):
-        FusionConfig.from_dict({"ekf": {"accel_sigma": "abc"}}, prefix=("fusion",))
+        validate(FusionConfig, {"ekf": {"accel_sigma": "abc"}}, prefix=("fusion",))
+    with pytest.raises(ValueError, match=r"^FusionConfig: ekf\.accel_sigma: expected a number, got 'abc'$"):
+        FusionConfig.from_dict({"ekf": {"accel_sigma": "abc"}})
     with pytest.raises(ValueError, match=r"^KltConfig: max_tracks: expected an integer, got 'many'$"):
         KltConfig.from_dict({"max_tracks": "many"})

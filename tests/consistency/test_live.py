@@ -36,8 +36,7 @@ def unbroken(streams):
 
 
 def test_valid_stream_is_fused_as_without_the_check(streams, unbroken):
-    off = FusionConfig()
-    off.consistency.check = False
+    off = FusionConfig(consistency={"check": False})
     np.testing.assert_array_equal(unbroken.trajectories["ekf"].xyyaw, stream(streams, off).trajectories["ekf"].xyyaw)
     assert [f["decision"] for f in unbroken.consistency] == ["kept"]  # once the gyro's axis was seen
 

@@ -99,8 +99,7 @@ def test_wheels_turning_the_other_way_are_the_liars_not_the_imu(streams):
 
 
 def test_valid_streams_are_fused_as_without_the_checks(streams):
-    off = FusionConfig()
-    off.consistency.check = False
+    off = FusionConfig(consistency={"check": False})
     on = fuse(streams, "ekf", FusionConfig())
     assert {f["decision"] for f in on.consistency} == {"kept"}, on.consistency
     np.testing.assert_array_equal(on.trajectories["ekf"].xyyaw, fuse(streams, "ekf", off).trajectories["ekf"].xyyaw)

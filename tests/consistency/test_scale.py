@@ -51,8 +51,7 @@ def test_wheel_radius_given_as_a_diameter_is_named(square_vo):
     assert found["decision"] == "corrected" and found["sensor"] == "wheels", found
     assert abs(found["estimate"]["ratio"] - 0.5) < 0.02
     assert "wheel_radius_left, wheel_radius_right" in found["sentence"] and "the accelerometer sides with the camera" in found["sentence"]
-    off = FusionConfig()
-    off.consistency.check = False
+    off = FusionConfig(consistency={"check": False})
     as_stated = fuse(broken, "ekf", off)
     unbroken = fuse(streams, "ekf", FusionConfig())
 

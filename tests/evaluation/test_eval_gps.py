@@ -147,7 +147,7 @@ def test_bad_gps_sensor_yaml_stops_the_evaluation_with_the_key(tmp_path, capsys)
     run = make_run(tmp_path, seq, ["wheel"])
     (seq / "gps0" / "sensor.yaml").write_text("horizontal_sigma_m: -1\n")
     assert main(["evaluate", str(run)]) == 2
-    assert "gps0/sensor.yaml: 'horizontal_sigma_m' must be positive" in capsys.readouterr().err
+    assert "gps0/sensor.yaml: horizontal_sigma_m must be positive, not -1" in capsys.readouterr().err
 
 
 def test_run_on_a_recording_without_ground_truth_scores_against_gps(tmp_path, capsys):

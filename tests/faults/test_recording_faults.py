@@ -4,6 +4,7 @@ the file and the line (or key), exit status 2, and writes nothing."""
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -211,14 +212,14 @@ def imu_yaml_noise_not_a_number(rec):
     assert "gyroscope_noise_density:" in text
     p.write_text("\n".join("gyroscope_noise_density: low" if ln.startswith("gyroscope_noise_density:") else ln
                            for ln in text.splitlines()) + "\n")
-    return "imu0/sensor.yaml: 'gyroscope_noise_density' must be a number", None
+    return "imu0/sensor.yaml: gyroscope_noise_density: expected a number, got 'low'", None
 
 
 def imu_yaml_noise_nan(rec):
     p = rec / "imu0" / "sensor.yaml"
     p.write_text("\n".join("gyroscope_random_walk: .nan" if ln.startswith("gyroscope_random_walk:") else ln
                            for ln in p.read_text().splitlines()) + "\n")
-    return "imu0/sensor.yaml: 'gyroscope_random_walk' must be non-negative", None
+    return "imu0/sensor.yaml: gyroscope_random_walk must be a finite number, not nan", None
 
 
 def gps_folder_without_data(rec):
@@ -361,43 +362,54 @@ def imu_yaml_missing(rec):
     return "imu0/sensor.yaml: file not found", None
 
 
+#: what a T_BS whose rotation part is scaled or mirrored is
+_NO_ROTATION = "T_BS must have a rotation matrix as its rotation part (orthonormal, determinant +1)"
+
 SENSOR_YAML_FAULTS = [
-    _yaml_fault("imu_T_BS_nan", "imu0", _pose_entry(0, float("nan")), "'T_BS' must hold finite numbers"),
-    _yaml_fault("imu_T_BS_scaled", "imu0", _pose_entry(0, 3.0), "T_BS rotation part is not a rotation matrix"),
-    _yaml_fault("imu_T_BS_shrunk", "imu0", _pose_entry(0, 0.5), "T_BS rotation part is not a rotation matrix"),
-    _yaml_fault("imu_T_BS_mirror", "imu0", _pose_entry(0, -1.0), "T_BS rotation part is not a rotation matrix"),
-    _yaml_fault("camera_T_BS_height_1e300", "cam0", _pose_entry(11, 1e300), "'T_BS' translation"),
-    _yaml_fault("camera_T_BS_lever_arm_1e300", "cam0", _pose_entry(3, 1e300), "'T_BS' translation"),
-    *[_yaml_fault(f"{key}_true", folder, _set(key, True), f"'{key}' must be a number, not True")
+    _yaml_fault("imu_T_BS_nan", "imu0", _pose_entry(0, float("nan")), "T_BS must hold finite numbers"),
+    _yaml_fault("imu_T_BS_scaled", "imu0", _pose_entry(0, 3.0), _NO_ROTATION),
+    _yaml_fault("imu_T_BS_shrunk", "imu0", _pose_entry(0, 0.5), _NO_ROTATION),
+    _yaml_fault("imu_T_BS_mirror", "imu0", _pose_entry(0, -1.0), _NO_ROTATION),
+    _yaml_fault("imu_T_BS_bottom_row", "imu0", _pose_entry(12, 0.5),
+                "T_BS must have the bottom row [0, 0, 0, 1], not [0.5, 0.0, 0.0, 1.0]"),
+    _yaml_fault("camera_T_BS_height_1e300", "cam0", _pose_entry(11, 1e300),
+                "T_BS must have a translation within 1000 m (a lever arm), not 1e+300 m"),
+    _yaml_fault("camera_T_BS_lever_arm_1e300", "cam0", _pose_entry(3, 1e300), "T_BS must have a translation within"),
+    *[_yaml_fault(f"{key}_true", folder, _set(key, True), f"{key}: expected a number, got True")
       for folder, key in (("wheel0", "ticks_per_revolution"), ("wheel0", "wheel_radius_left"),
                           ("wheel0", "wheel_base"), ("wheel0", "radius_sigma"), ("cam0", "height_sigma"),
                           ("imu0", "gyroscope_noise_density"), ("imu0", "rate_hz"), ("cam0", "rate_hz"))],
-    _yaml_fault("camera_rate_a_word", "cam0", _set("rate_hz", "fast"), "'rate_hz' must be a number, not 'fast'"),
-    _yaml_fault("camera_rate_negative", "cam0", _set("rate_hz", -20), "'rate_hz' must be positive"),
+    _yaml_fault("camera_rate_a_word", "cam0", _set("rate_hz", "fast"), "rate_hz: expected a number, got 'fast'"),
+    _yaml_fault("camera_rate_negative", "cam0", _set("rate_hz", -20), "rate_hz must be positive, not -20"),
     _yaml_fault("focal_length_1e308", "cam0", _set("intrinsics", [1e308, 1e308, 79.5, 59.5]),
-                "'intrinsics' focal lengths"),
+                "intrinsics: focal lengths 1e+308, 1e+308 px are not a camera's for a 160x120 image"),
+    _yaml_fault("focal_length_1e-9", "cam0", _set("intrinsics", [1e-9, 1e-9, 79.5, 59.5]),
+                "intrinsics: focal lengths 1e-09, 1e-09 px are not a camera's for a 160x120 image"),
+    _yaml_fault("resolution_fractional", "cam0", _set("resolution", [160.5, 120]),
+                "resolution[0]: expected an integer, got 160.5"),
     _yaml_fault("principal_point_far_outside", "cam0", _set("intrinsics", [200, 200, 5000, -3000]),
                 "the intrinsics"),
-    _yaml_fault("distortion_1e300", "cam0", _set("distortion_coefficients", [1e300, 0, 0, 0]), "the intrinsics"),
-    _yaml_fault("height_sigma_1e300", "cam0", _set("height_sigma", 1e300), "'height_sigma' must be at most"),
+    _yaml_fault("distortion_1e300", "cam0", _set("distortion_coefficients", [1e300, 0, 0, 0]),
+                "distortion_coefficients[0]: must be at most 1000000, not 1e+300"),
+    _yaml_fault("height_sigma_1e300", "cam0", _set("height_sigma", 1e300), "height_sigma must be at most 1000, not"),
     _yaml_fault("gyro_noise_1e300", "imu0", _set("gyroscope_noise_density", 1e300),
-                "'gyroscope_noise_density' must be at most"),
-    _yaml_fault("wheel_base_1e-300", "wheel0", _set("wheel_base", 1e-300), "'wheel_base' must be between"),
+                "gyroscope_noise_density must be at most 1000, not 1e+300"),
+    _yaml_fault("wheel_base_1e-300", "wheel0", _set("wheel_base", 1e-300), "wheel_base must be at least 1e-06, not"),
     _yaml_fault("wheel_radius_1e300", "wheel0", _set("wheel_radius_right", 1e300),
-                "'wheel_radius_right' must be between"),
+                "wheel_radius_right must be at most 1000, not 1e+300"),
+    _yaml_fault("wheel_key_missing", "wheel0", lambda data: data.pop("wheel_base"), "missing key 'wheel_base'"),
+    _yaml_fault("bit_depth_9", "cam0", _set("bit_depth", 9), "bit_depth: expected one of 8, 10, 12, 14 or 16, got 9"),
     _yaml_fault("coefficients_with_model_none", "cam0", _set("distortion_model", "none"),
                 "distortion_coefficients are not all zero but distortion_model is 'none'"),
     imu_yaml_missing,
-    # finite but absurd: fx = fy = 1e-9 ended a run 1.9e11 m away; a fractional resolution was cut down silently
-    _yaml_fault("focal_length_1e-9", "cam0", _set("intrinsics", [1e-9, 1e-9, 79.5, 59.5]),
-                "'intrinsics' focal lengths 1e-09, 1e-09 px are not a camera's for a 160x120 image"),
-    _yaml_fault("focal_length_1e6", "cam0", _set("intrinsics", [1e6, 1e6, 79.5, 59.5]), "'intrinsics' focal lengths"),
-    _yaml_fault("resolution_fractional", "cam0", _set("resolution", [160.5, 120]),
-                "'resolution' must be [width, height], two whole numbers of pixels"),
-    _yaml_fault("resolution_1e9", "cam0", _set("resolution", [160, 10**9]), "'resolution' must be [width, height]"),
+    # finite but absurd: fx = fy = 1e-9 ended a run 1.9e11 m away (above); a fractional resolution was cut down
+    # silently (above)
+    _yaml_fault("focal_length_1e6", "cam0", _set("intrinsics", [1e6, 1e6, 79.5, 59.5]), "intrinsics: focal lengths"),
+    _yaml_fault("resolution_1e9", "cam0", _set("resolution", [160, 10**9]),
+                "resolution[1]: must be at most 100000, not 1000000000"),
     _yaml_fault("camera_500_m_high", "cam0", _pose_entry(11, 500.0), "camera height must be in (0, 100] m, not 500"),
-    _yaml_fault("T_BS_bottom_row", "imu0", _pose_entry(12, 0.5), "'T_BS' bottom row must be [0, 0, 0, 1]"),
-    _yaml_fault("camera_T_BS_bottom_row", "cam0", _pose_entry(15, 2.0), "'T_BS' bottom row must be [0, 0, 0, 1]"),
+    _yaml_fault("camera_T_BS_bottom_row", "cam0", _pose_entry(15, 2.0),
+                "T_BS must have the bottom row [0, 0, 0, 1], not [0.0, 0.0, 0.0, 2.0]"),
 ]
 FAULTS += SENSOR_YAML_FAULTS
 
@@ -562,11 +574,13 @@ def test_zero_coefficients_with_model_none_and_an_empty_imu_yaml_are_accepted(re
 
 
 @pytest.mark.parametrize("text, expected", [
-    ("T_BS: {cols: 4, rows: 4, data: [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.4, 0, 0, 0, 1]}",
-     "T_BS rotation part is not a rotation matrix"),
+    ("T_BS: {cols: 4, rows: 4, data: [-1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0.4, 0, 0, 0, 1]}", _NO_ROTATION),
     ("T_BS: {cols: 4, rows: 4, data: [1, 0, 0, .nan, 0, 1, 0, 0, 0, 0, 1, 0.4, 0, 0, 0, 1]}",
-     "'T_BS' must hold finite numbers"),
-    ("horizontal_sigma_m: true", "'horizontal_sigma_m' must be a number, not True"),
+     "T_BS must hold finite numbers"),
+    ("horizontal_sigma_m: true", "horizontal_sigma_m: expected a number, got True"),
+    ("horizontal_sigma_m: 0", "horizontal_sigma_m must be positive, not 0"),
+    ("datum: {latitude: 91, longitude: 0}", "datum: latitude must be at most 90, not 91"),
+    ("datum: {longitude: 8}", "missing key 'datum.latitude'"),
 ])
 def test_gps_yaml_pose_and_numbers_are_checked_like_every_sensor_yaml(tmp_path, text, expected):
     from fusion_vo.errors import InputError
@@ -574,7 +588,7 @@ def test_gps_yaml_pose_and_numbers_are_checked_like_every_sensor_yaml(tmp_path, 
 
     p = tmp_path / "sensor.yaml"
     p.write_text(text + "\n")
-    with pytest.raises(InputError, match=expected.replace("(", r"\(")) as info:
+    with pytest.raises(InputError, match=re.escape(expected)) as info:
         _sensor_yaml(p)
     assert info.value.path == p
 

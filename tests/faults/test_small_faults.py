@@ -45,7 +45,7 @@ def test_streaming_fusion_sums_up_rejected_samples_in_a_note_and_a_few_warnings(
 def test_an_odometry_configuration_with_an_unknown_frontend_is_refused():
     from fusion_vo.odometry import OdometryConfig
 
-    with pytest.raises(ValueError, match="frontend must be one of klt, features, direct, not 'nope'"):
+    with pytest.raises(ValueError, match="frontend: expected one of 'klt', 'features' or 'direct', got 'nope'"):
         OdometryConfig(frontend="nope")
 
 

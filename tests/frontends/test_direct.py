@@ -23,8 +23,8 @@ def test_direct_is_a_run_option(tmp_path):
     assert make_frontend("direct", odo.frontend_options).config.iterations == 12
     with pytest.raises(ValueError, match="iterations"):
         make_frontend("direct", {"iterations": 0})
-    with pytest.raises(InputError, match="frontend: expected one of"):
-        RunConfig(frontend="dense").validate()
+    with pytest.raises(ValueError, match="frontend: expected one of"):
+        RunConfig(frontend="dense")
 
 
 def test_dense_check_replaces_a_wrong_point_estimate_and_keeps_a_right_one():

@@ -12,7 +12,7 @@ from frontends.direct import DirectConfig
 from frontends.features import FeatureConfig
 from frontends.klt import KltConfig
 from frontends.similarity import RobustOptions
-from fusion_vo import schema
+from fusion_vo.config.render import json_schema
 
 #: run in a fresh interpreter in which importing fusion_vo fails
 STANDALONE = textwrap.dedent("""
@@ -71,7 +71,7 @@ def test_every_integer_setting_has_an_upper_bound(model, work):
     """A setting that sets how much work is done (tracks, corners, levels, iterations, windows) has an upper
     bound: ``max_tracks: 1e11`` was accepted and then failed every frame inside OpenCV."""
     integers = {}
-    for name, prop in schema.json_schema(model)["properties"].items():
+    for name, prop in json_schema(model)["properties"].items():
         number = next((p for p in prop.get("anyOf", [prop]) if p.get("type") == "integer"), None)
         if number is not None:
             integers[name] = number

@@ -89,10 +89,10 @@ def test_six_column_files_of_older_imports_are_read(tmp_path):
 
 
 @pytest.mark.parametrize("yaml_data, message", [
-    ({"horizontal_sigma_m": "wide"}, "'horizontal_sigma_m' must be a number"),
-    ({"horizontal_sigma_m": 0}, "'horizontal_sigma_m' must be positive"),
-    ({"datum": [1, 2]}, "'datum' must be a mapping"),
-    ({"T_BS": [1, 2, 3]}, "'T_BS' must be a 4x4 matrix"),
+    ({"horizontal_sigma_m": "wide"}, "horizontal_sigma_m: expected a number, got 'wide'"),
+    ({"horizontal_sigma_m": 0}, "horizontal_sigma_m must be positive, not 0"),
+    ({"datum": [1, 2]}, r"datum: expected a mapping of key: value, got \[1, 2\]"),
+    ({"T_BS": [1, 2, 3]}, r"T_BS must be a 4x4 matrix \(cols: 4, rows: 4, data: \[16 numbers\]\)"),
 ])
 def test_bad_sensor_yaml_names_the_file_and_key(tmp_path, yaml_data, message):
     write_gps(tmp_path, [[0, 0, 0]], [0], [0], np.zeros((1, 3)), yaml_data)

@@ -8,10 +8,12 @@ Each reading is taken at the nearest node within ``max_gap`` of its sample.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
+from fusion_vo.config.base import Float, Section, Sigma
 from fusion_vo.measurements import SensorCount
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import Readings
@@ -30,20 +32,12 @@ class BeaconData:
         return len(self.t)
 
 
-@dataclass
-class BeaconNoise:
-    """Beacon ranges.
+class BeaconNoise(Section):
+    """Beacon ranges (the configuration section ``fusion: {beacon: ...}``)."""
 
-    Attributes
-    ----------
-    sigma : float
-        Standard deviation of one range [m] (default 0.05).
-    positions : list
-        The beacons' positions ``[[x, y], ...]`` [m] in the world frame.
-    """
-
-    sigma: float = 0.05
-    positions: list = field(default_factory=list)
+    sigma: Sigma = Field(0.05, description="Standard deviation of one range [m].")
+    positions: list[tuple[Float, Float]] = Field(default_factory=list, description=(
+        "The beacons' positions ``[[x, y], ...]`` [m] in the world frame."))
 
 
 @dataclass(frozen=True)

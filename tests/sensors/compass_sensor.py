@@ -15,8 +15,10 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
 from fusion_vo.backends.result import SensorCount
+from fusion_vo.config.base import Section, Sigma
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
@@ -44,17 +46,10 @@ class CompassSample:
     yaw: float
 
 
-@dataclass
-class CompassNoise:
-    """Compass noise.
+class CompassNoise(Section):
+    """Compass noise (its configuration section, ``fusion: {compass: {sigma: ...}}``)."""
 
-    Attributes
-    ----------
-    sigma : float
-        Standard deviation of one heading [rad] (default 0.02).
-    """
-
-    sigma: float = 0.02
+    sigma: Sigma = Field(0.02, description="Standard deviation of one heading [rad].")
 
 
 @dataclass(frozen=True)

@@ -14,7 +14,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
+from fusion_vo.config.base import Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import SensorCount
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
@@ -34,23 +36,12 @@ class TwistData:
         return len(self.t)
 
 
-@dataclass
-class SecondOdometryNoise:
-    """The second base's odometry noise.
+class SecondOdometryNoise(Section):
+    """The second base's odometry noise (the configuration section ``fusion: {odom1: ...}``)."""
 
-    Attributes
-    ----------
-    distance_sigma : float
-        Relative standard deviation of a distance (default 0.02).
-    turn_sigma : float
-        Relative standard deviation of a turn (default 0.02).
-    floor : float
-        Floor of every standard deviation [m or rad] (default 1e-4).
-    """
-
-    distance_sigma: float = 0.02
-    turn_sigma: float = 0.02
-    floor: float = 1e-4
+    distance_sigma: Sigma = Field(0.02, description="Relative standard deviation of a distance.")
+    turn_sigma: Sigma = Field(0.02, description="Relative standard deviation of a turn.")
+    floor: Sigma = Field(1e-4, description="Floor of every standard deviation [m or rad].")
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ def test_the_documented_sensor_example_runs_and_estimates_its_offset(capsys):
     assert "register(Sensor(" in code and "State(" in code
     space = {"wheels": s.wheel, "imu": s.imu, "t": t, "yaw": yaw}
     try:
-        exec(compile(code, str(PAGE), "exec"), space)
+        exec(compile(code, str(PAGE), "exec", dont_inherit=True), space)  # (as a script: no __future__ of this module)
     finally:
         registry.unregister("compass")
     printed = float(capsys.readouterr().out.strip())

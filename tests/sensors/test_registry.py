@@ -77,13 +77,15 @@ def test_a_registered_sensors_configuration_goes_through_the_schema(drive):
     with registry.registered(COMPASS_SENSOR):
         assert FusionConfig.from_dict({"compass": {"sigma": 0.5}}).section("compass").sigma == 0.5
         assert FusionConfig().section("compass").sigma == 0.02
-        with pytest.raises(InputError, match="compass.sigam"):
+        with pytest.raises(ValueError, match=r"^FusionConfig: compass\.sigam: unknown key \(known: sigma\)$"):
             FusionConfig.from_dict({"compass": {"sigam": 0.5}})
-        with pytest.raises(InputError, match="compass.sigma"):
+        with pytest.raises(ValueError, match=r"^FusionConfig: compass: sigma must be positive, not -1\.0$"):
             FusionConfig.from_dict({"compass": {"sigma": -1.0}})
+        with pytest.raises(ValueError, match="must be a fusion_vo.config.base.Section"):  # one base for every section
+            registry.register(dataclasses.replace(COMPASS_SENSOR, name="plain", config=("plain", dict)))
         with pytest.raises(ValueError, match="already registered"):
             registry.register(COMPASS_SENSOR)
-    with pytest.raises(InputError, match="compass"):
+    with pytest.raises(ValueError, match="compass: unknown key"):
         FusionConfig.from_dict({"compass": {"sigma": 0.5}})  # not registered: an unknown key
     with pytest.raises(InputError, match="unknown sensor 'compass'"):
         SensorStreams().select(["compass"])
@@ -172,8 +174,7 @@ def test_a_states_prior_and_random_walk_come_from_the_configuration(short_drive)
     with registry.registered(OFFSET_COMPASS_SENSOR):
         def run(prior):
             config = FusionConfig.from_dict({"graph": {"fixed_lag": 0.0}, "states": {"compass_offset": prior}})
-            assert config.states["compass_offset"] == registry.StatePrior(**{**dataclasses.asdict(
-                OFFSET_COMPASS_SENSOR.states[0].prior()), **prior})
+            assert config.states["compass_offset"] == OFFSET_COMPASS_SENSOR.states[0].prior().merged(prior)
             calibration = fuse(streams.select(["wheel", "compass"]), "all", config).calibration
             return {name: calibration[name]["compass_offset_sigma"] for name in names}, calibration
 
@@ -316,18 +317,18 @@ def test_the_command_line_runs_a_sensor_an_installed_package_registers(compass_r
 @pytest.mark.parametrize("text, message", [
     ("sensors: [wheel, magnet]\n", "sensors[1]: expected one of 'camera', 'wheel', 'imu', 'odom', 'range', 'gps' or "
                                    "'compass', got 'magnet'"),
-    ("fusion: {compass: {sigma: 0}}\n", "fusion: 'compass.sigma' must be positive, not 0.0"),
-    ("fusion: {compass: {sigma: -0.1}}\n", "fusion: 'compass.sigma' must be positive, not -0.1"),
-    ("fusion: {compass: {sigma: .nan}}\n", "fusion: 'compass.sigma' must be a finite number, not nan"),
+    ("fusion: {compass: {sigma: 0}}\n", "fusion.compass: sigma must be positive, not 0"),
+    ("fusion: {compass: {sigma: -0.1}}\n", "fusion.compass: sigma must be positive, not -0.1"),
+    ("fusion: {compass: {sigma: .nan}}\n", "fusion.compass: sigma must be a finite number, not nan"),
+    ("fusion: {compass: {sigma: 1.0e+300}}\n", "fusion.compass: sigma must be at most 1000, not 1e+300"),
     ("fusion: {compass: {sigam: 0.1}}\n", "fusion.compass.sigam: unknown key (known: sigma)"),
-    ("fusion: {states: {compass_offset: {sigma: 0}}}\n", "fusion: 'states.compass_offset.sigma' must be positive, "
-                                                          "not 0.0"),
-    ("fusion: {states: {compass_offset: {sigma: -1}}}\n", "fusion: 'states.compass_offset.sigma' must be positive, "
-                                                           "not -1.0"),
-    ("fusion: {states: {compass_offset: {sigma: .nan}}}\n", "fusion: 'states.compass_offset.sigma' must be a finite "
+    ("fusion: {states: {compass_offset: {sigma: 0}}}\n", "fusion.states.compass_offset: sigma must be positive, not 0"),
+    ("fusion: {states: {compass_offset: {sigma: -1}}}\n", "fusion.states.compass_offset: sigma must be positive, "
+                                                           "not -1"),
+    ("fusion: {states: {compass_offset: {sigma: .nan}}}\n", "fusion.states.compass_offset: sigma must be a finite "
                                                              "number, not nan"),
-    ("fusion: {states: {compass_offset: {random_walk: -0.1}}}\n", "fusion: 'states.compass_offset.random_walk' must "
-                                                                   "not be negative, not -0.1"),
+    ("fusion: {states: {compass_offset: {random_walk: -0.1}}}\n", "fusion.states.compass_offset: random_walk must "
+                                                                   "be at least 0, not -0.1"),
     ("fusion: {states: {compass_ofset: {sigma: 1}}}\n", "fusion.states.compass_ofset: unknown key (known: "
                                                         "wheel_curvature, compass_offset)"),
 ])
@@ -341,7 +342,7 @@ def test_run_yaml_errors_about_a_registered_sensor_name_the_key(tmp_path, text, 
             load_config(path)
         assert str(err.value) == f"{path}: {message}"
         ok = load_config(_write(tmp_path / "ok.yaml", "sensors: wheel,compass\nfusion: {compass: {sigma: 0.1}}\n"))
-        assert ok.sensors == ["wheel", "compass"] and ok.fusion_config().section("compass").sigma == 0.1
+        assert ok.sensors == ["wheel", "compass"] and ok.fusion.section("compass").sigma == 0.1
 
 
 def test_the_command_line_rejects_an_unknown_sensor_in_one_line(compass_recording, tmp_path, capsys):

@@ -12,6 +12,7 @@ from backend_synth import streams_of  # noqa: E402
 
 from fusion_vo.backends import FusionConfig, StreamingFusion, fuse  # noqa: E402
 from fusion_vo.backends.timeline import build_intervals  # noqa: E402
+from fusion_vo.config.files import validate  # noqa: E402
 from fusion_vo.errors import InputError  # noqa: E402
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams  # noqa: E402
 
@@ -99,13 +100,13 @@ def test_every_backend_fuses_the_estimate_as_if_configured():
 
 @pytest.mark.parametrize("options, message", [
     ({"visual_noise": {"estimate": "maybe"}}, "fusion.visual_noise.estimate: expected true or false, got 'maybe'"),
-    ({"visual_noise": {"scale_tolerance": 0.0}}, "fusion: 'visual_noise.scale_tolerance' must be positive, not 0.0"),
+    ({"visual_noise": {"scale_tolerance": 0.0}}, "fusion.visual_noise: scale_tolerance must be positive, not 0.0"),
     ({"visual_noise": {"frame_error_tolerance": float("nan")}},
-     "fusion: 'visual_noise.frame_error_tolerance' must be a finite number, not nan"),
-    ({"visual_noise": {"min_intervals": 10}}, "fusion.visual_noise: 'min_intervals' must be at least 100, not 10"),
+     "fusion.visual_noise: frame_error_tolerance must be a finite number, not nan"),
+    ({"visual_noise": {"min_intervals": 10}}, "fusion.visual_noise: min_intervals must be at least 100, not 10"),
     ({"visual_noise": {"estimat": True}}, "fusion.visual_noise.estimat: unknown key"),
 ])
 def test_bad_settings_are_one_line_errors_naming_the_key(options, message):
     with pytest.raises(InputError) as err:
-        FusionConfig.from_dict(options, prefix=("fusion",))
+        validate(FusionConfig, options, prefix=("fusion",))
     assert message in str(err.value) and "\n" not in str(err.value)

@@ -51,7 +51,8 @@ def test_arc_model_straight_turn_and_exponential_agree():
 
 
 def test_arc_covariance_is_the_propagated_wheel_variance():
-    noise = WheelNoise(k=0.02, sigma_floor=0.0, k_lateral=0.0, k_yaw=0.0)
+    # the bare model: no floor (outside the configuration's range, so not checked)
+    noise = WheelNoise.model_construct(k=0.02, sigma_floor=0.0, k_lateral=0.0, k_yaw=0.0)
     dl, dr, b = 0.3, 0.5, 0.4
     eps = 1e-7
     J = np.stack([(arc_increment(dl + eps, dr, b) - arc_increment(dl - eps, dr, b))[0] / (2 * eps),
@@ -70,7 +71,7 @@ def test_covariance_grows_with_distance_and_turning():
 
 
 def test_twist_covariance_matches_the_increment_model_for_small_steps():
-    noise = WheelNoise(k_lateral=0.0, k_yaw=0.0, sigma_floor=0.0)
+    noise = WheelNoise.model_construct(k_lateral=0.0, k_yaw=0.0, sigma_floor=0.0)  # the bare model, as above
     u, R = arc_twist(0.01, 0.012, 0.05, 0.4, noise)
     cov = arc_covariance(0.01, 0.012, 0.4, noise)[0]
     np.testing.assert_allclose(u[0], [0.22, 0.0, 0.1], rtol=1e-12)

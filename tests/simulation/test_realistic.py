@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from fusion_vo.config.sensor_files import camera_model
 import fusion_vo.simulation.realistic as realistic
 from fusion_vo import baseline
 from fusion_vo.errors import InputError
@@ -36,7 +37,7 @@ def test_fitted_calibration_approximates_the_true_lens(lens, size, focal, worst_
     cam = RealisticCamera(lens=lens, focal=focal)
     r = RealisticRenderer(cam, *size)
     calib = r.sensor_calibration()
-    model = CameraModel.from_dict({"resolution": list(size), **calib})
+    model = camera_model({"resolution": list(size), **calib})
     gu, gv = np.meshgrid(np.linspace(0, size[0] - 1, 17), np.linspace(0, size[1] - 1, 13))
     pix = np.column_stack([gu.ravel(), gv.ravel()])
     rays = r.lens.rays(pix)
@@ -151,7 +152,7 @@ def test_missing_intrinsics_is_an_error_unless_uncalibrated(tmp_path, monkeypatc
 def test_bad_realistic_options_are_refused(tmp_path):
     with pytest.raises(ValueError, match="lens"):
         simulate(tmp_path / "x", profile="straight", realistic={"lens": "spherical"})
-    with pytest.raises(ValueError, match="unknown realistic option"):
+    with pytest.raises(ValueError, match=r"realistic\.colour: unknown key \(known: lens, focal, "):
         simulate(tmp_path / "y", profile="straight", realistic={"colour": 1})
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
 

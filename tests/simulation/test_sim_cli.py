@@ -23,11 +23,13 @@ def test_simulate_writes_a_recording(tmp_path, capsys):
 
 @pytest.mark.parametrize("option, message", [
     ("no_such_option=1", "no_such_option: unknown key (known: duration, "),
-    ("camera_height=.nan", "option 'camera_height' must be finite"),
-    ("distortion=[0.1, .nan, 0, 0]", "option 'distortion' must be finite"),
+    ("camera_height=.nan", "camera_height must be a finite number, not nan"),
+    ("distortion=[0.1, .nan, 0, 0]", "distortion[1]: must be a finite number, not nan"),
     ("noise=loud", "noise: expected a number, got 'loud'"),
-    ("dropped_frames=1.5", "option 'dropped_frames' must be in [0, 1), not 1.5"),
-    ("texture=carpet", "option 'texture' must be one of gravel, grass, brick"),
+    ("dropped_frames=1.5", "dropped_frames must be below 1, not 1.5"),
+    ("texture=carpet", "texture: expected one of 'gravel', 'grass' or 'brick', got 'carpet'"),
+    ("camera_height=1.0e+300", "camera_height must be at most 100, not 1e+300"),
+    ("distortion=[0.1, 0, 0]", "distortion: radial-tangential takes 4 or 5 coefficients, not 3"),
 ])
 def test_bad_option_is_one_line_and_status_2(tmp_path, capsys, option, message):
     out = tmp_path / "rec"

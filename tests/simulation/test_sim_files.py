@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import yaml
 
-from fusion_vo.geometry.camera import CameraModel
+from fusion_vo.config.sensor_files import read_camera
 from fusion_vo.recording.reader import Recording
 from fusion_vo.simulation.mount import camera_mount
 from fusion_vo.simulation.sensors import wrap_int32
@@ -61,7 +61,7 @@ def test_layout_is_complete(generate):
     # the project's own reader sees every stream, and the camera written is the one simulated
     rec = Recording(root)
     assert rec.streams() == ["camera", "imu", "wheel", "odom", "range", "groundtruth"]
-    cam = CameraModel.from_yaml(root / "cam0/sensor.yaml")
+    cam = read_camera(root / "cam0/sensor.yaml")
     assert (cam.width, cam.height, cam.fu, cam.cu) == (80, 48, 60.0, 39.5)
     np.testing.assert_allclose(cam.T_BS, camera_mount(0.25, 0.10), atol=1e-12)
     summary = yaml.safe_load((root / "simulation.yaml").read_text())["summary"]

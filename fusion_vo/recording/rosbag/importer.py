@@ -27,8 +27,9 @@ from typing import Sequence
 
 import numpy as np
 
+from fusion_vo.config.files import load_yaml
+from fusion_vo.config.sensor_files import camera_model
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import CameraModel, load_yaml
 from fusion_vo.recording.rosbag.camera_info import camera_info_yaml, pick_camera_info
 from fusion_vo.recording.rosbag.images import UnsupportedImage, compressed_to_grey, image_to_grey
 from fusion_vo.recording.rosbag.reader import (
@@ -325,7 +326,7 @@ class _Importer:
         if "T_BS" not in data:
             self.summary.notes.append(f"cam0 T_BS unknown ({how}): the default mounting (looking straight "
                                       "down, 0.25 m ahead of the axle, 0.1 m up) was written; edit it")
-        model = CameraModel.from_dict(data, self.cam_yaml_path or self.bag)
+        model = camera_model(data, self.cam_yaml_path or self.bag)
         if (model.width, model.height) != tuple(self.image_size):
             raise InputError(f"camera calibration is for {model.width}x{model.height} but the images are "
                              f"{self.image_size[0]}x{self.image_size[1]}", self.cam_yaml_path or self.bag)
