@@ -49,6 +49,8 @@ from typing import Callable
 import numpy as np
 import yaml
 
+from frontends import make_frontend
+from fusion_vo import backends
 from fusion_vo.backends.result import write_pose_covariances
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError

@@ -42,8 +42,6 @@ from pydantic import Field, model_validator
 from fusion_vo.config.base import INTEGER, NUMBER, Float, Fraction, Int, NonNegative, Positive, Section
 from fusion_vo.simulation.floor import TEXTURES, load_texture, mirror_tile
 
-from fusion_vo.simulation.floor import load_texture, mirror_tile
-
 LENSES = ("polynomial", "equisolid")
 CALIBRATIONS = ("fitted", "focal", "none")
 
