@@ -13,12 +13,12 @@ offline   CPU time of the EKF (streams merged, filter, RTS smoother), GTSAM batc
           stages, wall beside CPU time. The EKF is the baseline of the graph (the same problem, the cheapest
           solver). Targets: EKF >= 150x real time, GTSAM batch >= 300x, iSAM2 < 0.5 ms per camera frame.
           ``--profile N`` adds the N costliest functions of one batch run (cProfile).
-solvers   the batch problem of the same drive solved by the graph's own Levenberg-Marquardt loop, with its
-          block-tridiagonal solve (``fusion_vo.backends.chain``, what a run uses) and on GTSAM's elimination
-          (``fusion_vo.backends.graph.levenberg_marquardt``), beside GTSAM's own ``LevenbergMarquardtOptimizer``,
-          ``GaussNewtonOptimizer`` and ``DoglegOptimizer`` given the same factors as ``gtsam.CustomFactor`` s,
-          the same iteration limit and tolerance: CPU time (range over interleaved runs), iterations, final
-          cost, largest position difference from the first's solution.
+solvers   the batch problem of the same drive solved by the graph's own Levenberg-Marquardt loop with its
+          block-tridiagonal solve (``fusion_vo.backends.chain``, what a run uses), beside GTSAM's own
+          ``LevenbergMarquardtOptimizer`` (what a graph that is not a chain gets), ``GaussNewtonOptimizer`` and
+          ``DoglegOptimizer`` given the same factors as ``gtsam.CustomFactor`` s, the same iteration limit and
+          tolerance: CPU time (range over interleaved runs), iterations, final cost, largest position
+          difference from the first's solution.
 latency   ``StreamingFusion`` fed the drive in arrival order (the camera's increments ``--camera-delay`` late,
           as a frontend delivers them), ``current_estimate()`` after every sample: latency percentiles of one
           ``add_*()`` + ``current_estimate()`` call (wall clock, what the caller waits, and the caller's CPU
@@ -170,8 +170,7 @@ def capture(seconds: float, fusion: dict) -> dict:
 
 
 #: the solvers compared, the graph's own first (the one ``run_graph`` uses on a chain-shaped graph)
-SOLVERS = ("block-tridiagonal loop (fusion-vo's)", "loop on GTSAM's elimination", "LevenbergMarquardt",
-           "GaussNewton", "Dogleg")
+SOLVERS = ("block-tridiagonal loop (fusion-vo's)", "LevenbergMarquardt", "GaussNewton", "Dogleg")
 
 
 def solvers(args) -> int:
@@ -191,9 +190,6 @@ def solvers(args) -> int:
         t0 = time.process_time()
         if name == SOLVERS[0]:
             solution, iterations, _ = chain.levenberg_marquardt(problem, v0, max_iterations, tolerance)
-        elif name == SOLVERS[1]:
-            solution, iterations, _ = graph.levenberg_marquardt(problem.graph, v0, problem.dims, max_iterations,
-                                                                tolerance, problem.groups)
         else:
             params = {"LevenbergMarquardt": gtsam.LevenbergMarquardtParams, "GaussNewton": gtsam.GaussNewtonParams,
                       "Dogleg": gtsam.DoglegParams}[name]()

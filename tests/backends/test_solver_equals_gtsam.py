@@ -19,7 +19,7 @@ import pytest
 
 import gtsam
 
-from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse
+from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse, graph
 from fusion_vo.backends.graph_builder import X
 from fusion_vo.sensors.model import robust_weight
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
@@ -122,3 +122,17 @@ def test_robust_kernel_is_active_at_the_wrong_match(captured):
         assert smallest > 0.5
     else:
         assert smallest < 0.2
+
+
+def test_marginals_equal_gtsam_marginals_at_the_same_linearisation(captured):
+    """The chain's marginal covariances (poses and scalars) are GTSAM's ``Marginals`` of the same linearisation."""
+    problem = captured["problem"]
+    _, _, system = chain.levenberg_marquardt(problem, captured["values"], *captured["settings"])
+    point = system.point
+    marginals = gtsam.Marginals(graph.gtsam_linearization(problem.graph, problem.groups, point), point)
+    ours = chain.pose_marginals(system, list(problem.pose_keys))
+    theirs = np.array([marginals.marginalCovariance(int(k)) for k in problem.pose_keys])
+    np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-9 * np.abs(theirs).max())
+    ours = chain.pose_marginals(system, list(problem.scalar_keys), dim=1)[:, 0, 0]
+    theirs = np.array([marginals.marginalCovariance(int(k))[0, 0] for k in problem.scalar_keys])
+    np.testing.assert_allclose(ours, theirs, rtol=1e-9)
