@@ -407,8 +407,8 @@ def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterati
                         relative_tolerance: float = 1e-3):
     """Levenberg–Marquardt (module docstring) from ``values`` on the block-tridiagonal system.
 
-    On the batch graph of the 60 s generated drive it took 30-33 ms of CPU where GTSAM's
-    ``LevenbergMarquardtOptimizer`` on the same factors took 3.4-3.6 s, to the same cost
+    On the batch graph of the 60 s generated drive it took 32-39 ms of CPU where GTSAM's
+    ``LevenbergMarquardtOptimizer`` on the same factors took 3.7-4.3 s, to the same cost
     (``python benchmarks/backend_speed.py solvers``; docs/decisions/0006-own-levenberg-marquardt-loop.md).
 
     Returns
