@@ -94,8 +94,8 @@ one array operation per sensor, and the block-tridiagonal normal equations of th
 by sweeps that also give the marginal covariances (:mod:`fusion_vo.backends.chain`, where the measurement
 that keeps it is stated). A graph that is not such a chain is solved by GTSAM's own
 ``LevenbergMarquardtOptimizer`` with the sensor-model factors as :class:`gtsam.CustomFactor` s
-(:func:`gtsam_levenberg_marquardt`), the same iteration (``tests/backends/test_solver_equals_gtsam.py``) at
-about 30 times the CPU time (``docs/decisions/0006-own-levenberg-marquardt-loop.md``).
+(:func:`gtsam_levenberg_marquardt`): the same iteration (``tests/backends/test_solver_equals_gtsam.py``) at
+about 100 times the chain loop's CPU time (``docs/decisions/0006-own-levenberg-marquardt-loop.md``).
 """
 
 from __future__ import annotations
