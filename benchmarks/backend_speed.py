@@ -13,12 +13,12 @@ offline   CPU time of the EKF (streams merged, filter, RTS smoother), GTSAM batc
           stages, wall beside CPU time. The EKF is the baseline of the graph (the same problem, the cheapest
           solver). Targets: EKF >= 150x real time, GTSAM batch >= 300x, iSAM2 < 0.5 ms per camera frame.
           ``--profile N`` adds the N costliest functions of one batch run (cProfile).
-solvers   the batch problem of the same drive solved by the graph's own Levenberg-Marquardt loop, with its
-          block-tridiagonal solve (``fusion_vo.backends.chain``, what a run uses) and on GTSAM's elimination
-          (``fusion_vo.backends.graph.levenberg_marquardt``), beside GTSAM's own ``LevenbergMarquardtOptimizer``,
-          ``GaussNewtonOptimizer`` and ``DoglegOptimizer`` given the same factors as ``gtsam.CustomFactor`` s,
-          the same iteration limit and tolerance: CPU time (range over interleaved runs), iterations, final
-          cost, largest position difference from the first's solution.
+solvers   the batch problem of the same drive solved by the graph's own Levenberg-Marquardt loop with its
+          block-tridiagonal solve (``fusion_vo.backends.chain``, what a run uses), beside GTSAM's own
+          ``LevenbergMarquardtOptimizer`` (what a graph that is not a chain gets), ``GaussNewtonOptimizer`` and
+          ``DoglegOptimizer`` given the same factors as ``gtsam.CustomFactor`` s, the same iteration limit and
+          tolerance: CPU time (range over interleaved runs), iterations, final cost, largest position
+          difference from the first's solution.
 latency   ``StreamingFusion`` fed the drive in arrival order (the camera's increments ``--camera-delay`` late,
           as a frontend delivers them), ``current_estimate()`` after every sample: latency percentiles of one
           ``add_*()`` + ``current_estimate()`` call (wall clock, what the caller waits, and the caller's CPU
@@ -150,39 +150,48 @@ def offline(args) -> int:
 
 # ------------------------------------------------------------------------------------------- solvers
 def capture(seconds: float, fusion: dict) -> dict:
-    """The batch problem, its start values and settings, as ``run_graph`` hands them to its solver."""
+    """The batch problem, its start values and settings, as ``run_graph`` hands them to its solver: the
+    chain's (``problem``) or, for a graph that is not a chain, GTSAM's optimizer's (``graph``, ``groups``)."""
     _, streams = drive(seconds)
     captured = {}
-    loop = chain.levenberg_marquardt
+    loop, fallback = chain.levenberg_marquardt, graph.gtsam_levenberg_marquardt
 
     def grab(problem, values, max_iterations=20, relative_tolerance=1e-3):
-        captured.update(problem=problem, values=values, args=(max_iterations, relative_tolerance))
+        captured.update(problem=problem, graph=problem.graph, groups=problem.groups, values=values,
+                        args=(max_iterations, relative_tolerance))
         return loop(problem, values, max_iterations, relative_tolerance)
 
-    chain.levenberg_marquardt = grab
+    def grab_fallback(factors, groups, values, max_iterations=20, relative_tolerance=1e-3):
+        captured.update(problem=None, graph=factors, groups=groups, values=values,
+                        args=(max_iterations, relative_tolerance))
+        return fallback(factors, groups, values, max_iterations, relative_tolerance)
+
+    chain.levenberg_marquardt, graph.gtsam_levenberg_marquardt = grab, grab_fallback
     try:
         fuse(streams, "gtsam", FusionConfig.from_dict(with_settings(fusion, ["graph.online=false"])))
     finally:
-        chain.levenberg_marquardt = loop
-    if not captured:
-        raise SystemExit("the batch graph of this drive is not a chain: nothing to compare")
+        chain.levenberg_marquardt, graph.gtsam_levenberg_marquardt = loop, fallback
     return captured
 
 
 #: the solvers compared, the graph's own first (the one ``run_graph`` uses on a chain-shaped graph)
-SOLVERS = ("block-tridiagonal loop (fusion-vo's)", "loop on GTSAM's elimination", "LevenbergMarquardt",
-           "GaussNewton", "Dogleg")
+SOLVERS = ("block-tridiagonal loop (fusion-vo's)", "LevenbergMarquardt", "GaussNewton", "Dogleg")
 
 
 def solvers(args) -> int:
     c = capture(args.seconds, fusion_settings(args))
     problem, v0 = c["problem"], c["values"]
+    names = SOLVERS if problem is not None else SOLVERS[1:]  # a graph that is not a chain: GTSAM's alone
+    if problem is None:
+        print("the batch graph is not a chain: run_graph solves it with GTSAM's LevenbergMarquardt")
     max_iterations, tolerance = c["args"]
-    full = gtsam.NonlinearFactorGraph(problem.graph)  # the same factors, the sensor models as CustomFactors
-    for group in problem.groups:
+    full = gtsam.NonlinearFactorGraph(c["graph"])  # the same factors, the sensor models as CustomFactors
+    for group in c["groups"]:
         for f in group.factors:
             full.add(f.custom_factor())
-    n = len(problem.pose_keys)
+    n = 0
+    while v0.exists(graph_builder.X(n)):
+        n += 1
 
     def positions(values):
         return np.array([[values.atPose2(graph_builder.X(i)).x(), values.atPose2(graph_builder.X(i)).y()] for i in range(n)])
@@ -191,9 +200,6 @@ def solvers(args) -> int:
         t0 = time.process_time()
         if name == SOLVERS[0]:
             solution, iterations, _ = chain.levenberg_marquardt(problem, v0, max_iterations, tolerance)
-        elif name == SOLVERS[1]:
-            solution, iterations, _ = graph.levenberg_marquardt(problem.graph, v0, problem.dims, max_iterations,
-                                                                tolerance, problem.groups)
         else:
             params = {"LevenbergMarquardt": gtsam.LevenbergMarquardtParams, "GaussNewton": gtsam.GaussNewtonParams,
                       "Dogleg": gtsam.DoglegParams}[name]()
@@ -205,16 +211,16 @@ def solvers(args) -> int:
             iterations = optimizer.iterations()
         return time.process_time() - t0, iterations, full.error(solution), positions(solution)
 
-    rows = {name: [] for name in SOLVERS}
+    rows = {name: [] for name in names}
     for _ in range(args.repeat):
-        for name in SOLVERS:
+        for name in names:
             rows[name].append(run(name))
-    reference = rows[SOLVERS[0]][0][3]
-    print(f"{args.seconds:.0f} s drive: {full.size()} factors ({sum(len(group) for group in problem.groups)} "
+    reference = rows[names[0]][0][3]
+    print(f"{args.seconds:.0f} s drive: {full.size()} factors ({sum(len(group) for group in c['groups'])} "
           f"sensor-model factors), start cost {full.error(v0):.6g}; CPU time over {args.repeat} interleaved runs; "
           f"load average {load()}")
     out = []
-    for name in SOLVERS:
+    for name in names:
         t = [r[0] for r in rows[name]]
         _, iterations, cost, p = rows[name][0]
         out.append([name, f"{1e3 * min(t):.1f}-{1e3 * max(t):.1f} ms", iterations, f"{cost:.6g}",

@@ -1,4 +1,4 @@
-"""Batch Levenberg–Marquardt and marginal covariances of a chain-shaped graph, in one sweep each.
+"""The batch Levenberg–Marquardt of a chain-shaped graph and its marginal covariances, in one sweep each.
 
 The batch graph of :mod:`fusion_vo.backends.graph` is a chain: every factor ties variables that are
 close in time (consecutive poses, a visual span of a few frames, a segment's bias and calibration
@@ -17,18 +17,24 @@ Rauch–Tung–Striebel smoother computes it)::
 (``D_k`` the diagonal blocks of ``H``, ``E_k`` the block below ``D_k``.) Each step is a dense LAPACK
 call on blocks of a few dozen columns, so the cost is linear in the length of the drive.
 
-Why not GTSAM's own elimination here: the linearisation of the sensor-model factors is computed in
-numpy for all factors of a kind at once (:meth:`fusion_vo.backends.factors.ModelFactors.jacobian`);
-handing them to GTSAM means building one ``JacobianFactor`` per factor from Python at every iteration,
-and its marginal covariances one ``Marginals.marginalCovariance`` call per pose; the sweeps here take less
-time for both (``docs/decisions/0006-own-levenberg-marquardt-loop.md``). GTSAM still linearises its own
-factors (priors, random walks, ``BetweenFactorPose2``:
+The Levenberg–Marquardt iteration (:func:`levenberg_marquardt`) is the standard one, GTSAM's: solve the
+damped Gauss–Newton system ``(H + λ I) δ = g`` and keep ``x ⊕ δ`` if it lowers the cost; otherwise λ grows
+tenfold (from 1e-4) and the step is tried again, and above 1e8 the iteration stops where it is. After a kept
+step λ shrinks tenfold (to 0 below 1e-3, a plain Gauss–Newton step). The iteration ends when a kept step
+lowers the cost by less than ``relative_tolerance`` of it, or after ``max_iterations`` linearisations.
+``tests/backends/test_solver_equals_gtsam.py`` holds it to GTSAM's ``LevenbergMarquardtOptimizer`` (the same
+steps and solution) on a small drive's graph, with and without a robust kernel at work.
+
+Why not GTSAM's own optimizers: they need each sensor-model factor as a ``gtsam.CustomFactor`` that calls back
+into Python at every linearisation; here the sensor-model factors are linearised in numpy, all factors of a
+kind at once (:meth:`fusion_vo.backends.factors.ModelFactors.jacobian`), and the marginal covariances come
+from the same factorisation instead of one ``Marginals.marginalCovariance`` call per pose. GTSAM still
+linearises its own factors (priors, random walks, ``BetweenFactorPose2``:
 ``NonlinearFactorGraph.linearize`` and ``GaussianFactorGraph.sparseJacobian_``), evaluates their
-error and retracts the values (``Values.retract``); the result is the same Gauss–Newton /
-Levenberg–Marquardt iteration as :func:`fusion_vo.backends.graph.levenberg_marquardt` to rounding
-(tests compare them). A graph that is not block tridiagonal in time order with blocks of at most
-:data:`MAX_BLOCK` columns (a long loop closure) raises :class:`NotAChain` and the caller falls back
-to GTSAM's elimination.
+error and retracts the values (``Values.retract``). A graph that is not block tridiagonal in time order
+with blocks of at most :data:`MAX_BLOCK` columns (a long loop closure, calibration segments of many
+seconds) raises :class:`NotAChain` and the caller solves it with GTSAM's own optimizer
+(:func:`fusion_vo.backends.graph.gtsam_levenberg_marquardt`).
 """
 
 from __future__ import annotations
@@ -37,13 +43,13 @@ import logging
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Any, Callable
 
 import gtsam
 import numpy as np
 import scipy.sparse
 from scipy.linalg import lapack
 
-from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.factors import ModelFactors, pose_table, scalar_table
 
 logger = logging.getLogger(__name__)
@@ -399,9 +405,18 @@ def _ramp(dims: np.ndarray) -> np.ndarray:
 
 def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterations: int = 20,
                         relative_tolerance: float = 1e-3):
-    """The Levenberg–Marquardt loop of :func:`fusion_vo.backends.graph.levenberg_marquardt` on the
-    block-tridiagonal system. Returns ``(solution, iterations, system)``; ``system`` is the last
-    linearisation, for :func:`pose_marginals`."""
+    """Levenberg–Marquardt (module docstring) from ``values`` on the block-tridiagonal system.
+
+    On the batch graph of the 60 s generated drive it took 32-39 ms of CPU where GTSAM's
+    ``LevenbergMarquardtOptimizer`` on the same factors took 3.7-4.3 s, to the same cost
+    (``python benchmarks/backend_speed.py solvers``; docs/decisions/0006-own-levenberg-marquardt-loop.md).
+
+    Returns
+    -------
+    solution, iterations, system
+        The solution, the number of linearisations, and the last linearisation (:class:`System`, for
+        :func:`pose_marginals`).
+    """
     def attempt(state, system, lam):
         values, tables = state
         try:
@@ -415,6 +430,47 @@ def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterati
         (values, tables), problem.error(values, tables), lambda state: problem.linearize(*state), attempt,
         max_iterations, relative_tolerance)
     return values, it, system
+
+
+def damped_gauss_newton(state: Any, error: float, linearize: Callable[[Any], Any],
+                        attempt: Callable[[Any, Any, float], tuple[Any, float]], max_iterations: int = 20,
+                        relative_tolerance: float = 1e-3) -> tuple[Any, int, Any]:
+    """The Levenberg–Marquardt iteration of the module docstring, minimising from ``state`` (cost ``error``).
+
+    Parameters
+    ----------
+    linearize : callable
+        ``linearize(state) -> system``, the linearisation at ``state``.
+    attempt : callable
+        ``attempt(state, system, lam) -> (trial, trial_error)``: the step of ``(H + λ I) δ = g`` from
+        ``state`` and its cost; ``(None, inf)`` when the system cannot be solved at this damping.
+
+    Returns
+    -------
+    state, iterations, system
+        The solution, the number of linearisations, and the last linearisation.
+    """
+    lam = 0.0
+    it = 0
+    system = None
+    for it in range(1, max_iterations + 1):
+        system = linearize(state)
+        while True:
+            trial, trial_error = attempt(state, system, lam)
+            if trial_error <= error:
+                break
+            if trial is None:
+                logger.debug("LM iteration %d: indeterminate system at lambda %.1e", it, lam)
+            lam = 1e-4 if lam == 0 else lam * 10.0
+            if lam > 1e8:
+                return state, it, system
+        decrease = error - trial_error
+        logger.debug("LM iteration %d: cost %.6g -> %.6g (lambda %.1e)", it, error, trial_error, lam)
+        state, error = trial, trial_error
+        lam = 0.0 if lam <= 1e-3 else lam / 10.0
+        if decrease <= relative_tolerance * max(error, 1e-12):
+            break
+    return state, it, system
 
 
 def pose_marginals(system: System, pose_keys: list[int], dim: int = 3) -> np.ndarray:

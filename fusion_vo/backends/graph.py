@@ -90,24 +90,17 @@ iSAM2 marginalises the nodes more than :data:`ONLINE_HORIZON` behind the newest 
 that its cost per update does not grow with the drive.
 
 The batch Levenberg–Marquardt loop is written out, with the sensor-model factors evaluated in numpy,
-one array operation per sensor. Its linear systems are solved by :mod:`fusion_vo.backends.chain` (the
-block-tridiagonal normal equations of the chain-shaped graph, and the marginal covariances from the
-same factorisation; see there for why), and by :func:`levenberg_marquardt` here,
-on GTSAM's linearisation and sparse elimination (``NonlinearFactorGraph.linearize``,
-``GaussianFactorGraph.optimize``) with the sensor-model factors handed to GTSAM as ``JacobianFactor`` s,
-when the graph is not such a chain. GTSAM's own optimizers need each of them as a :class:`gtsam.CustomFactor` that
-calls back into Python, and those callbacks, not GTSAM's solver, are what costs: the loop reaches the same
-cost in a small fraction of their time (``docs/decisions/0006-own-levenberg-marquardt-loop.md``,
-``python benchmarks/backend_speed.py solvers``). The algorithm is the standard one: try the Gauss–Newton
-step, and while the cost does not
-decrease (or the undamped system is too poorly conditioned to factorise), add ``λ I`` damping
-(λ × 10) and retry.
+one array operation per sensor, and the block-tridiagonal normal equations of the chain-shaped graph solved
+by sweeps that also give the marginal covariances (:mod:`fusion_vo.backends.chain`, where the measurement
+that keeps it is stated). A graph that is not such a chain is solved by GTSAM's own
+``LevenbergMarquardtOptimizer`` with the sensor-model factors as :class:`gtsam.CustomFactor` s
+(:func:`gtsam_levenberg_marquardt`): the same iteration (``tests/backends/test_solver_equals_gtsam.py``) at
+about 100 times the chain loop's CPU time (``docs/decisions/0006-own-levenberg-marquardt-loop.md``).
 """
 
 from __future__ import annotations
 
 import logging
-import math
 import time
 
 import gtsam
@@ -116,7 +109,6 @@ from threadpoolctl import threadpool_limits
 
 from fusion_vo.backends import chain
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.damping import damped_gauss_newton
 from fusion_vo.backends.result import FusionResult
 from fusion_vo.backends.fixes import GraphFixes
 from fusion_vo.backends.graph_adapter import absolute_factor
@@ -132,56 +124,27 @@ logger = logging.getLogger(__name__)
 
 
 # --------------------------------------------------------------------------- batch
-def levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, dims: dict[int, int],
-                        max_iterations: int = 20, relative_tolerance: float = 1e-3,
-                        model_factors: list[ModelFactors] | None = None):
-    """Levenberg–Marquardt on GTSAM's linearisation and elimination (see the module docstring).
+def gtsam_levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, groups: list[ModelFactors], values: gtsam.Values,
+                              max_iterations: int = 20, relative_tolerance: float = 1e-3):
+    """GTSAM's ``LevenbergMarquardtOptimizer`` on the batch graph, for a graph that is not a chain.
 
-    ``graph`` holds GTSAM's own factors; ``model_factors`` the sensor-model factors, evaluated and
-    linearised in groups (:class:`~fusion_vo.backends.factors.ModelFactors`).
-    Returns ``(solution, iterations, linear_graph)``; the last linearisation serves the marginals.
+    ``graph`` holds GTSAM's own factors, ``groups`` the sensor-model factors, given to GTSAM as
+    ``gtsam.CustomFactor`` s (:meth:`~fusion_vo.backends.factors.ModelFactor.custom_factor`); the iteration
+    limit and relative tolerance are the chain solver's (:func:`fusion_vo.backends.chain.levenberg_marquardt`),
+    the absolute tolerance 0. Returns ``(solution, iterations, linear_graph)``, the last the graph
+    linearised at the solution (:func:`gtsam_linearization`), for the marginals.
     """
-    groups = model_factors or []
-    pose_keys = pose_table(values)["keys"] if groups else None
-    if any(g.linear for g in groups):
-        # linear, non-robust factors (gyro, standstill) are exact as linear factors: linearised once
-        graph = gtsam.NonlinearFactorGraph(graph)
-        poses = pose_table(values, pose_keys)
-        for g in groups:
-            if g.linear:
-                for f in g.linearize(values, poses):
-                    graph.add(gtsam.LinearContainerFactor(f, values))
-        groups = [g for g in groups if not g.linear]
-
-    def total_error(v: gtsam.Values) -> float:
-        poses = pose_table(v, pose_keys) if groups else None
-        return graph.error(v) + sum(g.error(v, poses) for g in groups)
-
-    def linearize(v: gtsam.Values) -> gtsam.GaussianFactorGraph:
-        lin = graph.linearize(v)
-        poses = pose_table(v, pose_keys) if groups else None
-        for g in groups:
-            for f in g.linearize(v, poses):
-                lin.add(f)
-        return lin
-
-    def attempt(v: gtsam.Values, lin: gtsam.GaussianFactorGraph, lam: float):
-        system = lin
-        if lam > 0:
-            system = lin.clone()
-            for key, dim in dims.items():
-                system.add(gtsam.JacobianFactor(key, np.sqrt(lam) * np.eye(dim), np.zeros(dim),
-                                                gtsam.noiseModel.Unit.Create(dim)))
-        try:
-            trial = v.retract(system.optimize())
-            return trial, total_error(trial)
-        except RuntimeError as exc:  # a (nearly) singular Gauss-Newton system: damp it, as GTSAM's LM does
-            if "Indeterminate" not in str(exc):
-                raise
-            return None, math.inf
-
-    return damped_gauss_newton(values, total_error(values), linearize, attempt, max_iterations,
-                               relative_tolerance)
+    full = gtsam.NonlinearFactorGraph(graph)
+    for g in groups:
+        for f in g.factors:
+            full.add(f.custom_factor())
+    params = gtsam.LevenbergMarquardtParams()
+    params.setMaxIterations(max_iterations)
+    params.setRelativeErrorTol(relative_tolerance)
+    params.setAbsoluteErrorTol(0.0)
+    optimizer = gtsam.LevenbergMarquardtOptimizer(full, values, params)
+    solution = optimizer.optimize()
+    return solution, optimizer.iterations(), gtsam_linearization(graph, groups, solution)
 
 
 def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = None) -> FusionResult:
@@ -296,15 +259,15 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         try:  # the block-tridiagonal solver of a chain-shaped graph (see fusion_vo.backends.chain)
             problem = chain.ChainProblem(graph, groups, start_values, dims, time_rank(builder))
         except chain.NotAChain as exc:
-            logger.info("gtsam: GTSAM's elimination for the batch solution (%s)", exc)
+            logger.info("gtsam: GTSAM's LevenbergMarquardtOptimizer for the batch solution (%s)", exc)
             problem = None
         if problem is not None:
             with threadpool_limits(limits=1, user_api="blas"):  # small blocks: see fusion_vo.backends.chain
                 solution, iters, lin = chain.levenberg_marquardt(problem, start_values, gcfg.max_iterations,
                                                                  gcfg.relative_tolerance)
         else:
-            solution, iters, lin = levenberg_marquardt(graph, start_values, dims, gcfg.max_iterations,
-                                                       gcfg.relative_tolerance, groups)
+            solution, iters, lin = gtsam_levenberg_marquardt(graph, groups, start_values, gcfg.max_iterations,
+                                                             gcfg.relative_tolerance)
         poses = np.array([[p.x(), p.y(), p.theta()] for p in (solution.atPose2(X(n)) for n in range(n_nodes))])
         result.trajectories["gtsam"] = PoseData(builder.t.copy(), poses)
         result.counts["gtsam"] = counts

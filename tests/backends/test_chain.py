@@ -1,11 +1,11 @@
-"""The block-tridiagonal batch solver and iSAM2's marginalisation of old nodes agree with GTSAM's own."""
+"""The block-tridiagonal batch solver, its fallback to GTSAM's optimizer, and iSAM2's marginalisation of old nodes agree with GTSAM's own."""
 
 import dataclasses
 
 import numpy as np
 import pytest
 
-from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse
+from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse, graph
 from fusion_vo.backends import isam as G
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
@@ -80,21 +80,37 @@ def test_layout_refuses_a_long_loop_and_splits_a_chain():
         chain.layout(keys, dims, keys.astype(float), [consecutive, (keys[:1], keys[-1:])])
 
 
-def test_batch_solution_and_covariances_match_gtsam_elimination(streams, monkeypatch):
+def test_a_graph_that_is_not_a_chain_gets_gtsam_optimizer_with_the_same_solution(streams, monkeypatch):
+    """The fallback (GTSAM's ``LevenbergMarquardtOptimizer``) takes the chain loop's steps: the same solution to
+    the two loops' different first damping (GTSAM's 1e-5, about 1e-9 m here). Its covariances are GTSAM's
+    ``Marginals`` linearised at the solution, the chain's at the point before the last step, a step of a few
+    micrometres: they differ by about 6e-4 of the largest entry (the same point gives the same marginals to
+    1e-9: ``test_solver_equals_gtsam.py``)."""
     config = FusionConfig.from_dict({"graph": {"online": False}})
     ours = fuse(streams, "gtsam", config)
+    used = []
+    solve = graph.gtsam_levenberg_marquardt
 
     def refuse(*args, **kwargs):
-        raise chain.NotAChain("compare with GTSAM's elimination")
+        raise chain.NotAChain("compare with GTSAM's optimizer")
+
+    def spy(*args, **kwargs):
+        used.append(True)
+        return solve(*args, **kwargs)
 
     monkeypatch.setattr(chain, "ChainProblem", refuse)
+    monkeypatch.setattr(graph, "gtsam_levenberg_marquardt", spy)
     theirs = fuse(streams, "gtsam", config)
+    assert used
     a, b = ours.trajectories["gtsam"].xyyaw, theirs.trajectories["gtsam"].xyyaw
-    assert np.abs(a - b).max() < 1e-9
+    assert np.abs(a - b).max() < 1e-8
     ca, cb = ours.covariances["gtsam"], theirs.covariances["gtsam"]
-    np.testing.assert_allclose(ca, cb, rtol=1e-6, atol=1e-14)
+    np.testing.assert_allclose(ca, cb, rtol=0, atol=2e-3 * np.abs(cb).max())
     for key, value in theirs.calibration["gtsam"].items():
-        assert ours.calibration["gtsam"][key] == pytest.approx(value, rel=1e-9)
+        if key.endswith("_sigma"):
+            assert ours.calibration["gtsam"][key] == pytest.approx(value, rel=1e-2)
+        else:
+            assert ours.calibration["gtsam"][key] == pytest.approx(value, rel=1e-8, abs=1e-9)
 
 
 def test_isam2_marginalising_old_nodes_keeps_every_estimate(streams, monkeypatch):
