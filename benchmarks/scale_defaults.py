@@ -38,7 +38,10 @@ configuration:
 plus any ``--variant NAME:KEY=VALUE,...`` (fusion keys, ``ekf.`` / ``graph.`` prefixes for the nested ones;
 nothing stated), whose ``streams.`` keys change the streams fused instead: ``streams.yaw_sigma=F`` multiplies
 the standard deviation of every visual increment's heading by ``F`` (its covariance row and column),
-``streams.no_imu=1`` and ``streams.no_wheel=1`` leave the gyro or the wheels out. ``--configs`` limits the four
+``streams.no_imu=1`` and ``streams.no_wheel=1`` leave the gyro or the wheels out, ``streams.camera_noise=1`` gives
+the increments the camera's heading noise model (:mod:`fusion_vo.calibration.camera_noise`, what ``fusion-vo
+calibrate camera-noise`` states in ``cam0/sensor.yaml``) measured on the next seed's drive of the same profile
+(the last seed's on the first seed's), never on the drive it is applied to. ``--configs`` limits the four
 above (default all). "Nothing stated" removes ``height_sigma`` and ``radius_sigma`` from the streams.
 
 Printed per profile: the mean ATE [mm] of visual odometry and of wheel dead reckoning; the camera's heading
@@ -48,7 +51,8 @@ mean and the worst (largest) ratio over the seeds of each fused track's ATE (EKF
 to visual odometry's; how often the RTS smoother is at most the EKF and the batch at most iSAM2 (with the
 mean ratio); the mean ``|k_v - 1|`` of the smoothed EKF and the batch (the visual scale's error; the
 camera height is exact) and the mean over the seeds of the largest ``|k_v - 1|`` the EKF's filtered estimate
-reaches over the drive (its excursion, which shapes the filtered track). ATE is the RMS position error after an SE(2) alignment
+reaches over the drive (its excursion, which shapes the filtered track); the mean ATE [mm] of the EKF's and the
+batch's track against visual odometry's (how far fusion moves the track from the camera's, whichever is right). ATE is the RMS position error after an SE(2) alignment
 (:func:`fusion_vo.evaluation.metrics.align_se2`), in mm.
 
 Run (long: generation renders every frame; use ``nice``)::
@@ -66,6 +70,7 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import common
 import numpy as np
@@ -75,6 +80,8 @@ from threadpoolctl import threadpool_limits
 from fusion_vo.backends import ekf, fuse
 from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.calibration.camera_noise import CameraNoise, measure
+from fusion_vo.calibration.camera_noise_drive import heading_errors
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
@@ -186,9 +193,21 @@ def camera_heading_error(drive: Drive) -> tuple[float, float, float]:
     return float(np.sqrt(np.mean(err**2))), drift, stated
 
 
-def with_stream_options(streams: SensorStreams, options: dict) -> SensorStreams:
-    """``streams`` changed by a variant's ``streams.`` keys (``yaw_sigma``, ``no_imu``, ``no_wheel``)."""
+def camera_noise_of(drive: Drive) -> CameraNoise:
+    """The camera's heading noise model measured on ``drive`` against its ground truth
+    (:func:`fusion_vo.calibration.camera_noise.measure`, as ``fusion-vo calibrate camera-noise`` does)."""
+    errors, turns, chained = heading_errors(SimpleNamespace(groundtruth=lambda: drive.truth), drive.streams.visual)
+    if len(chained):
+        chained[0] = False
+    return measure(errors, turns, chained, RunConfig().odometry_config().frontend)
+
+
+def with_stream_options(streams: SensorStreams, options: dict, noise: CameraNoise | None = None) -> SensorStreams:
+    """``streams`` changed by a variant's ``streams.`` keys (``yaw_sigma``, ``no_imu``, ``no_wheel``,
+    ``camera_noise``: ``noise`` applied to the increments)."""
     out = dataclasses.replace(streams)
+    if options.get("camera_noise"):
+        out.visual = noise.apply(out.visual)
     factor = options.get("yaw_sigma", 1.0)
     if factor != 1.0 and out.visual is not None:
         scale = np.diag([1.0, 1.0, factor])
@@ -209,23 +228,26 @@ def unstated(streams: SensorStreams) -> SensorStreams:
     return out
 
 
-def run_configs(drive: Drive, configs: dict) -> dict:
-    """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration."""
+def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -> dict:
+    """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration
+    (``noise``: the camera noise model of ``streams.camera_noise``)."""
     out = {"vo": ate_mm(drive.truth, drive.vo_track), "heading": camera_heading_error(drive)}
     for label, (options, stated) in configs.items():
         options = dict(options)
         streams = with_stream_options(drive.streams if stated else unstated(drive.streams),
-                                      options.pop("streams", {}))
+                                      options.pop("streams", {}), noise)
         try:
             result = fuse(streams, "all", as_config(options))
         except InputError as exc:  # e.g. a walk too stiff for GTSAM's elimination: the row says so
             log(f"{drive.name} {label}: {exc}")
             out[label] = {**{k: np.nan for k in FUSED}, "kv": {"ekf_smoothed": np.nan, "gtsam": np.nan},
+                          "from_vo": {k: np.nan for k in FUSED},
                           "kv_excursion": np.nan}
             continue
         if "wheel" in result.trajectories:
             out.setdefault("wheel", ate_mm(drive.truth, result.trajectories["wheel"]))
         row = {k: ate_mm(drive.truth, result.trajectories[k]) for k in FUSED}
+        row["from_vo"] = {k: ate_mm(drive.vo_track, result.trajectories[k]) for k in FUSED}
         row["kv"] = {k: result.calibration.get(k, {}).get("visual_scale", np.nan) for k in ("ekf_smoothed", "gtsam")}
         with threadpool_limits(limits=1, user_api="blas"):
             row["kv_excursion"] = float(np.max(np.abs(filtered_visual_scale(streams, as_config(options)) - 1.0)))
@@ -252,7 +274,7 @@ def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
              f" (mean ATE); camera heading error per increment {heading[0]:.1f} µrad RMS, drift {heading[1]:.1f}"
              f" µrad/√increment, stated {heading[2]:.1f} µrad",
              "  config       " + "".join(f"{LABELS[k] + ' /VO mean worst':>22s}" for k in FUSED)
-             + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]"]
+             + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]   from VO EKF batch [mm]"]
     for label in configs:
         cells = []
         for k in FUSED:
@@ -264,8 +286,9 @@ def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
             smooth.append(f"{int(np.sum(ratio <= 1.0)):>2d}/{len(rows)} ({ratio.mean():.2f})")
         kv = [np.nanmean([abs(r[label]["kv"][k] - 1.0) * 1e4 for r in rows]) for k in ("ekf_smoothed", "gtsam")]
         excursion = np.nanmean([r[label]["kv_excursion"] * 1e4 for r in rows])
+        from_vo = [np.mean([r[label]["from_vo"][k] for r in rows]) for k in ("ekf", "gtsam")]
         lines.append(f"  {label:12s}" + "".join(f"{c:>22s}" for c in cells) + "   " + "   ".join(smooth)
-                     + f"   {kv[0]:6.2f} {kv[1]:6.2f} {excursion:6.1f}")
+                     + f"   {kv[0]:6.2f} {kv[1]:6.2f} {excursion:6.1f}   {from_vo[0]:6.3f} {from_vo[1]:6.3f}")
     return lines
 
 
@@ -322,10 +345,15 @@ def main(argv=None) -> int:
     groups += [(w, STANDARD[w][0], STANDARD[w][2], seeds[:args.wrong_seeds], wrong_summary) for w in wrong]
     for group, profile, options, group_seeds, summarise in groups:
         rows = []
-        for seed in group_seeds:
-            drive = cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+        drives = [cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+                  for seed in group_seeds]
+        calibrated = any(c[0].get("streams", {}).get("camera_noise") for c in configs.values())
+        for i, drive in enumerate(drives):
+            noise = camera_noise_of(drives[(i + 1) % len(drives)]) if calibrated and len(drives) > 1 else None
+            if calibrated and noise is None:
+                parser.error("streams.camera_noise needs at least two seeds (one calibrates the other)")
             t0 = time.time()
-            rows.append(run_configs(drive, configs))
+            rows.append(run_configs(drive, configs, noise))
             log(f"{drive.name}: fused {len(configs)} configurations in {time.time() - t0:.0f} s; VO {rows[-1]['vo']:.3f}"
                 + "".join(f", {c} EKF {rows[-1][c]['ekf']:.3f}" for c in configs))
         lines = summarise(group, rows, configs)
