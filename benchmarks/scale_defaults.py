@@ -59,6 +59,7 @@ Run (long: generation renders every frame; use ``nice``)::
 
     nice -n 10 python benchmarks/scale_defaults.py --cache DIR [--seeds 10] [--profiles square,circle]
         [--wrong height_error,hard,tilted] [--wrong-seeds 3] [--variant NAME:visual_scale_sigma=0.005,...]
+        [--configs new] [--variant NAME:streams.yaw_sigma=0.5]
 """
 
 from __future__ import annotations
