@@ -36,20 +36,30 @@ configuration:
                (the size of its calibration error, at least 0.1 mm: 0.1 % of the height, 0.6 % of the radius);
 
 plus any ``--variant NAME:KEY=VALUE,...`` (fusion keys, ``ekf.`` / ``graph.`` prefixes for the nested ones;
-nothing stated). "Nothing stated" removes ``height_sigma`` and ``radius_sigma`` from the streams.
+nothing stated), whose ``streams.`` keys change the streams fused instead: ``streams.yaw_sigma=F`` multiplies
+the standard deviation of every visual increment's heading by ``F`` (its covariance row and column),
+``streams.no_imu=1`` and ``streams.no_wheel=1`` leave the gyro or the wheels out, ``streams.camera_noise=1`` gives
+the increments the camera's heading noise model (:mod:`fusion_vo.calibration.camera_noise`, what ``fusion-vo
+calibrate camera-noise`` states in ``cam0/sensor.yaml``) measured on the next seed's drive of the same profile
+(the last seed's on the first seed's), never on the drive it is applied to. ``--configs`` limits the four
+above (default all). "Nothing stated" removes ``height_sigma`` and ``radius_sigma`` from the streams.
 
-Printed per profile: the mean ATE [mm] of visual odometry and of wheel dead reckoning; per configuration the
+Printed per profile: the mean ATE [mm] of visual odometry and of wheel dead reckoning; the camera's heading
+error per increment against the ground truth (RMS, and its growth over 100 increments per √increment, in µrad)
+beside the standard deviation its covariance states; per configuration the
 mean and the worst (largest) ratio over the seeds of each fused track's ATE (EKF, RTS, GTSAM batch, iSAM2)
 to visual odometry's; how often the RTS smoother is at most the EKF and the batch at most iSAM2 (with the
 mean ratio); the mean ``|k_v - 1|`` of the smoothed EKF and the batch (the visual scale's error; the
 camera height is exact) and the mean over the seeds of the largest ``|k_v - 1|`` the EKF's filtered estimate
-reaches over the drive (its excursion, which shapes the filtered track). ATE is the RMS position error after an SE(2) alignment
+reaches over the drive (its excursion, which shapes the filtered track); the mean ATE [mm] of the EKF's and the
+batch's track against visual odometry's (how far fusion moves the track from the camera's, whichever is right). ATE is the RMS position error after an SE(2) alignment
 (:func:`fusion_vo.evaluation.metrics.align_se2`), in mm.
 
 Run (long: generation renders every frame; use ``nice``)::
 
     nice -n 10 python benchmarks/scale_defaults.py --cache DIR [--seeds 10] [--profiles square,circle]
         [--wrong height_error,hard,tilted] [--wrong-seeds 3] [--variant NAME:visual_scale_sigma=0.005,...]
+        [--configs new] [--variant NAME:streams.yaw_sigma=0.5]
 """
 
 from __future__ import annotations
@@ -61,6 +71,7 @@ import shutil
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import common
 import numpy as np
@@ -70,12 +81,13 @@ from threadpoolctl import threadpool_limits
 from fusion_vo.backends import ekf, fuse
 from fusion_vo.backends.batch import as_config, streams_from_recording, with_recorded_noise
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.calibration.camera_noise import CameraNoise, measure
+from fusion_vo.calibration.camera_noise_drive import heading_errors
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.sensors import registry
 from fusion_vo.simulation.generate import simulate
 from fusion_vo.simulation.standard import STANDARD
 
@@ -156,16 +168,55 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
                       iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
                       frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
     meas = ekf.interval_measurements(iv, config)
-    for sensor in registry.sensors():
-        blocks = sensor.ekf_start(f, meas) if sensor.ekf_start is not None else None
-        if blocks:
-            f.update(blocks)
+    blocks = meas["readings"].start(f)
+    if blocks:
+        f.update(blocks)
     out = np.empty(iv.n_steps + 1)
     out[0] = f.x[ekf.KV]
     for k in range(iv.n_steps):
         f.predict(iv.dt[k], ekf.frame_error_cov(meas, k))
         f.update(ekf.step_blocks(f, meas, k))
         out[k + 1] = f.x[ekf.KV]
+    return out
+
+
+def camera_heading_error(drive: Drive) -> tuple[float, float, float]:
+    """The camera's heading error per visual increment against the ground truth [rad]: its RMS, its drift over
+    100 increments divided by √100 (equal to the RMS for independent errors, larger when they persist), and
+    the mean standard deviation the increments' covariances state."""
+    yaw = np.unwrap(drive.truth.xyyaw[:, 2])
+    ok = [v for v in drive.streams.visual if v.ok]
+    err = np.array([v.delta[2] - (np.interp(v.t1, drive.truth.t, yaw) - np.interp(v.t0, drive.truth.t, yaw))
+                    for v in ok])
+    walk = np.cumsum(err)
+    drift = float(np.std(walk[100:] - walk[:-100]) / 10.0) if len(err) > 100 else np.nan
+    stated = float(np.mean([np.sqrt(v.covariance[2, 2]) for v in ok]))
+    return float(np.sqrt(np.mean(err**2))), drift, stated
+
+
+def camera_noise_of(drive: Drive) -> CameraNoise:
+    """The camera's heading noise model measured on ``drive`` against its ground truth
+    (:func:`fusion_vo.calibration.camera_noise.measure`, as ``fusion-vo calibrate camera-noise`` does)."""
+    errors, turns, chained = heading_errors(SimpleNamespace(groundtruth=lambda: drive.truth), drive.streams.visual)
+    if len(chained):
+        chained[0] = False
+    return measure(errors, turns, chained, RunConfig().odometry_config().frontend)
+
+
+def with_stream_options(streams: SensorStreams, options: dict, noise: CameraNoise | None = None) -> SensorStreams:
+    """``streams`` changed by a variant's ``streams.`` keys (``yaw_sigma``, ``no_imu``, ``no_wheel``,
+    ``camera_noise``: ``noise`` applied to the increments)."""
+    out = dataclasses.replace(streams)
+    if options.get("camera_noise"):
+        out.visual = noise.apply(out.visual)
+    factor = options.get("yaw_sigma", 1.0)
+    if factor != 1.0 and out.visual is not None:
+        scale = np.diag([1.0, 1.0, factor])
+        out.visual = [dataclasses.replace(v, covariance=scale @ v.covariance @ scale) for v in out.visual]
+    if options.get("no_imu"):
+        out.imu = None
+    if options.get("no_wheel"):
+        out.wheel = None
     return out
 
 
@@ -178,29 +229,36 @@ def unstated(streams: SensorStreams) -> SensorStreams:
     return out
 
 
-def run_configs(drive: Drive, configs: dict) -> dict:
-    """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration."""
-    out = {"vo": ate_mm(drive.truth, drive.vo_track)}
+def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -> dict:
+    """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration
+    (``noise``: the camera noise model of ``streams.camera_noise``)."""
+    out = {"vo": ate_mm(drive.truth, drive.vo_track), "heading": camera_heading_error(drive)}
     for label, (options, stated) in configs.items():
+        options = dict(options)
+        streams = with_stream_options(drive.streams if stated else unstated(drive.streams),
+                                      options.pop("streams", {}), noise)
         try:
-            result = fuse(drive.streams if stated else unstated(drive.streams), "all", as_config(options))
+            result = fuse(streams, "all", as_config(options))
         except InputError as exc:  # e.g. a walk too stiff for GTSAM's elimination: the row says so
             log(f"{drive.name} {label}: {exc}")
             out[label] = {**{k: np.nan for k in FUSED}, "kv": {"ekf_smoothed": np.nan, "gtsam": np.nan},
+                          "from_vo": {k: np.nan for k in FUSED},
                           "kv_excursion": np.nan}
             continue
-        out.setdefault("wheel", ate_mm(drive.truth, result.trajectories["wheel"]))
+        if "wheel" in result.trajectories:
+            out.setdefault("wheel", ate_mm(drive.truth, result.trajectories["wheel"]))
         row = {k: ate_mm(drive.truth, result.trajectories[k]) for k in FUSED}
+        row["from_vo"] = {k: ate_mm(drive.vo_track, result.trajectories[k]) for k in FUSED}
         row["kv"] = {k: result.calibration.get(k, {}).get("visual_scale", np.nan) for k in ("ekf_smoothed", "gtsam")}
         with threadpool_limits(limits=1, user_api="blas"):
-            row["kv_excursion"] = float(np.max(np.abs(filtered_visual_scale(
-                drive.streams if stated else unstated(drive.streams), as_config(options)) - 1.0)))
+            row["kv_excursion"] = float(np.max(np.abs(filtered_visual_scale(streams, as_config(options)) - 1.0)))
         out[label] = row
     return out
 
 
 def variant(text: str) -> tuple[str, tuple[dict, bool]]:
-    """``NAME:KEY=VALUE,...`` -> (name, (fusion options, False)); ``ekf.KEY`` and ``graph.KEY`` nest."""
+    """``NAME:KEY=VALUE,...`` -> (name, (fusion options, False)); ``ekf.KEY``, ``graph.KEY`` and ``streams.KEY``
+    nest (the last are taken out before fusing, :func:`with_stream_options`)."""
     name, _, items = text.partition(":")
     options: dict = {}
     for item in filter(None, items.split(",")):
@@ -212,10 +270,12 @@ def variant(text: str) -> tuple[str, tuple[dict, bool]]:
 
 def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
     vo = np.array([r["vo"] for r in rows])
-    lines = [f"{name} ({len(rows)} seeds): VO {vo.mean():.3f} mm, wheels {np.mean([r['wheel'] for r in rows]):.2f} mm"
-             f" (mean ATE)",
+    heading = np.mean([r["heading"] for r in rows], axis=0) * 1e6
+    lines = [f"{name} ({len(rows)} seeds): VO {vo.mean():.3f} mm, wheels {np.nanmean([r.get('wheel', np.nan) for r in rows]):.2f} mm"
+             f" (mean ATE); camera heading error per increment {heading[0]:.1f} µrad RMS, drift {heading[1]:.1f}"
+             f" µrad/√increment, stated {heading[2]:.1f} µrad",
              "  config       " + "".join(f"{LABELS[k] + ' /VO mean worst':>22s}" for k in FUSED)
-             + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]"]
+             + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]   from VO EKF batch [mm]"]
     for label in configs:
         cells = []
         for k in FUSED:
@@ -227,15 +287,16 @@ def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
             smooth.append(f"{int(np.sum(ratio <= 1.0)):>2d}/{len(rows)} ({ratio.mean():.2f})")
         kv = [np.nanmean([abs(r[label]["kv"][k] - 1.0) * 1e4 for r in rows]) for k in ("ekf_smoothed", "gtsam")]
         excursion = np.nanmean([r[label]["kv_excursion"] * 1e4 for r in rows])
+        from_vo = [np.mean([r[label]["from_vo"][k] for r in rows]) for k in ("ekf", "gtsam")]
         lines.append(f"  {label:12s}" + "".join(f"{c:>22s}" for c in cells) + "   " + "   ".join(smooth)
-                     + f"   {kv[0]:6.2f} {kv[1]:6.2f} {excursion:6.1f}")
+                     + f"   {kv[0]:6.2f} {kv[1]:6.2f} {excursion:6.1f}   {from_vo[0]:6.3f} {from_vo[1]:6.3f}")
     return lines
 
 
 def wrong_summary(name: str, rows: list[dict], configs) -> list[str]:
     """Per configuration: mean ATE [mm] of each fused track, and the mean and worst ratio to the old defaults'."""
     lines = [f"{name} ({len(rows)} seeds, camera not right): VO {np.mean([r['vo'] for r in rows]):.3f} mm, wheels "
-             f"{np.mean([r['wheel'] for r in rows]):.2f} mm (mean ATE)",
+             f"{np.nanmean([r.get('wheel', np.nan) for r in rows]):.2f} mm (mean ATE)",
              "  config       " + "".join(f"{LABELS[k] + ' mm /old mean worst':>28s}" for k in FUSED)]
     for label in configs:
         cells = []
@@ -258,6 +319,8 @@ def main(argv=None) -> int:
     parser.add_argument("--wrong-seeds", type=int, default=3, help="seeds per --wrong recording (default 3)")
     parser.add_argument("--variant", action="append", default=[], type=variant, metavar="NAME:KEY=VALUE,...",
                         help="another configuration to fuse with (nothing stated)")
+    parser.add_argument("--configs", default=",".join(CONFIGS),
+                        help="the built-in configurations to fuse with (default: %(default)s)")
     parser.add_argument("--keep-recordings", action="store_true", help="keep the rendered recordings in --cache")
     args = parser.parse_args(argv)
     for p in filter(None, args.profiles.split(",")):
@@ -267,8 +330,15 @@ def main(argv=None) -> int:
     for w in wrong:
         if w not in STANDARD:
             parser.error(f"unknown standard recording {w!r}")
-    configs = dict(CONFIGS)
+    unknown = [c for c in filter(None, args.configs.split(",")) if c not in CONFIGS]
+    if unknown:
+        parser.error(f"unknown configuration {unknown[0]!r} (choose from {', '.join(CONFIGS)})")
+    configs = {c: CONFIGS[c] for c in filter(None, args.configs.split(","))}
+    if wrong and "old" not in configs:
+        parser.error("--wrong compares with the old defaults: keep 'old' in --configs")
     configs.update(dict(args.variant))
+    if not configs:
+        parser.error("no configuration to fuse with")
     args.cache.mkdir(parents=True, exist_ok=True)
     seeds = [args.first_seed + i for i in range(args.seeds)]
     report: list[str] = []
@@ -276,10 +346,15 @@ def main(argv=None) -> int:
     groups += [(w, STANDARD[w][0], STANDARD[w][2], seeds[:args.wrong_seeds], wrong_summary) for w in wrong]
     for group, profile, options, group_seeds, summarise in groups:
         rows = []
-        for seed in group_seeds:
-            drive = cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+        drives = [cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+                  for seed in group_seeds]
+        calibrated = any(c[0].get("streams", {}).get("camera_noise") for c in configs.values())
+        for i, drive in enumerate(drives):
+            noise = camera_noise_of(drives[(i + 1) % len(drives)]) if calibrated and len(drives) > 1 else None
+            if calibrated and noise is None:
+                parser.error("streams.camera_noise needs at least two seeds (one calibrates the other)")
             t0 = time.time()
-            rows.append(run_configs(drive, configs))
+            rows.append(run_configs(drive, configs, noise))
             log(f"{drive.name}: fused {len(configs)} configurations in {time.time() - t0:.0f} s; VO {rows[-1]['vo']:.3f}"
                 + "".join(f", {c} EKF {rows[-1][c]['ekf']:.3f}" for c in configs))
         lines = summarise(group, rows, configs)
