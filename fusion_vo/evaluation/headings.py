@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.io import write_atomic
+from fusion_vo.evaluation.io import read_rows, write_atomic
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.imu import ImuNoise, ahrs_heading, cumulative_angle, gyro_yaw
 
@@ -85,18 +85,8 @@ def read_headings(path: str | Path) -> Headings:
         time or gyro heading, times that do not increase.
     """
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file: {exc}", path) from None
-    if not lines or lines[0].strip() != HEADER:
-        raise InputError(f"expected the header '{HEADER}'", path, 1)
     t, gyro, ahrs = [], [], []
-    for number, text in enumerate(lines[1:], start=2):
-        if not text.strip():
-            continue
+    for number, text in read_rows(path, HEADER):
         fields = [f.strip() for f in text.split(",")]
         if len(fields) != 3:
             raise InputError(f"expected 3 fields ({HEADER}), got {len(fields)}", path, number)

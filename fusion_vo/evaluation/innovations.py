@@ -36,7 +36,7 @@ import numpy as np
 
 from fusion_vo.backends.result import INNOVATION_STATUSES, Innovations
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.io import write_atomic
+from fusion_vo.evaluation.io import read_rows, write_atomic
 
 #: file name in a run folder
 INNOVATIONS_CSV = "innovations.csv"
@@ -89,18 +89,8 @@ def read_innovations(path: str | Path) -> dict[str, Innovations]:
         that is not a finite number (NIS at least 0), a dof that is not a positive integer, an unknown status.
     """
     path = Path(path)
-    try:
-        lines = path.read_text(encoding="utf-8").splitlines()
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file: {exc}", path) from None
-    if not lines or lines[0].strip() != HEADER:
-        raise InputError(f"expected the header '{HEADER}'", path, 1)
     rows: dict[str, list] = {}
-    for number, text in enumerate(lines[1:], start=2):
-        if not text.strip():
-            continue
+    for number, text in read_rows(path, HEADER):
         fields = text.split(",")
         if len(fields) != 6:
             raise InputError(f"expected 6 fields ({HEADER}), got {len(fields)}", path, number)

@@ -97,6 +97,21 @@ def _read_lines(path: Path) -> list[str]:
         raise InputError(f"cannot read file: {exc}", path) from None
 
 
+def read_rows(path: str | Path, header: str) -> list[tuple[int, str]]:
+    """The non-blank rows of a CSV file a run wrote, after its first line, with their line numbers.
+
+    Raises
+    ------
+    InputError
+        Naming the file when it cannot be read, and line 1 when that line is not ``header``.
+    """
+    path = Path(path)
+    lines = _read_lines(path)
+    if not lines or lines[0].strip() != header:
+        raise InputError(f"expected the header '{header}'", path, 1)
+    return [(number, text) for number, text in enumerate(lines[1:], start=2) if text.strip()]
+
+
 def _increasing_rows(t: np.ndarray, lines: list[int], path: Path) -> np.ndarray:
     """Indices of the rows to keep: a repeated timestamp keeps its last row; going back is an error."""
     step = np.diff(t)
