@@ -4,7 +4,8 @@ Camera and wheels measure only the ratio of their distance scales (the visual sc
 height, and the wheels' ``k_r``, their common radius); the priors of the two decide who sets the common
 scale (``docs/decisions/0036-visual-scale-model.md``). This benchmark measures what that choice does when
 nothing states how well the camera height and the wheel radius are known, on drives where visual odometry
-is right.
+is right, and what the camera's heading floor (``odometry.min_sigma_yaw``,
+``docs/decisions/0037-camera-heading-floor-stays.md``) does to the weight the gyro takes from the camera there.
 
 Drives
 ------
@@ -22,20 +23,25 @@ a featureless stretch; a tilted camera with a vibrating height and a range finde
 its ATE under the old defaults (how much worse the new defaults make a run whose camera is wrong).
 
 Each drive is generated once and its visual odometry run once (the default configuration of ``fusion-vo
-run``: KLT frontend); the sensor streams, the visual track and the ground truth are cached in ``--cache``
-(one pickle per drive; the rendered frames are deleted unless ``--keep-recordings``), so a second run only
-fuses. Then the same streams are fused (:func:`fusion_vo.backends.fuse`, every backend) under each
-configuration:
+run``, KLT frontend, with the covariance floors off: each increment keeps the frontend's own covariance); the
+sensor streams, the visual track and the ground truth are cached in ``--cache`` (one pickle per drive; the
+rendered frames are deleted unless ``--keep-recordings``), so a second run only fuses. Then the same streams
+are fused (:func:`fusion_vo.backends.fuse`, every backend) under each configuration, the configuration's
+floors ``odometry.min_sigma_xy`` and ``odometry.min_sigma_yaw`` applied to every increment first with
+:func:`fusion_vo.geometry.ground.floor_covariance`, the function the ground geometry ends with (so the
+streams are those ``fusion-vo run`` would fuse with those floors):
 
-``old``        the previous defaults (visual scale prior 5 %, wheels 1 %, walks 1e-5 and 1e-4 /√s),
-               nothing stated in the sensors' files;
-``new``        the library's defaults (:class:`fusion_vo.backends.FusionConfig`), nothing stated;
+``old``        the defaults before decision 0036 (visual scale prior 5 %, wheels 1 %, walks 1e-5 and
+               1e-4 /√s; heading floor 20 µrad), nothing stated in the sensors' files;
+``new``        the library's defaults (:class:`fusion_vo.backends.FusionConfig`, :class:`fusion_vo.config.odometry.OdometryConfig`),
+               nothing stated;
 ``vs 0.002``   the old defaults with ``fusion.visual_scale_sigma: 0.002`` (the camera height stated as known
                to 0.2 %), nothing else stated;
 ``yaml``       the library's defaults with ``height_sigma`` and ``radius_sigma`` as the simulator writes them
                (the size of its calibration error, at least 0.1 mm: 0.1 % of the height, 0.6 % of the radius);
 
-plus any ``--variant NAME:KEY=VALUE,...`` (fusion keys, ``ekf.`` / ``graph.`` prefixes for the nested ones;
+plus any ``--variant NAME:KEY=VALUE,...`` (fusion keys, ``ekf.`` / ``graph.`` prefixes for the nested ones,
+``odometry.min_sigma_xy`` and ``odometry.min_sigma_yaw`` for the floors;
 nothing stated), whose ``streams.`` keys change the streams fused instead: ``streams.yaw_sigma=F`` multiplies
 the standard deviation of every visual increment's heading by ``F`` (its covariance row and column),
 ``streams.no_imu=1`` and ``streams.no_wheel=1`` leave the gyro or the wheels out, ``streams.camera_noise=1`` gives
@@ -46,7 +52,9 @@ above (default all). "Nothing stated" removes ``height_sigma`` and ``radius_sigm
 
 Printed per profile: the mean ATE [mm] of visual odometry and of wheel dead reckoning; the camera's heading
 error per increment against the ground truth (RMS, and its growth over 100 increments per √increment, in µrad)
-beside the standard deviation its covariance states; per configuration the
+beside the standard deviation its covariance states, and its error along the turns (the sum over the turning
+increments of the error signed by the turn's direction, and that per radian turned: :func:`camera_heading_error`);
+per configuration the
 mean and the worst (largest) ratio over the seeds of each fused track's ATE (EKF, RTS, GTSAM batch, iSAM2)
 to visual odometry's; how often the RTS smoother is at most the EKF and the batch at most iSAM2 (with the
 mean ratio); the mean ``|k_v - 1|`` of the smoothed EKF and the batch (the visual scale's error; the
@@ -86,6 +94,7 @@ from fusion_vo.calibration.camera_noise_drive import heading_errors
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
+from fusion_vo.geometry.ground import floor_covariance
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
 from fusion_vo.simulation.generate import simulate
@@ -96,14 +105,17 @@ PROFILES = {"square": {}, "circle": {}, "random": {"duration": 60.0}, "umbmark_c
             "straight": {}}
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 LABELS = {"ekf": "EKF", "ekf_smoothed": "RTS", "gtsam": "batch", "gtsam_online": "iSAM2"}
-#: the defaults before this benchmark's decision (all four keys, so that they hold whatever the library's are)
+#: the defaults before decision 0036 (every key, so that they hold whatever the library's are)
 OLD = {"visual_scale_sigma": 0.05, "wheel_scale_sigma": 0.01,
-       "ekf": {"visual_scale_random_walk": 1e-5, "scale_random_walk": 1e-4}}
-#: name -> (fusion options, keep the sensors' stated height_sigma / radius_sigma)
-CONFIGS = {"old": (OLD, False), "new": ({}, False), "vs 0.002": ({**OLD, "visual_scale_sigma": 0.002}, False),
-           "yaml": ({}, True)}
-#: bump when the cached content changes
-CACHE_VERSION = 1
+       "ekf": {"visual_scale_random_walk": 1e-5, "scale_random_walk": 1e-4},
+       "odometry": {"min_sigma_xy": 2e-5, "min_sigma_yaw": 2e-5}}
+#: name -> (options, keep the sensors' stated height_sigma / radius_sigma)
+CONFIGS = {"old": (OLD, False), "new": ({}, False),
+           "vs 0.002": ({**OLD, "visual_scale_sigma": 0.002}, False), "yaml": ({}, True)}
+#: the cached visual odometry: the default configuration without the covariance floors
+RAW = {"odometry": {"min_sigma_xy": 0.0, "min_sigma_yaw": 0.0}}
+#: bump when the cached content changes (2: increments without the floors)
+CACHE_VERSION = 2
 
 
 @dataclasses.dataclass
@@ -137,7 +149,7 @@ def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict,
     if not (seq / "simulation.yaml").exists():
         simulate(seq, profile=profile, seed=seed, **options)
     rec = Recording(seq)
-    vo = run_visual_odometry(rec, RunConfig().odometry_config())
+    vo = run_visual_odometry(rec, RunConfig.model_validate(RAW).odometry_config())
     streams = streams_from_recording(rec, vo)
     drive = Drive(name, streams, vo.track, rec.groundtruth())
     tmp = path.with_suffix(".tmp")
@@ -180,18 +192,40 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
     return out
 
 
-def camera_heading_error(drive: Drive) -> tuple[float, float, float]:
+def floored(streams: SensorStreams, floors: dict | None = None) -> SensorStreams:
+    """``streams`` with the covariance floors of the odometry configuration (the library's defaults, with
+    ``floors``' keys ``min_sigma_xy`` / ``min_sigma_yaw`` where given) applied to every visual increment."""
+    odometry = RunConfig().odometry_config()
+    xy = float((floors or {}).get("min_sigma_xy", odometry.min_sigma_xy))
+    yaw = float((floors or {}).get("min_sigma_yaw", odometry.min_sigma_yaw))
+    if streams.visual is None:
+        return streams
+    return dataclasses.replace(streams, visual=[dataclasses.replace(v, covariance=floor_covariance(v.covariance, xy, yaw))
+                                                for v in streams.visual])
+
+
+#: an increment turns when its true heading change exceeds this [rad] (20 mrad/s at 20 Hz)
+TURNING = 1e-3
+
+
+def camera_heading_error(drive: Drive) -> tuple[float, float, float, float, float]:
     """The camera's heading error per visual increment against the ground truth [rad]: its RMS, its drift over
-    100 increments divided by √100 (equal to the RMS for independent errors, larger when they persist), and
-    the mean standard deviation the increments' covariances state."""
+    100 increments divided by √100 (equal to the RMS for independent errors, larger when they persist), the
+    mean standard deviation the increments' covariances state at the library's default floors, and over the
+    turning increments (true ``|Δψ| >`` :data:`TURNING`) the error along the turn, ``Σ e_k sign(Δψ_k)``
+    (negative: the camera turns less than the robot), and the same divided by ``Σ |Δψ_k|`` (a rotation scale
+    error; a zero-mean error gives about ``RMS √n / Σ |Δψ|``)."""
     yaw = np.unwrap(drive.truth.xyyaw[:, 2])
-    ok = [v for v in drive.streams.visual if v.ok]
-    err = np.array([v.delta[2] - (np.interp(v.t1, drive.truth.t, yaw) - np.interp(v.t0, drive.truth.t, yaw))
-                    for v in ok])
+    ok = [v for v in floored(drive.streams).visual if v.ok]
+    true = np.array([np.interp(v.t1, drive.truth.t, yaw) - np.interp(v.t0, drive.truth.t, yaw) for v in ok])
+    err = np.array([v.delta[2] for v in ok]) - true
     walk = np.cumsum(err)
     drift = float(np.std(walk[100:] - walk[:-100]) / 10.0) if len(err) > 100 else np.nan
     stated = float(np.mean([np.sqrt(v.covariance[2, 2]) for v in ok]))
-    return float(np.sqrt(np.mean(err**2))), drift, stated
+    turning = np.abs(true) > TURNING
+    along = float(np.sum(err[turning] * np.sign(true[turning])))
+    turned = float(np.sum(np.abs(true[turning])))
+    return float(np.sqrt(np.mean(err**2))), drift, stated, along, along / turned if turned > 0 else np.nan
 
 
 def camera_noise_of(drive: Drive) -> CameraNoise:
@@ -235,8 +269,8 @@ def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -
     out = {"vo": ate_mm(drive.truth, drive.vo_track), "heading": camera_heading_error(drive)}
     for label, (options, stated) in configs.items():
         options = dict(options)
-        streams = with_stream_options(drive.streams if stated else unstated(drive.streams),
-                                      options.pop("streams", {}), noise)
+        streams = floored(drive.streams, options.pop("odometry", None))
+        streams = with_stream_options(streams if stated else unstated(streams), options.pop("streams", {}), noise)
         try:
             result = fuse(streams, "all", as_config(options))
         except InputError as exc:  # e.g. a walk too stiff for GTSAM's elimination: the row says so
@@ -257,8 +291,8 @@ def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -
 
 
 def variant(text: str) -> tuple[str, tuple[dict, bool]]:
-    """``NAME:KEY=VALUE,...`` -> (name, (fusion options, False)); ``ekf.KEY``, ``graph.KEY`` and ``streams.KEY``
-    nest (the last are taken out before fusing, :func:`with_stream_options`)."""
+    """``NAME:KEY=VALUE,...`` -> (name, (options, False)); ``ekf.KEY``, ``graph.KEY``, ``odometry.KEY`` and
+    ``streams.KEY`` nest (the last two are taken out before fusing: :func:`floored`, :func:`with_stream_options`)."""
     name, _, items = text.partition(":")
     options: dict = {}
     for item in filter(None, items.split(",")):
@@ -273,7 +307,8 @@ def clean_summary(name: str, rows: list[dict], configs) -> list[str]:
     heading = np.mean([r["heading"] for r in rows], axis=0) * 1e6
     lines = [f"{name} ({len(rows)} seeds): VO {vo.mean():.3f} mm, wheels {np.nanmean([r.get('wheel', np.nan) for r in rows]):.2f} mm"
              f" (mean ATE); camera heading error per increment {heading[0]:.1f} µrad RMS, drift {heading[1]:.1f}"
-             f" µrad/√increment, stated {heading[2]:.1f} µrad",
+             f" µrad/√increment, stated {heading[2]:.1f} µrad; along the turns {heading[3]:+.0f} µrad"
+             f" ({heading[4]:+.1f} µrad/rad turned)",
              "  config       " + "".join(f"{LABELS[k] + ' /VO mean worst':>22s}" for k in FUSED)
              + "   RTS<=EKF      batch<=iSAM2   |kv-1| RTS batch, EKF worst [1e-4]   from VO EKF batch [mm]"]
     for label in configs:

@@ -142,6 +142,20 @@ class GroundRectifier:
         return self.camera.denormalize(r[:, :2] / r[:, 2:3])
 
 
+def floor_covariance(P: np.ndarray, min_sigma_xy: float, min_sigma_yaw: float) -> np.ndarray:
+    """A body increment's covariance with its diagonal raised to the floors (a copy; off-diagonal terms kept).
+
+    ``P[0, 0] = max(P[0, 0], σ_xy²)``, ``P[1, 1] = max(P[1, 1], σ_xy²)``, ``P[2, 2] = max(P[2, 2], σ_yaw²)``: the
+    floors stand for what the frontend's residuals cannot show (floor relief, rolling, rendering), so no
+    increment claims less (``docs/decisions/0037-camera-heading-floor-stays.md``).
+    """
+    out = np.array(P, dtype=np.float64, copy=True)
+    out[0, 0] = max(out[0, 0], min_sigma_xy**2)
+    out[1, 1] = max(out[1, 1], min_sigma_xy**2)
+    out[2, 2] = max(out[2, 2], min_sigma_yaw**2)
+    return out
+
+
 @dataclass
 class GroundGeometry:
     """Converts frontend similarities (in rectified pixels) into body-frame SE(2) increments.
@@ -156,7 +170,7 @@ class GroundGeometry:
     min_sigma_xy : float
         Floor on the standard deviation of ``dx, dy`` [m] (unmodelled effects: floor relief, rolling).
     min_sigma_yaw : float
-        Floor on the standard deviation of ``dyaw`` [rad].
+        Floor on the standard deviation of ``dyaw`` [rad] (:func:`floor_covariance`).
     """
 
     camera: CameraModel
@@ -219,11 +233,7 @@ class GroundGeometry:
         if height_sigma > 0:
             j_h = -Rm @ (g - self._qc) / h  # d = q_c - R(-φ) g with g - q_c proportional to h
             P[:2, :2] += height_sigma**2 * np.outer(j_h, j_h)
-        P = 0.5 * (P + P.T)
-        P[0, 0] = max(P[0, 0], self.min_sigma_xy**2)
-        P[1, 1] = max(P[1, 1], self.min_sigma_xy**2)
-        P[2, 2] = max(P[2, 2], self.min_sigma_yaw**2)
-        return delta, P
+        return delta, floor_covariance(0.5 * (P + P.T), self.min_sigma_xy, self.min_sigma_yaw)
 
     def similarity_from_body(self, delta, height_ratio: float = 1.0) -> np.ndarray:
         """The rectified-pixel similarity that a body increment produces (inverse of :meth:`body_increment`).

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from frontends.base import similarity_params
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.camera import R_BS_DOWN_FORWARD, CameraModel
-from fusion_vo.geometry.ground import GroundGeometry, GroundRectifier
+from fusion_vo.geometry.ground import GroundGeometry, GroundRectifier, floor_covariance
 
 
 def rot_xyz(rx, ry, rz):
@@ -133,6 +133,23 @@ def test_covariance_matches_monte_carlo():
     outs = np.array([geo.body_increment(s)[0] for s in samples])
     emp = np.cov(outs.T)
     assert np.allclose(np.sqrt(np.diag(emp)), np.sqrt(np.diag(P)), rtol=0.08)
+
+
+def test_floors_applied_afterwards_equal_the_floored_increment():
+    """The floors are the last step of an increment's covariance: a covariance computed without them and floored
+    afterwards (what benchmarks/scale_defaults.py does with cached increments) is the floored one, the diagonal
+    raised only where it was below the floor and the correlations kept."""
+    cam = make_camera(0.25, 0.02, 0.1, 0.05, -0.03, [0, 0, 0, 0])
+    p = np.array([30.0, -60.0, 0.03, 0.001])
+    for C in (np.diag([1e-4, 1e-4, 1e-9, 1e-9]), np.diag([1e-1, 1e-1, 1e-7, 1e-7])):
+        _, raw = GroundGeometry(cam, min_sigma_xy=0, min_sigma_yaw=0).body_increment(p, C)
+        _, floored = GroundGeometry(cam, min_sigma_xy=2e-5, min_sigma_yaw=3e-4).body_increment(p, C)
+        again = floor_covariance(raw, 2e-5, 3e-4)
+        assert np.array_equal(again, floored)
+        raised = np.diag(raw) < np.array([2e-5, 2e-5, 3e-4]) ** 2
+        assert np.array_equal(np.diag(again) != np.diag(raw), raised)
+        assert np.array_equal(again[~np.eye(3, dtype=bool)], raw[~np.eye(3, dtype=bool)])
+    assert not np.shares_memory(floor_covariance(raw, 0, 0), raw)
 
 
 def test_height_uncertainty_enters_the_translation_covariance():
