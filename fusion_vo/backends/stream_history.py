@@ -118,23 +118,48 @@ class HistoryMixin:
             if cut > 0:
                 del buf[:cut]
 
-    def _apply_gps(self, fix: GpsFix) -> None:
+    def _align_world(self, fix: GpsFix, current=None):
+        """A fix while the heading of ENU is unknown: kept, and the online poses so far (``current``: the node being
+        processed, when it is not recorded yet) fitted to the fixes kept (:func:`align_to_fixes`). Returns the fit and
+        the standard deviations of the first pose's prior it gives (:func:`prior_from_alignment`), or None while it
+        does not fit (the fix counted as missing: kept for the alignment)."""
+        self._gps_seen.append(fix)
+        poses = np.array(self._poses + ([] if current is None else [current]))
+        times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
+        seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
+            [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
+            np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
+            np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
+        fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
+        if fit is None:
+            self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+            return None
+        sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
+        _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+        return fit, prior_sigma
 
+    def _to_enu(self, fit, t: float) -> None:
+        """The recorded poses and covariances re-expressed in ENU by the alignment ``fit`` (the start-frame ones kept
+        for a rewind across the switch), with a note."""
+        c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
+        rot = np.eye(3)
+        rot[:2, :2] = [[c, -s_], [s_, c]]
+        self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
+        self._poses = [p for p in fit.apply(np.array(self._poses))]
+        self._covs = [rot @ cv @ rot.T for cv in self._covs]
+        self._frame = "enu"
+        self._gps_reacquire = Reacquire(self.config.gps_reacquire)
+        self._notes.append(f"gps: world frame re-expressed in ENU at t={t:.2f} (first heading "
+                           f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
+
+    def _apply_gps(self, fix: GpsFix) -> None:
+        """EKF: a fix at the node just updated (module docstring of :mod:`~fusion_vo.backends.streaming`)."""
         ekf, model = self._ekf, self._gps_model
         if self._frame == "start":
-            self._gps_seen.append(fix)
-            poses = np.array(self._poses + [ekf.x[:3]])
-            times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
-            seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
-                [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
-                np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
-                np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
-            fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
-            if fit is None:
-                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+            aligned = self._align_world(fix, ekf.x[:3])
+            if aligned is None:
                 return
-            sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
-            _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+            fit, prior_sigma = aligned
             c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
             T = np.eye(ekf.kf.P.shape[0])
             T[:2, :2] = [[c, -s_], [s_, c]]
@@ -142,17 +167,9 @@ class HistoryMixin:
             ekf.kf.P = T @ ekf.kf.P @ T.T
             ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
-            rot = np.eye(3)
-            rot[:2, :2] = T[:2, :2]
-            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
-            self._poses = [p for p in fit.apply(np.array(self._poses))]
-            self._covs = [rot @ cv @ rot.T for cv in self._covs]
-            self._frame = "enu"
+            self._to_enu(fit, fix.t)
             if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
                 self._heading_offset -= fit.yaw
-            self._gps_reacquire = Reacquire(self.config.gps_reacquire)
-            self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
-                               f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
             accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)

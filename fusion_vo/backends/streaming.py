@@ -21,17 +21,23 @@ and handed to the EKF (``backend="ekf"``) or to iSAM2 (``backend="gtsam"``). A v
 ``t0`` is not the previous node (it spans frames the stream has already passed) cannot be applied
 causally and is counted as late.
 
-GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the pose there through
-:class:`~fusion_vo.sensors.gps.GpsModel` (gate, robust weight). Until the robot has moved enough for
+GPS (``add_gps``, both backends): every fix time is a node, and the fix measures the pose there through the GPS
+model of :mod:`fusion_vo.sensors.gps` (lever arm, ``fusion.gps``'s gate and robust weight, re-acquisition after
+``gps_reacquire`` seconds of rejections). Until the robot has moved enough for
 :func:`~fusion_vo.sensors.gps.align_to_fixes` to fix the heading of ENU, estimates are in the start frame
-(``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
-(plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
-and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+(``initial_pose``) and fixes are only collected; at the first alignment the poses recorded so far are
+re-expressed in ENU at the datum, and that fix and every later one are applied. ``current_estimate`` says which
+frame it is in (``Estimate.frame``). The EKF re-expresses its state and covariance (plus the alignment's
+uncertainty) in ENU. iSAM2 keeps its poses in the start frame and adds one variable, the start frame's pose in
+ENU ``T_WS`` with the alignment as its prior, which every later fix measures with its node's pose as
+``T_WS X_k`` (:mod:`fusion_vo.backends.online_graph`); its estimates are ``T̂_WS X̂_k`` from then on.
 The fixes keep their stated sigma (floored by ``fusion.gps.min_sigma``): ``fusion.gps.estimate_sigma``,
 the scatter measured by a batch run's world-frame alignment, is not applied here.
 The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
 kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
 as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).
+iSAM2 rebuilds a node for late data with the fixes' factors it had (as gated then); its node times stay, so a
+fix later than its node cannot be given one and is counted late, as one older than the history is by both.
 Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
 (kept for the alignment) or late.
 
@@ -232,8 +238,6 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(registry.names())})")
         if "wheel" in self.sensors and wheel_config is None:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
-        if "gps" in self.sensors and backend != "ekf":
-            raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
@@ -541,7 +545,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
-            result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
+            result.notes.append(f"{name}: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
                                 "world frame: " + ("ENU at the datum" if self._frame == "enu" else
                                                    "the start frame (the fixes never fixed the heading of ENU)"))
         if self._t_nodes:
