@@ -288,10 +288,14 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._graph = None
 
         lever = np.zeros(3) if gps_lever_arm is None else np.asarray(gps_lever_arm, dtype=np.float64).ravel()
+        if len(lever) not in (2, 3) or not np.all(np.isfinite(lever)):
+            raise InputError(f"gps_lever_arm must be 2 or 3 finite numbers [m] (the antenna in the body frame), "
+                             f"not {gps_lever_arm!r}")
         self._gps_model = GpsModel(lever, self.config.gps)
         self._gps_lever = lever
         self._gps: list[GpsFix] = []  # pending fixes, in time order
         self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
+        self._late_fixes: dict[int, list] = {}  # iSAM2: node -> late fixes re-timed onto it, (fix, lever arm)
         self._frame = "start"
         self._gps_reacquire = None
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
@@ -444,6 +448,10 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         cov = np.asarray(fix.covariance, dtype=np.float64).reshape(2, 2)
         if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
             self._count("gps").gated += 1
+            return
+        if self._graph is not None and fix.t < self._t_nodes[-1] + 1e-3:  # iSAM2: onto a processed node
+            self._late_fix(GpsFix(float(fix.t), enu, cov))
+            self._advance(fix.t)
             return
         if self._gps and fix.t < self._gps[-1].t:
             self._count("gps").reordered += 1
@@ -599,6 +607,9 @@ def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> 
         msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
     if streams.range is not None:
         msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    if streams.gps is not None:
+        g = streams.gps
+        msgs += [(t, 4, "gps", GpsFix(t, enu[:2], cov)) for t, enu, cov in zip(g.t, g.enu, g.covariance)]
     for name, data in streams.extra.items():
         live = registry.get(name).live if name in registry.names() else None
         if live is not None and live.samples is not None and data is not None:
@@ -612,7 +623,10 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     """A :class:`StreamingFusion` for the sensors and calibrations of ``streams`` (keyword arguments pass on)."""
     sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
                                           ("odom", streams.odom is not None), ("imu", streams.imu is not None),
-                                          ("range", streams.range is not None)) if present]
+                                          ("range", streams.range is not None), ("gps", streams.gps is not None))
+               if present]
+    if streams.gps is not None:
+        kwargs.setdefault("gps_lever_arm", streams.gps.lever_arm)
     sensors += [name for name, data in streams.extra.items()  # sensors registered outside the library
                 if data is not None and name in registry.names() and registry.get(name).live is not None]
     imu = streams.imu
