@@ -148,19 +148,20 @@ class EkfFixes:
         result.notes.extend(self.notes)
 
 
-def graph_gate(model: GpsModel, reacquire: Reacquire, pose, z, covariance, pose_cov, t: float) -> bool:
+def graph_gate(model: GpsModel, reacquire: Reacquire, pose, z, covariance, pose_cov, t: float) -> str | None:
     """Whether the factor graph adds a reading at ``t`` against its predicted ``pose`` (covariance ``pose_cov``, or
-    None): it passes ``model``'s gate, or fails it after ``reacquire.after`` seconds of rejections (then counted as a
-    use, not a rejection)."""
+    None): ``"used"`` when it passes ``model``'s gate, ``"reacquired"`` when it fails it after ``reacquire.after``
+    seconds of rejections (then counted as a use, not a rejection), else None."""
     chk = model.check(pose, z, covariance, pose_cov, t)
     if not chk.accepted and reacquire.due(t, False):
         model.n_rejected -= 1  # applied after all: a use, not a rejection
         model.rejected_t.pop()
         model.n_used += 1
-        return True
+        return "reacquired"
     if chk.accepted:
         reacquire.due(t, True)
-    return chk.accepted
+        return "used"
+    return None
 
 
 class GraphFixes:

@@ -231,16 +231,19 @@ class OnlineGraph:
             keys = (T_WS(), X(n))
             guess = self.isam.calculateEstimatePose2(T_WS()).compose(guess)
         xyyaw = np.array([guess.x(), guess.y(), guess.theta()])
-        model = self.gps_model
+        model, noise = self.gps_model, self.gps_model.noise
         if lever is None:
-            if not graph_gate(model, self.reacquire, xyyaw, fix.enu, fix.covariance, self.prev_cov, fix.t):
+            how = graph_gate(model, self.reacquire, xyyaw, fix.enu, fix.covariance, self.prev_cov, fix.t)
+            if how is None:
                 return None
+            if how == "reacquired":  # applied at its full weight, as the EKF applies it after widening its own
+                noise = noise.model_copy(update={"kernel": "none"})
         else:
-            model = GpsModel(lever, model.noise)
+            model = GpsModel(lever, noise)
             if not model.check(xyyaw, fix.enu, fix.covariance, pose_cov, fix.t).accepted:
                 return None
         factor = pose_factor(ANTENNA, fix.enu, model.covariance(fix.covariance), keys,
-                             {"lever_arm": model.lever_arm}, model.noise)
+                             {"lever_arm": model.lever_arm}, noise)
         self.fix_factors.setdefault(n, []).append(factor)
         return factor
 

@@ -88,6 +88,8 @@ class HistoryMixin:
             self._monitor.update(j - 1, iv)
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
+            if self._switch is not None and j == self._switch[0] and rec.heading_offset is not None:
+                rec.heading_offset -= self._switch[1]  # (the interval after it starts in ENU)
             batches.append((j, iv))
         late = {j: self._late_fixes.pop(j) for j, _ in batches if j in self._late_fixes}
         for j in list(self._late_fixes):  # (their node left the history meanwhile)
@@ -131,6 +133,9 @@ class HistoryMixin:
                 return
             fit, sigma = aligned
             self._to_enu(fit, fix.t)
+            self._switch = (len(T) - 1, fit.yaw)
+            if self._records[-1].heading_offset is not None:  # the next node's interval starts in ENU
+                self._records[-1].heading_offset -= fit.yaw
             for n, pose, cov, used in self._graph.align(np.array([*fit.offset, fit.yaw]), sigma, []):
                 self._poses[n], self._covs[n] = pose, cov
         motion, var = sliver
@@ -192,7 +197,8 @@ class HistoryMixin:
 
     def _to_enu(self, fit, t: float) -> None:
         """The recorded poses and covariances re-expressed in ENU by the alignment ``fit`` (the start-frame ones kept
-        for a rewind across the switch), with a note."""
+        for a rewind across the switch), the AHRS's heading offset turned with them (AHRS north was aligned to the
+        start frame's heading), with a note."""
         c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
         rot = np.eye(3)
         rot[:2, :2] = [[c, -s_], [s_, c]]
@@ -200,6 +206,8 @@ class HistoryMixin:
         self._poses = [p for p in fit.apply(np.array(self._poses))]
         self._covs = [rot @ cv @ rot.T for cv in self._covs]
         self._frame = "enu"
+        if self._heading_offset is not None:
+            self._heading_offset -= fit.yaw
         self._gps_reacquire = Reacquire(self.config.gps_reacquire)
         self._notes.append(f"gps: world frame re-expressed in ENU at t={t:.2f} (first heading "
                            f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
@@ -220,8 +228,6 @@ class HistoryMixin:
             ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
             self._to_enu(fit, fix.t)
-            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
-                self._heading_offset -= fit.yaw
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
             accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)

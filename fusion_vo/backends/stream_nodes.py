@@ -317,6 +317,7 @@ class NodesMixin:
             if aligned is not None:
                 fit, sigma = aligned
                 self._to_enu(fit, fix.t)
+                self._switch = (len(self._t_nodes), fit.yaw)
                 self._step_offered = len(fixes) - k
                 for n, pose, cov, sensors in self._graph.align(np.array([*fit.offset, fit.yaw]), sigma, fixes[k:]):
                     self._poses[n], self._covs[n] = pose, cov

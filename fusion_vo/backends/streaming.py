@@ -296,6 +296,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._gps: list[GpsFix] = []  # pending fixes, in time order
         self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
         self._late_fixes: dict[int, list] = {}  # iSAM2: node -> late fixes re-timed onto it, (fix, lever arm)
+        self._switch: tuple | None = None  # iSAM2: (node, heading of ENU in the start frame) of the switch to ENU
         self._frame = "start"
         self._gps_reacquire = None
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
