@@ -18,13 +18,15 @@
    antenna in ENU); with the receiver's stated sigma (the default), with the fixes' scatter measured by the
    world-frame alignment (``fusion.gps.estimate_sigma``) and with a 2 m floor (``fusion.gps.min_sigma``).
    Baselines: wheel dead reckoning and the backends without GPS, placed in ENU by the fit to the same fused
-   fixes (the same information), and for reference fitted to the withheld fixes themselves.
+   fixes (the same information), and for reference fitted to the withheld fixes themselves. The same streamed
+   (``StreamingFusion``, EKF and iSAM2, the stated sigma) with their fix counts and latency.
 
 ``--config`` and ``--set`` change the configuration of every run (``--set fusion.gps.estimate_sigma=true``).
 
 Usage::
 
-    python benchmarks/gps.py [--skip-husky] [--husky-split 0.5] [--config FILE] [--set KEY=VALUE ...] [--out DIR]
+    python benchmarks/gps.py [--skip-husky | --skip-outage] [--husky-split 0.5] [--config FILE] [--set KEY=VALUE ...]
+                             [--out DIR]
 """
 
 from __future__ import annotations
@@ -218,6 +220,14 @@ def husky(out: Path, split: float, fusion: dict) -> None:
         for name in FUSED:
             rows[f"{name} with the fused part's GPS, {label}"] = score_withheld(result.trajectories[name], second)
         notes += [f"({label}) {n}" for n in result.notes if "gps" in n]
+    for backend in ("ekf", "gtsam"):  # live: the stated sigma, the world frame found from the fixes so far
+        result, name, calls, per_node = stream(dataclasses.replace(base, gps=first), backend, fusion)
+        c = result.counts[name]["gps"]
+        rows[f"streaming {backend} with the fused part's GPS, stated sigma"] = score_withheld(
+            result.trajectories[name], second)
+        notes.append(f"(streaming {backend}) gps {c.used} used, {c.gated} gated, {c.missing} missing, {c.late} late; "
+                     f"add p50 {np.percentile(calls, 50):.3f} ms, p99 {np.percentile(calls, 99):.3f} ms, "
+                     f"CPU per node {per_node:.3f} ms")
     for name in ("wheel",) + FUSED:
         rows[f"{name} without GPS, fitted to the withheld fixes (reference)"] = score_withheld(
             place_in_enu(free.trajectories[name], second), second)
@@ -232,6 +242,7 @@ def husky(out: Path, split: float, fusion: dict) -> None:
 def main(argv=None) -> int:
     ap = parser(__doc__)
     ap.add_argument("--skip-husky", action="store_true", help="the generated recording only")
+    ap.add_argument("--skip-outage", action="store_true", help="the Husky log only")
     ap.add_argument("--husky-split", type=float, default=0.5,
                     help="fraction of the Husky recording whose fixes are fused (default 0.5: the first half)")
     add_settings(ap)
@@ -241,7 +252,8 @@ def main(argv=None) -> int:
         ap.error("--husky-split must be between 0.05 and 0.95")
     fusion = fusion_settings(args)
     with work_dir(args.out, "gps-") as out:
-        gps_outage(out, fusion)
+        if not args.skip_outage:
+            gps_outage(out, fusion)
         if not args.skip_husky:
             husky(out, args.husky_split, fusion)
     return 0

@@ -19,14 +19,15 @@ of later fixes flows back across the switch through ``T_WS``. A fix at a node fr
 factor, the GPS model of :mod:`fusion_vo.sensors.gps` on that pose (lever arm included,
 :func:`~fusion_vo.backends.graph_adapter.pose_factor`) in its robust kernel, gated first
 (:func:`~fusion_vo.backends.fixes.graph_gate`: ``fusion.gps``'s gate against the node's prediction and the previous
-node's covariance, re-acquisition after ``gps_reacquire`` seconds of rejections). A late fix placed on a node before
-``m`` measures ``T_WS X_k``. Poses and covariances are reported in ENU from ``m`` on, and for the nodes before it as
+node's covariance). A fix re-acquired after ``gps_reacquire`` seconds of rejections is added without the kernel, at
+its full weight, as the EKF applies it after widening its own covariance (inside the kernel, at the distance that
+failed the gate, it would barely pull, and an estimate that drifted from the fixes would not come back). A late fix
+placed on a node before ``m`` measures ``T_WS X_k``. Poses and covariances are reported in ENU from ``m`` on, and for the nodes before it as
 ``T̂_WS X̂_k`` with the covariance of that composition from the joint marginal of ``(T_WS, X_k)``
 (``δY = Ad(X⁻¹) δT + δX`` in GTSAM's tangent spaces).
 
 Why not one ``T_WS`` that every fix measures with its start-frame pose: it would sit in every clique of the Bayes
-tree, and each update's back-substitution would visit them all (measured on the generated ``gps_outage`` drive:
-2.8 ms per node 10 s after the alignment, 6.9 ms 60 s after, against a flat 2-3 ms without GPS).
+tree, and each update's back-substitution would visit them all, at a cost per node growing with the drive.
 """
 
 from __future__ import annotations

@@ -28,16 +28,20 @@ model of :mod:`fusion_vo.sensors.gps` (lever arm, ``fusion.gps``'s gate and robu
 (``initial_pose``) and fixes are only collected; at the first alignment the poses recorded so far are
 re-expressed in ENU at the datum, and that fix and every later one are applied. ``current_estimate`` says which
 frame it is in (``Estimate.frame``). The EKF re-expresses its state and covariance (plus the alignment's
-uncertainty) in ENU. iSAM2 keeps its poses in the start frame and adds one variable, the start frame's pose in
-ENU ``T_WS`` with the alignment as its prior, which every later fix measures with its node's pose as
-``T_WS X_k`` (:mod:`fusion_vo.backends.online_graph`); its estimates are ``T̂_WS X̂_k`` from then on.
+uncertainty) in ENU. iSAM2 keeps what it has in the start frame and adds the start frame's pose in ENU ``T_WS``,
+with the alignment as its prior, and the node's pose once more in ENU, tied to both; every later pose is an ENU
+variable and a fix there is the batch graph's factor on it (:mod:`fusion_vo.backends.online_graph`). A fix
+re-acquired after ``gps_reacquire`` seconds of rejections is applied at full weight by both: the EKF after
+widening its position covariance by the squared innovation, iSAM2 without the robust kernel.
 The fixes keep their stated sigma (floored by ``fusion.gps.min_sigma``): ``fusion.gps.estimate_sigma``,
 the scatter measured by a batch run's world-frame alignment, is not applied here.
 The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
 kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
 as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).
 iSAM2 rebuilds a node for late data with the fixes' factors it had (as gated then); its node times stay, so a
-fix later than its node cannot be given one and is counted late, as one older than the history is by both.
+fix later than the reorder window is re-timed onto the nearest processed node (the wheels' and gyro's motion
+from the node to the fix folded into the antenna's lever arm, its covariance grown by that motion's) and that
+node rebuilt with it; one older than the history, or with no wheel data around it, is counted late.
 Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
 (kept for the alignment) or late.
 
