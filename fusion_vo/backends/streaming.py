@@ -94,7 +94,8 @@ node and rebuild after rebuild in the order they were handed over, from its own 
 therefore those of the caller-thread run whatever the worker's timing. Until a node's update is done
 its pose is the last one predicted at constant twist; each later call takes the finished results in,
 and :meth:`finish` and :meth:`smoothed` wait for all of them (so does a call that would retire a node
-from the history before its result came: a worker that far behind slows the caller down).
+from the history before its result came: a worker that far behind slows the caller down, and, until the
+fixes have fixed the heading of ENU, a GPS fix: the alignment fits iSAM2's poses, not the ones predicted meanwhile).
 
 Latency
 -------
