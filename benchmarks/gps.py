@@ -8,19 +8,25 @@
    dead reckoning and the same backends without GPS, each placed in ENU by the robust rigid fit to all fixes
    (``fusion_vo.sensors.gps.align_to_fixes``: the best a GPS-free track can do, future fixes included).
    Printed per trajectory: position RMS while GPS is present, the largest error during the outage and at its
-   end (drift), the largest error during the jump, and the fixes used / rejected.
+   end (drift), the largest error during the jump, and the fixes used / rejected. Then the same streams fed in
+   arrival order to ``StreamingFusion`` (EKF and iSAM2, each with and without GPS; without it placed in ENU as
+   above), with the whole-drive position RMS beside the batch run's ``gtsam_online`` track, and each run's
+   latency per node (each call processing all that is due, as the ROS 2 node runs it): percentiles of the wall
+   time of the calls that processed a node, and the mean CPU time per node.
 2. robot_localization's Husky bag (395 s, 989 fixes, about 0.9 m sigma): wheel odometry (twist) and IMU with
    the GPS of the first half (``--husky-split``), the later fixes withheld and scored (plain RMS of the
    antenna in ENU); with the receiver's stated sigma (the default), with the fixes' scatter measured by the
    world-frame alignment (``fusion.gps.estimate_sigma``) and with a 2 m floor (``fusion.gps.min_sigma``).
    Baselines: wheel dead reckoning and the backends without GPS, placed in ENU by the fit to the same fused
-   fixes (the same information), and for reference fitted to the withheld fixes themselves.
+   fixes (the same information), and for reference fitted to the withheld fixes themselves. The same streamed
+   (``StreamingFusion``, EKF and iSAM2, the stated sigma) with their fix counts and latency.
 
 ``--config`` and ``--set`` change the configuration of every run (``--set fusion.gps.estimate_sigma=true``).
 
 Usage::
 
-    python benchmarks/gps.py [--skip-husky] [--husky-split 0.5] [--config FILE] [--set KEY=VALUE ...] [--out DIR]
+    python benchmarks/gps.py [--skip-husky | --skip-outage] [--husky-split 0.5] [--config FILE] [--set KEY=VALUE ...]
+                             [--out DIR]
 """
 
 from __future__ import annotations
@@ -38,6 +44,7 @@ from common import (FUSED, add_out, add_settings, fusion_settings, import_husky,
                     with_settings, work_dir)
 
 from fusion_vo.backends import fuse, streams_from_recording
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.measurements import GpsData, PoseData
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
@@ -101,7 +108,7 @@ def gps_outage(out: Path, fusion: dict) -> None:
     ok = ~((gps.t - t0 >= JUMP[0]) & (gps.t - t0 <= JUMP[1]))
     rows["GPS fixes alone (antenna)"] = {"rms_gps_present": float(np.sqrt(np.mean(err[ok] ** 2))),
                                          "max_jump": float(err[~ok].max())}
-    timing, notes = {}, []
+    timing, notes, batch = {}, [], None
     for label, sensors in (("with GPS", ["camera", "wheel", "imu", "gps"]), ("without GPS", ["camera", "wheel", "imu"])):
         start = time.perf_counter()
         result = fuse(streams_from_recording(rec, vo, sensors), "all", fusion)
@@ -116,7 +123,7 @@ def gps_outage(out: Path, fusion: dict) -> None:
             if counts is not None:
                 rows[key]["fixes"] = f"{counts.used} / {counts.gated}"
         if label == "with GPS":
-            notes = [n for n in result.notes if "gps" in n]
+            notes, batch = [n for n in result.notes if "gps" in n], result
         else:
             wheel = place_in_enu(result.trajectories["wheel"], gps)
             rows["wheel dead reckoning (fitted to all fixes)"] = outage_figures(position_errors(wheel, truth), t0)
@@ -128,6 +135,63 @@ def gps_outage(out: Path, fusion: dict) -> None:
     for n in notes:
         print("  note:", n)
     print("  backends' wall time [s]: " + ", ".join(f"{k} {v:.1f}" for k, v in timing.items()))
+    streaming(rec, vo, truth, gps, fusion, batch)
+
+
+def stream(streams, backend: str, fusion: dict):
+    """``StreamingFusion`` fed ``streams`` in arrival order, each call processing all that is due
+    (``steps_per_call=None``, as the ROS 2 node runs it): its result, the wall times [ms] of the calls that processed
+    a node (the processed state moved on: one node, rarely more) and the CPU time per node [ms] (of the whole run,
+    ``finish`` included)."""
+    fusion_run = streaming_for(streams, backend, fusion, steps_per_call=None)
+    calls = []
+    last = None
+    cpu = time.process_time()
+    for _, kind, m in time_ordered_messages(streams):
+        start = time.perf_counter()
+        getattr(fusion_run, f"add_{kind}")(m)
+        spent = time.perf_counter() - start
+        now = fusion_run.processed_estimate()
+        if now is not None and (last is None or now.t > last):
+            calls.append(spent)
+            last = now.t
+    result = fusion_run.finish()
+    cpu = time.process_time() - cpu
+    name = "ekf" if backend == "ekf" else "gtsam_online"
+    return result, name, 1e3 * np.array(calls), 1e3 * cpu / max(len(result.trajectories[name]), 1)
+
+
+def streaming(rec: Recording, vo, truth: PoseData, gps: GpsData, fusion: dict, batch) -> None:
+    """The streaming backends with and without GPS, beside the batch run's online iSAM2 track with GPS."""
+    t0 = float(truth.t[0])
+    rows = []
+
+    def whole(track):
+        return float(np.sqrt(np.mean(position_errors(track, truth)[1] ** 2)))
+
+    for label, sensors in (("with GPS", ["camera", "wheel", "imu", "gps"]), ("without GPS", ["camera", "wheel", "imu"])):
+        streams = streams_from_recording(rec, vo, sensors)
+        for backend in ("ekf", "gtsam"):
+            result, name, calls, per_node = stream(streams, backend, fusion)
+            track = result.trajectories[name]
+            if label == "without GPS":
+                track = place_in_enu(track, gps)
+            r = outage_figures(position_errors(track, truth), t0)
+            c = result.counts[name].get("gps")
+            rows.append([f"streaming {backend} {label}" + (" (fitted to all fixes)" if label == "without GPS" else ""),
+                         f"{1e3 * whole(track):.1f}", f"{1e3 * r['rms_gps_present']:.1f}", f"{1e3 * r['end_outage']:.1f}",
+                         f"{1e3 * r['max_jump']:.1f}", "–" if c is None else f"{c.used} / {c.gated} / {c.missing} / {c.late}",
+                         f"{np.percentile(calls, 50):.3f}", f"{np.percentile(calls, 99):.3f}", f"{calls.max():.1f}",
+                         f"{per_node:.3f}"])
+    online = batch.trajectories["gtsam_online"]
+    r = outage_figures(position_errors(online, truth), t0)
+    c = batch.counts["gtsam_online"]["gps"]
+    rows.append(["batch run's gtsam_online with GPS", f"{1e3 * whole(online):.1f}", f"{1e3 * r['rms_gps_present']:.1f}",
+                 f"{1e3 * r['end_outage']:.1f}", f"{1e3 * r['max_jump']:.1f}", f"{c.used} / {c.gated} / {c.missing} / –",
+                 "–", "–", "–", "–"])
+    print("\nstreaming, fed in arrival order: position errors in ENU [mm], fixes, latency per node [ms]")
+    print(table(["trajectory", "RMS whole drive", "RMS while GPS present", "at outage end", "max during jump",
+                 "fixes used / gated / missing / late", "node p50", "node p99", "node max", "CPU per node"], rows))
 
 
 def gps_subset(gps: GpsData, keep: np.ndarray) -> GpsData:
@@ -163,6 +227,14 @@ def husky(out: Path, split: float, fusion: dict) -> None:
         for name in FUSED:
             rows[f"{name} with the fused part's GPS, {label}"] = score_withheld(result.trajectories[name], second)
         notes += [f"({label}) {n}" for n in result.notes if "gps" in n]
+    for backend in ("ekf", "gtsam"):  # live: the stated sigma, the world frame found from the fixes so far
+        result, name, calls, per_node = stream(dataclasses.replace(base, gps=first), backend, fusion)
+        c = result.counts[name]["gps"]
+        rows[f"streaming {backend} with the fused part's GPS, stated sigma"] = score_withheld(
+            result.trajectories[name], second)
+        notes.append(f"(streaming {backend}) gps {c.used} used, {c.gated} gated, {c.missing} missing, {c.late} late; "
+                     f"per node p50 {np.percentile(calls, 50):.3f} ms, p99 {np.percentile(calls, 99):.3f} ms, "
+                     f"CPU per node {per_node:.3f} ms")
     for name in ("wheel",) + FUSED:
         rows[f"{name} without GPS, fitted to the withheld fixes (reference)"] = score_withheld(
             place_in_enu(free.trajectories[name], second), second)
@@ -177,6 +249,7 @@ def husky(out: Path, split: float, fusion: dict) -> None:
 def main(argv=None) -> int:
     ap = parser(__doc__)
     ap.add_argument("--skip-husky", action="store_true", help="the generated recording only")
+    ap.add_argument("--skip-outage", action="store_true", help="the Husky log only")
     ap.add_argument("--husky-split", type=float, default=0.5,
                     help="fraction of the Husky recording whose fixes are fused (default 0.5: the first half)")
     add_settings(ap)
@@ -186,7 +259,8 @@ def main(argv=None) -> int:
         ap.error("--husky-split must be between 0.05 and 0.95")
     fusion = fusion_settings(args)
     with work_dir(args.out, "gps-") as out:
-        gps_outage(out, fusion)
+        if not args.skip_outage:
+            gps_outage(out, fusion)
         if not args.skip_husky:
             husky(out, args.husky_split, fusion)
     return 0

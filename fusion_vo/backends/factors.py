@@ -2,8 +2,9 @@
 
 A :class:`ModelFactor` is one measurement of a sensor model between graph variables: the model, its
 reading ``z``, the variable keys of each model argument (``motion``: the two poses ``X_i, X_j`` whose
-relative pose ``X_i⁻¹ X_j`` is the motion; ``heading``, ``pose``: one pose; the others: one scalar variable),
-arguments held fixed, and the noise covariance (optionally inside the graph's robust kernel).
+relative pose ``X_i⁻¹ X_j`` is the motion; ``heading``: one pose; ``pose``: one pose ``X``, or a frame transform
+and a pose ``(T, X)`` whose composition ``T X`` is the argument, the pose of B in T's target frame; the others: one
+scalar variable), arguments held fixed, and the noise covariance (optionally inside the graph's robust kernel).
 
 The graph does not wrap these in Python factors that GTSAM calls back: :class:`ModelFactors`
 evaluates all factors of one kind at once with the model's vectorised prediction and Jacobians, and
@@ -19,6 +20,9 @@ perturbations ``X · Exp(ξ)``)::
     ∂δ/∂ξ_i = [[-1, 0, d_y], [0, -1, -d_x], [0, 0, -1]],     ∂δ/∂ξ_j = [[cos d_ψ, -sin d_ψ, 0], [sin d_ψ, cos d_ψ, 0], [0, 0, 1]]
 
 of a pose's heading ``∂ψ/∂ξ = (0, 0, 1)``, and of a pose itself ``∂(x, y, ψ)/∂ξ = [[R(ψ), 0], [0, 1]]``.
+Of a composition ``Y = T X``: ``T Exp(ξ_T) X Exp(ξ_X) = Y Exp(Ad(X⁻¹) ξ_T + ξ_X)``, so the pose's Jacobians are
+``[[R(ψ_Y), 0], [0, 1]] Ad(X⁻¹)`` and ``[[R(ψ_Y), 0], [0, 1]]``, with GTSAM's adjoint of a Pose2 ``(x, y, ψ)``
+``Ad = [[cos ψ, -sin ψ, y], [sin ψ, cos ψ, -x], [0, 0, 1]]`` (:func:`_composed`).
 """
 
 from __future__ import annotations
@@ -120,6 +124,11 @@ class ModelFactor:
             elif name == "heading":
                 args[name] = np.array([current[keys[0]].theta()])
                 links.append((name, _HEADING[0], keys[0]))
+            elif name == "pose" and len(keys) == 2:  # (T, X): the pose T X
+                p = current[keys[0]].compose(current[keys[1]])
+                args[name] = np.array([p.x(), p.y(), p.theta()])
+                body = _body(np.array([p.theta()]))[0]
+                links += [(name, body @ current[keys[1]].inverse().AdjointMap(), keys[0]), (name, body, keys[1])]
             elif name == "pose":
                 p = current[keys[0]]
                 args[name] = np.array([p.x(), p.y(), p.theta()])
@@ -243,6 +252,23 @@ def _body(yaw: np.ndarray) -> np.ndarray:
     return out
 
 
+def _composed(pt: np.ndarray, px: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``Y = T X`` (N, 3) of poses ``T``, ``X`` (N, 3) and the Jacobians (N, 3, 3) of ``Y``'s ``(x, y, ψ)`` in the world
+    frame with respect to ``ξ_T`` and ``ξ_X`` (module docstring)."""
+    c, s = np.cos(pt[:, 2]), np.sin(pt[:, 2])
+    y = np.stack([pt[:, 0] + c * px[:, 0] - s * px[:, 1], pt[:, 1] + s * px[:, 0] + c * px[:, 1],
+                  se2.wrap_angle(pt[:, 2] + px[:, 2])], axis=1)
+    d_x = _body(y[:, 2])
+    # Ad(X⁻¹): X⁻¹ = (-R(ψ)ᵀ t, -ψ)
+    cx, sx = np.cos(px[:, 2]), np.sin(px[:, 2])
+    ix, iy = -(cx * px[:, 0] + sx * px[:, 1]), sx * px[:, 0] - cx * px[:, 1]
+    ad = np.zeros((len(px), 3, 3))
+    ad[:, 0, 0], ad[:, 0, 1], ad[:, 0, 2] = cx, sx, iy
+    ad[:, 1, 0], ad[:, 1, 1], ad[:, 1, 2] = -sx, cx, -ix
+    ad[:, 2, 2] = 1.0
+    return y, d_x @ ad, d_x
+
+
 class ModelFactors:
     """Factors of one signature (:meth:`ModelFactor.signature`), evaluated and linearised together."""
 
@@ -281,6 +307,9 @@ class ModelFactors:
             elif name == "heading":
                 args[name] = _poses(values, keys[:, 0], poses)[:, 2:3]
                 chains.append((name, [_HEADING]))
+            elif name == "pose" and keys.shape[1] == 2:  # (T, X): the pose T X
+                args[name], d_t, d_x = _composed(_poses(values, keys[:, 0], poses), _poses(values, keys[:, 1], poses))
+                chains.append((name, [d_t, d_x]))
             elif name == "pose":
                 args[name] = _poses(values, keys[:, 0], poses)
                 chains.append((name, [_body(args[name][:, 2])]))
@@ -449,9 +478,10 @@ def scalar_table(keys: np.ndarray, values: np.ndarray) -> dict:
     return {"keys": np.asarray(keys, dtype=np.int64), "values": np.asarray(values, dtype=np.float64)}
 
 
-#: GTSAM symbol letters of the Pose2 variables: the poses and the camera's frame poses
-#: (:func:`fusion_vo.backends.graph_builder.X`, :func:`~fusion_vo.backends.graph_builder.F`)
-POSE_LETTERS = ("x", "F")
+#: GTSAM symbol letters of the Pose2 variables: the poses, the camera's frame poses and the world frame of a stream
+#: aligned to GPS fixes (:func:`fusion_vo.backends.graph_builder.X`, :func:`~fusion_vo.backends.graph_builder.F`,
+#: :func:`~fusion_vo.backends.graph_builder.T_WS`)
+POSE_LETTERS = ("x", "F", "E")
 
 
 def pose_table(values: gtsam.Values, keys: np.ndarray | None = None) -> dict:

@@ -16,8 +16,9 @@ the ``pose`` argument of its model, ``z = h(x) + n`` (the antenna's position: ``
 * an outage of :data:`OUTAGE_NOTE_S` or more is reported with the drift the first reading after it measures.
 
 :class:`EkfFixes` does this for a batch EKF run, :class:`GraphFixes` for the factor graph (gated against its node's
-predicted pose and, with iSAM2, the online marginal covariance of the previous node), and the functions
-:func:`ekf_update`, :func:`ekf_reacquire` and :class:`Reacquire` for the streaming EKF.
+predicted pose and, with iSAM2, the online marginal covariance of the previous node), the functions
+:func:`ekf_update`, :func:`ekf_reacquire` and :class:`Reacquire` for the streaming EKF, and :func:`graph_gate` for
+the streaming iSAM2 (:class:`~fusion_vo.backends.online_graph.OnlineGraph`).
 """
 
 from __future__ import annotations
@@ -147,6 +148,22 @@ class EkfFixes:
         result.notes.extend(self.notes)
 
 
+def graph_gate(model: GpsModel, reacquire: Reacquire, pose, z, covariance, pose_cov, t: float) -> str | None:
+    """Whether the factor graph adds a reading at ``t`` against its predicted ``pose`` (covariance ``pose_cov``, or
+    None): ``"used"`` when it passes ``model``'s gate, ``"reacquired"`` when it fails it after ``reacquire.after``
+    seconds of rejections (then counted as a use, not a rejection), else None."""
+    chk = model.check(pose, z, covariance, pose_cov, t)
+    if not chk.accepted and reacquire.due(t, False):
+        model.n_rejected -= 1  # applied after all: a use, not a rejection
+        model.rejected_t.pop()
+        model.n_used += 1
+        return "reacquired"
+    if chk.accepted:
+        reacquire.due(t, True)
+        return "used"
+    return None
+
+
 class GraphFixes:
     """One sensor's absolute readings in the factor graph: each gated against its node's predicted pose (and the
     online marginal covariance of the previous node when iSAM2 runs) and added inside the readings' own robust
@@ -170,14 +187,8 @@ class GraphFixes:
         key = builder.key(n)
         guess = nf.values[key]
         t = float(builder.iv.t[g])
-        chk = model.check(np.array([guess.x(), guess.y(), guess.theta()]), r.z[j], r.cov[j], pose_cov, t)
-        if not chk.accepted and self.reacquire.due(t, False):
-            model.n_rejected -= 1  # applied after all: a use, not a rejection
-            model.rejected_t.pop()
-            model.n_used += 1
-        elif chk.accepted:
-            self.reacquire.due(t, True)
-        else:
+        if not graph_gate(model, self.reacquire, np.array([guess.x(), guess.y(), guess.theta()]), r.z[j], r.cov[j],
+                          pose_cov, t):
             builder.counts.setdefault(r.sensor, SensorCount()).gated += 1
             return
         nf.factors.append(factor(key, r.z[j], model.covariance(r.cov[j])))

@@ -213,16 +213,22 @@ def frame_poses(builder, nf, span: Span, n: int, segment: int, previous_pose) ->
     return builder.F(a), builder.F(b)
 
 
+def pose_factor(model, z, covariance, keys: tuple, params: dict, noise) -> ModelFactor:
+    """An absolute reading ``z`` of ``model``'s ``pose`` argument: on the pose ``keys = (X,)``, or on ``T X`` for
+    ``keys = (T, X)`` (a frame transform and the pose, :mod:`fusion_vo.backends.factors`), inside ``noise``'s own
+    robust kernel (``noise.kernel`` of width ``noise.kernel_width``; ``"none"``: Gaussian)."""
+    robust = None if noise.kernel == "none" else (noise.kernel, float(noise.kernel_width))
+    return ModelFactor(model, np.asarray(z, dtype=np.float64), {"pose": tuple(keys)},
+                       np.asarray(covariance, dtype=np.float64), {}, params, None, robust)
+
+
 def absolute_factor(r: Readings):
     """``factor(key, z, covariance)``: an absolute reading of ``r`` on the pose at ``key``, inside its own robust
-    kernel, as the model's :class:`gtsam.CustomFactor` (its residual and body-frame Jacobian)."""
-    noise = r.absolute.noise
-    robust = None if noise.kernel == "none" else (noise.kernel, float(noise.kernel_width))
+    kernel, as the model's :class:`gtsam.CustomFactor` (its residual and body-frame Jacobian; :func:`pose_factor`)."""
     params = {name: np.asarray(value, dtype=np.float64) for name, value in r.params.items()}
 
     def factor(key: int, z, covariance):
-        return ModelFactor(r.model, np.asarray(z, dtype=np.float64), {"pose": (key,)},
-                           np.asarray(covariance, dtype=np.float64), {}, params, None, robust).custom_factor()
+        return pose_factor(r.model, z, covariance, (key,), params, r.absolute.noise).custom_factor()
 
     return factor
 

@@ -70,6 +70,16 @@ def F(k: int) -> int:
     return gtsam.symbol(FRAME_LETTER, k)
 
 
+#: GTSAM symbol letter of the world frame of a stream aligned to GPS fixes (:func:`T_WS`)
+WORLD_LETTER = POSE_LETTERS[2]
+
+
+def T_WS() -> int:
+    """The pose of the start frame in ENU, ``T_WS``, when a stream's poses stay in the frame they started in and
+    GPS fixes measure ``T_WS X_k`` (:class:`~fusion_vo.backends.online_graph.OnlineGraph`)."""
+    return gtsam.symbol(WORLD_LETTER, 0)
+
+
 _NO_INCREMENT = np.zeros(3)
 _NO_INCREMENT.flags.writeable = False
 

@@ -17,6 +17,7 @@ from fusion_vo.backends.ekf import YAW
 from fusion_vo.backends.world import prior_from_alignment
 from fusion_vo.backends.fixes import Reacquire, ekf_reacquire, ekf_update
 from fusion_vo.sensors.gps import align_to_fixes
+from fusion_vo.sensors.gps import predict as gps_predict
 
 from fusion_vo.backends.stream_state import merge_counts
 
@@ -81,18 +82,68 @@ class HistoryMixin:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
             prev = self._records[j - 1]
             iv, step, consumed, _ = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
+                step["gps"] = rec.counts["gps"]
             rec.counts, rec.visual = step, consumed
             self._monitor.update(j - 1, iv)
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
+            if self._switch is not None and j == self._switch[0] and rec.heading_offset is not None:
+                rec.heading_offset -= self._switch[1]  # (the interval after it starts in ENU)
             batches.append((j, iv))
+        late = {j: self._late_fixes.pop(j) for j, _ in batches if j in self._late_fixes}
+        for j in list(self._late_fixes):  # (their node left the history meanwhile)
+            self._retired_counts.setdefault("gps", SensorCount()).late += len(self._late_fixes.pop(j))
         if not batches:
             return
         self._heading_offset = self._records[-1].heading_offset
-        for j, pose, cov, used in self._graph.replace(batches):
+        for j, pose, cov, used in self._graph.replace(batches, fixes=late):
             self._poses[j], self._covs[j] = pose, cov
             self._count_used(j, used)
         self.rewinds += 1
+
+    def _late_fix(self, fix: GpsFix) -> None:
+        """iSAM2: a fix at or before the last processed node, within the history, re-timed onto the nearest node
+        ``a`` (at most a node step away) as a late camera increment is: the antenna at the fix's time is at
+        ``h(s) = s_t + R(s_ψ) l`` in node ``a``'s body frame (:func:`~fusion_vo.sensors.gps.predict` of the wheels'
+        and gyro's motion ``s`` from the node to the fix, :meth:`_sliver`), which is the fix's lever arm at that node;
+        its covariance grows by that motion's variance (the heading's through the lever arm). Node ``a`` is rebuilt
+        with it (:meth:`_replace`), gated against iSAM2's estimate of that node (not re-acquired). Before the
+        alignment the fix is kept for it as an in-order one is (missing); a fix that cannot be placed is late."""
+        T = self._t_nodes
+        k = bisect.bisect_left(T, fix.t)
+        a = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - fix.t))
+        rec = self._records[a]
+        sliver = None
+        if a > 0 and rec is not None and self._records[a - 1] is not None \
+                and abs(T[a] - fix.t) <= 1.0 / self.config.step_hz:
+            sliver = self._sliver(T[a], fix.t)
+        if sliver is None:
+            self._count("gps").late += 1
+            logger.warning("gps fix at t=%.3f arrived after t=%.3f was processed and could not be placed on a node; "
+                           "not applied", fix.t, T[-1])
+            return
+        if self._frame == "start":
+            bisect.insort(self._gps_seen, fix, key=lambda f: f.t)
+            if self.background:  # the poses the alignment fits are iSAM2's, not the ones predicted meanwhile
+                self._collect(wait=True)
+            aligned = self._fit_world(np.array(T), np.array(self._poses), T[-1])
+            if aligned is None:
+                rec.counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+                return
+            fit, sigma = aligned
+            self._to_enu(fit, fix.t)
+            self._switch = (len(T) - 1, fit.yaw)
+            if self._records[-1].heading_offset is not None:  # the next node's interval starts in ENU
+                self._records[-1].heading_offset -= fit.yaw
+            for n, pose, cov, used in self._graph.align(np.array([*fit.offset, fit.yaw]), sigma, []):
+                self._poses[n], self._covs[n] = pose, cov
+        motion, var = sliver
+        lever = gps_predict(motion, self._gps_lever)
+        cov = fix.covariance + np.eye(2) * (max(var[0], var[1]) + var[2] * float(lever @ lever))
+        rec.offered += 1
+        self._late_fixes.setdefault(a, []).append((GpsFix(fix.t, fix.enu, cov), lever))
+        self._dirty.add(a)
 
     def _retire(self) -> None:
         """Drop the rewind data of nodes older than the history (their counts are kept)."""
@@ -118,23 +169,57 @@ class HistoryMixin:
             if cut > 0:
                 del buf[:cut]
 
-    def _apply_gps(self, fix: GpsFix) -> None:
+    def _align_world(self, fix: GpsFix, current=None):
+        """A fix while the heading of ENU is unknown: kept, and the online poses so far (``current``: the node being
+        processed, when it is not recorded yet) fitted to the fixes kept (:func:`align_to_fixes`). Returns the fit and
+        the standard deviations of the first pose's prior it gives (:func:`prior_from_alignment`), or None while it
+        does not fit (the fix counted as missing: kept for the alignment)."""
+        self._gps_seen.append(fix)
+        poses = np.array(self._poses + ([] if current is None else [current]))
+        aligned = self._fit_world(np.array(self._t_nodes[:len(poses) - 1] + [fix.t]), poses, fix.t)
+        if aligned is None:
+            self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+        return aligned
 
+    def _fit_world(self, times: np.ndarray, poses: np.ndarray, t_end: float):
+        """:func:`align_to_fixes` of the online ``poses`` at ``times`` (start frame) to the fixes kept up to ``t_end``:
+        the fit and its prior's standard deviations, or None."""
+        seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
+            [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
+            np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
+            np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
+        fit = align_to_fixes(times, poses, seen, t_end=t_end) if len(times) > 1 else None
+        if fit is None:
+            return None
+        sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
+        _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+        return fit, prior_sigma
+
+    def _to_enu(self, fit, t: float) -> None:
+        """The recorded poses and covariances re-expressed in ENU by the alignment ``fit`` (the start-frame ones kept
+        for a rewind across the switch), the AHRS's heading offset turned with them (AHRS north was aligned to the
+        start frame's heading), with a note."""
+        c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
+        rot = np.eye(3)
+        rot[:2, :2] = [[c, -s_], [s_, c]]
+        self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
+        self._poses = [p for p in fit.apply(np.array(self._poses))]
+        self._covs = [rot @ cv @ rot.T for cv in self._covs]
+        self._frame = "enu"
+        if self._heading_offset is not None:
+            self._heading_offset -= fit.yaw
+        self._gps_reacquire = Reacquire(self.config.gps_reacquire)
+        self._notes.append(f"gps: world frame re-expressed in ENU at t={t:.2f} (first heading "
+                           f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
+
+    def _apply_gps(self, fix: GpsFix) -> None:
+        """EKF: a fix at the node just updated (module docstring of :mod:`~fusion_vo.backends.streaming`)."""
         ekf, model = self._ekf, self._gps_model
         if self._frame == "start":
-            self._gps_seen.append(fix)
-            poses = np.array(self._poses + [ekf.x[:3]])
-            times = np.array(self._t_nodes[:len(poses) - 1] + [fix.t])
-            seen = GpsData(np.array([f.t for f in self._gps_seen]), np.column_stack(
-                [np.array([f.enu for f in self._gps_seen]), np.zeros(len(self._gps_seen))]),
-                np.array([f.covariance for f in self._gps_seen]), np.zeros((len(self._gps_seen), 3)),
-                np.zeros(len(self._gps_seen), int), (0.0, 0.0, 0.0), self._gps_lever, 0.0)
-            fit = align_to_fixes(times, poses, seen, t_end=fix.t) if len(times) > 1 else None
-            if fit is None:
-                self._step_counts.setdefault("gps", SensorCount()).missing += 1  # kept for the alignment
+            aligned = self._align_world(fix, ekf.x[:3])
+            if aligned is None:
                 return
-            sigma = math.sqrt(float(np.median(np.trace(seen.covariance, axis1=1, axis2=2))) / 2.0)
-            _, prior_sigma = prior_from_alignment(fit, poses[0], sigma)
+            fit, prior_sigma = aligned
             c, s_ = math.cos(fit.yaw), math.sin(fit.yaw)
             T = np.eye(ekf.kf.P.shape[0])
             T[:2, :2] = [[c, -s_], [s_, c]]
@@ -142,17 +227,7 @@ class HistoryMixin:
             ekf.kf.P = T @ ekf.kf.P @ T.T
             ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
-            rot = np.eye(3)
-            rot[:2, :2] = T[:2, :2]
-            self._start_frame = (len(self._t_nodes), list(self._poses), list(self._covs), len(self._notes))
-            self._poses = [p for p in fit.apply(np.array(self._poses))]
-            self._covs = [rot @ cv @ rot.T for cv in self._covs]
-            self._frame = "enu"
-            if self._heading_offset is not None:  # AHRS north was aligned to the start frame's heading
-                self._heading_offset -= fit.yaw
-            self._gps_reacquire = Reacquire(self.config.gps_reacquire)
-            self._notes.append(f"gps: world frame re-expressed in ENU at t={fix.t:.2f} (first heading "
-                               f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")
+            self._to_enu(fit, fix.t)
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
             accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)

@@ -226,6 +226,7 @@ class NodesMixin:
         iv, step = started.iv, started.step
         self._step_counts = step
         self._step_fixes = []
+        self._step_offered = 0
         if iv.heading_offset is not None:
             self._heading_offset = iv.heading_offset
         if self.backend == "ekf":
@@ -239,7 +240,8 @@ class NodesMixin:
         keep = state is not None
         self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
                                          monitor=self._monitor.state() if keep else None, dropped=started.dropped,
-                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None))
+                                         fixes=self._step_fixes, gps=self._gps_state() if keep else None,
+                                         offered=self._step_offered))
         self._retire()
         self._prune(t0)
 
@@ -259,7 +261,8 @@ class NodesMixin:
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(NodeRecord(None, None))
-            self._graph = self._online_graph(cfg, t, (kv, kb), self.background, self._states)
+            self._graph = self._online_graph(cfg, t, (kv, kb), self.background, self._states,
+                                             self._gps_lever if "gps" in self.sensors else None)
             pose, cov = self._graph.start()
             self._record(pose, cov)
 
@@ -272,14 +275,8 @@ class NodesMixin:
         meas = interval_measurements(iv, self.config)
         ekf.predict(float(iv.dt[0]), frame_error_cov(meas, 0))
         ekf.update(step_blocks(ekf, meas, 0))
-        t1 = float(iv.t[-1])
-        for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
-            self._gps.remove(fix)
-            self._step_fixes.append(fix)
-            if abs(fix.t - t1) > 1e-3:  # behind the last node already: cannot be applied causally
-                self._step_counts.setdefault("gps", SensorCount()).late += 1
-            else:
-                self._apply_gps(fix)
+        for fix in self._due_fixes(float(iv.t[-1])):
+            self._apply_gps(fix)
         for sensor, c in ekf.counts.items():
             own = self._step_counts.setdefault(sensor, SensorCount())
             own.used += c.used
@@ -287,14 +284,45 @@ class NodesMixin:
         ekf.counts = {}
         self._record(ekf.x[:3], ekf.P[:3, :3])
 
+    def _due_fixes(self, t1: float) -> list:
+        """The queued fixes up to the node at ``t1`` leave the queue (kept in the node's record): those before it are
+        counted late (behind the last node already: they cannot be applied causally), those at it returned."""
+        due = []
+        for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
+            self._gps.remove(fix)
+            self._step_fixes.append(fix)
+            if abs(fix.t - t1) > 1e-3:
+                self._step_counts.setdefault("gps", SensorCount()).late += 1
+            else:
+                due.append(fix)
+        return due
+
     def _graph_step(self, iv, prepared=None) -> None:
-        pose, cov, sensors = self._graph.step(iv, prepared)
+        """iSAM2's update of the node ending ``iv``, with its fixes once ENU is aligned; before that a fix is kept for
+        the alignment, which, once it fits, re-expresses the poses in ENU and adds the world frame to iSAM2
+        (:meth:`~fusion_vo.backends.online_graph.OnlineGraph.align`, with that fix)."""
+        fixes = self._due_fixes(float(iv.t[-1]))
+        offered = fixes if self._frame == "enu" else []
+        self._step_offered = len(offered)
+        pose, cov, sensors = self._graph.step(iv, prepared, offered)
         if pose is None:  # background update under way: the last pose predicted meanwhile
             pose, cov = extrapolate(self._t_nodes, self._poses, self._covs, float(iv.t[-1]) - self._t_nodes[-1],
                                      self.config)
-        for s in sensors or ():
-            self._step_counts.setdefault(s, SensorCount()).used += 1
+        self._used_from(self._step_counts, sensors, self._step_offered)
         self._record(pose, cov)
+        for k, fix in enumerate(fixes if self._frame == "start" else ()):
+            if self.background:  # the poses the alignment fits are iSAM2's, not the ones predicted meanwhile
+                self._collect(wait=True)
+            aligned = self._align_world(fix)
+            if aligned is not None:
+                fit, sigma = aligned
+                self._to_enu(fit, fix.t)
+                self._switch = (len(self._t_nodes), fit.yaw)
+                self._step_offered = len(fixes) - k
+                for n, pose, cov, sensors in self._graph.align(np.array([*fit.offset, fit.yaw]), sigma, fixes[k:]):
+                    self._poses[n], self._covs[n] = pose, cov
+                    self._used_from(self._step_counts, sensors, self._step_offered)
+                break
 
     def _collect(self, wait: bool = False) -> None:
         """Take in the results of finished background iSAM2 updates (all of them with ``wait``)."""
@@ -309,13 +337,26 @@ class NodesMixin:
         """Node ``n``'s factors are now those of ``sensors`` (None: unchanged): its ``used`` counts follow."""
         if sensors is None:
             return
+        if n == len(self._records):  # the node being processed (its record comes at the end of its step)
+            self._used_from(self._step_counts, sensors, self._step_offered)
+            return
         rec = self._records[n] if n < len(self._records) else None
         if rec is None:  # left the history while its update ran: its counts were merged already
             return
-        for c in rec.counts.values():
+        self._used_from(rec.counts, sensors, rec.offered)
+
+    @staticmethod
+    def _used_from(counts: dict, sensors, offered: int = 0) -> None:
+        """``counts`` of a node whose factors are those of ``sensors`` (None: unchanged): one use per factor, and of
+        the ``offered`` fixes those without a factor gated."""
+        if sensors is None:
+            return
+        for c in counts.values():
             c.used = 0
         for s in sensors:
-            rec.counts.setdefault(s, SensorCount()).used += 1
+            counts.setdefault(s, SensorCount()).used += 1
+        if offered:
+            counts.setdefault("gps", SensorCount()).gated = offered - sum(s == "gps" for s in sensors)
 
     def _calibration_flags(self) -> tuple[bool, bool]:
         s = set(self.sensors)

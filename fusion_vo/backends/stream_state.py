@@ -63,6 +63,7 @@ class NodeRecord:
     fixes: list = field(default_factory=list)  # GPS fixes this node's step consumed
     gps: tuple | None = None  # GPS bookkeeping after this node (_gps_state)
     dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
+    offered: int = 0  # iSAM2: fixes offered to the gate at this node (those without a factor were gated)
 
 
 def payload_values(payload):

@@ -21,17 +21,27 @@ and handed to the EKF (``backend="ekf"``) or to iSAM2 (``backend="gtsam"``). A v
 ``t0`` is not the previous node (it spans frames the stream has already passed) cannot be applied
 causally and is counted as late.
 
-GPS (``add_gps``, EKF only): every fix time is a node, and the fix updates the pose there through
-:class:`~fusion_vo.sensors.gps.GpsModel` (gate, robust weight). Until the robot has moved enough for
+GPS (``add_gps``, both backends): every fix time is a node, and the fix measures the pose there through the GPS
+model of :mod:`fusion_vo.sensors.gps` (lever arm, ``fusion.gps``'s gate and robust weight, re-acquisition after
+``gps_reacquire`` seconds of rejections). Until the robot has moved enough for
 :func:`~fusion_vo.sensors.gps.align_to_fixes` to fix the heading of ENU, estimates are in the start frame
-(``initial_pose``) and fixes are only collected; at the first alignment the state, its covariance
-(plus the alignment's uncertainty) and the poses recorded so far are re-expressed in ENU at the datum,
-and every later fix is applied. ``current_estimate`` says which frame it is in (``Estimate.frame``).
+(``initial_pose``) and fixes are only collected; at the first alignment the poses recorded so far are
+re-expressed in ENU at the datum, and that fix and every later one are applied. ``current_estimate`` says which
+frame it is in (``Estimate.frame``). The EKF re-expresses its state and covariance (plus the alignment's
+uncertainty) in ENU. iSAM2 keeps what it has in the start frame and adds the start frame's pose in ENU ``T_WS``,
+with the alignment as its prior, and the node's pose once more in ENU, tied to both; every later pose is an ENU
+variable and a fix there is the batch graph's factor on it (:mod:`fusion_vo.backends.online_graph`). A fix
+re-acquired after ``gps_reacquire`` seconds of rejections is applied at full weight by both: the EKF after
+widening its position covariance by the squared innovation, iSAM2 without the robust kernel.
 The fixes keep their stated sigma (floored by ``fusion.gps.min_sigma``): ``fusion.gps.estimate_sigma``,
 the scatter measured by a batch run's world-frame alignment, is not applied here.
 The history keeps what each node did to this bookkeeping (the fixes it consumed, the frame, the fixes
 kept for the alignment, the re-acquisition timer), so a late sample or fix rewinds the EKF with GPS
 as without it, back across the switch to ENU if need be (the start-frame poses are kept for that).
+iSAM2 rebuilds a node for late data with the fixes' factors it had (as gated then); its node times stay, so a
+fix later than the reorder window is re-timed onto the nearest processed node (the wheels' and gyro's motion
+from the node to the fix folded into the antenna's lever arm, its covariance grown by that motion's) and that
+node rebuilt with it; one older than the history, or with no wheel data around it, is counted late.
 Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
 (kept for the alignment) or late.
 
@@ -84,7 +94,8 @@ node and rebuild after rebuild in the order they were handed over, from its own 
 therefore those of the caller-thread run whatever the worker's timing. Until a node's update is done
 its pose is the last one predicted at constant twist; each later call takes the finished results in,
 and :meth:`finish` and :meth:`smoothed` wait for all of them (so does a call that would retire a node
-from the history before its result came: a worker that far behind slows the caller down).
+from the history before its result came: a worker that far behind slows the caller down, and, until the
+fixes have fixed the heading of ENU, a GPS fix: the alignment fits iSAM2's poses, not the ones predicted meanwhile).
 
 Latency
 -------
@@ -232,8 +243,6 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(registry.names())})")
         if "wheel" in self.sensors and wheel_config is None:
             raise InputError("the wheel sensor needs its wheel_config (ticks per revolution, radii, wheel base)")
-        if "gps" in self.sensors and backend != "ekf":
-            raise InputError("streaming GPS fusion needs backend 'ekf' (batch runs fuse GPS in both backends)")
         if "range" in self.sensors and camera_height is None:
             raise InputError("the range sensor needs the camera_height the visual increments assume")
         self.wheel_config = wheel_config
@@ -284,10 +293,15 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._graph = None
 
         lever = np.zeros(3) if gps_lever_arm is None else np.asarray(gps_lever_arm, dtype=np.float64).ravel()
+        if len(lever) not in (2, 3) or not np.all(np.isfinite(lever)):
+            raise InputError(f"gps_lever_arm must be 2 or 3 finite numbers [m] (the antenna in the body frame), "
+                             f"not {gps_lever_arm!r}")
         self._gps_model = GpsModel(lever, self.config.gps)
         self._gps_lever = lever
         self._gps: list[GpsFix] = []  # pending fixes, in time order
         self._gps_seen: list[GpsFix] = []  # fixes before the world frame was aligned
+        self._late_fixes: dict[int, list] = {}  # iSAM2: node -> late fixes re-timed onto it, (fix, lever arm)
+        self._switch: tuple | None = None  # iSAM2: (node, heading of ENU in the start frame) of the switch to ENU
         self._frame = "start"
         self._gps_reacquire = None
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
@@ -441,6 +455,10 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         if np.any(np.linalg.eigvalsh(0.5 * (cov + cov.T)) <= 0):
             self._count("gps").gated += 1
             return
+        if self._graph is not None and fix.t < self._t_nodes[-1] + 1e-3:  # iSAM2: onto a processed node
+            self._late_fix(GpsFix(float(fix.t), enu, cov))
+            self._advance(fix.t)
+            return
         if self._gps and fix.t < self._gps[-1].t:
             self._count("gps").reordered += 1
         bisect.insort(self._gps, GpsFix(float(fix.t), enu, cov), key=lambda f: f.t)
@@ -541,7 +559,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
-            result.notes.append(f"ekf: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
+            result.notes.append(f"{name}: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
                                 "world frame: " + ("ENU at the datum" if self._frame == "enu" else
                                                    "the start frame (the fixes never fixed the heading of ENU)"))
         if self._t_nodes:
@@ -595,6 +613,9 @@ def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> 
         msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
     if streams.range is not None:
         msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
+    if streams.gps is not None:
+        g = streams.gps
+        msgs += [(t, 4, "gps", GpsFix(t, enu[:2], cov)) for t, enu, cov in zip(g.t, g.enu, g.covariance)]
     for name, data in streams.extra.items():
         live = registry.get(name).live if name in registry.names() else None
         if live is not None and live.samples is not None and data is not None:
@@ -608,7 +629,10 @@ def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionCo
     """A :class:`StreamingFusion` for the sensors and calibrations of ``streams`` (keyword arguments pass on)."""
     sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
                                           ("odom", streams.odom is not None), ("imu", streams.imu is not None),
-                                          ("range", streams.range is not None)) if present]
+                                          ("range", streams.range is not None), ("gps", streams.gps is not None))
+               if present]
+    if streams.gps is not None:
+        kwargs.setdefault("gps_lever_arm", streams.gps.lever_arm)
     sensors += [name for name, data in streams.extra.items()  # sensors registered outside the library
                 if data is not None and name in registry.names() and registry.get(name).live is not None]
     imu = streams.imu

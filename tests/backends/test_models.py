@@ -8,8 +8,10 @@ import pytest
 
 from fusion_vo.backends import FusionConfig
 from fusion_vo.backends.ekf import DIM, PlanarEkf
-from fusion_vo.backends.factors import ModelFactor, ModelFactors, covariance_noise, group, pose_table
-from fusion_vo.backends.graph_builder import B, O, R, X, S, W
+from fusion_vo.backends.factors import POSE_LETTERS, ModelFactor, ModelFactors, covariance_noise, group, pose_table
+from fusion_vo.backends.graph_adapter import pose_factor
+from fusion_vo.backends.graph_builder import B, O, R, T_WS, X, S, W
+from fusion_vo.sensors import gps
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import STANDSTILL, WHEEL
@@ -64,7 +66,7 @@ def _numeric_jacobians(factor, values, keys):
     out = []
     base = values
     for key in keys:
-        is_pose = chr(gtsam.Symbol(key).chr()) == "x"
+        is_pose = chr(gtsam.Symbol(key).chr()) in POSE_LETTERS
         dim = 3 if is_pose else 1
         J = np.zeros((factor.dim(), dim))
         for i in range(dim):
@@ -158,6 +160,44 @@ def test_frozen_model_factor_is_gtsams_linearisation():
         frozen = f.linearized(lambda k: v.atPose2(k) if chr(gtsam.Symbol(k).chr()) == "x" else v.atDouble(k))
         theirs = gtsam.LinearContainerFactor(f.custom_factor().linearize(v), v)
         assert np.isclose(frozen.error(_moved(v)), theirs.error(_moved(v)), rtol=1e-10), f.model.name
+
+
+@pytest.mark.parametrize("kernel", ["none", "cauchy"])
+def test_fix_on_the_world_frame_and_a_pose_is_the_gps_model_of_their_composition(kernel):
+    """A fix on ``T_WS X`` (streaming iSAM2 with GPS): its error is the GPS model's residual at the composed pose (lever
+    arm included), its Jacobians in T's and X's tangent spaces match finite differences, and the frozen and grouped
+    linearisations equal GTSAM's of the same CustomFactor."""
+    v = gtsam.Values()
+    v.insert(T_WS(), gtsam.Pose2(5.0, -3.0, 0.7))
+    v.insert(X(3), gtsam.Pose2(1.2, 0.4, -2.9))
+    lever = np.array([-0.3, 0.2])
+    z = np.array([6.4, -1.6])
+    f = pose_factor(gps.ANTENNA, z, np.diag([0.04, 0.09]), (T_WS(), X(3)), {"lever_arm": lever},
+                    gps.GpsNoise(kernel=kernel))
+    factor = f.custom_factor()
+    world = v.atPose2(T_WS()).compose(v.atPose2(X(3)))
+    expected = gps.predict(np.array([world.x(), world.y(), world.theta()]), lever) - z
+    np.testing.assert_allclose(factor.unwhitenedError(v), expected, atol=1e-12)
+    if kernel == "none":
+        A = factor.linearize(v).jacobian()[0]
+        num = np.hstack(_numeric_jacobians(factor, v, [T_WS(), X(3)]))
+        np.testing.assert_allclose(np.linalg.solve(covariance_noise(f.covariance).R(), A), num, atol=1e-6)
+    frozen = f.linearized(lambda k: v.atPose2(k))
+    theirs = gtsam.LinearContainerFactor(factor.linearize(v), v)
+    moved = v.retract(_delta({T_WS(): [0.02, -0.01, 0.01], X(3): [0.01, 0.03, -0.02]}))
+    assert np.isclose(frozen.error(moved), theirs.error(moved), rtol=1e-10)
+    (mine,) = ModelFactors([f]).linearize(v)
+    A1, b1 = theirs.linearize(v).jacobian()
+    A2, b2 = mine.jacobian()
+    np.testing.assert_allclose(A2.T @ A2, A1.T @ A1, rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(A2.T @ b2, A1.T @ b1, rtol=1e-10, atol=1e-12)
+
+
+def _delta(steps: dict) -> gtsam.VectorValues:
+    delta = gtsam.VectorValues()
+    for key, d in steps.items():
+        delta.insert(key, np.asarray(d, dtype=float))
+    return delta
 
 
 def test_gyro_factor_is_exact_away_from_its_linearisation_point():

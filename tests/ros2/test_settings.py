@@ -37,6 +37,19 @@ def test_parameters_override_the_file_key_by_key(tmp_path):
     assert load_settings(None, {"sensors": "imu,odom"}).backend == "ekf"  # the node's default backend
 
 
+def test_gps_with_the_isam2_backend_is_fused(tmp_path):
+    """The node's iSAM2 takes GPS as its EKF does: the fixes and the antenna's lever arm of ``gps0/sensor.yaml``."""
+    (tmp_path / "gps0").mkdir()
+    (tmp_path / "gps0" / "sensor.yaml").write_text("T_BS: {rows: 4, cols: 4, data: [1,0,0,-0.1, 0,1,0,0.2, "
+                                                   "0,0,1,0.5, 0,0,0,1]}\nhorizontal_sigma_m: 0.5\n")
+    (tmp_path / "odom0").mkdir()
+    s = load_settings(None, {"backend": "gtsam", "sensors": "odom,gps", "calibration": str(tmp_path)})
+    setup = sensor_setup(s)
+    fusion = streaming_fusion(s, setup)
+    assert fusion.backend == "gtsam" and "gps" in fusion.sensors
+    assert list(fusion._gps_lever[:2]) == [-0.1, 0.2]
+
+
 @pytest.mark.parametrize("params, message", [
     ({"publish_rat": 5.0}, "unknown parameter 'publish_rat'"),
     ({"fusion.ekf.accel_sigmaa": 1.0}, "fusion.ekf.accel_sigmaa: unknown key"),
