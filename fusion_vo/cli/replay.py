@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--background is for --backend gtsam (the EKF's steps are cheap)")
     cfg = apply_overrides(load_config(args.config), argparse.Namespace(sensors=args.sensors))  # --backend: its own
     rec = Recording(args.sequence)
-    sensors = [s for s in resolve_sensors(rec, cfg) if s != "gps"]
+    sensors = resolve_sensors(rec, cfg)  # GPS only when --sensors names it, as in `run`
     fusion_cfg = cfg.fusion
     if args.window is not None:
         try:

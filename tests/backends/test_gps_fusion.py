@@ -4,6 +4,7 @@ are present, a multipath jump rejected and counted, drift during an outage, stre
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 
 import numpy as np
@@ -11,6 +12,8 @@ import pytest
 
 from fusion_vo.backends import StreamingFusion, fuse, streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.cli.main import main
+from fusion_vo.evaluation.io import read_tum_poses
 from fusion_vo.measurements import GpsFix, ImuSample, PoseData, WheelTicks
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
@@ -135,6 +138,29 @@ def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
     assert counts.gated == 5
     assert counts.used + counts.gated + counts.missing + counts.late == len(rec.gps().t)
     assert any(f"ekf: gps {counts.used} fixes used, 5 rejected" in n for n in result.notes)
+
+
+@pytest.mark.parametrize("backend", ["ekf", "gtsam"])
+def test_replay_fuses_the_gps_it_is_given(rec, truth, tmp_path, backend):
+    """``fusion-vo replay --sensors wheel,imu,gps`` streams the fixes: the live track ends in ENU at the truth,
+    every fix is counted, the 5 jumped ones gated; without GPS the track stays in the start frame, metres off."""
+    ends = {}
+    for sensors in ("wheel,imu,gps", "wheel,imu"):
+        out = tmp_path / f"{backend}_{sensors.count(',')}"
+        assert main(["-q", "replay", str(rec.path), "--out", str(out), "--speed", "0", "--backend", backend,
+                     "--sensors", sensors]) == 0
+        info = json.loads((out / "replay.json").read_text())
+        assert info["sensors"] == sensors.split(",")
+        track = read_tum_poses(out / f"stream_{backend}.tum")
+        t_end, end = track.t[-1], track.xyz[-1, :2]
+        true_end = [np.interp(t_end, truth.t, truth.xyyaw[:, k]) for k in (0, 1)]
+        ends[sensors] = float(np.hypot(*(end - true_end)))
+        if "gps" in sensors:
+            counts = info["counts"]["gps"]
+            assert counts["gated"] == 5
+            assert counts["used"] + counts["gated"] + counts["missing"] + counts["late"] == len(rec.gps().t)
+    assert ends["wheel,imu,gps"] < 2 * NOISE
+    assert ends["wheel,imu"] > 1.0
 
 
 def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec):
