@@ -13,6 +13,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from background import BackgroundJobs, jobs_of
+
+from fusion_vo.cli.main import main
+from fusion_vo.simulation.standard import make_standard
 
 LAYERS = {
     "unit": ("frontends", "geometry", "sensors", "config", "recording", "evaluation"),
@@ -21,6 +25,9 @@ LAYERS = {
 }
 FOLDER_LAYER = {folder: layer for layer, folders in LAYERS.items() for folder in folders}
 TESTS = Path(__file__).resolve().parent
+ROBOT_LOGS = TESTS / "data" / "robot_localization"
+#: base_link -> imu_link of robot_localization's test_ekf_localization_node_bag1.test (the Husky's IMU lies on its side)
+HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 
 def pytest_collection_modifyitems(config, items) -> None:
@@ -30,3 +37,66 @@ def pytest_collection_modifyitems(config, items) -> None:
         if folder not in FOLDER_LAYER:
             raise pytest.UsageError(f"tests/{folder}: no layer in tests/conftest.py's LAYERS names this folder")
         item.add_marker(getattr(pytest.mark, FOLDER_LAYER[folder]))
+
+
+_background: BackgroundJobs | None = None
+
+
+def pytest_collection_finish(session) -> None:
+    """Start the work the collected tests name in their modules' ``BACKGROUND_JOBS`` (tests/background.py)."""
+    global _background
+    keys = jobs_of(session.items)
+    if keys and not session.config.option.collectonly:
+        _background = BackgroundJobs(keys)
+
+
+def pytest_sessionfinish(session) -> None:
+    if _background is not None:
+        _background.stop()
+
+
+@pytest.fixture(scope="session")
+def background() -> BackgroundJobs | None:
+    """The jobs started in the background for this session (None: the collected tests name none)."""
+    return _background
+
+
+# ------------------------------------------------------------------ inputs made once per session, shared by folders
+# Each is made the first time a test asks for it and never modified afterwards: a test that breaks one copies it.
+
+
+@pytest.fixture(scope="session")
+def standard_recording(tmp_path_factory, background):
+    """``standard_recording(name)`` -> path of that standard generated recording (never modify it): made by the
+    background job ``standard:NAME`` when a collected test names it, else here."""
+    made = {}
+
+    def get(name):
+        if name not in made:
+            key = f"standard:{name}"
+            if background is not None and key in background:
+                made[name] = background.result(key).out
+            else:
+                made[name] = make_standard(name, tmp_path_factory.mktemp("rec") / name)
+        return made[name]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def jackal_log(tmp_path_factory) -> Path:
+    """robot_localization's test2.bag (Jackal) imported as a user would: ``fusion-vo import-bag`` with its IMU and
+    wheel odometry topics, into a folder named ``jackal_log`` (never modify it)."""
+    seq = tmp_path_factory.mktemp("jackal") / "jackal_log"
+    assert main(["-q", "import-bag", str(ROBOT_LOGS / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
+                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
+    return seq
+
+
+@pytest.fixture(scope="session")
+def husky_log(tmp_path_factory) -> Path:
+    """robot_localization's test1.bag (Husky, 395 s) imported with its launch file's IMU transform (never modify
+    it)."""
+    seq = tmp_path_factory.mktemp("husky") / "husky"
+    assert main(["-q", "import-bag", str(ROBOT_LOGS / "test1.bag"), str(seq), "--static-tf", HUSKY_IMU_TF]) == 0
+    return seq

@@ -162,17 +162,11 @@ def test_bad_gps_option_is_a_one_line_error():
 
 
 # --------------------------------------------------------------------------- Husky (real recording)
-def test_husky_gps_of_the_first_minute_then_withheld(tmp_path):
+def test_husky_gps_of_the_first_minute_then_withheld(husky_log):
     """test1.bag, first 120 s: GPS fused for 60 s, the next 60 s scored against the withheld fixes,
-    beside wheel dead reckoning and the filter without GPS placed in ENU by the same first-minute fixes."""
-    from pathlib import Path
-
-    from fusion_vo.cli.main import main
-
-    bag = Path(__file__).resolve().parents[1] / "data" / "robot_localization" / "test1.bag"
-    tf = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
-    assert main(["-q", "import-bag", str(bag), str(tmp_path / "husky"), "--static-tf", tf]) == 0
-    rec = Recording(tmp_path / "husky")
+    beside wheel dead reckoning and the filter without GPS placed in ENU by the same first-minute fixes.
+    (``husky_log``: the bag imported with its launch file's IMU transform, tests/conftest.py.)"""
+    rec = Recording(husky_log)
     gps = rec.gps()
     t0 = float(gps.t[0])
     base = streams_from_recording(rec, None, ["odom", "imu"])

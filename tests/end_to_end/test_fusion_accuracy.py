@@ -15,6 +15,9 @@ from fusion_vo.evaluation.io import read_velocities
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
 
+#: the recording the module's run reads, made ahead in the background (tests/background.py)
+BACKGROUND_JOBS = {"test_no_visual_increment_turns_the_wrong_way": ["standard:hard"]}
+
 
 @pytest.fixture(scope="module")
 def hard_run(standard_recording, tmp_path_factory):

@@ -26,8 +26,6 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
-#: base_link -> imu_link of robot_localization's test_ekf_localization_node_bag1.test (the IMU lies on its side)
-HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 RL_FINAL = np.array([1.0206, 3.4292])
 
 
@@ -37,13 +35,11 @@ def _read_tum(path):
 
 
 @pytest.fixture(scope="module")
-def jackal(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("jackal")
-    seq, out = tmp / "SEQ", tmp / "OUT"
-    assert main(["import-bag", str(DATA / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
-    assert main(["run", str(seq), "--out", str(out), "--backend", "all"]) == 0
-    return seq, out
+def jackal(jackal_log, tmp_path_factory):
+    """test2.bag as ``fusion-vo import-bag`` writes it (tests/conftest.py), run with every backend."""
+    out = tmp_path_factory.mktemp("jackal") / "OUT"
+    assert main(["run", str(jackal_log), "--out", str(out), "--backend", "all"]) == 0
+    return jackal_log, out
 
 
 def test_jackal_final_position_matches_robot_localization(jackal):
@@ -84,9 +80,8 @@ def test_covariance_files_next_to_the_trajectories(jackal):
     assert not (out / "wheel.cov.csv").exists()
 
 
-def test_husky_against_gps(tmp_path):
-    seq, out = tmp_path / "SEQ", tmp_path / "OUT"
-    assert main(["import-bag", str(DATA / "test1.bag"), str(seq), "--static-tf", HUSKY_IMU_TF]) == 0
+def test_husky_against_gps(husky_log, tmp_path):
+    seq, out = husky_log, tmp_path / "OUT"  # test1.bag imported with the launch file's IMU transform
     assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "all"]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
     rms = {name: metrics[name]["gps_rms_m"] for name in ("wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online")}

@@ -15,17 +15,12 @@ import pytest
 from fusion_vo.cli.main import main
 from fusion_vo.evaluation.innovations import band, read_innovations
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
-
-
 @pytest.fixture(scope="module")
-def jackal(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("jackal")
-    seq, out = tmp / "jackal_log", tmp / "out"
-    assert main(["-q", "import-bag", str(DATA / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
-    assert main(["-q", "run", str(seq), "--out", str(out), "--backend", "ekf"]) == 0
-    return seq, out
+def jackal(jackal_log, tmp_path_factory):
+    """test2.bag imported by ``fusion-vo import-bag`` into ``jackal_log`` (tests/conftest.py), run with the EKF."""
+    out = tmp_path_factory.mktemp("jackal") / "out"
+    assert main(["-q", "run", str(jackal_log), "--out", str(out), "--backend", "ekf"]) == 0
+    return jackal_log, out
 
 
 def section(text: str, heading: str) -> str:

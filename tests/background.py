@@ -1,0 +1,116 @@
+"""Deterministic work made ahead in a second process while the suite runs (tests/conftest.py starts it).
+
+A test module may name, in ``BACKGROUND_JOBS`` (test name -> job keys), the work its tests will wait for:
+
+``standard:NAME``  the standard generated recording NAME, made by :func:`fusion_vo.simulation.standard.make_standard`
+                   (the function the ``standard_recording`` fixture calls in-process otherwise)
+``example:NAME``   ``python examples/NAME.py --quick --seed 1 --out DIR``, the example script as a user runs it
+
+Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
+the order the tests come; a test that needs a job's result waits for it. The jobs use fixed seeds, so making
+them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
+so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+#: seconds one job may take (the longest, the 60 s drive random60 or the thesis_square example, takes 10-15 s of
+#: CPU on an idle core)
+TIMEOUT_S = 300.0
+
+_MAKE_STANDARD = "import sys\nfrom fusion_vo.simulation.standard import make_standard\nmake_standard(sys.argv[1], sys.argv[2])"
+
+
+@dataclass
+class Job:
+    """One job: its command line and output folder; once ``done`` is set, its exit status and output."""
+
+    key: str
+    argv: list[str]
+    out: Path
+    done: threading.Event = field(default_factory=threading.Event)
+    returncode: int | None = None
+    stdout: str = ""
+    stderr: str = ""
+
+
+def command(key: str, out: Path) -> list[str]:
+    """The command line of job ``key`` writing into ``out``."""
+    kind, _, name = key.partition(":")
+    if kind == "standard":
+        return [sys.executable, "-c", _MAKE_STANDARD, name, str(out)]
+    if kind == "example":
+        return [sys.executable, str(REPO / "examples" / f"{name}.py"), "--quick", "--seed", "1", "--out", str(out)]
+    raise ValueError(f"unknown background job {key!r} (standard:NAME or example:NAME)")
+
+
+class BackgroundJobs:
+    """Runs the jobs ``keys`` one after another in a thread, each in its own interpreter."""
+
+    def __init__(self, keys: list[str]):
+        self.root = Path(tempfile.mkdtemp(prefix="fusion-vo-tests-"))
+        self.jobs = {}
+        for i, key in enumerate(keys):
+            out = self.root / f"{i:02d}_{key.replace(':', '_')}" / key.partition(":")[2]
+            self.jobs[key] = Job(key, command(key, out), out)
+        self.stopped = False
+        self.process: subprocess.Popen | None = None
+        self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
+        self.thread.start()
+
+    def _run_all(self) -> None:
+        for job in self.jobs.values():
+            try:
+                if self.stopped:
+                    job.stderr = "not run: the session ended first"
+                    continue
+                job.out.parent.mkdir(parents=True, exist_ok=True)
+                self.process = subprocess.Popen(job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                                cwd=REPO)
+                try:
+                    job.stdout, job.stderr = self.process.communicate(timeout=TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    self.process.kill()
+                    job.stdout, job.stderr = self.process.communicate()
+                    job.stderr += f"\n(killed after {TIMEOUT_S:.0f} s)"
+                job.returncode = self.process.returncode
+            except Exception as exc:  # noqa: BLE001 -- reported by the test that waits for this job
+                job.stderr = f"could not run {job.key}: {exc!r}"
+            finally:
+                job.done.set()
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.jobs
+
+    def result(self, key: str) -> Job:
+        """Wait for job ``key`` and return it, after checking that it exited with status 0."""
+        job = self.jobs[key]
+        assert job.done.wait(TIMEOUT_S * len(self.jobs) + 60.0), f"{key} did not finish"
+        assert job.returncode == 0, f"{key} failed:\n{job.stderr[-3000:]}"
+        return job
+
+    def stop(self) -> None:
+        """End the running job (if any), skip the rest and remove every output."""
+        self.stopped = True
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+        self.thread.join(timeout=30.0)
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+def jobs_of(items) -> list[str]:
+    """The job keys the collected test ``items`` name, in the order of their first test."""
+    keys = []
+    for item in items:
+        named = getattr(getattr(item, "module", None), "BACKGROUND_JOBS", {})
+        keys += named.get(item.originalname, [])
+    return list(dict.fromkeys(keys))
