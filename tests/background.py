@@ -1,10 +1,15 @@
 """Deterministic work made ahead in a second process while the suite runs (tests/conftest.py starts it).
 
-A test module may name, in ``BACKGROUND_JOBS`` (test name -> job keys), the work its tests will wait for:
+A test module may name, in ``BACKGROUND_JOBS`` (test name, or ``*`` for every test of the module -> job keys), the
+work its tests will wait for:
 
 ``standard:NAME``  the standard generated recording NAME, made by :func:`fusion_vo.simulation.standard.make_standard`
                    (the function the ``standard_recording`` fixture calls in-process otherwise)
 ``example:NAME``   ``python examples/NAME.py --quick --seed 1 --out DIR``, the example script as a user runs it
+``fusion-vo:LABEL`` the command ``fusion-vo ARGS...`` of the module's ``BACKGROUND_COMMANDS[LABEL]`` (its output
+                   folder is named as LABEL's last part: ``a/out`` writes a folder ``out``), in which an
+                   argument starting ``{out}`` is this job's output folder, ``{data}`` the folder tests/data, ``{KEY}`` the
+                   output of the job KEY (named before it in the same test's list, so it runs first)
 
 Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
 the order the tests come; a test that needs a job's result waits for it. The jobs use fixed seeds, so making
@@ -43,25 +48,38 @@ class Job:
     stderr: str = ""
 
 
-def command(key: str, out: Path) -> list[str]:
-    """The command line of job ``key`` writing into ``out``."""
+def command(key: str, out: Path, commands: dict[str, list[str]], outs: dict[str, Path]) -> list[str]:
+    """The command line of job ``key`` writing into ``out`` (``commands``: the ``fusion-vo:`` jobs' arguments,
+    ``outs``: the output folders of the jobs before it)."""
     kind, _, name = key.partition(":")
     if kind == "standard":
         return [sys.executable, "-c", _MAKE_STANDARD, name, str(out)]
     if kind == "example":
         return [sys.executable, str(REPO / "examples" / f"{name}.py"), "--quick", "--seed", "1", "--out", str(out)]
-    raise ValueError(f"unknown background job {key!r} (standard:NAME or example:NAME)")
+    if kind == "fusion-vo":
+        places = {"out": str(out), "data": str(REPO / "tests" / "data"), **{k: str(v) for k, v in outs.items()}}
+        return [sys.executable, "-m", "fusion_vo.cli.main",
+                *(_placed(arg, places) for arg in commands[key])]
+    raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME or fusion-vo:LABEL)")
+
+
+def _placed(arg: str, places: dict[str, str]) -> str:
+    """``arg`` with a leading ``{NAME}`` replaced by ``places[NAME]`` (``{data}/x.bag`` -> ``.../tests/data/x.bag``)."""
+    if not arg.startswith("{"):
+        return arg
+    name, _, rest = arg[1:].partition("}")
+    return places[name] + rest
 
 
 class BackgroundJobs:
     """Runs the jobs ``keys`` one after another in a thread, each in its own interpreter."""
 
-    def __init__(self, keys: list[str]):
+    def __init__(self, keys: list[str], commands: dict[str, list[str]]):
         self.root = Path(tempfile.mkdtemp(prefix="fusion-vo-tests-"))
         self.jobs = {}
         for i, key in enumerate(keys):
-            out = self.root / f"{i:02d}_{key.replace(':', '_')}" / key.partition(":")[2]
-            self.jobs[key] = Job(key, command(key, out), out)
+            out = self.root / f"{i:02d}_{key.replace(':', '_').replace('/', '_')}" / Path(key.partition(":")[2]).name
+            self.jobs[key] = Job(key, command(key, out, commands, {k: j.out for k, j in self.jobs.items()}), out)
         self.stopped = False
         self.process: subprocess.Popen | None = None
         self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
@@ -107,10 +125,13 @@ class BackgroundJobs:
         shutil.rmtree(self.root, ignore_errors=True)
 
 
-def jobs_of(items) -> list[str]:
-    """The job keys the collected test ``items`` name, in the order of their first test."""
-    keys = []
+def jobs_of(items) -> tuple[list[str], dict[str, list[str]]]:
+    """The job keys the collected test ``items`` name, in the order of their first test, and the arguments of
+    their ``fusion-vo:`` jobs."""
+    keys, commands = [], {}
     for item in items:
-        named = getattr(getattr(item, "module", None), "BACKGROUND_JOBS", {})
-        keys += named.get(item.originalname, [])
-    return list(dict.fromkeys(keys))
+        module = getattr(item, "module", None)
+        named = getattr(module, "BACKGROUND_JOBS", {})
+        keys += named.get(item.originalname, named.get("*", []))
+        commands.update({f"fusion-vo:{label}": args for label, args in getattr(module, "BACKGROUND_COMMANDS", {}).items()})
+    return list(dict.fromkeys(keys)), commands

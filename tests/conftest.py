@@ -45,9 +45,9 @@ _background: BackgroundJobs | None = None
 def pytest_collection_finish(session) -> None:
     """Start the work the collected tests name in their modules' ``BACKGROUND_JOBS`` (tests/background.py)."""
     global _background
-    keys = jobs_of(session.items)
+    keys, commands = jobs_of(session.items)
     if keys and not session.config.option.collectonly:
-        _background = BackgroundJobs(keys)
+        _background = BackgroundJobs(keys, {**SHARED_COMMANDS, **commands})
 
 
 def pytest_sessionfinish(session) -> None:
@@ -66,37 +66,58 @@ def background() -> BackgroundJobs | None:
 
 
 @pytest.fixture(scope="session")
-def standard_recording(tmp_path_factory, background):
+def standard_recording(tmp_path_factory, ahead):
     """``standard_recording(name)`` -> path of that standard generated recording (never modify it): made by the
     background job ``standard:NAME`` when a collected test names it, else here."""
     made = {}
 
     def get(name):
         if name not in made:
-            key = f"standard:{name}"
-            if background is not None and key in background:
-                made[name] = background.result(key).out
-            else:
-                made[name] = make_standard(name, tmp_path_factory.mktemp("rec") / name)
+            made[name] = ahead(f"standard:{name}", lambda: make_standard(name, tmp_path_factory.mktemp("rec") / name))
         return made[name]
 
     return get
 
 
 @pytest.fixture(scope="session")
-def jackal_log(tmp_path_factory) -> Path:
-    """robot_localization's test2.bag (Jackal) imported as a user would: ``fusion-vo import-bag`` with its IMU and
-    wheel odometry topics, into a folder named ``jackal_log`` (never modify it)."""
-    seq = tmp_path_factory.mktemp("jackal") / "jackal_log"
-    assert main(["-q", "import-bag", str(ROBOT_LOGS / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
-    return seq
+def ahead(background):
+    """``ahead(key, make)`` -> the output folder of the background job ``key`` if the session started it (waiting
+    for it), else ``make()``, the same work done here."""
+
+    def get(key: str, make) -> Path:
+        if background is not None and key in background:
+            return background.result(key).out
+        return make()
+
+    return get
+
+
+#: robot_localization's bags imported as a user would (``fusion-vo import-bag``), as background jobs
+#: ``fusion-vo:jackal_log`` and ``fusion-vo:husky_log`` (tests/background.py) or in the fixtures below
+JACKAL_IMPORT = ["-q", "import-bag", "{data}/robot_localization/test2.bag", "{out}", "--imu-topic", "/imu/data",
+                 "--odom-topic", "/jackal_velocity_controller/odom"]
+HUSKY_IMPORT = ["-q", "import-bag", "{data}/robot_localization/test1.bag", "{out}", "--static-tf", HUSKY_IMU_TF]
+SHARED_COMMANDS = {"fusion-vo:jackal_log": JACKAL_IMPORT, "fusion-vo:husky_log": HUSKY_IMPORT}
+
+
+def _cli_here(args: list[str], out: Path) -> Path:
+    """``fusion-vo ARGS`` run in this process with ``{out}`` and ``{data}`` in place; returns ``out``."""
+    places = {"{out}": str(out), "{data}": str(TESTS / "data")}
+    argv = [next((arg.replace(k, v) for k, v in places.items() if arg.startswith(k)), arg) for arg in args]
+    assert main(argv) == 0
+    return out
 
 
 @pytest.fixture(scope="session")
-def husky_log(tmp_path_factory) -> Path:
+def jackal_log(ahead, tmp_path_factory) -> Path:
+    """robot_localization's test2.bag (Jackal) imported with its IMU and wheel odometry topics into a folder named
+    ``jackal_log`` (never modify it)."""
+    return ahead("fusion-vo:jackal_log",
+                 lambda: _cli_here(JACKAL_IMPORT, tmp_path_factory.mktemp("jackal") / "jackal_log"))
+
+
+@pytest.fixture(scope="session")
+def husky_log(ahead, tmp_path_factory) -> Path:
     """robot_localization's test1.bag (Husky, 395 s) imported with its launch file's IMU transform (never modify
     it)."""
-    seq = tmp_path_factory.mktemp("husky") / "husky"
-    assert main(["-q", "import-bag", str(ROBOT_LOGS / "test1.bag"), str(seq), "--static-tf", HUSKY_IMU_TF]) == 0
-    return seq
+    return ahead("fusion-vo:husky_log", lambda: _cli_here(HUSKY_IMPORT, tmp_path_factory.mktemp("husky") / "husky_log"))

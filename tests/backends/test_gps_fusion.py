@@ -162,6 +162,10 @@ def test_bad_gps_option_is_a_one_line_error():
 
 
 # --------------------------------------------------------------------------- Husky (real recording)
+#: the import the Husky test reads, made ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_JOBS = {"test_husky_gps_of_the_first_minute_then_withheld": ["fusion-vo:husky_log"]}
+
+
 def test_husky_gps_of_the_first_minute_then_withheld(husky_log):
     """test1.bag, first 120 s: GPS fused for 60 s, the next 60 s scored against the withheld fixes,
     beside wheel dead reckoning and the filter without GPS placed in ENU by the same first-minute fixes.

@@ -19,6 +19,8 @@ from dds_namespace import DATA, run_peer
 
 pytestmark = pytest.mark.ros2
 RL_FINAL = np.array([1.0206, 3.4292])
+#: the import the node is given, made ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_JOBS = {"*": ["fusion-vo:jackal_log"]}
 
 
 @pytest.fixture(scope="module")
