@@ -10,11 +10,18 @@ work its tests will wait for:
                    folder is named as LABEL's last part: ``a/out`` writes a folder ``out``), in which an
                    argument starting ``{out}`` is this job's output folder, ``{data}`` the folder tests/data, ``{KEY}`` the
                    output of the job KEY (named before it in the same test's list, so it runs first)
+``python:LABEL``   ``python ARGS...`` of the module's ``BACKGROUND_COMMANDS["python:LABEL"]``, placed likewise
+                   (``{repo}``: the repository; a script of the repository run as a user runs it)
 
 Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
 the order the tests come; a test that needs a job's result waits for it. The jobs use fixed seeds, so making
 them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
 so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
+
+Only one job runs at a time, and every job named so far is needed by a test before ``tests/ros2`` (the DDS tests,
+whose timing a busy machine can upset), so the second process is idle before they start. The tests that run
+beside it and measure time hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch
+commands' refusals), which a second busy core does not reach.
 """
 
 from __future__ import annotations
@@ -56,11 +63,12 @@ def command(key: str, out: Path, commands: dict[str, list[str]], outs: dict[str,
         return [sys.executable, "-c", _MAKE_STANDARD, name, str(out)]
     if kind == "example":
         return [sys.executable, str(REPO / "examples" / f"{name}.py"), "--quick", "--seed", "1", "--out", str(out)]
-    if kind == "fusion-vo":
-        places = {"out": str(out), "data": str(REPO / "tests" / "data"), **{k: str(v) for k, v in outs.items()}}
-        return [sys.executable, "-m", "fusion_vo.cli.main",
+    if kind in ("fusion-vo", "python"):
+        places = {"out": str(out), "data": str(REPO / "tests" / "data"), "repo": str(REPO),
+                  **{k: str(v) for k, v in outs.items()}}
+        return [sys.executable, *(["-m", "fusion_vo.cli.main"] if kind == "fusion-vo" else []),
                 *(_placed(arg, places) for arg in commands[key])]
-    raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME or fusion-vo:LABEL)")
+    raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME, fusion-vo:LABEL or python:LABEL)")
 
 
 def _placed(arg: str, places: dict[str, str]) -> str:
@@ -133,5 +141,6 @@ def jobs_of(items) -> tuple[list[str], dict[str, list[str]]]:
         module = getattr(item, "module", None)
         named = getattr(module, "BACKGROUND_JOBS", {})
         keys += named.get(item.originalname, named.get("*", []))
-        commands.update({f"fusion-vo:{label}": args for label, args in getattr(module, "BACKGROUND_COMMANDS", {}).items()})
+        for label, args in getattr(module, "BACKGROUND_COMMANDS", {}).items():
+            commands[label if label.startswith("python:") else f"fusion-vo:{label}"] = args
     return list(dict.fromkeys(keys)), commands
