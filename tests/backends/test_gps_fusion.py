@@ -309,18 +309,16 @@ def test_bad_gps_option_is_a_one_line_error():
 
 
 # --------------------------------------------------------------------------- Husky (real recording)
+#: the import the Husky tests read, made ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_JOBS = {"test_husky_gps_of_the_first_minute_then_withheld": ["fusion-vo:husky_log"],
+                   "test_husky_streamed_with_the_gps_of_the_first_minute": ["fusion-vo:husky_log"]}
+
+
 @pytest.fixture(scope="module")
-def husky(tmp_path_factory):
-    """test1.bag, first 120 s: odometry and IMU, the fixes of the first 60 s and those of the next 60 s."""
-    from pathlib import Path
-
-    from fusion_vo.cli.main import main
-
-    bag = Path(__file__).resolve().parents[1] / "data" / "robot_localization" / "test1.bag"
-    tf = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
-    folder = tmp_path_factory.mktemp("husky") / "husky"
-    assert main(["-q", "import-bag", str(bag), str(folder), "--static-tf", tf]) == 0
-    rec = Recording(folder)
+def husky(husky_log):
+    """test1.bag, first 120 s: odometry and IMU, the fixes of the first 60 s and those of the next 60 s
+    (``husky_log``: the bag imported with its launch file's IMU transform, tests/conftest.py)."""
+    rec = Recording(husky_log)
     gps = rec.gps()
     t0 = float(gps.t[0])
     base = streams_from_recording(rec, None, ["odom", "imu"])

@@ -198,11 +198,13 @@ def test_concurrent_producers_and_a_reader(drive, backend, name):
 
 
 # ---------------------------------------------------------------------------- fusion-vo replay
-@pytest.fixture(scope="module")
-def short_recording(tmp_path_factory):
-    from fusion_vo.simulation.standard import make_standard
+#: the recording the replay tests read, made ahead in the background (tests/background.py)
+BACKGROUND_JOBS = {"test_replay_writes_live_poses_at_a_fixed_rate_beside_the_batch_result": ["standard:short"]}
 
-    return make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+
+@pytest.fixture(scope="module")
+def short_recording(standard_recording):
+    return standard_recording("short")
 
 
 def _read_tum(path):

@@ -14,7 +14,6 @@ from fusion_vo import baseline
 from fusion_vo.benchmark import EndToEnd, bound_table, first_frames, run_benchmark, wall_bound_ms
 from fusion_vo.cli.main import main
 from fusion_vo.recording import Recording
-from fusion_vo.simulation.standard import make_standard
 
 
 @pytest.mark.parametrize("argv, key", [
@@ -43,8 +42,8 @@ def test_a_folder_without_frames_is_a_one_line_error(tmp_path, capsys):
 
 
 @pytest.fixture(scope="module")
-def short(tmp_path_factory):
-    return make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+def short(standard_recording):
+    return standard_recording("short")
 
 
 def test_first_frames_links_the_first_n(short, tmp_path):

@@ -73,15 +73,26 @@ def test_consistency_prints_every_backend_and_sensor():
         assert 0.5 < float(r[1]) < 20.0 and r[4] in ("consistent", "overconfident", "pessimistic"), r
 
 
+#: ``python benchmarks/fusion.py --only short --seeds 1 --out DIR``, run from the session's start in the background
+#: (tests/background.py) or else by the test itself
+FUSION_SHORT = ["{repo}/benchmarks/fusion.py", "--only", "short", "--seeds", "1", "--out", "{out}"]
+BACKGROUND_COMMANDS = {"python:fusion_short": FUSION_SHORT}
+BACKGROUND_JOBS = {"test_fusion_over_two_seeds_summarises_the_rows_it_printed": ["python:fusion_short"]}
+
+
 @pytest.mark.slow
-def test_fusion_over_two_seeds_summarises_the_rows_it_printed(tmp_path):
+def test_fusion_over_two_seeds_summarises_the_rows_it_printed(background, tmp_path):
     """``fusion.py --only short --seeds 1``: two rows, and the summary's means and comparisons are those of the
     rows (the relative differences against each seed's best input, the smoothers against their filters)."""
-    proc = subprocess.run([sys.executable, str(FOLDER / "fusion.py"), "--only", "short", "--seeds", "1", "--out",
-                           str(tmp_path)], capture_output=True, text=True, timeout=900, cwd=REPO)
-    assert proc.returncode == 0, proc.stderr[-3000:]
+    if background is not None and "python:fusion_short" in background:
+        stdout = background.result("python:fusion_short").stdout  # (exit status 0 checked there)
+    else:
+        argv = [a.replace("{repo}", str(REPO)).replace("{out}", str(tmp_path)) for a in FUSION_SHORT]
+        proc = subprocess.run([sys.executable, *argv], capture_output=True, text=True, timeout=900, cwd=REPO)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        stdout = proc.stdout
     header, rows = None, []
-    for line in proc.stdout.splitlines():
+    for line in stdout.splitlines():
         if line.startswith("| recording"):
             header = [c.strip() for c in line.strip("|").split("|")]
         elif line.startswith("| short"):
@@ -91,13 +102,13 @@ def test_fusion_over_two_seeds_summarises_the_rows_it_printed(tmp_path):
            for r in rows]
     for a in ate:
         assert a["best"] == min(a["vo"], a["wheel"]) and 0.0 < a["best"] < 1.0
-    means = re.search(r"mean ATE \[mm\] (.*)", proc.stdout).group(1)
+    means = re.search(r"mean ATE \[mm\] (.*)", stdout).group(1)
     for key in ("vo", "ekf", "gtsam_online"):
         printed = float(re.search(rf"\b{key} ([0-9.]+)", means).group(1))
         assert abs(printed - (ate[0][key] + ate[1][key]) / 2) < 1.5e-3, (key, means)
     # the printed ATEs are rounded to 1 µm: the relative differences recomputed from them are known to that
     rel = [a["ekf_smoothed"] / a["ekf"] - 1 for a in ate]
     rounding = sum(1e-3 / a["ekf"] for a in ate) / 2
-    rts = re.search(r"RTS vs EKF ([+-][0-9.]+) % on average, at most on (\d) of 2", proc.stdout)
+    rts = re.search(r"RTS vs EKF ([+-][0-9.]+) % on average, at most on (\d) of 2", stdout)
     assert abs(float(rts.group(1)) / 100 - sum(rel) / 2) <= rounding + 5e-4, (rts.group(0), rel)
     assert int(rts.group(2)) in {sum(r <= -rounding for r in rel), sum(r <= rounding for r in rel)}

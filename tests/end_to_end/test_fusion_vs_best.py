@@ -13,13 +13,21 @@ from fusion_vo.config import RunConfig
 from fusion_vo.pipeline import run_pipeline
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+#: the recording and the run both tests read, made ahead in the background (tests/background.py)
+BACKGROUND_COMMANDS = {"short_all": ["-q", "run", "{standard:short}", "--out", "{out}", "--backend", "all"]}
+BACKGROUND_JOBS = {"*": ["standard:short", "fusion-vo:short_all"]}
 
 
 @pytest.fixture(scope="module")
-def short_metrics(standard_recording, tmp_path_factory):
-    out = tmp_path_factory.mktemp("short_run")
-    run_pipeline(standard_recording("short"), out, RunConfig(backend="all"))
-    return json.loads((out / "metrics.json").read_text())
+def short_metrics(standard_recording, ahead, tmp_path_factory):
+    """``fusion-vo run short --backend all``: its metrics.json."""
+
+    def here():
+        out = tmp_path_factory.mktemp("short_run") / "run"
+        run_pipeline(standard_recording("short"), out, RunConfig(backend="all"))
+        return out
+
+    return json.loads((ahead("fusion-vo:short_all", here) / "metrics.json").read_text())
 
 
 def test_every_fused_track_is_at_most_the_best_single_sensor(short_metrics):

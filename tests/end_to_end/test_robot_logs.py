@@ -26,9 +26,20 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
-#: base_link -> imu_link of robot_localization's test_ekf_localization_node_bag1.test (the IMU lies on its side)
-HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 RL_FINAL = np.array([1.0206, 3.4292])
+
+#: the runs the tests read, made ahead in the background (tests/background.py; the imports are tests/conftest.py's)
+BACKGROUND_COMMANDS = {
+    "jackal_all": ["run", "{fusion-vo:jackal_log}", "--out", "{out}", "--backend", "all"],
+    "husky_all": ["run", "{fusion-vo:husky_log}", "--out", "{out}", "--sensors", "odom,imu", "--backend", "all"],
+    "husky_plain": ["import-bag", "{data}/robot_localization/test1.bag", "{out}"],
+    "husky_plain_all": ["run", "{fusion-vo:husky_plain}", "--out", "{out}", "--sensors", "odom,imu", "--backend", "all"],
+}
+BACKGROUND_JOBS = {"test_husky_against_gps": ["fusion-vo:husky_log", "fusion-vo:husky_all"],
+                   "test_husky_imu_imported_without_its_mounting_is_found_from_the_data":
+                       ["fusion-vo:husky_plain", "fusion-vo:husky_plain_all"],
+                   "test_husky_imu_imported_without_its_mounting_is_found_while_streaming": ["fusion-vo:husky_plain"],
+                   "*": ["fusion-vo:jackal_log", "fusion-vo:jackal_all"]}  # (the jackal tests)
 
 
 def _read_tum(path):
@@ -37,13 +48,16 @@ def _read_tum(path):
 
 
 @pytest.fixture(scope="module")
-def jackal(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("jackal")
-    seq, out = tmp / "SEQ", tmp / "OUT"
-    assert main(["import-bag", str(DATA / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
-    assert main(["run", str(seq), "--out", str(out), "--backend", "all"]) == 0
-    return seq, out
+def jackal(jackal_log, ahead, tmp_path_factory):
+    """test2.bag as ``fusion-vo import-bag`` writes it (tests/conftest.py), run with every backend."""
+    return jackal_log, ahead("fusion-vo:jackal_all", lambda: _run(BACKGROUND_COMMANDS["jackal_all"], jackal_log,
+                                                                  tmp_path_factory.mktemp("jackal") / "OUT"))
+
+
+def _run(args, seq, out):
+    """``fusion-vo ARGS`` of BACKGROUND_COMMANDS in this process, the recording ``seq`` written to ``out``."""
+    assert main([str(seq) if a.startswith("{fusion-vo:") else str(out) if a == "{out}" else a for a in args]) == 0
+    return out
 
 
 def test_jackal_final_position_matches_robot_localization(jackal):
@@ -84,10 +98,9 @@ def test_covariance_files_next_to_the_trajectories(jackal):
     assert not (out / "wheel.cov.csv").exists()
 
 
-def test_husky_against_gps(tmp_path):
-    seq, out = tmp_path / "SEQ", tmp_path / "OUT"
-    assert main(["import-bag", str(DATA / "test1.bag"), str(seq), "--static-tf", HUSKY_IMU_TF]) == 0
-    assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "all"]) == 0
+def test_husky_against_gps(husky_log, ahead, tmp_path):
+    seq = husky_log  # test1.bag imported with the launch file's IMU transform
+    out = ahead("fusion-vo:husky_all", lambda: _run(BACKGROUND_COMMANDS["husky_all"], seq, tmp_path / "OUT"))
     metrics = json.loads((out / "metrics.json").read_text())
     rms = {name: metrics[name]["gps_rms_m"] for name in ("wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online")}
     assert all(metrics[name]["gps_frame"] == "SE(2)-aligned" and metrics[name]["gps_fixes"] > 900 for name in rms)
@@ -106,20 +119,24 @@ def test_husky_against_gps(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def husky_plain(tmp_path_factory):
+def husky_plain(ahead, tmp_path_factory):
     """test1.bag imported without the launch file's static transform: the IMU's T_BS is the identity."""
-    seq = tmp_path_factory.mktemp("husky_plain") / "SEQ"
-    assert main(["import-bag", str(DATA / "test1.bag"), str(seq)]) == 0
-    return seq
+
+    def here():
+        seq = tmp_path_factory.mktemp("husky_plain") / "SEQ"
+        assert main(["import-bag", str(DATA / "test1.bag"), str(seq)]) == 0
+        return seq
+
+    return ahead("fusion-vo:husky_plain", here)
 
 
-def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_plain, tmp_path):
+def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_plain, ahead, tmp_path):
     """Without the launch file's static transform the IMU's T_BS is the identity and its z axis is not the body's
     (fused as stated, the tracks end 20.7 m RMS from the GPS). The consistency check finds the mounting from the
     gyro's turn axis, gravity and the accelerations, fuses the IMU with it and gives the transform to put in
     imu0/sensor.yaml or --static-tf; the tracks land where the right transform puts them (2.52 m)."""
-    seq, out = husky_plain, tmp_path / "OUT"
-    assert main(["run", str(seq), "--out", str(out), "--sensors", "odom,imu", "--backend", "all"]) == 0
+    seq = husky_plain
+    out = ahead("fusion-vo:husky_plain_all", lambda: _run(BACKGROUND_COMMANDS["husky_plain_all"], seq, tmp_path / "OUT"))
     summary = json.loads((out / "summary.json").read_text())
     (sentence,) = [n for n in summary["notes"] if "T_BS" in n]
     assert sentence.startswith("imu0/sensor.yaml: T_BS contradicts the data (the body's up is the IMU's +y axis")

@@ -14,6 +14,10 @@ from fusion_vo.recording import Recording
 from e2e_accuracy import end_errors
 
 FRONTENDS = ["klt", "features"]
+#: the standard recordings each test reads, made ahead in the background (tests/background.py)
+BACKGROUND_JOBS = {"test_square": ["standard:square"], "test_full_circle_heading": ["standard:circle"],
+                   "test_standstill": ["standard:standstill"],
+                   "test_random_drive": ["standard:random60", "standard:tilted"]}
 
 
 def run_vo(path, frontend):

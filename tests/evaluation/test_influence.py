@@ -15,12 +15,11 @@ from fusion_vo.evaluation.influence import inputs, leave_one_out
 from fusion_vo.measurements import RangeData
 from fusion_vo.odometry import OdometryConfig, run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.simulation.standard import make_standard
 
 
 @pytest.fixture(scope="module")
-def short(tmp_path_factory):
-    rec_dir = make_standard("short", tmp_path_factory.mktemp("rec") / "short")
+def short(standard_recording):
+    rec_dir = standard_recording("short")
     rec = Recording(rec_dir)
     vo = run_visual_odometry(rec, OdometryConfig())
     config = as_config({})

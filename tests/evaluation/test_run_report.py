@@ -15,17 +15,22 @@ import pytest
 from fusion_vo.cli.main import main
 from fusion_vo.evaluation.innovations import band, read_innovations
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
+#: the run every test reads, made ahead in the background (tests/background.py; the import is tests/conftest.py's),
+#: into a folder named ``out`` as the report's rebuilt copy is (the report names the run by its folder)
+BACKGROUND_COMMANDS = {"run_report/out": ["-q", "run", "{fusion-vo:jackal_log}", "--out", "{out}", "--backend", "ekf"]}
+BACKGROUND_JOBS = {"*": ["fusion-vo:jackal_log", "fusion-vo:run_report/out"]}
 
 
 @pytest.fixture(scope="module")
-def jackal(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("jackal")
-    seq, out = tmp / "jackal_log", tmp / "out"
-    assert main(["-q", "import-bag", str(DATA / "test2.bag"), str(seq), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
-    assert main(["-q", "run", str(seq), "--out", str(out), "--backend", "ekf"]) == 0
-    return seq, out
+def jackal(jackal_log, ahead, tmp_path_factory):
+    """test2.bag imported by ``fusion-vo import-bag`` into ``jackal_log`` (tests/conftest.py), run with the EKF."""
+
+    def here():
+        out = tmp_path_factory.mktemp("jackal") / "out"
+        assert main(["-q", "run", str(jackal_log), "--out", str(out), "--backend", "ekf"]) == 0
+        return out
+
+    return jackal_log, ahead("fusion-vo:run_report/out", here)
 
 
 def section(text: str, heading: str) -> str:

@@ -1,29 +1,21 @@
 """Smoke test of the example scripts: each runs in its ``--quick`` mode and prints tables with sane numbers.
 
-The scripts are run as a user runs them (``python examples/NAME.py --quick --out DIR``); their printed
-tables are read back and checked against loose accuracy bounds, so a script that runs but reports
-nonsense (NaN, a frontend that fails every frame, errors of tens of percent) fails the test.
+The scripts are run as a user runs them (``python examples/NAME.py --quick --seed 1 --out DIR``, started in the
+background from the session's start by ``conftest.py``); their printed tables are read back and checked against
+loose accuracy bounds, so a script that runs but reports nonsense (NaN, a frontend that fails every frame, errors
+of tens of percent) fails the test.
 """
 
 import math
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[2]
-EXAMPLES = REPO / "examples"
-
-
-def run_example(name: str, out: Path, timeout: float = 240.0) -> str:
-    """Run ``examples/NAME.py --quick --out OUT --seed 1`` and return its standard output."""
-    proc = subprocess.run([sys.executable, str(EXAMPLES / f"{name}.py"), "--quick", "--seed", "1",
-                           "--out", str(out)], capture_output=True, text=True, timeout=timeout, cwd=REPO)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc.stdout
-
+#: each test's example script, run from the session's start in the background (tests/background.py)
+BACKGROUND_JOBS = {"test_table_5_1": ["example:thesis_table_5_1"], "test_square": ["example:thesis_square"],
+                   "test_heading": ["example:thesis_heading"], "test_klt_zero_motion": ["example:klt_zero_motion"],
+                   "test_fusion_comparison": ["example:fusion_comparison"]}
 
 def table(text: str, title_start: str) -> list[dict[str, str]]:
     """Rows of the printed table whose title line starts with ``title_start`` (header -> cell)."""
@@ -56,8 +48,9 @@ def number(cell: str) -> float:
 
 
 @pytest.mark.slow
-def test_table_5_1(tmp_path):
-    rows = table(run_example("thesis_table_5_1", tmp_path), "Table 5.1")
+def test_table_5_1(example):
+    text, _ = example("thesis_table_5_1")
+    rows = table(text, "Table 5.1")
     assert {r["lighting"] for r in rows} == {"good light", "spotlights", "dark"}
     assert {r["frontend"] for r in rows} == {"klt", "features", "plain script"}
     for r in rows:
@@ -73,8 +66,8 @@ def test_table_5_1(tmp_path):
 
 
 @pytest.mark.slow
-def test_square(tmp_path):
-    text = run_example("thesis_square", tmp_path)
+def test_square(example):
+    text, out = example("thesis_square")
     legs = table(text, "Table 5.2")
     assert len(legs) == 4
     for leg in legs:
@@ -85,23 +78,24 @@ def test_square(tmp_path):
     whole = table(text, "Whole square")
     assert [r["frontend"] for r in whole] == ["klt", "features"]
     assert all(number(r["end %"]) < 1.0 for r in whole), whole
-    assert is_png(tmp_path / "square.png")
+    assert is_png(out / "square.png")
 
 
 @pytest.mark.slow
-def test_heading(tmp_path):
-    rows = table(run_example("thesis_heading", tmp_path), "Heading after one full circle")
+def test_heading(example):
+    text, out = example("thesis_heading")
+    rows = table(text, "Heading after one full circle")
     assert [r["frontend"] for r in rows] == ["klt", "features"]
     for r in rows:
         assert number(r["turned deg"]) > 350.0
         assert number(r["error deg"]) < 1.0, r
         assert abs(number(r["error %"]) - 100 * number(r["error deg"]) / number(r["turned deg"])) < 1e-3
-    assert is_png(tmp_path / "heading.png")
+    assert is_png(out / "heading.png")
 
 
 @pytest.mark.slow
-def test_klt_zero_motion(tmp_path):
-    text = run_example("klt_zero_motion", tmp_path)
+def test_klt_zero_motion(example):
+    text, out = example("klt_zero_motion")
     corners = {r["lighting"]: r for r in table(text, "Figures 3.3-3.5")}
     assert set(corners) == {"good light", "spotlights", "dark"}
     for r in corners.values():
@@ -114,12 +108,13 @@ def test_klt_zero_motion(tmp_path):
         assert int(r["failed"]) == 0, r
         assert number(r["max mm/frame"]) < 0.1, r
         assert r["< 0.1 mm"] == "yes"
-    assert is_png(tmp_path / "klt_zero_motion.png")
+    assert is_png(out / "klt_zero_motion.png")
 
 
 @pytest.mark.slow
-def test_fusion_comparison(tmp_path):
-    rows = table(run_example("fusion_comparison", tmp_path), "Fusion comparison")
+def test_fusion_comparison(example):
+    text, out = example("fusion_comparison")
+    rows = table(text, "Fusion comparison")
     by_name = {r["trajectory"]: r for r in rows}
     assert set(by_name) == {"vo", "wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online"}
     for r in rows:
@@ -127,4 +122,4 @@ def test_fusion_comparison(tmp_path):
         assert number(r["end %"]) >= 0.0, r
     fused = min(number(by_name[n]["ATE m"]) for n in ("ekf", "ekf_smoothed", "gtsam"))
     assert fused <= number(by_name["wheel"]["ATE m"])
-    assert (tmp_path / "run-klt" / "metrics.json").is_file()
+    assert (out / "run-klt" / "metrics.json").is_file()

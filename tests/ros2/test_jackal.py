@@ -12,7 +12,6 @@ import pytest
 
 from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-from fusion_vo.cli.main import main
 from fusion_vo.geometry import se2
 from fusion_vo.recording import Recording
 
@@ -20,14 +19,14 @@ from dds_namespace import DATA, run_peer
 
 pytestmark = pytest.mark.ros2
 RL_FINAL = np.array([1.0206, 3.4292])
+#: the import the node is given, made ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_JOBS = {"*": ["fusion-vo:jackal_log"]}
 
 
 @pytest.fixture(scope="module")
-def jackal_run(tmp_path_factory):
+def jackal_run(jackal_log, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("jackal")
-    calib = tmp / "calib"
-    assert main(["import-bag", str(DATA / "test2.bag"), str(calib), "--imu-topic", "/imu/data",
-                 "--odom-topic", "/jackal_velocity_controller/odom"]) == 0
+    calib = jackal_log  # the folder fusion-vo import-bag writes from test2.bag (tests/conftest.py)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
                      "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
             "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "3"], "signal": "SIGINT"}

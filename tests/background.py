@@ -1,0 +1,148 @@
+"""Deterministic work made ahead in a second process while the suite runs (tests/conftest.py starts it).
+
+A test module may name, in ``BACKGROUND_JOBS`` (test name, or ``*`` for every test of the module -> job keys), the
+work its tests will wait for:
+
+``standard:NAME``  the standard generated recording NAME, made by :func:`fusion_vo.simulation.standard.make_standard`
+                   (the function the ``standard_recording`` fixture calls in-process otherwise)
+``example:NAME``   ``python examples/NAME.py --quick --seed 1 --out DIR``, the example script as a user runs it
+``fusion-vo:LABEL`` the command ``fusion-vo ARGS...`` of the module's ``BACKGROUND_COMMANDS[LABEL]`` (its output
+                   folder is named as LABEL's last part: ``a/out`` writes a folder ``out``), in which an
+                   argument starting ``{out}`` is this job's output folder, ``{data}`` the folder tests/data, ``{KEY}`` the
+                   output of the job KEY (named before it in the same test's list, so it runs first)
+``python:LABEL``   ``python ARGS...`` of the module's ``BACKGROUND_COMMANDS["python:LABEL"]``, placed likewise
+                   (``{repo}``: the repository; a script of the repository run as a user runs it)
+
+Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
+the order the tests come; a test that needs a job's result waits for it. The jobs use fixed seeds, so making
+them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
+so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
+
+Only one job runs at a time, at a lower priority than the suite (``nice -n 5``), and every job named so far is needed by a test before ``tests/ros2`` (the DDS tests,
+whose timing a busy machine can upset), so the second process is idle before they start. The tests that run
+beside it and measure time hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch
+commands' refusals), which a second busy core does not reach.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import tempfile
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+#: seconds one job may take (the longest, the 60 s drive random60 or the thesis_square example, takes 10-15 s of
+#: CPU on an idle core)
+TIMEOUT_S = 300.0
+
+#: the jobs run 5 steps nicer than the suite: on an idle core at full speed, on a busy machine the tests come first
+NICE = ["nice", "-n", "5"] if shutil.which("nice") else []
+_MAKE_STANDARD = "import sys\nfrom fusion_vo.simulation.standard import make_standard\nmake_standard(sys.argv[1], sys.argv[2])"
+
+
+@dataclass
+class Job:
+    """One job: its command line and output folder; once ``done`` is set, its exit status and output."""
+
+    key: str
+    argv: list[str]
+    out: Path
+    done: threading.Event = field(default_factory=threading.Event)
+    returncode: int | None = None
+    stdout: str = ""
+    stderr: str = ""
+
+
+def command(key: str, out: Path, commands: dict[str, list[str]], outs: dict[str, Path]) -> list[str]:
+    """The command line of job ``key`` writing into ``out`` (``commands``: the ``fusion-vo:`` jobs' arguments,
+    ``outs``: the output folders of the jobs before it)."""
+    kind, _, name = key.partition(":")
+    if kind == "standard":
+        return [sys.executable, "-c", _MAKE_STANDARD, name, str(out)]
+    if kind == "example":
+        return [sys.executable, str(REPO / "examples" / f"{name}.py"), "--quick", "--seed", "1", "--out", str(out)]
+    if kind in ("fusion-vo", "python"):
+        places = {"out": str(out), "data": str(REPO / "tests" / "data"), "repo": str(REPO),
+                  **{k: str(v) for k, v in outs.items()}}
+        return [sys.executable, *(["-m", "fusion_vo.cli.main"] if kind == "fusion-vo" else []),
+                *(_placed(arg, places) for arg in commands[key])]
+    raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME, fusion-vo:LABEL or python:LABEL)")
+
+
+def _placed(arg: str, places: dict[str, str]) -> str:
+    """``arg`` with a leading ``{NAME}`` replaced by ``places[NAME]`` (``{data}/x.bag`` -> ``.../tests/data/x.bag``)."""
+    if not arg.startswith("{"):
+        return arg
+    name, _, rest = arg[1:].partition("}")
+    return places[name] + rest
+
+
+class BackgroundJobs:
+    """Runs the jobs ``keys`` one after another in a thread, each in its own interpreter."""
+
+    def __init__(self, keys: list[str], commands: dict[str, list[str]]):
+        self.root = Path(tempfile.mkdtemp(prefix="fusion-vo-tests-"))
+        self.jobs = {}
+        for i, key in enumerate(keys):
+            out = self.root / f"{i:02d}_{key.replace(':', '_').replace('/', '_')}" / Path(key.partition(":")[2]).name
+            self.jobs[key] = Job(key, command(key, out, commands, {k: j.out for k, j in self.jobs.items()}), out)
+        self.stopped = False
+        self.process: subprocess.Popen | None = None
+        self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
+        self.thread.start()
+
+    def _run_all(self) -> None:
+        for job in self.jobs.values():
+            try:
+                if self.stopped:
+                    job.stderr = "not run: the session ended first"
+                    continue
+                job.out.parent.mkdir(parents=True, exist_ok=True)
+                self.process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                                text=True, cwd=REPO)
+                try:
+                    job.stdout, job.stderr = self.process.communicate(timeout=TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    self.process.kill()
+                    job.stdout, job.stderr = self.process.communicate()
+                    job.stderr += f"\n(killed after {TIMEOUT_S:.0f} s)"
+                job.returncode = self.process.returncode
+            except Exception as exc:  # noqa: BLE001 -- reported by the test that waits for this job
+                job.stderr = f"could not run {job.key}: {exc!r}"
+            finally:
+                job.done.set()
+
+    def __contains__(self, key: str) -> bool:
+        return key in self.jobs
+
+    def result(self, key: str) -> Job:
+        """Wait for job ``key`` and return it, after checking that it exited with status 0."""
+        job = self.jobs[key]
+        assert job.done.wait(TIMEOUT_S * len(self.jobs) + 60.0), f"{key} did not finish"
+        assert job.returncode == 0, f"{key} failed:\n{job.stderr[-3000:]}"
+        return job
+
+    def stop(self) -> None:
+        """End the running job (if any), skip the rest and remove every output."""
+        self.stopped = True
+        if self.process is not None and self.process.poll() is None:
+            self.process.kill()
+        self.thread.join(timeout=30.0)
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+def jobs_of(items) -> tuple[list[str], dict[str, list[str]]]:
+    """The job keys the collected test ``items`` name, in the order of their first test, and the arguments of
+    their ``fusion-vo:`` jobs."""
+    keys, commands = [], {}
+    for item in items:
+        module = getattr(item, "module", None)
+        named = getattr(module, "BACKGROUND_JOBS", {})
+        keys += named.get(item.originalname, named.get("*", []))
+        for label, args in getattr(module, "BACKGROUND_COMMANDS", {}).items():
+            commands[label if label.startswith("python:") else f"fusion-vo:{label}"] = args
+    return list(dict.fromkeys(keys)), commands
