@@ -69,11 +69,11 @@ def command(key: str, out: Path, commands: dict[str, list[str]], outs: dict[str,
         places = {"out": str(out), "data": str(REPO / "tests" / "data"), "repo": str(REPO),
                   **{k: str(v) for k, v in outs.items()}}
         return [sys.executable, *(["-m", "fusion_vo.cli.main"] if kind == "fusion-vo" else []),
-                *(_placed(arg, places) for arg in commands[key])]
+                *(placed(arg, places) for arg in commands[key])]
     raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME, fusion-vo:LABEL or python:LABEL)")
 
 
-def _placed(arg: str, places: dict[str, str]) -> str:
+def placed(arg: str, places: dict[str, str]) -> str:
     """``arg`` with a leading ``{NAME}`` replaced by ``places[NAME]`` (``{data}/x.bag`` -> ``.../tests/data/x.bag``)."""
     if not arg.startswith("{"):
         return arg

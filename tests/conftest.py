@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from background import BackgroundJobs, jobs_of
+from background import BackgroundJobs, jobs_of, placed
 
 from fusion_vo.cli.main import main
 from fusion_vo.simulation.standard import make_standard
@@ -102,9 +102,8 @@ SHARED_COMMANDS = {"fusion-vo:jackal_log": JACKAL_IMPORT, "fusion-vo:husky_log":
 
 def _cli_here(args: list[str], out: Path) -> Path:
     """``fusion-vo ARGS`` run in this process with ``{out}`` and ``{data}`` in place; returns ``out``."""
-    places = {"{out}": str(out), "{data}": str(TESTS / "data")}
-    argv = [next((arg.replace(k, v) for k, v in places.items() if arg.startswith(k)), arg) for arg in args]
-    assert main(argv) == 0
+    places = {"out": str(out), "data": str(TESTS / "data")}
+    assert main([placed(arg, places) for arg in args]) == 0
     return out
 
 

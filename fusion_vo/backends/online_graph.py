@@ -180,14 +180,15 @@ class OnlineGraph:
         if prepared is None:
             prepared = self._node_factors(n, iv, self._pending_first, self.prev_pose) + (None, None)
         builder, nf, frozen, weights = prepared
-        if frozen is None:
+        lookup = None
+        if frozen is None or fixes:
             lookup = current_value_lookup(nf.values, self.isam, self.prev_pose, self._offset(n))
+        if frozen is None:
             weights = []
             frozen = freeze_custom_factors(nf.factors, lookup, weights=weights)
         self._pending_first = False
         factors, sensors = nf.factors, nf.sensors
         if fixes:  # the fixes that pass the gate, linearised at the prediction as the node's other factors
-            lookup = current_value_lookup(nf.values, self.isam, self.prev_pose, self._offset(n))
             gps = [f for fix in fixes if (f := self._fix_factor(n, nf.values[self.key(n)], fix)) is not None]
             if gps:
                 weights = list(weights)
