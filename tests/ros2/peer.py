@@ -40,7 +40,8 @@ class Recorder(Node):
         super().__init__("fusion_vo_test_peer")
         qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
         self.poses, self.smoothed, self.diagnostics = [], [], None
-        self.create_subscription(Odometry, "/odometry/filtered", lambda m: self.poses.append(_pose(m)), qos)
+        self.filtered = self.create_subscription(Odometry, "/odometry/filtered",
+                                                 lambda m: self.poses.append(_pose(m)), qos)
         self.create_subscription(Odometry, "/odometry/smoothed", lambda m: self.smoothed.append(_pose(m)), qos)
         self.create_subscription(DiagnosticArray, "/diagnostics", self._diag, qos)
         self.clock_t = None
@@ -207,7 +208,13 @@ def main() -> int:
         time.sleep(0.05)
     out["ready"] = ready.is_set()
     if ready.is_set():
-        time.sleep(0.5)  # discovery
+        # discovery: the node's pose publisher matched to this recorder before any data reaches the node, so
+        # that the first pose recorded is the node's first (a busy machine can take seconds)
+        end = time.time() + 20.0
+        while time.time() < end and peer.filtered.get_publisher_count() == 0:
+            time.sleep(0.05)
+        out["pose_publisher_matched"] = peer.filtered.get_publisher_count() > 0
+        time.sleep(0.5)
         if spec.get("play"):
             player = subprocess.run(FUSION_VO + spec["play"], capture_output=True, text=True, timeout=300)
             out["player"] = {"code": player.returncode, "stdout": player.stdout, "stderr": player.stderr}

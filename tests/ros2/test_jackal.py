@@ -40,7 +40,9 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     yaw0 = float(se2.yaw_of_quaternion(imu[:1, 7:11])[0])
     t_end = imu[-1, 0] * 1e-9
     poses = [p for p in out["poses"] if p["t"] <= t_end + 1e-6]
+    assert out["pose_publisher_matched"]
     assert len(poses) > 1000 and poses[-1]["t"] > t_end - 0.1  # 50 Hz over the 61 s, up to the bag's end
+    assert poses[0]["t"] < imu[0, 0] * 1e-9 + 0.5, "the recorder missed the node's first poses"
     first, last = poses[0], poses[-1]
     d = yaw0 - first["yaw"]
     rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
@@ -57,7 +59,7 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     raw = np.loadtxt(calib / "odom0" / "pose.csv", delimiter=",", comments="#", ndmin=2)
     print(f"final position off by: node {np.linalg.norm(final - RL_FINAL):.4f} m, in-process "
           f"{np.linalg.norm(in_process - RL_FINAL):.4f} m, raw odometry {np.linalg.norm(raw[-1, 1:3] - RL_FINAL):.2f} m")
-    assert np.linalg.norm(final - RL_FINAL) < 0.138, final
+    assert np.linalg.norm(final - RL_FINAL) < 0.138, (final, poses[0]["t"], out["diagnostics"])
     assert np.linalg.norm(raw[-1, 1:3] - RL_FINAL) > 5.0  # the raw odometry is far off: the check can fail
 
 
