@@ -19,12 +19,17 @@ how many seeds it is at most that input, and the same for the RTS smoother again
 against iSAM2 and the EKF: what tells a systematic loss from the chance of one drive. A seed whose best
 input has an ATE of 0 (a drive that does not move) is left out of those comparisons.
 
+With ``--live`` each recording's streams are also fed to ``StreamingFusion`` (EKF and iSAM2) in time order
+(``time_ordered_messages``), and a line under its row prints the largest position difference of each live track
+from the batch run's online track (``ekf``, ``gtsam_online``) over their common nodes, and both ATEs: where the
+live engine and the batch run part (docs/streaming.md, "The same estimator as a batch run").
+
 When the run estimated the camera's heading noise from the gyro's (``--set fusion.visual_noise.estimate=true``)
 the estimate is printed under the row.
 
 Usage::
 
-    python benchmarks/fusion.py [--only square,circle] [--seeds N] [--sensors camera,wheel]
+    python benchmarks/fusion.py [--only square,circle] [--seeds N] [--sensors camera,wheel] [--live]
         [--config FILE] [--set KEY=VALUE ...] [--out DIR]
 
 Generation renders every frame: the whole set takes several minutes on two cores (``--out`` keeps it).
@@ -40,8 +45,13 @@ import numpy as np
 
 from common import FUSED, add_out, add_settings, describe_settings, names, parser, run_config, standard, work_dir
 
+from fusion_vo.backends import fuse, streams_from_recording
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.evaluation import evaluate_run
+from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
+from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
+from fusion_vo.recording import Recording
 from fusion_vo.simulation.standard import STANDARD
 
 SINGLE = ("vo", "wheel")
@@ -68,6 +78,36 @@ def compare(seq, run_dir, config) -> dict:
             "smoothed_le_ekf": ate.get("ekf_smoothed", 0) <= ate.get("ekf", 0),
             "batch_le_online": ate.get("gtsam", 0) <= ate.get("gtsam_online", 0),
             "visual_noise": (summary.get("fusion") or {}).get("visual_noise") or {}}
+
+
+def _ate_mm(truth, track) -> float:
+    reference = planar_trajectory(truth.t, *truth.xyyaw.T)
+    est = planar_trajectory(track.t, *track.xyyaw.T)
+    reference, est = associate(reference, est)
+    return float(ape_rmse(reference, align_se2(reference, est)) * 1e3)
+
+
+def live_beside_batch(seq, config) -> str:
+    """The live engine fed ``seq``'s streams in time order beside the batch run's online tracks: per backend the
+    largest position difference over their common nodes [m] and both ATEs [mm]."""
+    rec = Recording(seq)
+    vo = run_visual_odometry(rec, config.odometry_config()) if rec.has_camera() else None
+    streams = streams_from_recording(rec, vo, config.sensors, config.fusion)
+    batch = fuse(streams, "all", config.fusion)
+    truth = rec.groundtruth()
+    cells = []
+    for backend, name in (("ekf", "EKF"), ("gtsam", "iSAM2")):
+        track_name = "ekf" if backend == "ekf" else "gtsam_online"
+        fusion = streaming_for(streams, backend, config.fusion)
+        for _, kind, message in time_ordered_messages(streams):
+            getattr(fusion, f"add_{kind}")(message) if hasattr(fusion, f"add_{kind}") else fusion.add(kind, message)
+        live, ref = fusion.finish().trajectories[track_name], batch.trajectories[track_name]
+        common = np.intersect1d(live.t, ref.t)
+        a, b = live.xyyaw[np.isin(live.t, common), :2], ref.xyyaw[np.isin(ref.t, common), :2]
+        gap = float(np.max(np.linalg.norm(a - b, axis=1))) if len(common) else float("nan")
+        cells.append(f"{name} live - batch {gap:.1e} m on {len(common)}/{len(ref.t)} nodes, ATE batch "
+                     f"{_ate_mm(truth, ref):.3f} / live {_ate_mm(truth, live):.3f} mm")
+    return "    live: " + "; ".join(cells)
 
 
 def relative(rows: list[dict], track: str, reference: str) -> np.ndarray:
@@ -118,6 +158,7 @@ def main(argv=None) -> int:
     ap.add_argument("--only", help="comma-separated standard recordings (default: all with camera and wheels)")
     ap.add_argument("--seeds", type=int, default=0, help="also generate every recording with this many other seeds")
     ap.add_argument("--sensors", help="comma-separated sensors to fuse (default: the camera, wheels and IMU)")
+    ap.add_argument("--live", action="store_true", help="also the live engine beside the batch run's online tracks")
     add_settings(ap)
     add_out(ap)
     args = ap.parse_args(argv)
@@ -149,6 +190,8 @@ def main(argv=None) -> int:
                 print("| " + " | ".join(cells) + f" |   ({time.perf_counter() - t0:.0f} s)", flush=True)
                 if r["visual_noise"]:
                     print(visual_noise_line(label, r["visual_noise"]), flush=True)
+                if args.live:
+                    print(live_beside_batch(seq, config), flush=True)
             if args.seeds:
                 for line in seed_summary(rows):
                     print(f"    {name}, {len(rows)} seeds: {line}", flush=True)

@@ -4,18 +4,44 @@ decision, the backend's update, a bounded amount of work per call (:mod:`fusion_
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import logging
 
 import numpy as np
 
 from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
 from fusion_vo.backends.result import SensorCount
-from fusion_vo.backends.timeline import SensorStreams, build_intervals
+from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
+from fusion_vo.geometry import se2
+from fusion_vo.measurements import VisualIncrement
 from fusion_vo.sensors import registry
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate
 
 logger = logging.getLogger(__name__)
+
+
+def increment_part(inc: VisualIncrement, nodes: list[float], k: int) -> VisualIncrement | None:
+    """The share of a camera increment that spans several node intervals (frames dropped or failed between its
+    two), ``nodes`` from its first frame to its second, over its ``k``-th interval, as a batch run applies it
+    (:mod:`fusion_vo.backends.ekf_adapter`): the increment's mean twist ``ξ / T`` (``ξ = log Δ`` over its span
+    ``T``) with ``n`` times its covariance per unit time, ``n`` the intervals it spans. The part is
+    ``Δ_k = exp(ξ Δt_k / T)`` with covariance ``J_k⁻¹ (n (Δt_k / T)² J Σ Jᵀ) J_k⁻ᵀ`` (``J``, ``J_k`` the
+    Jacobians of ``log`` at ``Δ`` and ``Δ_k``), so that a reading over the one interval, ``log(Δ_k) / Δt_k``
+    with ``J_k Σ_k J_kᵀ / Δt_k²``, is that twist and covariance.
+
+    None when the increment states its frames' own errors (those apply to single intervals only).
+    """
+    if not inc.ok or inc.frame_covariance is not None:
+        return None
+    t0, t1 = nodes[k], nodes[k + 1]
+    share = (t1 - t0) / (inc.t1 - inc.t0)
+    delta = np.asarray(inc.delta, dtype=np.float64)
+    J = se2.log_jacobian(delta)[0]
+    part = se2.exp_many(se2.log_many(delta) * share)[0]
+    Jk_inv = se2.exp_jacobian(se2.log_many(part))[0]
+    cov = Jk_inv @ (J @ np.asarray(inc.covariance, dtype=np.float64) @ J.T) @ Jk_inv.T * ((len(nodes) - 1) * share**2)
+    return dataclasses.replace(inc, t0=t0, t1=t1, delta=part, covariance=0.5 * (cov + cov.T))
 
 
 class NodesMixin:
@@ -83,22 +109,45 @@ class NodesMixin:
         return extrapolate(self._t_nodes, self._poses, self._covs, dt, self.config)
 
     # ------------------------------------------------------------------ processing
-    def _next_node(self, after: float, until: float) -> float | None:
-        """The node after ``after``: the next frame if it comes within 1.5 steps, else a fill-in node."""
+    def _next_node(self, after: float, until: float, end: float = np.inf) -> float | None:
+        """The node after ``after``: toward the next frame, the batch grid's nodes (:meth:`_fill_to`); with none
+        known, a fill-in node one step on; once the stream finishes, those up to ``end``, the last sample's time,
+        and ``end`` itself unless it is within half a step of the last node (so that the nodes never depend on
+        when the samples arrived). A GPS fix is a node of its own."""
         step = 1.0 / self.config.step_hz
         frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
         fixes = [f.t for f in self._gps if f.t > after + 1e-9]
-        if frames and frames[0] <= after + 1.5 * step:
-            nxt = frames[0]
+        if frames:
+            nxt = self._fill_to(after, frames[0], step)
+        elif np.isfinite(end):  # one step at a time, as before the stream finished, then the last sample
+            if end - after <= 0.5 * step:
+                return None
+            nxt = min(after + step, end)
         else:
             nxt = after + step
         if fixes and fixes[0] < nxt - 1e-3:  # a fix is a node of its own (timeline.GPS_SNAP)
             nxt = fixes[0]
         return nxt if nxt <= until else None
 
+    def _fill_to(self, after: float, anchor: float, step: float) -> float:
+        """The node after ``after`` toward the next frame ``anchor``: the batch grid's fill-in nodes between the two
+        (:func:`~fusion_vo.backends.timeline.fill_nodes`, kept while ``anchor`` stays the next frame)."""
+        fill = self._fill
+        if fill is None or fill[1] != anchor or not (fill[0] == after or np.any(fill[2] == after)):
+            fill = self._fill = (after, anchor, fill_nodes(after, anchor, step))
+        later = fill[2][fill[2] > after]
+        return float(later[0]) if len(later) else anchor
+
     def _start_time(self) -> float | None:
+        """The first node: the first sample's time, or the first frame's when it comes within half a step of it
+        (as the batch grid starts, :func:`~fusion_vo.backends.timeline.node_times`); None before any sample (a
+        fix alone does not start the track)."""
         times = [b[0][0] for b in self._buffers.values() if b] + [v.t0 for v in self._visual]
-        return min(times) if times else None  # a fix alone does not start the track
+        if not times:
+            return None
+        start = min(times)
+        frames = [v.t0 for v in self._visual if v.t0 - start <= 0.5 / self.config.step_hz]
+        return min(frames) if frames else start
 
     def _process(self, until: float, budget: int | None = None) -> None:
         """Process the nodes up to ``until``, at most ``budget`` units of work (None: all).
@@ -128,7 +177,11 @@ class NodesMixin:
             started = self._pending
             if started is None:
                 t0 = self._t_nodes[-1]
-                t1 = self._next_node(t0, until if np.isfinite(until) else self._last_time())
+                if np.isfinite(until):
+                    t1 = self._next_node(t0, until)
+                else:  # finishing: the last samples end the track
+                    end = self._last_time()
+                    t1 = self._next_node(t0, end, end) if np.isfinite(end) else None
                 if t1 is None:
                     return
                 self._begin_step(t0, t1)
@@ -143,6 +196,24 @@ class NodesMixin:
                 started.stage = 2
             else:
                 self._end_step()
+
+    def _part(self, inc: VisualIncrement, t0: float, t1: float) -> VisualIncrement | None:
+        """The share of ``inc`` over the node interval ``(t0, t1)`` (:func:`increment_part`), its nodes those
+        processed from its first frame on, ``t1``, and those to come up to its second frame
+        (:meth:`_next_node`); None if its first frame is not a processed node or its second is not reached."""
+        done = self._t_nodes
+        j = bisect.bisect_left(done, inc.t0 - 1e-6)
+        if j >= len(done) or abs(done[j] - inc.t0) > 1e-9:
+            return None
+        nodes = [*done[j:], t1]
+        while nodes[-1] < inc.t1 - 1e-9:
+            nxt = self._next_node(nodes[-1], np.inf)
+            if nxt is None or nxt > inc.t1 + 1e-9:
+                return None
+            nodes.append(nxt)
+        if abs(nodes[-1] - inc.t1) > 1e-9 or len(nodes) < 3:
+            return None
+        return increment_part(inc, nodes, len(done) - 1 - j)
 
     def _last_time(self) -> float:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
@@ -181,21 +252,34 @@ class NodesMixin:
         """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
         time of the last sample read per stream)``.
 
-        Consumes the buffered visual increments ending at or before ``t1``; those that do not span
-        exactly this interval cannot be applied and are counted as late.
+        Consumes the buffered visual increments ending at or before ``t1``: one that spans exactly this interval
+        is its camera reading; one that spans it and the next intervals up to its frame gives its share
+        (:func:`increment_part`); failed ones are counted missing; any other cannot be applied and is counted
+        late.
         """
         step: dict[str, SensorCount] = {}
         reach: dict[str, float] = {}
         streams = self._streams_between(t0, t1, heading_offset, reach)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
-        usable = [v for v in consumed if abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
+        failed = sum(not v.ok for v in consumed)  # frames the frontend could not measure: nodes, counted missing
+        if failed:
+            step.setdefault("camera", SensorCount()).missing += failed
+        usable = [v for v in consumed if v.ok and abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
+        spanning = None  # an increment over several node intervals, applied over each as a batch run does
+        if not usable:
+            spanning = next(((v, p) for v in self._visual if v.ok and v.t0 <= t0 + 1e-9 and v.t1 >= t1 - 1e-9
+                             and (p := self._part(v, t0, t1)) is not None), None)
         for v in consumed:
-            if v not in usable:
+            if v.ok and v not in usable and (spanning is None or v is not spanning[0]):
                 step.setdefault("camera", SensorCount()).late += 1
         self._visual = [v for v in self._visual if v.t1 > t1 + 1e-9]
         if usable:
             streams.visual = usable
+        elif spanning is not None:
+            streams.visual = [spanning[1]]
         iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset)
+        if spanning is not None and spanning[0].t1 > t1 + 1e-9:  # counted used once, at its last interval
+            iv.counts["camera"].used -= 1
         iv.visual_scale_sigma = self._priors.visual_scale_sigma  # what the whole streams give (one interval's
         iv.wheel_scale_sigma = self._priors.wheel_scale_sigma  # samples do not carry the sensors' files)
         for sensor, c in iv.counts.items():

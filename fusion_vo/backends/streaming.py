@@ -280,6 +280,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                                             wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
                                             wheel_config.wheel_base, observable)
         self._visual: list[VisualIncrement] = []
+        self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf
         self._t_nodes: list[float] = []
         self._poses: list[np.ndarray] = []
@@ -408,8 +409,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._touch("visual", inc.t1)
         if self._late("camera", inc.t0 if inc.ok else inc.t1, back=0):
             return
-        if not inc.ok:
-            self._count("camera").missing += 1
+        if not inc.ok:  # its frame is still a node, as in a batch run; counted missing when the node is made
+            self._insert_visual(inc)
             self._advance(inc.t1)
             return
         if self.backend == "gtsam" and self._t_nodes and inc.t0 < self._t_nodes[-1] - 1e-9:

@@ -262,13 +262,30 @@ class Intervals:
 
 
 # --------------------------------------------------------------------------- grid
+def fill_nodes(a: float, b: float, step: float) -> np.ndarray:
+    """The fill-in nodes strictly between the nodes ``a`` and ``b``: none when ``b`` comes within 1.5 steps of
+    ``a``, else the fewest evenly spaced nodes that keep every interval at most ``step``.
+
+    The one rule of the node grid between known nodes (camera frames, the ends of the data): a batch run fills
+    every gap with it (:func:`node_times`), a live run fills the gap to the next frame with it once that frame
+    has arrived (:class:`~fusion_vo.backends.streaming.StreamingFusion`), so both put their nodes at the same
+    times.
+    """
+    if b - a <= 1.5 * step:
+        return np.zeros(0)
+    return np.linspace(a, b, int(np.ceil((b - a) / step)) + 1)[1:-1]
+
+
 def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
-    """Camera frame times plus fill-in nodes at ``step_hz`` over the span of all streams."""
+    """Camera frame times plus fill-in nodes at ``step_hz`` over the span of all streams (:func:`fill_nodes`)."""
     starts, ends, others = [], [], []
     cam = np.zeros(0)
     if streams.visual:
         cam = np.array([v for inc in streams.visual for v in (inc.t0, inc.t1)], dtype=np.float64)
-        cam = np.unique(np.round(cam[np.isfinite(cam)], 9))
+        cam = np.unique(cam[np.isfinite(cam)])
+        # times within a nanosecond are one frame, kept at its first time (rounding to nanoseconds would move
+        # an epoch-scale time by a float step, 0.24 µs, off the frame time a live run uses)
+        cam = cam[np.concatenate([[True], np.diff(cam) > 1e-9])]
         if len(cam):
             starts.append(cam[0])
             ends.append(cam[-1])
@@ -290,8 +307,7 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
             nodes.append(edge)
     nodes = np.unique(np.asarray(nodes))
     gaps = np.diff(nodes)
-    fill = [np.linspace(a, b, int(np.ceil((b - a) / step)) + 1)[1:-1] for a, b, g in zip(nodes[:-1], nodes[1:], gaps)
-            if g > 1.5 * step]
+    fill = [fill_nodes(a, b, step) for a, b, g in zip(nodes[:-1], nodes[1:], gaps) if g > 1.5 * step]
     if fill:
         fill = np.concatenate(fill)
         # only between two samples of the other streams at most max_gap apart: a stretch without samples has
