@@ -294,10 +294,10 @@ class InstanceGyroModel(GyroModel):
 
     name: str = "imu1"
     args: tuple = ("motion", "imu1_gyro_bias")
-    guess_rank: tuple = (None, None)
 
     def guess(self, z, estimate: dict, dt: float):
-        return None, None
+        """The heading change: the angle less the running estimate of its own bias's share, ``Θ - b̂ Δt``."""
+        return None, float(z[0]) - estimate.get(self.args[1], 0.0) * dt
 
     def evaluate(self, motion, dt=1.0, **bias):
         h, jac = GyroModel.evaluate(self, motion, bias[self.args[1]], dt)
