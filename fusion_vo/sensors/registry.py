@@ -13,7 +13,8 @@ plus one :func:`register` call (README, "Adding a sensor")::
 
 The built-in sensors register themselves in :mod:`~fusion_vo.sensors.visual` (``camera``),
 :mod:`~fusion_vo.sensors.wheel` (``wheel``, ``odom``), :mod:`~fusion_vo.sensors.imu` (``imu``),
-:mod:`~fusion_vo.sensors.range` (``range``) and :mod:`~fusion_vo.sensors.gps` (``gps``), in that order.
+:mod:`~fusion_vo.sensors.range` (``range``) and :mod:`~fusion_vo.sensors.gps` (``gps``), in that order;
+:mod:`~fusion_vo.sensors.instances` declares the kinds ``odom`` and ``imu`` (:func:`register_kind`).
 
 Hooks with an ``order`` run sorted by it across all sensors (stable, so equal orders keep the
 registration order): a sensor's measurements may need another's (the camera's slope projection needs the
