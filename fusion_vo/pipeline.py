@@ -121,6 +121,7 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     Any registered sensor (:mod:`fusion_vo.sensors.registry`) may be named; by default the camera, wheels
     (or odometry) and IMU are used, and a sensor registered outside the library when its folder is present
     (and its ``default`` allows)."""
+    registry.ensure(config.sensors or ())
     known = registry.sensors()
     present = {s.name: s.present(rec) for s in known}
     present["camera"] = rec.has_camera()

@@ -283,6 +283,7 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
     """Read the streams of ``sensors`` from ``recording`` (only those) into :class:`SensorStreams`."""
     config = config or FusionConfig()
     increments = getattr(visual, "increments", visual)
+    registry.ensure(sensors or ())
     known = registry.sensors()
     # the camera's data is the frontend's output; every other sensor's is read from its folder
     present = {s.name: s.present(recording) for s in known if s.name != "camera"}

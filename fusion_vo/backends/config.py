@@ -224,12 +224,18 @@ class FusionConfig(Section):
         if not isinstance(data, dict):
             return handler(data)
         data = dict(data)
+        # the instances of a kind that the configuration names (``odom1``, or a state ``imu1_gyro_bias``)
+        states_given = data.get("states") if isinstance(data.get("states"), dict) else {}
+        registry.ensure([k for k in data if isinstance(k, str)] +
+                        [k.split("_")[0] for k in states_given if isinstance(k, str)])
         errors: list = []
         sensors: dict[str, Section] = {}
         own = cls.model_fields
         for sensor in registry.sensors():
             if sensor.config is None or sensor.config[0] in own:
                 continue
+            if registry.is_instance(sensor.name) and sensor.config[0] not in data:
+                continue  # an instance's defaults come from section() when it is used
             name, model = sensor.config
             value = data.pop(name, None)
             try:
@@ -318,8 +324,11 @@ def _keys_at(model: type[Section], loc: tuple) -> list[str]:
 def _state_priors(data: Any, errors: list) -> dict[str, StatePrior]:
     """``fusion: {states: ...}``: each registered state's :class:`~fusion_vo.sensors.registry.StatePrior`, its
     defaults the registered ones; problems are appended to ``errors``."""
-    known = {state.name: state for state in registry.all_states()}
     data = {} if data is None else data
+    given = data if isinstance(data, dict) else {}
+    # an instance's states only when configured (its registered prior applies otherwise)
+    known = {state.name: state for s in registry.sensors() for state in s.states
+             if not registry.is_instance(s.name) or state.name in given}
     if not isinstance(data, dict):
         errors.append({"type": "dict_type", "loc": ("states",), "input": data})
         return {}

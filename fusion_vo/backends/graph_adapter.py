@@ -53,9 +53,22 @@ def compose_with_covariance(a, cov_a, b, cov_b):
     return se2.compose(a, b), ja @ cov_a @ ja.T + jb @ cov_b @ jb.T
 
 
+def _full(cov: np.ndarray, rows: tuple) -> np.ndarray:
+    """The covariance ``cov`` of the rows ``rows`` of a relative pose as a 3 x 3 one, zero in the other rows."""
+    out = np.zeros((3, 3))
+    out[np.ix_(rows, rows)] = cov
+    return out
+
+
 def _chain(a: Span, r: Readings, j: int):
-    """Chain the reading ``j`` of ``r`` onto the span ``a``."""
-    if r.model.increment:
+    """Chain the reading ``j`` of ``r`` onto the span ``a``. A relative pose that measures some of its rows
+    (``Readings.rows``) holds the others at their reading (zero where the sensor leaves a component out) while
+    composing; the chain keeps the covariance of its measured rows."""
+    if r.model.increment and r.rows is not None:
+        rows = list(r.rows)
+        z, cov = compose_with_covariance(a.z, _full(a.cov, rows), r.z[j], _full(r.cov[j], rows))
+        cov = cov[np.ix_(rows, rows)]
+    elif r.model.increment:
         z, cov = compose_with_covariance(a.z, a.cov, r.z[j], r.cov[j])
     else:
         z, cov = a.z + r.z[j], a.cov + r.cov[j]

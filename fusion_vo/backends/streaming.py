@@ -238,6 +238,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                            "noise density at rest too")
         self.backend = backend
         self.sensors = list(sensors)
+        registry.ensure(self.sensors)
         bad = [s for s in self.sensors if s not in registry.names()]
         if bad:
             raise InputError(f"unknown sensor '{bad[0]}' (use {', '.join(registry.names())})")

@@ -107,6 +107,7 @@ class SensorStreams:
         twist explicitly (the two are the same sensor to the backends, ticks preferred).
         """
         sensors = list(sensors)
+        registry.ensure(sensors)
         known = registry.names()
         unknown = [s for s in sensors if s not in known]
         if unknown:

@@ -18,7 +18,9 @@ def register(subparsers) -> None:
         "import-bag",
         help="convert a ROS bag (ROS 1 .bag, ROS 2 folder or .mcap) into a recording folder",
         description="Write the recording layout (cam0, imu0, odom0, gps0) from a ROS 1 or ROS 2 bag. "
-                    "A stream whose topic is not given takes the bag's only topic of that message type.",
+                    "A stream whose topic is not given takes the bag's only topic of that message type. "
+                    "--imu-topic and --odom-topic may be given more than once: the first topic goes to imu0 "
+                    "(odom0), the next to imu1 (odom1), and so on.",
     )
     parser.add_argument("bag", help="ROS 1 .bag file, ROS 2 bag folder, or .mcap/.db3 file")
     # an empty value is a usage error naming the option, not the default topic or the current folder
@@ -26,8 +28,10 @@ def register(subparsers) -> None:
                         help="recording folder: new, empty, or a recording fusion-vo wrote (replaced)")
     topic = non_empty("a topic name")
     parser.add_argument("--image-topic", type=topic, help="sensor_msgs/Image or CompressedImage topic (cam0)")
-    parser.add_argument("--imu-topic", type=topic, help="sensor_msgs/Imu topic (imu0)")
-    parser.add_argument("--odom-topic", type=topic, help="nav_msgs/Odometry topic (odom0)")
+    parser.add_argument("--imu-topic", type=topic, action="append",
+                        help="sensor_msgs/Imu topic (imu0); repeated, the next ones go to imu1, imu2 ...")
+    parser.add_argument("--odom-topic", type=topic, action="append",
+                        help="nav_msgs/Odometry topic (odom0); repeated, the next ones go to odom1, odom2 ...")
     parser.add_argument("--gps-topic", type=topic, help="sensor_msgs/NavSatFix topic (gps0)")
     parser.add_argument("--camera-yaml", type=non_empty("a file name"),
                         help="cam0/sensor.yaml to use instead of the bag's CameraInfo")

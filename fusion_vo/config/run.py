@@ -49,6 +49,7 @@ def sensor_names() -> tuple[str, ...]:
 
 
 def _registered_sensor(name: str) -> str:
+    registry.ensure([name])  # an instance of a kind (odom1, imu2) is made when named
     names = sensor_names()
     if name not in names:
         expected = ", ".join(repr(n) for n in names[:-1]) + f" or {names[-1]!r}"

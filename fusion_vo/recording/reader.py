@@ -262,13 +262,14 @@ class Recording:
             cap.release()
 
     # ------------------------------------------------------------------ other streams
-    def imu(self) -> ImuData:
-        """``imu0``: gyro, accelerometer and (when the 4 extra columns are present) an AHRS orientation.
+    def imu(self, folder: str = "imu0") -> ImuData:
+        """``imu0`` (or another IMU's ``folder``, ``imu1`` ...): gyro, accelerometer and (when the 4 extra columns are
+        present) an AHRS orientation.
 
-        ``imu0/sensor.yaml`` is required (its absence is an :class:`InputError`); without ``T_BS`` the IMU
+        ``sensor.yaml`` is required (its absence is an :class:`InputError`); without ``T_BS`` the IMU
         is taken as aligned with the body and without the noise keys the configuration's noise is used, with
         a warning naming the file."""
-        path = self._need("IMU", "imu0")
+        path = self._need("IMU", folder)
         tab = _enough_rows(read_table(path, (6, 10), "IMU values"), path, 2, "IMU")
         if tab.values.shape[1] not in (6, 10):
             raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
@@ -277,20 +278,20 @@ class Recording:
         orient = None
         if tab.values.shape[1] == 10:
             orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
-        T, noise, rate = self.imu_calibration()
+        T, noise, rate = self.imu_calibration(folder)
         return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
 
-    def imu_calibration(self) -> tuple[np.ndarray, dict, float | None]:
-        """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (required): the IMU's pose in the body frame
-        (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default taken is
-        warned about once, naming the file."""
-        imu = self._file("imu0", ImuFile, required=True)  # the IMU's mounting and noise: never assumed without a word
-        ypath = self.path / "imu0" / "sensor.yaml"
+    def imu_calibration(self, folder: str = "imu0") -> tuple[np.ndarray, dict, float | None]:
+        """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (or ``folder``'s, required): the IMU's pose in the
+        body frame (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default
+        taken is warned about once, naming the file."""
+        imu = self._file(folder, ImuFile, required=True)  # the IMU's mounting and noise: never assumed without a word
+        ypath = self.path / folder / "sensor.yaml"
         T, noise, rate = imu.pose(np.eye(4)), imu.noise(), imu.rate_hz
         defaults = ([] if imu.T_BS is not None else ["no T_BS: the IMU is taken as aligned with the body (identity)"]) + (
             [] if noise else ["no noise keys: the configuration's IMU noise is used"])
-        if defaults and "imu0" not in self._defaults_told:
-            self._defaults_told.add("imu0")
+        if defaults and folder not in self._defaults_told:
+            self._defaults_told.add(folder)
             log.warning("%s: %s", ypath, "; ".join(defaults))
         return T, noise, rate
 
@@ -330,9 +331,9 @@ class Recording:
             return None
         return CameraNoise.from_file(stated)
 
-    def odom(self) -> TwistData:
-        """``odom0``: body-frame twist."""
-        path = self._need("odometry", "odom0")
+    def odom(self, folder: str = "odom0") -> TwistData:
+        """``odom0`` (or another odometry's ``folder``, ``odom1`` ...): body-frame twist."""
+        path = self._need("odometry", folder)
         tab = _enough_rows(read_table(path, 3, "twist values"), path, 1, "odometry")
         check_magnitude(tab, path, slice(0, 2), MAX_SPEED, "speed [m/s]")
         check_magnitude(tab, path, slice(2, 3), MAX_ANGULAR_RATE, "yaw rate [rad/s]")

@@ -3,7 +3,8 @@
 Each module turns a recorded stream (arrays from :mod:`fusion_vo.measurements`) into gated samples with
 a documented noise model; the backends integrate them between their nodes. Each module also registers its sensor with
 :mod:`fusion_vo.sensors.registry` (reader, configuration section, timeline, EKF and graph parts), which
-is how the rest of the library finds it.
+is how the rest of the library finds it. :mod:`fusion_vo.sensors.instances` declares the further instances
+of the odometry-twist and IMU kinds (``odom1`` ... ``odom9``, ``imu1`` ... ``imu9``), made when a name asks for one.
 """
 
 from fusion_vo.sensors.gps import GpsModel, GpsNoise, align_to_fixes

@@ -13,7 +13,8 @@ plus one :func:`register` call (README, "Adding a sensor")::
 
 The built-in sensors register themselves in :mod:`~fusion_vo.sensors.visual` (``camera``),
 :mod:`~fusion_vo.sensors.wheel` (``wheel``, ``odom``), :mod:`~fusion_vo.sensors.imu` (``imu``),
-:mod:`~fusion_vo.sensors.range` (``range``) and :mod:`~fusion_vo.sensors.gps` (``gps``), in that order.
+:mod:`~fusion_vo.sensors.range` (``range``) and :mod:`~fusion_vo.sensors.gps` (``gps``), in that order;
+:mod:`~fusion_vo.sensors.instances` declares the kinds ``odom`` and ``imu`` (:func:`register_kind`).
 
 Hooks with an ``order`` run sorted by it across all sensors (stable, so equal orders keep the
 registration order): a sensor's measurements may need another's (the camera's slope projection needs the
@@ -35,10 +36,16 @@ twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset) is
 A sensor fed live (:meth:`fusion_vo.backends.streaming.StreamingFusion.add`) declares a :class:`Live`
 intake: how one sample is read and checked, and how buffered samples become its data, or (the camera, GPS:
 samples that make nodes) where a checked sample goes instead (``Live.take``).
+
+Several instances of a kind (``odom1`` ... ``odom9``, ``imu1`` ... ``imu9``, besides instance 0, the sensors
+``odom`` and ``imu``) are made by a factory the kind registers (:func:`register_kind`), the first time a name asks
+for one (:func:`get`, :func:`known`, :func:`ensure`): a sensor like any other from then on. A name whose number is
+outside ``1..MAX_INSTANCE`` or written otherwise (``odom0``, ``odom01``, ``odom10``) is no sensor.
 """
 
 from __future__ import annotations
 
+import re
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -49,7 +56,7 @@ from fusion_vo.sensors.model import ARGUMENT_SIZES
 
 #: the built-in sensor modules, imported (and so registered) on first use of the registry
 BUILTIN_MODULES = ("fusion_vo.sensors.visual", "fusion_vo.sensors.wheel", "fusion_vo.sensors.imu",
-                   "fusion_vo.sensors.range", "fusion_vo.sensors.gps")
+                   "fusion_vo.sensors.range", "fusion_vo.sensors.gps", "fusion_vo.sensors.instances")
 DEFAULT_ORDER = 100.0
 
 
@@ -281,7 +288,52 @@ class Sensor:
 
 _REGISTRY: dict[str, Sensor] = {}
 _ORDERED: dict = {}  # attribute -> the sorted steps (cleared when a sensor is added or removed)
+_KINDS: dict[str, Callable[[int], Sensor]] = {}  # kind -> factory of its instance N (register_kind)
 _loaded = False
+
+#: the highest instance number of a kind (``odom1`` ... ``odom9``)
+MAX_INSTANCE = 9
+_INSTANCE_NAME = re.compile(r"([a-z]+)([1-9])")
+
+
+def register_kind(kind: str, factory: Callable[[int], Sensor]) -> None:
+    """Declare that the sensors ``KIND1`` ... ``KIND9`` exist: ``factory(n)`` makes instance ``n`` (a
+    :class:`Sensor` named ``f"{kind}{n}"``), registered the first time its name is asked for (module docstring)."""
+    _KINDS[kind] = factory
+
+
+def instance(name: str) -> Sensor | None:
+    """The sensor ``name``: a registered one, or an instance of a declared kind made and registered now; None
+    when it is neither."""
+    _load_builtins()
+    sensor = _REGISTRY.get(name)
+    if sensor is not None or not isinstance(name, str):
+        return sensor
+    match = _INSTANCE_NAME.fullmatch(name)
+    if match is None or match.group(1) not in _KINDS:
+        return None
+    sensor = _KINDS[match.group(1)](int(match.group(2)))
+    if sensor.name != name:
+        raise ValueError(f"the factory of kind '{match.group(1)}' made sensor '{sensor.name}' for '{name}'")
+    return register(sensor)
+
+
+def is_instance(name: str) -> bool:
+    """Whether ``name`` is an instance of a declared kind (``odom1``), registered or not."""
+    match = _INSTANCE_NAME.fullmatch(name) if isinstance(name, str) else None
+    return match is not None and match.group(1) in _KINDS
+
+
+def known(name: str) -> bool:
+    """Whether ``name`` is a sensor (registered, or an instance of a declared kind, then registered)."""
+    return instance(name) is not None
+
+
+def ensure(names) -> None:
+    """Register the instances of declared kinds among ``names`` (other names are left alone)."""
+    for name in names:
+        if isinstance(name, str):
+            instance(name)
 
 
 def register(sensor: Sensor, replace: bool = False) -> Sensor:
@@ -386,9 +438,11 @@ def names() -> tuple[str, ...]:
 
 
 def get(name: str) -> Sensor:
-    """The sensor called ``name`` (KeyError when none is)."""
-    _load_builtins()
-    return _REGISTRY[name]
+    """The sensor called ``name``, an instance of a declared kind made on first use (KeyError when none is)."""
+    sensor = instance(name)
+    if sensor is None:
+        raise KeyError(name)
+    return sensor
 
 
 def states(used, config=None) -> tuple[State, ...]:

@@ -65,9 +65,9 @@ def test_a_second_base_with_its_own_scale_state_is_calibrated_by_both_backends(d
     w = np.interp(t, s.truth.t, w_true) + rng.normal(0.0, 0.005, len(t))
     with registry.registered(SECOND_ODOMETRY):
         streams = SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height,
-                                extra={"odom1": TwistData(t, v, w)})
-        result = fuse(streams.select(["camera", "wheel", "imu", "odom1"]), "all", {"graph": {"fixed_lag": 0.0}})
+                                extra={"second_base": TwistData(t, v, w)})
+        result = fuse(streams.select(["camera", "wheel", "imu", "second_base"]), "all", {"graph": {"fixed_lag": 0.0}})
     for name in TRACKS:
-        scale = result.calibration[name]["odom1_scale"]
+        scale = result.calibration[name]["second_base_scale"]
         assert scale == pytest.approx(1.03, abs=0.004), (name, scale)
-    assert result.counts["gtsam"]["odom1"].used > 0.9 * len(result.trajectories["gtsam"].t)
+    assert result.counts["gtsam"]["second_base"].used > 0.9 * len(result.trajectories["gtsam"].t)

@@ -65,8 +65,8 @@ def import_bag(
     out: str | Path,
     *,
     image_topic: str | None = None,
-    imu_topic: str | None = None,
-    odom_topic: str | None = None,
+    imu_topic: str | Sequence[str] | None = None,
+    odom_topic: str | Sequence[str] | None = None,
     gps_topic: str | None = None,
     camera_yaml: str | Path | None = None,
     static_tfs: Sequence[StaticTransform] = (),
@@ -79,7 +79,9 @@ def import_bag(
     bag : path of a ROS 1 ``.bag`` file, a ROS 2 bag folder, or a ROS 2 ``.mcap``/``.db3`` file.
     out : the recording folder to create.
     image_topic, imu_topic, odom_topic, gps_topic : topic of each stream; when ``None`` the single topic
-        of the stream's message type is taken (none: the stream is left out; several: an error).
+        of the stream's message type is taken (none: the stream is left out; several: an error). ``imu_topic``
+        and ``odom_topic`` may be a list of topics: the first is written to ``imu0/`` (``odom0/``), the next to
+        ``imu1/`` (``odom1/``) and so on, up to ``imu9/`` (``odom9/``); one topic may be listed more than once.
     camera_yaml : a ``cam0/sensor.yaml`` to use instead of the bag's ``CameraInfo``.
     static_tfs : fixed transforms to add to the bag's ``/tf_static`` (see :func:`parse_static_tf`); two
         between the same frames that disagree are an error.
@@ -102,7 +104,8 @@ def import_bag(
     cam_yaml = load_yaml(camera_yaml) if camera_yaml is not None else None
     with opened(bag) as reader:
         topics = bag_topics(reader)
-        requested = {"cam0": image_topic, "imu0": imu_topic, "odom0": odom_topic, "gps0": gps_topic}
+        requested = {"cam0": image_topic, **_instances("imu", imu_topic), **_instances("odom", odom_topic),
+                     "gps0": gps_topic}
         chosen = select_topics(topics, requested, bag)
         if not chosen:
             raise InputError("no supported topic (sensor_msgs/Image, CompressedImage, Imu, NavSatFix, "
@@ -124,6 +127,24 @@ def import_bag(
 
 #: the option of ``fusion-vo import-bag`` that names each stream's topic
 TOPIC_OPTIONS = {"cam0": "--image-topic", "imu0": "--imu-topic", "odom0": "--odom-topic", "gps0": "--gps-topic"}
+#: the most instances of a kind a recording holds (``imu0`` ... ``imu9``)
+MAX_INSTANCES = 10
+
+
+def _instances(kind: str, topics: str | Sequence[str] | None) -> dict[str, str | None]:
+    """``{KIND0: topic, KIND1: topic, ...}`` of one topic or a list of them (``{KIND0: None}`` for none)."""
+    if topics is None or isinstance(topics, str):
+        return {f"{kind}0": topics}
+    topics = list(topics)
+    if len(topics) > MAX_INSTANCES:
+        raise InputError(f"{TOPIC_OPTIONS[kind + '0']} given {len(topics)} times: at most {MAX_INSTANCES} "
+                         f"({kind}0/ ... {kind}{MAX_INSTANCES - 1}/)")
+    return {f"{kind}{i}": topic for i, topic in enumerate(topics)} if topics else {f"{kind}0": None}
+
+
+def _kind(stream: str) -> str:
+    """The stream's instance 0 (``imu0`` of ``imu2``)."""
+    return stream.rstrip("0123456789") + "0"
 
 
 class _Importer:
@@ -140,8 +161,8 @@ class _Importer:
         self.rows = {name: Rows(StreamSummary(name, t.topic, t.msgtype)) for name, t in chosen.items()}
         self.image_size: tuple[int, int] | None = None
         self.written_images: set[int] = set()
-        self.imu_missing_orientation = 0
-        self.imu_covariance: dict[str, list[float]] = {"gyro": [], "accel": []}
+        self.imu_missing_orientation: dict[str, int] = {}  # IMU stream -> messages without an orientation
+        self.imu_covariance: dict[str, dict[str, list[float]]] = {}  # IMU stream -> its gyro's and accel's
         self.gps_sigma: list[float] = []
         self.camera_info = None
         self.caminfo_topic = pick_camera_info(topics, chosen.get("cam0")) if cam_yaml is None else None
@@ -152,15 +173,17 @@ class _Importer:
         """Read the messages and write the streams; a stream whose topic has no message is left out (its
         folder would make the recording claim a sensor it has no sample of), an error when its topic was
         given (``explicit``)."""
-        wanted = {t.topic: name for name, t in self.chosen.items()}
+        wanted: dict[str, list[str]] = {}  # topic -> the streams it is written to
+        for name, t in self.chosen.items():
+            wanted.setdefault(t.topic, []).append(name)
         extra = set(self.tf_topics) | ({self.caminfo_topic} if self.caminfo_topic else set())
         conns = [c for c in self.reader.connections if c.topic in wanted or c.topic in extra]
         handlers = {"cam0": self._image, "imu0": self._imu, "odom0": self._odom, "gps0": self._gps}
         for conn, bag_t, msg in self._messages(conns):
             if conn.topic in wanted:
-                name = wanted[conn.topic]
-                self.rows[name].summary.messages += 1
-                handlers[name](msg, bag_t)
+                for name in wanted[conn.topic]:
+                    self.rows[name].summary.messages += 1
+                    handlers[_kind(name)](msg, bag_t, name)
             elif conn.msgtype == TF_MESSAGE:
                 self._tf(msg)
             elif self.camera_info is None and conn.msgtype == CAMERA_INFO and float(msg.k[0]) > 0:
@@ -170,14 +193,16 @@ class _Importer:
         for name in empty:
             topic = self.chosen[name].topic
             if name in explicit:
-                raise InputError(f"{TOPIC_OPTIONS[name]} {topic}: the topic has no message", self.bag)
+                raise InputError(f"{TOPIC_OPTIONS[_kind(name)]} {topic}: the topic has no message", self.bag)
             self.summary.notes.append(f"{topic}: no message; {name}/ not written")
         if len(empty) == len(self.chosen):
             raise InputError("no message on any supported topic (" + ", ".join(self.chosen[n].topic for n in empty)
                              + ")", self.bag)
         for name in self.chosen:
             if name not in empty:
-                getattr(self, f"_finish_{name}")()
+                finish = {"cam0": self._finish_cam0, "imu0": self._finish_imu, "odom0": self._finish_odom,
+                          "gps0": self._finish_gps0}[_kind(name)]
+                finish(name)
             self.summary.streams.append(self.rows[name].summary)
 
     def _messages(self, conns):
@@ -202,7 +227,7 @@ class _Importer:
         return t
 
     # -------------------------------------------------------------- per message
-    def _image(self, msg, bag_t: int) -> None:
+    def _image(self, msg, bag_t: int, name: str = "cam0") -> None:
         rows = self.rows["cam0"]
         t = self._header_time("cam0", msg, bag_t)
         if t in self.written_images:
@@ -229,9 +254,9 @@ class _Importer:
         self.written_images.add(t)
         rows.add(t, (path.name,))
 
-    def _imu(self, msg, bag_t: int) -> None:
-        rows = self.rows["imu0"]
-        t = self._header_time("imu0", msg, bag_t)
+    def _imu(self, msg, bag_t: int, name: str = "imu0") -> None:
+        rows = self.rows[name]
+        t = self._header_time(name, msg, bag_t)
         w, a, q = msg.angular_velocity, msg.linear_acceleration, msg.orientation
         values = (float(w.x), float(w.y), float(w.z), float(a.x), float(a.y), float(a.z))
         if not finite(values):
@@ -241,16 +266,17 @@ class _Importer:
         has_q = float(msg.orientation_covariance[0]) != -1.0 and finite(quat) and \
             abs(math.sqrt(sum(v * v for v in quat)) - 1.0) < 0.05
         if not has_q:
-            self.imu_missing_orientation += 1
+            self.imu_missing_orientation[name] = self.imu_missing_orientation.get(name, 0) + 1
         rows.add(t, values + (quat if has_q else None,))
-        if len(self.imu_covariance["gyro"]) < 1000:
-            self.imu_covariance["gyro"].append(float(msg.angular_velocity_covariance[0]))
-            self.imu_covariance["accel"].append(float(msg.linear_acceleration_covariance[0]))
+        covariance = self.imu_covariance.setdefault(name, {"gyro": [], "accel": []})
+        if len(covariance["gyro"]) < 1000:
+            covariance["gyro"].append(float(msg.angular_velocity_covariance[0]))
+            covariance["accel"].append(float(msg.linear_acceleration_covariance[0]))
 
-    def _odom(self, msg, bag_t: int) -> None:
-        rows = self.rows["odom0"]
-        t = self._header_time("odom0", msg, bag_t)
-        if self.body_frame is None and msg.child_frame_id:
+    def _odom(self, msg, bag_t: int, name: str = "odom0") -> None:
+        rows = self.rows[name]
+        t = self._header_time(name, msg, bag_t)
+        if self.body_frame is None and msg.child_frame_id and name == "odom0":
             self.body_frame = frame_name(msg.child_frame_id)
         tw, p = msg.twist.twist, msg.pose.pose
         twist = (float(tw.linear.x), float(tw.linear.y), float(tw.angular.z))
@@ -261,7 +287,7 @@ class _Importer:
             return
         rows.add(t, (twist, pose if finite(pose) and any(pose[3:]) else None))
 
-    def _gps(self, msg, bag_t: int) -> None:
+    def _gps(self, msg, bag_t: int, name: str = "gps0") -> None:
         rows = self.rows["gps0"]
         t = self._header_time("gps0", msg, bag_t)
         fix = (float(msg.latitude), float(msg.longitude), float(msg.altitude))
@@ -298,7 +324,7 @@ class _Importer:
             return None, f"no fixed transform from '{self.body_frame}' to '{frame}'"
         return T, f"from the fixed transforms '{self.body_frame}' -> '{frame}'"
 
-    def _finish_cam0(self) -> None:
+    def _finish_cam0(self, name: str = "cam0") -> None:
         rows = self.rows["cam0"]
         t, values = rows.finish()
         write_csv(self.root / "cam0" / "data.csv", "#timestamp [ns],filename", t, values, "%s")
@@ -334,8 +360,8 @@ class _Importer:
                    [f"camera of {rows.summary.topic} ({rows.summary.msgtype}), calibration {source}",
                     f"T_BS {how}" if "T_BS" in data else "T_BS: default mounting, not from the bag"])
 
-    def _finish_imu0(self) -> None:
-        rows = self.rows["imu0"]
+    def _finish_imu(self, name: str = "imu0") -> None:
+        rows = self.rows[name]
         t, values = rows.finish()
         with_q = bool(values) and all(v[6] is not None for v in values)
         header = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
@@ -346,38 +372,38 @@ class _Importer:
         else:
             table = [v[:6] for v in values]
             if any(v[6] is not None for v in values):
-                self.summary.notes.append(f"{rows.summary.topic}: {self.imu_missing_orientation} messages "
+                self.summary.notes.append(f"{rows.summary.topic}: {self.imu_missing_orientation.get(name, 0)} messages "
                                           "without an orientation; the quaternion columns were left out")
-        write_csv(self.root / "imu0" / "data.csv", header, t, table, "%.9g")
-        T, how = self._extrinsics("imu0")
-        comments = [f"IMU of {rows.summary.topic}, frame '{self.frames.get('imu0', '')}'"]
+        write_csv(self.root / name / "data.csv", header, t, table, "%.9g")
+        T, how = self._extrinsics(name)
+        comments = [f"IMU of {rows.summary.topic}, frame '{self.frames.get(name, '')}'"]
         if T is None:
             T = np.eye(4)
             comments.append(f"T_BS is the identity: {how}; edit it if the IMU is not aligned with the body")
-            self.summary.notes.append(f"imu0 T_BS set to the identity ({how})")
+            self.summary.notes.append(f"{name} T_BS set to the identity ({how})")
         else:
             comments.append(f"T_BS {how}")
         data = {"sensor_type": "imu", "rate_hz": rows.summary.rate_hz, "T_BS": matrix_entry(T)}
         rate = rows.summary.rate_hz or 0.0
-        for key, name in (("gyroscope_noise_density", "gyro"), ("accelerometer_noise_density", "accel")):
-            var = [v for v in self.imu_covariance[name] if v > 0]
+        for key, sensor in (("gyroscope_noise_density", "gyro"), ("accelerometer_noise_density", "accel")):
+            var = [v for v in self.imu_covariance.get(name, {}).get(sensor, []) if v > 0]
             if var and rate > 0:
                 data[key] = float(f"{math.sqrt(float(np.median(var)) / rate):.6g}")
         if len(data) > 3:
             comments.append("noise densities = sqrt(message covariance / rate_hz)")
-        write_yaml(self.root / "imu0" / "sensor.yaml", data, comments)
+        write_yaml(self.root / name / "sensor.yaml", data, comments)
 
-    def _finish_odom0(self) -> None:
-        rows = self.rows["odom0"]
+    def _finish_odom(self, name: str = "odom0") -> None:
+        rows = self.rows[name]
         t, values = rows.finish()
-        write_csv(self.root / "odom0" / "data.csv",
+        write_csv(self.root / name / "data.csv",
                    "#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]", t, [v[0] for v in values], "%.9g")
         poses = [(ti, v[1]) for ti, v in zip(t, values) if v[1] is not None]
-        write_csv(self.root / "odom0" / "pose.csv",
+        write_csv(self.root / name / "pose.csv",
                    "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []",
                    np.array([p[0] for p in poses], dtype=np.int64), [p[1] for p in poses], "%.9g")
 
-    def _finish_gps0(self) -> None:
+    def _finish_gps0(self, name: str = "gps0") -> None:
         rows = self.rows["gps0"]
         t, values = rows.finish()
         table = np.array(values, dtype=float).reshape(-1, 8)

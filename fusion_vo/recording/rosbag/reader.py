@@ -115,12 +115,17 @@ def select_topics(topics: Sequence[BagTopic], requested: dict[str, str | None], 
     Parameters
     ----------
     topics : the bag's topics.
-    requested : stream name (``cam0``, ``imu0``, ``odom0``, ``gps0``) -> topic or ``None``.
+    requested : stream name (``cam0``, ``imu0``, ``odom0``, ``gps0``; ``imu1``, ``odom1`` ... with a topic) -> topic
+        or ``None``.
     bag : the bag, for error messages.
     """
     by_name = {t.topic: t for t in topics}
     chosen: dict[str, BagTopic] = {}
-    for stream, (types, option) in STREAM_TYPES.items():
+    # the further instances of a kind (imu1, odom2 ...) are written only for a topic named for them
+    order = [(s, spec) for base, spec in STREAM_TYPES.items()
+             for s in [base] + sorted((r for r in requested if r not in STREAM_TYPES and
+                                       r.rstrip("0123456789") + "0" == base), key=lambda r: int(r[len(base) - 1:]))]
+    for stream, (types, option) in order:
         want = requested.get(stream)
         if want:
             name = want if want in by_name else "/" + want.lstrip("/")
