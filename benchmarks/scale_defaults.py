@@ -67,7 +67,7 @@ Run (long: generation renders every frame; use ``nice``)::
 
     nice -n 10 python benchmarks/scale_defaults.py --cache DIR [--seeds 10] [--profiles square,circle]
         [--wrong height_error,hard,tilted] [--wrong-seeds 3] [--variant NAME:visual_scale_sigma=0.005,...]
-        [--configs new] [--variant NAME:streams.yaw_sigma=0.5]
+        [--configs new] [--variant NAME:streams.yaw_sigma=0.5] [--vo-set klt.min_sigma=0.01]
 """
 
 from __future__ import annotations
@@ -134,7 +134,8 @@ def log(text: str) -> None:
     print(f"[{time.strftime('%H:%M:%S')}] {text}", file=sys.stderr, flush=True)
 
 
-def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict, keep: bool) -> Drive:
+def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict, keep: bool,
+                 vo: dict | None = None) -> Drive:
     """The drive ``name`` from ``cache``, generated and run through visual odometry when not there yet."""
     path = cache / f"{name}.pkl"
     if path.exists():
@@ -149,7 +150,7 @@ def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict,
     if not (seq / "simulation.yaml").exists():
         simulate(seq, profile=profile, seed=seed, **options)
     rec = Recording(seq)
-    vo = run_visual_odometry(rec, RunConfig.model_validate(RAW).odometry_config())
+    vo = run_visual_odometry(rec, RunConfig.model_validate(common.with_settings(RAW, vo or [])).odometry_config())
     streams = streams_from_recording(rec, vo)
     drive = Drive(name, streams, vo.track, rec.groundtruth())
     tmp = path.with_suffix(".tmp")
@@ -357,6 +358,9 @@ def main(argv=None) -> int:
     parser.add_argument("--configs", default=",".join(CONFIGS),
                         help="the built-in configurations to fuse with (default: %(default)s)")
     parser.add_argument("--keep-recordings", action="store_true", help="keep the rendered recordings in --cache")
+    parser.add_argument("--vo-set", action="append", default=[], metavar="KEY=VALUE",
+                        help="a run-configuration setting of the cached visual odometry (e.g. klt.min_sigma=0.01); "
+                             "the cache holds one setting: give each its own --cache")
     args = parser.parse_args(argv)
     for p in filter(None, args.profiles.split(",")):
         if p not in PROFILES:
@@ -381,7 +385,7 @@ def main(argv=None) -> int:
     groups += [(w, STANDARD[w][0], STANDARD[w][2], seeds[:args.wrong_seeds], wrong_summary) for w in wrong]
     for group, profile, options, group_seeds, summarise in groups:
         rows = []
-        drives = [cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings)
+        drives = [cached_drive(args.cache, f"{group}_s{seed}", profile, seed, options, args.keep_recordings, args.vo_set)
                   for seed in group_seeds]
         calibrated = any(c[0].get("streams", {}).get("camera_noise") for c in configs.values())
         for i, drive in enumerate(drives):
