@@ -67,7 +67,7 @@ class KltConfig(PointSettings):
     confidence: Confidence = 0.999
     max_iterations: Hypotheses = 256
     seed: Seed = 0
-    min_sigma: ResidualFloor = 0.02
+    min_sigma: ResidualFloor = 0.01
     min_inliers: MinInliers = 10
     min_inlier_ratio: InlierRatio = Field(0.5, description=(
         "Fewer inliers than this fraction of the tracked points reject the estimate."))

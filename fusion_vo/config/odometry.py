@@ -39,7 +39,7 @@ class OdometrySettings(Section):
         "the frame."))
     min_sigma_xy: Float = Field(2e-5, ge=0, le=10, description=(
         "Floor on the standard deviation of a visual increment's translation [m] (0: no floor)."))
-    min_sigma_yaw: Float = Field(2e-5, ge=0, le=math.pi, description=(
+    min_sigma_yaw: Float = Field(1.4e-5, ge=0, le=math.pi, description=(
         "Floor on the standard deviation of a visual increment's heading [rad] (0: no floor)."))
     max_bad_start_frames: Int = Field(5, ge=1, le=1_000_000, description=(
         "If this many frames in a row fail to load at the start (wrong size, unreadable), stop with an error "

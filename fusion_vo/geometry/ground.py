@@ -176,7 +176,7 @@ class GroundGeometry:
     camera: CameraModel
     height: float | None = None
     min_sigma_xy: float = 2e-5
-    min_sigma_yaw: float = 2e-5
+    min_sigma_yaw: float = 1.4e-5
 
     def __post_init__(self) -> None:
         self.rectifier = GroundRectifier(self.camera)
