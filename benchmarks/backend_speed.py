@@ -58,7 +58,7 @@ import numpy as np
 from common import Stages, add_settings, cpu_seconds, fusion_settings, load, parser, table, with_settings
 
 from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, batch, chain, fuse, graph, graph_builder
-from fusion_vo.backends.streaming import time_ordered_messages
+from fusion_vo.backends.streaming import MESSAGE_SENSOR, time_ordered_messages
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
@@ -235,15 +235,15 @@ def truth_at(s, t: np.ndarray) -> np.ndarray:
 
 
 def run_backend(s, msgs, backend: str, config: FusionConfig, background: bool = False) -> dict:
-    """Feed ``msgs`` to a ``StreamingFusion``, timing every ``add_*()`` + ``current_estimate()``."""
+    """Feed ``msgs`` to a ``StreamingFusion``, timing every ``add()`` + ``current_estimate()``."""
     fusion = StreamingFusion(backend, config, ["camera", "wheel", "imu"], wheel_config=s.wheel.config,
                              imu_noise=s.imu.noise, background=background)
     lat, cpu, age, age_held, t_new, pos = [], [], [], [], [], []
     newest = -np.inf
     for _, kind, m in msgs:
-        add = getattr(fusion, f"add_{kind}")
+        sensor = MESSAGE_SENSOR.get(kind, kind)
         c0, p0 = time.perf_counter(), time.thread_time()
-        add(m)
+        fusion.add(sensor, m)
         est = fusion.current_estimate()
         lat.append(time.perf_counter() - c0)
         cpu.append(time.thread_time() - p0)

@@ -27,6 +27,7 @@ import yaml
 from fusion_vo.config import RunConfig, load_config, validate_config
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation.gps import score_track
+from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.measurements import GpsData, PoseData
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
 from fusion_vo.simulation.generate import SimulationOptions, simulate
@@ -254,3 +255,12 @@ class Stages:
         for module, attribute, inner in reversed(self._wrapped):
             setattr(module, attribute, inner)
         self._wrapped.clear()
+
+
+def ate_mm(truth: PoseData, track: PoseData) -> float:
+    """ATE [mm] of ``track`` against ``truth``: the RMS position error after the SE(2) alignment that minimises
+    it, over the track's poses paired with the truth in time (:func:`fusion_vo.evaluation.metrics.associate`)."""
+    reference = planar_trajectory(truth.t, *truth.xyyaw.T)
+    est = planar_trajectory(track.t, *track.xyyaw.T)
+    reference, est = associate(reference, est)
+    return float(ape_rmse(reference, align_se2(reference, est)) * 1e3)

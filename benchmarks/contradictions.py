@@ -67,8 +67,7 @@ def config(check: bool = True, **changes) -> FusionConfig:
 
 def streamed(streams, backend: str, cfg: FusionConfig) -> PoseData:
     fusion = streaming_for(streams, backend, cfg)
-    for _, kind, message in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(message)
+    fusion.feed(time_ordered_messages(streams))
     result = fusion.finish()
     return result.trajectories["ekf" if backend == "ekf" else "gtsam_online"]
 
@@ -110,16 +109,6 @@ def husky(tmp: Path) -> None:
 
 
 # --------------------------------------------------------------------------- 2. wrong focal length
-def ate_mm(track: PoseData, truth: PoseData) -> float:
-    keep = (track.t >= truth.t[0]) & (track.t <= truth.t[-1])
-    p = track.xyyaw[keep, :2]
-    g = np.column_stack([np.interp(track.t[keep], truth.t, truth.xyyaw[:, i]) for i in range(2)])
-    pc, gc = p - p.mean(0), g - g.mean(0)
-    u, _, vt = np.linalg.svd(pc.T @ gc)
-    r = vt.T @ np.diag([1.0, np.sign(np.linalg.det(vt.T @ u.T))]) @ u.T
-    return 1e3 * float(np.sqrt(np.mean(np.sum((pc @ r.T - gc) ** 2, axis=1))))
-
-
 def rescaled(streams, ratio: float, offset: np.ndarray):
     """The alternative measured against leaving the translation out: each increment ``m`` of turn ``ψ`` made
     ``m / ρ + (1 - 1/ρ)(I - R(ψ)) t`` (the camera at ``t`` in the body frame, :mod:`fusion_vo.geometry.ground`),
@@ -167,8 +156,8 @@ def wrong_focal(tmp: Path, full: bool) -> None:
                      released))
         for label, s, cfg in variants:
             r = fuse(s, "all", cfg)
-            print(f"   {name:10s} {focal:5.0f} {label:34s} {ate_mm(vo.track, truth):12.1f} "
-                  + " ".join(f"{ate_mm(r.trajectories[n], truth):12.1f}" for n in ("wheel",) + FUSED))
+            print(f"   {name:10s} {focal:5.0f} {label:34s} {common.ate_mm(truth, vo.track):12.1f} "
+                  + " ".join(f"{common.ate_mm(truth, r.trajectories[n]):12.1f}" for n in ("wheel",) + FUSED))
 
 
 # --------------------------------------------------------------------------- 3. broken copies
@@ -197,7 +186,7 @@ def broken_drives(tmp: Path) -> None:
         streams = streams_from_recording(Recording(rec), None, sensors.split(","))
         on, off = fuse(streams, "ekf", config()), fuse(streams, "ekf", config(False))
         decided = ", ".join(f"{f['check']} {f['decision']}" for f in on.consistency if f["decision"] != "kept") or "all kept"
-        print(f"   {label:38s} {ate_mm(on.trajectories['ekf'], truth):10.1f} {ate_mm(off.trajectories['ekf'], truth):11.1f}"
+        print(f"   {label:38s} {common.ate_mm(truth, on.trajectories['ekf']):10.1f} {common.ate_mm(truth, off.trajectories['ekf']):11.1f}"
               f"   {decided}")
 
 

@@ -43,12 +43,11 @@ import time
 
 import numpy as np
 
-from common import FUSED, add_out, add_settings, describe_settings, names, parser, run_config, standard, work_dir
+from common import FUSED, add_out, add_settings, ate_mm, describe_settings, names, parser, run_config, standard, work_dir
 
 from fusion_vo.backends import fuse, streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.evaluation import evaluate_run
-from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
@@ -80,13 +79,6 @@ def compare(seq, run_dir, config) -> dict:
             "visual_noise": (summary.get("fusion") or {}).get("visual_noise") or {}}
 
 
-def _ate_mm(truth, track) -> float:
-    reference = planar_trajectory(truth.t, *truth.xyyaw.T)
-    est = planar_trajectory(track.t, *track.xyyaw.T)
-    reference, est = associate(reference, est)
-    return float(ape_rmse(reference, align_se2(reference, est)) * 1e3)
-
-
 def live_beside_batch(seq, config) -> str:
     """The live engine fed ``seq``'s streams in time order beside the batch run's online tracks: per backend the
     largest position difference over their common nodes [m] and both ATEs [mm]."""
@@ -99,14 +91,13 @@ def live_beside_batch(seq, config) -> str:
     for backend, name in (("ekf", "EKF"), ("gtsam", "iSAM2")):
         track_name = "ekf" if backend == "ekf" else "gtsam_online"
         fusion = streaming_for(streams, backend, config.fusion)
-        for _, kind, message in time_ordered_messages(streams):
-            getattr(fusion, f"add_{kind}")(message) if hasattr(fusion, f"add_{kind}") else fusion.add(kind, message)
+        fusion.feed(time_ordered_messages(streams))
         live, ref = fusion.finish().trajectories[track_name], batch.trajectories[track_name]
         common = np.intersect1d(live.t, ref.t)
         a, b = live.xyyaw[np.isin(live.t, common), :2], ref.xyyaw[np.isin(ref.t, common), :2]
         gap = float(np.max(np.linalg.norm(a - b, axis=1))) if len(common) else float("nan")
         cells.append(f"{name} live - batch {gap:.1e} m on {len(common)}/{len(ref.t)} nodes, ATE batch "
-                     f"{_ate_mm(truth, ref):.3f} / live {_ate_mm(truth, live):.3f} mm")
+                     f"{ate_mm(truth, ref):.3f} / live {ate_mm(truth, live):.3f} mm")
     return "    live: " + "; ".join(cells)
 
 

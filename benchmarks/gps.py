@@ -147,9 +147,9 @@ def stream(streams, backend: str, fusion: dict):
     calls = []
     last = None
     cpu = time.process_time()
-    for _, kind, m in time_ordered_messages(streams):
+    for message in time_ordered_messages(streams):
         start = time.perf_counter()
-        getattr(fusion_run, f"add_{kind}")(m)
+        fusion_run.feed([message])
         spent = time.perf_counter() - start
         now = fusion_run.processed_estimate()
         if now is not None and (last is None or now.t > last):

@@ -95,8 +95,7 @@ def distance(a: PoseData, b: PoseData) -> np.ndarray:
 def stream(streams: SensorStreams, backend: str, config: FusionConfig):
     fusion = streaming_for(streams, backend, config)
     t0 = time.process_time()
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(time_ordered_messages(streams))
     result = fusion.finish()
     return result, time.process_time() - t0
 

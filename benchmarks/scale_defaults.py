@@ -93,7 +93,6 @@ from fusion_vo.calibration.camera_noise import CameraNoise, measure
 from fusion_vo.calibration.camera_noise_drive import heading_errors
 from fusion_vo.config import RunConfig
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
 from fusion_vo.geometry.ground import floor_covariance
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
@@ -160,14 +159,6 @@ def cached_drive(cache: Path, name: str, profile: str, seed: int, options: dict,
         shutil.rmtree(seq)
     log(f"{name}: generated and visual odometry in {time.time() - t0:.0f} s")
     return drive
-
-
-def ate_mm(truth, track) -> float:
-    """ATE [mm] of ``track`` against ``truth`` (PoseData both) after an SE(2) alignment."""
-    reference = planar_trajectory(truth.t, truth.xyyaw[:, 0], truth.xyyaw[:, 1], truth.xyyaw[:, 2])
-    est = planar_trajectory(track.t, track.xyyaw[:, 0], track.xyyaw[:, 1], track.xyyaw[:, 2])
-    ref, est = associate(reference, est)
-    return float(ape_rmse(ref, align_se2(ref, est)) * 1e3)
 
 
 def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
@@ -267,7 +258,7 @@ def unstated(streams: SensorStreams) -> SensorStreams:
 def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -> dict:
     """ATE [mm] of VO, the wheels and each fused track, and the final visual scales, per configuration
     (``noise``: the camera noise model of ``streams.camera_noise``)."""
-    out = {"vo": ate_mm(drive.truth, drive.vo_track), "heading": camera_heading_error(drive)}
+    out = {"vo": common.ate_mm(drive.truth, drive.vo_track), "heading": camera_heading_error(drive)}
     for label, (options, stated) in configs.items():
         options = dict(options)
         streams = floored(drive.streams, options.pop("odometry", None))
@@ -281,9 +272,9 @@ def run_configs(drive: Drive, configs: dict, noise: CameraNoise | None = None) -
                           "kv_excursion": np.nan}
             continue
         if "wheel" in result.trajectories:
-            out.setdefault("wheel", ate_mm(drive.truth, result.trajectories["wheel"]))
-        row = {k: ate_mm(drive.truth, result.trajectories[k]) for k in FUSED}
-        row["from_vo"] = {k: ate_mm(drive.vo_track, result.trajectories[k]) for k in FUSED}
+            out.setdefault("wheel", common.ate_mm(drive.truth, result.trajectories["wheel"]))
+        row = {k: common.ate_mm(drive.truth, result.trajectories[k]) for k in FUSED}
+        row["from_vo"] = {k: common.ate_mm(drive.vo_track, result.trajectories[k]) for k in FUSED}
         row["kv"] = {k: result.calibration.get(k, {}).get("visual_scale", np.nan) for k in ("ekf_smoothed", "gtsam")}
         with threadpool_limits(limits=1, user_api="blas"):
             row["kv_excursion"] = float(np.max(np.abs(filtered_visual_scale(streams, as_config(options)) - 1.0)))

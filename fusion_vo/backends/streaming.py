@@ -112,6 +112,7 @@ import bisect
 import dataclasses
 import logging
 import threading
+from collections.abc import Iterable
 
 import numpy as np
 
@@ -140,6 +141,8 @@ from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge
 
 logger = logging.getLogger(__name__)
 
+#: the sensor a kind of :func:`time_ordered_messages` is added to, where the two names differ
+MESSAGE_SENSOR = {"visual": "camera", "twist": "odom"}
 
 
 class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
@@ -399,6 +402,13 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         offset = aligned_offset(self.imu_T_BS, first, float(self.config.initial_pose[2]))
         if offset is not None:
             self._heading_offset = offset
+
+    def feed(self, messages: Iterable[tuple[float, str, object]]) -> None:
+        """Add the samples ``(arrival time, kind, sample)`` of ``messages`` in their order
+        (:func:`time_ordered_messages`): :meth:`add` with the sensor ``kind`` names, where ``visual`` is the
+        camera's and ``twist`` the odometry's (``odom``) samples."""
+        for _, kind, sample in messages:
+            self.add(MESSAGE_SENSOR.get(kind, kind), sample)
 
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame;

@@ -196,7 +196,6 @@ def _play(fusion, msgs, speed: float, rate: float) -> tuple[list, list]:
             next_query += period
         wait_until(t_arrival)
         c0 = time.perf_counter()
-        add = getattr(fusion, f"add_{kind}", None)  # a built-in kind, else a registered sensor's name
-        add(m) if add is not None else fusion.add(kind, m)
+        fusion.feed([(t_arrival, kind, m)])
         call_ms.append((time.perf_counter() - c0) * 1e3)
     return rows, call_ms

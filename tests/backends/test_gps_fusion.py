@@ -188,8 +188,7 @@ def _streamed(streams, backend: str, delay: float = 0.0, **kwargs) -> StreamingF
         fixes = [m for m in msgs if m[1] == "gps"]
         msgs = [m for m in msgs if m[1] != "gps"] + [(t + delay * (1.0 + i % 2), k, m) for i, (t, k, m) in enumerate(fixes)]
         msgs.sort(key=lambda m: m[0])
-    for _, kind, m in msgs:
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(msgs)
     return fusion
 
 

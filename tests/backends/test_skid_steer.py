@@ -150,8 +150,7 @@ def test_streaming_puts_delayed_odometry_on_the_gyro_clock():
     rms = {}
     for sync in (True, False):
         fusion = streaming_for(late, "ekf", FusionConfig(sync_odometry=sync))
-        for _, kind, m in time_ordered_messages(late):
-            getattr(fusion, f"add_{kind}")(m)
+        fusion.feed(time_ordered_messages(late))
         result = fusion.finish()
         _, rms[sync] = position_errors(result.trajectories["ekf"], truth)
         if sync:

@@ -36,8 +36,7 @@ def test_shuffled_arrivals_give_the_batch_online_estimate(drive, backend, batch_
                              wheel_config=stated.wheel.config, imu_noise=s.imu.noise,
                              camera_height=s.camera_height, camera_height_sigma=stated.camera_height_sigma)
     assert fusion.current_estimate() is None
-    for _, kind, m in _messages(s, np.random.default_rng(1), 0.1):
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(_messages(s, np.random.default_rng(1), 0.1))
     now = fusion.current_estimate()
     assert now is not None and now.t > 9.0 and now.covariance.shape == (3, 3)
     result = fusion.finish()
@@ -60,9 +59,8 @@ def test_measurements_later_than_the_window_are_counted_not_applied(drive):
     held = [m for m in msgs if m[1] == "wheel" and 4.0 < m[0] < 4.5]
     for m in msgs:
         if m not in held:
-            getattr(fusion, f"add_{m[1]}")(m[2])
-    for _, kind, m in held:  # arrive seconds late
-        getattr(fusion, f"add_{kind}")(m)
+            fusion.feed([m])
+    fusion.feed(held)  # arrive seconds late
     result = fusion.finish()
     assert result.counts["ekf"]["wheel"].late == len(held)
     assert any("late measurements not applied: wheel" in n for n in result.notes)
@@ -86,6 +84,13 @@ def _on_the_epoch_clock(streams, offset: float = 1.6e9):
         imu=dataclasses.replace(streams.imu, t=streams.imu.t + offset))
 
 
+def _batch_and_engine(streams, backend: str):
+    """The batch run of ``streams`` and the streaming engine's result with every sample fed in time order."""
+    fusion = streaming_for(streams, backend)
+    fusion.feed(time_ordered_messages(streams))
+    return fuse(streams, "all"), fusion.finish()
+
+
 @pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
 def test_the_engine_fed_in_time_order_is_the_batch_runs_online_track(drive, backend, name):
     """Without anything a whole log shows in hindsight (docs/streaming.md), the batch run's online track is the
@@ -94,11 +99,7 @@ def test_the_engine_fed_in_time_order_is_the_batch_runs_online_track(drive, back
     left without a node, did)."""
     s, _ = drive
     streams = _on_the_epoch_clock(streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"]))
-    batch = fuse(streams, "all")
-    fusion = streaming_for(streams, backend)
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
-    live = fusion.finish()
+    batch, live = _batch_and_engine(streams, backend)
     ours, ref = live.trajectories[name], batch.trajectories[name]
     assert len(ours.t) == len(ref.t) and np.array_equal(ours.t, ref.t)
     assert np.max(np.abs(ours.xyyaw - ref.xyyaw)) < 1e-8
@@ -140,11 +141,7 @@ def test_the_engine_spans_dropped_and_lost_frames_as_the_batch_run_does(drive, b
     s, _ = drive
     streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
     streams = _on_the_epoch_clock(dataclasses.replace(streams, visual=_with_frames_dropped_and_lost(streams.visual)))
-    batch = fuse(streams, "all")
-    fusion = streaming_for(streams, backend)
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
-    live = fusion.finish()
+    batch, live = _batch_and_engine(streams, backend)
     ours, ref = live.trajectories[name], batch.trajectories[name]
     counts = live.counts[name]["camera"]
     assert counts.late == 0 and counts.missing == 4

@@ -40,8 +40,7 @@ def _fusion(s, backend="ekf", window=0.05, **kw):
 
 
 def _feed(fusion, msgs):
-    for _, kind, m in msgs:
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(msgs)
 
 
 def _truth_at(s, t):
@@ -56,7 +55,7 @@ def test_the_current_estimate_is_the_pose_of_now(drive, backend):
     fusion = _fusion(s, backend, window=0.3)
     ages, err_now, err_processed, grown = [], [], [], []
     for t, kind, m in _messages(s):
-        getattr(fusion, f"add_{kind}")(m)
+        fusion.feed([(t, kind, m)])
         now = fusion.current_estimate()
         if now is None or t < 1.0:
             continue
@@ -132,7 +131,7 @@ def test_bad_measurements_are_counted_never_raised(drive, backend, name):
     msgs = _messages(s)
     n_bad = 0
     for i, (t, kind, m) in enumerate(msgs):
-        getattr(dirty, f"add_{kind}")(m)
+        dirty.feed([(t, kind, m)])
         if i % 97 == 50:
             dirty.add_imu(ImuSample(t, np.array([np.nan, 0.0, 0.0]), np.zeros(3)))  # NaN gyro
             dirty.add_wheel(WheelTicks(t + 3600.0, 0, 0))  # a clock an hour ahead
@@ -376,7 +375,7 @@ def test_the_processed_state_keeps_up_when_samples_come_in_few_calls(backend):
     msgs += [(t, 2, "imu", ImuSample(t, g, a)) for t, g, a in zip(s.imu.t, s.imu.gyro, s.imu.accel)]
     behind = []
     for t, _, kind, m in sorted(msgs, key=lambda m: (m[0], m[1])):
-        getattr(fusion, f"add_{kind}")(m)
+        fusion.feed([(t, kind, m)])
         now = fusion.current_estimate()
         if now is not None and t > 2.0:
             behind.append(now.predicted)

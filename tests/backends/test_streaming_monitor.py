@@ -15,8 +15,7 @@ from husky_like import husky_like
 
 def _stream(streams, backend, config):
     fusion = streaming_for(streams, backend, config)
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(time_ordered_messages(streams))
     return fusion.finish()
 
 
@@ -97,12 +96,10 @@ def test_the_spans_found_so_far_are_readable_while_streaming():
     fusion = streaming_for(streams, "ekf", FusionConfig())
     msgs = time_ordered_messages(streams)
     assert fusion.inconsistent() == []  # nothing processed yet
-    for _, kind, m in msgs[: len(msgs) // 2]:
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(msgs[: len(msgs) // 2])
     midway = fusion.inconsistent()
     assert [e["component"] for e in midway] == ["yaw rate"] and midway[0]["sensor"] == "wheel", midway
     assert midway[0]["end"] == pytest.approx(fusion.processed_estimate().t)
-    for _, kind, m in msgs[len(msgs) // 2:]:
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(msgs[len(msgs) // 2:])
     final = fusion.finish().inconsistent
     assert final[0]["start"] == midway[0]["start"] and final[0]["end"] > midway[0]["end"]

@@ -20,8 +20,7 @@ def _fed(s, backend):
     msgs += [(t, 1, "wheel", WheelTicks(t, lt, rt)) for t, lt, rt in zip(s.wheel.t, s.wheel.left, s.wheel.right)]
     msgs += [(t, 2, "imu", ImuSample(t, g, a)) for t, g, a in zip(s.imu.t, s.imu.gyro, s.imu.accel)]
     msgs.sort(key=lambda m: (m[0], m[1]))
-    for _, _, kind, m in msgs:
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed((t, kind, m) for t, _, kind, m in msgs)
     return fusion
 
 

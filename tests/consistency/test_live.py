@@ -25,8 +25,7 @@ def streams():
 
 def stream(streams, config: FusionConfig | None = None, backend: str = "ekf"):
     fusion = streaming_for(streams, backend, config or FusionConfig())
-    for _, kind, message in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(message)
+    fusion.feed(time_ordered_messages(streams))
     return fusion.finish()
 
 

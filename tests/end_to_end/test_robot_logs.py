@@ -157,8 +157,7 @@ def test_husky_imu_imported_without_its_mounting_is_found_while_streaming(husky_
 
     streams = streams_from_recording(Recording(husky_plain), None, ["odom", "imu"])
     fusion = streaming_for(streams, "ekf")
-    for _, kind, message in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(message)
+    fusion.feed(time_ordered_messages(streams))
     result = fusion.finish()
     (note,) = [n for n in result.notes if n.startswith("live check from")]
     assert float(note.split("t=")[1].split(":")[0]) - streams.imu.t[0] < 0.5, note

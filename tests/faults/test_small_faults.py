@@ -25,7 +25,7 @@ def test_streaming_fusion_sums_up_rejected_samples_in_a_note_and_a_few_warnings(
                   key=lambda m: (m[0], m[1]))
     with caplog.at_level(logging.WARNING, logger="fusion_vo.backends.streaming"):
         for i, (t, _, kind, m) in enumerate(msgs):
-            getattr(fusion, f"add_{kind}")(m)
+            fusion.feed([(t, kind, m)])
             if i % 3 == 0:
                 fusion.add_imu(ImuSample(t, np.array([np.nan, 0.0, 0.0]), np.zeros(3)))
             if i % 7 == 0:

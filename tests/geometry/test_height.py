@@ -264,8 +264,7 @@ def test_a_stream_takes_the_same_scale_priors_as_a_batch_run(tilted, use_range):
     streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"] + (["range"] if use_range else []))
     offline = backends.fuse(streams, "ekf")
     fusion = streaming_for(streams, "ekf")
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(time_ordered_messages(streams))
     online = fusion.finish()
     assert ate(online.trajectories["ekf"]) < 1.05 * ate(offline.trajectories["ekf"])
     # every stream is honest: the live monitor drops nothing (it used to drop the gyro for the first

@@ -50,8 +50,7 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     # beside it, the same fusion fed the same samples in-process (the baseline of docs/ros2.md)
     streams = streams_from_recording(Recording(calib), None, ["imu", "odom"])
     fusion = streaming_for(streams, "ekf")
-    for _, kind, m in time_ordered_messages(streams):
-        getattr(fusion, f"add_{kind}")(m)
+    fusion.feed(time_ordered_messages(streams))
     xy = fusion.finish().trajectories["ekf"].xyyaw
     d = yaw0 - xy[0, 2]
     rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])

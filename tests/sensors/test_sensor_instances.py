@@ -72,9 +72,7 @@ def _heading_rms(track, truth) -> float:
 def _stream(streams: SensorStreams, backend: str, config=None):
     """Every sample through the streaming fusion as ``fusion-vo replay`` feeds it; its result."""
     fusion = streaming_for(streams, backend, config)
-    for _, kind, message in time_ordered_messages(streams):
-        add = getattr(fusion, f"add_{kind}", None)
-        add(message) if add is not None else fusion.add(kind, message)
+    fusion.feed(time_ordered_messages(streams))
     return fusion.finish()
 
 
