@@ -167,10 +167,7 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
     value is the ``visual_scale`` of the EKF's calibration."""
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
-    kv_ok, kb_ok = ekf.calibration_observable(iv)
-    f = ekf.PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                      iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
-                      frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
+    f = ekf.filter_for(iv, config)
     meas = ekf.interval_measurements(iv, config)
     blocks = meas["readings"].start(f)
     if blocks:

@@ -42,6 +42,7 @@ from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.imu import gyro_yaw
 from fusion_vo.sensors.sync import odometry_delay
+from fusion_vo.sensors.visual import camera_grid
 from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
 
 logger = logging.getLogger(__name__)
@@ -210,8 +211,9 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     result.priors = calibration_priors(iv, config)
     result.timing["timeline"] = time.process_time() - t0
     result.inconsistent = [ep.as_dict() for ep in iv.episodes]
-    if iv.visual_noise is not None:
-        result.visual_noise = iv.visual_noise.as_dict()
+    noise = camera_grid(iv).noise
+    if noise is not None:
+        result.visual_noise = noise.as_dict()
     if "ekf" in names:
         # single-threaded BLAS for the filter's small matrices: with OpenBLAS's threads (one per core by
         # default) each 5x5 inverse of the update cost about 2.5 ms of CPU instead of 0.02 ms on a busy

@@ -113,7 +113,11 @@ from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.imu import imu_grid
 from fusion_vo.sensors.model import Gate, MeasurementModel
+from fusion_vo.sensors.range import range_grid
+from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.wheel import wheel_grid
 
 logger = logging.getLogger(__name__)
 
@@ -156,9 +160,9 @@ class PlanarEkf:
         Visual increments are fused. With a frame error ``f > 0`` the state then ends with the camera's
         frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
     frame_error : float, optional
-        That ``f`` (default ``config.visual_frame_error``; :attr:`Intervals.visual_frame_error` in batch use);
+        That ``f`` (default ``config.visual_frame_error``; :attr:`CameraGrid.frame_error <fusion_vo.sensors.visual.CameraGrid.frame_error>` in batch use);
         only whether it is above 0 matters here (the frames' covariances come with :meth:`predict`), so batch
-        use gives 1 when the increments state their own (:attr:`Intervals.vis_frame_cov`).
+        use gives 1 when the increments state their own (``CameraGrid.frame_cov``).
     """
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None,
@@ -448,13 +452,20 @@ def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
     return [b for _, b in meas["readings"].blocks(ekf, k)]
 
 
+def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
+    """The filter for the node grid ``iv`` at its first node: its calibrations estimated where observable
+    (:func:`calibration_observable`), their priors, the sensors' states and the camera's frame errors."""
+    cam, whl = camera_grid(iv), wheel_grid(iv)
+    kv_ok, kb_ok = calibration_observable(iv)
+    return PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, whl.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
+                     iv.initial_pose, iv.initial_sigma, iv.states, camera=len(cam.i0) > 0,
+                     frame_error=cam.frame_error if cam.frame_cov is None else 1.0)
+
+
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.process_time()
-    kv_ok, kb_ok = calibration_observable(iv)
-    ekf = PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, iv.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                    iv.initial_pose, iv.initial_sigma, iv.states, camera=len(iv.vis_i0) > 0,
-                    frame_error=iv.visual_frame_error if iv.vis_frame_cov is None else 1.0)
+    ekf = filter_for(iv, config)
     ekf.innovations = InnovationLog()
     ekf.time = float(iv.t[0])
     meas = interval_measurements(iv, config)
@@ -512,9 +523,9 @@ def calibration_observable(iv: Intervals) -> tuple[bool, bool]:
     the wheel base needs an independent heading change (camera, gyro, or a sensor that measures the heading:
     the AHRS, a registered one declaring ``absolute_heading``) next to the wheels.
     """
-    cam = len(iv.vis_i0) > 0
+    cam = len(camera_grid(iv).i0) > 0
     wheel = iv.uses("wheel")
-    kv = cam and (wheel or iv.range_ok.any())
+    kv = cam and (wheel or range_grid(iv).ok.any())
     kb = wheel and (cam or iv.uses("gyro") or any(s.gives_heading(iv) for s in registry.sensors()
                                                    if s.absolute_heading))
     return bool(kv), bool(kb)
@@ -540,6 +551,7 @@ def rts_smooth(xs, Ps, x_prior, P_prior, Fs) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
+    whl, imu = wheel_grid(iv), imu_grid(iv)
     out = {}
     if iv.uses("gyro"):
         out.update(gyro_bias=float(x[BG]), gyro_bias_sigma=float(np.sqrt(P[BG, BG])))
@@ -555,9 +567,9 @@ def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
     if config.self_calibration and kb_ok:
         out["wheel_base_factor"] = float(x[KB])
         out["wheel_base_factor_sigma"] = float(np.sqrt(P[KB, KB]))
-        if not iv.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
-            out["wheel_base"] = float(iv.wheel_base * x[KB])
-    if iv.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
+        if not whl.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
+            out["wheel_base"] = float(whl.base * x[KB])
+    if imu.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
         out["ahrs_offset"] = float(x[AO])
         out["ahrs_offset_sigma"] = float(np.sqrt(P[AO, AO]))
     for i, state in enumerate(iv.states):  # the sensors' own states
@@ -571,6 +583,7 @@ def calibration_priors(iv: Intervals, config: FusionConfig) -> dict[str, dict]:
     the keys of their calibration estimates (:func:`_calibration`): the values :class:`PlanarEkf` starts from
     and the graph's prior factors hold. ``camera_height`` and ``wheel_base`` are the configured values with the
     σ of their factor, ``h σ_kv`` and ``b σ_kb``."""
+    whl, imu = wheel_grid(iv), imu_grid(iv)
     out = {}
     if iv.uses("gyro"):
         out["gyro_bias"] = {"mean": 0.0, "sigma": float(config.imu.gyro_bias_sigma)}
@@ -583,11 +596,11 @@ def calibration_priors(iv: Intervals, config: FusionConfig) -> dict[str, dict]:
     if config.self_calibration and kv_ok and kb_ok:
         out["wheel_scale"] = {"mean": 1.0, "sigma": float(iv.wheel_scale_sigma)}
     if config.self_calibration and kb_ok:
-        sigma = float(config.wheel_model(iv.twist)[1])
+        sigma = float(config.wheel_model(whl.twist)[1])
         out["wheel_base_factor"] = {"mean": 1.0, "sigma": sigma}
-        if not iv.twist:
-            out["wheel_base"] = {"mean": float(iv.wheel_base), "sigma": float(iv.wheel_base * sigma)}
-    if iv.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
+        if not whl.twist:
+            out["wheel_base"] = {"mean": float(whl.base), "sigma": float(whl.base * sigma)}
+    if imu.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
         out["ahrs_offset"] = {"mean": 0.0, "sigma": float(config.imu.ahrs_yaw_sigma)}
     for state in iv.states:
         out[state.name] = {"mean": float(state.initial), "sigma": float(state.sigma)}

@@ -114,6 +114,7 @@ from fusion_vo.backends.fixes import GraphFixes
 from fusion_vo.backends.graph_adapter import absolute_factor
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.measurements import PoseData
+from fusion_vo.sensors.wheel import wheel_grid
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, group,
                                         pose_table)
 from fusion_vo.backends.graph_builder import B, FRAME_LETTER, GraphBuilder, R, S, W, X
@@ -387,6 +388,7 @@ def _seed_poses(values: gtsam.Values, initial: PoseData, builder: GraphBuilder) 
 
 def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     iv = builder.iv
+    whl = wheel_grid(iv)
     out = {}
     last = int(builder.segment[-1])
     if iv.uses("gyro") and values.exists(B(last)):
@@ -399,8 +401,8 @@ def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
     if builder.kb_on:
         kb = float(values.atDouble(W(last)))
         out["wheel_base_factor"] = kb
-        if not iv.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
-            out["wheel_base"] = float(iv.wheel_base * kb)
+        if not whl.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
+            out["wheel_base"] = float(whl.base * kb)
     if builder.kr_on:
         out["wheel_scale"] = float(values.atDouble(R(last)))
     for st in builder.states:  # the sensors' own states

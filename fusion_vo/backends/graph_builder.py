@@ -30,7 +30,9 @@ from fusion_vo.backends.graph_adapter import guess as readings_guess
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, covariance_noise
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.wheel import arc_increment
+from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.wheel import arc_increment, wheel_grid
 
 
 logger = logging.getLogger(__name__)
@@ -217,7 +219,7 @@ class GraphBuilder:
         if self.kv_on:
             priors.append((S(0), 1.0, self.iv.visual_scale_sigma, est.get("visual_scale", 1.0)))
         if self.kb_on:
-            priors.append((W(0), 1.0, cfg.wheel_model(self.iv.twist)[1], est.get("wheel_base_factor", 1.0)))
+            priors.append((W(0), 1.0, cfg.wheel_model(wheel_grid(self.iv).twist)[1], est.get("wheel_base_factor", 1.0)))
         if self.kr_on:
             priors.append((R(0), 1.0, self.iv.wheel_scale_sigma, est.get("wheel_scale", 1.0)))
         for st in self.states:
@@ -364,31 +366,32 @@ def initial_calibration(iv: Intervals) -> dict:
     drifts with the uncorrected gyro bias and Levenberg–Marquardt needs many damped iterations.
     The reference heading change is the camera's (independent of every calibration) where available.
     """
+    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     out: dict = {}
     dt = iv.dt
-    single = iv.vis_i1 == iv.vis_i0 + 1
+    single = cam.i1 == cam.i0 + 1
     vis_yaw = np.full(iv.n_steps, np.nan)
     vis_xy = np.full(iv.n_steps, np.nan)
-    vis_yaw[iv.vis_i0[single]] = iv.vis_delta[single, 2]
-    vis_xy[iv.vis_i0[single]] = np.hypot(iv.vis_delta[single, 0], iv.vis_delta[single, 1])
+    vis_yaw[cam.i0[single]] = cam.delta[single, 2]
+    vis_xy[cam.i0[single]] = np.hypot(cam.delta[single, 0], cam.delta[single, 1])
     wheel_yaw = wheel_xy = None
     if iv.uses("wheel"):
-        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
-        yaw_ok = iv.wheel_ok if iv.wheel_yaw_ok is None else iv.wheel_ok & iv.wheel_yaw_ok
+        inc = arc_increment(whl.dl, whl.dr, whl.base)
+        yaw_ok = whl.ok if whl.yaw_ok is None else whl.ok & whl.yaw_ok
         wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
-        wheel_xy = np.where(iv.wheel_ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
+        wheel_xy = np.where(whl.ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
     ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw
     if iv.uses("gyro") and ref is not None:
-        ok = iv.gyro_ok & np.isfinite(ref)
+        ok = imu.gyro_ok & np.isfinite(ref)
         if ok.sum() > 10:
-            out["gyro_bias"] = float(np.sum(iv.gyro_angle[ok] - ref[ok]) / np.sum(dt[ok]))
+            out["gyro_bias"] = float(np.sum(imu.gyro_angle[ok] - ref[ok]) / np.sum(dt[ok]))
     if wheel_xy is not None:
         ok = np.isfinite(vis_xy) & np.isfinite(wheel_xy)
         if ok.sum() > 10 and np.sum(wheel_xy[ok]) > 0:
             out["visual_scale"] = float(np.sum(vis_xy[ok]) / np.sum(wheel_xy[ok]))
         heading = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else None
         if heading is None and "gyro_bias" in out:
-            heading = np.where(iv.gyro_ok, iv.gyro_angle - out["gyro_bias"] * dt, np.nan)
+            heading = np.where(imu.gyro_ok, imu.gyro_angle - out["gyro_bias"] * dt, np.nan)
         if heading is not None:
             ok = np.isfinite(heading) & np.isfinite(wheel_yaw)
             if ok.sum() > 10 and np.sum(heading[ok] ** 2) > 1e-6:

@@ -18,6 +18,7 @@ judges the other sources nor is judged: a constant bias is the backends' to esti
 from __future__ import annotations
 
 import bisect
+import copy
 import dataclasses
 import logging
 
@@ -26,7 +27,10 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.monitor import Episode, check_heading_sources, visual_heading_rows
 from fusion_vo.backends.timeline import Intervals
-from fusion_vo.sensors.wheel import arc_increment, at_rest
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors.visual import CameraGrid, camera_grid
+from fusion_vo.sensors.wheel import arc_increment, at_rest, wheel_grid
 
 logger = logging.getLogger(__name__)
 
@@ -78,6 +82,7 @@ class LiveHeadingMonitor:
     # ------------------------------------------------------------------ intervals
     def add(self, iv: Intervals) -> None:
         """Keep one two-node interval (raw, before any masking); it must start where the last one ended."""
+        cam = camera_grid(iv)
         if not self.enabled:
             return
         fields = _split(iv)
@@ -95,7 +100,7 @@ class LiveHeadingMonitor:
                 self._interval[name] = _Column(v[0])
             self._interval[name].append(v[0])
         pos = len(self._t) - 2
-        for d, c in zip(iv.vis_delta, iv.vis_cov):
+        for d, c in zip(cam.delta, cam.cov):
             self._vis["pos"].append(pos)
             self._vis["delta"].append(d)
             self._vis["cov"].append(c)
@@ -105,6 +110,7 @@ class LiveHeadingMonitor:
 
     def update(self, index: int, iv: Intervals) -> None:
         """Interval number ``index`` (counting every interval ever added), rebuilt with late data."""
+        cam = camera_grid(iv)
         pos = index - self._dropped_before
         if not self.enabled or pos < 0 or pos >= len(self._t) - 1:
             return
@@ -117,8 +123,8 @@ class LiveHeadingMonitor:
                 self._interval[name].set(pos, v[0])
         rows = self._vis["pos"].array()
         keep = rows != pos
-        new = {"pos": np.full(len(iv.vis_delta), pos), "delta": np.asarray(iv.vis_delta).reshape(-1, 3),
-               "cov": np.asarray(iv.vis_cov).reshape(-1, 3, 3)}
+        new = {"pos": np.full(len(cam.delta), pos), "delta": np.asarray(cam.delta).reshape(-1, 3),
+               "cov": np.asarray(cam.cov).reshape(-1, 3, 3)}
         merged = {k: np.concatenate([c.array()[keep], new[k]]) for k, c in self._vis.items()}
         order = np.argsort(merged["pos"], kind="stable")
         for k, c in self._vis.items():
@@ -141,23 +147,31 @@ class LiveHeadingMonitor:
         self._dropped_before += cut
 
     def _merged(self) -> Intervals:
+        """The kept intervals as one :class:`Intervals`: the array fields of the grid and of every sensor's
+        measurements from their columns, everything else as the newest interval has it, the camera's increments
+        from their rows (each over one interval), the wheels' yaw everywhere."""
         last = self._last
-        kw = {}
-        for f in dataclasses.fields(Intervals):
-            if f.name in self._node:
-                kw[f.name] = self._node[f.name].array()
-            elif f.name in self._interval:
-                kw[f.name] = self._interval[f.name].array()
-            elif not f.name.startswith("vis_") and not isinstance(getattr(last, f.name), np.ndarray):
-                kw[f.name] = getattr(last, f.name)
+        n = len(self._t) - 1
+        columns = {**self._node, **self._interval}
+        kw = {f.name: getattr(last, f.name) for f in dataclasses.fields(Intervals)
+              if not isinstance(getattr(last, f.name), np.ndarray)}
+        kw.update({key[1]: col.array() for key, col in columns.items() if key[0] is None})
         kw["t"] = np.array(self._t)
         kw["counts"] = {name: None for name in self._uses}
         kw["notes"], kw["episodes"] = [], []
-        kw["vis_i0"] = self._vis["pos"].array().astype(int)
-        kw["vis_i1"] = kw["vis_i0"] + 1
-        kw["vis_delta"] = self._vis["delta"].array()
-        kw["vis_cov"] = self._vis["cov"].array()
-        kw["wheel_yaw_ok"] = np.ones(len(self._t) - 1, bool)
+        kw["sensors"] = sensors = {}
+        for name, grid in last.sensors.items():
+            if dataclasses.is_dataclass(grid) and any(key[0] == name for key in columns):
+                grid = copy.copy(grid)
+                for f in dataclasses.fields(grid):
+                    if (name, f.name) in columns:
+                        setattr(grid, f.name, columns[(name, f.name)].array())
+            sensors[name] = grid
+        pos = self._vis["pos"].array().astype(int)
+        sensors["camera"] = CameraGrid(pos, pos + 1, self._vis["delta"].array(), self._vis["cov"].array(),
+                                       frame_error=last.sensors["camera"].frame_error,
+                                       noise=last.sensors["camera"].noise)
+        sensors["wheel"].yaw_ok = np.ones(n, bool)
         return Intervals(**kw)
 
     @property
@@ -176,9 +190,10 @@ class LiveHeadingMonitor:
             return
         self._next_check = self._t[-1] + self.every
         iv = self._merged()
-        raw = {"wheel": iv.wheel_ok.copy(), "gyro": iv.gyro_ok.copy(), "ahrs": iv.ahrs_ok[1:] & iv.ahrs_ok[:-1]}
+        whl, imu = wheel_grid(iv), imu_grid(iv)
+        raw = {"wheel": whl.ok.copy(), "gyro": imu.gyro_ok.copy(), "ahrs": imu.ahrs_ok[1:] & imu.ahrs_ok[:-1]}
         if "ahrs" in self.dropped:  # a heading known to drift judges nothing any more
-            iv.ahrs_ok = np.zeros(len(iv.t), bool)
+            imu.ahrs_ok = np.zeros(len(iv.t), bool)
         bias, at_rest = _gyro_bias(iv, self.config)
         if at_rest:
             self._rest_bias = bias
@@ -186,9 +201,9 @@ class LiveHeadingMonitor:
             bias = self._rest_bias  # the last standstill's bias beats one measured against a moving reference
         unknown = bias is None and iv.uses("gyro") and "gyro" not in self.dropped
         if unknown:  # too few intervals yet to measure the bias: the gyro neither judges nor is judged
-            iv.gyro_ok = np.zeros(len(iv.t) - 1, bool)
+            imu.gyro_ok = np.zeros(len(iv.t) - 1, bool)
         episodes = check_heading_sources(iv, self.config, bias)
-        kept = {"wheel": iv.wheel_yaw_ok, "gyro": iv.gyro_ok, "ahrs": iv.ahrs_ok[1:]}
+        kept = {"wheel": whl.yaw_ok, "gyro": imu.gyro_ok, "ahrs": imu.ahrs_ok[1:]}
         t_now = self._t[-1]
         for name in _COMPONENTS:
             if not raw[name][-1] or (name == "gyro" and unknown):
@@ -214,13 +229,14 @@ class LiveHeadingMonitor:
 
     def apply(self, iv: Intervals, dropped=None) -> None:
         """Mask the dropped components in ``iv`` (in place; default: the current decisions)."""
+        whl, imu = wheel_grid(iv), imu_grid(iv)
         dropped = self.dropped if dropped is None else dropped
         if "wheel" in dropped:
-            iv.wheel_yaw_ok = np.zeros(iv.n_steps, bool)
+            whl.yaw_ok = np.zeros(iv.n_steps, bool)
         if "gyro" in dropped:
-            iv.gyro_ok = np.zeros(iv.n_steps, bool)
+            imu.gyro_ok = np.zeros(iv.n_steps, bool)
         if "ahrs" in dropped:
-            iv.ahrs_ok = np.zeros(len(iv.t), bool)
+            imu.ahrs_ok = np.zeros(len(iv.t), bool)
 
     def all_episodes(self, t_end: float) -> list[Episode]:
         """Closed spans and the open ones, ending at ``t_end``."""
@@ -274,33 +290,34 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s
     (``docs/decisions/0023-monitor-removes-the-gyro-bias-first.md``).
     """
+    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
 
     if not iv.uses("gyro"):
         return None, False
     dt = iv.dt
     if iv.uses("wheel"):
-        still = at_rest(iv, config) & iv.gyro_ok
+        still = at_rest(iv, config) & imu.gyro_ok
         if np.count_nonzero(still) >= 10:
-            return float(np.median(iv.gyro_angle[still] / dt[still])), True
+            return float(np.median(imu.gyro_angle[still] / dt[still])), True
     refs = []  # (error variance of the summed reference heading, ok, heading change per interval)
-    ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:] & iv.gyro_ok
+    ok = imu.ahrs_ok[:-1] & imu.ahrs_ok[1:] & imu.gyro_ok
     if np.count_nonzero(ok) >= 10:
         runs = int(np.count_nonzero(np.diff(np.concatenate(([0], ok.astype(np.int8)))) == 1))
         var = runs * 2.0 * config.imu.ahrs_yaw_sigma**2 + config.imu.ahrs_offset_walk**2 * float(np.sum(dt[ok]))
-        refs.append((var, ok, np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
-    if len(iv.vis_i0):  # the camera's heading increments (independent of every calibration)
+        refs.append((var, ok, np.angle(np.exp(1j * np.diff(imu.ahrs_yaw)))))
+    if len(cam.i0):  # the camera's heading increments (independent of every calibration)
         ok, angle, var = visual_heading_rows(iv, with_variance=True)
-        ok &= iv.gyro_ok
+        ok &= imu.gyro_ok
         if np.count_nonzero(ok) >= 10:
             refs.append((float(np.sum(var[ok])), ok, angle))
     if not refs and iv.uses("wheel"):
-        ok = iv.wheel_ok & iv.gyro_ok
+        ok = whl.ok & imu.gyro_ok
         if np.count_nonzero(ok) >= 10:
-            refs.append((0.0, ok, arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[:, 2]))
+            refs.append((0.0, ok, arc_increment(whl.dl, whl.dr, whl.base)[:, 2]))
     if not refs:
         return None, False
     _, ok, angle = min(refs, key=lambda r: r[0])
-    return float(np.sum(iv.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
+    return float(np.sum(imu.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
 
 
 class _Column:
@@ -344,16 +361,21 @@ class _Column:
 
 
 def _split(iv: Intervals) -> tuple[dict, dict]:
-    """Per-node and per-interval array fields of a two-node interval (the visual rows aside)."""
+    """Per-node and per-interval array fields of a two-node interval, of the grid (keys ``(None, field)``) and of
+    the measurements of each sensor that registers their container (``(sensor, field)``,
+    :attr:`Sensor.grid <fusion_vo.sensors.registry.Sensor.grid>`); the camera's increments aside."""
     nodes, intervals = {}, {}
-    for f in dataclasses.fields(Intervals):
-        v = getattr(iv, f.name)
-        if f.name == "t" or f.name.startswith("vis_") or not isinstance(v, np.ndarray):
-            continue
-        if len(v) == 2:
-            nodes[f.name] = v
-        elif len(v) == 1:
-            intervals[f.name] = v
+    parts = [(None, iv)] + [(s.name, iv.sensors[s.name]) for s in registry.sensors()
+                            if s.grid is not None and s.name != "camera" and s.name in iv.sensors]
+    for owner, part in parts:
+        for f in dataclasses.fields(part):
+            v = getattr(part, f.name)
+            if (owner is None and f.name == "t") or not isinstance(v, np.ndarray):
+                continue
+            if len(v) == 2:
+                nodes[(owner, f.name)] = v
+            elif len(v) == 1:
+                intervals[(owner, f.name)] = v
     return nodes, intervals
 
 

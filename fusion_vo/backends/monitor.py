@@ -53,7 +53,7 @@ window whose NIS is below the 90 % quantile, 2.7, so a liar is not trusted again
 happened to be quiet; a component found inconsistent over more than ``monitor_whole_fraction`` of
 the time it was checked is dropped for the whole recording, since its quiet windows are no evidence
 that it is right there): the wheels' speed
-stays in use while their yaw rate is dropped (``Intervals.wheel_yaw_ok``), a dropped gyro or AHRS
+stays in use while their yaw rate is dropped (``WheelGrid.yaw_ok``), a dropped gyro or AHRS
 span clears ``gyro_ok`` / ``ahrs_ok`` there; in a span where the camera's heading is dropped, each
 visual increment is tested on its own against the other sources and removed if it fails (an increment
 is one estimate; its translation is expressed in its wrong heading). Each drop becomes an
@@ -70,7 +70,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.sensors.wheel import arc_increment, at_rest, travel_variances
+from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.wheel import arc_increment, at_rest, travel_variances, wheel_grid
 
 logger = logging.getLogger(__name__)
 
@@ -119,21 +121,22 @@ def visual_heading_rows(iv, with_variance: bool = False):
     """The visual increments' heading spread over the node intervals they span: ``(ok, angle, variance)``
     per interval (``variance`` None unless asked). An increment over ``n`` intervals gives each ``1/n``
     of its heading change and of its variance; where increments overlap, the later one wins."""
+    cam = camera_grid(iv)
     K = len(iv.t) - 1
     ok = np.zeros(K, bool)
     ang = np.zeros(K)
     var = np.zeros(K) if with_variance else None
-    i0 = np.asarray(iv.vis_i0, dtype=np.int64)
-    n = np.asarray(iv.vis_i1, dtype=np.int64) - i0
+    i0 = np.asarray(cam.i0, dtype=np.int64)
+    n = np.asarray(cam.i1, dtype=np.int64) - i0
     if not len(i0):
         return ok, ang, var
     rows = np.repeat(np.arange(len(i0)), n)
     idx = i0[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n))
     ok[idx] = True
-    delta = np.asarray(iv.vis_delta).reshape(-1, 3)
+    delta = np.asarray(cam.delta).reshape(-1, 3)
     ang[idx] = (delta[:, 2] / n)[rows]
     if with_variance:
-        var[idx] = (np.asarray(iv.vis_cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
+        var[idx] = (np.asarray(cam.cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
     return ok, ang, var
 
 
@@ -157,22 +160,23 @@ def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None, chunk
     """The gyro's bias for the check: median rate at rest, else its rate against the AHRS's, the
     camera's or the wheels' heading (:func:`reference_bias`, chunks of ``chunk`` seconds; a constant
     bias is the backends' to estimate, not a lie)."""
+    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     dt = iv.dt
-    rate = np.where(iv.gyro_ok, iv.gyro_angle / np.maximum(dt, 1e-9), np.nan)
-    if still is not None and np.count_nonzero(still & iv.gyro_ok) >= 10:
-        return float(np.median(rate[still & iv.gyro_ok]))
+    rate = np.where(imu.gyro_ok, imu.gyro_angle / np.maximum(dt, 1e-9), np.nan)
+    if still is not None and np.count_nonzero(still & imu.gyro_ok) >= 10:
+        return float(np.median(rate[still & imu.gyro_ok]))
     refs = []
-    if iv.ahrs_ok.any():
-        refs.append((iv.ahrs_ok[:-1] & iv.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(iv.ahrs_yaw)))))
-    if len(iv.vis_i0):
+    if imu.ahrs_ok.any():
+        refs.append((imu.ahrs_ok[:-1] & imu.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(imu.ahrs_yaw)))))
+    if len(cam.i0):
         ok, ang, _ = visual_heading_rows(iv)
         refs.append((ok, ang))
     if wheel_yaw is not None:
-        refs.append((iv.wheel_ok.copy(), wheel_yaw))
+        refs.append((whl.ok.copy(), wheel_yaw))
     for ok, ang in refs:
-        ok = ok & iv.gyro_ok
+        ok = ok & imu.gyro_ok
         if np.count_nonzero(ok) >= 10:
-            return reference_bias(iv.t, iv.gyro_angle - ang, ok, chunk)
+            return reference_bias(iv.t, imu.gyro_angle - ang, ok, chunk)
     return 0.0
 
 
@@ -211,10 +215,10 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
 
     ``gyro_bias`` [rad/s] replaces the bias the check estimates itself (:func:`_gyro_bias`).
     """
-
     cfg = config
     if not cfg.monitor or iv.n_steps < 2:
         return []
+    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     T, dt = iv.t, iv.dt
     threshold = _chi2_ppf(cfg.monitor_probability, 1)
     release = _chi2_ppf(0.9, 1)
@@ -222,8 +226,8 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     wheel_yaw = still = None
     wheel_rel = 0.0
     if iv.uses("wheel"):
-        noise, base_sigma = cfg.wheel_model(iv.twist)
-        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)
+        noise, base_sigma = cfg.wheel_model(whl.twist)
+        inc = arc_increment(whl.dl, whl.dr, whl.base)
         wheel_yaw = inc[:, 2]
         still = at_rest(iv, cfg)
     bias = 0.0
@@ -232,21 +236,21 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
                 else float(gyro_bias))
     gyro = None
     if iv.uses("gyro"):
-        gyro = iv.gyro_angle - bias * dt
-        sources["gyro"] = (iv.gyro_ok.copy(), gyro, cfg.imu.gyro_noise_density**2 * dt)
+        gyro = imu.gyro_angle - bias * dt
+        sources["gyro"] = (imu.gyro_ok.copy(), gyro, cfg.imu.gyro_noise_density**2 * dt)
     if wheel_yaw is not None:
-        d = np.abs(0.5 * (iv.wheel_dl + iv.wheel_dr))
+        d = np.abs(0.5 * (whl.dl + whl.dr))
         rel = noise.yaw_scale**2 + base_sigma**2
-        turn = np.abs(np.where(iv.gyro_ok, gyro, wheel_yaw)) if gyro is not None else np.abs(wheel_yaw)
-        var = noise.k_yaw**2 * turn + 2.0 * (noise.k**2 * d + noise.sigma_floor**2) / iv.wheel_base**2
+        turn = np.abs(np.where(imu.gyro_ok, gyro, wheel_yaw)) if gyro is not None else np.abs(wheel_yaw)
+        var = noise.k_yaw**2 * turn + 2.0 * (noise.k**2 * d + noise.sigma_floor**2) / whl.base**2
         # the relative error is shared over a window (a track width), added per window below
-        sources["wheel"] = (iv.wheel_ok.copy(), wheel_yaw, var)
+        sources["wheel"] = (whl.ok.copy(), wheel_yaw, var)
         wheel_rel = rel
-    if iv.ahrs_ok.any():
-        ok = iv.ahrs_ok[:-1] & iv.ahrs_ok[1:]
-        d = np.angle(np.exp(1j * (iv.ahrs_yaw[1:] - iv.ahrs_yaw[:-1])))
+    if imu.ahrs_ok.any():
+        ok = imu.ahrs_ok[:-1] & imu.ahrs_ok[1:]
+        d = np.angle(np.exp(1j * (imu.ahrs_yaw[1:] - imu.ahrs_yaw[:-1])))
         sources["ahrs"] = (ok, d, np.zeros(len(dt)))
-    if len(iv.vis_i0):
+    if len(cam.i0):
         ok, ang, var = visual_heading_rows(iv, with_variance=True)
         sources["camera"] = (ok, ang, var)
     if len(sources) < 2:
@@ -302,17 +306,17 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
             k = j
     episodes.sort(key=lambda e: e.start)
     if "wheel" in bad:
-        iv.wheel_yaw_ok = iv.wheel_yaw_ok & ~bad["wheel"]
+        whl.yaw_ok = whl.yaw_ok & ~bad["wheel"]
     if "gyro" in bad:
-        iv.gyro_ok = iv.gyro_ok & ~bad["gyro"]
+        imu.gyro_ok = imu.gyro_ok & ~bad["gyro"]
     if "ahrs" in bad:
         drop = np.zeros(len(T), bool)
         drop[1:] |= bad["ahrs"]
-        iv.ahrs_ok = iv.ahrs_ok & ~drop
+        imu.ahrs_ok = imu.ahrs_ok & ~drop
     if "camera" in bad and bad["camera"].any():
         # within the flagged windows, each increment is tested on its own against the other sources
-        keep = np.ones(len(iv.vis_i0), bool)
-        for m, (a, b) in enumerate(zip(iv.vis_i0, iv.vis_i1)):
+        keep = np.ones(len(cam.i0), bool)
+        for m, (a, b) in enumerate(zip(cam.i0, cam.i1)):
             if bad["camera"][a:b].any():
                 theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
                 nis = _window_nis("camera", theta, var)
@@ -341,6 +345,7 @@ def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sour
     the new anchor; otherwise it is dropped too (an AHRS that has departed from the true heading can
     agree again in its heading *changes* while its heading stays off).
     """
+    imu = imu_grid(iv)
     T = iv.t
     bad_a = bad["ahrs"]
     ok_a = sources["ahrs"][0]
@@ -357,12 +362,12 @@ def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sour
     # relative heading summed from the start; an AHRS dropout does not break it
     rel = np.concatenate([[0.0], np.cumsum(ref)])
     rel_var = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(ref_var), ref_var, 0.0))])
-    offset = iv.ahrs_yaw - rel
+    offset = imu.ahrs_yaw - rel
     runs = _runs(ok_a & ~bad_a)
     if not runs:
         return
     # the heading offset is set from the AHRS's first samples: its offset is known there
-    start = int(np.argmax(iv.ahrs_ok))
+    start = int(np.argmax(imu.ahrs_ok))
     anchor = (start, start)
     for a, b in runs:
         if a == start:
@@ -389,10 +394,11 @@ def drop_visual_increments(iv, keep: np.ndarray) -> None:
     """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
     estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
     frame too. The other sensors carry the estimate there."""
+    cam = camera_grid(iv)
     if keep.all():
         return
-    iv.vis_i0, iv.vis_i1 = iv.vis_i0[keep], iv.vis_i1[keep]
-    iv.vis_delta, iv.vis_cov = iv.vis_delta[keep], iv.vis_cov[keep]
+    cam.i0, cam.i1 = cam.i0[keep], cam.i1[keep]
+    cam.delta, cam.cov = cam.delta[keep], cam.cov[keep]
     if iv.counts.get("camera") is not None:  # the live monitor's window has no counts
         iv.counts["camera"].gated += int(np.count_nonzero(~keep))
 
@@ -460,22 +466,22 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
 
 def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
     """Find the spans where the wheels' and the camera's distances disagree; drop the wheels' speed
-    there (``Intervals.wheel_speed_ok``, in place) and return the episodes (see the module docstring)."""
-
+    there (``WheelGrid.speed_ok``, in place) and return the episodes (see the module docstring)."""
+    cam, whl = camera_grid(iv), wheel_grid(iv)
     cfg = config
-    if not cfg.monitor or iv.n_steps < 2 or not iv.uses("wheel") or not len(iv.vis_i0):
+    if not cfg.monitor or iv.n_steps < 2 or not iv.uses("wheel") or not len(cam.i0):
         return []
     T, dt = iv.t, iv.dt
     K = len(dt)
-    noise = cfg.wheel_model(iv.twist)[0]
-    wheel_ok = iv.wheel_ok.copy()
-    d_w = 0.5 * (iv.wheel_dl + iv.wheel_dr) * iv.cx
-    vl, vr = travel_variances(iv.wheel_dl, iv.wheel_dr, noise)
+    noise = cfg.wheel_model(whl.twist)[0]
+    wheel_ok = whl.ok.copy()
+    d_w = 0.5 * (whl.dl + whl.dr) * iv.cx
+    vl, vr = travel_variances(whl.dl, whl.dr, noise)
     v_w = 0.25 * (vl + vr)
     cam_ok = np.zeros(K, bool)
     d_c = np.zeros(K)
     v_c = np.zeros(K)
-    for a, b, delta, cov in zip(iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov):
+    for a, b, delta, cov in zip(cam.i0, cam.i1, cam.delta, cam.cov):
         n = b - a
         cam_ok[a:b] = True
         d_c[a:b] = delta[0] / n
@@ -526,7 +532,7 @@ def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
         episodes.append(Episode("wheel", "speed", float(T[a]), float(T[b]), float(peak[a:b].max()), "camera",
                                 f" (wheel/camera distance ratio {span_rho:.3f} there, {rho:.3f} over the recording; "
                                 "with no third speed source either may be the wrong one)"))
-    iv.wheel_speed_ok = iv.wheel_speed_ok & ~bad
+    whl.speed_ok = whl.speed_ok & ~bad
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes

@@ -18,7 +18,8 @@ from fusion_vo.measurements import (
     VisualIncrement,
 )
 from fusion_vo.geometry import se2
-from fusion_vo.sensors.wheel import arc_increment
+from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors.wheel import arc_increment, wheel_grid
 
 from fusion_vo.backends.stream_state import payload_values
 
@@ -180,17 +181,17 @@ class IntakeMixin:
     def _sliver(self, x: float, y: float):
         """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
         (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
-
         lo, hi = min(x, y), max(x, y)
         if hi - lo < 1e-9:
             return np.zeros(3), np.zeros(3)
         iv = build_intervals(self._streams_between(lo, hi, self._heading_offset), self.config, np.array([lo, hi]),
                              self._heading_offset)
-        if not iv.uses("wheel") or not iv.wheel_ok[0]:
+        whl, imu = wheel_grid(iv), imu_grid(iv)
+        if not iv.uses("wheel") or not whl.ok[0]:
             return None
-        inc = arc_increment(iv.wheel_dl, iv.wheel_dr, iv.wheel_base)[0]
-        if iv.uses("gyro") and iv.gyro_ok[0]:
-            inc[2] = iv.gyro_angle[0]
+        inc = arc_increment(whl.dl, whl.dr, whl.base)[0]
+        if iv.uses("gyro") and imu.gyro_ok[0]:
+            inc[2] = imu.gyro_angle[0]
         var = (0.02 * np.abs(inc)) ** 2 + np.array([1e-4, 1e-4, 1e-4]) ** 2
         return (inc if y >= x else se2.inverse(inc)), var
 

@@ -43,7 +43,6 @@ from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, Visua
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors import visual_noise
-from fusion_vo.sensors.visual_noise import VisualNoiseEstimate
 from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 from fusion_vo.sensors.gps import GPS_SNAP
 
@@ -141,22 +140,16 @@ class Intervals:
     ----------
     t : ndarray (K+1,)
         Node times [s].
-    vis_i0, vis_i1 : ndarray (M,) int
-        Node indices spanned by each usable visual increment.
-    vis_delta, vis_cov : ndarray (M, 3), (M, 3, 3)
-        The increments (slope-projected) and their covariances.
-    wheel_ok, wheel_dl, wheel_dr : ndarray (K,)
-        Wheel travel per node interval [m] and where it is usable.
-    wheel_base : float
-        Configured (or nominal, for an odometry twist) wheel base [m].
-    gyro_ok, gyro_angle : ndarray (K,)
-        Integrated body yaw rate per interval [rad] and where it is usable.
+    sensors : dict
+        Sensor name -> its measurements on the grid: a container its own module defines and registers
+        (:attr:`Sensor.grid <fusion_vo.sensors.registry.Sensor.grid>`; the camera's
+        :class:`~fusion_vo.sensors.visual.CameraGrid`, the wheels' :class:`~fusion_vo.sensors.wheel.WheelGrid`,
+        the IMU's :class:`~fusion_vo.sensors.imu.ImuGrid`, the range finder's
+        :class:`~fusion_vo.sensors.range.RangeGrid`, GPS's :class:`~fusion_vo.sensors.gps.GpsGrid`), or what its
+        ``intervals`` step put there.
     cx, cy : ndarray (K,)
-        Slope factors projecting body travel to the horizontal (1 on flat ground or without AHRS).
-    ahrs_ok, ahrs_yaw : ndarray (K+1,)
-        AHRS heading at the nodes, aligned so that the first one equals the initial yaw.
-    range_ok, range_height : ndarray (K+1,)
-        Camera height from the range finder at the nodes.
+        Slope factors projecting body travel to the horizontal (1 on flat ground or without a sensor measuring
+        the tilt).
     camera_height : float or None
         Height the visual increments assume.
     counts : dict[str, SensorCount]
@@ -165,14 +158,6 @@ class Intervals:
         Camera outages and streams that stop.
     heading_offset : float or None
         AHRS heading minus the estimate's heading (from the first AHRS sample).
-    twist : bool
-        The wheel travel comes from an odometry twist (``odom0``) rather than encoder ticks.
-    wheel_yaw_ok : ndarray (K,) or None
-        Where the wheels' yaw component may be used (False where the consistency monitor dropped it;
-        None: everywhere the wheels are).
-    wheel_speed_ok : ndarray (K,) or None
-        Where the wheels' speed (translation) may be used (False where the monitor found it disagreeing
-        with the camera's; None: everywhere the wheels are).
     episodes : list
         The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
     visual_scale_sigma, wheel_scale_sigma : float
@@ -182,73 +167,40 @@ class Intervals:
         ``FusionConfig.visual_scale_sigma`` and ``FusionConfig.wheel_scale_sigma``. The common scale of
         camera and wheels is unobservable from the two alone: their ratio is measured, and these priors
         (or a range finder) decide how a disagreement is shared.
-    gps_ok, gps_enu, gps_cov : ndarray (K+1,), (K+1, 2), (K+1, 2, 2)
-        The GPS fix (east, north [m] in ENU at the datum, and its covariance [m²]) at each node that has one.
-    gps : GpsData or None
-        The fixes (lever arm, datum, skip counts) when GPS is fused.
     initial_pose, initial_sigma : ndarray (3,) or None
         Start pose and its standard deviations ``(x, y, yaw)`` when the world frame was aligned to the
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
         ``initial_pose``, taken as exact.
-    gps_min_sigma : float or None
-        The fixes' sigma floor [m] measured by the world-frame alignment when they scatter significantly
-        more than the receiver states (``fusion.gps.estimate_sigma``, :func:`~fusion_vo.sensors.gps.scatter_floor`);
-        None: ``fusion.gps.min_sigma``.
-    extra : dict
-        Sensor name -> its measurements on the grid, for sensors registered outside the library
-        (:mod:`fusion_vo.sensors.registry`; the built-in ones have the fields above).
     states : tuple of registry.State
         The state variables the sensors with data add to the backends (:class:`fusion_vo.sensors.registry.State`).
-    visual_frame_error : float
-        The camera's frame-error share ``f`` both backends use (:mod:`fusion_vo.sensors.visual`):
-        ``FusionConfig.visual_frame_error``, or the estimate of :mod:`fusion_vo.sensors.visual_noise`.
-    vis_frame_cov : ndarray (M, 3, 3) or None
-        The covariance of each increment's frames' own errors when the increments state it
-        (:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance`); it replaces
-        ``visual_frame_error``'s ``f/2 Σ`` (:func:`fusion_vo.sensors.visual.frame_covariances`).
-    visual_noise : VisualNoiseEstimate or None
-        What that estimate found (``fusion.visual_noise.estimate``; None when off or in streaming use).
     """
 
     t: np.ndarray
-    vis_i0: np.ndarray
-    vis_i1: np.ndarray
-    vis_delta: np.ndarray
-    vis_cov: np.ndarray
-    wheel_ok: np.ndarray
-    wheel_dl: np.ndarray
-    wheel_dr: np.ndarray
-    wheel_base: float
-    gyro_ok: np.ndarray
-    gyro_angle: np.ndarray
-    cx: np.ndarray
-    cy: np.ndarray
-    ahrs_ok: np.ndarray
-    ahrs_yaw: np.ndarray
-    range_ok: np.ndarray
-    range_height: np.ndarray
+    sensors: dict = field(default_factory=dict)
+    cx: np.ndarray | None = None
+    cy: np.ndarray | None = None
     camera_height: float | None = None
     counts: dict[str, SensorCount] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
     heading_offset: float | None = None
-    twist: bool = False
-    wheel_yaw_ok: np.ndarray | None = None
-    wheel_speed_ok: np.ndarray | None = None
     episodes: list = field(default_factory=list)
     visual_scale_sigma: float = FusionConfig.model_fields["visual_scale_sigma"].default
     wheel_scale_sigma: float = FusionConfig.model_fields["wheel_scale_sigma"].default
-    gps_ok: np.ndarray | None = None
-    gps_enu: np.ndarray | None = None
-    gps_cov: np.ndarray | None = None
-    gps: GpsData | None = None
     initial_pose: np.ndarray | None = None
     initial_sigma: np.ndarray | None = None
-    gps_min_sigma: float | None = None
-    extra: dict = field(default_factory=dict)
     states: tuple = ()
-    visual_frame_error: float = 0.0
-    vis_frame_cov: np.ndarray | None = None
-    visual_noise: VisualNoiseEstimate | None = None
+
+    def __post_init__(self) -> None:
+        K = len(self.t) - 1
+        if self.cx is None:
+            self.cx = np.ones(K)
+        if self.cy is None:
+            self.cy = np.ones(K)
+
+    @property
+    def extra(self) -> dict:
+        """:attr:`sensors` (the name it had for sensors registered outside the library)."""
+        return self.sensors
 
     @property
     def n_steps(self) -> int:
@@ -391,15 +343,11 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     K = len(T) - 1
     counts: dict[str, SensorCount] = {}
     notes: list[str] = []
-    iv = Intervals(
-        t=T, vis_i0=np.zeros(0, int), vis_i1=np.zeros(0, int), vis_delta=np.zeros((0, 3)), vis_cov=np.zeros((0, 3, 3)),
-        wheel_ok=np.zeros(K, bool), wheel_dl=np.zeros(K), wheel_dr=np.zeros(K), wheel_base=1.0,
-        gyro_ok=np.zeros(K, bool), gyro_angle=np.zeros(K), cx=np.ones(K), cy=np.ones(K),
-        ahrs_ok=np.zeros(K + 1, bool), ahrs_yaw=np.zeros(K + 1), range_ok=np.zeros(K + 1, bool),
-        range_height=np.full(K + 1, np.nan), camera_height=streams.camera_height, counts=counts, notes=notes,
-        visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma,
-        visual_frame_error=config.visual_frame_error,
-    )
+    iv = Intervals(t=T, camera_height=streams.camera_height, counts=counts, notes=notes,
+                   visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma)
+    for sensor in registry.sensors():  # every sensor's (empty) measurements, data or not
+        if sensor.grid is not None:
+            iv.sensors[sensor.name] = sensor.grid(K, config)
     range_in_visual = streams.visual is not None and streams.range_in_visual
     priors = scale_priors(config, streams.camera_height, streams.camera_height_sigma,
                           streams.range_height_sigma if range_in_visual else None,
@@ -413,15 +361,16 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     for sensor, step in registry.ordered("intervals"):  # each sensor's samples onto the grid (its own module)
         if sensor.data(streams) is not None:
             step.run(iv, streams, config, counts)
-    iv.wheel_yaw_ok = np.ones(K, bool)
-    iv.wheel_speed_ok = np.ones(K, bool)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
-        iv.visual_noise = visual_noise.apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
+        visual_noise.apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)
         notes.extend(ep.note(T[0], T[-1]) for ep in iv.episodes)
-    for name, ok in (("wheel", iv.wheel_ok), ("gyro", iv.gyro_ok)):
+    for sensor in registry.sensors():
+        if sensor.coverage is None:
+            continue
+        name, ok = sensor.coverage(iv)
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):
                 notes.append(f"{name} unavailable from {when(a, T)} to {when(b, T)}")

@@ -15,7 +15,7 @@ the datum of ``gps0/sensor.yaml``, and nothing tells the backends which way the 
 5. with ``fusion.gps.estimate_sigma``, the fit's residuals measure the fixes' actual scatter about the
    GPS-free track (its own drift over the fitted span, from its covariance, taken out); when that is
    significantly larger than the receiver's stated sigma (:func:`~fusion_vo.sensors.gps.scatter_floor`),
-   ``Intervals.gps_min_sigma`` raises the fixes' sigma floor to it for both backends, and a note says so.
+   ``GpsGrid.min_sigma`` raises the fixes' sigma floor to it for both backends, and a note says so.
 
 While the robot has not moved a few fix sigmas the heading is unobservable; the configured initial
 heading is then kept, the first pose is put under the first fix, and a note says so.
@@ -23,6 +23,7 @@ heading is then kept, the first pose is put under the first fix, and a note says
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import logging
 import math
@@ -31,7 +32,8 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.timeline import Intervals
-from fusion_vo.sensors.gps import align_to_fixes, fixes_in, predict, scatter_floor
+from fusion_vo.sensors.gps import align_to_fixes, fixes_in, gps_grid, predict, scatter_floor
+from fusion_vo.sensors.imu import imu_grid
 from fusion_vo.backends.ekf import run_ekf
 from fusion_vo.geometry import se2
 
@@ -52,11 +54,12 @@ def prior_from_alignment(fit, pose0: np.ndarray, fix_sigma: float) -> tuple[np.n
 
 def fallback_prior(iv: Intervals, config: FusionConfig, fix_sigma: float) -> tuple[np.ndarray, np.ndarray]:
     """First pose under the first fix with the configured heading (heading not observable)."""
-    k = int(np.argmax(iv.gps_ok))
+    grid = gps_grid(iv)
+    k = int(np.argmax(grid.ok))
     yaw = float(config.initial_pose[2])
-    lever = iv.gps.lever_arm
+    lever = grid.fixes.lever_arm
     antenna = predict(np.array([0.0, 0.0, yaw]), lever)
-    pose = np.array([*(iv.gps_enu[k] - antenna), yaw])
+    pose = np.array([*(grid.enu[k] - antenna), yaw])
     return pose, np.array([3.0 * fix_sigma, 3.0 * fix_sigma, 1e-3])
 
 
@@ -64,23 +67,27 @@ def rotate_ahrs(iv: Intervals, yaw: float) -> None:
     """AHRS headings re-expressed in the rotated world frame: they were aligned to the configured
     initial heading, which the world alignment turned by ``yaw``."""
 
-    if iv.ahrs_ok.any():
-        iv.ahrs_yaw = se2.wrap_angle(iv.ahrs_yaw + yaw)
+    imu = imu_grid(iv)
+    if imu.ahrs_ok.any():
+        imu.ahrs_yaw = se2.wrap_angle(imu.ahrs_yaw + yaw)
     if iv.heading_offset is not None:
         iv.heading_offset = float(iv.heading_offset - yaw)
 
 
 def align_world(iv: Intervals, config: FusionConfig) -> None:
     """Set ``iv.initial_pose`` / ``iv.initial_sigma`` in ENU from the fixes (module docstring); adds a note."""
-    if iv.gps_ok is None or not iv.gps_ok.any():
+    grid = gps_grid(iv)
+    if grid is None or not grid.ok.any():
         return
 
-    free = dataclasses.replace(iv, gps_ok=None, notes=[], initial_pose=None, initial_sigma=None)
+    # the same measurements without the fixes (each sensor's own copy: nothing the run sets reaches iv)
+    others = {name: copy.copy(m) for name, m in iv.sensors.items() if name != "gps"}
+    free = dataclasses.replace(iv, sensors=others, notes=[], initial_pose=None, initial_sigma=None)
     track = run_ekf(free, config)
     traj = track.trajectories.get("ekf_smoothed") or track.trajectories["ekf"]
-    gps = iv.gps
+    gps = grid.fixes
     fix_sigma = math.sqrt(float(np.median(np.trace(gps.covariance, axis1=1, axis2=2))) / 2.0)
-    t_first = float(iv.t[np.argmax(iv.gps_ok)])
+    t_first = float(iv.t[np.argmax(grid.ok)])
     fit = None
     window = 2.0
     while True:
@@ -125,10 +132,11 @@ def track_drift_var(track, traj, gps, t_end: float) -> float:
 
 def floor_from_scatter(iv: Intervals, config: FusionConfig, fit, track, traj, t_end: float, fix_sigma: float) -> None:
     """Raise the fixes' sigma floor to their measured scatter when it is significantly above the stated sigma."""
-    est = scatter_floor(fit, fix_sigma, track_drift_var(track, traj, iv.gps, t_end))
+    grid = gps_grid(iv)
+    est = scatter_floor(fit, fix_sigma, track_drift_var(track, traj, grid.fixes, t_end))
     if not est.significant or not est.sigma > max(config.gps.min_sigma, fix_sigma):
         return
-    iv.gps_min_sigma = est.sigma
+    grid.min_sigma = est.sigma
     # the heading's sigma came from the stated sigma: scaled to the measured one (position sigma is the fit's rms)
     iv.initial_sigma[2] = float(np.clip(iv.initial_sigma[2] * est.sigma / max(fix_sigma, 1e-12), MIN_YAW_SIGMA,
                                         MAX_YAW_SIGMA))

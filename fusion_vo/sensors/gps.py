@@ -405,8 +405,9 @@ def scatter_floor(fit: Alignment, stated_sigma: float, drift_var: float = 0.0) -
 
 def gps_noise(iv, config) -> GpsNoise:
     """``config.gps`` with the run's measured scatter as ``min_sigma`` when :func:`scatter_floor` raised it
-    (``Intervals.gps_min_sigma``, set by the world-frame alignment): both backends fuse with the same sigma."""
-    floor = getattr(iv, "gps_min_sigma", None)
+    (:attr:`GpsGrid.min_sigma`, set by the world-frame alignment): both backends fuse with the same sigma."""
+    grid = gps_grid(iv)
+    floor = None if grid is None else grid.min_sigma
     if floor is None or not floor > config.gps.min_sigma:
         return config.gps
     return config.gps.model_copy(update={"min_sigma": float(floor)})
@@ -424,29 +425,50 @@ def node_times(gps: GpsData, nodes: np.ndarray, config) -> np.ndarray:
     return np.unique(np.concatenate([nodes, fixes[~near]]))
 
 
+@dataclass
+class GpsGrid:
+    """The fixes on the node grid (``Intervals.sensors["gps"]``, :func:`gps_grid`).
+
+    ``ok, enu, cov`` (K+1,), (K+1, 2), (K+1, 2, 2): the fix at each node that has one (east, north [m] in ENU
+    at the datum, and its covariance [m²]); ``fixes``: the :class:`~fusion_vo.measurements.GpsData` (lever arm,
+    datum, skip counts); ``min_sigma``: the fixes' sigma floor [m] the world-frame alignment measured when they
+    scatter significantly more than the receiver states (``fusion.gps.estimate_sigma``, :func:`scatter_floor`),
+    else None (``fusion.gps.min_sigma``).
+    """
+
+    ok: np.ndarray
+    enu: np.ndarray
+    cov: np.ndarray
+    fixes: GpsData
+    min_sigma: float | None = None
+
+
+def gps_grid(iv) -> GpsGrid | None:
+    """The fixes on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`); None without GPS."""
+    return iv.sensors.get("gps")
+
+
 def add_intervals(iv, streams, config, counts) -> None:
     """Each fix at the node of its time (:data:`GPS_SNAP`); fixes outside the node span are counted missing
-    (``Intervals.gps_ok, gps_enu, gps_cov, gps``)."""
+    (:class:`GpsGrid`)."""
 
     gps = streams.gps
     count = counts.setdefault("gps", SensorCount())
     T = iv.t
-    iv.gps = gps
-    iv.gps_ok = np.zeros(len(T), bool)
-    iv.gps_enu = np.zeros((len(T), 2))
-    iv.gps_cov = np.tile(np.eye(2), (len(T), 1, 1))
+    grid = iv.sensors["gps"] = GpsGrid(np.zeros(len(T), bool), np.zeros((len(T), 2)), np.tile(np.eye(2), (len(T), 1, 1)),
+                                       gps)
     idx, n_re, n_dup = time_order(gps.t)
     count.reordered += n_re
     count.gated += n_dup
     for i in idx:
         k = int(np.clip(np.searchsorted(T, gps.t[i]), 0, len(T) - 1))
         k = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - gps.t[i]))
-        if abs(T[k] - gps.t[i]) > GPS_SNAP or iv.gps_ok[k]:
+        if abs(T[k] - gps.t[i]) > GPS_SNAP or grid.ok[k]:
             count.missing += 1
             continue
-        iv.gps_ok[k] = True
-        iv.gps_enu[k] = gps.enu[i, :2]
-        iv.gps_cov[k] = gps.covariance[i]
+        grid.ok[k] = True
+        grid.enu[k] = gps.enu[i, :2]
+        grid.cov[k] = gps.covariance[i]
 
 
 @dataclass(frozen=True)
@@ -479,17 +501,19 @@ def readings(iv, config) -> list[Readings]:
     gated against the prediction of its node, inside the GPS kernel, with the sigma floor of ``fusion.gps`` (raised
     to the scatter the world-frame alignment measured, :func:`gps_noise`), re-acquired after ``gps_reacquire``
     seconds of rejections."""
-    if iv.gps_ok is None or iv.gps is None or not iv.gps_ok.any():
+    grid = gps_grid(iv)
+    if grid is None or not grid.ok.any():
         return []
-    n = np.flatnonzero(iv.gps_ok)
-    policy = Absolute(gps_noise(iv, config), float(config.gps_reacquire), dict(iv.gps.skipped or {}))
-    return [Readings("gps", ANTENNA, n, n, iv.gps_enu[n], iv.gps_cov[n], params={"lever_arm": iv.gps.lever_arm[:2]},
+    n = np.flatnonzero(grid.ok)
+    policy = Absolute(gps_noise(iv, config), float(config.gps_reacquire), dict(grid.fixes.skipped or {}))
+    return [Readings("gps", ANTENNA, n, n, grid.enu[n], grid.cov[n], params={"lever_arm": grid.fixes.lever_arm[:2]},
                      absolute=policy, order=ORDER["gps"])]
 
 
 def _keyframes(iv):
     """A fix's node is always a keyframe."""
-    return np.flatnonzero(iv.gps_ok) if iv.gps_ok is not None else None
+    grid = gps_grid(iv)
+    return np.flatnonzero(grid.ok) if grid is not None else None
 
 
 def _live_sample(fix) -> tuple:

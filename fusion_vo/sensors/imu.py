@@ -352,13 +352,38 @@ GYRO = GyroModel()
 AHRS = AhrsModel()
 
 
+# --------------------------------------------------------------------------- on the node grid
+@dataclass
+class ImuGrid:
+    """The IMU's measurements on the node grid (``Intervals.sensors["imu"]``, :func:`imu_grid`).
+
+    ``gyro_ok, gyro_angle`` (K,): where the gyro covers each node interval and its integrated body yaw
+    rate over it [rad]; ``ahrs_ok, ahrs_yaw`` (K+1,): the AHRS heading at the nodes [rad], aligned so that the
+    first one is the initial yaw (``Intervals.heading_offset``).
+    """
+
+    gyro_ok: np.ndarray
+    gyro_angle: np.ndarray
+    ahrs_ok: np.ndarray
+    ahrs_yaw: np.ndarray
+
+    @classmethod
+    def empty(cls, n_steps: int, config=None) -> "ImuGrid":
+        return cls(np.zeros(n_steps, bool), np.zeros(n_steps), np.zeros(n_steps + 1, bool), np.zeros(n_steps + 1))
+
+
+def imu_grid(iv) -> ImuGrid:
+    """The IMU's measurements on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`)."""
+    return iv.sensors["imu"]
+
+
 # --------------------------------------------------------------------------- registration
 def add_intervals(iv, streams, config, counts) -> None:
-    """The gyro's integrated angle per node interval (``Intervals.gyro_ok, gyro_angle``) and, with an AHRS
-    orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw,
-    heading_offset``) and the slope factors ``cx, cy``."""
+    """The gyro's integrated angle per node interval (:class:`ImuGrid` ``gyro_ok, gyro_angle``) and, with an AHRS
+    orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw``,
+    ``Intervals.heading_offset``) and the slope factors ``Intervals.cx, cy``."""
 
-    imu = streams.imu
+    imu, grid = streams.imu, imu_grid(iv)
     count = counts.setdefault("gyro", SensorCount())
     imu = ordered_fields(imu, ("gyro", "accel", "orientation"), count)
     gyro = gyro_yaw(imu, config.imu.with_sensor_keys(imu.noise))
@@ -366,7 +391,7 @@ def add_intervals(iv, streams, config, counts) -> None:
     T = iv.t
     ok = coverage(gyro.t, np.zeros(max(len(gyro.t) - 1, 0), bool), T, config.max_gap)
     theta = np.interp(T, gyro.t, cumulative_angle(gyro)) if len(gyro.t) else np.zeros(len(T))
-    iv.gyro_ok, iv.gyro_angle = ok, np.diff(theta)
+    grid.gyro_ok, grid.gyro_angle = ok, np.diff(theta)
     count.used += int(ok.sum())
     count.missing += int((~ok).sum())
     heading = ahrs_heading(imu)
@@ -396,8 +421,8 @@ def add_intervals(iv, streams, config, counts) -> None:
         mean = float(np.mean(diffs)) if len(diffs) else 0.0
         iv.heading_offset = float(yaw_t[first] + mean - float(config.initial_pose[2]))
     offset = iv.heading_offset
-    iv.ahrs_ok = ok_n
-    iv.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
+    grid.ahrs_ok = ok_n
+    grid.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
     acount.used += int(ok_n.sum())
     mid = 0.5 * (T[:-1] + T[1:])
     iv.cx = np.interp(mid, ht, heading.cx[heading.valid])
@@ -407,20 +432,20 @@ def add_intervals(iv, streams, config, counts) -> None:
 def readings(iv, config) -> list[Readings]:
     """The gyro's integrated angle per interval (``σ_g² Δt``, ``σ_rest`` where the wheels are at rest; gated
     upstream, so not robust) and the AHRS heading at the nodes (``σ_ψ²``)."""
-    out = []
+    out, grid = [], imu_grid(iv)
     if iv.uses("gyro"):
-        k = np.flatnonzero(iv.gyro_ok)
+        k = np.flatnonzero(grid.gyro_ok)
         var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt)
-        out.append(Readings("gyro", GYRO, k, k + 1, iv.gyro_angle[k], var[k], robust=False, order=ORDER["gyro"]))
-    if iv.ahrs_ok.any():
-        n = np.flatnonzero(iv.ahrs_ok)
-        out.append(Readings("ahrs", AHRS, n, n, iv.ahrs_yaw[n], config.imu.ahrs_yaw_sigma**2, order=ORDER["ahrs"]))
+        out.append(Readings("gyro", GYRO, k, k + 1, grid.gyro_angle[k], var[k], robust=False, order=ORDER["gyro"]))
+    if grid.ahrs_ok.any():
+        n = np.flatnonzero(grid.ahrs_ok)
+        out.append(Readings("ahrs", AHRS, n, n, grid.ahrs_yaw[n], config.imu.ahrs_yaw_sigma**2, order=ORDER["ahrs"]))
     return out
 
 
 def has_heading(iv) -> bool:
     """Whether the AHRS gives headings on the grid ``iv`` (a heading reference: ``Sensor.absolute_heading``)."""
-    return bool(iv.ahrs_ok.any())
+    return bool(imu_grid(iv).ahrs_ok.any())
 
 
 def _live_sample(m) -> tuple:
@@ -438,7 +463,7 @@ def _live_data(t, rows, fusion) -> ImuData:
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
-    intervals=Step(10, add_intervals), readings=readings,
-    absolute_heading=has_heading,
+    grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings,
+    coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=has_heading,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
 ))

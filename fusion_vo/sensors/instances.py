@@ -235,10 +235,10 @@ def odometry_instance(n: int) -> Sensor:
 
     def intervals(iv, streams, config, counts) -> None:
         count = counts.setdefault(name, SensorCount())
-        iv.extra[name] = twist_on_grid(streams.extra[name], iv.t, config.section(name), config.max_gap, count)
+        iv.sensors[name] = twist_on_grid(streams.extra[name], iv.t, config.section(name), config.max_gap, count)
 
     def readings(iv, config) -> list[Readings]:
-        on_grid = iv.extra.get(name)
+        on_grid = iv.sensors.get(name)
         return [] if on_grid is None else odom_readings(name, on_grid, iv, config.section(name))
 
     return Sensor(name=name, where=f"{folder}/", min_samples=2, folder=folder,
@@ -331,12 +331,12 @@ def imu_instance(n: int) -> Sensor:
         data = streams.extra[name]
         noise = config.section(name).imu_noise(data.noise)
         ok, angle = gyro_on_grid(data, iv.t, noise, config.max_gap, counts.setdefault(name, SensorCount()))
-        iv.extra[name] = (ok, angle, noise.gyro_noise_density)
+        iv.sensors[name] = (ok, angle, noise.gyro_noise_density)
 
     def readings(iv, config) -> list[Readings]:
-        if name not in iv.extra:
+        if name not in iv.sensors:
             return []
-        ok, angle, density = iv.extra[name]
+        ok, angle, density = iv.sensors[name]
         k = np.flatnonzero(ok)
         var = GyroModel.variance(density, iv.dt[k])
         return [Readings(name, model, k, k + 1, angle[k], var, robust=False, order=GYRO_ORDER)]

@@ -127,10 +127,29 @@ class RangeModel(MeasurementModel):
 RANGE = RangeModel()
 
 
+# --------------------------------------------------------------------------- on the node grid
+@dataclass
+class RangeGrid:
+    """The range finder's camera heights at the nodes (``Intervals.sensors["range"]``, :func:`range_grid`):
+    ``ok, height`` (K+1,) [m], NaN where ``ok`` is False."""
+
+    ok: np.ndarray
+    height: np.ndarray
+
+    @classmethod
+    def empty(cls, n_steps: int, config=None) -> "RangeGrid":
+        return cls(np.zeros(n_steps + 1, bool), np.full(n_steps + 1, np.nan))
+
+
+def range_grid(iv) -> RangeGrid:
+    """The range finder's measurements on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`)."""
+    return iv.sensors["range"]
+
+
 # --------------------------------------------------------------------------- registration
 def add_intervals(iv, streams, config, counts) -> None:
-    """Camera heights at the nodes (``Intervals.range_ok, range_height``), within ``max_gap`` of a reading;
-    nothing when the visual increments were already scaled with them (used once)."""
+    """Camera heights at the nodes (:class:`RangeGrid`), within ``max_gap`` of a reading; nothing when the
+    visual increments were already scaled with them (used once)."""
 
     if streams.visual is not None and streams.range_in_visual:
         iv.notes.append("range finder: already in the visual increments (their per-frame height), "
@@ -151,17 +170,19 @@ def add_intervals(iv, streams, config, counts) -> None:
     jm = np.clip(j - 1, 0, len(ht) - 1)
     nearest = np.minimum(np.abs(ht[j] - T), np.abs(ht[jm] - T))
     ok = nearest <= config.max_gap
-    iv.range_ok = ok
-    iv.range_height = np.where(ok, np.interp(T, ht, hv), np.nan)
+    grid = range_grid(iv)
+    grid.ok = ok
+    grid.height = np.where(ok, np.interp(T, ht, hv), np.nan)
     count.used += int(ok.sum())
 
 
 def readings(iv, config) -> list[Readings]:
     """The camera heights at the nodes (``σ_r²``), measurements of the visual scale."""
-    if not iv.range_ok.any():
+    grid = range_grid(iv)
+    if not grid.ok.any():
         return []
-    n = np.flatnonzero(iv.range_ok)
-    return [Readings("range", RANGE, n, n, iv.range_height[n], config.range.sigma**2,
+    n = np.flatnonzero(grid.ok)
+    return [Readings("range", RANGE, n, n, grid.height[n], config.range.sigma**2,
                      params={"camera_height": iv.camera_height}, order=ORDER["range"])]
 
 
@@ -172,7 +193,7 @@ def _live_sample(m) -> tuple:
 
 register(Sensor(
     name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
-    has=lambda recording: recording.has_range(), config=("range", RangeNoise), intervals=Step(40, add_intervals),
+    has=lambda recording: recording.has_range(), config=("range", RangeNoise), grid=RangeGrid.empty, intervals=Step(40, add_intervals),
     readings=readings,
     # the streaming buffers read as many neighbours around an interval as the gyro's spike check
     live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,

@@ -206,10 +206,20 @@ class Sensor:
         ``initial_sigma``); a piece of a recording with such data is placed by it (:mod:`fusion_vo.backends.pauses`).
     node_times : callable or None
         ``node_times(data, nodes, config) -> nodes``: node times the sensor needs besides the grid's.
+    grid : callable or None
+        ``grid(n_steps, config) -> measurements``: the empty container of its measurements on a node grid of
+        ``n_steps`` intervals (a dataclass of its module), put in ``Intervals.sensors[name]`` before any
+        sensor's ``intervals`` step runs, so that every sensor (and the consistency monitor) finds it there
+        whether or not the sensor has data. None: the sensor's ``intervals`` step puts what it needs in
+        ``iv.sensors[name]`` itself.
     intervals : Step or None
-        ``run(iv, streams, config, counts)``: its samples onto the node grid, into its fields of
-        :class:`~fusion_vo.backends.timeline.Intervals` (``iv.extra[name]`` for a sensor registered outside
-        the library), updating ``counts[name]`` (:class:`~fusion_vo.backends.result.SensorCount`).
+        ``run(iv, streams, config, counts)``: its samples onto the node grid, into ``iv.sensors[name]`` of
+        :class:`~fusion_vo.backends.timeline.Intervals`, updating ``counts[name]``
+        (:class:`~fusion_vo.backends.result.SensorCount`).
+    coverage : callable or None
+        ``coverage(iv) -> (label, ok)``: the node intervals its samples cover (``ok``, after the consistency
+        monitor's decisions) and the name its counts go under; a run of uncovered intervals longer than half a
+        second inside the data becomes a note (``"label unavailable from ... to ..."``).
     readings : callable or None
         ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
         :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
@@ -244,7 +254,9 @@ class Sensor:
     config: tuple | None = None
     absolute_position: bool = False
     node_times: Callable | None = None
+    grid: Callable | None = None
     intervals: Step | None = None
+    coverage: Callable | None = None
     readings: Callable | None = None
     graph_keyframes: Callable | None = None
     states: tuple = ()

@@ -73,9 +73,52 @@ class VisualModel(MeasurementModel):
 VISUAL = VisualModel()
 
 
+# --------------------------------------------------------------------------- on the node grid
+@dataclass
+class CameraGrid:
+    """The camera's measurements on the node grid (``Intervals.sensors["camera"]``, :func:`camera_grid`).
+
+    Attributes
+    ----------
+    i0, i1 : ndarray (M,) int
+        Node indices spanned by each usable increment.
+    delta, cov : ndarray (M, 3), (M, 3, 3)
+        The increments (slope-projected: ``d_x cx``, ``d_y cy`` over the intervals they span) and their
+        covariances.
+    frame_cov : ndarray (M, 3, 3) or None
+        The covariance of each increment's frames' own errors when the increments state it
+        (:attr:`~fusion_vo.measurements.VisualIncrement.frame_covariance`); it replaces ``frame_error``'s
+        ``f/2 Σ`` (:func:`frame_covariances`).
+    frame_error : float
+        The frame-error share ``f`` both backends use (module docstring): ``FusionConfig.visual_frame_error``,
+        or the estimate of :mod:`fusion_vo.sensors.visual_noise`.
+    noise : VisualNoiseEstimate or None
+        What that estimate found (``fusion.visual_noise.estimate``; None when off or in streaming use).
+    """
+
+    i0: np.ndarray
+    i1: np.ndarray
+    delta: np.ndarray
+    cov: np.ndarray
+    frame_cov: np.ndarray | None = None
+    frame_error: float = 0.0
+    noise: object = None
+
+    @classmethod
+    def empty(cls, n_steps: int, config) -> "CameraGrid":
+        """No increments; the configured frame-error share."""
+        return cls(np.zeros(0, int), np.zeros(0, int), np.zeros((0, 3)), np.zeros((0, 3, 3)),
+                   frame_error=config.visual_frame_error)
+
+
+def camera_grid(iv) -> CameraGrid:
+    """The camera's measurements on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`)."""
+    return iv.sensors["camera"]
+
+
 # --------------------------------------------------------------------------- registration
 def add_intervals(iv, streams, config, counts) -> None:
-    """The usable increments onto the node grid (``Intervals.vis_*``), projected to the horizontal; camera
+    """The usable increments onto the node grid (:class:`CameraGrid`), projected to the horizontal; camera
     outages become notes.
 
     Every check is one array operation over all increments (the increments' times, readings and
@@ -83,7 +126,7 @@ def add_intervals(iv, streams, config, counts) -> None:
     has 1200 of them.
     """
 
-    visual, notes = streams.visual, iv.notes
+    visual, notes, cam = streams.visual, iv.notes, camera_grid(iv)
     count = counts.setdefault("camera", SensorCount())
     T = iv.t
     n = len(visual)
@@ -108,22 +151,22 @@ def add_intervals(iv, streams, config, counts) -> None:
     keep = np.flatnonzero(good)
     keep = keep[np.argsort(t1[keep], kind="stable")]
     if len(keep):
-        iv.vis_i0, iv.vis_i1 = i0[keep], i1[keep]
-        iv.vis_delta, iv.vis_cov = delta[keep], cov[keep]
+        cam.i0, cam.i1 = i0[keep], i1[keep]
+        cam.delta, cam.cov = delta[keep], cov[keep]
         # slope: mean projection factors over the spanned intervals (a single interval's is its own)
-        cx, cy = iv.cx[iv.vis_i0], iv.cy[iv.vis_i0]
-        for m in np.flatnonzero(iv.vis_i1 - iv.vis_i0 > 1):
-            a, b = iv.vis_i0[m], iv.vis_i1[m]
+        cx, cy = iv.cx[cam.i0], iv.cy[cam.i0]
+        for m in np.flatnonzero(cam.i1 - cam.i0 > 1):
+            a, b = cam.i0[m], cam.i1[m]
             cx[m], cy[m] = iv.cx[a:b].mean(), iv.cy[a:b].mean()
-        iv.vis_delta[:, 0] *= cx
-        iv.vis_delta[:, 1] *= cy
+        cam.delta[:, 0] *= cx
+        cam.delta[:, 1] *= cy
     count.used += len(keep)
     stated = [visual[i].frame_covariance for i in keep]
     if any(c is not None for c in stated):
-        iv.vis_frame_cov = _stated_frame_cov(stated, iv.vis_cov)
+        cam.frame_cov = _stated_frame_cov(stated, cam.cov)
     edges = np.zeros(len(T), dtype=np.int64)  # covered intervals: +1 where an increment starts, -1 where it ends
-    np.add.at(edges, iv.vis_i0, 1)
-    np.add.at(edges, iv.vis_i1, -1)
+    np.add.at(edges, cam.i0, 1)
+    np.add.at(edges, cam.i1, -1)
     covered = np.cumsum(edges)[:-1] > 0
     for a, b in uncovered_runs(T, covered, 0.2):
         notes.append(f"camera lost from {when(a, T)} to {when(b, T)}; the other sensors carried the estimate")
@@ -149,20 +192,22 @@ def _stated_frame_cov(stated: list, cov: np.ndarray) -> np.ndarray:
 
 def frame_covariances(iv) -> np.ndarray | None:
     """Covariance of each increment's frames' own errors (M, 3, 3): the increments' own
-    (:attr:`Intervals.vis_frame_cov`), else ``f/2`` of their covariance with ``visual_frame_error = f > 0``;
+    (:attr:`CameraGrid.frame_cov`), else ``f/2`` of their covariance with ``frame_error = f > 0``;
     None: independent increments."""
-    if iv.vis_frame_cov is not None:
-        return iv.vis_frame_cov
-    f = iv.visual_frame_error
-    return 0.5 * f * iv.vis_cov if f > 0 else None
+    cam = camera_grid(iv)
+    if cam.frame_cov is not None:
+        return cam.frame_cov
+    f = cam.frame_error
+    return 0.5 * f * cam.cov if f > 0 else None
 
 
 def readings(iv, config) -> list[Readings]:
     """The usable increments between their frames' nodes, with their frames' own errors when modelled
     (:func:`frame_covariances`)."""
-    if not len(iv.vis_i0):
+    cam = camera_grid(iv)
+    if not len(cam.i0):
         return []
-    return [Readings("camera", VISUAL, iv.vis_i0, iv.vis_i1, iv.vis_delta, iv.vis_cov, frame_cov=frame_covariances(iv),
+    return [Readings("camera", VISUAL, cam.i0, cam.i1, cam.delta, cam.cov, frame_cov=frame_covariances(iv),
                      order=ORDER["camera"])]
 
 
@@ -183,6 +228,6 @@ def _live_take(fusion, inc) -> None:
 
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
-    intervals=Step(30, add_intervals), readings=readings,
+    grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings,
     live=Live(_live_sample, values=_live_values, take=_live_take),
 ))

@@ -63,7 +63,8 @@ import numpy as np
 from pydantic import Field
 
 from fusion_vo.config.base import MAX_NUMBER, Int, Positive, Section
-from fusion_vo.sensors.imu import GYRO
+from fusion_vo.sensors.imu import GYRO, imu_grid
+from fusion_vo.sensors.visual import camera_grid
 from fusion_vo.sensors.wheel import at_rest
 
 logger = logging.getLogger(__name__)
@@ -247,33 +248,35 @@ def estimate(camera, camera_var, gyro, gyro_var, config: VisualNoiseConfig) -> V
 
 def apply(iv, config) -> VisualNoiseEstimate | None:
     """Estimate the camera's heading noise on the whole recording's grid ``iv`` and put what is resolved into
-    it: the increments' heading (co)variances scaled, ``iv.visual_frame_error`` set. Returns the estimate
-    (its note added to ``iv.notes``), or None when ``config.visual_noise.estimate`` is off."""
+    it: the increments' heading (co)variances scaled, the camera's frame-error share set
+    (:class:`~fusion_vo.sensors.visual.CameraGrid` ``cov``, ``frame_error``). Returns the estimate, also kept as
+    the grid's ``noise`` (its note added to ``iv.notes``), or None when ``config.visual_noise.estimate`` is off."""
 
-    cfg = config.visual_noise
+    cfg, cam, imu = config.visual_noise, camera_grid(iv), imu_grid(iv)
     if not cfg.estimate:
         return None
-    if not len(iv.vis_i0) or not iv.uses("gyro"):
+    if not len(cam.i0) or not iv.uses("gyro"):
         out = VisualNoiseEstimate(note="camera heading noise not estimated: it needs the camera and the gyro")
-    elif iv.vis_frame_cov is not None:  # a calibrated model is better than this estimate, and would not add up
+    elif cam.frame_cov is not None:  # a calibrated model is better than this estimate, and would not add up
         out = VisualNoiseEstimate(note="camera heading noise not estimated: the increments state their own "
                                        "(camera_noise of cam0/sensor.yaml)")
     else:
         K = iv.n_steps
         camera, camera_var = np.full(K, np.nan), np.full(K, np.nan)
-        single = iv.vis_i1 == iv.vis_i0 + 1
-        camera[iv.vis_i0[single]] = iv.vis_delta[single, 2]
-        camera_var[iv.vis_i0[single]] = iv.vis_cov[single, 2, 2]
-        gyro = np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
+        single = cam.i1 == cam.i0 + 1
+        camera[cam.i0[single]] = cam.delta[single, 2]
+        camera_var[cam.i0[single]] = cam.cov[single, 2, 2]
+        gyro = np.where(imu.gyro_ok, imu.gyro_angle, np.nan)
         gyro_var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt) * np.ones(K)
         out = estimate(camera, camera_var, gyro, gyro_var, cfg)
     if out.scale_applied:
         root = np.sqrt(out.scale)
-        iv.vis_cov = iv.vis_cov.copy()
-        iv.vis_cov[:, 2, :] *= root
-        iv.vis_cov[:, :, 2] *= root
+        cam.cov = cam.cov.copy()
+        cam.cov[:, 2, :] *= root
+        cam.cov[:, :, 2] *= root
     if out.frame_error_applied:
-        iv.visual_frame_error = out.frame_error
+        cam.frame_error = out.frame_error
+    cam.noise = out
     iv.notes.append(out.note)
     logger.info("%s", out.note)
     return out

@@ -507,28 +507,56 @@ def _chain(start: np.ndarray, inc: np.ndarray) -> np.ndarray:
 
 
 
+# --------------------------------------------------------------------------- on the node grid
+@dataclass
+class WheelGrid:
+    """The wheels' measurements on the node grid (``Intervals.sensors["wheel"]``, :func:`wheel_grid`).
+
+    ``ok, dl, dr`` (K,): where the wheels cover each node interval and each wheel's travel over it [m];
+    ``base``: the configured wheel base [m] (1 for an odometry twist, ``twist`` True, whose ``dl, dr`` are
+    the travel of wheels one metre apart); ``yaw_ok``, ``speed_ok`` (K,): where the consistency monitor keeps
+    the wheels' yaw and their speed (:mod:`fusion_vo.backends.monitor`).
+    """
+
+    ok: np.ndarray
+    dl: np.ndarray
+    dr: np.ndarray
+    yaw_ok: np.ndarray
+    speed_ok: np.ndarray
+    base: float = 1.0
+    twist: bool = False
+
+    @classmethod
+    def empty(cls, n_steps: int, config=None) -> "WheelGrid":
+        return cls(np.zeros(n_steps, bool), np.zeros(n_steps), np.zeros(n_steps), np.ones(n_steps, bool),
+                   np.ones(n_steps, bool))
+
+
+def wheel_grid(iv) -> WheelGrid:
+    """The wheels' measurements on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`)."""
+    return iv.sensors["wheel"]
+
+
 # --------------------------------------------------------------------------- registration
-
-
 def add_intervals(iv, streams, config, counts) -> None:
-    """Wheel travel (encoder ticks, else the odometry twist) interpolated at the node times:
-    ``Intervals.wheel_ok, wheel_dl, wheel_dr, wheel_base, twist``."""
+    """Wheel travel (encoder ticks, else the odometry twist) interpolated at the node times (:class:`WheelGrid`)."""
 
     count = counts.setdefault("wheel", SensorCount())
+    w = wheel_grid(iv)
     if streams.wheel is not None:
         data = ordered_fields(streams.wheel, ("left", "right"), count)
         travel: WheelTravel = ticks_to_travel(data, config.wheel)
     else:
         data = ordered_fields(streams.odom, ("vx", "vy", "wz"), count)
         travel = twist_to_travel(data, max_speed=config.odom.max_speed)
-        iv.twist = True
+        w.twist = True
     count.gated += travel.n_gated
     T = iv.t
     ok = coverage(travel.t, ~travel.valid, T, config.max_gap)
     left = np.interp(T, travel.t, travel.left)
     right = np.interp(T, travel.t, travel.right)
-    iv.wheel_ok, iv.wheel_dl, iv.wheel_dr = ok, np.diff(left), np.diff(right)
-    iv.wheel_base = travel.wheel_base
+    w.ok, w.dl, w.dr = ok, np.diff(left), np.diff(right)
+    w.base = travel.wheel_base
     if streams.wheel is not None:
         observable = curvature_observable(camera=any(v.ok for v in streams.visual or ()),
                                           ahrs=streams.imu is not None and streams.imu.orientation is not None,
@@ -552,7 +580,8 @@ def gyro_turn(iv) -> np.ndarray | None:
     independent measure of the turn that scales the wheels' skid variance (:func:`skid_variance`)."""
     if not iv.uses("gyro"):
         return None
-    return np.where(iv.gyro_ok, iv.gyro_angle, np.nan)
+    imu = iv.sensors["imu"]
+    return np.where(imu.gyro_ok, imu.gyro_angle, np.nan)
 
 
 def at_rest(iv, config) -> np.ndarray:
@@ -560,7 +589,8 @@ def at_rest(iv, config) -> np.ndarray:
     all False without wheels."""
     if not iv.uses("wheel"):
         return np.zeros(iv.n_steps, bool)
-    return iv.wheel_ok & standstill(iv.wheel_dl, iv.wheel_dr, iv.dt, config.wheel_model(iv.twist)[0])
+    w = wheel_grid(iv)
+    return w.ok & standstill(w.dl, w.dr, iv.dt, config.wheel_model(w.twist)[0])
 
 
 def readings(iv, config) -> list[Readings]:
@@ -570,25 +600,25 @@ def readings(iv, config) -> list[Readings]:
     the lateral slip, the skid; :func:`arc_twist`), carried to the increment's ``(d_x, d_y, d_ψ)`` by the exponential's
     Jacobian (:func:`fusion_vo.geometry.se2.exp_jacobian`); the travel is projected to the horizontal by the forward
     slope factor (``Intervals.cx``) before the arc is made. Intervals in which the consistency monitor dropped a component of the wheels
-    (``Intervals.wheel_yaw_ok``, ``wheel_speed_ok``) are readings with that component dropped. Both wheels at rest
+    (:attr:`WheelGrid.yaw_ok`, ``speed_ok``) are readings with that component dropped. Both wheels at rest
     over an interval: its heading change is zero (``σ_still Δt``; not robust)."""
-    out = []
-    if iv.uses("wheel") and iv.wheel_ok.any():
-        noise = config.wheel_model(iv.twist)[0]
-        k = np.flatnonzero(iv.wheel_ok)
-        dl, dr, dt = iv.wheel_dl[k], iv.wheel_dr[k], iv.dt[k]
+    out, w = [], wheel_grid(iv)
+    if iv.uses("wheel") and w.ok.any():
+        noise = config.wheel_model(w.twist)[0]
+        k = np.flatnonzero(w.ok)
+        dl, dr, dt = w.dl[k], w.dr[k], iv.dt[k]
         turn = gyro_turn(iv)
-        _, rate_cov = arc_twist(dl, dr, dt, iv.wheel_base, noise, None if turn is None else turn[k])
+        _, rate_cov = arc_twist(dl, dr, dt, w.base, noise, None if turn is None else turn[k])
         # the arc's twist (d, 0, θ), its forward travel projected to the horizontal (Intervals.cx): the reading is its
         # exponential, so that the EKF, which reads the logarithm, gets the twist itself
-        xi = np.stack([0.5 * (dl + dr) * iv.cx[k], np.zeros(len(k)), (dr - dl) / iv.wheel_base], axis=1)
+        xi = np.stack([0.5 * (dl + dr) * iv.cx[k], np.zeros(len(k)), (dr - dl) / w.base], axis=1)
         J = se2.exp_jacobian(xi)
         cov = J @ (rate_cov * (dt**2)[:, None, None]) @ np.transpose(J, (0, 2, 1))
         z = se2.exp_many(xi)
         model = wheel_model(iv.states)
-        params = {"wheel_base": iv.wheel_base} if model is CURVED_WHEEL else {}
-        yaw_ok = np.ones(len(k), bool) if iv.wheel_yaw_ok is None else iv.wheel_yaw_ok[k]
-        speed_ok = np.ones(len(k), bool) if iv.wheel_speed_ok is None else iv.wheel_speed_ok[k]
+        params = {"wheel_base": w.base} if model is CURVED_WHEEL else {}
+        yaw_ok = w.yaw_ok[k]
+        speed_ok = w.speed_ok[k]
         for yaw in (True, False):
             for speed in (True, False):
                 sel = (yaw_ok == yaw) & (speed_ok == speed)
@@ -599,7 +629,7 @@ def readings(iv, config) -> list[Readings]:
     still = at_rest(iv, config)
     if still.any():
         k = np.flatnonzero(still)
-        sigma = config.wheel_model(iv.twist)[0].standstill_yaw_rate * np.maximum(iv.dt[k], 1e-3)
+        sigma = config.wheel_model(w.twist)[0].standstill_yaw_rate * np.maximum(iv.dt[k], 1e-3)
         out.append(Readings("standstill", STANDSTILL, k, k + 1, np.zeros(len(k)), sigma**2, robust=False,
                             order=ORDER["standstill"]))
     return out
@@ -642,7 +672,8 @@ register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
     read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
     pick=_pick_ticks, config=("wheel", WheelNoise),
-    intervals=Step(20, add_intervals), readings=readings,
+    grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
+    coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
     states=(CURVATURE,), live=Live(_live_ticks, _live_ticks_data),
 ))
 register(Sensor(

@@ -441,7 +441,7 @@ def test_fixes_scattering_four_times_their_claim_are_fused_with_the_measured_sig
     # the estimate's standard error is about sigma / sqrt(2 m) for the m = 161 fixes of the alignment (32 s):
     # 3 of them (measured 0.1996 m)
     assert any("(161 fixes of the alignment" in n for n in iv.notes), iv.notes
-    assert iv.gps_min_sigma == pytest.approx(SCATTER_TRUE, rel=3.0 / math.sqrt(2 * 161)), iv.gps_min_sigma
+    assert gps_model.gps_grid(iv).min_sigma == pytest.approx(SCATTER_TRUE, rel=3.0 / math.sqrt(2 * 161)), gps_model.gps_grid(iv).min_sigma
     measured = fuse(streams, "all", {"gps": {"estimate_sigma": True}})
     claimed = fuse(streams, "all", {"gps": {"estimate_sigma": False}})
     assert any("fixes scatter" in n and "fusion.gps.estimate_sigma: false" in n for n in measured.notes)
@@ -455,7 +455,7 @@ def test_honest_fixes_keep_their_stated_sigma(scatter_rec):
     """Fixes that scatter as they claim: no floor is raised and the estimate changes nothing."""
     streams = streams_from_recording(scatter_rec, None, ["wheel", "imu", "gps"])
     iv = _aligned(streams, {"gps": {"estimate_sigma": True}})
-    assert iv.gps_min_sigma is None
+    assert gps_model.gps_grid(iv).min_sigma is None
     on = fuse(streams, "ekf", {"gps": {"estimate_sigma": True}})
     off = fuse(streams, "ekf", {"gps": {"estimate_sigma": False}})
     np.testing.assert_array_equal(on.trajectories["ekf"].xyyaw, off.trajectories["ekf"].xyyaw)

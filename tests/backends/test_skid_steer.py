@@ -5,7 +5,7 @@ import pytest
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.backends.timeline import build_intervals
-from fusion_vo.sensors.wheel import WheelNoise, arc_covariance, odom_twist_noise
+from fusion_vo.sensors.wheel import WheelNoise, arc_covariance, odom_twist_noise, wheel_grid
 
 from backend_synth import position_errors
 from husky_like import husky_like
@@ -23,7 +23,7 @@ def test_zero_twist_does_not_pin_the_pose():
 def test_twist_streams_use_the_odometry_noise_model():
     odom, imu, _ = husky_like(duration=10.0, stop=(3.0, 6.0))
     iv = build_intervals(SensorStreams(odom=odom, imu=imu), FusionConfig())
-    assert iv.twist
+    assert wheel_grid(iv).twist
     assert FusionConfig().wheel_model(True)[0] == odom_twist_noise()
     assert FusionConfig().wheel_model(False)[0] == WheelNoise()
 

@@ -7,6 +7,8 @@ from fusion_vo.backends import FusionConfig, SensorStreams, build_intervals
 from fusion_vo.backends.timeline import node_times, time_order
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import VisualIncrement, WheelConfig, WheelData
+from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.wheel import wheel_grid
 
 CFG = WheelConfig(4096.0, 0.05, 0.05, 0.4)
 PER_TICK = 2 * np.pi * 0.05 / 4096.0
@@ -42,9 +44,9 @@ def test_interval_travel_is_exact_for_jittered_rates():
     tw = np.sort(np.arange(0, 3, 0.02) + rng.uniform(-0.004, 0.004, 150))
     cam = np.arange(0.05, 2.9, 0.05) + rng.uniform(-0.002, 0.002, 57)
     iv = build_intervals(SensorStreams(visual=_visual(cam), wheel=_wheel(tw)), FusionConfig())
-    inside = iv.wheel_ok
+    inside = wheel_grid(iv).ok
     assert inside.sum() > 50
-    np.testing.assert_allclose(iv.wheel_dl[inside], 0.5 * iv.dt[inside], atol=2 * PER_TICK)
+    np.testing.assert_allclose(wheel_grid(iv).dl[inside], 0.5 * iv.dt[inside], atol=2 * PER_TICK)
 
 
 def test_out_of_order_samples_are_reordered_and_counted():
@@ -57,7 +59,7 @@ def test_out_of_order_samples_are_reordered_and_counted():
     a = build_intervals(SensorStreams(wheel=w), FusionConfig())
     b = build_intervals(SensorStreams(wheel=shuffled), FusionConfig())
     assert b.counts["wheel"].reordered == 2 and a.counts["wheel"].reordered == 0
-    np.testing.assert_array_equal(a.wheel_dl, b.wheel_dl)
+    np.testing.assert_array_equal(wheel_grid(a).dl, wheel_grid(b).dl)
     idx, n_re, n_dup = time_order(np.array([0.0, 0.2, 0.1, 0.2, 0.3]))
     assert (n_re, n_dup) == (1, 1) and list(idx) == [0, 2, 1, 4]
 
@@ -139,8 +141,8 @@ def test_camera_increments_are_checked_counted_and_put_in_time_order():
     count = iv.counts["camera"]
     assert (count.missing, count.gated, count.reordered, count.used) == (1, 3, 1, len(vis) - len(bad))
     kept = [inc for i, inc in enumerate(clean) if i not in bad]  # in time order, the swap undone
-    np.testing.assert_array_equal(iv.vis_delta[:, 2], [inc.delta[2] for inc in kept])
-    np.testing.assert_allclose(iv.t[iv.vis_i0], [inc.t0 for inc in kept], atol=1e-9)
-    np.testing.assert_allclose(iv.t[iv.vis_i1], [inc.t1 for inc in kept], atol=1e-9)
+    np.testing.assert_array_equal(camera_grid(iv).delta[:, 2], [inc.delta[2] for inc in kept])
+    np.testing.assert_allclose(iv.t[camera_grid(iv).i0], [inc.t0 for inc in kept], atol=1e-9)
+    np.testing.assert_allclose(iv.t[camera_grid(iv).i1], [inc.t1 for inc in kept], atol=1e-9)
     # the intervals of the dropped increments are not covered by the camera: a note says so only when long
     assert not any("camera lost" in note for note in iv.notes)

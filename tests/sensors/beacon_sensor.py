@@ -61,13 +61,13 @@ BEACON = BeaconModel()
 
 
 def on_grid(iv, streams, config, counts):
-    """Each range at the nearest node within ``max_gap``: ``iv.extra["beacon"] = (node, beacon, distance)``."""
+    """Each range at the nearest node within ``max_gap``: ``iv.sensors["beacon"] = (node, beacon, distance)``."""
     data = streams.extra["beacon"]
     T = iv.t
     n = np.clip(np.searchsorted(T, data.t), 1, len(T) - 1)
     n = np.where(np.abs(T[n - 1] - data.t) < np.abs(T[n] - data.t), n - 1, n)
     near = np.abs(T[n] - data.t) <= config.max_gap
-    iv.extra["beacon"] = (n[near], data.beacon[near], data.distance[near])
+    iv.sensors["beacon"] = (n[near], data.beacon[near], data.distance[near])
     count = counts.setdefault("beacon", SensorCount())
     count.used += int(near.sum())
     count.missing += int((~near).sum())
@@ -75,9 +75,9 @@ def on_grid(iv, streams, config, counts):
 
 def readings(iv, config):
     """The ranges as readings of the pose at their nodes, each with its beacon's position."""
-    if "beacon" not in iv.extra:
+    if "beacon" not in iv.sensors:
         return []
-    nodes, beacon, distance = iv.extra["beacon"]
+    nodes, beacon, distance = iv.sensors["beacon"]
     section = config.section("beacon")
     positions = np.asarray(section.positions, dtype=np.float64).reshape(-1, 2)
     return [Readings("beacon", BEACON, nodes, nodes, distance, section.sigma**2,

@@ -64,7 +64,7 @@ SECOND_BASE = ScaledOdometryModel()
 
 
 def on_grid(iv, streams, config, counts):
-    """Distance and turn over each node interval the samples cover: ``iv.extra["second_base"] = (ok, d, θ)``."""
+    """Distance and turn over each node interval the samples cover: ``iv.sensors["second_base"] = (ok, d, θ)``."""
     data = streams.extra["second_base"]
     t = np.asarray(data.t, dtype=np.float64)
     dt = np.diff(t)
@@ -72,7 +72,7 @@ def on_grid(iv, streams, config, counts):
     turn = np.concatenate([[0.0], np.cumsum(data.w[:-1] * dt)])
     T = iv.t
     ok = (T[:-1] >= t[0]) & (T[1:] <= t[-1])
-    iv.extra["second_base"] = (ok, np.diff(np.interp(T, t, dist)), np.diff(np.interp(T, t, turn)))
+    iv.sensors["second_base"] = (ok, np.diff(np.interp(T, t, dist)), np.diff(np.interp(T, t, turn)))
     count = counts.setdefault("second_base", SensorCount())
     count.used += int(ok.sum())
     count.missing += int((~ok).sum())
@@ -80,9 +80,9 @@ def on_grid(iv, streams, config, counts):
 
 def readings(iv, config):
     """The arcs as readings of the motion, their noise carried from the arc's coordinates to the increment's."""
-    if "second_base" not in iv.extra:
+    if "second_base" not in iv.sensors:
         return []
-    ok, d, th = iv.extra["second_base"]
+    ok, d, th = iv.sensors["second_base"]
     k = np.flatnonzero(ok)
     noise = config.section("second_base")
     xi = np.stack([d[k], np.zeros(len(k)), th[k]], axis=1)

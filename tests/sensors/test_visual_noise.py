@@ -15,6 +15,7 @@ from fusion_vo.backends.timeline import build_intervals  # noqa: E402
 from fusion_vo.config.files import validate  # noqa: E402
 from fusion_vo.errors import InputError  # noqa: E402
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams  # noqa: E402
+from fusion_vo.sensors.visual import camera_grid  # noqa: E402
 
 ESTIMATE = {"visual_noise": {"estimate": True}}
 
@@ -37,15 +38,15 @@ def test_recovers_the_scale_and_the_frame_error_of_a_known_camera():
     _, streams = _drive(0.5, 4.0)
     stated = np.array([v.covariance[2, 2] for v in streams.visual if v.ok])
     iv = build_intervals(streams.select(["camera", "imu", "wheel"]), FusionConfig.from_dict(ESTIMATE))
-    e = iv.visual_noise
+    e = camera_grid(iv).noise
     assert e.intervals > 1100
     assert e.scale == pytest.approx(0.25, rel=0.2) and e.scale_se < 0.04
     assert e.correlation == pytest.approx(-0.25, abs=0.1) and e.correlation_se < 0.075
     assert e.scale_applied and e.frame_error_applied
-    assert iv.visual_frame_error == pytest.approx(0.5, abs=0.2)
+    assert camera_grid(iv).frame_error == pytest.approx(0.5, abs=0.2)
     # the increments' heading variance is the estimate times the stated one; their translation as stated
-    assert np.median(iv.vis_cov[:, 2, 2]) == pytest.approx(e.scale * np.median(stated), rel=0.05)
-    assert np.median(iv.vis_cov[:, 0, 0]) == pytest.approx(0.0015**2, rel=0.05)
+    assert np.median(camera_grid(iv).cov[:, 2, 2]) == pytest.approx(e.scale * np.median(stated), rel=0.05)
+    assert np.median(camera_grid(iv).cov[:, 0, 0]) == pytest.approx(0.0015**2, rel=0.05)
     assert any("lag-1 correlation" in n and "used: scale and frame error" in n for n in iv.notes), iv.notes
 
 
@@ -53,10 +54,10 @@ def test_independent_honest_increments_keep_their_noise():
     """Truth: scale 1, no correlation. Measured: 1.103 ± 0.089, correlation +0.013 ± 0.054 (f = 0)."""
     _, streams = _drive(0.0, 1.0)
     iv = build_intervals(streams.select(["camera", "imu"]), FusionConfig.from_dict(ESTIMATE))
-    e = iv.visual_noise
+    e = camera_grid(iv).noise
     assert e.scale == pytest.approx(1.0, rel=0.2)
     assert abs(e.correlation) < 0.1 and e.frame_error < 0.2
-    assert iv.visual_frame_error < 0.2
+    assert camera_grid(iv).frame_error < 0.2
 
 
 def test_without_a_gyro_or_with_too_few_intervals_it_does_nothing_and_says_so():
@@ -65,11 +66,11 @@ def test_without_a_gyro_or_with_too_few_intervals_it_does_nothing_and_says_so():
     for sensors, words in ((["camera", "wheel"], "needs the camera and the gyro"),
                            (["camera", "imu"], "fewer than visual_noise.min_intervals (200)")):
         iv = build_intervals(streams.select(sensors), config)
-        assert not iv.visual_noise.scale_applied and iv.visual_frame_error == 0.0
+        assert not camera_grid(iv).noise.scale_applied and camera_grid(iv).frame_error == 0.0
         assert any(words in n for n in iv.notes), iv.notes
         reference = build_intervals(streams.select(sensors), FusionConfig())
-        assert np.array_equal(iv.vis_cov, reference.vis_cov)
-        assert reference.visual_noise is None
+        assert np.array_equal(camera_grid(iv).cov, camera_grid(reference).cov)
+        assert camera_grid(reference).noise is None
 
 
 def test_every_backend_fuses_the_estimate_as_if_configured():
