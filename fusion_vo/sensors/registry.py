@@ -3,7 +3,8 @@
 A :class:`Sensor` gathers everything about one sensor that the rest of the library needs: where its data
 lives in a recording and how it is read, its field of :class:`~fusion_vo.backends.timeline.SensorStreams`,
 its configuration section, how its samples become measurements on the node grid
-(:func:`~fusion_vo.backends.timeline.build_intervals`), and its contributions to the EKF
+(:func:`~fusion_vo.backends.timeline.build_intervals`; kept in ``Intervals.sensors[name]``, a container its module
+defines), and its contributions to the EKF
 (:func:`~fusion_vo.backends.ekf.step_blocks`) and to the factor graph
 (:class:`~fusion_vo.backends.graph_builder.GraphBuilder`). The timeline, both backends, ``SensorStreams`` and
 the recording reader iterate :func:`sensors` instead of naming sensors, so adding a sensor is one module
