@@ -172,7 +172,8 @@ class Intervals:
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
         ``initial_pose``, taken as exact.
     states : tuple of registry.State
-        The state variables the sensors with data add to the backends (:class:`fusion_vo.sensors.registry.State`).
+        The state variables the sensors add to the backends (:class:`fusion_vo.sensors.registry.State`): those of
+        the sensors with data, or in streaming use the run's.
     """
 
     t: np.ndarray
@@ -199,7 +200,7 @@ class Intervals:
 
     @property
     def extra(self) -> dict:
-        """:attr:`sensors` (the name it had for sensors registered outside the library)."""
+        """:attr:`sensors`, under the name a sensor registered outside the library may also use."""
         return self.sensors
 
     @property
