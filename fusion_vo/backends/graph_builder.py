@@ -377,7 +377,7 @@ def initial_calibration(iv: Intervals) -> dict:
     wheel_yaw = wheel_xy = None
     if iv.uses("wheel"):
         inc = arc_increment(whl.dl, whl.dr, whl.base)
-        yaw_ok = whl.ok if whl.yaw_ok is None else whl.ok & whl.yaw_ok
+        yaw_ok = whl.ok & whl.yaw_ok
         wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
         wheel_xy = np.where(whl.ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
     ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw

@@ -82,9 +82,9 @@ class LiveHeadingMonitor:
     # ------------------------------------------------------------------ intervals
     def add(self, iv: Intervals) -> None:
         """Keep one two-node interval (raw, before any masking); it must start where the last one ended."""
-        cam = camera_grid(iv)
         if not self.enabled:
             return
+        cam = camera_grid(iv)
         fields = _split(iv)
         if not self._t:
             self._t = [float(iv.t[0])]
@@ -110,10 +110,10 @@ class LiveHeadingMonitor:
 
     def update(self, index: int, iv: Intervals) -> None:
         """Interval number ``index`` (counting every interval ever added), rebuilt with late data."""
-        cam = camera_grid(iv)
         pos = index - self._dropped_before
         if not self.enabled or pos < 0 or pos >= len(self._t) - 1:
             return
+        cam = camera_grid(iv)
         nodes, intervals = _split(iv)
         for name, v in nodes.items():
             if name in self._node:
@@ -290,10 +290,9 @@ def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]
     summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s
     (``docs/decisions/0023-monitor-removes-the-gyro-bias-first.md``).
     """
-    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
-
     if not iv.uses("gyro"):
         return None, False
+    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     dt = iv.dt
     if iv.uses("wheel"):
         still = at_rest(iv, config) & imu.gyro_ok

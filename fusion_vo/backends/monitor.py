@@ -394,9 +394,9 @@ def drop_visual_increments(iv, keep: np.ndarray) -> None:
     """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
     estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
     frame too. The other sensors carry the estimate there."""
-    cam = camera_grid(iv)
     if keep.all():
         return
+    cam = camera_grid(iv)
     cam.i0, cam.i1 = cam.i0[keep], cam.i1[keep]
     cam.delta, cam.cov = cam.delta[keep], cam.cov[keep]
     if iv.counts.get("camera") is not None:  # the live monitor's window has no counts

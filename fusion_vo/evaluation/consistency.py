@@ -38,8 +38,6 @@ from fusion_vo.backends.timeline import build_intervals
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
-from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import wheel_grid
 
 #: the fused trajectories whose NEES is computed
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
@@ -113,10 +111,7 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     """Sensor -> (dof, (M, 2) rows ``(t, NIS)``) over one EKF pass (:func:`leave_one_out_nis` at every step)."""
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
-    cam, whl = camera_grid(iv), wheel_grid(iv)
-    kv, kb = ekf_mod.calibration_observable(iv)
-    f = ekf_mod.PlanarEkf(config, iv.camera_height, kv, kb, whl.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                          states=iv.states, camera=len(cam.i0) > 0, frame_error=cam.frame_error)
+    f = ekf_mod.filter_for(iv, config)  # the filter of a batch run (ekf.run_ekf)
     meas = ekf_mod.interval_measurements(iv, config)
     out: dict[str, tuple[int, list]] = {}
     for k in range(iv.n_steps):
