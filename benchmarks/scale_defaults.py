@@ -172,12 +172,13 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
     blocks = meas["readings"].start(f)
     if blocks:
         f.update(blocks)
+    kv = f.columns["visual_scale"].start
     out = np.empty(iv.n_steps + 1)
-    out[0] = f.x[ekf.KV]
+    out[0] = f.x[kv]
     for k in range(iv.n_steps):
         f.predict(iv.dt[k], ekf.frame_error_cov(meas, k))
         f.update(ekf.step_blocks(f, meas, k))
-        out[k + 1] = f.x[ekf.KV]
+        out[k + 1] = f.x[kv]
     return out
 
 

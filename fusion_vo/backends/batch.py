@@ -31,9 +31,10 @@ import numpy as np
 
 from fusion_vo import backends
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import calibration_priors, run_ekf
+from fusion_vo.backends.ekf import run_ekf
 from fusion_vo.backends.pauses import chain, cuts, find_pauses, pause_notes, sample_times, spans_time, split
 from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
+from fusion_vo.backends.states import calibration_priors
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
 from fusion_vo.consistency.stage import check_streams
@@ -208,7 +209,7 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     if delay is not None:
         iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
         result.time_offsets["odom_delay"] = float(delay)
-    result.priors = calibration_priors(iv, config)
+    result.priors = calibration_priors(iv)
     result.timing["timeline"] = time.process_time() - t0
     result.inconsistent = [ep.as_dict() for ep in iv.episodes]
     noise = camera_grid(iv).noise

@@ -326,9 +326,10 @@ def _state_priors(data: Any, errors: list) -> dict[str, StatePrior]:
     defaults the registered ones; problems are appended to ``errors``."""
     data = {} if data is None else data
     given = data if isinstance(data, dict) else {}
-    # an instance's states only when configured (its registered prior applies otherwise)
+    # an instance's states only when configured (its registered prior applies otherwise); a state with a rule
+    # (the built-in calibrations) is configured in its sensor's section
     known = {state.name: state for s in registry.sensors() for state in s.states
-             if not registry.is_instance(s.name) or state.name in given}
+             if state.rule is None and (not registry.is_instance(s.name) or state.name in given)}
     if not isinstance(data, dict):
         errors.append({"type": "dict_type", "loc": ("states",), "input": data})
         return {}

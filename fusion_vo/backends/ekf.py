@@ -1,16 +1,17 @@
 """Extended Kalman filter over the node grid, with a Rauch–Tung–Striebel smoother.
 
-State (10)::
+State::
 
-    x = [p_x, p_y, ψ,  v_x, v_y, ω,  b_g,  k_v, k_b,  o_ψ,  k_r]
+    x = [p_x, p_y, ψ,  v_x, v_y, ω,  s_1 ... s_m]
 
 pose of B in W, the body twist ``u = (v_x, v_y, ω)`` *averaged over the interval that ends at the node*,
-the gyro bias, the visual scale ``k_v = h_configured / h_true`` and the wheel-base factor
-``k_b = b_true / b_configured`` (these two are frozen when self-calibration is off), the offset
-``o_ψ`` of the AHRS heading from the true heading, and the wheels' distance scale
-``k_r = r_configured / r_true`` (their common radius error; frozen with self-calibration off).
-A registered sensor's own state variables (:class:`fusion_vo.sensors.registry.State`: a compass offset,
-a second camera's scale) follow them while its data is used, each with its prior and random walk.
+and the run's scalar states ``s_i`` (:func:`fusion_vo.backends.states.run_states`, in the registry's order),
+each declared by its sensor (:class:`fusion_vo.sensors.registry.State`): the visual scale
+``k_v = h_configured / h_true``, the wheel-base factor ``k_b = b_true / b_configured``, the wheels' distance
+scale ``k_r = r_configured / r_true`` (their common radius error), the gyro bias ``b_g``, the offset ``o_ψ`` of
+the AHRS heading from the true heading, and any a registered sensor adds (a compass offset, a second camera's
+scale). Each starts at its prior ``N(initial, σ²)``; one the run does not estimate (``k_v`` and ``k_b`` with
+self-calibration off or unobservable) is frozen: variance 10⁻¹², no random walk.
 
 Camera and wheels measure only the ratio ``k_v / k_r``; their common scale is set by the priors on
 ``k_v`` (``height_sigma`` of ``cam0/sensor.yaml``) and ``k_r`` (``radius_sigma`` of
@@ -20,16 +21,14 @@ Motion model (constant twist, interval ``Δt = T_{k+1} - T_k``)::
 
     u_{k+1} = u_k + w_u,                   w_u ~ N(0, diag(σ_a², σ_lat², σ_α²) Δt)
     pose_{k+1} = pose_k ⊕ exp(u_{k+1} Δt)  (SE(2) exponential: exact circular arc)
-    b_{k+1} = b_k + w_b,                   w_b ~ N(0, σ_bw² Δt)
-    k_{k+1} = k_k + w_k,                   w_k ~ N(0, q_k² Δt)
-    o_{k+1} = o_k + w_o,                   w_o ~ N(0, σ_ow² Δt)
+    s_{k+1} = s_k + w_s,                   w_s ~ N(0, q_s² Δt)   (each state's random walk q_s)
 
 ``F = ∂f/∂x`` and ``Q = G diag(...) Gᵀ`` with ``G = ∂f/∂w`` (the twist noise also moves the pose).
 
 Measurements over an interval (all sensors are integrated onto the same interval by
 :mod:`fusion_vo.backends.timeline`, so each one constrains the twist of *that* interval). Each is the
 sensor's measurement model of :mod:`fusion_vo.sensors` (:meth:`PlanarEkf.block`: the prediction and
-Jacobians of the model, whose arguments are read from the state, :data:`STATE_COLUMNS`), the same one
+Jacobians of the model, whose arguments are read from the state, :attr:`PlanarEkf.columns`), the same one
 the factor graph uses; the interval models are evaluated per unit time, on the twist::
 
     visual   z = log(Δ_vis)/Δt          h = (k_v v_x, k_v v_y, ω)       R = Σ_vis / Δt²
@@ -109,28 +108,24 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf_adapter import EkfReadings
 from fusion_vo.backends.fixes import EkfFixes
 from fusion_vo.backends.result import FusionResult, InnovationLog, SensorCount
+from fusion_vo.backends.states import calibration, run_states
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
-from fusion_vo.sensors import registry
-from fusion_vo.sensors.imu import imu_grid
 from fusion_vo.sensors.model import Gate, MeasurementModel
-from fusion_vo.sensors.range import range_grid
+from fusion_vo.sensors.registry import StateContext
 from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import wheel_grid
 
 logger = logging.getLogger(__name__)
 
-PX, PY, YAW, VX, VY, W, BG, KV, KB, AO, KR = range(11)
-DIM = 11
+PX, PY, YAW, VX, VY, W = range(6)
+#: the pose and the twist; the run's scalar states follow
+DIM = 6
 #: size of a camera frame error (x, y, ψ of a visual increment)
 FRAME_ERRORS = 3
-#: state columns of each measurement-model argument (:mod:`fusion_vo.sensors.model`); the interval
-#: models are evaluated per unit time, on the twist state
-STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "pose": slice(PX, YAW + 1),
-                 "gyro_bias": slice(BG, BG + 1),
-                 "visual_scale": slice(KV, KV + 1), "wheel_scale": slice(KR, KR + 1),
-                 "wheel_base_factor": slice(KB, KB + 1), "ahrs_offset": slice(AO, AO + 1)}
+#: state columns of the measurement-model arguments every run has (:mod:`fusion_vo.sensors.model`); the
+#: interval models are evaluated per unit time, on the twist state. Each scalar state is the column of its name.
+STATE_COLUMNS = {"motion": slice(VX, W + 1), "heading": slice(YAW, YAW + 1), "pose": slice(PX, YAW + 1)}
 _FROZEN_VAR = 1e-12
 _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected outright; between, down-weighted
 #: a measurement row with at least this variance carries no information (a component the consistency monitor
@@ -146,16 +141,10 @@ class PlanarEkf:
     config : FusionConfig
     camera_height : float, optional
         Height the visual increments assume (for range updates).
-    estimate_visual_scale, estimate_wheel_base : bool, optional
-        Whether the two calibration factors are observable (default: as ``config.self_calibration``);
-        the wheels' distance scale is estimated with the wheel base.
-    visual_scale_sigma, wheel_scale_sigma : float, optional
-        Priors of ``k_v`` and ``k_r`` (default: ``config.visual_scale_sigma``, ``config.wheel_scale_sigma``).
-    twist : bool
-        The wheels are an odometry twist (``config.odom`` noise and ``odom_base_sigma`` prior).
-    states : tuple of registry.State
-        State variables the sensors add (:class:`fusion_vo.sensors.registry.State`), appended to the state
-        vector after the built-in ones with their prior and random walk.
+    states : tuple of registry.State, optional
+        The run's scalar states (:func:`fusion_vo.backends.states.run_states`), appended to the pose and twist
+        with their priors and random walks, frozen where not estimated. Default: those of a run that fuses
+        the camera, the wheels and the IMU with its AHRS (:func:`default_states`).
     camera : bool
         Visual increments are fused. With a frame error ``f > 0`` the state then ends with the camera's
         frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
@@ -165,23 +154,17 @@ class PlanarEkf:
         use gives 1 when the increments state their own (``CameraGrid.frame_cov``).
     """
 
-    def __init__(self, config: FusionConfig, camera_height: float | None = None,
-                 estimate_visual_scale: bool | None = None, estimate_wheel_base: bool | None = None,
-                 twist: bool = False, visual_scale_sigma: float | None = None,
-                 wheel_scale_sigma: float | None = None, initial_pose=None, initial_sigma=None, states=(),
-                 camera: bool = False, frame_error: float | None = None):
+    def __init__(self, config: FusionConfig, camera_height: float | None = None, initial_pose=None,
+                 initial_sigma=None, states=None, camera: bool = False, frame_error: float | None = None):
         # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
         from filterpy.kalman import ExtendedKalmanFilter
         from scipy.stats import chi2
 
         self.config = config
-        calib = config.self_calibration
-        self.estimate_kv = calib if estimate_visual_scale is None else calib and estimate_visual_scale
-        self.estimate_kb = calib if estimate_wheel_base is None else calib and estimate_wheel_base
         self.camera_height = camera_height
-        self.states = tuple(states)
+        self.states = tuple(default_states(config) if states is None else states)
         self.dim = dim = DIM + len(self.states)
-        #: state columns of each measurement-model argument: the built-in ones and the sensors' states
+        #: state columns of each measurement-model argument: the pose's, the twist's and each state's
         self.columns = dict(STATE_COLUMNS)
         for i, state in enumerate(self.states):
             self.columns[state.name] = slice(DIM + i, DIM + i + 1)
@@ -195,23 +178,17 @@ class PlanarEkf:
         self.kf = ExtendedKalmanFilter(dim_x=dim, dim_z=1)
         x = np.zeros(dim)
         x[:3] = config.initial_pose if initial_pose is None else initial_pose
-        x[KV] = x[KB] = x[KR] = 1.0
         var = np.zeros(dim)
+        #: each state's random-walk variance per second (0 for a frozen one)
+        self._walk = np.zeros(len(self.states))
         for i, state in enumerate(self.states):
             x[DIM + i] = state.initial
-            var[DIM + i] = state.sigma**2
+            var[DIM + i] = state.sigma**2 if state.estimated else _FROZEN_VAR
+            self._walk[i] = state.random_walk**2 if state.estimated else 0.0
         self.kf.x = x.reshape(dim, 1)
         var[:3] = 1e-10 if initial_sigma is None else np.square(initial_sigma)
         var[VX] = var[VY] = config.initial_velocity_sigma**2
         var[W] = 0.5**2
-        var[BG] = config.imu.gyro_bias_sigma**2
-        sv = config.visual_scale_sigma if visual_scale_sigma is None else visual_scale_sigma
-        sr = config.wheel_scale_sigma if wheel_scale_sigma is None else wheel_scale_sigma
-        var[KV] = sv**2 if self.estimate_kv else _FROZEN_VAR
-        var[KR] = sr**2 if self.estimate_kv and self.estimate_kb else _FROZEN_VAR
-        var[KB] = config.wheel_model(twist)[1] ** 2 if self.estimate_kb else _FROZEN_VAR
-        # the AHRS north is aligned to the initial heading; no offset walk: an AHRS trusted as absolute
-        var[AO] = config.imu.ahrs_yaw_sigma**2 if config.imu.ahrs_offset_walk > 0 else _FROZEN_VAR
         if self.frame_errors is not None:  # (no frame measured yet: their covariance comes with the first)
             var[self.frame_errors[0]] = var[self.frame_errors[1]] = _FROZEN_VAR
         self.kf.P = np.diag(var)
@@ -237,7 +214,7 @@ class PlanarEkf:
 
     # ------------------------------------------------------------------ prediction
     def reset_state(self, name: str, value: float, sigma: float) -> None:
-        """Start the scalar state ``name`` (a column of :data:`STATE_COLUMNS`) again at ``value`` with standard
+        """Start the scalar state ``name`` (one of :attr:`states`) again at ``value`` with standard
         deviation ``sigma`` and no correlation with the others (what was learned of it is forgotten)."""
         i = self.columns[name].start
         self.kf.x[i, 0] = value
@@ -276,16 +253,8 @@ class PlanarEkf:
         G[VX:W + 1] = np.eye(3)
         qv = np.array([cfg.ekf.accel_sigma, cfg.ekf.lateral_accel_sigma, cfg.ekf.yaw_accel_sigma]) ** 2 * dt
         Q = (G * qv) @ G.T
-        Q[BG, BG] += cfg.imu.gyro_random_walk**2 * dt
-        Q[AO, AO] += cfg.imu.ahrs_offset_walk**2 * dt
-        if self.estimate_kv:
-            Q[KV, KV] += cfg.ekf.visual_scale_random_walk**2 * dt
-        if self.estimate_kb:
-            Q[KB, KB] += cfg.ekf.scale_random_walk**2 * dt
-        if self.estimate_kv and self.estimate_kb:  # the wheels' radius factor, estimated as in __init__
-            Q[KR, KR] += cfg.ekf.scale_random_walk**2 * dt
-        for i, state in enumerate(self.states):
-            Q[DIM + i, DIM + i] += state.random_walk**2 * dt
+        for i, walk in enumerate(self._walk):
+            Q[DIM + i, DIM + i] += walk * dt
         x_new = x.copy()
         x_new[PX] += c * ax - s * ay
         x_new[PY] += s * ax + c * ay
@@ -453,13 +422,19 @@ def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
 
 
 def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
-    """The filter for the node grid ``iv`` at its first node: its calibrations estimated where observable
-    (:func:`calibration_observable`), their priors, the sensors' states and the camera's frame errors."""
-    cam, whl = camera_grid(iv), wheel_grid(iv)
-    kv_ok, kb_ok = calibration_observable(iv)
-    return PlanarEkf(config, iv.camera_height, kv_ok, kb_ok, whl.twist, iv.visual_scale_sigma, iv.wheel_scale_sigma,
-                     iv.initial_pose, iv.initial_sigma, iv.states, camera=len(cam.i0) > 0,
-                     frame_error=cam.frame_error if cam.frame_cov is None else 1.0)
+    """The filter for the node grid ``iv`` at its first node: the run's states (``iv.states``), the start pose
+    and the camera's frame errors."""
+    cam = camera_grid(iv)
+    return PlanarEkf(config, iv.camera_height, iv.initial_pose, iv.initial_sigma, iv.states,
+                     camera=len(cam.i0) > 0, frame_error=cam.frame_error if cam.frame_cov is None else 1.0)
+
+
+def default_states(config: FusionConfig) -> tuple:
+    """The states of a run fusing the camera, the wheels (encoder ticks) and the IMU with its AHRS, with the
+    configured priors: the filter's states when none are given."""
+    context = StateContext(config, frozenset({"camera", "wheel", "gyro", "ahrs"}), (True, True), False,
+                           config.visual_scale_sigma, config.wheel_scale_sigma)
+    return run_states(context)
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
@@ -501,7 +476,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     result.covariances["ekf"] = Ps[:, :3, :3].copy()
     counts = _merge_counts(iv.counts, ekf.counts)
     result.counts["ekf"] = counts
-    result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv, config)
+    result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv)
     result.innovations["ekf"] = ekf.innovations.table()
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:
@@ -510,25 +485,10 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
         result.trajectories["ekf_smoothed"] = PoseData(iv.t.copy(), xsm[:, :3].copy())
         result.covariances["ekf_smoothed"] = Psm[:, :3, :3].copy()
         result.counts["ekf_smoothed"] = counts
-        result.calibration["ekf_smoothed"] = _calibration(xsm[-1], Psm[-1], iv, config)
+        result.calibration["ekf_smoothed"] = _calibration(xsm[-1], Psm[-1], iv)
         result.timing["ekf_smoothed"] = time.process_time() - t1
     result.notes.extend(iv.notes)
     return result
-
-
-def calibration_observable(iv: Intervals) -> tuple[bool, bool]:
-    """Whether the visual scale and the wheel base can be told apart from the motion.
-
-    The visual scale needs an independent distance (wheels or the range finder) next to the camera;
-    the wheel base needs an independent heading change (camera, gyro, or a sensor that measures the heading:
-    the AHRS, a registered one declaring ``absolute_heading``) next to the wheels.
-    """
-    cam = len(camera_grid(iv).i0) > 0
-    wheel = iv.uses("wheel")
-    kv = cam and (wheel or range_grid(iv).ok.any())
-    kb = wheel and (cam or iv.uses("gyro") or any(s.gives_heading(iv) for s in registry.sensors()
-                                                   if s.absolute_heading))
-    return bool(kv), bool(kb)
 
 
 def rts_smooth(xs, Ps, x_prior, P_prior, Fs) -> tuple[np.ndarray, np.ndarray]:
@@ -550,61 +510,11 @@ def rts_smooth(xs, Ps, x_prior, P_prior, Fs) -> tuple[np.ndarray, np.ndarray]:
     return xsm, Psm
 
 
-def _calibration(x, P, iv: Intervals, config: FusionConfig) -> dict:
-    whl, imu = wheel_grid(iv), imu_grid(iv)
-    out = {}
-    if iv.uses("gyro"):
-        out.update(gyro_bias=float(x[BG]), gyro_bias_sigma=float(np.sqrt(P[BG, BG])))
-    kv_ok, kb_ok = calibration_observable(iv)
-    if config.self_calibration and kv_ok:
-        out["visual_scale"] = float(x[KV])
-        out["visual_scale_sigma"] = float(np.sqrt(P[KV, KV]))
-        if iv.camera_height:
-            out["camera_height"] = float(iv.camera_height / x[KV])
-    if config.self_calibration and kv_ok and kb_ok:
-        out["wheel_scale"] = float(x[KR])
-        out["wheel_scale_sigma"] = float(np.sqrt(P[KR, KR]))
-    if config.self_calibration and kb_ok:
-        out["wheel_base_factor"] = float(x[KB])
-        out["wheel_base_factor_sigma"] = float(np.sqrt(P[KB, KB]))
-        if not whl.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
-            out["wheel_base"] = float(whl.base * x[KB])
-    if imu.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
-        out["ahrs_offset"] = float(x[AO])
-        out["ahrs_offset_sigma"] = float(np.sqrt(P[AO, AO]))
-    for i, state in enumerate(iv.states):  # the sensors' own states
-        out[state.name] = float(x[DIM + i])
-        out[f"{state.name}_sigma"] = float(np.sqrt(P[DIM + i, DIM + i]))
-    return out
-
-
-def calibration_priors(iv: Intervals, config: FusionConfig) -> dict[str, dict]:
-    """The prior ``{"mean": m, "sigma": s}`` of every calibration state the backends estimate on ``iv``, under
-    the keys of their calibration estimates (:func:`_calibration`): the values :class:`PlanarEkf` starts from
-    and the graph's prior factors hold. ``camera_height`` and ``wheel_base`` are the configured values with the
-    σ of their factor, ``h σ_kv`` and ``b σ_kb``."""
-    whl, imu = wheel_grid(iv), imu_grid(iv)
-    out = {}
-    if iv.uses("gyro"):
-        out["gyro_bias"] = {"mean": 0.0, "sigma": float(config.imu.gyro_bias_sigma)}
-    kv_ok, kb_ok = calibration_observable(iv)
-    if config.self_calibration and kv_ok:
-        out["visual_scale"] = {"mean": 1.0, "sigma": float(iv.visual_scale_sigma)}
-        if iv.camera_height:
-            out["camera_height"] = {"mean": float(iv.camera_height),
-                                    "sigma": float(iv.camera_height * iv.visual_scale_sigma)}
-    if config.self_calibration and kv_ok and kb_ok:
-        out["wheel_scale"] = {"mean": 1.0, "sigma": float(iv.wheel_scale_sigma)}
-    if config.self_calibration and kb_ok:
-        sigma = float(config.wheel_model(whl.twist)[1])
-        out["wheel_base_factor"] = {"mean": 1.0, "sigma": sigma}
-        if not whl.twist:
-            out["wheel_base"] = {"mean": float(whl.base), "sigma": float(whl.base * sigma)}
-    if imu.ahrs_ok.any() and config.imu.ahrs_offset_walk > 0:
-        out["ahrs_offset"] = {"mean": 0.0, "sigma": float(config.imu.ahrs_yaw_sigma)}
-    for state in iv.states:
-        out[state.name] = {"mean": float(state.initial), "sigma": float(state.sigma)}
-    return out
+def _calibration(x, P, iv: Intervals) -> dict:
+    """The calibration report (:func:`fusion_vo.backends.states.calibration`) of the state ``x, P``."""
+    values = {st.name: x[DIM + i] for i, st in enumerate(iv.states)}
+    sigmas = {st.name: np.sqrt(P[DIM + i, DIM + i]) for i, st in enumerate(iv.states)}
+    return calibration(iv, values, sigmas)
 
 
 def _merge_counts(base: dict, extra: dict) -> dict:

@@ -114,10 +114,10 @@ from fusion_vo.backends.fixes import GraphFixes
 from fusion_vo.backends.graph_adapter import absolute_factor
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.measurements import PoseData
-from fusion_vo.sensors.wheel import wheel_grid
+from fusion_vo.backends.states import calibration
 from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors, ValuesMaker, group,
                                         pose_table)
-from fusion_vo.backends.graph_builder import B, FRAME_LETTER, GraphBuilder, R, S, W, X
+from fusion_vo.backends.graph_builder import FRAME_LETTER, GraphBuilder, X
 from fusion_vo.backends.residuals import sensor_nis
 from fusion_vo.backends.isam import Retired, current_value_lookup, freeze_custom_factors, isam_params, track_estimate, update_reweighted
 
@@ -387,40 +387,25 @@ def _seed_poses(values: gtsam.Values, initial: PoseData, builder: GraphBuilder) 
 
 
 def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
-    iv = builder.iv
-    whl = wheel_grid(iv)
-    out = {}
+    """The calibration report (:func:`fusion_vo.backends.states.calibration`): each estimated state's last
+    segment's variable."""
     last = int(builder.segment[-1])
-    if iv.uses("gyro") and values.exists(B(last)):
-        out["gyro_bias"] = float(values.atDouble(B(last)))
-    if builder.kv_on:
-        kv = float(values.atDouble(S(last)))
-        out["visual_scale"] = kv
-        if iv.camera_height:
-            out["camera_height"] = float(iv.camera_height / kv)
-    if builder.kb_on:
-        kb = float(values.atDouble(W(last)))
-        out["wheel_base_factor"] = kb
-        if not whl.twist:  # an odometry twist has no wheel base: the factor scales its yaw rate
-            out["wheel_base"] = float(whl.base * kb)
-    if builder.kr_on:
-        out["wheel_scale"] = float(values.atDouble(R(last)))
-    for st in builder.states:  # the sensors' own states
-        out[st.name] = float(values.atDouble(builder.state_key(st.name, last)))
-    return out
+    found = {st.name: values.atDouble(builder.state_key(st.name, last)) for st in builder.variables
+             if values.exists(builder.state_key(st.name, last))}
+    return calibration(builder.iv, found)
 
 
 def _state_sigmas(out: dict, builder: GraphBuilder, variances) -> None:
-    """``NAME_sigma`` in ``out`` for each of the sensors' own states (their last segment's variable), as the EKF
-    reports it; ``variances(keys)`` gives their marginal variances. Nothing when the marginals fail."""
-    if not builder.states:
+    """``NAME_sigma`` in ``out`` for each estimated state (its last segment's variable), as the EKF reports it;
+    ``variances(keys)`` gives their marginal variances. Nothing when the marginals fail."""
+    if not builder.variables:
         return
     last = int(builder.segment[-1])
     try:
-        var = variances([builder.state_key(st.name, last) for st in builder.states])
+        var = variances([builder.state_key(st.name, last) for st in builder.variables])
     except RuntimeError as exc:  # an indeterminate system: the estimates stand without their sigma
-        logger.warning("gtsam: no marginal variance of the sensors' states (%s)", exc)
+        logger.warning("gtsam: no marginal variance of the states (%s)", exc)
         return
-    for st, v in zip(builder.states, var):
+    for st, v in zip(builder.variables, var):
         out[f"{st.name}_sigma"] = float(np.sqrt(v))
 

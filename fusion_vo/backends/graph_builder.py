@@ -3,9 +3,11 @@
 Variables: ``X_k`` (:func:`X`) the Pose2 of B in W at graph node ``k`` (every ``keyframe_every``-th node of the
 grid, and every node with an absolute reading); ``F_k`` (:func:`F`) the camera's measured pose at node ``k`` when
 its readings state their frames' errors; per calibration segment ``c`` (``GraphConfig.calibration_interval``
-seconds of nodes) the gyro bias ``B_c``, the AHRS offset ``O_c``, the visual scale ``S_c``, the wheel-base factor
-``W_c``, the wheels' distance scale ``R_c`` (each while the run estimates it) and a variable of each state a
-sensor declares (:meth:`GraphBuilder.state_key`), tied between segments by their random walks.
+seconds of nodes) a variable of each scalar state the run estimates (:func:`fusion_vo.backends.states.run_states`:
+the gyro bias ``b_c``, the AHRS offset ``o_c``, the visual scale ``s_c``, the wheel-base factor ``w_c``, the wheels'
+distance scale ``r_c``, and any a registered sensor declares; :meth:`GraphBuilder.state_key`) with its prior on
+the first segment's, tied between segments by its random walk. A state the run does not estimate has no variable:
+the models take it at its initial value.
 
 :class:`GraphBuilder` turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node batches
 (:class:`NodeFactors`): the priors of the first node, the random walks of a new segment, the sensors' readings as
@@ -23,8 +25,8 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import calibration_observable
 from fusion_vo.backends.result import SensorCount
+from fusion_vo.backends.states import estimated
 from fusion_vo.backends.graph_adapter import GraphReadings, frame_poses, interval_factor, node_factor
 from fusion_vo.backends.graph_adapter import guess as readings_guess
 from fusion_vo.backends.timeline import Intervals, sensor_readings
@@ -40,26 +42,6 @@ logger = logging.getLogger(__name__)
 
 def X(k: int) -> int:
     return gtsam.symbol("x", k)
-
-
-def B(k: int) -> int:
-    return gtsam.symbol("b", k)
-
-
-def O(k: int) -> int:  # noqa: E743 (the symbol's letter)
-    return gtsam.symbol("o", k)
-
-
-def S(k: int) -> int:
-    return gtsam.symbol("s", k)
-
-
-def W(k: int) -> int:
-    return gtsam.symbol("w", k)
-
-
-def R(k: int) -> int:
-    return gtsam.symbol("r", k)
 
 
 #: GTSAM symbol letter of the camera's frame poses (:func:`F`)
@@ -85,7 +67,8 @@ def T_WS() -> int:
 _NO_INCREMENT = np.zeros(3)
 _NO_INCREMENT.flags.writeable = False
 
-#: GTSAM symbol letters of the sensors' own state variables (the built-in ones use x, b, o, s, w, r)
+#: GTSAM symbol letters of the states that name none of their own (:attr:`State.symbol
+#: <fusion_vo.sensors.registry.State.symbol>`), in the order the states come
 _STATE_LETTERS = "acdefghijklmnpqtuvyz"
 
 # --------------------------------------------------------------------------- graph construction
@@ -105,28 +88,24 @@ class NodeFactors:
 class GraphBuilder:
     """Turns :class:`~fusion_vo.backends.timeline.Intervals` into per-node factor batches."""
 
-    #: the variables' keys, for the sensors' graph steps (pose, gyro bias, AHRS offset, visual scale, wheel base
-    #: and radius factors of a segment; module docstring)
-    X, B, O, S, W, R = staticmethod(X), staticmethod(B), staticmethod(O), staticmethod(S), staticmethod(W), staticmethod(R)
-    F = staticmethod(F)
+    #: the variables' keys, for the sensors' graph steps (pose and camera frame of a node; module docstring)
+    X, F = staticmethod(X), staticmethod(F)
 
     def __init__(self, iv: Intervals, config: FusionConfig, offset: int = 0, t_origin: float | None = None,
-                 calibrate: tuple[bool, bool] | None = None, states: tuple | None = None):
-        """``offset``, ``t_origin``, ``calibrate`` and ``states`` let a stream be built one interval at a time:
-        local node ``n`` is variable ``X(offset + n)``, segments count from ``t_origin``, ``calibrate``
-        says which calibration factors are estimated (default: where observable in ``iv``) and ``states``
-        which sensors' state variables exist (default: ``iv.states``)."""
+                 states: tuple | None = None):
+        """``offset``, ``t_origin`` and ``states`` let a stream be built one interval at a time: local node ``n``
+        is variable ``X(offset + n)``, segments count from ``t_origin`` and ``states`` are the run's (default:
+        ``iv.states``)."""
         self.iv = iv
+        #: the run's scalar states (estimated or held); :attr:`variables`: those with variables
         self.states = tuple(iv.states if states is None else states)
-        # each state's variables: one letter of GTSAM's symbols per state, besides the built-in ones
-        self._state_letter = {st.name: _STATE_LETTERS[i] for i, st in enumerate(self.states)}
+        self.variables = estimated(self.states)
+        # each estimated state's variables: the letter it names, else the next free one of GTSAM's symbols
+        free = iter(_STATE_LETTERS)
+        self._state_letter = {st.name: st.symbol or next(free) for st in self.variables}
+        self._held = {st.name: float(st.initial) for st in self.states if not st.estimated}
         self.config = config
         self.offset = offset
-        if calibrate is None:
-            calibrate = calibration_observable(iv)
-        self.kv_on, self.kb_on = calibrate if config.self_calibration else (False, False)
-        # the wheels' distance scale: with the visual scale, only their ratio is measured
-        self.kr_on = self.kv_on and self.kb_on
         every = config.graph.keyframe_every
         nodes = np.arange(0, len(iv.t), every)
         if nodes[-1] != len(iv.t) - 1:
@@ -146,8 +125,6 @@ class GraphBuilder:
         # the same as Python lists: indexed once per node, faster than numpy scalars
         self._grid, self._segment, self._times = self.grid.tolist(), self.segment.tolist(), iv.t.tolist()
         self._kernels: dict[int, tuple] = {}  # rows -> ((name, width), GTSAM mEstimator) or None
-        # the AHRS offset variables exist with the IMU (an AHRS may report in any interval of a stream)
-        self.ahrs_offset_on = iv.uses("gyro") and config.imu.ahrs_offset_walk > 0
         self.counts: dict[str, SensorCount] = {k: SensorCount(**v.as_dict()) for k, v in iv.counts.items()}
         for c in self.counts.values():
             c.used = 0
@@ -211,22 +188,10 @@ class GraphBuilder:
               else gtsam.noiseModel.Diagonal.Sigmas(np.asarray(self.iv.initial_sigma, dtype=np.float64)))
         nf.factors.append(gtsam.PriorFactorPose2(X(0), pose, nm))
         nf.values[X(0)] = pose
-        priors = []  # (key, prior mean, prior sigma, initial value)
-        if self.iv.uses("gyro"):
-            priors.append((B(0), 0.0, cfg.imu.gyro_bias_sigma, est.get("gyro_bias", 0.0)))
-        if self.ahrs_offset_on:
-            priors.append((O(0), 0.0, cfg.imu.ahrs_yaw_sigma, est.get("ahrs_offset", 0.0)))
-        if self.kv_on:
-            priors.append((S(0), 1.0, self.iv.visual_scale_sigma, est.get("visual_scale", 1.0)))
-        if self.kb_on:
-            priors.append((W(0), 1.0, cfg.wheel_model(wheel_grid(self.iv).twist)[1], est.get("wheel_base_factor", 1.0)))
-        if self.kr_on:
-            priors.append((R(0), 1.0, self.iv.wheel_scale_sigma, est.get("wheel_scale", 1.0)))
-        for st in self.states:
-            priors.append((self.state_key(st.name, 0), st.initial, st.sigma, est.get(st.name, st.initial)))
-        for key, mean, sigma, guess in priors:
-            nf.factors.append(gtsam.PriorFactorDouble(key, mean, gtsam.noiseModel.Isotropic.Sigma(1, sigma)))
-            nf.values[key] = guess
+        for st in self.variables:  # each estimated state's prior, at its initial guess
+            key = self.state_key(st.name, 0)
+            nf.factors.append(gtsam.PriorFactorDouble(key, st.initial, gtsam.noiseModel.Isotropic.Sigma(1, st.sigma)))
+            nf.values[key] = est.get(st.name, st.initial)
         self._unary(nf, 0)
         return nf
 
@@ -281,19 +246,14 @@ class GraphBuilder:
 
     def state_variable(self, name: str, segment: int) -> int | None:
         """The variable of state ``name`` in calibration ``segment``, or None when the graph does not estimate it."""
-        builtin = {"gyro_bias": (self.iv.uses("gyro"), B), "ahrs_offset": (self.ahrs_offset_on, O),
-                   "visual_scale": (self.kv_on, S), "wheel_base_factor": (self.kb_on, W), "wheel_scale": (self.kr_on, R)}
-        if name in builtin:
-            on, letter = builtin[name]
-            return letter(segment) if on else None
         if name in self._state_letter:
             return self.state_key(name, segment)
         return None
 
     def state_initial(self, name: str) -> float:
         """The value a state the graph does not estimate is held at: its initial value (scales 1, offsets 0)."""
-        if name in ("visual_scale", "wheel_base_factor", "wheel_scale"):
-            return 1.0
+        if name in self._held:
+            return self._held[name]
         for st in registry.all_states():
             if st.name == name:
                 return float(st.initial)
@@ -304,42 +264,25 @@ class GraphBuilder:
         return X(self.offset + n)
 
     def state_key(self, name: str, segment: int) -> int:
-        """The variable of a sensor's state ``name`` (:class:`fusion_vo.sensors.registry.State`) in calibration
+        """The variable of the estimated state ``name`` (:class:`fusion_vo.sensors.registry.State`) in calibration
         ``segment``."""
         return gtsam.symbol(self._state_letter[name], segment)
 
     def _new_segment(self, nf: NodeFactors, c: int, estimate: dict, previous: int) -> None:
         """Bias and calibration variables of segment ``c``, tied to the ``previous`` segment (``c-1``, or an
         earlier one across a stretch without nodes) by random walks over the time between them."""
-        cfg = self.config
-        span = float(cfg.graph.calibration_interval) * (c - previous)
-        walks = []
-        if self.iv.uses("gyro"):
-            walks.append((B, cfg.imu.gyro_random_walk, estimate.get("gyro_bias", 0.0)))
-        if self.ahrs_offset_on:
-            walks.append((O, cfg.imu.ahrs_offset_walk, estimate.get("ahrs_offset", 0.0)))
-        if self.kv_on:
-            walks.append((S, cfg.ekf.visual_scale_random_walk, estimate.get("visual_scale", 1.0)))
-        if self.kb_on:
-            walks.append((W, cfg.ekf.scale_random_walk, estimate.get("wheel_base_factor", 1.0)))
-        if self.kr_on:
-            walks.append((R, cfg.ekf.scale_random_walk, estimate.get("wheel_scale", 1.0)))
-        for st in self.states:
-            walks.append((lambda c, name=st.name: self.state_key(name, c), st.random_walk,
-                          estimate.get(st.name, st.initial)))
-        for key, q, guess in walks:
-            sigma = max(q * np.sqrt(span), 1e-7)
+        span = float(self.config.graph.calibration_interval) * (c - previous)
+        for st in self.variables:
+            sigma = max(st.random_walk * np.sqrt(span), 1e-7)
             nm = gtsam.noiseModel.Isotropic.Sigma(1, sigma)
-            nf.factors.append(gtsam.BetweenFactorDouble(key(previous), key(c), 0.0, nm))
-            nf.values[key(c)] = guess
+            key = self.state_key(st.name, c)
+            nf.factors.append(gtsam.BetweenFactorDouble(self.state_key(st.name, previous), key, 0.0, nm))
+            nf.values[key] = estimate.get(st.name, st.initial)
 
     def segment_keys(self, n: int) -> list[int]:
         """Bias and calibration variables of node ``n``'s segment."""
         c = int(self.segment[n])
-        keys = [B(c)] if self.iv.uses("gyro") else []
-        keys += [O(c)] if self.ahrs_offset_on else []
-        keys += ([S(c)] if self.kv_on else []) + ([W(c)] if self.kb_on else []) + ([R(c)] if self.kr_on else [])
-        return keys + [self.state_key(st.name, c) for st in self.states]
+        return [self.state_key(st.name, c) for st in self.variables]
 
     def _unary(self, nf: NodeFactors, n: int) -> None:
         """The sensors' readings at node ``n`` (:func:`~fusion_vo.backends.graph_adapter.node_factor`)."""

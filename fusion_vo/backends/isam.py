@@ -17,7 +17,7 @@ import gtsam
 import numpy as np
 
 from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, ValuesMaker
-from fusion_vo.backends.graph_builder import B, F, GraphBuilder, NodeFactors, O, R, S, W, X
+from fusion_vo.backends.graph_builder import F, GraphBuilder, NodeFactors, X
 
 logger = logging.getLogger(__name__)
 
@@ -232,18 +232,9 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
 
 def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:
     """Running estimates of the bias and calibration for initial guesses of the next node."""
-    if builder.iv.uses("gyro"):
-        estimate["gyro_bias"] = isam.calculateEstimateDouble(B(int(builder.segment[n])))
-    if builder.ahrs_offset_on:
-        estimate["ahrs_offset"] = isam.calculateEstimateDouble(O(int(builder.segment[n])))
-    if builder.kv_on:
-        estimate["visual_scale"] = isam.calculateEstimateDouble(S(int(builder.segment[n])))
-    if builder.kb_on:
-        estimate["wheel_base_factor"] = isam.calculateEstimateDouble(W(int(builder.segment[n])))
-    if builder.kr_on:
-        estimate["wheel_scale"] = isam.calculateEstimateDouble(R(int(builder.segment[n])))
-    for st in builder.states:
-        estimate[st.name] = isam.calculateEstimateDouble(builder.state_key(st.name, int(builder.segment[n])))
+    segment = int(builder.segment[n])
+    for st in builder.variables:
+        estimate[st.name] = isam.calculateEstimateDouble(builder.state_key(st.name, segment))
     estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
 
 

@@ -84,12 +84,11 @@ class OnlineGraph:
     counters and the re-acquisition are this object's, so a worker thread decides as the caller's thread would.
     """
 
-    def __init__(self, config: FusionConfig, t_origin: float, calibrate: tuple[bool, bool], background: bool = False,
-                 states: tuple = (), gps=None):
+    def __init__(self, config: FusionConfig, t_origin: float, background: bool = False, states: tuple = (),
+                 gps=None):
         self.config = config
         self.t_origin = t_origin
-        self.calibrate = calibrate
-        self.states = states  # the sensors' own state variables (registry.State)
+        self.states = states  # the run's scalar states (registry.State)
         # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
         # a conditioning that Cholesky can report as indeterminate
         self.isam = gtsam.ISAM2(isam_params())
@@ -130,7 +129,7 @@ class OnlineGraph:
     def _node_factors(self, n: int, iv, first: bool, previous_pose):
         offset = self._offset(n)
         builder = GraphBuilder(iv, self.config, offset=offset, t_origin=self.t_origin,
-                                          calibrate=self.calibrate, states=self.states)
+                                          states=self.states)
         # the camera's frame poses made so far (fusion_vo.sensors.visual); a node rebuilt for late data makes
         # again the ones it made (their ties go with its old factors)
         self.frames -= self.frames_made.pop(n, set())

@@ -125,7 +125,7 @@ class FusionResult:
         pass: ``"ekf"``; the smoother and the graph do not test innovations).
     priors : dict[str, dict]
         Calibration state (the keys of ``calibration``) -> ``{"mean": m, "sigma": s}``, the prior the
-        backends start from (:func:`fusion_vo.backends.ekf.calibration_priors`).
+        backends start from (:func:`fusion_vo.backends.states.calibration_priors`).
     time_offsets : dict[str, float]
         Clock offsets the run estimated and corrected [s]: ``odom_delay``, the odometry twist's delay behind
         the gyro (:func:`fusion_vo.backends.batch.synchronise_odometry`).

@@ -14,7 +14,6 @@ from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
-from fusion_vo.sensors import registry
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate
 
@@ -336,19 +335,15 @@ class NodesMixin:
     def _first_node(self, t: float) -> None:
         cfg = self.config
         self._t_nodes.append(t)
-        kv, kb = self._calibration_flags()
         if self.backend == "ekf":
-            twist = "odom" in self.sensors and "wheel" not in self.sensors
-            self._ekf = PlanarEkf(cfg, self.camera_height, kv, kb, twist, visual_scale_sigma=self._priors.visual_scale_sigma,
-                                  wheel_scale_sigma=self._priors.wheel_scale_sigma, states=self._states,
-                                  camera="camera" in self.sensors,
+            self._ekf = PlanarEkf(cfg, self.camera_height, states=self._states, camera="camera" in self.sensors,
                                   frame_error=1.0 if self._camera_frame_errors else None)
             self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
             self._records.append(NodeRecord(None, None))
-            self._graph = self._online_graph(cfg, t, (kv, kb), self.background, self._states,
+            self._graph = self._online_graph(cfg, t, self.background, self._states,
                                              self._gps_lever if "gps" in self.sensors else None)
             pose, cov = self._graph.start()
             self._record(pose, cov)
@@ -444,9 +439,3 @@ class NodesMixin:
             counts.setdefault(s, SensorCount()).used += 1
         if offered:
             counts.setdefault("gps", SensorCount()).gated = offered - sum(s == "gps" for s in sensors)
-
-    def _calibration_flags(self) -> tuple[bool, bool]:
-        s = set(self.sensors)
-        wheel = bool(s & {"wheel", "odom"})
-        heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)  # a heading reference
-        return "camera" in s and (wheel or "range" in s), wheel and heading

@@ -122,6 +122,7 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor
 from fusion_vo.backends.result import FusionResult, SensorCount
+from fusion_vo.backends.states import live_context, run_states
 from fusion_vo.backends.timeline import SensorStreams, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
@@ -132,7 +133,7 @@ from fusion_vo.measurements import (
     WheelTicks,
 )
 from fusion_vo.sensors.gps import GpsModel
-from fusion_vo.sensors.wheel import curvature_observable, curvature_states
+from fusion_vo.sensors.wheel_states import curvature_observable, curvature_states
 
 from fusion_vo.backends.stream_history import HistoryMixin
 from fusion_vo.backends.stream_intake import IntakeMixin
@@ -273,7 +274,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._counted = {name: s.live.counted_as or name for name, s in self._intake.items()}
         # per-stream buffers of (t, payload) of those whose samples are interpolated at the nodes (no Live.take)
         self._buffers: dict[str, list] = {name: [] for name, s in self._intake.items() if s.live.take is None}
-        #: the sensors' own state variables (registry.State) in both backends
+        #: the run's scalar states (registry.State) in both backends
         self._states = registry.states(self.sensors, self.config)
         if wheel_config is not None:  # the wheels' curvature bias and its prior, as in a batch run
 
@@ -283,6 +284,9 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             self._states = curvature_states(self._states, self.config,
                                             wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
                                             wheel_config.wheel_base, observable)
+        # with the built-in calibrations, decided from the sensors declared (states.live_context)
+        self._states = run_states(live_context(self.config, self.sensors, self._priors.visual_scale_sigma,
+                                               self._priors.wheel_scale_sigma), self._states)
         self._visual: list[VisualIncrement] = []
         self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf

@@ -44,6 +44,7 @@ from fusion_vo.sensors import registry
 from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors import visual_noise
 from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
+from fusion_vo.backends.states import context_of, run_states
 from fusion_vo.sensors.gps import GPS_SNAP
 
 logger = logging.getLogger(__name__)
@@ -172,8 +173,8 @@ class Intervals:
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
         ``initial_pose``, taken as exact.
     states : tuple of registry.State
-        The state variables the sensors add to the backends (:class:`fusion_vo.sensors.registry.State`): those of
-        the sensors with data, or in streaming use the run's.
+        The scalar states both backends carry (:func:`fusion_vo.backends.states.run_states`): the built-in
+        calibrations, estimated or held, and the states of the sensors with data; in streaming use the run's.
     """
 
     t: np.ndarray
@@ -375,6 +376,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):
                 notes.append(f"{name} unavailable from {when(a, T)} to {when(b, T)}")
+    iv.states = run_states(context_of(iv, config), iv.states)  # with the built-in calibrations, decided here
     return iv
 
 

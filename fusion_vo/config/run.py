@@ -149,7 +149,7 @@ def run_model() -> type[Section]:
     from its class's, like ``fusion.odom``, shows its own)."""
     sections = tuple(s.config for s in registry.sensors()
                      if s.config is not None and s.config[0] not in FusionConfig.model_fields)
-    return _run_model(sensor_names(), sections, registry.all_states())
+    return _run_model(sensor_names(), sections, registry.configurable_states())
 
 
 @functools.cache

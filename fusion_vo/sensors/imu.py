@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import logging
 import math
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,7 +49,7 @@ from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData
 from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.sensors.wheel import at_rest
@@ -460,10 +461,30 @@ def _live_data(t, rows, fusion) -> ImuData:
                    None if any(x is None for x in q) else np.array(q), fusion.imu_T_BS, None, fusion.imu_noise)
 
 
+def _gyro_bias(state: State, context) -> State:
+    """``b_g``: estimated with the gyro, its prior and random walk from the ``imu`` section."""
+    imu = context.config.imu
+    return dataclasses.replace(state, sigma=imu.gyro_bias_sigma, random_walk=imu.gyro_random_walk,
+                               estimated="gyro" in context.used)
+
+
+def _ahrs_offset(state: State, context) -> State:
+    """``o_ψ``: estimated with AHRS headings when the ``imu`` section gives it a random walk (else the AHRS is
+    an absolute heading, held at offset 0), its prior the AHRS heading's σ."""
+    imu = context.config.imu
+    return dataclasses.replace(state, sigma=imu.ahrs_yaw_sigma, random_walk=imu.ahrs_offset_walk,
+                               estimated="ahrs" in context.used and imu.ahrs_offset_walk > 0)
+
+
+#: the gyro's bias ``b_g`` [rad/s] (:class:`GyroModel`) and the AHRS heading's offset ``o_ψ`` [rad]
+#: (:class:`AhrsModel`), states of every run
+GYRO_BIAS = State("gyro_bias", symbol="b", rule=_gyro_bias)
+AHRS_OFFSET = State("ahrs_offset", symbol="o", rule=_ahrs_offset)
+
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
-    grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings,
+    grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings, states=(GYRO_BIAS, AHRS_OFFSET),
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=has_heading,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
 ))

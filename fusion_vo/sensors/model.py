@@ -19,11 +19,11 @@ A model names its arguments; the backends know how to supply each name:
                        per unit time: readings and noise divided by the interval, ``dt = 1``);
 ``heading``            (1,) the pose's heading ``ψ`` at the measurement's time;
 ``pose``               (3,) the pose ``(x, y, ψ)`` at the measurement's time (world frame);
-``gyro_bias``          (1,) ``b_g`` [rad/s];
-``visual_scale``       (1,) ``k_v = h_configured / h_true``;
-``wheel_scale``        (1,) ``k_r = r_configured / r_true``;
-``wheel_base_factor``  (1,) ``k_b = b_true / b_configured``;
-``ahrs_offset``        (1,) ``o_ψ`` [rad].
+a state's name         (1,) a scalar state a sensor declares (:class:`fusion_vo.sensors.registry.State`), e.g.
+                       ``gyro_bias`` ``b_g`` [rad/s] and ``ahrs_offset`` ``o_ψ`` [rad] (:mod:`~fusion_vo.sensors.imu`),
+                       ``visual_scale`` ``k_v = h_configured / h_true`` (:mod:`~fusion_vo.sensors.visual`),
+                       ``wheel_scale`` ``k_r = r_configured / r_true`` and ``wheel_base_factor``
+                       ``k_b = b_true / b_configured`` (:mod:`~fusion_vo.sensors.wheel`).
 
 Every function is vectorised over leading axes (one row per measurement), so the EKF evaluates a
 model on one interval and the graph on all of its factors of one kind at once.
@@ -38,8 +38,8 @@ import numpy as np
 
 from fusion_vo.geometry.se2 import wrap_angle
 
-ARGUMENT_SIZES = {"motion": 3, "heading": 1, "pose": 3, "gyro_bias": 1, "visual_scale": 1, "wheel_scale": 1,
-                  "wheel_base_factor": 1, "ahrs_offset": 1}
+#: sizes of the arguments every backend supplies; every other argument is a sensor's scalar state
+ARGUMENT_SIZES = {"motion": 3, "heading": 1, "pose": 3}
 
 
 @dataclass(frozen=True)

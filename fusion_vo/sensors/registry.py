@@ -46,6 +46,7 @@ outside ``1..MAX_INSTANCE`` or written otherwise (``odom0``, ``odom01``, ``odom1
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -83,12 +84,31 @@ class State:
         Prior standard deviation (default 1; positive).
     random_walk : float
         Random walk [unit/√s] (default 0: a constant, estimated from all the data).
+    estimated : bool
+        Whether the backends estimate it (default True). When False it is held at ``initial``: the EKF keeps it in
+        its state vector with a negligible variance and no random walk, the factor graph makes no variable for it.
+    symbol : str or None
+        The letter of its variables among GTSAM's symbols (None: one the graph picks among the free letters).
+    rule : callable or None
+        ``rule(state, context) -> State``: the state as a run carries it, decided from the run's
+        :class:`StateContext` (its prior, random walk and ``estimated`` taken from the sensor's configuration
+        section and the observability of the run). A state with a rule is carried by every run, its sensor's
+        data used or not (another sensor's model may take it as an argument: the range finder's visual scale),
+        and is configured in its sensor's section, not in ``fusion: {states: ...}``. None: carried, as registered
+        or configured, while its sensor's data is used.
+    derived : callable or None
+        ``derived(value, sigma, iv) -> {name: (value, sigma)}``: further calibration figures its estimate gives on
+        the node grid ``iv`` (the camera height from the visual scale), reported beside it.
     """
 
     name: str
     initial: float = 0.0
     sigma: float = 1.0
     random_walk: float = 0.0
+    estimated: bool = True
+    symbol: str | None = None
+    rule: Callable | None = None
+    derived: Callable | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -104,7 +124,37 @@ class State:
         """This state with the prior and random walk of ``prior`` (itself when None)."""
         if prior is None:
             return self
-        return State(self.name, prior.initial, prior.sigma, prior.random_walk)
+        return dataclasses.replace(self, initial=prior.initial, sigma=prior.sigma, random_walk=prior.random_walk)
+
+
+@dataclass(frozen=True)
+class StateContext:
+    """What decides the states a run carries (:attr:`State.rule`), the same whether the run is a whole recording's
+    (:func:`~fusion_vo.backends.timeline.build_intervals`) or a live one's
+    (:class:`~fusion_vo.backends.streaming.StreamingFusion`, from the sensors it fuses).
+
+    Attributes
+    ----------
+    config : FusionConfig
+    used : frozenset of str
+        The measurement kinds the run fuses, as its counts name them (``camera``, ``wheel``, ``gyro``, ``ahrs``,
+        ``range``, ``gps``, a registered sensor's name).
+    observable : tuple of bool
+        Whether the visual scale and the wheel base can be told apart from the motion
+        (:func:`~fusion_vo.backends.states.calibration_observable`).
+    twist : bool
+        The wheels are an odometry twist (no wheel base of their own).
+    visual_scale_sigma, wheel_scale_sigma : float
+        The priors of the visual scale and of the wheels' distance scale the run's files give
+        (:func:`~fusion_vo.backends.timeline.scale_priors`).
+    """
+
+    config: Any
+    used: frozenset
+    observable: tuple
+    twist: bool
+    visual_scale_sigma: float
+    wheel_scale_sigma: float
 
 
 class StatePrior(Section):
@@ -233,7 +283,7 @@ class Sensor:
     absolute_heading : bool or callable
         The sensor measures the heading (absolute, or up to an offset it estimates as a state): beside the
         wheels it is a heading reference, so the wheel-base factor is estimated
-        (:func:`~fusion_vo.backends.ekf.calibration_observable`), as with the camera or the gyro. True: when its
+        (:func:`~fusion_vo.backends.states.calibration_observable`), as with the camera or the gyro. True: when its
         samples are used on the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that
         says so (the IMU: when its AHRS gives headings). Default False.
     live : Live or None
@@ -459,17 +509,39 @@ def get(name: str) -> Sensor:
 
 
 def states(used, config=None) -> tuple[State, ...]:
-    """The state variables the sensors named in ``used`` add (in :func:`sensors` order), with the prior and random
-    walk ``config`` (a :class:`~fusion_vo.backends.config.FusionConfig`) sets in its ``states`` section."""
+    """The state variables without a rule (:attr:`State.rule`) that the sensors named in ``used`` add (in
+    :func:`sensors` order), with the prior and random walk ``config`` (a
+    :class:`~fusion_vo.backends.config.FusionConfig`) sets in its ``states`` section."""
     used = set(used)
     configured = getattr(config, "states", None) or {}
     return tuple(state.configured(configured.get(state.name)) for s in sensors() if s.name in used
-                 for state in s.states)
+                 for state in s.states if state.rule is None)
+
+
+def carried(context: StateContext, plain) -> tuple[State, ...]:
+    """Every state a run carries, in :func:`sensors` order: each state with a rule as its rule gives it for
+    ``context``, and those of ``plain`` (the states without a rule of the sensors whose data the run uses,
+    :func:`states`, as the sensors' steps left them)."""
+    given = {st.name: st for st in plain}
+    out = []
+    for s in sensors():
+        for state in s.states:
+            if state.rule is not None:
+                out.append(state.rule(state, context))
+            elif state.name in given:
+                out.append(given.pop(state.name))
+    return tuple(out) + tuple(given.values())
 
 
 def all_states() -> tuple[State, ...]:
     """Every registered sensor's state variables, as registered (in :func:`sensors` order)."""
     return tuple(state for s in sensors() for state in s.states)
+
+
+def configurable_states() -> tuple[State, ...]:
+    """The registered states whose prior ``fusion: {states: {NAME: ...}}`` sets: those without a rule (a state
+    with one takes its prior from its sensor's section)."""
+    return tuple(state for state in all_states() if state.rule is None)
 
 
 def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:

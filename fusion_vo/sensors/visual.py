@@ -35,13 +35,14 @@ share of every increment's covariance (:func:`frame_covariances`).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
-from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
 
@@ -226,8 +227,27 @@ def _live_take(fusion, inc) -> None:
     fusion.take_increment(inc)
 
 
+def _visual_scale(state: State, context) -> State:
+    """``k_v``: estimated under self-calibration where another sensor measures distance (its observability, in
+    ``context``), with the prior the run's files give and the configured random walk."""
+    config = context.config
+    return dataclasses.replace(state, sigma=context.visual_scale_sigma,
+                               random_walk=config.ekf.visual_scale_random_walk,
+                               estimated=bool(config.self_calibration and context.observable[0]))
+
+
+def _camera_height(value: float, sigma: float, iv) -> dict:
+    """The camera height ``h / k_v`` a visual scale ``k_v`` gives (σ ``h σ_kv``), ``h`` the configured one."""
+    if not iv.camera_height:
+        return {}
+    return {"camera_height": (float(iv.camera_height / value), float(iv.camera_height * sigma))}
+
+
+#: the visual scale ``k_v = h_configured / h_true`` (:class:`VisualModel`), a state of every run
+VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale, derived=_camera_height)
+
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
-    grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings,
+    grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
     live=Live(_live_sample, values=_live_values, take=_live_take),
 ))

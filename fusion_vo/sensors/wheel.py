@@ -74,7 +74,6 @@ does not rotate, so its yaw rate is measured as ``0`` with standard deviation ``
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -87,7 +86,9 @@ from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
-from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.sensors.wheel_states import (CURVATURE, WHEEL_BASE_FACTOR, WHEEL_SCALE, curvature_observable,
+                                            curvature_states)
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.sensors.readings import ORDER, Readings
@@ -124,7 +125,8 @@ class WheelNoise(Section):
     estimate_curvature: bool | Literal["auto"] = Field("auto", description=(
         "Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`; encoder "
         "ticks only, an odometry twist has no radii). ``auto``: when a camera, an AHRS heading or GPS is fused "
-        "(:func:`curvature_observable`); on the generated drives, which all have a camera, it improves ``hard``, "
+        "(:func:`~fusion_vo.sensors.wheel_states.curvature_observable`); on the generated drives, which all have "
+        "a camera, it improves ``hard``, "
         "``height_error``, ``tilted`` and ``gps_outage`` and costs ``random60``'s EKF and iSAM2 4 %. With the "
         "wheels and a gyro alone the curvature's turn and the gyro's bias are told apart only by changes of speed, "
         "and the heading then follows the two priors' split."))
@@ -403,8 +405,8 @@ class CurvedWheelModel(WheelModel):
     ``h(δ, k_r, k_b, c) = (k_r d_x + q c d_ψ, k_r d_y, k_b d_ψ + c d_x)`` with ``q = b² k_b / (4 k_r)``;
     Jacobians as :class:`WheelModel`'s plus ``∂h_x/∂d_ψ = q c``, ``∂h_x/∂k_r = d_x - q c d_ψ / k_r``,
     ``∂h_x/∂k_b = q c d_ψ / k_b``, ``∂h_ψ/∂d_x = c`` and ``∂h/∂c = (q d_ψ, 0, d_x)ᵀ``. With relative radius
-    errors ``ε_l, ε_r`` (true radius ``r (1 + ε)``), ``c ≈ (ε_l - ε_r) / b``; its prior (:data:`CURVATURE`)
-    has mean 0 and ``σ_c = √2 σ_ε / b`` for independent per-wheel errors of standard deviation ``σ_ε``
+    errors ``ε_l, ε_r`` (true radius ``r (1 + ε)``), ``c ≈ (ε_l - ε_r) / b``; its prior
+    (:data:`~fusion_vo.sensors.wheel_states.CURVATURE`) has mean 0 and ``σ_c = √2 σ_ε / b`` for independent per-wheel errors of standard deviation ``σ_ε``
     (``radius_sigma / radius`` of ``wheel0/sensor.yaml``, else ``wheel_scale_sigma``). Constant over the
     run: a tyre's radius changes with wear and load over hours, not within a recording.
     Arguments ``motion``, ``wheel_scale``, ``wheel_base_factor``, ``wheel_curvature``; parameter
@@ -443,43 +445,6 @@ class CurvedWheelModel(WheelModel):
 WHEEL = WheelModel()
 CURVED_WHEEL = CurvedWheelModel()
 STANDSTILL = StandstillModel()
-#: the wheels' curvature bias ``c`` [rad/m] (:class:`CurvedWheelModel`), a state of encoder-tick wheels; its
-#: prior standard deviation is set per recording from the radius uncertainty and the wheel base
-#: (:func:`curvature_sigma`); 0.05 rad/m (1 % per wheel on a 0.28 m base) where no recording says it
-CURVATURE = State("wheel_curvature", initial=0.0, sigma=0.05, random_walk=1e-4)
-
-
-def curvature_sigma(radius_rel_sigma: float, wheel_base: float) -> float:
-    """``σ_c = √2 σ_ε / b`` [rad/m] of independent relative radius errors ``σ_ε`` on a wheel base ``b`` [m]."""
-    return float(math.sqrt(2.0) * radius_rel_sigma / wheel_base)
-
-
-def curvature_observable(camera: bool, ahrs: bool, gps: bool) -> bool:
-    """Whether the wheels' curvature bias is estimated under ``estimate_curvature: "auto"``: when a sensor
-    besides the wheels and the gyro measures the heading or its change (a camera, an AHRS heading, GPS).
-
-    The wheels' turn carries ``c`` per metre driven, the gyro's its bias ``b`` per second; with nothing else,
-    only their difference ``c v - b`` is measured, and the two separate only through changes of speed ``v``.
-    The estimate of that split then leans on the two priors, and the heading drifts at the split's error
-    (``docs/decisions/0013-no-curvature-without-a-heading-reference.md``).
-    """
-    return camera or ahrs or gps
-
-
-def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float,
-                     observable: bool = True) -> tuple:
-    """``states`` with the curvature bias only if ``config.wheel.estimate_curvature`` is true, or ``"auto"`` and
-    ``observable`` (:func:`curvature_observable`); with it, its prior set from the wheels' relative radius
-    uncertainty and base (:func:`curvature_sigma`), unless the configuration's ``states`` section sets it."""
-    wanted = config.wheel.estimate_curvature
-    if wanted is False or (wanted == "auto" and not observable):
-        return tuple(st for st in states if st.name != CURVATURE.name)
-    if CURVATURE.name in (getattr(config, "states", None) or {}):
-        return tuple(states)
-    sigma = curvature_sigma(radius_rel_sigma, wheel_base)
-    return tuple(dataclasses.replace(st, sigma=sigma) if st.name == CURVATURE.name else st for st in states)
-
-
 def wheel_model(states) -> WheelModel:
     """The wheel model with the curvature bias when ``wheel_curvature`` is among the estimated ``states``."""
     return CURVED_WHEEL if any(st.name == CURVATURE.name for st in states) else WHEEL
@@ -674,7 +639,7 @@ register(Sensor(
     pick=_pick_ticks, config=("wheel", WheelNoise),
     grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
-    states=(CURVATURE,), live=Live(_live_ticks, _live_ticks_data),
+    states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",
@@ -689,6 +654,6 @@ register(Sensor(
 __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
-    "WheelModel", "CurvedWheelModel", "StandstillModel", "WHEEL", "CURVED_WHEEL", "STANDSTILL", "CURVATURE",
-    "curvature_sigma", "curvature_observable", "curvature_states", "wheel_model", "gyro_turn",
+    "WheelModel", "CurvedWheelModel", "StandstillModel", "WHEEL", "CURVED_WHEEL", "STANDSTILL",
+    "wheel_model", "gyro_turn",
 ]

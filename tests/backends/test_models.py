@@ -7,14 +7,48 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig
-from fusion_vo.backends.ekf import DIM, PlanarEkf
+from fusion_vo.backends.ekf import PlanarEkf
 from fusion_vo.backends.factors import POSE_LETTERS, ModelFactor, ModelFactors, covariance_noise, group, pose_table
 from fusion_vo.backends.graph_adapter import pose_factor
-from fusion_vo.backends.graph_builder import B, O, R, T_WS, X, S, W
+from fusion_vo.backends.graph_builder import T_WS, X
 from fusion_vo.sensors import gps
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import STANDSTILL, WHEEL
+
+
+# the variables of the states, by their letters (the sensors' declarations: fusion_vo.sensors.registry.State)
+def B(k):
+    return gtsam.symbol("b", k)
+
+
+def O(k):  # noqa: E743
+    return gtsam.symbol("o", k)
+
+
+def S(k):
+    return gtsam.symbol("s", k)
+
+
+def W(k):
+    return gtsam.symbol("w", k)
+
+
+def R(k):
+    return gtsam.symbol("r", k)
+
+
+EKF = PlanarEkf(FusionConfig())
+DIM = EKF.dim
+
+
+def _state(pose_twist, **states):
+    """A state vector of the default filter: the pose and twist, then its scalar states by name (others 0)."""
+    x = np.zeros(DIM)
+    x[:6] = pose_twist
+    for name, value in states.items():
+        x[EKF.columns[name]] = value
+    return x
 
 
 def _predict(x, dt):
@@ -24,8 +58,18 @@ def _predict(x, dt):
     return ekf.x.copy(), F
 
 
+def test_the_default_filter_carries_the_built_in_states_after_pose_and_twist():
+    assert DIM == 11
+    assert {EKF.columns[n].start for n in ("visual_scale", "wheel_base_factor", "wheel_scale", "gyro_bias",
+                                           "ahrs_offset")} == set(range(6, 11))
+
+
+X0 = _state([0.3, -0.2, 0.7, 0.4, 0.02, 0.8], gyro_bias=0.01, visual_scale=1.02, wheel_base_factor=0.99,
+            ahrs_offset=0.05, wheel_scale=0.98)
+
+
 def test_ekf_transition_jacobian():
-    x = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05, 0.98])
+    x = X0
     _, F = _predict(x, 0.05)
     eps = 1e-7
     num = np.zeros((DIM, DIM))
@@ -37,7 +81,7 @@ def test_ekf_transition_jacobian():
 
 
 def test_ekf_wheel_block_jacobian_includes_the_wheel_scale():
-    x0 = np.array([0.3, -0.2, 0.7, 0.4, 0.02, 0.8, 0.01, 1.02, 0.99, 0.05, 0.98])
+    x0 = X0
 
     def block(x):
         ekf = PlanarEkf(FusionConfig())
@@ -56,8 +100,7 @@ def test_ekf_wheel_block_jacobian_includes_the_wheel_scale():
 
 
 def test_ekf_prediction_follows_the_arc():
-    x = np.zeros(DIM)
-    x[3], x[5], x[7], x[8] = 1.0, np.pi / 2, 1.0, 1.0  # quarter circle of radius 2/π in one second
+    x = _state([0, 0, 0, 1.0, 0, np.pi / 2], visual_scale=1.0, wheel_base_factor=1.0)  # quarter circle, radius 2/π
     pred, _ = _predict(x, 1.0)
     np.testing.assert_allclose(pred[:3], [2 / np.pi, 2 / np.pi, np.pi / 2], atol=1e-12)
 
@@ -288,7 +331,7 @@ def test_graph_takes_the_wheels_whole_arc_as_the_ekf_does(curvature):
     config = FusionConfig.from_dict({"wheel": {"estimate_curvature": curvature}})
     iv = build_intervals(SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height), config)
     builder = GraphBuilder(iv, config)
-    assert builder.kr_on and builder.kb_on
+    assert {"wheel_scale", "wheel_base_factor"} <= {st.name for st in builder.variables}
     nf = builder.node(5, gtsam.Pose2())
     model = CURVED_WHEEL if curvature else WHEEL
     wheel = [f for f in nf.factors if isinstance(f, ModelFactor) and f.model.name == "wheel"]

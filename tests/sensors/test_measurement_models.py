@@ -5,6 +5,7 @@ import pytest
 
 from fusion_vo.sensors.imu import AHRS, GYRO
 from fusion_vo.sensors.model import ARGUMENT_SIZES, Gate, robust_loss, robust_weight
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.range import RANGE
 from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.wheel import CURVED_WHEEL, STANDSTILL, WHEEL
@@ -12,7 +13,7 @@ from fusion_vo.sensors.wheel import CURVED_WHEEL, STANDSTILL, WHEEL
 ARGS = {"motion": np.array([0.12, -0.03, 0.4]), "heading": np.array([2.9]), "gyro_bias": np.array([0.013]),
         "visual_scale": np.array([1.04]), "wheel_scale": np.array([0.97]), "wheel_base_factor": np.array([1.1]),
         "ahrs_offset": np.array([-0.2]), "wheel_curvature": np.array([0.035])}
-SIZES = {**ARGUMENT_SIZES, "wheel_curvature": 1}
+SIZES = {**ARGUMENT_SIZES, **{state.name: 1 for state in registry.all_states()}}
 CASES = [(VISUAL, {}), (WHEEL, {}), (STANDSTILL, {}), (GYRO, {"dt": 0.05}), (AHRS, {}), (RANGE, {"camera_height": 0.3}),
          (CURVED_WHEEL, {"wheel_base": 0.3})]
 

@@ -1,0 +1,113 @@
+"""The scalar states one run carries, the same table for both backends.
+
+Each sensor declares its states in its own module (:class:`~fusion_vo.sensors.registry.State`): the IMU its
+gyro bias ``b_g`` and AHRS offset ``o_ψ``, the camera the visual scale ``k_v``, the wheels their base factor
+``k_b``, distance scale ``k_r`` and curvature bias, a registered sensor whatever it adds. For one run,
+:func:`run_states` turns them into the table both backends consume, in the registry's order: each state's prior
+``N(initial, sigma²)``, its random walk ``q`` (``Δx ~ N(0, q² Δt)``) and whether it is estimated or held at
+``initial``. The EKF appends the table to its pose and twist (:class:`~fusion_vo.backends.ekf.PlanarEkf`), the
+factor graph makes one variable per estimated state and calibration segment
+(:class:`~fusion_vo.backends.graph_builder.GraphBuilder`), and both report the estimates through
+:func:`calibration`.
+
+Two of the built-in calibrations are estimated only where the motion tells them apart
+(:func:`calibration_observable`): ``k_v`` needs a distance measured besides the camera's (the wheels, the range
+finder) and ``k_b`` a heading change measured besides the wheels' (the camera, the gyro, a heading sensor);
+``k_r`` needs both. A live run decides this from the sensors it fuses (:func:`observable_from`), a whole
+recording's from the measurements on its node grid.
+"""
+
+from __future__ import annotations
+
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.range import range_grid
+from fusion_vo.sensors.registry import State, StateContext
+from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.wheel import wheel_grid
+
+
+def calibration_observable(iv) -> tuple[bool, bool]:
+    """Whether the visual scale and the wheel base can be told apart from the motion on the node grid ``iv``.
+
+    The visual scale needs an independent distance (wheels or the range finder) next to the camera;
+    the wheel base needs an independent heading change (camera, gyro, or a sensor that measures the heading:
+    the AHRS, a registered one declaring ``absolute_heading``) next to the wheels.
+    """
+    cam = len(camera_grid(iv).i0) > 0
+    wheel = iv.uses("wheel")
+    kv = cam and (wheel or range_grid(iv).ok.any())
+    kb = wheel and (cam or iv.uses("gyro") or any(s.gives_heading(iv) for s in registry.sensors()
+                                                   if s.absolute_heading))
+    return bool(kv), bool(kb)
+
+
+def observable_from(sensors) -> tuple[bool, bool]:
+    """:func:`calibration_observable` for a live run fusing the sensors named in ``sensors``."""
+    s = set(sensors)
+    wheel = bool(s & {"wheel", "odom"})
+    heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)
+    return "camera" in s and (wheel or "range" in s), wheel and heading
+
+
+def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: float) -> StateContext:
+    """The :class:`~fusion_vo.sensors.registry.StateContext` of a live run fusing the sensors named in
+    ``sensors``, whose data is not known ahead: each counted as its live intake counts it (an odometry twist as
+    the wheels, the IMU as the gyro), the IMU's AHRS heading taken as coming (it may arrive in any interval)."""
+    used = set()
+    for name in sensors:
+        sensor = registry.get(name)
+        used.add(sensor.live.counted_as or name if sensor.live is not None else name)
+        if name == "imu":
+            used.add("ahrs")
+    s = set(sensors)
+    return StateContext(config, frozenset(used), observable_from(s), "odom" in s and "wheel" not in s,
+                        float(visual_scale_sigma), float(wheel_scale_sigma))
+
+
+def context_of(iv, config) -> StateContext:
+    """The :class:`~fusion_vo.sensors.registry.StateContext` of the node grid ``iv`` of a whole recording."""
+    return StateContext(config, frozenset(iv.counts), calibration_observable(iv), bool(wheel_grid(iv).twist),
+                        float(iv.visual_scale_sigma), float(iv.wheel_scale_sigma))
+
+
+def run_states(context: StateContext, plain=()) -> tuple[State, ...]:
+    """The states a run carries (module docstring): every state with a rule as its rule gives it for
+    ``context``, and ``plain``, the states without one of the sensors whose data the run uses."""
+    return registry.carried(context, plain)
+
+
+def estimated(states) -> tuple[State, ...]:
+    """The states of ``states`` the backends estimate (the others are held at their initial value)."""
+    return tuple(st for st in states if st.estimated)
+
+
+def calibration(iv, values: dict, sigmas: dict | None = None) -> dict:
+    """A backend's calibration report on the node grid ``iv``: each estimated state's value (``values``, by
+    name) and, where ``sigmas`` has it, its standard deviation as ``NAME_sigma``, followed by the figures
+    derived from it (:attr:`State.derived <fusion_vo.sensors.registry.State.derived>`: the camera height, the
+    wheel base)."""
+    sigmas = sigmas or {}
+    out: dict = {}
+    for st in estimated(iv.states):
+        if st.name not in values:
+            continue
+        value = float(values[st.name])
+        out[st.name] = value
+        if st.name in sigmas:
+            out[f"{st.name}_sigma"] = float(sigmas[st.name])
+        if st.derived is not None:
+            out.update({name: v for name, (v, _) in st.derived(value, st.sigma, iv).items()})
+    return out
+
+
+def calibration_priors(iv) -> dict[str, dict]:
+    """The prior ``{"mean": m, "sigma": s}`` of every state the backends estimate on ``iv`` and of the figures
+    derived from it (the camera height ``h`` with σ ``h σ_kv``, the wheel base ``b`` with ``b σ_kb``): the values
+    the EKF starts from and the graph's prior factors hold."""
+    out: dict = {}
+    for st in estimated(iv.states):
+        out[st.name] = {"mean": float(st.initial), "sigma": float(st.sigma)}
+        if st.derived is not None:
+            for name, (mean, sigma) in st.derived(st.initial, st.sigma, iv).items():
+                out[name] = {"mean": mean, "sigma": sigma}
+    return out

@@ -1,0 +1,86 @@
+"""The wheels' states: the wheel-base factor ``k_b``, the distance scale ``k_r`` and the curvature bias ``c``.
+
+``k_b = b_true / b_configured`` scales the wheels' (or an odometry twist's) turn, ``k_r = r_configured / r_true``
+their distance (the common radius error), ``c`` [rad/m] adds a turn per metre driven (unequal radii;
+:class:`~fusion_vo.sensors.wheel.CurvedWheelModel`). ``k_b`` is estimated where another sensor measures the
+heading, ``k_r`` where the visual scale is estimated too (camera and wheels measure only the ratio of their
+scales), ``c`` by ``wheel.estimate_curvature`` (:func:`curvature_states`); each is a
+:class:`~fusion_vo.sensors.registry.State` of the ``wheel`` sensor (:mod:`fusion_vo.backends.states`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from fusion_vo.sensors.registry import State
+
+
+#: the wheels' curvature bias ``c`` [rad/m] (:class:`CurvedWheelModel`), a state of encoder-tick wheels; its
+#: prior standard deviation is set per recording from the radius uncertainty and the wheel base
+#: (:func:`curvature_sigma`); 0.05 rad/m (1 % per wheel on a 0.28 m base) where no recording says it
+CURVATURE = State("wheel_curvature", initial=0.0, sigma=0.05, random_walk=1e-4)
+
+
+def _wheel_base_factor(state: State, context) -> State:
+    """``k_b``: estimated under self-calibration where another sensor measures the heading (its observability,
+    in ``context``), its prior the wheel base's (or the odometry twist's yaw-rate) σ."""
+    config = context.config
+    return dataclasses.replace(state, sigma=config.wheel_model(context.twist)[1],
+                               random_walk=config.ekf.scale_random_walk,
+                               estimated=bool(config.self_calibration and context.observable[1]))
+
+
+def _wheel_scale(state: State, context) -> State:
+    """``k_r``: estimated with both the visual scale and the wheel base (only their ratio is measured otherwise),
+    its prior the run's radius uncertainty."""
+    config = context.config
+    kv, kb = context.observable
+    return dataclasses.replace(state, sigma=context.wheel_scale_sigma, random_walk=config.ekf.scale_random_walk,
+                               estimated=bool(config.self_calibration and kv and kb))
+
+
+def _wheel_base(value: float, sigma: float, iv) -> dict:
+    """The wheel base ``b k_b`` (σ ``b σ_kb``) of encoder ticks; none for an odometry twist, whose factor scales
+    its yaw rate."""
+    grid = iv.sensors["wheel"]  # (a WheelGrid, fusion_vo.sensors.wheel)
+    if grid.twist:
+        return {}
+    return {"wheel_base": (float(grid.base * value), float(grid.base * sigma))}
+
+
+#: the wheel-base factor ``k_b = b_true / b_configured`` and the wheels' distance scale
+#: ``k_r = r_configured / r_true`` (:class:`WheelModel`), states of every run
+WHEEL_BASE_FACTOR = State("wheel_base_factor", initial=1.0, symbol="w", rule=_wheel_base_factor, derived=_wheel_base)
+WHEEL_SCALE = State("wheel_scale", initial=1.0, symbol="r", rule=_wheel_scale)
+
+
+def curvature_sigma(radius_rel_sigma: float, wheel_base: float) -> float:
+    """``σ_c = √2 σ_ε / b`` [rad/m] of independent relative radius errors ``σ_ε`` on a wheel base ``b`` [m]."""
+    return float(math.sqrt(2.0) * radius_rel_sigma / wheel_base)
+
+
+def curvature_observable(camera: bool, ahrs: bool, gps: bool) -> bool:
+    """Whether the wheels' curvature bias is estimated under ``estimate_curvature: "auto"``: when a sensor
+    besides the wheels and the gyro measures the heading or its change (a camera, an AHRS heading, GPS).
+
+    The wheels' turn carries ``c`` per metre driven, the gyro's its bias ``b`` per second; with nothing else,
+    only their difference ``c v - b`` is measured, and the two separate only through changes of speed ``v``.
+    The estimate of that split then leans on the two priors, and the heading drifts at the split's error
+    (``docs/decisions/0013-no-curvature-without-a-heading-reference.md``).
+    """
+    return camera or ahrs or gps
+
+
+def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float,
+                     observable: bool = True) -> tuple:
+    """``states`` with the curvature bias only if ``config.wheel.estimate_curvature`` is true, or ``"auto"`` and
+    ``observable`` (:func:`curvature_observable`); with it, its prior set from the wheels' relative radius
+    uncertainty and base (:func:`curvature_sigma`), unless the configuration's ``states`` section sets it."""
+    wanted = config.wheel.estimate_curvature
+    if wanted is False or (wanted == "auto" and not observable):
+        return tuple(st for st in states if st.name != CURVATURE.name)
+    if CURVATURE.name in (getattr(config, "states", None) or {}):
+        return tuple(states)
+    sigma = curvature_sigma(radius_rel_sigma, wheel_base)
+    return tuple(dataclasses.replace(st, sigma=sigma) if st.name == CURVATURE.name else st for st in states)

@@ -1,0 +1,104 @@
+"""The run's scalar states: one table, declared by the sensors, that the EKF and the factor graph both consume."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.backends.ekf import DIM, filter_for
+from fusion_vo.backends.graph_builder import GraphBuilder
+from fusion_vo.backends.states import live_context, run_states
+from fusion_vo.backends.timeline import build_intervals
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.registry import Sensor, State
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+
+
+@pytest.fixture(scope="module")
+def drive():
+    return synthetic_streams(SyntheticOptions(duration=4.0), seed=3)
+
+
+def _grid(drive, config=None, **which):
+    streams = SensorStreams(camera_height=drive.camera_height, **which)
+    config = config or FusionConfig()
+    return build_intervals(streams, config), config
+
+
+def test_wheels_and_gyro_estimate_the_wheel_base_and_hold_the_camera_scale(drive):
+    iv, config = _grid(drive, wheel=drive.wheel, imu=drive.imu)
+    table = {st.name: st for st in iv.states}
+    assert [n for n in table if n in ("visual_scale", "wheel_base_factor", "wheel_scale", "gyro_bias")] == [
+        "visual_scale", "wheel_base_factor", "wheel_scale", "gyro_bias"]  # the registry's order
+    assert table["wheel_base_factor"].estimated and table["gyro_bias"].estimated
+    # no camera: its scale is held, and so the wheels' distance scale (only their ratio would be measured)
+    assert not table["visual_scale"].estimated and not table["wheel_scale"].estimated
+    assert table["wheel_base_factor"].sigma == config.wheel_base_sigma
+    assert table["gyro_bias"].random_walk == config.imu.gyro_random_walk
+    # the EKF carries every state of the table, a held one frozen; the graph has variables for the estimated ones
+    ekf = filter_for(iv, config)
+    assert ekf.dim == DIM + len(iv.states)
+    for name, st in table.items():
+        var = ekf.P[ekf.columns[name], ekf.columns[name]][0, 0]
+        assert var == pytest.approx(st.sigma**2 if st.estimated else 1e-12)
+    builder = GraphBuilder(iv, config)
+    assert {st.name for st in builder.variables} == {n for n, st in table.items() if st.estimated}
+    assert builder.state_variable("visual_scale", 0) is None and builder.state_initial("visual_scale") == 1.0
+    assert builder.state_variable("gyro_bias", 0) is not None
+
+
+def test_self_calibration_off_holds_the_three_calibrations(drive):
+    config = FusionConfig.from_dict({"self_calibration": False})
+    iv, _ = _grid(drive, config, visual=drive.visual, wheel=drive.wheel, imu=drive.imu)
+    held = {st.name for st in iv.states if not st.estimated}
+    assert {"visual_scale", "wheel_base_factor", "wheel_scale"} <= held
+    on, _ = _grid(drive, visual=drive.visual, wheel=drive.wheel, imu=drive.imu)
+    assert not {"visual_scale", "wheel_base_factor", "wheel_scale"} & {st.name for st in on.states if not st.estimated}
+
+
+def test_a_live_run_decides_from_the_sensors_it_fuses():
+    config = FusionConfig()
+    table = {st.name: st for st in run_states(live_context(config, ["camera", "odom", "imu"], 0.02, 0.01))}
+    assert table["visual_scale"].estimated and table["wheel_base_factor"].estimated and table["wheel_scale"].estimated
+    assert table["visual_scale"].sigma == 0.02 and table["wheel_scale"].sigma == 0.01
+    assert table["wheel_base_factor"].sigma == config.odom_base_sigma  # an odometry twist's prior
+    alone = {st.name: st for st in run_states(live_context(config, ["odom"], 0.02, 0.01))}
+    assert not any(st.estimated for st in alone.values())
+
+
+def _trim(state: State, context) -> State:
+    """A state whose rule estimates it only beside the wheels (as a built-in calibration's does)."""
+    return dataclasses.replace(state, sigma=0.3, estimated="wheel" in context.used)
+
+
+TRIM = Sensor(name="trim", states=(State("trim_offset", initial=0.5, rule=_trim),))
+
+
+def test_a_registered_state_with_a_rule_is_carried_like_the_built_in_ones(drive):
+    with registry.registered(TRIM):
+        iv, config = _grid(drive, wheel=drive.wheel, imu=drive.imu)
+        st = {s.name: s for s in iv.states}["trim_offset"]  # carried although the sensor has no data
+        assert st.estimated and st.sigma == 0.3
+        ekf = filter_for(iv, config)
+        col = ekf.columns["trim_offset"]
+        assert ekf.x[col][0] == 0.5 and ekf.P[col, col][0, 0] == pytest.approx(0.09)
+        assert "trim_offset" in {s.name for s in GraphBuilder(iv, config).variables}
+        held, _ = _grid(drive, imu=drive.imu)
+        st = {s.name: s for s in held.states}["trim_offset"]
+        assert not st.estimated and GraphBuilder(held, config).state_initial("trim_offset") == 0.5
+        # its prior is its rule's: not a key of fusion.states
+        assert "trim_offset" not in {s.name for s in registry.configurable_states()}
+
+
+def test_every_backend_reports_the_same_calibration_keys(drive):
+    streams = SensorStreams(visual=drive.visual, wheel=drive.wheel, imu=drive.imu, camera_height=drive.camera_height)
+    result = fuse(streams, "all")
+    keys = {name: set(cal) for name, cal in result.calibration.items()}
+    assert keys["ekf"] >= {"visual_scale", "visual_scale_sigma", "camera_height", "wheel_base_factor", "wheel_base",
+                           "wheel_scale", "gyro_bias", "gyro_bias_sigma"}
+    assert keys["gtsam"] == keys["ekf"] == keys["ekf_smoothed"] == keys["gtsam_online"], keys
+    for name in ("gtsam", "gtsam_online"):
+        cal = result.calibration[name]
+        assert np.isfinite(cal["gyro_bias_sigma"]) and cal["gyro_bias_sigma"] < FusionConfig().imu.gyro_bias_sigma
