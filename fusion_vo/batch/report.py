@@ -8,7 +8,6 @@ recordings, per trajectory) and names the best parameter set.
 from __future__ import annotations
 
 import base64
-import io
 import logging
 from datetime import datetime, timezone
 from pathlib import Path
@@ -21,7 +20,7 @@ from fusion_vo.batch.grid import Grid
 from fusion_vo.batch.ranking import best_sets, describe_set
 from fusion_vo.batch.columns import METRICS
 from fusion_vo.evaluation.io import write_atomic
-from fusion_vo.evaluation.plots import colour_of, label_of
+from fusion_vo.evaluation.plots import colour_of, figure_png, label_of
 from fusion_vo.evaluation.report import _environment, _number
 
 log = logging.getLogger(__name__)
@@ -36,9 +35,7 @@ MAX_ROWS = 2000
 
 
 def _png(fig: Figure) -> bytes:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    return buffer.getvalue()
+    return figure_png(fig)
 
 
 def _figure(n: int, width: float = 8.0, height: float = 3.2):

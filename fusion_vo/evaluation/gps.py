@@ -19,7 +19,6 @@ given without them.
 
 from __future__ import annotations
 
-import io
 import logging
 import math
 from dataclasses import dataclass
@@ -30,8 +29,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from fusion_vo.errors import InputError
-from fusion_vo.evaluation.io import read_tum_poses, write_atomic
-from fusion_vo.evaluation.plots import colour_of, label_of
+from fusion_vo.evaluation.io import read_tum_poses
+from fusion_vo.evaluation.plots import colour_of, label_of, save_figure
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
@@ -155,9 +154,7 @@ def plot_fixes(gps: GpsData, scores: dict[str, GpsScore], path: Path) -> Path:
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png")
-    return write_atomic(path, buffer.getvalue())
+    return save_figure(fig, path)
 
 
 def gps_frame(metrics: dict[str, dict]) -> str:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.image import imsave
 from matplotlib.figure import Figure
 
 from fusion_vo.geometry.se2 import yaw_of_quaternion
@@ -84,12 +85,25 @@ def new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: b
     return fig, axes
 
 
-def save_figure(fig: Figure, path: str | Path) -> Path:
-    """Write ``fig`` as PNG to ``path`` atomically."""
+def figure_png(fig: Figure) -> bytes:
+    """``fig`` as PNG bytes: those of ``fig.savefig(format="png")`` with the ``Software`` text
+    :data:`~fusion_vo.outputs.PNG_SOFTWARE` (how the program's pictures are told from the user's), drawn once.
+
+    ``savefig`` draws a figure with a layout engine twice, once for the layout and once for the pixels; a
+    report's figures spend most of their time there.
+    """
+    canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
+    canvas.draw()  # (lays the figure out and renders it)
     buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", metadata={"Software": PNG_SOFTWARE})  # (told from the user's pictures)
-    logger.debug("wrote %s", path)
-    return write_atomic(path, buffer.getvalue())
+    imsave(buffer, canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi,
+           metadata={"Software": PNG_SOFTWARE})
+    return buffer.getvalue()
+
+
+def save_figure(fig: Figure, path: str | Path) -> Path:
+    """Write ``fig`` as PNG to ``path`` atomically (:func:`figure_png`)."""
+    logger.debug("writing %s", path)
+    return write_atomic(path, figure_png(fig))
 
 
 def _xy(trajectory) -> np.ndarray:

@@ -11,6 +11,7 @@ import pytest
 import yaml
 
 from fusion_vo.cli.main import main
+from fusion_vo.outputs import PNG_SOFTWARE, png_software
 from fusion_vo.recording import write_tum
 from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
 from fusion_vo.sensors import gps as gps_model
@@ -85,6 +86,8 @@ def test_unfused_run_is_scored_after_an_se2_alignment(tmp_path, capsys):
     html = (run / "report.html").read_text()
     assert "Errors against GPS fixes" in html and "Errors against ground truth" not in html
     assert "GPS fixes in ENU" in html and (run / "gps.png").stat().st_size > 10_000
+    # every picture of the run is marked as fusion-vo's (a later run may replace it, never a user's own)
+    assert {p.name: png_software(p) for p in run.glob("*.png")} == {p.name: PNG_SOFTWARE for p in run.glob("*.png")}
 
 
 def test_fused_run_is_scored_in_enu_without_alignment(tmp_path):
