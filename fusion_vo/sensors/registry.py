@@ -30,9 +30,13 @@ factor graph makes it a variable per calibration segment tied by the random walk
 (:meth:`~fusion_vo.backends.graph_builder.GraphBuilder.state_key`). Its prior and random walk are the registered ones
 unless the configuration sets them (``fusion: {states: {NAME: {initial, sigma, random_walk}}}``,
 :class:`StatePrior`). Its estimate at the end is reported in
-``FusionResult.calibration`` under its name, with its standard deviation as ``NAME_sigma``. The built-in state (pose,
-twist, gyro bias, visual scale, wheel base and radius factors, AHRS offset) is
-:data:`fusion_vo.sensors.model.ARGUMENT_SIZES`.
+``FusionResult.calibration`` under its name, with its standard deviation as ``NAME_sigma``. The built-in
+calibrations are states of the built-in sensors declared the same way, each with a rule (:attr:`State.rule`) that
+decides its prior and whether the run estimates it (the gyro bias and AHRS offset in
+:mod:`~fusion_vo.sensors.imu`, the visual scale in :mod:`~fusion_vo.sensors.visual`, the wheels' in
+:mod:`~fusion_vo.sensors.wheel_states`); :mod:`fusion_vo.backends.states` makes one table of a run's states for both
+backends. Only the pose, the twist and the heading are arguments the backends supply themselves
+(:data:`fusion_vo.sensors.model.ARGUMENT_SIZES`).
 
 A sensor fed live (:meth:`fusion_vo.backends.streaming.StreamingFusion.add`) declares a :class:`Live`
 intake: how one sample is read and checked, and how buffered samples become its data, or (the camera, GPS:
@@ -279,7 +283,8 @@ class Sensor:
         ``graph_keyframes(iv) -> indices``: grid nodes that must stay pose variables when the graph keeps only
         every ``keyframe_every``-th (a GPS fix's node).
     states : tuple of State
-        State variables the sensor adds to both backends while its data is used (module docstring).
+        State variables the sensor adds to both backends: while its data is used, or, for a state with a rule,
+        as the rule decides for every run (module docstring).
     absolute_heading : bool or callable
         The sensor measures the heading (absolute, or up to an offset it estimates as a state): beside the
         wheels it is a heading reference, so the wheel-base factor is estimated
