@@ -101,7 +101,8 @@ class GraphBuilder:
         self.states = tuple(iv.states if states is None else states)
         self.variables = estimated(self.states)
         # each estimated state's variables: the letter it names, else the next free one of GTSAM's symbols
-        free = iter(_STATE_LETTERS)
+        named = {st.symbol for st in self.variables}
+        free = iter(letter for letter in _STATE_LETTERS if letter not in named)
         self._state_letter = {st.name: st.symbol or next(free) for st in self.variables}
         self._held = {st.name: float(st.initial) for st in self.states if not st.estimated}
         self.config = config

@@ -415,13 +415,19 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
         raise ValueError(f"sensor '{sensor.name}': its configuration section must be a fusion_vo.config.base.Section "
                          f"(a pydantic model of its options), not {sensor.config[1]!r}")
 
-    taken = set(ARGUMENT_SIZES) | {st.name for s in _REGISTRY.values() if s.name != sensor.name for st in s.states}
+    others = [st for s in _REGISTRY.values() if s.name != sensor.name for st in s.states]
+    taken = set(ARGUMENT_SIZES) | {st.name for st in others}
+    symbols = {st.symbol for st in others if st.symbol}
     for state in sensor.states:
         if not isinstance(state, State):
             raise ValueError(f"sensor '{sensor.name}': states must be registry.State, not {type(state).__name__}")
         if state.name in taken:
             raise ValueError(f"sensor '{sensor.name}': state '{state.name}' is already a state of the backends")
+        if state.symbol is not None and (not re.fullmatch(r"[a-wyz]", state.symbol) or state.symbol in symbols):
+            raise ValueError(f"sensor '{sensor.name}': state '{state.name}': symbol must be a lower-case letter other "
+                             f"than x that no other state uses, not {state.symbol!r}")
         taken.add(state.name)
+        symbols.add(state.symbol)
     _REGISTRY[sensor.name] = sensor
     _ORDERED.clear()
     return sensor

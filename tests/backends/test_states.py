@@ -2,6 +2,7 @@
 
 import dataclasses
 
+import gtsam
 import numpy as np
 import pytest
 
@@ -90,6 +91,28 @@ def test_a_registered_state_with_a_rule_is_carried_like_the_built_in_ones(drive)
         assert not st.estimated and GraphBuilder(held, config).state_initial("trim_offset") == 0.5
         # its prior is its rule's: not a key of fusion.states
         assert "trim_offset" not in {s.name for s in registry.configurable_states()}
+
+
+@pytest.mark.parametrize("symbol", ["x", "b", "B", "ab"])
+def test_a_states_graph_letter_is_its_own(symbol):
+    """x is the poses' letter and b the gyro bias's: a sensor's state may name neither (nor two letters)."""
+    with pytest.raises(ValueError, match="symbol must be a lower-case letter"):
+        registry.register(Sensor(name="lettered", states=(State("lettered_offset", symbol=symbol),)))
+    assert "lettered" not in registry.names()
+
+
+def test_a_free_letter_is_not_one_another_state_names(drive):
+    """The curvature bias takes the first free letter, ``a``, unless a registered state names ``a`` itself."""
+    named = Sensor(name="named", states=(State("named_offset", symbol="a", rule=lambda st, ctx: st),))
+    config = FusionConfig.from_dict({"wheel": {"estimate_curvature": True}})
+    iv, _ = _grid(drive, config, wheel=drive.wheel, imu=drive.imu)
+    assert chr(gtsam.Symbol(GraphBuilder(iv, config).state_key("wheel_curvature", 0)).chr()) == "a"
+    with registry.registered(named):
+        iv, _ = _grid(drive, config, wheel=drive.wheel, imu=drive.imu)
+        builder = GraphBuilder(iv, config)
+        letters = {name: chr(gtsam.Symbol(builder.state_key(name, 0)).chr())
+                   for name in ("wheel_curvature", "named_offset")}
+        assert letters == {"wheel_curvature": "c", "named_offset": "a"}
 
 
 def test_every_backend_reports_the_same_calibration_keys(drive):
