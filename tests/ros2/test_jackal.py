@@ -29,7 +29,7 @@ def jackal_run(jackal_log, tmp_path_factory):
     calib = jackal_log  # the folder fusion-vo import-bag writes from test2.bag (tests/conftest.py)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
                      "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
-            "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "3"], "signal": "SIGINT"}
+            "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "5"], "signal": "SIGINT"}
     return calib, run_peer(tmp, spec)
 
 
