@@ -27,9 +27,8 @@ from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
 from fusion_vo.sensors.registry import StatePrior
 from fusion_vo.sensors.visual_noise import VisualNoiseConfig
+from fusion_vo.sensors.model import ROBUST_KERNELS
 from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
-
-ROBUST_KERNELS = ("huber", "cauchy", "none")
 
 #: ``initial_pose``: x and y [m], within :data:`~fusion_vo.measurements.MAX_POSITION_M`
 _Coordinate = Annotated[float, Field(ge=-MAX_POSITION_M, le=MAX_POSITION_M)]

@@ -29,7 +29,8 @@ With the innovation ``r = z - h(x)`` and its covariance ``S`` (``S = H P Hᵀ + 
 covariance ``P``; ``S = Σ`` against a fixed estimate), the squared Mahalanobis distance is
 ``d² = rᵀ S⁻¹ r``. A fix with ``d² > gate_chi2`` (default 13.82, the 99.9 % point of χ² with 2 degrees
 of freedom) is rejected and counted. Accepted fixes are further down-weighted by a robust kernel of
-``d`` with width ``k`` (the weight multiplies the information ``Σ⁻¹``; a filter divides ``Σ`` by it):
+``d`` with width ``k`` (the weight multiplies the information ``Σ⁻¹``; a filter divides ``Σ`` by it;
+:func:`fusion_vo.sensors.model.robust_weight`, every robust reading's):
 
 * Huber:  ``w(d) = 1`` for ``d ≤ k``, else ``k / d``
 * Cauchy: ``w(d) = 1 / (1 + (d / k)²)``
@@ -58,7 +59,7 @@ from pydantic import Field
 from fusion_vo.config.base import Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
-from fusion_vo.sensors.model import MeasurementModel
+from fusion_vo.sensors.model import ROBUST_KERNELS, MeasurementModel, robust_weight
 from fusion_vo.sensors.readings import ORDER, Absolute, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
@@ -72,7 +73,6 @@ OUTAGE_NOTE_S = 2.0  # [s] a gap between GPS fixes at least this long is reporte
 
 #: 99.9 % point of the chi-square distribution with 2 degrees of freedom
 CHI2_2DOF_999 = 13.815510557964274
-ROBUST_KERNELS = ("huber", "cauchy", "none")
 
 
 # ---------------------------------------------------------------------- configuration
@@ -136,18 +136,6 @@ def mahalanobis2(residual, covariance) -> float:
     """``rᵀ S⁻¹ r`` of a 2-vector residual and its 2x2 covariance."""
     r = np.asarray(residual, dtype=np.float64)
     return float(r @ np.linalg.solve(np.asarray(covariance, dtype=np.float64), r))
-
-
-def robust_weight(distance: float, kernel: str = "cauchy", width: float = 2.0) -> float:
-    """Weight in ``(0, 1]`` of the information of a fix at Mahalanobis distance ``distance``."""
-    d = abs(float(distance))
-    if kernel == "huber":
-        return 1.0 if d <= width else width / d
-    if kernel == "cauchy":
-        return 1.0 / (1.0 + (d / width) ** 2)
-    if kernel == "none":
-        return 1.0
-    raise ValueError(f"unknown robust kernel {kernel!r}")
 
 
 @dataclass

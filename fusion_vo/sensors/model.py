@@ -173,27 +173,41 @@ class Gate:
 
 
 # --------------------------------------------------------------------------- robust kernels (GTSAM's)
+#: the robust kernels (GTSAM's ``mEstimator`` of each name; ``none``, or None: the Gaussian alone)
+ROBUST_KERNELS = ("huber", "cauchy", "none")
+
+
 def robust_weight(distance, kernel: str | None, k: float):
-    """Weight of a residual at whitened distance ``distance`` under GTSAM's ``mEstimator`` ``kernel``
-    (``"huber"``, ``"cauchy"`` or None)."""
+    """Weight in ``(0, 1]`` of a residual at whitened (Mahalanobis) distance ``d`` under GTSAM's ``mEstimator``
+    ``kernel`` of width ``k``: Huber ``1`` for ``d ≤ k``, else ``k / d``; Cauchy ``k² / (k² + d²)``; ``none``
+    (or None) ``1``. The one weight of every robust reading: the EKF's blocks and GPS fixes, the graph's
+    reweighting. An unknown kernel is a ValueError."""
     if isinstance(distance, float):  # one factor: without array overhead
         d = abs(distance)
         if kernel == "huber":
             return 1.0 if d <= k else k / d
-        return k * k / (k * k + d * d) if kernel == "cauchy" else 1.0
+        if kernel == "cauchy":
+            return k * k / (k * k + d * d)
+        if kernel is None or kernel == "none":
+            return 1.0
+        raise ValueError(f"unknown robust kernel {kernel!r}")
     d = np.abs(np.asarray(distance, dtype=np.float64))
     if kernel == "huber":
         return np.where(d <= k, 1.0, k / np.maximum(d, 1e-300))
     if kernel == "cauchy":
         return k * k / (k * k + d * d)
-    return np.ones_like(d)
+    if kernel is None or kernel == "none":
+        return np.ones_like(d)
+    raise ValueError(f"unknown robust kernel {kernel!r}")
 
 
 def robust_loss(distance, kernel: str | None, k: float):
-    """GTSAM's ``mEstimator`` loss ``ρ(d)`` (``d²/2`` without a kernel)."""
+    """GTSAM's ``mEstimator`` loss ``ρ(d)`` of :func:`robust_weight`'s kernels (``d²/2`` without one)."""
     d = np.abs(np.asarray(distance, dtype=np.float64))
     if kernel == "huber":
         return np.where(d <= k, 0.5 * d * d, k * d - 0.5 * k * k)
     if kernel == "cauchy":
         return 0.5 * k * k * np.log1p(d * d / (k * k))
-    return 0.5 * d * d
+    if kernel is None or kernel == "none":
+        return 0.5 * d * d
+    raise ValueError(f"unknown robust kernel {kernel!r}")

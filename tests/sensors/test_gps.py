@@ -11,6 +11,7 @@ import pytest
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
 from fusion_vo.sensors import gps
+from fusion_vo.sensors.model import robust_weight
 from fusion_vo.backends.factors import ModelFactor
 
 LEVER = np.array([-0.35, 0.12, 0.8])
@@ -79,12 +80,15 @@ def test_factor_without_lever_arm_agrees_with_gtsams_translation_prior():
 
 
 def test_robust_weights():
-    assert gps.robust_weight(1.0, "huber", 2.0) == 1.0
-    assert gps.robust_weight(8.0, "huber", 2.0) == pytest.approx(0.25)
-    assert gps.robust_weight(2.0, "cauchy", 2.0) == pytest.approx(0.5)
-    assert gps.robust_weight(40.0, "cauchy", 2.0) < 0.003
-    with pytest.raises(ValueError):
-        gps.robust_weight(1.0, "tukey")
+    """The fixes' weights are the one robust weight of every reading (fusion_vo.sensors.model)."""
+    assert robust_weight(1.0, "huber", 2.0) == 1.0
+    assert robust_weight(8.0, "huber", 2.0) == pytest.approx(0.25)
+    assert robust_weight(2.0, "cauchy", 2.0) == pytest.approx(0.5)
+    assert robust_weight(40.0, "cauchy", 2.0) < 0.003
+    assert robust_weight(40.0, "none", 2.0) == 1.0 and robust_weight(40.0, None, 2.0) == 1.0
+    for distance in (1.0, np.array([1.0, 3.0])):
+        with pytest.raises(ValueError):
+            robust_weight(distance, "tukey", 2.0)
     with pytest.raises(ValueError):
         gps.GpsNoise(kernel="tukey")
 
