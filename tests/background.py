@@ -18,8 +18,9 @@ the order the tests come; a test that needs a job's result waits for it. The job
 them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
 so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
 
-Only one job runs at a time, at a lower priority than the suite (``nice -n 5``), and every job named so far is needed by a test before ``tests/ros2`` (the DDS tests,
-whose timing a busy machine can upset), so the second process is idle before they start. The tests that run
+Only one job runs at a time, at a lower priority than the suite (``nice -n 5``). The jobs of ``tests/ros2`` (the DDS
+tests, whose timing a busy machine can upset) are their inputs: a DDS test starts once they are made, and the jobs
+before them take far less than the tests before ``tests/ros2``, so the second process is idle while a node runs. The tests that run
 beside it and measure time hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch
 commands' refusals), which a second busy core does not reach.
 """

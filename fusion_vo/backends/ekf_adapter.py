@@ -84,6 +84,15 @@ def _dropped(R: np.ndarray, dropped: tuple, ok: np.ndarray) -> np.ndarray:
     return R
 
 
+def spread_covariance(cov: np.ndarray, n, span):
+    """The covariance per unit time with which a reading over ``n`` node intervals of total length ``span`` is
+    applied to each of them: ``n`` times that of its mean rate, ``cov n / span²`` (``cov`` that of the reading in
+    rate coordinates times ``span``, :func:`_as_rates`), the same information over the span (module docstring).
+    The one rule: the batch filter's tables and the streaming engine's share of an increment
+    (:func:`fusion_vo.backends.stream_nodes.increment_part`) use it."""
+    return cov * (n / span**2)
+
+
 def interval_table(r: Readings, t: np.ndarray) -> _Table:
     """The interval readings ``r`` spread over the grid ``t`` (module docstring)."""
     K = len(t) - 1
@@ -101,7 +110,7 @@ def interval_table(r: Readings, t: np.ndarray) -> _Table:
         if not len(free):
             continue
         z[free] = rate[j]
-        R[free] = cov[j] * (n[j] / span[j] ** 2)
+        R[free] = spread_covariance(cov[j], n[j], span[j])
         ok[free] = True
         index[free] = j
     if r.dropped:

@@ -10,6 +10,7 @@ import logging
 import numpy as np
 
 from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
+from fusion_vo.backends.ekf_adapter import spread_covariance
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
 from fusion_vo.geometry import se2
@@ -24,7 +25,8 @@ def increment_part(inc: VisualIncrement, nodes: list[float], k: int) -> VisualIn
     """The share of a camera increment that spans several node intervals (frames dropped or failed between its
     two), ``nodes`` from its first frame to its second, over its ``k``-th interval, as a batch run applies it
     (:mod:`fusion_vo.backends.ekf_adapter`): the increment's mean twist ``ξ / T`` (``ξ = log Δ`` over its span
-    ``T``) with ``n`` times its covariance per unit time, ``n`` the intervals it spans. The part is
+    ``T``) with ``n`` times its covariance per unit time, ``n`` the intervals it spans
+    (:func:`~fusion_vo.backends.ekf_adapter.spread_covariance`). The part is
     ``Δ_k = exp(ξ Δt_k / T)`` with covariance ``J_k⁻¹ (n (Δt_k / T)² J Σ Jᵀ) J_k⁻ᵀ`` (``J``, ``J_k`` the
     Jacobians of ``log`` at ``Δ`` and ``Δ_k``), so that a reading over the one interval, ``log(Δ_k) / Δt_k``
     with ``J_k Σ_k J_kᵀ / Δt_k²``, is that twist and covariance.
@@ -34,12 +36,13 @@ def increment_part(inc: VisualIncrement, nodes: list[float], k: int) -> VisualIn
     if not inc.ok or inc.frame_covariance is not None:
         return None
     t0, t1 = nodes[k], nodes[k + 1]
-    share = (t1 - t0) / (inc.t1 - inc.t0)
+    span = inc.t1 - inc.t0
     delta = np.asarray(inc.delta, dtype=np.float64)
     J = se2.log_jacobian(delta)[0]
-    part = se2.exp_many(se2.log_many(delta) * share)[0]
+    part = se2.exp_many(se2.log_many(delta) * ((t1 - t0) / span))[0]
     Jk_inv = se2.exp_jacobian(se2.log_many(part))[0]
-    cov = Jk_inv @ (J @ np.asarray(inc.covariance, dtype=np.float64) @ J.T) @ Jk_inv.T * ((len(nodes) - 1) * share**2)
+    rate_cov = spread_covariance(J @ np.asarray(inc.covariance, dtype=np.float64) @ J.T, len(nodes) - 1, span)
+    cov = Jk_inv @ (rate_cov * (t1 - t0) ** 2) @ Jk_inv.T  # (the one-interval reading's R Δt_k²)
     return dataclasses.replace(inc, t0=t0, t1=t1, delta=part, covariance=0.5 * (cov + cov.T))
 
 

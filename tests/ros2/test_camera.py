@@ -18,14 +18,24 @@ from fusion_vo.recording import write_tum
 from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
+#: the recording and its batch EKF run, made ahead in the background (tests/background.py)
+BATCH = ["run", "{standard:short}", "--out", "{out}", "--backend", "ekf", "--no-evaluate"]
+BACKGROUND_COMMANDS = {"camera_batch/batch": BATCH}
+BACKGROUND_JOBS = {"*": ["standard:short", "fusion-vo:camera_batch/batch"]}
 
 
 @pytest.fixture(scope="module")
-def camera_run(tmp_path_factory):
+def camera_run(tmp_path_factory, standard_recording, ahead):
     tmp = tmp_path_factory.mktemp("camera")
-    rec, batch, track = tmp / "short", tmp / "batch", tmp / "node_track.tum"
-    assert main(["simulate", "--standard", "short", str(rec)]) == 0
-    assert main(["run", str(rec), "--out", str(batch), "--backend", "ekf", "--no-evaluate"]) == 0
+    rec, track = standard_recording("short"), tmp / "node_track.tum"
+
+    def batch_here():
+        out = tmp / "batch"
+        assert main([str(rec) if arg == "{standard:short}" else str(out) if arg == "{out}" else arg
+                     for arg in BATCH]) == 0
+        return out
+
+    batch = ahead("fusion-vo:camera_batch/batch", batch_here)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={rec}", "-p", "use_sim_time:=true",
                      "-p", "diagnostics_period:=0.25", "-p", "fusion.reorder_window:=0.05",
                      # a busy machine may leave the node seconds behind: no frame dropped, no sample too late,
