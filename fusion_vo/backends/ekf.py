@@ -108,12 +108,11 @@ from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf_adapter import EkfReadings
 from fusion_vo.backends.fixes import EkfFixes
 from fusion_vo.backends.result import FusionResult, InnovationLog, SensorCount
-from fusion_vo.backends.states import calibration, run_states
+from fusion_vo.backends.states import calibration, live_context, run_states
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.model import Gate, MeasurementModel
-from fusion_vo.sensors.registry import StateContext
 from fusion_vo.sensors.visual import camera_grid
 
 logger = logging.getLogger(__name__)
@@ -432,9 +431,8 @@ def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
 def default_states(config: FusionConfig) -> tuple:
     """The states of a run fusing the camera, the wheels (encoder ticks) and the IMU with its AHRS, with the
     configured priors: the filter's states when none are given."""
-    context = StateContext(config, frozenset({"camera", "wheel", "gyro", "ahrs"}), (True, True), False,
-                           config.visual_scale_sigma, config.wheel_scale_sigma)
-    return run_states(context)
+    return run_states(live_context(config, ("camera", "wheel", "imu"), config.visual_scale_sigma,
+                                   config.wheel_scale_sigma))
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:

@@ -71,9 +71,18 @@ def context_of(iv, config) -> StateContext:
 
 
 def run_states(context: StateContext, plain=()) -> tuple[State, ...]:
-    """The states a run carries (module docstring): every state with a rule as its rule gives it for
-    ``context``, and ``plain``, the states without one of the sensors whose data the run uses."""
-    return registry.carried(context, plain)
+    """The states a run carries (module docstring), in the registry's order: every state with a rule as its rule
+    gives it for ``context``, and those of ``plain`` (the states without a rule of the sensors whose data the run
+    uses, :func:`fusion_vo.sensors.registry.states`, as the sensors' steps left them)."""
+    given = {st.name: st for st in plain}
+    out = []
+    for sensor in registry.sensors():
+        for state in sensor.states:
+            if state.rule is not None:
+                out.append(state.rule(state, context))
+            elif state.name in given:
+                out.append(given.pop(state.name))
+    return tuple(out) + tuple(given.values())
 
 
 def estimated(states) -> tuple[State, ...]:

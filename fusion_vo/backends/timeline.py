@@ -334,12 +334,14 @@ def sensor_readings(iv: "Intervals", config: FusionConfig) -> list[Readings]:
 
 # --------------------------------------------------------------------------- builder
 def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None,
-                    heading_offset: float | None = None) -> Intervals:
+                    heading_offset: float | None = None, states: tuple | None = None) -> Intervals:
     """Express every stream of ``streams`` on the node grid (see the module docstring).
 
     ``nodes`` overrides the grid (streaming use builds one interval at a time); ``heading_offset``
     keeps the AHRS alignment of earlier calls (by default the first heading is aligned to the
-    initial yaw).
+    initial yaw); ``states`` are the run's states when they are decided for the whole run (streaming use: one
+    interval's data must not change them), else they are decided from this grid
+    (:func:`~fusion_vo.backends.states.run_states`).
     """
     T = node_times(streams, config) if nodes is None else np.asarray(nodes, dtype=np.float64)
     K = len(T) - 1
@@ -376,7 +378,8 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         if name in counts:
             for a, b in uncovered_runs(T, ok, 0.5):
                 notes.append(f"{name} unavailable from {when(a, T)} to {when(b, T)}")
-    iv.states = run_states(context_of(iv, config), iv.states)  # with the built-in calibrations, decided here
+    # with the built-in calibrations, decided here unless given for the run
+    iv.states = run_states(context_of(iv, config), iv.states) if states is None else tuple(states)
     return iv
 
 

@@ -529,21 +529,6 @@ def states(used, config=None) -> tuple[State, ...]:
                  for state in s.states if state.rule is None)
 
 
-def carried(context: StateContext, plain) -> tuple[State, ...]:
-    """Every state a run carries, in :func:`sensors` order: each state with a rule as its rule gives it for
-    ``context``, and those of ``plain`` (the states without a rule of the sensors whose data the run uses,
-    :func:`states`, as the sensors' steps left them)."""
-    given = {st.name: st for st in plain}
-    out = []
-    for s in sensors():
-        for state in s.states:
-            if state.rule is not None:
-                out.append(state.rule(state, context))
-            elif state.name in given:
-                out.append(given.pop(state.name))
-    return tuple(out) + tuple(given.values())
-
-
 def all_states() -> tuple[State, ...]:
     """Every registered sensor's state variables, as registered (in :func:`sensors` order)."""
     return tuple(state for s in sensors() for state in s.states)
