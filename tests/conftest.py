@@ -10,6 +10,7 @@ end_to_end   the commands and scripts as a user runs them: end_to_end, faults, b
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -87,6 +88,19 @@ def ahead(background):
     def get(key: str, make) -> Path:
         if background is not None and key in background:
             return background.result(key).out
+        return make()
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def ahead_json(background):
+    """``ahead_json(key, make)`` -> the JSON object the ``python:`` job ``key`` printed last if the session started
+    it (waiting for it), else ``make()``, the same figures computed here."""
+
+    def get(key: str, make) -> dict:
+        if background is not None and key in background:
+            return json.loads(background.result(key).stdout.strip().splitlines()[-1])
         return make()
 
     return get

@@ -153,15 +153,11 @@ def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_pl
         assert (rms > 6.0) if name == "wheel" else (rms < 3.0), (name, rms)
 
 
-def test_husky_imu_imported_without_its_mounting_is_found_while_streaming(husky_plain, background):
+def test_husky_imu_imported_without_its_mounting_is_found_while_streaming(husky_plain, ahead_json):
     """The same log through streaming fusion (tests/end_to_end/husky_stream_job.py, made ahead in the background):
     gravity gives the IMU's up axis within a third of a second and the streaming EKF lands where the right transform
     puts it (101 m with the IMU as stated)."""
-    key = "python:husky_plain_stream"
-    if background is not None and key in background:
-        run = json.loads(background.result(key).stdout.strip().splitlines()[-1])
-    else:
-        run = husky_stream(husky_plain)
+    run = ahead_json("python:husky_plain_stream", lambda: husky_stream(husky_plain))
     (note,) = [n for n in run["notes"] if n.startswith("live check from")]
     assert float(note.split("t=")[1].split(":")[0]) - run["imu_t0"] < 0.5, note
     assert run["gps_rms_m"] < 3.0, run["gps_rms_m"]

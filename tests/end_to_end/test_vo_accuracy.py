@@ -5,8 +5,6 @@ error <= 0.3 deg after one full circle (thesis: 0.59 %); <= 0.1 mm of estimated 
 standing still; <= 0.5 % and <= 0.5 deg on a 60 s random drive at up to 0.3 m/s and 0.9 rad/s.
 """
 
-import json
-
 import numpy as np
 import pytest
 
@@ -27,15 +25,12 @@ BACKGROUND_JOBS = {test: [job for name in names for job in (f"standard:{name}", 
 
 
 @pytest.fixture(scope="module")
-def run_vo(standard_recording, background):
+def run_vo(standard_recording, ahead_json):
     """``run_vo(name, frontend)`` -> (the recording, its visual odometry's figures, :func:`vo_job.figures`)."""
 
     def get(name, frontend):
         path = standard_recording(name)
-        key = f"python:vo_{name}_{frontend}"
-        if background is not None and key in background:
-            return Recording(path), json.loads(background.result(key).stdout.strip().splitlines()[-1])
-        return Recording(path), vo_figures(path, frontend)
+        return Recording(path), ahead_json(f"python:vo_{name}_{frontend}", lambda: vo_figures(path, frontend))
 
     return get
 
