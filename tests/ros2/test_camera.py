@@ -15,6 +15,7 @@ from fusion_vo.evaluation.evaluate import evaluate_trajectories
 from fusion_vo.evaluation.io import read_groundtruth
 from fusion_vo.recording import write_tum
 
+from background import placed
 from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
@@ -31,8 +32,7 @@ def camera_run(tmp_path_factory, standard_recording, ahead):
 
     def batch_here():
         out = tmp / "batch"
-        assert main([str(rec) if arg == "{standard:short}" else str(out) if arg == "{out}" else arg
-                     for arg in BATCH]) == 0
+        assert main([placed(arg, {"standard:short": str(rec), "out": str(out)}) for arg in BATCH]) == 0
         return out
 
     batch = ahead("fusion-vo:camera_batch/batch", batch_here)
