@@ -34,10 +34,6 @@ MAX_BARS = 30
 MAX_ROWS = 2000
 
 
-def _png(fig: Figure) -> bytes:
-    return figure_png(fig)
-
-
 def _figure(n: int, width: float = 8.0, height: float = 3.2):
     fig = Figure(figsize=(width, height * n), dpi=90, layout="constrained")
     FigureCanvasAgg(fig)
@@ -72,7 +68,7 @@ def _metric_per_recording(frame, metric: str) -> bytes | None:
     ax.set_ylabel(METRIC_LABELS[metric])
     _scale(ax, ok[metric])
     ax.grid(True, axis="y", alpha=0.3)
-    return _png(fig)
+    return figure_png(fig)
 
 
 def _scale(ax, values) -> None:
@@ -110,7 +106,7 @@ def _metric_against_keys(frame, metric: str, keys: list[str]) -> bytes | None:
         ax.grid(True, alpha=0.3)
     axes[0].set_title(f"{METRIC_LABELS[metric]}: mean over the recordings, per value of each swept key")
     axes[0].legend(fontsize="small", ncols=min(len(trajectories), 4))
-    return _png(fig)
+    return figure_png(fig)
 
 
 def _rows_table(frame, keys: list[str]) -> tuple[list[str], list[list]]:
