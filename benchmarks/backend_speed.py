@@ -58,7 +58,7 @@ import numpy as np
 from common import Stages, add_settings, cpu_seconds, fusion_settings, load, parser, table, with_settings
 
 from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, batch, chain, fuse, graph, graph_builder
-from fusion_vo.backends.streaming import MESSAGE_SENSOR, time_ordered_messages
+from fusion_vo.backends.streaming import message_sensor, time_ordered_messages
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
@@ -241,7 +241,7 @@ def run_backend(s, msgs, backend: str, config: FusionConfig, background: bool = 
     lat, cpu, age, age_held, t_new, pos = [], [], [], [], [], []
     newest = -np.inf
     for _, kind, m in msgs:
-        sensor = MESSAGE_SENSOR.get(kind, kind)
+        sensor = message_sensor(kind)
         c0, p0 = time.perf_counter(), time.thread_time()
         fusion.add(sensor, m)
         est = fusion.current_estimate()

@@ -124,7 +124,7 @@ def rescaled(streams, ratio: float, offset: np.ndarray):
         d[:2] = f * d[:2] + (1.0 - f) * (offset - np.array([c * offset[0] - s * offset[1], s * offset[0] + c * offset[1]]))
         return dataclasses.replace(v, delta=d, covariance=S @ np.asarray(v.covariance) @ S)
 
-    return dataclasses.replace(streams, visual=[one(v) for v in streams.visual], camera_height_sigma=None)
+    return streams.replace(visual=[one(v) for v in streams.visual], camera_height_sigma=None)
 
 
 def wrong_focal(tmp: Path, full: bool) -> None:
@@ -148,7 +148,7 @@ def wrong_focal(tmp: Path, full: bool) -> None:
         (scale,) = [f for f in checked.consistency if f["check"] == "scale"]
         ratio = scale["estimate"]["ratio"]
         released = config(False, visual_scale_sigma=config().consistency.released_scale_sigma)
-        no_height = dataclasses.replace(streams, camera_height_sigma=None)
+        no_height = streams.replace(camera_height_sigma=None)
         variants = (("checks: translation left out", streams, config()),
                     ("as stated (no checks)", streams, config(False)),
                     ("scale prior released only", no_height, released),

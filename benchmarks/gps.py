@@ -223,12 +223,12 @@ def husky(out: Path, split: float, fusion: dict) -> None:
     notes = []
     for label, change in (("stated sigma", []), ("sigma estimated", ["gps.estimate_sigma=true"]),
                           ("sigma >= 2 m", ["gps.min_sigma=2.0"])):
-        result = fuse(dataclasses.replace(base, gps=first), "all", with_settings(fusion, change))
+        result = fuse(base.replace(gps=first), "all", with_settings(fusion, change))
         for name in FUSED:
             rows[f"{name} with the fused part's GPS, {label}"] = score_withheld(result.trajectories[name], second)
         notes += [f"({label}) {n}" for n in result.notes if "gps" in n]
     for backend in ("ekf", "gtsam"):  # live: the stated sigma, the world frame found from the fixes so far
-        result, name, calls, per_node = stream(dataclasses.replace(base, gps=first), backend, fusion)
+        result, name, calls, per_node = stream(base.replace(gps=first), backend, fusion)
         c = result.counts[name]["gps"]
         rows[f"streaming {backend} with the fused part's GPS, stated sigma"] = score_withheld(
             result.trajectories[name], second)

@@ -190,7 +190,7 @@ def floored(streams: SensorStreams, floors: dict | None = None) -> SensorStreams
     yaw = float((floors or {}).get("min_sigma_yaw", odometry.min_sigma_yaw))
     if streams.visual is None:
         return streams
-    return dataclasses.replace(streams, visual=[dataclasses.replace(v, covariance=floor_covariance(v.covariance, xy, yaw))
+    return streams.replace(visual=[dataclasses.replace(v, covariance=floor_covariance(v.covariance, xy, yaw))
                                                 for v in streams.visual])
 
 
@@ -230,7 +230,7 @@ def camera_noise_of(drive: Drive) -> CameraNoise:
 def with_stream_options(streams: SensorStreams, options: dict, noise: CameraNoise | None = None) -> SensorStreams:
     """``streams`` changed by a variant's ``streams.`` keys (``yaw_sigma``, ``no_imu``, ``no_wheel``,
     ``camera_noise``: ``noise`` applied to the increments)."""
-    out = dataclasses.replace(streams)
+    out = streams.replace()
     if options.get("camera_noise"):
         out.visual = noise.apply(out.visual)
     factor = options.get("yaw_sigma", 1.0)
@@ -247,7 +247,7 @@ def with_stream_options(streams: SensorStreams, options: dict, noise: CameraNois
 def unstated(streams: SensorStreams) -> SensorStreams:
     """``streams`` as if neither ``cam0/sensor.yaml`` stated ``height_sigma`` nor ``wheel0/sensor.yaml``
     ``radius_sigma``."""
-    out = dataclasses.replace(streams, camera_height_sigma=None)
+    out = streams.replace(camera_height_sigma=None)
     if out.wheel is not None:
         out.wheel = dataclasses.replace(out.wheel, config=dataclasses.replace(out.wheel.config, radius_sigma=None))
     return out

@@ -7,7 +7,7 @@
     result.covariances["ekf"]           # (N, 3, 3)
     result.summary()                    # counts, calibration, notes, timing
 
-``fuse`` does the same from :class:`~fusion_vo.backends.timeline.SensorStreams` already in memory.
+``fuse`` does the same from :class:`~fusion_vo.sensors.streams.SensorStreams` already in memory.
 
 Before anything is fused, the streams pass the consistency checks (:mod:`fusion_vo.consistency`): a stated
 configuration the data contradict (the IMU's mounting, an encoder's sign, a twist's frame, a clock, the
@@ -250,7 +250,7 @@ def synchronise_odometry(streams: SensorStreams, config: FusionConfig) -> tuple[
     if delay is None:
         return streams, None
     logger.info("odometry twist delayed by %.3f s behind the gyro; corrected", delay)
-    return dataclasses.replace(streams, odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
+    return streams.replace(odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
 
 
 def with_recorded_noise(config: FusionConfig, streams: SensorStreams) -> FusionConfig:
@@ -315,11 +315,7 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
     for s in known:
         if s.name == "camera" or s.read is None or not s.is_wanted(sensors, present):
             continue
-        data = s.read(recording)
-        if s.field is not None:
-            setattr(streams, s.field, data)
-        else:
-            streams.extra[s.name] = data
+        streams[s.name] = s.read(recording)
     return streams.select(sensors)
 
 

@@ -328,7 +328,7 @@ def _state_priors(data: Any, errors: list) -> dict[str, StatePrior]:
     # an instance's states only when configured (its registered prior applies otherwise); a state with a rule
     # (the built-in calibrations) is configured in its sensor's section
     known = {state.name: state for s in registry.sensors() for state in s.states
-             if state.rule is None and (not registry.is_instance(s.name) or state.name in given)}
+             if state.configurable and (not registry.is_instance(s.name) or state.name in given)}
     if not isinstance(data, dict):
         errors.append({"type": "dict_type", "loc": ("states",), "input": data})
         return {}

@@ -34,7 +34,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.backends.timeline import SensorStreams
-from fusion_vo.sensors import registry
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, VisualIncrement
 
@@ -126,13 +125,9 @@ def split(streams: SensorStreams, pauses: list[Pause]) -> list[SensorStreams]:
         visual = None
         if streams.visual is not None:
             visual = [inc for inc in streams.visual if lo <= inc.t0 and inc.t1 <= hi]
-        piece = dataclasses.replace(streams, visual=visual, extra=dict(streams.extra))
+        piece = streams.replace(camera=visual)
         for name, data in streams.sampled():
-            part = _slice(data, lo, hi)
-            if name in streams.extra:
-                piece.extra[name] = part
-            else:
-                setattr(piece, registry.get(name).field, part)
+            piece[name] = _slice(data, lo, hi)
         pieces.append(piece)
     return pieces
 

@@ -242,12 +242,8 @@ class NodesMixin:
                 reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
             if len(rows) < live.min_rows:
                 continue
-            data = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)  # the sensor's own module
-            field_name = self._intake[name].field
-            if field_name is not None:
-                setattr(streams, field_name, data)
-            else:
-                streams.extra[name] = data
+            # the sensor's own module makes its data
+            streams[name] = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)
         return streams
 
     def _interval(self, t0: float, t1: float, heading_offset: float | None):

@@ -142,8 +142,13 @@ from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge
 
 logger = logging.getLogger(__name__)
 
-#: the sensor a kind of :func:`time_ordered_messages` is added to, where the two names differ
-MESSAGE_SENSOR = {"visual": "camera", "twist": "odom"}
+def message_sensor(kind: str) -> str:
+    """The sensor a kind of :func:`time_ordered_messages` is added to: the one whose intake names its samples
+    ``kind`` (:attr:`Live.message <fusion_vo.sensors.registry.Live.message>`), else the sensor called ``kind``."""
+    for sensor in registry.sensors():
+        if sensor.live is not None and sensor.live.message == kind:
+            return sensor.name
+    return kind
 
 
 class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
@@ -411,8 +416,11 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         """Add the samples ``(arrival time, kind, sample)`` of ``messages`` in their order
         (:func:`time_ordered_messages`): :meth:`add` with the sensor ``kind`` names, where ``visual`` is the
         camera's and ``twist`` the odometry's (``odom``) samples."""
+        sensor_of: dict[str, str] = {}
         for _, kind, sample in messages:
-            self.add(MESSAGE_SENSOR.get(kind, kind), sample)
+            if kind not in sensor_of:
+                sensor_of[kind] = message_sensor(kind)
+            self.add(sensor_of[kind], sample)
 
     def add_visual(self, inc: VisualIncrement) -> None:
         """Add one frame-to-frame increment (applied at its ``t1``; ``t0`` must be the previous frame;
@@ -609,48 +617,36 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
 def time_ordered_messages(streams: SensorStreams, camera_delay: float = 0.0) -> list[tuple[float, str, object]]:
     """The samples of ``streams`` as ``(arrival time, kind, message)`` in arrival order.
 
-    ``kind`` names the :class:`StreamingFusion` method (``add_<kind>``), or for a sensor registered outside the
-    library whose :class:`~fusion_vo.sensors.registry.Live` intake gives ``samples``, the sensor
-    (``add(kind, message)``). Samples arrive at their own time, the visual increments ``camera_delay`` seconds
-    after their ``t1`` (frontend latency).
+    Each sensor's data become samples through its :class:`~fusion_vo.sensors.registry.Live` intake (``samples``);
+    ``kind`` is the intake's ``message`` name, which :meth:`StreamingFusion.feed` adds to the sensor (the camera's
+    are ``visual``, the odometry's ``twist``: the ``add_<kind>`` methods). Samples arrive at their own time, the
+    visual increments ``camera_delay`` seconds after their ``t1`` (frontend latency); samples arriving together
+    keep the order of their intakes' ``order``, then of the registry.
     """
-    msgs: list[tuple[float, int, str, object]] = []
-    if streams.visual:
-        msgs += [(v.t1 + camera_delay, 0, "visual", v) for v in streams.visual]
-    if streams.wheel is not None:
-        w = streams.wheel
-        msgs += [(t, 1, "wheel", WheelTicks(t, int(lt), int(rt))) for t, lt, rt in zip(w.t, w.left, w.right)]
-    if streams.odom is not None:
-        o = streams.odom
-        msgs += [(t, 1, "twist", TwistSample(t, vx, vy, wz)) for t, vx, vy, wz in zip(o.t, o.vx, o.vy, o.wz)]
-    if streams.imu is not None:
-        m = streams.imu
-        q = m.orientation if m.orientation is not None else [None] * len(m.t)
-        msgs += [(t, 2, "imu", ImuSample(t, g, a, o)) for t, g, a, o in zip(m.t, m.gyro, m.accel, q)]
-    if streams.range is not None:
-        msgs += [(t, 3, "range", RangeSample(t, d)) for t, d in zip(streams.range.t, streams.range.distance)]
-    if streams.gps is not None:
-        g = streams.gps
-        msgs += [(t, 4, "gps", GpsFix(t, enu[:2], cov)) for t, enu, cov in zip(g.t, g.enu, g.covariance)]
-    for name, data in streams.extra.items():
-        live = registry.get(name).live if name in registry.names() else None
-        if live is not None and live.samples is not None and data is not None:
-            msgs += [(float(t), 4, name, m) for t, m in live.samples(data)]
+    msgs: list[tuple[float, float, str, object]] = []
+    for sensor in registry.sensors():
+        live, data = sensor.live, streams.get(sensor.name)
+        if live is None or live.samples is None or not _has_samples(data):
+            continue
+        delay = camera_delay if sensor.name == "camera" else 0.0
+        kind = live.message or sensor.name
+        msgs += [(t + delay, live.order, kind, m) for t, m in live.samples(data)]
     msgs.sort(key=lambda m: (m[0], m[1]))
     return [(float(m[0]), m[2], m[3]) for m in msgs]
+
+
+def _has_samples(data) -> bool:
+    """Whether a sensor's data is there (not None, and not an empty list of increments)."""
+    return data is not None and not (isinstance(data, (list, tuple)) and not data)
 
 
 def streaming_for(streams: SensorStreams, backend: str = "ekf", config: FusionConfig | dict | None = None,
                   **kwargs) -> StreamingFusion:
     """A :class:`StreamingFusion` for the sensors and calibrations of ``streams`` (keyword arguments pass on)."""
-    sensors = [name for name, present in (("camera", bool(streams.visual)), ("wheel", streams.wheel is not None),
-                                          ("odom", streams.odom is not None), ("imu", streams.imu is not None),
-                                          ("range", streams.range is not None), ("gps", streams.gps is not None))
-               if present]
+    sensors = [sensor.name for sensor in registry.sensors()
+               if sensor.live is not None and _has_samples(streams.get(sensor.name))]
     if streams.gps is not None:
         kwargs.setdefault("gps_lever_arm", streams.gps.lever_arm)
-    sensors += [name for name, data in streams.extra.items()  # sensors registered outside the library
-                if data is not None and name in registry.names() and registry.get(name).live is not None]
     imu = streams.imu
     return StreamingFusion(backend, config, sensors, wheel_config=None if streams.wheel is None else streams.wheel.config,
                            imu_T_BS=None if imu is None else imu.T_BS, imu_noise=None if imu is None else imu.noise,

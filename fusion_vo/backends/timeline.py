@@ -39,9 +39,9 @@ from fusion_vo.measurements.grid import (  # noqa: F401 (the grid's helpers, her
     coverage, node_index, node_indices, ordered_fields, time_order, uncovered_runs, when,
 )
 from fusion_vo.errors import InputError
-from fusion_vo.measurements import GpsData, ImuData, RangeData, TwistData, VisualIncrement, WheelData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.readings import Readings
+from fusion_vo.sensors.streams import SensorStreams  # noqa: F401 (the run's input, here too)
 from fusion_vo.sensors import visual_noise
 from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 from fusion_vo.backends.states import context_of, run_states
@@ -56,81 +56,6 @@ def __getattr__(name: str):
     if name == "GPS_SNAP":
         return GPS_SNAP
     raise AttributeError(name)
-
-
-@dataclass
-class SensorStreams:
-    """The measurements a fusion run may use (any may be None when not recorded or not wanted).
-
-    ``visual`` is the frontend's time-ordered list of increments; the others are per-stream arrays.
-    ``camera_height`` is the height the visual increments were computed with (for the range finder),
-    ``camera_height_sigma`` its standard deviation [m] as ``cam0/sensor.yaml`` states it (``height_sigma``).
-    ``range_in_visual`` says the visual increments were already scaled with the range finder's heights
-    (visual odometry's ``use_range``): the range finder is then not used again as a height measurement,
-    and ``range_height_sigma`` [m], the typical standard deviation of the heights the frames were scaled
-    with, bounds the prior of the visual scale (their precision is what the increments' scale has).
-    """
-
-    visual: list[VisualIncrement] | None = None
-    wheel: WheelData | None = None
-    odom: TwistData | None = None
-    imu: ImuData | None = None
-    range: RangeData | None = None
-    camera_height: float | None = None
-    camera_height_sigma: float | None = None
-    range_in_visual: bool = False
-    range_height_sigma: float | None = None
-    gps: GpsData | None = None
-    extra: dict = field(default_factory=dict)
-
-    def data(self, sensor: str):
-        """The data of the registered sensor ``sensor`` (None when absent)."""
-        return registry.get(sensor).data(self)
-
-    def sampled(self) -> list[tuple[str, object]]:
-        """``(name, data)`` of every stream with per-sample times ``t`` (all but the camera's increments)."""
-        out = []
-        for s in registry.sensors():
-            data = s.data(self)
-            if s.name != "camera" and data is not None:
-                out.append((s.name, data))
-        return out
-
-    def available(self) -> list[str]:
-        """Sensor names with data."""
-        return [s.name for s in registry.sensors() if s.available(s.data(self))]
-
-    def select(self, sensors) -> "SensorStreams":
-        """Only the named sensors; a sensor that is asked for but absent is an :class:`InputError`.
-
-        ``wheel`` falls back to the odometry twist when there are no encoder ticks; ``odom`` asks for the
-        twist explicitly (the two are the same sensor to the backends, ticks preferred).
-        """
-        sensors = list(sensors)
-        registry.ensure(sensors)
-        known = registry.names()
-        unknown = [s for s in sensors if s not in known]
-        if unknown:
-            raise InputError(f"unknown sensor '{unknown[0]}' (use {', '.join(known)})")
-        available = self.available()
-        for s in registry.sensors():
-            if s.name in available:
-                available += [a for a in s.also_available_as if a not in available]
-        missing = [s for s in sensors if s not in available]
-        if missing:
-            raise InputError(f"sensor '{missing[0]}' was asked for but the recording has no "
-                             f"{registry.get(missing[0]).where} data")
-        if not sensors:
-            raise InputError("no sensors selected")
-        out = SensorStreams(camera_height=self.camera_height, camera_height_sigma=self.camera_height_sigma,
-                            range_in_visual=self.range_in_visual, range_height_sigma=self.range_height_sigma)
-        for s in registry.sensors():
-            data = s.pick(self, sensors) if s.pick is not None else (s.data(self) if s.name in sensors else None)
-            if s.field is not None:
-                setattr(out, s.field, data)
-            elif data is not None:
-                out.extra[s.name] = data
-        return out
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """Inputs that contradict each other, caught before any backend fuses them.
 
-The stage runs on the time-ordered measurements (:class:`~fusion_vo.backends.timeline.SensorStreams`), after
+The stage runs on the time-ordered measurements (:class:`~fusion_vo.sensors.streams.SensorStreams`), after
 the frontend and before the backends (:func:`fusion_vo.backends.batch.fuse`). Each check estimates one
 quantity from the data, compares it with what the recording's files state, decides, and says so in one
 plain sentence that names the file and the key to change (:class:`Finding`):

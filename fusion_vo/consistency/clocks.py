@@ -128,10 +128,10 @@ def check_clocks(streams, max_delay: float):
 def _shift(streams, name: str, d: float):
     """``streams`` with stream ``name``'s timestamps moved back by ``d`` seconds."""
     if name == "camera":
-        return dataclasses.replace(streams, visual=[dataclasses.replace(v, t0=v.t0 - d, t1=v.t1 - d)
+        return streams.replace(visual=[dataclasses.replace(v, t0=v.t0 - d, t1=v.t1 - d)
                                                     for v in streams.visual])
     data = getattr(streams, name)
-    return dataclasses.replace(streams, **{name: dataclasses.replace(data, t=np.asarray(data.t, dtype=np.float64) - d)})
+    return streams.replace(**{name: dataclasses.replace(data, t=np.asarray(data.t, dtype=np.float64) - d)})
 
 
 __all__ = ["check_clocks", "MIN_SHIFT"]

@@ -222,7 +222,7 @@ def _without_translation(streams):
             frame[2, 2] = np.asarray(v.frame_covariance, dtype=np.float64)[2, 2]
         return dataclasses.replace(v, covariance=out, frame_covariance=frame)
 
-    return dataclasses.replace(streams, visual=[heading_only(v) for v in streams.visual], camera_height_sigma=None,
+    return streams.replace(visual=[heading_only(v) for v in streams.visual], camera_height_sigma=None,
                                range_height_sigma=None)
 
 
@@ -231,7 +231,7 @@ def _scaled_wheels(streams, factor: float):
     if streams.wheel is not None:
         cfg = dataclasses.replace(streams.wheel.config, wheel_radius_left=streams.wheel.config.wheel_radius_left * factor,
                                   wheel_radius_right=streams.wheel.config.wheel_radius_right * factor, radius_sigma=None)
-        return dataclasses.replace(streams, wheel=dataclasses.replace(streams.wheel, config=cfg))
+        return streams.replace(wheel=dataclasses.replace(streams.wheel, config=cfg))
     odom = streams.odom
-    return dataclasses.replace(streams, odom=dataclasses.replace(odom, vx=np.asarray(odom.vx) * factor,
+    return streams.replace(odom=dataclasses.replace(odom, vx=np.asarray(odom.vx) * factor,
                                                                  vy=np.asarray(odom.vy) * factor))

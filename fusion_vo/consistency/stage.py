@@ -48,7 +48,7 @@ class Checked:
 
 
 def check_streams(streams, config) -> Checked:
-    """Run the checks (module docstring) on ``streams`` (:class:`~fusion_vo.backends.timeline.SensorStreams`)
+    """Run the checks (module docstring) on ``streams`` (:class:`~fusion_vo.sensors.streams.SensorStreams`)
     with ``config`` (:class:`~fusion_vo.backends.config.FusionConfig`; ``config.consistency.check`` false
     skips them)."""
     if not config.consistency.check:
@@ -78,9 +78,9 @@ def _mounting(out: Checked) -> None:
     if finding.decision == CORRECTED:
         T = np.array(streams.imu.T_BS, dtype=np.float64)
         T[:3, :3] = est.R_BS
-        out.streams = dataclasses.replace(streams, imu=dataclasses.replace(streams.imu, T_BS=T))
+        out.streams = streams.replace(imu=dataclasses.replace(streams.imu, T_BS=T))
     elif finding.decision == REFUSED:
-        out.streams = dataclasses.replace(streams, imu=None)
+        out.streams = streams.replace(imu=None)
 
 
 def _wheels(out: Checked) -> None:
@@ -92,15 +92,15 @@ def _wheels(out: Checked) -> None:
     if streams.wheel is not None and len(streams.wheel) >= 3 and reference is not None:
         finding, wheel = check_encoder_signs(streams.wheel, reference, name, config.consistency, config.max_gap)
         out.findings.append(finding)
-        streams = dataclasses.replace(streams, wheel=wheel)
+        streams = streams.replace(wheel=wheel)
     if streams.odom is not None and len(streams.odom) >= 3:
         if reference is not None:
             finding, odom = check_twist_sign(streams.odom, reference, name, config.consistency, config.max_gap)
             out.findings.append(finding)
-            streams = dataclasses.replace(streams, odom=odom)
+            streams = streams.replace(odom=odom)
         finding, odom = check_twist_frame(streams.odom, camera_steps(streams.visual), config.max_gap)
         out.findings.append(finding)
-        streams = dataclasses.replace(streams, odom=odom)
+        streams = streams.replace(odom=odom)
     out.streams = streams
 
 

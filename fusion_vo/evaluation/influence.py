@@ -80,16 +80,13 @@ def inputs(streams: SensorStreams) -> list[tuple[str, SensorStreams, bool]]:
         data = sensor.data(streams)
         if not sensor.available(data):
             continue
-        if sensor.field is not None:
-            without = dataclasses.replace(streams, **{sensor.field: None})
-        else:
-            without = dataclasses.replace(streams, extra={k: v for k, v in streams.extra.items() if k != sensor.name})
+        without = streams.replace(**{sensor.name: None})
         name = sensor.name
         if name == "imu" and not _has_ahrs(data):
             name = "gyro"
         out.append((name, without, sensor.absolute_position))
         if name == "imu":
-            out.append(("ahrs", dataclasses.replace(streams, imu=dataclasses.replace(data, orientation=None)), False))
+            out.append(("ahrs", streams.replace(imu=dataclasses.replace(data, orientation=None)), False))
     return out
 
 

@@ -58,7 +58,7 @@ from pydantic import Field
 
 from fusion_vo.config.base import Positive, Section, Sigma
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import GpsData
+from fusion_vo.measurements import GpsData, GpsFix
 from fusion_vo.sensors.model import ROBUST_KERNELS, MeasurementModel, robust_weight
 from fusion_vo.sensors.readings import ORDER, Absolute, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
@@ -519,10 +519,15 @@ def _live_take(fusion, fix) -> None:
     fusion.take_fix(fix)
 
 
+def _live_samples(data: GpsData) -> list:
+    """Recorded usable fixes as live samples (their East-North position and its covariance)."""
+    return [(t, GpsFix(t, enu[:2], cov)) for t, enu, cov in zip(data.t, data.enu, data.covariance)]
+
+
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
     default=False, config=("gps", GpsNoise), absolute_position=True, node_times=node_times, intervals=Step(50, add_intervals),
     readings=readings, graph_keyframes=_keyframes,
-    live=Live(_live_sample, values=_live_values, take=_live_take),
+    live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, order=4),
 ))

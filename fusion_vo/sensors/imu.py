@@ -47,7 +47,7 @@ from pydantic import Field
 
 from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import ImuData
+from fusion_vo.measurements import ImuData, ImuSample
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
@@ -481,10 +481,17 @@ def _ahrs_offset(state: State, context) -> State:
 GYRO_BIAS = State("gyro_bias", symbol="b", rule=_gyro_bias)
 AHRS_OFFSET = State("ahrs_offset", symbol="o", rule=_ahrs_offset)
 
+def _live_samples(data: ImuData) -> list:
+    """Recorded IMU rows as live samples (with the AHRS orientation when recorded)."""
+    q = data.orientation if data.orientation is not None else [None] * len(data.t)
+    return [(t, ImuSample(t, g, a, o)) for t, g, a, o in zip(data.t, data.gyro, data.accel, q)]
+
+
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
     grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings, states=(GYRO_BIAS, AHRS_OFFSET),
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=has_heading,
-    live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro"),
+    live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
+              samples=_live_samples, order=2),
 ))

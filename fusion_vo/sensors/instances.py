@@ -235,7 +235,7 @@ def odometry_instance(n: int) -> Sensor:
 
     def intervals(iv, streams, config, counts) -> None:
         count = counts.setdefault(name, SensorCount())
-        iv.sensors[name] = twist_on_grid(streams.extra[name], iv.t, config.section(name), config.max_gap, count)
+        iv.sensors[name] = twist_on_grid(streams[name], iv.t, config.section(name), config.max_gap, count)
 
     def readings(iv, config) -> list[Readings]:
         on_grid = iv.sensors.get(name)
@@ -328,7 +328,7 @@ def imu_instance(n: int) -> Sensor:
     model = InstanceGyroModel(name=name, args=("motion", bias))
 
     def intervals(iv, streams, config, counts) -> None:
-        data = streams.extra[name]
+        data = streams[name]
         noise = config.section(name).imu_noise(data.noise)
         ok, angle = gyro_on_grid(data, iv.t, noise, config.max_gap, counts.setdefault(name, SensorCount()))
         iv.sensors[name] = (ok, angle, noise.gyro_noise_density)

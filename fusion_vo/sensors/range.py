@@ -20,7 +20,7 @@ from pydantic import Field, model_validator
 
 from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.errors import InputError
-from fusion_vo.measurements import RangeData
+from fusion_vo.measurements import RangeData, RangeSample
 from fusion_vo.sensors.imu import running_median
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
@@ -191,11 +191,16 @@ def _live_sample(m) -> tuple:
     return m.t, float(m.distance)
 
 
+def _live_samples(data: RangeData) -> list:
+    """Recorded distances as live samples."""
+    return [(t, RangeSample(t, d)) for t, d in zip(data.t, data.distance)]
+
+
 register(Sensor(
     name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
     has=lambda recording: recording.has_range(), config=("range", RangeNoise), grid=RangeGrid.empty, intervals=Step(40, add_intervals),
     readings=readings,
     # the streaming buffers read as many neighbours around an interval as the gyro's spike check
     live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,
-              neighbours=lambda config: int(config.imu.spike_window) + 1),
+              neighbours=lambda config: int(config.imu.spike_window) + 1, samples=_live_samples, order=3),
 ))

@@ -1,7 +1,7 @@
 """The sensors the backends know, each registered by its own module.
 
 A :class:`Sensor` gathers everything about one sensor that the rest of the library needs: where its data
-lives in a recording and how it is read, its field of :class:`~fusion_vo.backends.timeline.SensorStreams`,
+lives in a recording and how it is read, its data in :class:`~fusion_vo.sensors.streams.SensorStreams`,
 its configuration section, how its samples become measurements on the node grid
 (:func:`~fusion_vo.backends.timeline.build_intervals`; kept in ``Intervals.sensors[name]``, a container its module
 defines), and its contributions to the EKF
@@ -120,6 +120,12 @@ class State:
         except ConfigError as exc:
             raise ValueError(f"state {self.name}: {str(exc).removeprefix('StatePrior: ')}") from None
 
+    @property
+    def configurable(self) -> bool:
+        """Whether ``fusion: {states: {NAME: ...}}`` sets its prior: a state without a :attr:`rule` (one with a rule
+        takes its prior from its sensor's section)."""
+        return self.rule is None
+
     def prior(self) -> StatePrior:
         """Its prior and random walk as a configuration section (the defaults of ``fusion: {states: {NAME: ...}}``)."""
         return StatePrior(initial=self.initial, sigma=self.sigma, random_walk=self.random_walk)
@@ -184,7 +190,7 @@ class Live:
     data : callable
         ``data(t, payloads, fusion) -> data``: the buffered samples around a node interval (``t`` an array, the
         payloads a list, ``fusion`` the :class:`~fusion_vo.backends.streaming.StreamingFusion` for its
-        calibrations) as the sensor's data for :class:`~fusion_vo.backends.timeline.SensorStreams`.
+        calibrations) as the sensor's data for :class:`~fusion_vo.sensors.streams.SensorStreams`.
     min_rows : int
         Samples an interval needs to be built from (default 2: they are interpolated at the node times).
     neighbours : int or callable
@@ -193,9 +199,14 @@ class Live:
     counted_as : str or None
         The name its counts are reported under (default: the sensor's).
     samples : callable or None
-        ``samples(data) -> iterable of (t, sample)``: its data as live samples, for replaying a recording
-        (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``) of a sensor
-        registered outside the library.
+        ``samples(data) -> iterable of (t, sample)``: its data as live samples (``t`` their arrival time), for
+        replaying a recording (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``).
+    message : str or None
+        The kind its replayed samples are named by (default: the sensor's name; the camera's are ``visual``, the
+        odometry's ``twist``, the names of :class:`~fusion_vo.backends.streaming.StreamingFusion`'s ``add_*``).
+    order : float
+        Among samples that arrive at the same time, those of a smaller ``order`` come first (default 4: after the
+        built-in sensors' 0 to 4, in registration order).
     take : callable or None
         ``take(fusion, payload)``: for a sensor whose samples make nodes rather than being interpolated at them
         (the camera's increments, GPS fixes): what the fusion does with a sample that was read and passed the
@@ -214,6 +225,8 @@ class Live:
     samples: Callable | None = None
     take: Callable | None = None
     values: Callable | None = None
+    message: str | None = None
+    order: float = 4
 
 
 @dataclass(frozen=True)
@@ -227,8 +240,8 @@ class Sensor:
     where : str
         What a recording lacks when the sensor is asked for but has no data (``"gps0/ (usable fixes)"``).
     field : str or None
-        Attribute of :class:`~fusion_vo.backends.timeline.SensorStreams` holding its data; None: the data is
-        ``SensorStreams.extra[name]`` (a sensor registered outside the library). The data is a dataclass with
+        A second name its data answers to in :class:`~fusion_vo.sensors.streams.SensorStreams` (the camera's
+        increments are ``visual``), besides its own name; None: its own name only. The data is a dataclass with
         sample times ``t`` and per-sample arrays (the camera's: a list of increments), so that the node grid
         covers it and a pause in every stream cuts it (:mod:`fusion_vo.backends.pauses`).
     min_samples : int
@@ -320,10 +333,8 @@ class Sensor:
     absolute_heading: Any = False
 
     def data(self, streams) -> Any:
-        """Its data in ``streams`` (a :class:`~fusion_vo.backends.timeline.SensorStreams`), or None."""
-        if self.field is not None:
-            return getattr(streams, self.field)
-        return streams.extra.get(self.name)
+        """Its data in ``streams`` (a :class:`~fusion_vo.sensors.streams.SensorStreams`), or None."""
+        return streams.get(self.name)
 
     def gives_heading(self, iv) -> bool:
         """Whether it is a heading reference on the node grid ``iv`` (:attr:`absolute_heading`)."""
@@ -356,6 +367,7 @@ class Sensor:
 
 _REGISTRY: dict[str, Sensor] = {}
 _ORDERED: dict = {}  # attribute -> the sorted steps (cleared when a sensor is added or removed)
+_ALIASES: dict = {}  # second name (Sensor.field) -> its sensor (cleared likewise)
 _KINDS: dict[str, Callable[[int], Sensor]] = {}  # kind -> factory of its instance N (register_kind)
 _loaded = False
 
@@ -430,6 +442,7 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
         symbols.add(state.symbol)
     _REGISTRY[sensor.name] = sensor
     _ORDERED.clear()
+    _ALIASES.clear()
     return sensor
 
 
@@ -437,6 +450,7 @@ def unregister(name: str) -> None:
     """Remove a sensor registered with :func:`register` (no error when it is not)."""
     _REGISTRY.pop(name, None)
     _ORDERED.clear()
+    _ALIASES.clear()
 
 
 @contextmanager
@@ -511,6 +525,17 @@ def names() -> tuple[str, ...]:
     return tuple(s.name for s in sensors())
 
 
+def resolve(key: str) -> Sensor | None:
+    """The sensor ``key`` names: a registered sensor or an instance of a declared kind (:func:`instance`), or the
+    sensor whose second name (:attr:`Sensor.field`) it is; None when it is neither."""
+    sensor = instance(key)
+    if sensor is not None:
+        return sensor
+    if not _ALIASES:
+        _ALIASES.update({s.field: s for s in _REGISTRY.values() if s.field is not None})
+    return _ALIASES.get(key)
+
+
 def get(name: str) -> Sensor:
     """The sensor called ``name``, an instance of a declared kind made on first use (KeyError when none is)."""
     sensor = instance(name)
@@ -520,13 +545,13 @@ def get(name: str) -> Sensor:
 
 
 def states(used, config=None) -> tuple[State, ...]:
-    """The state variables without a rule (:attr:`State.rule`) that the sensors named in ``used`` add (in
+    """The configurable state variables (:attr:`State.configurable`) that the sensors named in ``used`` add (in
     :func:`sensors` order), with the prior and random walk ``config`` (a
     :class:`~fusion_vo.backends.config.FusionConfig`) sets in its ``states`` section."""
     used = set(used)
     configured = getattr(config, "states", None) or {}
     return tuple(state.configured(configured.get(state.name)) for s in sensors() if s.name in used
-                 for state in s.states if state.rule is None)
+                 for state in s.states if state.configurable)
 
 
 def all_states() -> tuple[State, ...]:
@@ -537,7 +562,7 @@ def all_states() -> tuple[State, ...]:
 def configurable_states() -> tuple[State, ...]:
     """The registered states whose prior ``fusion: {states: {NAME: ...}}`` sets: those without a rule (a state
     with one takes its prior from its sensor's section)."""
-    return tuple(state for state in all_states() if state.rule is None)
+    return tuple(state for state in all_states() if state.configurable)
 
 
 def ordered(attribute: str, used=None) -> list[tuple[Sensor, Step]]:

@@ -222,6 +222,11 @@ def _live_values(inc) -> list:
     return [inc.t0] + ([] if not inc.ok else [inc.delta, inc.covariance])
 
 
+def _live_samples(increments) -> list:
+    """Recorded increments as live samples: each arrives at its second frame's time."""
+    return [(inc.t1, inc) for inc in increments]
+
+
 def _live_take(fusion, inc) -> None:
     """Streaming: an increment makes its node (:meth:`~fusion_vo.backends.streaming.StreamingFusion.take_increment`)."""
     fusion.take_increment(inc)
@@ -249,5 +254,5 @@ VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
-    live=Live(_live_sample, values=_live_values, take=_live_take),
+    live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
 ))

@@ -84,7 +84,7 @@ from pydantic import Field, field_validator
 
 from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import PoseData, TwistData, WheelConfig, WheelData
+from fusion_vo.measurements import PoseData, TwistData, TwistSample, WheelConfig, WheelData, WheelTicks
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.sensors.wheel_states import (CURVATURE, WHEEL_BASE_FACTOR, WHEEL_SCALE, curvature_observable,
@@ -628,6 +628,16 @@ def _live_twist(m) -> tuple:
     return m.t, (m.vx, m.vy, m.wz)
 
 
+def _live_ticks_samples(data: WheelData) -> list:
+    """Recorded tick counts as live samples."""
+    return [(t, WheelTicks(t, int(lt), int(rt))) for t, lt, rt in zip(data.t, data.left, data.right)]
+
+
+def _live_twist_samples(data: TwistData) -> list:
+    """A recorded twist as live samples."""
+    return [(t, TwistSample(t, vx, vy, wz)) for t, vx, vy, wz in zip(data.t, data.vx, data.vy, data.wz)]
+
+
 def _live_twist_data(t, rows, fusion) -> TwistData:
     v = np.array(rows)
     return TwistData(t, v[:, 0], v[:, 1], v[:, 2])
@@ -639,7 +649,7 @@ register(Sensor(
     pick=_pick_ticks, config=("wheel", WheelNoise),
     grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
-    states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data),
+    states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",
@@ -648,7 +658,7 @@ register(Sensor(
                                       and not ("wheel" in selected and present.get("wheel", False))),
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
     config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals),
-    live=Live(_live_twist, _live_twist_data, counted_as="wheel"),
+    live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1),
 ))
 
 __all__ = [

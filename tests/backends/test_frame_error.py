@@ -65,7 +65,7 @@ def test_frame_errors_stated_by_the_increments_are_the_same_model(camera_only):
     import dataclasses
 
     s, runs = camera_only
-    stated = dataclasses.replace(streams_of(s).select(["camera"]), visual=_stating(s.visual, 0.25))
+    stated = streams_of(s).select(["camera"]).replace(visual=_stating(s.visual, 0.25))
     result = fuse(stated, "all", FusionConfig())
     for name in TRACKS:
         np.testing.assert_allclose(result.trajectories[name].xyyaw, runs[0.5].trajectories[name].xyyaw,
@@ -81,7 +81,7 @@ def test_streaming_takes_the_frame_errors_the_increments_state(camera_only, back
     import dataclasses
 
     s, runs = camera_only
-    stated = dataclasses.replace(streams_of(s).select(["camera"]), visual=_stating(s.visual, 0.25))
+    stated = streams_of(s).select(["camera"]).replace(visual=_stating(s.visual, 0.25))
     fusion = streaming_for(stated, backend, FusionConfig())
     for v in stated.visual:
         fusion.add_visual(v)

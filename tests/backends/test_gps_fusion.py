@@ -209,7 +209,7 @@ def streamed(gps_streams):
     isam = _streamed(gps_streams, "gtsam")
     frame = isam.current_estimate().frame
     return {"gtsam": isam.finish(), "frame": frame, "ekf": _streamed(gps_streams, "ekf").finish(),
-            "free": _streamed(dataclasses.replace(gps_streams, gps=None), "gtsam").finish()}
+            "free": _streamed(gps_streams.replace(gps=None), "gtsam").finish()}
 
 
 def _present_rms(track: PoseData, truth: PoseData) -> float:
@@ -259,7 +259,7 @@ def test_streaming_isam2_gates_and_counts_a_wild_fix(gps_streams, streamed, trut
     wild = dataclasses.replace(g, t=np.insert(g.t, i + 1, t), enu=np.insert(g.enu, i + 1, g.enu[i] + [1000.0, 0.0, 0.0], 0),
                                covariance=np.insert(g.covariance, i + 1, g.covariance[i], 0),
                                geodetic=np.insert(g.geodetic, i + 1, g.geodetic[i], 0), status=np.insert(g.status, i + 1, 0))
-    result = _streamed(dataclasses.replace(gps_streams, gps=wild), "gtsam").finish()
+    result = _streamed(gps_streams.replace(gps=wild), "gtsam").finish()
     before = streamed["gtsam"].counts["gtsam_online"]["gps"]
     after = result.counts["gtsam_online"]["gps"]
     assert (after.gated, after.used) == (before.gated + 1, before.used)
@@ -328,7 +328,7 @@ def husky(husky_log):
                                             if isinstance(getattr(data, f.name), np.ndarray)
                                             and len(getattr(data, f.name)) == len(data.t)})
 
-    part = dataclasses.replace(base, odom=until(base.odom, t0 + 120.0), imu=until(base.imu, t0 + 120.0))
+    part = base.replace(odom=until(base.odom, t0 + 120.0), imu=until(base.imu, t0 + 120.0))
     first = until(gps, t0 + 60.0)
     keep = (gps.t > t0 + 60.0) & (gps.t <= t0 + 120.0)
     second = dataclasses.replace(gps, t=gps.t[keep], enu=gps.enu[keep], covariance=gps.covariance[keep],
@@ -354,7 +354,7 @@ def test_husky_gps_of_the_first_minute_then_withheld(husky):
     beside wheel dead reckoning and the filter without GPS placed in ENU by the same first-minute fixes."""
     part, first, second, baseline = husky
     # the receiver claims 0.9 m; its fixes scatter about 2 m around any smooth track: that is the floor
-    fused = fuse(dataclasses.replace(part, gps=first), "ekf", {"gps": {"min_sigma": 2.0}})
+    fused = fuse(part.replace(gps=first), "ekf", {"gps": {"min_sigma": 2.0}})
     assert any(n.startswith("gps: world frame is ENU") for n in fused.notes)
     rms = _withheld_rms(fused.trajectories["ekf"], second)
     assert rms < 0.5 * baseline["wheel"], (rms, baseline)
@@ -369,7 +369,7 @@ def test_husky_streamed_with_the_gps_of_the_first_minute(husky):
     part, first, second, _ = husky
     runs = {}
     for backend, name in (("ekf", "ekf"), ("gtsam", "gtsam_online")):
-        result = _streamed(dataclasses.replace(part, gps=first), backend, config={"gps": {"min_sigma": 2.0}}).finish()
+        result = _streamed(part.replace(gps=first), backend, config={"gps": {"min_sigma": 2.0}}).finish()
         assert sum("re-expressed in ENU" in n for n in result.notes) == 1
         track = result.trajectories[name]
         runs[backend] = result.counts[name]["gps"], _withheld_rms(track, first), _withheld_rms(track, second)
@@ -419,7 +419,7 @@ def _stated(streams, sigma):
     """The same fixes, each claiming ``sigma`` per axis."""
     gps = streams.gps
     cov = np.tile(np.eye(2) * sigma ** 2, (len(gps.t), 1, 1))
-    return dataclasses.replace(streams, gps=dataclasses.replace(gps, covariance=cov))
+    return streams.replace(gps=dataclasses.replace(gps, covariance=cov))
 
 
 def _aligned(streams, options):

@@ -48,7 +48,7 @@ def drive():
 
 
 def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
-    streams = dataclasses.replace(streams_of(drive), wheel=_wheel_scaled(drive.wheel, *LIE, 1.3))
+    streams = streams_of(drive).replace(wheel=_wheel_scaled(drive.wheel, *LIE, 1.3))
     result = fuse(streams, "all", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent
@@ -75,7 +75,7 @@ def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
 
 
 def test_camera_scale_gone_wrong_is_reported_with_its_span(drive):
-    streams = dataclasses.replace(streams_of(drive), visual=_camera_scaled(drive.visual, *LIE, 1.3))
+    streams = streams_of(drive).replace(visual=_camera_scaled(drive.visual, *LIE, 1.3))
     result = fuse(streams, "ekf", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent

@@ -77,8 +77,7 @@ def test_undeclared_or_unconfigured_sensors_are_input_errors():
 def _on_the_epoch_clock(streams, offset: float = 1.6e9):
     """The same streams stamped ``offset`` seconds later, as recordings are (epoch seconds, where a float resolves
     0.24 µs)."""
-    return dataclasses.replace(
-        streams,
+    return streams.replace(
         visual=[dataclasses.replace(v, t0=v.t0 + offset, t1=v.t1 + offset) for v in streams.visual],
         wheel=dataclasses.replace(streams.wheel, t=streams.wheel.t + offset),
         imu=dataclasses.replace(streams.imu, t=streams.imu.t + offset))
@@ -140,7 +139,7 @@ def test_the_engine_spans_dropped_and_lost_frames_as_the_batch_run_does(drive, b
     than one interval."""
     s, _ = drive
     streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
-    streams = _on_the_epoch_clock(dataclasses.replace(streams, visual=_with_frames_dropped_and_lost(streams.visual)))
+    streams = _on_the_epoch_clock(streams.replace(visual=_with_frames_dropped_and_lost(streams.visual)))
     batch, live = _batch_and_engine(streams, backend)
     ours, ref = live.trajectories[name], batch.trajectories[name]
     counts = live.counts[name]["camera"]
@@ -160,7 +159,7 @@ def test_in_a_camera_outage_the_engine_keeps_the_wheels_model(drive, backend, na
     streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
     lost = [dataclasses.replace(v, t0=streams.visual[99].t1, status="lost") if 100 <= i < 140 else v
             for i, v in enumerate(streams.visual)]
-    streams = _on_the_epoch_clock(dataclasses.replace(streams, visual=lost))
+    streams = _on_the_epoch_clock(streams.replace(visual=lost))
     batch, live = _batch_and_engine(streams, backend)
     ours, ref = live.trajectories[name], batch.trajectories[name]
     assert live.counts[name]["camera"].missing == 40 and abs(batch.calibration[name]["wheel_curvature"]) > 1e-3

@@ -73,10 +73,10 @@ def test_correction_mid_stream_replaces_the_bias_and_realigns_the_ahrs():
 
     made = synthetic_streams(SyntheticOptions(duration=30.0, ahrs_sigma=0.01), seed=3)
     right = streams_of(made).select(["camera", "wheel", "imu"])
-    right = dataclasses.replace(right, imu=dataclasses.replace(right.imu, accel=np.zeros_like(right.imu.accel)))
+    right = right.replace(imu=dataclasses.replace(right.imu, accel=np.zeros_like(right.imu.accel)))
     imu = right.imu
     q = Rotation.from_matrix(quat_to_matrix(imu.orientation) @ ON_ITS_SIDE).as_quat()[:, [3, 0, 1, 2]]
-    turned = dataclasses.replace(right, imu=dataclasses.replace(imu, gyro=imu.gyro @ ON_ITS_SIDE, orientation=q))
+    turned = right.replace(imu=dataclasses.replace(imu, gyro=imu.gyro @ ON_ITS_SIDE, orientation=q))
 
     def rms(result):
         track = result.trajectories["ekf"]

@@ -33,7 +33,7 @@ def mounted(streams, R_BS: np.ndarray, accel: bool = True):
     """The same streams from an IMU mounted with ``R_BS`` (its samples ``R_BSᵀ`` the body's), still stated as
     the identity."""
     imu = streams.imu
-    return dataclasses.replace(streams, imu=dataclasses.replace(
+    return streams.replace(imu=dataclasses.replace(
         imu, gyro=imu.gyro @ R_BS, accel=imu.accel @ R_BS if accel else imu.accel))
 
 
@@ -71,7 +71,7 @@ def test_mounting_other_than_stated_is_corrected(streams, R_BS):
 
 def test_mounting_without_gravity_is_corrected_from_the_gyro_alone(streams):
     broken = mounted(streams, ON_ITS_SIDE)
-    broken = dataclasses.replace(broken, imu=dataclasses.replace(broken.imu, accel=np.zeros_like(broken.imu.accel)))
+    broken = broken.replace(imu=dataclasses.replace(broken.imu, accel=np.zeros_like(broken.imu.accel)))
     found = findings(check_streams(broken, FusionConfig()))["mounting"]
     assert found.decision == "corrected" and found.estimate["gravity_z"] is None, found
     assert "heading about the vertical is kept as stated" in found.sentence
@@ -89,8 +89,8 @@ def test_wheels_turning_the_other_way_are_the_liars_not_the_imu(streams):
     """Both encoders counting backwards: the wheels turn against the gyro, whose axis gravity confirms; the IMU is
     kept and the encoders are negated."""
     wheel = streams.wheel
-    backwards = dataclasses.replace(streams, wheel=dataclasses.replace(wheel, left=-wheel.left, right=-wheel.right))
-    checked = check_streams(dataclasses.replace(backwards, visual=None), FusionConfig())
+    backwards = streams.replace(wheel=dataclasses.replace(wheel, left=-wheel.left, right=-wheel.right))
+    checked = check_streams(backwards.replace(visual=None), FusionConfig())
     found = findings(checked)
     assert found["mounting"].decision == "kept" and found["mounting"].estimate["reference_reversed"]
     assert found["wheel sign"].decision == "corrected"
@@ -107,7 +107,7 @@ def test_valid_streams_are_fused_as_without_the_checks(streams):
 
 def test_gravity_alone_disagreeing_leaves_the_imu_as_stated_with_a_warning(streams):
     """The gyro turns about the stated axis (what the backends read); only the accelerometer's axes differ."""
-    broken = dataclasses.replace(streams, imu=dataclasses.replace(streams.imu, accel=streams.imu.accel @ ON_ITS_SIDE))
+    broken = streams.replace(imu=dataclasses.replace(streams.imu, accel=streams.imu.accel @ ON_ITS_SIDE))
     checked = check_streams(broken, FusionConfig())
     found = findings(checked)["mounting"]
     assert found.decision == "undecided" and "gravity lies 90° from it" in found.sentence, found

@@ -45,7 +45,7 @@ def test_wheel_radius_given_as_a_diameter_is_named(square_vo):
     cfg = streams.wheel.config
     wrong = dataclasses.replace(cfg, wheel_radius_left=2 * cfg.wheel_radius_left,
                                 wheel_radius_right=2 * cfg.wheel_radius_right)
-    broken = dataclasses.replace(streams, wheel=dataclasses.replace(streams.wheel, config=wrong))
+    broken = streams.replace(wheel=dataclasses.replace(streams.wheel, config=wrong))
     result = fuse(broken, "ekf", FusionConfig())
     (found,) = [f for f in result.consistency if f["check"] == "scale"]
     assert found["decision"] == "corrected" and found["sensor"] == "wheels", found
@@ -69,7 +69,7 @@ def test_imu_on_a_late_clock_is_the_odd_one_out(square_vo):
     timestamps are the ones moved."""
     rec, vo = square_vo
     streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"])
-    late = dataclasses.replace(streams, imu=dataclasses.replace(streams.imu, t=streams.imu.t + 0.2))
+    late = streams.replace(imu=dataclasses.replace(streams.imu, t=streams.imu.t + 0.2))
     result = fuse(late, "none", FusionConfig())
     (found,) = [f for f in result.consistency if f["check"] == "clock"]
     assert found["decision"] == "corrected" and found["sensor"] == "imu", found

@@ -29,7 +29,7 @@ def short(standard_recording):
 def test_an_input_without_usable_data_has_no_influence(short):
     _, streams, config = short
     t = np.array([inc.t1 for inc in streams.visual])
-    silent = dataclasses.replace(streams, range=RangeData(t, np.full(len(t), np.nan)))  # every reading gated
+    silent = streams.replace(range=RangeData(t, np.full(len(t), np.nan)))  # every reading gated
     assert [name for name, _, _ in inputs(silent)] == ["camera", "wheel", "gyro", "range"]
     full = fuse(silent, "ekf", config).trajectories["ekf_smoothed"]
     influence = {e["name"]: e for e in leave_one_out(silent, config, full)["inputs"]}

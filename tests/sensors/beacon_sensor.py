@@ -62,7 +62,7 @@ BEACON = BeaconModel()
 
 def on_grid(iv, streams, config, counts):
     """Each range at the nearest node within ``max_gap``: ``iv.sensors["beacon"] = (node, beacon, distance)``."""
-    data = streams.extra["beacon"]
+    data = streams["beacon"]
     T = iv.t
     n = np.clip(np.searchsorted(T, data.t), 1, len(T) - 1)
     n = np.where(np.abs(T[n - 1] - data.t) < np.abs(T[n] - data.t), n - 1, n)

@@ -88,7 +88,7 @@ OFFSET_COMPASS = OffsetCompassModel()
 # --------------------------------------------------------------------------- hooks
 def compass_intervals(iv, streams, config, counts):
     """Headings at the nodes within ``max_gap`` of a reading (``iv.extra["compass"]``)."""
-    data = streams.extra["compass"]
+    data = streams["compass"]
     T = iv.t
     j = np.clip(np.searchsorted(data.t, T), 1, len(data.t) - 1)
     near = np.minimum(np.abs(data.t[j] - T), np.abs(data.t[j - 1] - T)) <= config.max_gap

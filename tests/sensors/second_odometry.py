@@ -65,7 +65,7 @@ SECOND_BASE = ScaledOdometryModel()
 
 def on_grid(iv, streams, config, counts):
     """Distance and turn over each node interval the samples cover: ``iv.sensors["second_base"] = (ok, d, θ)``."""
-    data = streams.extra["second_base"]
+    data = streams["second_base"]
     t = np.asarray(data.t, dtype=np.float64)
     dt = np.diff(t)
     dist = np.concatenate([[0.0], np.cumsum(data.v[:-1] * dt)])

@@ -28,7 +28,7 @@ def _drive(frame_error: float, stated: float, duration: float = 60.0, seed: int 
     root = np.sqrt(stated)
     factor = np.array([[1.0, 1.0, root], [1.0, 1.0, root], [root, root, stated]])
     visual = [dataclasses.replace(v, covariance=np.asarray(v.covariance) * factor) for v in s.visual]
-    return s, dataclasses.replace(streams_of(s), visual=visual)
+    return s, streams_of(s).replace(visual=visual)
 
 
 def test_recovers_the_scale_and_the_frame_error_of_a_known_camera():
@@ -84,7 +84,7 @@ def test_every_backend_fuses_the_estimate_as_if_configured():
     assert e["scale_applied"] and e["frame_error_applied"] and 0 < e["frame_error"] < 0.9
     root = np.sqrt(e["scale"])
     factor = np.array([[1.0, 1.0, root], [1.0, 1.0, root], [root, root, e["scale"]]])
-    by_hand = dataclasses.replace(streams, visual=[dataclasses.replace(v, covariance=np.asarray(v.covariance) * factor)
+    by_hand = streams.replace(visual=[dataclasses.replace(v, covariance=np.asarray(v.covariance) * factor)
                                                    for v in streams.visual])
     configured = fuse(by_hand, "all", FusionConfig.from_dict({"visual_frame_error": e["frame_error"]}))
     for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
