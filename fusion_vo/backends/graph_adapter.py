@@ -83,6 +83,10 @@ class GraphReadings:
     readings : list of Readings
     grid : ndarray (N,)
         Grid index of each graph node.
+
+    An interval reading whose first node is before the grid (``i0 < 0``, where graph node 0 is grid node 0) starts
+    ``-i0`` graph nodes before node 0: a stream built one interval at a time gives its camera increment over several
+    intervals so (:meth:`~fusion_vo.backends.streaming.StreamingFusion._span_reading`).
     """
 
     def __init__(self, readings: list[Readings], grid: np.ndarray):
@@ -110,6 +114,8 @@ class GraphReadings:
                     span = Span(r, int(j), chain[0].start, z, cov, fc)
                 elif i0 in pos:
                     span = Span(r, int(j), pos[i0], r.z[j].copy(), r.cov[j].copy(), fc)
+                elif i0 < 0 and pos.get(0) == 0:  # from before the grid (class docstring)
+                    span = Span(r, int(j), i0, r.z[j].copy(), r.cov[j].copy(), fc)
                 else:
                     chain = None
                     continue

@@ -224,8 +224,9 @@ class GraphBuilder:
                 frames = frame_poses(self, nf, span, n, c, previous_pose)
                 if frames is not None:
                     (xs, xe), cov = frames, span.cov - 2.0 * span.frame_cov
-            factor = interval_factor(self, span, xs, xe, c, self._times[g1] - self._times[self._grid[span.start]],
-                                     cov=cov)
+            # (a reading that starts before the grid, span.start < 0, is a camera increment: no dt)
+            dt_span = self._times[g1] - self._times[self._grid[span.start]] if span.start >= 0 else float("nan")
+            factor = interval_factor(self, span, xs, xe, c, dt_span, cov=cov)
             nf.factors.append(factor)
             nf.sensors.append(span.readings.sensor)
         (translation, _), (heading, _) = readings_guess(spans, n, est, dt)

@@ -81,12 +81,16 @@ class HistoryMixin:
             for v in rec.visual:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
             prev = self._records[j - 1]
-            iv, step, consumed, _ = self._interval(self._t_nodes[j - 1], self._t_nodes[j], prev.heading_offset)
+            iv, step, consumed, _, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
+                                                                  prev.heading_offset)
             if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
                 step["gps"] = rec.counts["gps"]
             rec.counts, rec.visual = step, consumed
+            rec.slope = (float(iv.cx[0]), float(iv.cy[0]))
             self._monitor.update(j - 1, iv)
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
+            if graph_camera is not None:
+                iv.sensors["camera"] = graph_camera
             rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
             if self._switch is not None and j == self._switch[0] and rec.heading_offset is not None:
                 rec.heading_offset -= self._switch[1]  # (the interval after it starts in ENU)

@@ -199,23 +199,30 @@ class NodesMixin:
             else:
                 self._end_step()
 
-    def _part(self, inc: VisualIncrement, t0: float, t1: float) -> VisualIncrement | None:
+    def _part(self, inc: VisualIncrement, t0: float, t1: float) -> tuple[VisualIncrement, int, int, int] | None:
         """The share of ``inc`` over the node interval ``(t0, t1)`` (:func:`increment_part`), its nodes those
-        processed from its first frame on, ``t1``, and those to come up to its second frame
-        (:meth:`_next_node`); None if its first frame is not a processed node or its second is not reached."""
-        done = self._t_nodes
+        processed from its first frame up to ``t0``, ``t1``, and the later ones up to its second frame (those
+        processed already when an interval is rebuilt, else those to come, :meth:`_next_node`). With it: the node
+        of its first frame (an index of the processed nodes), the place of ``(t0, t1)`` among the intervals it
+        spans, and their number. None if its first frame is not a processed node or its second is not reached."""
+        T = self._t_nodes
+        end = bisect.bisect_right(T, t0 + 1e-9)  # the processed nodes up to t0
+        done = T[:end]
         j = bisect.bisect_left(done, inc.t0 - 1e-6)
         if j >= len(done) or abs(done[j] - inc.t0) > 1e-9:
             return None
         nodes = [*done[j:], t1]
+        later = list(T[end + 1:]) if end < len(T) and abs(T[end] - t1) < 1e-9 else []
         while nodes[-1] < inc.t1 - 1e-9:
-            nxt = self._next_node(nodes[-1], np.inf)
+            nxt = later.pop(0) if later else self._next_node(nodes[-1], np.inf)
             if nxt is None or nxt > inc.t1 + 1e-9:
                 return None
             nodes.append(nxt)
         if abs(nodes[-1] - inc.t1) > 1e-9 or len(nodes) < 3:
             return None
-        return increment_part(inc, nodes, len(done) - 1 - j)
+        k = len(done) - 1 - j
+        part = increment_part(inc, nodes, k)
+        return None if part is None else (part, j, k, len(nodes) - 1)
 
     def _last_time(self) -> float:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
@@ -248,12 +255,14 @@ class NodesMixin:
 
     def _interval(self, t0: float, t1: float, heading_offset: float | None):
         """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
-        time of the last sample read per stream)``.
+        time of the last sample read per stream, the factor graph's camera readings)``.
 
         Consumes the buffered visual increments ending at or before ``t1``: one that spans exactly this interval
         is its camera reading; one that spans it and the next intervals up to its frame gives its share
         (:func:`increment_part`); failed ones are counted missing; any other cannot be applied and is counted
-        late.
+        late. The EKF and the heading monitor take the shares; iSAM2 takes such an increment whole, as a batch
+        run's graph does: one factor between its two frames' nodes, added with the node of its second frame
+        (:meth:`_span_reading`; the last item, None when the graph takes the interval's own readings).
         """
         step: dict[str, SensorCount] = {}
         reach: dict[str, float] = {}
@@ -265,7 +274,7 @@ class NodesMixin:
         usable = [v for v in consumed if v.ok and abs(v.t1 - t1) < 1e-9 and abs(v.t0 - t0) < 1e-9]
         spanning = None  # an increment over several node intervals, applied over each as a batch run does
         if not usable:
-            spanning = next(((v, p) for v in self._visual if v.ok and v.t0 <= t0 + 1e-9 and v.t1 >= t1 - 1e-9
+            spanning = next(((v, *p) for v in self._visual if v.ok and v.t0 <= t0 + 1e-9 and v.t1 >= t1 - 1e-9
                              and (p := self._part(v, t0, t1)) is not None), None)
         for v in consumed:
             if v.ok and v not in usable and (spanning is None or v is not spanning[0]):
@@ -286,13 +295,40 @@ class NodesMixin:
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated
             own.missing += c.missing
-        return iv, step, consumed, reach
+        graph_camera = None
+        # (the whole increment needs its two nodes in one frame: not across the switch to ENU)
+        if spanning is not None and self.backend != "ekf" and (
+                "gps" not in self.sensors or (self._switch is not None and spanning[2] >= self._switch[0])):
+            graph_camera = self._span_reading(iv, *spanning)
+        return iv, step, consumed, reach, graph_camera
+
+    def _span_reading(self, iv, inc: VisualIncrement, part: VisualIncrement, first: int, k: int, n_intervals: int):
+        """iSAM2's camera readings of the interval ``iv``, the ``k``-th of the ``n_intervals`` that ``inc`` spans from
+        the processed node ``first`` on: none before its last interval; at its last, the whole increment from node
+        ``first``, a reading that starts ``n_intervals - 1`` nodes before ``iv`` (a
+        :class:`~fusion_vo.sensors.visual.CameraGrid` over the nodes ``1 - n_intervals`` and 1 of ``iv``), its
+        translation projected with the mean slope factors of the intervals it spans, as in a batch run."""
+        cam = iv.sensors["camera"]
+        if k < n_intervals - 1:
+            return dataclasses.replace(cam, i0=np.zeros(0, int), i1=np.zeros(0, int), delta=np.zeros((0, 3)),
+                                       cov=np.zeros((0, 3, 3)), frame_cov=None)
+        slopes = [rec.slope if rec is not None and rec.slope is not None else (float(iv.cx[0]), float(iv.cy[0]))
+                  for rec in self._records[first + 1:first + k + 1]] + [(float(iv.cx[0]), float(iv.cy[0]))]
+        cx, cy = np.array(slopes).T
+        delta = np.asarray(inc.delta, dtype=np.float64).reshape(1, 3).copy()
+        delta[:, 0] *= cx.mean()
+        delta[:, 1] *= cy.mean()
+        return dataclasses.replace(cam, i0=np.array([1 - n_intervals]), i1=np.array([1]), delta=delta,
+                                   cov=np.asarray(inc.covariance, dtype=np.float64).reshape(1, 3, 3).copy(),
+                                   frame_cov=None)
 
     def _begin_step(self, t0: float, t1: float) -> None:
         """First unit of a node: its interval from the buffers, handed to the heading monitor."""
-        iv, step, consumed, reach = self._interval(t0, t1, self._heading_offset)
+        iv, step, consumed, reach, graph_camera = self._interval(t0, t1, self._heading_offset)
         monitor = self._monitor.state()
-        self._monitor.add(iv)
+        self._monitor.add(iv)  # (the monitor judges the shares of an increment over several intervals)
+        if graph_camera is not None:
+            iv.sensors["camera"] = graph_camera
         self._pending = Started(t0, t1, iv, step, consumed, monitor, reach)
 
     def _decide(self, started: Started) -> None:
@@ -325,7 +361,7 @@ class NodesMixin:
         self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
                                          monitor=self._monitor.state() if keep else None, dropped=started.dropped,
                                          fixes=self._step_fixes, gps=self._gps_state() if keep else None,
-                                         offered=self._step_offered))
+                                         offered=self._step_offered, slope=(float(iv.cx[0]), float(iv.cy[0]))))
         self._retire()
         self._prune(t0)
 

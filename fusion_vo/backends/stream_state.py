@@ -64,6 +64,7 @@ class NodeRecord:
     gps: tuple | None = None  # GPS bookkeeping after this node (_gps_state)
     dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
     offered: int = 0  # iSAM2: fixes offered to the gate at this node (those without a factor were gated)
+    slope: tuple | None = None  # the slope projection factors (cx, cy) of the interval ending at this node
 
 
 def payload_values(payload):
