@@ -25,19 +25,18 @@ import logging
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.monitor import Episode, check_heading_sources, visual_heading_rows
+from fusion_vo.backends.monitor import Episode, check_heading_sources, heading_changes
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.imu import imu_grid
 from fusion_vo.sensors.visual import CameraGrid, camera_grid
-from fusion_vo.sensors.wheel import arc_increment, at_rest, wheel_grid
 
 logger = logging.getLogger(__name__)
 
-#: components the check can drop: (name in the check, how the streaming path masks it)
-_COMPONENTS = ("wheel", "gyro", "ahrs")
-_SENSOR = {"wheel": "wheel", "gyro": "imu", "ahrs": "imu"}
-_LABEL = {"wheel": "yaw rate", "gyro": "gyro yaw rate", "ahrs": "AHRS heading"}
+
+def _components() -> dict:
+    """The heading sources the live monitor decides for (those that can be cleared from an interval), in the
+    registry's order: key -> ``(sensor name, source)``."""
+    return {h.key: (sensor.name, h) for sensor, h in registry.heading_sources() if h.clear is not None}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,9 +148,8 @@ class LiveHeadingMonitor:
     def _merged(self) -> Intervals:
         """The kept intervals as one :class:`Intervals`: the array fields of the grid and of every sensor's
         measurements from their columns, everything else as the newest interval has it, the camera's increments
-        from their rows (each over one interval), the wheels' yaw everywhere."""
+        from their rows (each over one interval)."""
         last = self._last
-        n = len(self._t) - 1
         columns = {**self._node, **self._interval}
         kw = {f.name: getattr(last, f.name) for f in dataclasses.fields(Intervals)
               if not isinstance(getattr(last, f.name), np.ndarray)}
@@ -171,7 +169,6 @@ class LiveHeadingMonitor:
         sensors["camera"] = CameraGrid(pos, pos + 1, self._vis["delta"].array(), self._vis["cov"].array(),
                                        frame_error=last.sensors["camera"].frame_error,
                                        noise=last.sensors["camera"].noise)
-        sensors["wheel"].yaw_ok = np.ones(n, bool)
         return Intervals(**kw)
 
     @property
@@ -190,57 +187,59 @@ class LiveHeadingMonitor:
             return
         self._next_check = self._t[-1] + self.every
         iv = self._merged()
-        whl, imu = wheel_grid(iv), imu_grid(iv)
-        raw = {"wheel": whl.ok.copy(), "gyro": imu.gyro_ok.copy(), "ahrs": imu.ahrs_ok[1:] & imu.ahrs_ok[:-1]}
-        if "ahrs" in self.dropped:  # a heading known to drift judges nothing any more
-            imu.ahrs_ok = np.zeros(len(iv.t), bool)
-        bias, at_rest = _gyro_bias(iv, self.config)
+        components = _components()
+        raw = {key: rows[0] for key, (_, _, rows) in heading_changes(iv, self.config).items()}
+        for key, (_, h) in components.items():
+            if h.absolute and key in self.dropped:  # a heading known to drift judges nothing any more
+                h.clear(iv)
+        bias, at_rest = _bias(iv, self.config)
         if at_rest:
             self._rest_bias = bias
         elif self._rest_bias is not None:
             bias = self._rest_bias  # the last standstill's bias beats one measured against a moving reference
-        unknown = bias is None and iv.uses("gyro") and "gyro" not in self.dropped
-        if unknown:  # too few intervals yet to measure the bias: the gyro neither judges nor is judged
-            imu.gyro_ok = np.zeros(len(iv.t) - 1, bool)
+        unknown = set()
+        if bias is None:  # too few intervals yet to measure the bias: the source neither judges nor is judged
+            unknown = {key for key, (_, h) in components.items() if h.biased and key in raw and key not in self.dropped}
+            for key in unknown:
+                components[key][1].clear(iv)
         episodes = check_heading_sources(iv, self.config, bias)
-        kept = {"wheel": whl.yaw_ok, "gyro": imu.gyro_ok, "ahrs": imu.ahrs_ok[1:]}
+        kept = {key: h.kept(iv) for key, (_, h) in components.items()}
         t_now = self._t[-1]
-        for name in _COMPONENTS:
-            if not raw[name][-1] or (name == "gyro" and unknown):
+        for name, (sensor, h) in components.items():
+            if name not in raw or not raw[name][-1] or name in unknown:
                 continue  # not measured in the newest interval (or not judged yet): no new evidence
             liar = not kept[name][-1]
             if liar and name not in self.dropped:
-                ep = next((e for e in reversed(episodes) if e.component == _LABEL[name]), None)
+                ep = next((e for e in reversed(episodes) if e.component == h.component), None)
                 self.dropped.add(name)
                 self._open[name] = [t_now, 0.0 if ep is None else ep.max_nis, "" if ep is None else ep.against]
-                logger.info("live monitor: %s %s dropped at t=%.2f (inconsistent with %s)", _SENSOR[name],
-                            _LABEL[name], t_now, self._open[name][2])
+                logger.info("live monitor: %s %s dropped at t=%.2f (inconsistent with %s)", sensor,
+                            h.component, t_now, self._open[name][2])
             elif liar:
-                ep = next((e for e in reversed(episodes) if e.component == _LABEL[name]), None)
+                ep = next((e for e in reversed(episodes) if e.component == h.component), None)
                 if ep is not None:
                     self._open[name][1] = max(self._open[name][1], ep.max_nis)
-            elif name in self.dropped and name != "ahrs":  # the AHRS' offset is lost for good
+            elif name in self.dropped and not h.absolute:  # an absolute heading's offset is lost for good
                 self._close(name, t_now)
 
     def _close(self, name: str, t_end: float) -> None:
         start, nis, against = self._open.pop(name)
         self.dropped.discard(name)
-        self.episodes.append(Episode(_SENSOR[name], _LABEL[name], start, t_end, nis, against))
+        sensor, h = _components()[name]
+        self.episodes.append(Episode(sensor, h.component, start, t_end, nis, against))
 
     def apply(self, iv: Intervals, dropped=None) -> None:
         """Mask the dropped components in ``iv`` (in place; default: the current decisions)."""
-        whl, imu = wheel_grid(iv), imu_grid(iv)
         dropped = self.dropped if dropped is None else dropped
-        if "wheel" in dropped:
-            whl.yaw_ok = np.zeros(iv.n_steps, bool)
-        if "gyro" in dropped:
-            imu.gyro_ok = np.zeros(iv.n_steps, bool)
-        if "ahrs" in dropped:
-            imu.ahrs_ok = np.zeros(len(iv.t), bool)
+        for key, (_, h) in _components().items():
+            if key in dropped:
+                h.clear(iv)
 
     def all_episodes(self, t_end: float) -> list[Episode]:
         """Closed spans and the open ones, ending at ``t_end``."""
-        open_eps = [Episode(_SENSOR[n], _LABEL[n], s, t_end, nis, who) for n, (s, nis, who) in self._open.items()]
+        components = _components()
+        open_eps = [Episode(components[n][0], components[n][1].component, s, t_end, nis, who)
+                    for n, (s, nis, who) in self._open.items()]
         return sorted(self.episodes + open_eps, key=lambda e: e.start)
 
     # ------------------------------------------------------------------ rewind
@@ -273,50 +272,53 @@ class LiveHeadingMonitor:
             col.keep(n_vis)
 
 
-def _gyro_bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]:
-    """The gyro's bias over the kept intervals and whether it was measured at rest.
+def _bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]:
+    """The bias of the biased heading source (the gyro) over the kept intervals, and whether it was measured at rest.
 
-    With ten intervals at rest, the median rate there (as the whole-recording check does). Without,
-    the rate difference to a heading reference is averaged over the span where both are measured: the
-    heading change telescopes, so the bias comes out to ``σ / T`` with ``σ`` the reference's error over
-    the span. Of the AHRS and the camera, the reference with the smaller stated error is taken: the
-    AHRS's is ``√2 σ_ψ`` per run of readings (its end points; plus its offset walk over the span), the
+    With ten intervals at rest (where a source says so: the wheels), the median rate there (as the whole-recording
+    check does). Without, the rate difference to a heading reference is averaged over the span where both are
+    measured: the heading change telescopes, so the bias comes out to ``σ / T`` with ``σ`` the reference's error
+    over the span. Of the references that state their error (the AHRS, the camera), the one with the smaller is
+    taken: the AHRS's is ``√2 σ_ψ`` per run of readings (its end points; plus its offset walk over the span), the
     camera's the root of its increments' summed heading variances. The median of per-interval rate
     differences (what the whole-recording check uses when there is no standstill) would follow the
-    AHRS's interval noise. The wheels' yaw, which depends on their calibration, is used only without either.
+    AHRS's interval noise. A reference that states none (the wheels' yaw, which depends on their calibration) is
+    used only without either.
 
     Why the smaller error: over the first seconds of a stream the AHRS's end points give the bias to
     ``√2 σ_ψ / T``, 0.028 rad/s after 1 s at σ_ψ 0.02 rad, twenty times ``monitor_bias_sigma``; the camera's
     summed increments (15-20 µrad each on the generated drives) give it to about 1e-4 rad/s
     (``docs/decisions/0023-monitor-removes-the-gyro-bias-first.md``).
     """
-    if not iv.uses("gyro"):
+    changes = heading_changes(iv, config)
+    key = next((k for k, (_, h, _) in changes.items() if h.biased), None)
+    if key is None:
         return None, False
-    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
+    ok_b, angle_b = changes[key][2][0], changes[key][2][1]
     dt = iv.dt
-    if iv.uses("wheel"):
-        still = at_rest(iv, config) & imu.gyro_ok
+    rest = next((h for _, h, _ in changes.values() if h.at_rest is not None), None)
+    if rest is not None:
+        still = rest.at_rest(iv, config) & ok_b
         if np.count_nonzero(still) >= 10:
-            return float(np.median(imu.gyro_angle[still] / dt[still])), True
+            return float(np.median(angle_b[still] / dt[still])), True
     refs = []  # (error variance of the summed reference heading, ok, heading change per interval)
-    ok = imu.ahrs_ok[:-1] & imu.ahrs_ok[1:] & imu.gyro_ok
-    if np.count_nonzero(ok) >= 10:
-        runs = int(np.count_nonzero(np.diff(np.concatenate(([0], ok.astype(np.int8)))) == 1))
-        var = runs * 2.0 * config.imu.ahrs_yaw_sigma**2 + config.imu.ahrs_offset_walk**2 * float(np.sum(dt[ok]))
-        refs.append((var, ok, np.angle(np.exp(1j * np.diff(imu.ahrs_yaw)))))
-    if len(cam.i0):  # the camera's heading increments (independent of every calibration)
-        ok, angle, var = visual_heading_rows(iv, with_variance=True)
-        ok &= imu.gyro_ok
-        if np.count_nonzero(ok) >= 10:
-            refs.append((float(np.sum(var[ok])), ok, angle))
-    if not refs and iv.uses("wheel"):
-        ok = whl.ok & imu.gyro_ok
-        if np.count_nonzero(ok) >= 10:
-            refs.append((0.0, ok, arc_increment(whl.dl, whl.dr, whl.base)[:, 2]))
+    others = sorted(((h.reference, k) for k, (_, h, _) in changes.items() if k != key and h.reference is not None))
+    for _, k in others:
+        h, (ok, angle, var) = changes[k][1], changes[k][2]
+        ok = ok & ok_b
+        if h.reference_error is not None and np.count_nonzero(ok) >= 10:
+            refs.append((h.reference_error(iv, config, ok, var), ok, angle))
+    if not refs:
+        for _, k in others:
+            h, (ok, angle, _) = changes[k][1], changes[k][2]
+            ok = ok & ok_b
+            if h.reference_error is None and np.count_nonzero(ok) >= 10:
+                refs.append((0.0, ok, angle))
+                break
     if not refs:
         return None, False
     _, ok, angle = min(refs, key=lambda r: r[0])
-    return float(np.sum(imu.gyro_angle[ok] - angle[ok]) / np.sum(dt[ok])), False
+    return float(np.sum(angle_b[ok] - angle[ok]) / np.sum(dt[ok])), False
 
 
 class _Column:

@@ -1,14 +1,17 @@
 """Per-component consistency of the heading sources and the speeds: a stream that lies is caught before fusion.
 
-Four streams may measure how much the robot turned over a window of ``W`` seconds
-(``FusionConfig.monitor_window``):
+The heading sources measure how much the robot turned over a window of ``W`` seconds
+(``FusionConfig.monitor_window``). Each is declared by its sensor's module as a
+:class:`~fusion_vo.sensors.registry.HeadingSource` (its change per node interval, its variance, what a window
+adds, how it is dropped, its role: suspect, absolute, biased), and a sensor registered outside the library is
+judged the same way. The built-in ones:
 
-* the wheels' yaw component ``θ_w = (d_r - d_l) / b`` (a twist's ``ω`` integrated);
+* the wheels' yaw component ``θ_w = (d_r - d_l) / b`` (a twist's ``ω`` integrated; :mod:`~fusion_vo.sensors.wheel`);
 * the gyro's integrated angle ``Θ`` minus its bias ``b̂ W`` (``b̂`` the median of the gyro's rate where
   the wheels stand still, else its rate against the AHRS heading's, the camera's or the wheels' from
-  :func:`reference_bias`, else 0);
-* the AHRS heading's change ``ψ(t_1) - ψ(t_0)``;
-* the camera's summed heading increments.
+  :func:`reference_bias`, else 0; :func:`bias_of`, :mod:`~fusion_vo.sensors.imu`);
+* the AHRS heading's change ``ψ(t_1) - ψ(t_0)`` (:mod:`~fusion_vo.sensors.imu`);
+* the camera's summed heading increments (:mod:`~fusion_vo.sensors.visual`).
 
 Each has a variance over the window from its noise model (the wheels' includes the relative error of
 the track width, ``sqrt(yaw_scale² + base_sigma²)`` of the turn, so a skid-steered base that turns
@@ -20,9 +23,9 @@ squared against the inverse-variance mean of the others, ``NIS = (θ_s - θ̄)²
 tested against the chi-square quantile of ``monitor_probability`` (1 degree of freedom); of the
 sources above it, the one whose removal leaves the others most consistent (their chi-square about
 their own mean within its quantile) is dropped in that window, so one liar cannot condemn two honest
-streams. With two sources only, the wheels' yaw is the one dropped when they disagree (a twist's
-yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
-judged. An absolute heading (the AHRS) is dropped per span too, but after a span in which it
+streams. With two sources only, the suspect one (the wheels' yaw) is the one dropped when they disagree (a
+twist's yaw rate from a nominal track width is the usual liar; a gyro is not), and nothing else can be
+judged. An absolute heading (the AHRS, a compass) is dropped per span too, but after a span in which it
 disagreed it is trusted again only where its absolute heading still agrees with the heading carried
 from where it was last trusted (:func:`_readmit_absolute`): an offset it picked up meanwhile does not
 show in its heading changes.
@@ -70,9 +73,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import arc_increment, at_rest, travel_variances, wheel_grid
+from fusion_vo.sensors.wheel import travel_variances, wheel_grid
 
 logger = logging.getLogger(__name__)
 
@@ -117,29 +120,6 @@ def _chi2_ppf(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
 
 
-def visual_heading_rows(iv, with_variance: bool = False):
-    """The visual increments' heading spread over the node intervals they span: ``(ok, angle, variance)``
-    per interval (``variance`` None unless asked). An increment over ``n`` intervals gives each ``1/n``
-    of its heading change and of its variance; where increments overlap, the later one wins."""
-    cam = camera_grid(iv)
-    K = len(iv.t) - 1
-    ok = np.zeros(K, bool)
-    ang = np.zeros(K)
-    var = np.zeros(K) if with_variance else None
-    i0 = np.asarray(cam.i0, dtype=np.int64)
-    n = np.asarray(cam.i1, dtype=np.int64) - i0
-    if not len(i0):
-        return ok, ang, var
-    rows = np.repeat(np.arange(len(i0)), n)
-    idx = i0[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n))
-    ok[idx] = True
-    delta = np.asarray(cam.delta).reshape(-1, 3)
-    ang[idx] = (delta[:, 2] / n)[rows]
-    if with_variance:
-        var[idx] = (np.asarray(cam.cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
-    return ok, ang, var
-
-
 def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
     """Consecutive runs of node intervals ``[a, b)`` about ``length`` seconds long."""
     K = len(T) - 1
@@ -156,27 +136,21 @@ def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
     return out
 
 
-def _gyro_bias(iv, wheel_yaw: np.ndarray | None, still: np.ndarray | None, chunk: float) -> float:
-    """The gyro's bias for the check: median rate at rest, else its rate against the AHRS's, the
-    camera's or the wheels' heading (:func:`reference_bias`, chunks of ``chunk`` seconds; a constant
-    bias is the backends' to estimate, not a lie)."""
-    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
+def bias_of(iv, changes: dict, key: str, still: np.ndarray | None, chunk: float) -> float:
+    """The bias [rad/s] of the biased source ``key`` for the check: its median rate at rest (``still``), else its
+    rate against the reference sources' heading changes in their order (the AHRS's, the camera's, the wheels'; the
+    first with ten intervals beside it; :func:`reference_bias`, chunks of ``chunk`` seconds), else 0 (a constant bias
+    is the backends' to estimate, not a lie). ``changes``: key -> ``(sensor, source, (ok, angle, var))``."""
+    ok_b, angle_b = changes[key][2][0], changes[key][2][1]
     dt = iv.dt
-    rate = np.where(imu.gyro_ok, imu.gyro_angle / np.maximum(dt, 1e-9), np.nan)
-    if still is not None and np.count_nonzero(still & imu.gyro_ok) >= 10:
-        return float(np.median(rate[still & imu.gyro_ok]))
-    refs = []
-    if imu.ahrs_ok.any():
-        refs.append((imu.ahrs_ok[:-1] & imu.ahrs_ok[1:], np.angle(np.exp(1j * np.diff(imu.ahrs_yaw)))))
-    if len(cam.i0):
-        ok, ang, _ = visual_heading_rows(iv)
-        refs.append((ok, ang))
-    if wheel_yaw is not None:
-        refs.append((whl.ok.copy(), wheel_yaw))
-    for ok, ang in refs:
-        ok = ok & imu.gyro_ok
+    rate = np.where(ok_b, angle_b / np.maximum(dt, 1e-9), np.nan)
+    if still is not None and np.count_nonzero(still & ok_b) >= 10:
+        return float(np.median(rate[still & ok_b]))
+    refs = sorted((h.reference, k) for k, (_, h, _) in changes.items() if k != key and h.reference is not None)
+    for _, k in refs:
+        ok = changes[k][2][0] & ok_b
         if np.count_nonzero(ok) >= 10:
-            return reference_bias(iv.t, imu.gyro_angle - ang, ok, chunk)
+            return reference_bias(iv.t, angle_b - changes[k][2][1], ok, chunk)
     return 0.0
 
 
@@ -210,51 +184,48 @@ def reference_bias(T: np.ndarray, diff: np.ndarray, ok: np.ndarray, chunk: float
     return float(np.sum(diff[ok]) / np.sum(dt[ok]))
 
 
+def heading_changes(iv, config: FusionConfig) -> dict:
+    """Every registered heading source's raw changes on the grid ``iv`` (:attr:`HeadingSource.change
+    <fusion_vo.sensors.registry.HeadingSource.change>`), in their ``rank`` order: key -> ``(sensor name, source,
+    (ok, angle, var))``; the sources without data left out."""
+    out = {}
+    for sensor, h in sorted(registry.heading_sources(), key=lambda pair: pair[1].rank):
+        rows = h.change(iv, config)
+        if rows is not None:
+            out[h.key] = (sensor.name, h, rows)
+    return out
+
+
 def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = None) -> list[Episode]:
     """Find and drop the inconsistent heading components of ``iv`` (in place); returns the episodes.
 
-    ``gyro_bias`` [rad/s] replaces the bias the check estimates itself (:func:`_gyro_bias`).
+    The components are the registered heading sources (:class:`~fusion_vo.sensors.registry.HeadingSource`: the
+    gyro, the wheels' yaw, the AHRS and the camera's heading). ``gyro_bias`` [rad/s] replaces the bias the check
+    estimates for a biased source (:func:`bias_of`).
     """
     cfg = config
     if not cfg.monitor or iv.n_steps < 2:
         return []
-    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     T, dt = iv.t, iv.dt
     threshold = _chi2_ppf(cfg.monitor_probability, 1)
     release = _chi2_ppf(0.9, 1)
-    sources: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}  # name -> (ok, angle, var) per interval
-    wheel_yaw = still = None
-    wheel_rel = 0.0
-    if iv.uses("wheel"):
-        noise, base_sigma = cfg.wheel_model(whl.twist)
-        inc = arc_increment(whl.dl, whl.dr, whl.base)
-        wheel_yaw = inc[:, 2]
-        still = at_rest(iv, cfg)
-    bias = 0.0
-    if iv.uses("gyro"):
-        bias = (_gyro_bias(iv, wheel_yaw, still, _BIAS_CHUNK * cfg.monitor_window) if gyro_bias is None
-                else float(gyro_bias))
-    gyro = None
-    if iv.uses("gyro"):
-        gyro = imu.gyro_angle - bias * dt
-        sources["gyro"] = (imu.gyro_ok.copy(), gyro, cfg.imu.gyro_noise_density**2 * dt)
-    if wheel_yaw is not None:
-        d = np.abs(0.5 * (whl.dl + whl.dr))
-        rel = noise.yaw_scale**2 + base_sigma**2
-        turn = np.abs(np.where(imu.gyro_ok, gyro, wheel_yaw)) if gyro is not None else np.abs(wheel_yaw)
-        var = noise.k_yaw**2 * turn + 2.0 * (noise.k**2 * d + noise.sigma_floor**2) / whl.base**2
-        # the relative error is shared over a window (a track width), added per window below
-        sources["wheel"] = (whl.ok.copy(), wheel_yaw, var)
-        wheel_rel = rel
-    if imu.ahrs_ok.any():
-        ok = imu.ahrs_ok[:-1] & imu.ahrs_ok[1:]
-        d = np.angle(np.exp(1j * (imu.ahrs_yaw[1:] - imu.ahrs_yaw[:-1])))
-        sources["ahrs"] = (ok, d, np.zeros(len(dt)))
-    if len(cam.i0):
-        ok, ang, var = visual_heading_rows(iv, with_variance=True)
-        sources["camera"] = (ok, ang, var)
+    changes = heading_changes(iv, cfg)
+    still = next((h.at_rest(iv, cfg) for _, h, _ in changes.values() if h.at_rest is not None), None)
+    sources: dict[str, list] = {}  # key -> [ok, angle, var] per interval, as judged
+    for key, (_, h, (ok, angle, var)) in changes.items():
+        if h.biased:
+            bias = (bias_of(iv, changes, key, still, _BIAS_CHUNK * cfg.monitor_window) if gyro_bias is None
+                    else float(gyro_bias))
+            angle = angle - bias * dt
+        sources[key] = [ok, angle, var]
+    found = {key: (ok, angle) for key, (ok, angle, _) in sources.items()}
+    for key, (_, h, _) in changes.items():
+        if h.variance is not None:
+            sources[key][2] = h.variance(iv, cfg, sources[key][1], found)
     if len(sources) < 2:
         return []
+    extra = {key: h.window(iv, cfg) for key, (_, h, _) in changes.items() if h.window is not None}
+    suspects = {key for key, (_, h, _) in changes.items() if h.suspect}
     names = list(sources)
     bad = {s: np.zeros(len(dt), bool) for s in names}
     peak = {s: np.zeros(len(dt)) for s in names}
@@ -262,8 +233,8 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     for scale in _SCALES:
         dropped: set[str] = set()  # hysteresis state at this scale
         for a, b in _windows(T, cfg.monitor_window * scale):
-            theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
-            liar, liar_nis, liar_others = _find_liar(theta, var, threshold, cfg.monitor_probability)
+            theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), extra)
+            liar, liar_nis, liar_others = _find_liar(theta, var, threshold, cfg.monitor_probability, suspects)
             for s in names:
                 if s == liar:
                     dropped.add(s)
@@ -280,18 +251,20 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
                 bad[s][a:b] = True
                 peak[s][a:b] = np.maximum(peak[s][a:b], nis)
                 against[s][a:b] = ", ".join(others)
-    if "ahrs" in bad and bad["ahrs"].any():
-        _readmit_absolute(iv, bad, peak["ahrs"], against["ahrs"], sources, cfg, release)
+    for key, (_, h, _) in changes.items():
+        if h.absolute and bad[key].any():
+            _readmit_absolute(iv, key, h, bad, peak[key], against[key], sources, changes, extra[key], cfg, release)
     episodes: list[Episode] = []
     for s in names:
+        sensor, h = changes[s][0], changes[s][1]
         checked = np.count_nonzero(sources[s][0])
-        # the AHRS's quiet runs after a drop are judged on its absolute heading (_readmit_absolute) instead
-        fraction = 1.0 if s == "ahrs" else cfg.monitor_whole_fraction
+        # an absolute heading's quiet runs after a drop are judged on its heading (_readmit_absolute) instead
+        fraction = 1.0 if h.absolute else cfg.monitor_whole_fraction
         if checked and np.count_nonzero(bad[s]) > fraction * checked:
             # a stream that contradicts the others most of the time is not trusted in its quiet windows either
             who = next(x for x in against[s] if x)
             bad[s][:] = True
-            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[0]), float(T[-1]), float(peak[s].max()), who))
+            episodes.append(Episode(sensor, h.component, float(T[0]), float(T[-1]), float(peak[s].max()), who))
             continue
         k = 0
         while k < len(dt):
@@ -301,73 +274,63 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
             j = k
             while j < len(dt) and bad[s][j]:
                 j += 1
-            episodes.append(Episode(_SENSOR[s], _COMPONENT[s], float(T[k]), float(T[j]), float(peak[s][k:j].max()),
+            episodes.append(Episode(sensor, h.component, float(T[k]), float(T[j]), float(peak[s][k:j].max()),
                                     str(against[s][k])))
             k = j
     episodes.sort(key=lambda e: e.start)
-    if "wheel" in bad:
-        whl.yaw_ok = whl.yaw_ok & ~bad["wheel"]
-    if "gyro" in bad:
-        imu.gyro_ok = imu.gyro_ok & ~bad["gyro"]
-    if "ahrs" in bad:
-        drop = np.zeros(len(T), bool)
-        drop[1:] |= bad["ahrs"]
-        imu.ahrs_ok = imu.ahrs_ok & ~drop
-    if "camera" in bad and bad["camera"].any():
-        # within the flagged windows, each increment is tested on its own against the other sources
-        keep = np.ones(len(cam.i0), bool)
-        for m, (a, b) in enumerate(zip(cam.i0, cam.i1)):
-            if bad["camera"][a:b].any():
-                theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), cfg, wheel_rel)
-                nis = _window_nis("camera", theta, var)
-                keep[m] = nis is None or nis <= threshold
-        drop_visual_increments(iv, keep)
+    for s in names:
+        def agrees(a: int, b: int, s=s) -> bool:  # one stretch of the source against the others
+            theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), extra)
+            nis = _window_nis(s, theta, var)
+            return nis is None or nis <= threshold
+
+        changes[s][1].drop(iv, bad[s], agrees)
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes
 
 
-def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sources: dict, cfg: FusionConfig,
-                      release: float) -> None:
-    """After a span in which the AHRS heading was dropped, keep it again only where its *absolute*
-    heading still agrees (in place on ``bad["ahrs"]`` and the AHRS's ``peak`` and ``against`` per interval).
+def _readmit_absolute(iv, key: str, source, bad: dict, peak: np.ndarray, against: np.ndarray, sources: dict,
+                      changes: dict, window, cfg: FusionConfig, release: float) -> None:
+    """After a span in which the absolute heading ``key`` (the AHRS) was dropped, keep it again only where its
+    *absolute* heading still agrees (in place on ``bad[key]`` and its ``peak`` and ``against`` per interval).
 
     The windowed check compares heading *changes*: an AHRS whose offset moved during a dropped span
     (a magnetic disturbance, a heading-dependent error) agrees again in changes afterwards while its
     heading stays wrong by the offset it picked up. Each later run of intervals the windowed check
-    kept is compared, through its mean offset against the relative heading (the bias-corrected gyro
-    where it is usable and not dropped, else the wheels', else the camera's, summed since the AHRS was
-    last trusted; a dropout of the AHRS itself does not matter, its heading is absolute),
-    with the offset at the end of the last trusted run (at first, the AHRS's first sample, which sets
-    the heading offset); the variance is the AHRS's noise and offset
-    walk plus the relative heading's noise and ``monitor_bias_sigma`` over the gap. A run is kept only
+    kept is compared, through its mean offset against the relative heading (the relative sources' by rank where
+    usable and not dropped: the bias-corrected gyro, else the wheels', else the camera's, summed since it was
+    last trusted; a dropout of the absolute heading itself does not matter),
+    with the offset at the end of the last trusted run (at first, its first sample, which sets
+    the heading offset); the variance is its ``window`` over the gap (the AHRS's noise and offset
+    walk) plus the relative heading's noise and ``monitor_bias_sigma`` over the gap. A run is kept only
     below the 90 % quantile (``release``, as a dropped component's comeback elsewhere), and becomes
     the new anchor; otherwise it is dropped too (an AHRS that has departed from the true heading can
     agree again in its heading *changes* while its heading stays off).
     """
-    imu = imu_grid(iv)
+    heading_ok, heading = source.heading(iv)
     T = iv.t
-    bad_a = bad["ahrs"]
-    ok_a = sources["ahrs"][0]
+    bad_a = bad[key]
+    ok_a = sources[key][0]
     K = len(bad_a)
     ref = np.zeros(K)
     ref_var = np.full(K, np.inf)
-    for name in ("camera", "wheel", "gyro"):  # later ones take precedence; a span dropped from one is not used
-        if name in sources:
-            ok, ang, var = sources[name]
-            use = ok & ~bad[name]
-            ref = np.where(use, ang, ref)
-            ref_var = np.where(use, var, ref_var)
-    # a node's offset: the AHRS heading (absolute: the recording's heading offset removed) minus the
-    # relative heading summed from the start; an AHRS dropout does not break it
+    relative = [k for k in sources if not changes[k][1].absolute]  # by rank
+    for name in reversed(relative):  # the better ranked take precedence; a span dropped from one is not used
+        ok, ang, var = sources[name]
+        use = ok & ~bad[name]
+        ref = np.where(use, ang, ref)
+        ref_var = np.where(use, var, ref_var)
+    # a node's offset: the absolute heading (the recording's heading offset removed) minus the
+    # relative heading summed from the start; a dropout of the absolute heading does not break it
     rel = np.concatenate([[0.0], np.cumsum(ref)])
     rel_var = np.concatenate([[0.0], np.cumsum(np.where(np.isfinite(ref_var), ref_var, 0.0))])
-    offset = imu.ahrs_yaw - rel
+    offset = heading - rel
     runs = _runs(ok_a & ~bad_a)
     if not runs:
         return
-    # the heading offset is set from the AHRS's first samples: its offset is known there
-    start = int(np.argmax(imu.ahrs_ok))
+    # the heading offset is set from its first samples: its offset is known there
+    start = int(np.argmax(heading_ok))
     anchor = (start, start)
     for a, b in runs:
         if a == start:
@@ -379,61 +342,45 @@ def _readmit_absolute(iv, bad: dict, peak: np.ndarray, against: np.ndarray, sour
             continue
         gap = float(T[a] - T[anchor[1]])
         diff = float(np.mean(np.angle(np.exp(1j * (offset[a:b + 1] - offset[anchor[1]])))))
-        var = (2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * gap
-               + float(rel_var[a] - rel_var[anchor[1]]) + (cfg.monitor_bias_sigma * gap) ** 2)
+        var = window(gap, {}) + float(rel_var[a] - rel_var[anchor[1]]) + (cfg.monitor_bias_sigma * gap) ** 2
         nis = diff**2 / var
         if nis <= release:
             anchor = (a, b)
             continue
         bad_a[a:b] = True
         peak[a:b] = np.maximum(peak[a:b], nis)
-        against[a:b] = ", ".join(n for n in ("gyro", "wheel", "camera") if n in sources) + " (absolute heading)"
+        against[a:b] = ", ".join(relative) + " (absolute heading)"
 
 
-def drop_visual_increments(iv, keep: np.ndarray) -> None:
-    """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
-    estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
-    frame too. The other sensors carry the estimate there."""
-    if keep.all():
-        return
-    cam = camera_grid(iv)
-    cam.i0, cam.i1 = cam.i0[keep], cam.i1[keep]
-    cam.delta, cam.cov = cam.delta[keep], cam.cov[keep]
-    if iv.counts.get("camera") is not None:  # the live monitor's window has no counts
-        iv.counts["camera"].gated += int(np.count_nonzero(~keep))
-
-
-def _window_sums(sources: dict, a: int, b: int, span: float, cfg: FusionConfig, wheel_rel: float):
-    """Each source's heading change over intervals ``[a, b)`` and its variance (sources that cover it)."""
+def _window_sums(sources: dict, a: int, b: int, span: float, extra: dict):
+    """Each source's heading change over intervals ``[a, b)`` and its variance (sources that cover it), with what
+    the sources' ``window`` adds over ``span`` seconds (``extra``)."""
     theta, var = {}, {}
     for s, (ok, ang, v) in sources.items():
         if ok[a:b].all():
             theta[s] = float(ang[a:b].sum())
             var[s] = float(v[a:b].sum())
-    if "gyro" in theta:
-        var["gyro"] += (cfg.monitor_bias_sigma * span) ** 2
-    if "ahrs" in theta:
-        var["ahrs"] += 2.0 * cfg.imu.ahrs_yaw_sigma**2 + cfg.imu.ahrs_offset_walk**2 * span
-    if "wheel" in theta:
-        ref = theta.get("gyro", theta["wheel"])
-        var["wheel"] += wheel_rel * ref**2
+    for s, add in extra.items():
+        if s in theta:
+            var[s] += add(span, theta)
     return theta, var
 
 
-def _find_liar(theta: dict, var: dict, threshold: float, probability: float):
+def _find_liar(theta: dict, var: dict, threshold: float, probability: float, suspects=frozenset()):
     """The one source to drop in a window, its NIS and the sources it contradicts, or ``(None, 0, [])``.
 
-    With two sources, only the wheels' yaw is ever dropped. With more, each source whose NIS against
+    With two sources, only a suspect (the wheels' yaw) is ever dropped. With more, each source whose NIS against
     the others' mean exceeds ``threshold`` is a candidate; the one whose removal leaves the others most
     consistent (smallest chi-square about their mean, which must itself pass) is dropped.
     """
     present = list(theta)
     if len(present) == 2:
-        if "wheel" not in present:
+        suspect = next((s for s in present if s in suspects), None)
+        if suspect is None:
             return None, 0.0, []
-        other = [s for s in present if s != "wheel"][0]
-        nis = (theta["wheel"] - theta[other]) ** 2 / (var["wheel"] + var[other])
-        return ("wheel", nis, [other]) if nis > threshold else (None, 0.0, [])
+        other = [s for s in present if s != suspect][0]
+        nis = (theta[suspect] - theta[other]) ** 2 / (var[suspect] + var[other])
+        return (suspect, nis, [other]) if nis > threshold else (None, 0.0, [])
     if len(present) < 2:
         return None, 0.0, []
     best = (None, 0.0, [], np.inf)
@@ -546,7 +493,5 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 _BIAS_CHUNK = 5  # the gyro bias' chunks (reference_bias) in units of monitor_window
 _SCALES = (1, 5, 15)  # window lengths in units of monitor_window: fast lies and slow drifts
-_SENSOR = {"wheel": "wheel", "gyro": "imu", "ahrs": "imu", "camera": "camera"}
-_COMPONENT = {"wheel": "yaw rate", "gyro": "gyro yaw rate", "ahrs": "AHRS heading", "camera": "visual heading"}
 
 __all__ = ["Episode", "check_heading_sources", "check_speed_sources"]

@@ -49,7 +49,7 @@ from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData, ImuSample
 from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
+from fusion_vo.sensors.registry import HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.sensors.wheel import at_rest
@@ -481,6 +481,69 @@ def _ahrs_offset(state: State, context) -> State:
 GYRO_BIAS = State("gyro_bias", symbol="b", rule=_gyro_bias)
 AHRS_OFFSET = State("ahrs_offset", symbol="o", rule=_ahrs_offset)
 
+# --------------------------------------------------------------------------- its headings, for the monitor
+def _gyro_change(iv, config):
+    """The gyro's integrated angle per interval (its bias in it) and its white noise's variance."""
+    if not iv.uses("gyro"):
+        return None
+    imu = imu_grid(iv)
+    return imu.gyro_ok.copy(), imu.gyro_angle, config.imu.gyro_noise_density**2 * iv.dt
+
+
+def _gyro_drop(iv, bad, agrees) -> None:
+    imu = imu_grid(iv)
+    imu.gyro_ok = imu.gyro_ok & ~bad
+
+
+def _gyro_clear(iv) -> None:
+    imu_grid(iv).gyro_ok = np.zeros(iv.n_steps, bool)
+
+
+def _ahrs_change(iv, config):
+    """The AHRS heading's change per interval (wrapped), where it has headings at both nodes."""
+    imu = imu_grid(iv)
+    if not imu.ahrs_ok.any():
+        return None
+    ok = imu.ahrs_ok[:-1] & imu.ahrs_ok[1:]
+    return ok, np.angle(np.exp(1j * (imu.ahrs_yaw[1:] - imu.ahrs_yaw[:-1]))), np.zeros(len(iv.dt))
+
+
+def _ahrs_window(iv, config):
+    """Over ``span`` seconds the AHRS heading's change has its two ends' noise and its offset's walk."""
+    sigma, walk = config.imu.ahrs_yaw_sigma, config.imu.ahrs_offset_walk
+    return lambda span, theta: 2.0 * sigma**2 + walk**2 * span
+
+
+def _ahrs_drop(iv, bad, agrees) -> None:
+    imu = imu_grid(iv)
+    drop = np.zeros(len(iv.t), bool)
+    drop[1:] |= bad
+    imu.ahrs_ok = imu.ahrs_ok & ~drop
+
+
+def _ahrs_clear(iv) -> None:
+    imu_grid(iv).ahrs_ok = np.zeros(len(iv.t), bool)
+
+
+def _ahrs_reference_error(iv, config, ok, var) -> float:
+    """The error of the AHRS heading changes summed where ``ok``: its two ends' noise per run of them, and its
+    offset's walk over the time summed."""
+    runs = int(np.count_nonzero(np.diff(np.concatenate(([0], ok.astype(np.int8)))) == 1))
+    return runs * 2.0 * config.imu.ahrs_yaw_sigma**2 + config.imu.ahrs_offset_walk**2 * float(np.sum(iv.dt[ok]))
+
+
+#: the gyro's yaw rate, whose constant bias the monitor removes first
+GYRO_HEADING = HeadingSource(
+    "gyro", "gyro yaw rate", rank=10, change=_gyro_change, drop=_gyro_drop, biased=True,
+    window=lambda iv, config: lambda span, theta: (config.monitor_bias_sigma * span) ** 2,
+    kept=lambda iv: imu_grid(iv).gyro_ok, clear=_gyro_clear)
+#: the AHRS heading, an absolute one
+AHRS_HEADING = HeadingSource(
+    "ahrs", "AHRS heading", rank=30, change=_ahrs_change, drop=_ahrs_drop, window=_ahrs_window, absolute=True,
+    heading=lambda iv: (imu_grid(iv).ahrs_ok, imu_grid(iv).ahrs_yaw), kept=lambda iv: imu_grid(iv).ahrs_ok[1:],
+    clear=_ahrs_clear, reference=0, reference_error=_ahrs_reference_error)
+
+
 def _live_samples(data: ImuData) -> list:
     """Recorded IMU rows as live samples (with the AHRS orientation when recorded)."""
     q = data.orientation if data.orientation is not None else [None] * len(data.t)
@@ -494,4 +557,5 @@ register(Sensor(
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=has_heading,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
               samples=_live_samples, order=2),
+    heading=(GYRO_HEADING, AHRS_HEADING),
 ))

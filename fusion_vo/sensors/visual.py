@@ -42,7 +42,7 @@ import numpy as np
 
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
-from fusion_vo.sensors.registry import Live, Sensor, State, Step, register
+from fusion_vo.sensors.registry import HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
 
@@ -212,6 +212,67 @@ def readings(iv, config) -> list[Readings]:
                      order=ORDER["camera"])]
 
 
+# --------------------------------------------------------------------------- its heading, for the monitor
+def heading_rows(iv, with_variance: bool = False):
+    """The visual increments' heading spread over the node intervals they span: ``(ok, angle, variance)``
+    per interval (``variance`` None unless asked). An increment over ``n`` intervals gives each ``1/n``
+    of its heading change and of its variance; where increments overlap, the later one wins."""
+    cam = camera_grid(iv)
+    K = len(iv.t) - 1
+    ok = np.zeros(K, bool)
+    ang = np.zeros(K)
+    var = np.zeros(K) if with_variance else None
+    i0 = np.asarray(cam.i0, dtype=np.int64)
+    n = np.asarray(cam.i1, dtype=np.int64) - i0
+    if not len(i0):
+        return ok, ang, var
+    rows = np.repeat(np.arange(len(i0)), n)
+    idx = i0[rows] + (np.arange(len(rows)) - np.repeat(np.cumsum(n) - n, n))
+    ok[idx] = True
+    delta = np.asarray(cam.delta).reshape(-1, 3)
+    ang[idx] = (delta[:, 2] / n)[rows]
+    if with_variance:
+        var[idx] = (np.asarray(cam.cov).reshape(-1, 3, 3)[:, 2, 2] / n)[rows]
+    return ok, ang, var
+
+
+def drop_increments(iv, keep: np.ndarray) -> None:
+    """Remove the visual increments where ``keep`` is False (counted as gated): an increment is one
+    estimate of the frontend, and one whose heading is wrong has its translation expressed in a wrong
+    frame too. The other sensors carry the estimate there."""
+    if keep.all():
+        return
+    cam = camera_grid(iv)
+    cam.i0, cam.i1 = cam.i0[keep], cam.i1[keep]
+    cam.delta, cam.cov = cam.delta[keep], cam.cov[keep]
+    if iv.counts.get("camera") is not None:  # the live monitor's window has no counts
+        iv.counts["camera"].gated += int(np.count_nonzero(~keep))
+
+
+def _heading_change(iv, config):
+    """The heading monitor's camera rows (:func:`heading_rows`); None without increments."""
+    if not len(camera_grid(iv).i0):
+        return None
+    return heading_rows(iv, with_variance=True)
+
+
+def _heading_drop(iv, bad: np.ndarray, agrees) -> None:
+    """Within the intervals the monitor flagged, each increment tested on its own against the other sources."""
+    if not bad.any():
+        return
+    cam = camera_grid(iv)
+    keep = np.ones(len(cam.i0), bool)
+    for m, (a, b) in enumerate(zip(cam.i0, cam.i1)):
+        if bad[a:b].any():
+            keep[m] = agrees(a, b)
+    drop_increments(iv, keep)
+
+
+#: the summed heading increments: the camera's heading, for the monitor
+HEADING = HeadingSource("camera", "visual heading", rank=40, change=_heading_change, drop=_heading_drop, reference=1,
+                        reference_error=lambda iv, config, ok, var: float(np.sum(var[ok])))
+
+
 def _live_sample(inc) -> tuple:
     """A live :class:`~fusion_vo.measurements.VisualIncrement`: its time (``t1``) and itself."""
     return inc.t1, inc
@@ -255,4 +316,5 @@ register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
+    heading=(HEADING,),
 ))

@@ -126,6 +126,39 @@ def read_compass(recording) -> CompassData:
 COMPASS_SENSOR = Sensor(name="compass", where="compass0/", config=("compass", CompassNoise),
                         intervals=Step(100, compass_intervals), readings=compass_readings(COMPASS))
 
+
+# --------------------------------------------------------------------------- its heading, for the monitor
+def compass_change(iv, config):
+    """The heading change over each node interval with a heading at both ends, and its variance (none of its own
+    per interval: its two ends' noise is the window's)."""
+    if "compass" not in iv.extra:
+        return None
+    near, yaw = iv.extra["compass"]
+    return near[:-1] & near[1:], se2.wrap_angle(np.diff(yaw)), np.zeros(len(iv.dt))
+
+
+def compass_drop(iv, bad, agrees) -> None:
+    """The headings at the ends of the intervals the monitor dropped are not used."""
+    near, yaw = iv.extra["compass"]
+    drop = np.zeros(len(iv.t), bool)
+    drop[1:] |= bad
+    iv.extra["compass"] = (near & ~drop, yaw)
+
+
+def compass_clear(iv) -> None:
+    if "compass" in iv.extra:
+        iv.extra["compass"] = (np.zeros(len(iv.t), bool), iv.extra["compass"][1])
+
+
+#: the compass as an absolute heading the monitor judges against the gyro, the wheels and the camera
+COMPASS_HEADING = registry.HeadingSource(
+    "compass", "compass heading", rank=35, change=compass_change, drop=compass_drop, absolute=True,
+    window=lambda iv, config: lambda span, theta: 2.0 * config.section("compass").sigma ** 2,
+    heading=lambda iv: iv.extra["compass"], kept=lambda iv: iv.extra["compass"][0][1:], clear=compass_clear)
+
+#: the compass with its heading checked by the monitor
+CHECKED_COMPASS_SENSOR = dataclasses.replace(COMPASS_SENSOR, heading=(COMPASS_HEADING,))
+
 #: the compass with an unknown constant offset, estimated by both backends (prior 0 ± 0.5 rad)
 OFFSET_COMPASS_SENSOR = dataclasses.replace(
     COMPASS_SENSOR, folder="compass0", read=read_compass,

@@ -92,7 +92,8 @@ def test_a_registered_sensors_configuration_goes_through_the_schema(drive):
 
 
 def test_each_built_in_sensor_lives_in_its_own_module():
-    """Every hook of a built-in sensor is defined in that sensor's module (GPS, range ... need no backend edits)."""
+    """Every hook of a built-in sensor, its heading sources' too, is defined in that sensor's module or one of its
+    parts (``wheel_arc``, ``wheel_states``: GPS, range ... need no backend edits)."""
     home = {"camera": "fusion_vo.sensors.visual", "wheel": "fusion_vo.sensors.wheel", "odom": "fusion_vo.sensors.wheel",
             "imu": "fusion_vo.sensors.imu", "range": "fusion_vo.sensors.range", "gps": "fusion_vo.sensors.gps"}
     assert registry.names()[:6] == tuple(home)
@@ -101,8 +102,8 @@ def test_each_built_in_sensor_lives_in_its_own_module():
         for f in dataclasses.fields(sensor):
             value = getattr(sensor, f.name)
             for item in value if isinstance(value, tuple) else (value,):
-                if isinstance(item, registry.Live):  # the streaming intake's hooks
-                    hooks += [(f"live.{g.name}", getattr(item, g.name)) for g in dataclasses.fields(item)
+                if isinstance(item, (registry.Live, registry.HeadingSource)):  # the intake's, the monitor's hooks
+                    hooks += [(f"{f.name}.{g.name}", getattr(item, g.name)) for g in dataclasses.fields(item)
                               if inspect.isfunction(getattr(item, g.name))]
                     continue
                 fn = item.run if isinstance(item, Step) else item
@@ -110,7 +111,9 @@ def test_each_built_in_sensor_lives_in_its_own_module():
                     hooks.append((f.name, fn))
         assert len(hooks) >= 3, sensor.name
         for field_name, fn in hooks:
-            assert fn.__module__ == home[sensor.name], (sensor.name, field_name, fn.__module__)
+            assert fn.__module__ in (home[sensor.name], home[sensor.name] + "_arc", home[sensor.name] + "_states"), (
+                sensor.name, field_name, fn.__module__)
+    assert {h.key for _, h in registry.heading_sources()} == {"camera", "wheel", "gyro", "ahrs"}
     assert [s.name for s in registry.sensors()[:6] if s.live is not None] == list(home)
     assert [s.name for s in registry.sensors()[:6] if s.live.take is not None] == ["camera", "gps"]
     gps = registry.get("gps")
