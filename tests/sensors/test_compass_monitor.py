@@ -45,8 +45,8 @@ def test_the_monitor_drops_a_registered_heading_that_jumps(drive):
         unchecked = fuse(streams, "all", FusionConfig.from_dict({"compass": {"sigma": 0.02}, "monitor": False}))
     episodes = [e for e in checked.inconsistent if e["sensor"] == "compass"]
     assert len(episodes) == 1 and episodes[0]["component"] == "compass heading", checked.inconsistent
-    # the 5 s window that holds the jump is dropped whole (the check's windows of 1, 5 and 15 s)
-    assert t0 + JUMP_AT - 5.0 <= episodes[0]["start"] <= t0 + JUMP_AT
+    # the check's windows are 2, 10 and 30 s: the 10 s window that holds the jump (from 10 s) is dropped whole
+    assert t0 + 10.0 - 0.1 <= episodes[0]["start"] <= t0 + JUMP_AT
     assert episodes[0]["end"] == pytest.approx(float(s.truth.t[-1]), abs=0.2)
     assert any(n.startswith("compass compass heading inconsistent with gyro") for n in checked.notes), checked.notes
     for name in ("ekf", "gtsam"):
