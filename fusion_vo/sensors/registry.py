@@ -445,6 +445,7 @@ class Sensor:
 _REGISTRY: dict[str, Sensor] = {}
 _ORDERED: dict = {}  # attribute -> the sorted steps (cleared when a sensor is added or removed)
 _ALIASES: dict = {}  # second name (Sensor.field) -> its sensor (cleared likewise)
+_SORTED: list = []  # the sensors in sensors() order (cleared likewise)
 _KINDS: dict[str, Callable[[int], Sensor]] = {}  # kind -> factory of its instance N (register_kind)
 _loaded = False
 
@@ -520,6 +521,7 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
     _REGISTRY[sensor.name] = sensor
     _ORDERED.clear()
     _ALIASES.clear()
+    _SORTED.clear()
     return sensor
 
 
@@ -528,6 +530,7 @@ def unregister(name: str) -> None:
     _REGISTRY.pop(name, None)
     _ORDERED.clear()
     _ALIASES.clear()
+    _SORTED.clear()
 
 
 @contextmanager
@@ -593,8 +596,10 @@ BUILTIN_ORDER = ("camera", "wheel", "odom", "imu", "range", "gps")
 def sensors() -> list[Sensor]:
     """Every registered sensor: the built-in ones in :data:`BUILTIN_ORDER`, then the others in registration order."""
     _load_builtins()
-    rank = {name: i for i, name in enumerate(BUILTIN_ORDER)}
-    return sorted(_REGISTRY.values(), key=lambda s: rank.get(s.name, len(rank)))
+    if not _SORTED:  # (the backends ask at every node)
+        rank = {name: i for i, name in enumerate(BUILTIN_ORDER)}
+        _SORTED.extend(sorted(_REGISTRY.values(), key=lambda s: rank.get(s.name, len(rank))))
+    return list(_SORTED)
 
 
 def names() -> tuple[str, ...]:
@@ -605,6 +610,9 @@ def names() -> tuple[str, ...]:
 def resolve(key: str) -> Sensor | None:
     """The sensor ``key`` names: a registered sensor or an instance of a declared kind (:func:`instance`), or the
     sensor whose second name (:attr:`Sensor.field`) it is; None when it is neither."""
+    sensor = _REGISTRY.get(key) if _loaded else None  # (the common case, asked for at every node)
+    if sensor is not None:
+        return sensor
     sensor = instance(key)
     if sensor is not None:
         return sensor

@@ -73,7 +73,10 @@ class SensorStreams:
 
     def get(self, key: str, default: Any = None) -> Any:
         """The data of sensor ``key`` (or its second name), ``default`` when absent."""
-        return self._data.get(self._name(key), default)
+        data = self._data
+        if key in data:  # (a sensor's own name: asked for at every node)
+            return data[key]
+        return data.get(self._name(key), default)
 
     def set(self, key: str, value: Any) -> None:
         """Set the data of sensor ``key`` (None removes it)."""
@@ -103,7 +106,12 @@ class SensorStreams:
 
     def __getattr__(self, key: str) -> Any:
         # only reached for names that are not attributes: a sensor's data by name, None when absent
-        if key.startswith("_") or registry.resolve(key) is None:
+        if key.startswith("_"):
+            raise AttributeError(f"'SensorStreams' object has no attribute '{key}'")
+        data = self.__dict__.get("_data", {})
+        if key in data:
+            return data[key]
+        if registry.resolve(key) is None:
             raise AttributeError(f"'SensorStreams' object has no attribute '{key}'")
         return self.get(key)
 
