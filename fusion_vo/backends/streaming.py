@@ -19,7 +19,9 @@ nodes at ``step_hz`` when no frame comes; without a camera they are every ``1/st
 node interval is integrated exactly as in batch use (:func:`~fusion_vo.backends.timeline.build_intervals`)
 and handed to the EKF (``backend="ekf"``) or to iSAM2 (``backend="gtsam"``). A visual increment whose
 ``t0`` is not the previous node (it spans frames the stream has already passed) cannot be applied
-causally and is counted as late.
+causally and is counted as late. One that starts at the previous node and ends at a later frame (frames
+dropped between its two) is applied as a batch run applies it: by the EKF as a share over each of its node
+intervals, by iSAM2 as one factor between its two frames' nodes, added with the second.
 
 GPS (``add_gps``, both backends): every fix time is a node, and the fix measures the pose there through the GPS
 model of :mod:`fusion_vo.sensors.gps` (lever arm, ``fusion.gps``'s gate and robust weight, re-acquisition after

@@ -15,6 +15,7 @@ streams because other sensors' models need them (the range finder, the visual sc
 
 from __future__ import annotations
 
+from types import MappingProxyType
 from typing import Any, Iterator, Mapping
 
 from fusion_vo.errors import InputError
@@ -124,10 +125,11 @@ class SensorStreams:
             raise AttributeError(f"SensorStreams: '{key}' is neither a sensor nor one of {', '.join(FACTS)}")
 
     @property
-    def extra(self) -> dict:
-        """The data of the sensors without a second name (those registered outside the library), by name: a copy."""
-        return {name: data for name, data in self.items()
-                if (s := registry.resolve(name)) is None or s.field is None}
+    def extra(self) -> Mapping:
+        """The data of the sensors without a second name (those registered outside the library), by name: a
+        read-only view (set a sensor's data with ``streams[name] = data``)."""
+        return MappingProxyType({name: data for name, data in self.items()
+                                 if (s := registry.resolve(name)) is None or s.field is None})
 
     # ------------------------------------------------------------------ copies
     def facts(self) -> dict:

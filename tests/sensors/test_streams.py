@@ -44,6 +44,8 @@ def test_a_registered_sensor_is_held_like_a_built_in_one():
         assert picked.beeper is beeps and picked.camera_height == 0.3
         # the data by name as before (a plugin written against SensorStreams.extra still finds its own)
         assert streams.extra == {"beeper": beeps}
+        with pytest.raises(TypeError):  # a write there would be lost: it is refused
+            streams.extra["beeper"] = None
 
 
 def test_the_camera_answers_to_its_second_name():
