@@ -38,7 +38,8 @@ whole recordings.
 Speeds
 ------
 :func:`check_speed_sources` does the same for the distance travelled over each window: the wheels'
-``(d_l + d_r) / 2`` against the camera's summed forward increments. Their ratio ``ρ`` is a
+``(d_l + d_r) / 2`` against the camera's summed forward increments (each declared by its sensor as a
+:class:`~fusion_vo.sensors.registry.DistanceSource`; the suspect one, the wheels', against the first other). Their ratio ``ρ`` is a
 calibration the backends estimate (camera height against wheel radius), not a lie, so the check
 uses the median ``ρ₀`` of the ratios over the shortest windows and tests
 ``NIS = (D_w - ρ₀ D_c)² / (σ_w² + ρ₀² σ_c² + (monitor_scale_sigma · D_w)²)`` in each window
@@ -74,8 +75,6 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import travel_variances, wheel_grid
 
 logger = logging.getLogger(__name__)
 
@@ -412,28 +411,22 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
 
 
 def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
-    """Find the spans where the wheels' and the camera's distances disagree; drop the wheels' speed
-    there (``WheelGrid.speed_ok``, in place) and return the episodes (see the module docstring)."""
-    cam, whl = camera_grid(iv), wheel_grid(iv)
+    """Find the spans where a suspect distance source (the wheels') and the first other one (the camera's) disagree;
+    drop the suspect's distance there (:attr:`DistanceSource.drop <fusion_vo.sensors.registry.DistanceSource.drop>`,
+    in place) and return the episodes (see the module docstring)."""
     cfg = config
-    if not cfg.monitor or iv.n_steps < 2 or not iv.uses("wheel") or not len(cam.i0):
+    if not cfg.monitor or iv.n_steps < 2:
+        return []
+    found = [(sensor.name, d, rows) for sensor, d in sorted(registry.distance_sources(), key=lambda p: p[1].rank)
+             if (rows := d.change(iv, cfg)) is not None]
+    suspect = next((f for f in found if f[1].suspect), None)
+    other = next((f for f in found if not f[1].suspect), None)
+    if suspect is None or other is None:
         return []
     T, dt = iv.t, iv.dt
     K = len(dt)
-    noise = cfg.wheel_model(whl.twist)[0]
-    wheel_ok = whl.ok.copy()
-    d_w = 0.5 * (whl.dl + whl.dr) * iv.cx
-    vl, vr = travel_variances(whl.dl, whl.dr, noise)
-    v_w = 0.25 * (vl + vr)
-    cam_ok = np.zeros(K, bool)
-    d_c = np.zeros(K)
-    v_c = np.zeros(K)
-    for a, b, delta, cov in zip(cam.i0, cam.i1, cam.delta, cam.cov):
-        n = b - a
-        cam_ok[a:b] = True
-        d_c[a:b] = delta[0] / n
-        v_c[a:b] = cov[0, 0] / n
-    both = wheel_ok & cam_ok
+    (sensor, source, (s_ok, d_w, v_w)), (_, reference, (o_ok, d_c, v_c)) = suspect, other
+    both = s_ok & o_ok
 
     def sums(a: int, b: int):
         if not both[a:b].all():
@@ -476,10 +469,10 @@ def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
     for a, b in _runs(bad):
         sel = both[a:b]
         span_rho = float(d_w[a:b][sel].sum() / d_c[a:b][sel].sum()) if abs(d_c[a:b][sel].sum()) > 0 else float("nan")
-        episodes.append(Episode("wheel", "speed", float(T[a]), float(T[b]), float(peak[a:b].max()), "camera",
-                                f" (wheel/camera distance ratio {span_rho:.3f} there, {rho:.3f} over the recording; "
-                                "with no third speed source either may be the wrong one)"))
-    whl.speed_ok = whl.speed_ok & ~bad
+        episodes.append(Episode(sensor, source.component, float(T[a]), float(T[b]), float(peak[a:b].max()),
+                                reference.key, f" ({source.key}/{reference.key} distance ratio {span_rho:.3f} there, "
+                                f"{rho:.3f} over the recording; with no third speed source either may be the wrong one)"))
+    source.drop(iv, bad)
     for ep in episodes:
         logger.info("monitor: %s", ep.note(T[0]))
     return episodes

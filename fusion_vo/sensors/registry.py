@@ -7,7 +7,7 @@ its configuration section, how its samples become measurements on the node grid
 defines), and its contributions to the EKF
 (:func:`~fusion_vo.backends.ekf.step_blocks`) and to the factor graph
 (:class:`~fusion_vo.backends.graph_builder.GraphBuilder`), and the heading components the heading monitor judges
-(:class:`HeadingSource`). The timeline, both backends, ``SensorStreams``, the monitor and the recording reader
+(:class:`HeadingSource`) and the distances the speed check compares (:class:`DistanceSource`). The timeline, both backends, ``SensorStreams``, the monitor and the recording reader
 iterate :func:`sensors` instead of naming sensors, so adding a sensor is one module
 plus one :func:`register` call (README, "Adding a sensor")::
 
@@ -60,6 +60,7 @@ from pydantic import Field
 
 from fusion_vo.config.base import MAX_NUMBER, ConfigError, Float, Section, Sigma, Walk
 from fusion_vo.sensors.model import ARGUMENT_SIZES
+from fusion_vo.sensors.sources import DistanceSource, HeadingSource  # noqa: F401 (a Sensor's, here too)
 
 #: the built-in sensor modules, imported (and so registered) on first use of the registry
 BUILTIN_MODULES = ("fusion_vo.sensors.visual", "fusion_vo.sensors.wheel", "fusion_vo.sensors.imu",
@@ -231,79 +232,6 @@ class Live:
 
 
 @dataclass(frozen=True)
-class HeadingSource:
-    """A heading component of a sensor that the heading monitor judges against the others
-    (:func:`fusion_vo.backends.monitor.check_heading_sources`; live: :mod:`fusion_vo.backends.live_monitor`).
-
-    Attributes
-    ----------
-    key : str
-        Its name in the check (``gyro``, ``ahrs``: one sensor may give several).
-    component : str
-        What its episodes call it (``"gyro yaw rate"``).
-    rank : float
-        Its place among the sources: the order they are judged and reported in; of the relative ones (not
-        ``absolute``), the smaller carries the heading across a span where an absolute one was dropped.
-    change : callable
-        ``change(iv, config) -> (ok, angle, var) or None``: per node interval of the grid ``iv``, whether it has a
-        heading change, the change [rad] and its variance [rad²] (None when it depends on the other sources:
-        :attr:`variance`); None when the grid has none of its data. A ``biased`` source's change still holds its bias.
-    variance : callable or None
-        ``variance(iv, config, angle, found) -> var``: the variance of its changes given the others' (``found``:
-        key -> ``(ok, angle)`` of every source as judged, a biased one's without its bias).
-    window : callable or None
-        ``window(iv, config) -> add``, ``add(span, theta) -> float``: the variance added to its change summed over a
-        window of ``span`` seconds (an error shared over the window: an offset's walk, a scale; ``theta``: each
-        source's summed change over the window).
-    drop : callable
-        ``drop(iv, bad, agrees)``: take the component out of ``iv`` (in place) in the intervals where ``bad``;
-        ``agrees(a, b) -> bool``: whether its change over intervals ``[a, b)`` agrees with the others'.
-    kept, clear : callable or None
-        ``kept(iv) -> (K,) bool``: where it is still used after ``drop``; ``clear(iv)``: take it out of all of ``iv``.
-        The live monitor decides for the sources that have them (None: the camera's increments, judged per
-        increment in a whole recording only).
-    suspect : bool
-        Between two sources, this one is dropped when they disagree (the wheels' yaw: a twist's yaw rate from a
-        nominal track width is the usual liar); two sources without a suspect judge nothing.
-    absolute : bool
-        An absolute heading (the AHRS), ``heading(iv) -> (ok, yaw)`` per node: after a span in which it disagreed it
-        is trusted again only where its heading still agrees (``window`` over the gap is its offset's variance), it
-        is dropped for a whole recording only when it disagrees throughout, and the live monitor never takes it
-        back once dropped.
-    heading : callable or None
-        See ``absolute``.
-    biased : bool
-        Its change carries an unknown constant bias (a gyro's), estimated against the other sources and removed
-        before it is judged: the median rate at rest where a source says the robot stands still (``at_rest``), else
-        against the ``reference`` sources; while the live monitor cannot measure it, it neither judges nor is judged.
-    reference : float or None
-        Its rank as a reference for a biased source's bias (the smaller first; None: not one).
-    reference_error : callable or None
-        ``reference_error(iv, config, ok, var) -> float``: the error variance of its change summed where ``ok`` (the
-        live monitor takes the reference with the smallest; one without is taken only when no other is there).
-    at_rest : callable or None
-        ``at_rest(iv, config) -> (K,) bool``: the intervals in which the robot stands still (the wheels').
-    """
-
-    key: str
-    component: str
-    rank: float
-    change: Callable
-    drop: Callable
-    variance: Callable | None = None
-    window: Callable | None = None
-    kept: Callable | None = None
-    clear: Callable | None = None
-    suspect: bool = False
-    absolute: bool = False
-    heading: Callable | None = None
-    biased: bool = False
-    reference: float | None = None
-    reference_error: Callable | None = None
-    at_rest: Callable | None = None
-
-
-@dataclass(frozen=True)
 class Sensor:
     """A sensor as the library sees it (module docstring).
 
@@ -383,6 +311,8 @@ class Sensor:
         camera and GPS, whose samples make nodes, hand them on with ``Live.take``.
     heading : tuple of HeadingSource
         The heading components it gives the heading monitor (the IMU: its gyro and its AHRS).
+    distance : tuple of DistanceSource
+        The distances it gives the speed check (the wheels', the camera's).
     """
 
     name: str
@@ -408,6 +338,7 @@ class Sensor:
     live: Live | None = None
     absolute_heading: Any = False
     heading: tuple = ()
+    distance: tuple = ()
 
     def data(self, streams) -> Any:
         """Its data in ``streams`` (a :class:`~fusion_vo.sensors.streams.SensorStreams`), or None."""
@@ -632,6 +563,11 @@ def get(name: str) -> Sensor:
 def heading_sources() -> list[tuple[Sensor, HeadingSource]]:
     """``(sensor, source)`` of every registered heading source, in :func:`sensors` order."""
     return [(s, h) for s in sensors() for h in s.heading]
+
+
+def distance_sources() -> list[tuple[Sensor, DistanceSource]]:
+    """``(sensor, source)`` of every registered distance source, in :func:`sensors` order."""
+    return [(s, d) for s in sensors() for d in s.distance]
 
 
 def states(used, config=None) -> tuple[State, ...]:

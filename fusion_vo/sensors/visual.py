@@ -42,7 +42,7 @@ import numpy as np
 
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
-from fusion_vo.sensors.registry import HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
 
@@ -268,6 +268,25 @@ def _heading_drop(iv, bad: np.ndarray, agrees) -> None:
     drop_increments(iv, keep)
 
 
+def _distance_change(iv, config):
+    """The increments' forward distance spread over the intervals they span (``1/n`` of it and of its variance
+    each)."""
+    cam = camera_grid(iv)
+    if not len(cam.i0):
+        return None
+    K = len(iv.t) - 1
+    ok, d, v = np.zeros(K, bool), np.zeros(K), np.zeros(K)
+    for a, b, delta, cov in zip(cam.i0, cam.i1, cam.delta, cam.cov):
+        n = b - a
+        ok[a:b] = True
+        d[a:b] = delta[0] / n
+        v[a:b] = cov[0, 0] / n
+    return ok, d, v
+
+
+#: the camera's distance, what the wheels' is checked against
+DISTANCE = DistanceSource("camera", "distance", rank=40, change=_distance_change)
+
 #: the summed heading increments: the camera's heading, for the monitor
 HEADING = HeadingSource("camera", "visual heading", rank=40, change=_heading_change, drop=_heading_drop, reference=1,
                         reference_error=lambda iv, config, ok, var: float(np.sum(var[ok])))
@@ -316,5 +335,5 @@ register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
-    heading=(HEADING,),
+    heading=(HEADING,), distance=(DISTANCE,),
 ))

@@ -27,7 +27,7 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, TwistSample, WheelConfig, WheelData, WheelTicks
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
-from fusion_vo.sensors.registry import HeadingSource, Live, Sensor, Step, register
+from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, Step, register
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
     WheelNoise, arc_covariance, arc_increment, arc_twist, odom_twist_noise, skid_variance, standstill,
     travel_variances,
@@ -462,6 +462,23 @@ def _heading_clear(iv) -> None:
     wheel_grid(iv).yaw_ok = np.zeros(iv.n_steps, bool)
 
 
+def _distance_change(iv, config):
+    """The axle's travel per interval, projected to the horizontal, with its variance from the wheels' noise."""
+    if not iv.uses("wheel"):
+        return None
+    whl = wheel_grid(iv)
+    vl, vr = travel_variances(whl.dl, whl.dr, config.wheel_model(whl.twist)[0])
+    return whl.ok.copy(), 0.5 * (whl.dl + whl.dr) * iv.cx, 0.25 * (vl + vr)
+
+
+def _distance_drop(iv, bad) -> None:
+    whl = wheel_grid(iv)
+    whl.speed_ok = whl.speed_ok & ~bad
+
+
+#: the wheels' distance, the one dropped when it and the camera's disagree
+DISTANCE = DistanceSource("wheel", "speed", rank=20, change=_distance_change, drop=_distance_drop, suspect=True)
+
 #: the wheels' yaw: the one dropped when only two heading sources disagree
 HEADING = HeadingSource(
     "wheel", "yaw rate", rank=20, change=_heading_change, variance=_heading_variance, window=_heading_window,
@@ -491,7 +508,7 @@ register(Sensor(
     grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
     states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
-    heading=(HEADING,),
+    heading=(HEADING,), distance=(DISTANCE,),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",

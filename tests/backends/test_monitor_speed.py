@@ -105,3 +105,35 @@ def test_a_constant_scale_ratio_is_calibration_not_a_lie():
 def test_monitor_scale_sigma_is_checked():
     with pytest.raises(ValueError, match="monitor_scale_sigma must be positive"):
         FusionConfig.from_dict({"monitor_scale_sigma": 0.0})
+
+
+def test_the_wheels_are_checked_against_a_registered_distance_source(drive):
+    """A sensor registered outside the library that declares a DistanceSource (an odometer reading the distance
+    travelled from ground truth, 1 mm per interval) takes the camera's place: the wheels scaled 1.3 in the same
+    span are dropped against it. Fails if the speed check names the camera instead of taking the registered
+    sources (no camera here: nothing would be checked)."""
+    from fusion_vo.backends import SensorStreams
+    from fusion_vo.measurements import SensorCount
+    from fusion_vo.sensors.registry import DistanceSource, Sensor, Step, registered
+
+    def on_grid(iv, streams, config, counts):
+        truth = streams["odometer"]  # (its samples: the true poses)
+        xy = np.column_stack([np.interp(iv.t, truth.t, truth.xyyaw[:, i]) for i in range(2)])
+        iv.sensors["odometer"] = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+        counts.setdefault("odometer", SensorCount()).used += len(iv.dt)
+
+    def change(iv, config):
+        d = iv.sensors.get("odometer")
+        return None if d is None else (np.ones(len(d), bool), d, np.full(len(d), 1e-6))
+
+    odometer = Sensor(name="odometer", intervals=Step(100, on_grid),
+                      distance=(DistanceSource("odometer", "distance", rank=50, change=change),))
+    with registered(odometer):
+        streams = SensorStreams(wheel=_wheel_scaled(drive.wheel, *LIE, 1.3), imu=drive.imu, odometer=drive.truth)
+        result = fuse(streams.select(["wheel", "imu"]), "ekf", FusionConfig())
+        assert _speed_episodes(result) == []  # without the odometer: the wheels' distance has nothing to meet
+        result = fuse(streams.select(["wheel", "imu", "odometer"]), "ekf", FusionConfig())
+    eps = _speed_episodes(result)
+    assert len(eps) == 1 and eps[0]["sensor"] == "wheel" and eps[0]["against"] == "odometer", result.inconsistent
+    assert LIE[0] - 2.5 <= eps[0]["start"] <= LIE[0] + 0.5 and LIE[1] - 0.5 <= eps[0]["end"] <= LIE[1] + 2.5, eps
+    assert "wheel/odometer distance ratio 1.2" in eps[0]["detail"] or "ratio 1.3" in eps[0]["detail"], eps[0]

@@ -102,7 +102,7 @@ def test_each_built_in_sensor_lives_in_its_own_module():
         for f in dataclasses.fields(sensor):
             value = getattr(sensor, f.name)
             for item in value if isinstance(value, tuple) else (value,):
-                if isinstance(item, (registry.Live, registry.HeadingSource)):  # the intake's, the monitor's hooks
+                if isinstance(item, (registry.Live, registry.HeadingSource, registry.DistanceSource)):  # intake, monitor
                     hooks += [(f"{f.name}.{g.name}", getattr(item, g.name)) for g in dataclasses.fields(item)
                               if inspect.isfunction(getattr(item, g.name))]
                     continue
@@ -114,6 +114,7 @@ def test_each_built_in_sensor_lives_in_its_own_module():
             assert fn.__module__ in (home[sensor.name], home[sensor.name] + "_arc", home[sensor.name] + "_states"), (
                 sensor.name, field_name, fn.__module__)
     assert {h.key for _, h in registry.heading_sources()} == {"camera", "wheel", "gyro", "ahrs"}
+    assert {d.key for _, d in registry.distance_sources()} == {"camera", "wheel"}
     assert [s.name for s in registry.sensors()[:6] if s.live is not None] == list(home)
     assert [s.name for s in registry.sensors()[:6] if s.live.take is not None] == ["camera", "gps"]
     gps = registry.get("gps")
