@@ -31,7 +31,8 @@ class SensorStreams:
     Parameters
     ----------
     data : mapping, optional
-        Sensor name (or a sensor's second name, ``visual``) -> its data (None entries are left out).
+        Sensor name (or a sensor's second name, ``visual``) -> its data (None entries are left out). A name that is
+        no registered sensor yet is kept as it is (the data of a sensor registered later).
     camera_height : float, optional
         The height [m] the visual increments were computed with (for the range finder).
     camera_height_sigma : float, optional
