@@ -299,15 +299,17 @@ class NodesMixin:
         # (the whole increment needs its two nodes in one frame: not across the switch to ENU)
         if spanning is not None and self.backend != "ekf" and (
                 "gps" not in self.sensors or (self._switch is not None and spanning[2] >= self._switch[0])):
-            graph_camera = self._span_reading(iv, *spanning)
+            inc, _, first, k, n_intervals = spanning
+            graph_camera = self._span_reading(iv, inc, first, k, n_intervals)
         return iv, step, consumed, reach, graph_camera
 
-    def _span_reading(self, iv, inc: VisualIncrement, part: VisualIncrement, first: int, k: int, n_intervals: int):
+    def _span_reading(self, iv, inc: VisualIncrement, first: int, k: int, n_intervals: int):
         """iSAM2's camera readings of the interval ``iv``, the ``k``-th of the ``n_intervals`` that ``inc`` spans from
         the processed node ``first`` on: none before its last interval; at its last, the whole increment from node
         ``first``, a reading that starts ``n_intervals - 1`` nodes before ``iv`` (a
         :class:`~fusion_vo.sensors.visual.CameraGrid` over the nodes ``1 - n_intervals`` and 1 of ``iv``), its
-        translation projected with the mean slope factors of the intervals it spans, as in a batch run."""
+        translation projected with the mean slope factors of the intervals it spans, as in a batch run (an interval
+        whose node has left the history counts with ``iv``'s: the span is shorter than the history by default)."""
         cam = iv.sensors["camera"]
         if k < n_intervals - 1:
             return dataclasses.replace(cam, i0=np.zeros(0, int), i1=np.zeros(0, int), delta=np.zeros((0, 3)),

@@ -450,18 +450,20 @@ def register(sensor: Sensor, replace: bool = False) -> Sensor:
         taken.add(state.name)
         symbols.add(state.symbol)
     _REGISTRY[sensor.name] = sensor
-    _ORDERED.clear()
-    _ALIASES.clear()
-    _SORTED.clear()
+    _forget_lookups()
     return sensor
 
 
 def unregister(name: str) -> None:
     """Remove a sensor registered with :func:`register` (no error when it is not)."""
     _REGISTRY.pop(name, None)
-    _ORDERED.clear()
-    _ALIASES.clear()
-    _SORTED.clear()
+    _forget_lookups()
+
+
+def _forget_lookups() -> None:
+    """Clear what is derived from the registered sensors (their sorted steps, second names and order)."""
+    for cache in (_ORDERED, _ALIASES, _SORTED):
+        cache.clear()
 
 
 @contextmanager
