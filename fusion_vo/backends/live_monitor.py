@@ -1,9 +1,9 @@
-"""The heading-consistency monitor run causally, node by node, for streaming use.
+"""The consistency monitor run causally, node by node, for streaming use: heading sources and speeds.
 
-:func:`~fusion_vo.backends.monitor.check_heading_sources` judges a whole recording at once. A live
-stack cannot wait for the end: :class:`LiveHeadingMonitor` keeps the node intervals of the last
-``15 * monitor_window`` seconds (the longest window the check uses), runs the same check on them every
-``monitor_window / 2`` seconds of data, and a component the check drops in the newest interval is
+:func:`~fusion_vo.backends.monitor.check_heading_sources` and :func:`~fusion_vo.backends.monitor.check_speed_sources`
+judge a whole recording at once. A live stack cannot wait for the end: :class:`LiveHeadingMonitor` keeps the node
+intervals of the last ``15 * monitor_window`` seconds (the longest window the checks use), runs the same checks on
+them every ``monitor_window / 2`` seconds of data, and a component a check drops in the newest interval is
 dropped from the intervals that follow until a later check no longer drops it there. The AHRS heading,
 once dropped, stays dropped (its offset is no longer known; the batch check, which sees the whole
 recording, may trust it again where its absolute heading agrees). Each span in which
@@ -13,6 +13,18 @@ Decisions only use data up to the interval they are applied to, so they can diff
 check's (which also sees what comes after): a lie is used until the check has seen enough of it. Until
 the gyro's bias can be measured (ten intervals at rest or with a heading reference), the gyro neither
 judges the other sources nor is judged: a constant bias is the backends' to estimate, not a lie.
+
+Speeds: the batch check holds the suspect's distance (the wheels') to ``ρ₀`` times the other's (the camera's),
+``ρ₀`` the median ratio over the recording's windows. Here ``ρ₀`` is the median over the windows of
+``monitor_window`` seen so far, each counted once when it is complete, those overlapping a span in which the
+suspect was dropped left out (a lie is no calibration); the check starts after :data:`MIN_SPEED_WINDOWS` of them.
+The intervals of a span already closed are left out of the check's windows too, so a long window reaching back
+into it does not find the lie again after its end.
+
+The window the checks judge starts at a node that moves on in steps of at least 64 intervals; where it starts is
+part of the state a rewind restores (:class:`MonitorState`), and the rows before it are kept while a rewind of
+``history`` seconds can reach them, so a stream rewound for late data judges the windows it would have judged with
+the same data in time order.
 """
 
 from __future__ import annotations
@@ -25,7 +37,8 @@ import logging
 import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.monitor import Episode, check_heading_sources, heading_changes
+from fusion_vo.backends.monitor import (Episode, check_heading_sources, heading_changes, speed_disagreement, speed_pair,
+                                       windows)
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.visual import CameraGrid, camera_grid
@@ -39,6 +52,24 @@ def _components() -> dict:
     return {h.key: (sensor.name, h) for sensor, h in registry.heading_sources() if h.clear is not None}
 
 
+def _speed_components() -> dict:
+    """The distance sources the live speed check can drop from an interval: ``"<key> <component>"`` (``"wheel
+    speed"``) -> ``(sensor name, source)``."""
+    return {f"{d.key} {d.component}": (sensor.name, d) for sensor, d in registry.distance_sources()
+            if d.drop is not None}
+
+
+def _described(key: str) -> tuple[str, str]:
+    """``(sensor, component)`` of a decision's key, heading source or distance source."""
+    sensor, source = _components().get(key) or _speed_components()[key]
+    return sensor, source.component
+
+
+#: fewest windows of ``monitor_window`` with both distances before the live speed check judges (their median is the
+#: distance ratio the check holds the two to)
+MIN_SPEED_WINDOWS = 5
+
+
 @dataclasses.dataclass(frozen=True)
 class MonitorState:
     """What a rewind restores: the dropped components, the open spans and the intervals kept."""
@@ -49,19 +80,26 @@ class MonitorState:
     next_check: float
     n_intervals: int
     rest_bias: float | None
+    first: int = 0
+    n_ratios: int = 0
+    ratios_until: float = -np.inf
 
 
 class LiveHeadingMonitor:
-    """Causal, windowed :func:`~fusion_vo.backends.monitor.check_heading_sources` over node intervals.
+    """Causal, windowed :func:`~fusion_vo.backends.monitor.check_heading_sources` and
+    :func:`~fusion_vo.backends.monitor.check_speed_sources` over node intervals.
 
     Parameters
     ----------
     config : FusionConfig
         ``monitor``, ``monitor_window`` and the check's other settings.
+    history : float
+        How far back [s] a rewind may restore one of its states (``StreamingFusion``'s ``history``).
     """
 
-    def __init__(self, config: FusionConfig):
+    def __init__(self, config: FusionConfig, history: float = 2.0):
         self.config = config
+        self.history = history  # how far back a rewind may restore a state (StreamingFusion's history)
         self.enabled = bool(config.monitor)
         self.span = 15.0 * config.monitor_window
         self.every = 0.5 * config.monitor_window
@@ -76,7 +114,11 @@ class LiveHeadingMonitor:
         self._uses: set[str] = set()
         self._last: Intervals | None = None
         self._dropped_before = 0  # intervals trimmed from the front
+        self._first = 0  # the first node of the window the check judges (counting every node ever added)
+        self._firsts: list[tuple[float, int]] = []  # (newest node time, _first before) of each move of _first
         self._rest_bias: float | None = None  # the gyro's bias at the last standstill
+        self._ratios: list[float] = []  # the speed check's distance ratio per window seen (module docstring)
+        self._ratios_until = -np.inf  # end of the last window counted there
 
     # ------------------------------------------------------------------ intervals
     def add(self, iv: Intervals) -> None:
@@ -131,8 +173,20 @@ class LiveHeadingMonitor:
         self._uses |= set(iv.counts)
 
     def _trim(self) -> None:
-        cut = bisect.bisect_left(self._t, self._t[-1] - self.span) - 1
-        if cut < 64:  # trim in batches
+        """Move the window's first node on, in steps of at least 64 intervals, to within ``span`` of the newest one,
+        and forget the rows no rewind can reach (those before the first node of ``history`` seconds ago).
+
+        The window is a function of the nodes added since the stream started, as each state restores it, so a
+        stream rewound for late data judges the same windows as the same data in time order."""
+        p = self._first - self._dropped_before  # (the row of the window's first node)
+        cut = bisect.bisect_left(self._t, self._t[-1] - self.span, lo=p) - 1 - p
+        if cut >= 64:  # trim in batches
+            self._firsts.append((self._t[-1], self._first))
+            self._first += cut
+        t_old = self._t[-1] - self.history - 1.0
+        self._firsts = [(t, f) for t, f in self._firsts if t > t_old]
+        cut = (self._firsts[0][1] if self._firsts else self._first) - self._dropped_before
+        if cut < 64:
             return
         del self._t[:cut]
         for col in self._node.values():
@@ -146,15 +200,16 @@ class LiveHeadingMonitor:
         self._dropped_before += cut
 
     def _merged(self) -> Intervals:
-        """The kept intervals as one :class:`Intervals`: the array fields of the grid and of every sensor's
-        measurements from their columns, everything else as the newest interval has it, the camera's increments
-        from their rows (each over one interval)."""
+        """The intervals of the window (from its first node on) as one :class:`Intervals`: the array fields of the
+        grid and of every sensor's measurements from their columns, everything else as the newest interval has it,
+        the camera's increments from their rows (each over one interval)."""
         last = self._last
+        p = self._first - self._dropped_before
         columns = {**self._node, **self._interval}
         kw = {f.name: getattr(last, f.name) for f in dataclasses.fields(Intervals)
               if not isinstance(getattr(last, f.name), np.ndarray)}
-        kw.update({key[1]: col.array() for key, col in columns.items() if key[0] is None})
-        kw["t"] = np.array(self._t)
+        kw.update({key[1]: col.array()[p:] for key, col in columns.items() if key[0] is None})
+        kw["t"] = np.array(self._t[p:])
         kw["counts"] = {name: None for name in self._uses}
         kw["notes"], kw["episodes"] = [], []
         kw["sensors"] = sensors = {}
@@ -163,10 +218,12 @@ class LiveHeadingMonitor:
                 grid = copy.copy(grid)
                 for f in dataclasses.fields(grid):
                     if (name, f.name) in columns:
-                        setattr(grid, f.name, columns[(name, f.name)].array())
+                        setattr(grid, f.name, columns[(name, f.name)].array()[p:])
             sensors[name] = grid
         pos = self._vis["pos"].array().astype(int)
-        sensors["camera"] = CameraGrid(pos, pos + 1, self._vis["delta"].array(), self._vis["cov"].array(),
+        rows = pos >= p
+        sensors["camera"] = CameraGrid(pos[rows] - p, pos[rows] - p + 1, self._vis["delta"].array()[rows],
+                                       self._vis["cov"].array()[rows],
                                        frame_error=last.sensors["camera"].frame_error,
                                        noise=last.sensors["camera"].noise)
         return Intervals(**kw)
@@ -221,12 +278,51 @@ class LiveHeadingMonitor:
                     self._open[name][1] = max(self._open[name][1], ep.max_nis)
             elif name in self.dropped and not h.absolute:  # an absolute heading's offset is lost for good
                 self._close(name, t_now)
+        self._check_speed(iv, t_now)
+
+    def _check_speed(self, iv: Intervals, t_now: float) -> None:
+        """The speed check on the kept intervals (module docstring): the suspect's distance dropped from the next
+        intervals while the newest disagrees with the distance ratio of the stream so far.
+
+        The ratio is the median over the windows of ``monitor_window`` seen so far, leaving out those that overlap a
+        span in which the suspect was dropped (a lie is no calibration). The intervals of a span already closed are
+        no evidence either: a long window reaching back into it would otherwise find the lie again after its end.
+        """
+        pair = speed_pair(iv, self.config)
+        if pair is None or pair.source.drop is None:
+            return
+        T = iv.t
+        key = pair.key
+        sensor, component = pair.sensor, pair.source.component
+        closed = [(e.start, e.end) for e in self.episodes if (e.sensor, e.component) == (sensor, component)]
+        spans = closed + ([(self._open[key][0], np.inf)] if key in self._open else [])
+        for a, b in windows(T, self.config.monitor_window)[:-1]:  # the complete windows not counted yet
+            if T[a] >= self._ratios_until - 1e-9:
+                self._ratios_until = float(T[b])
+                if not any(T[b] > s0 and T[a] < s1 for s0, s1 in spans) and (r := pair.ratio(a, b)) is not None:
+                    self._ratios.append(r)
+        if len(self._ratios) < MIN_SPEED_WINDOWS or not pair.both[-1]:
+            return  # no ratio to hold the two to yet, or no new evidence
+        for s0, s1 in closed:
+            pair.both &= ~((T[1:] > s0) & (T[:-1] < s1))
+        rho = float(np.median(self._ratios))
+        bad, peak = speed_disagreement(pair, T, rho, self.config)
+        if bad[-1] and key not in self.dropped:
+            self.dropped.add(key)
+            self._open[key] = [t_now, float(peak[-1]), pair.reference.key,
+                               f" ({pair.source.key}/{pair.reference.key} distance ratio {rho:.3f} so far)"]
+            logger.info("live monitor: %s %s dropped at t=%.2f (inconsistent with %s)", sensor, component, t_now,
+                        pair.reference.key)
+        elif bad[-1]:
+            self._open[key][1] = max(self._open[key][1], float(peak[-1]))
+        elif key in self.dropped:
+            self._close(key, t_now)
 
     def _close(self, name: str, t_end: float) -> None:
-        start, nis, against = self._open.pop(name)
+        start, nis, against, *detail = self._open.pop(name)
         self.dropped.discard(name)
-        sensor, h = _components()[name]
-        self.episodes.append(Episode(sensor, h.component, start, t_end, nis, against))
+        sensor, component = _described(name)
+        self.episodes.append(Episode(sensor, component, start, t_end, nis, against, *detail))
 
     def apply(self, iv: Intervals, dropped=None) -> None:
         """Mask the dropped components in ``iv`` (in place; default: the current decisions)."""
@@ -234,19 +330,21 @@ class LiveHeadingMonitor:
         for key, (_, h) in _components().items():
             if key in dropped:
                 h.clear(iv)
+        for key, (_, d) in _speed_components().items():
+            if key in dropped:
+                d.drop(iv, np.ones(iv.n_steps, bool))
 
     def all_episodes(self, t_end: float) -> list[Episode]:
         """Closed spans and the open ones, ending at ``t_end``."""
-        components = _components()
-        open_eps = [Episode(components[n][0], components[n][1].component, s, t_end, nis, who)
-                    for n, (s, nis, who) in self._open.items()]
+        open_eps = [Episode(*_described(n), s, t_end, nis, who, *detail)
+                    for n, (s, nis, who, *detail) in self._open.items()]
         return sorted(self.episodes + open_eps, key=lambda e: e.start)
 
     # ------------------------------------------------------------------ rewind
     def state(self) -> MonitorState:
         return MonitorState(frozenset(self.dropped), tuple((k, tuple(v)) for k, v in self._open.items()),
                             len(self.episodes), self._next_check, self._dropped_before + max(len(self._t) - 1, 0),
-                           self._rest_bias)
+                            self._rest_bias, self._first, len(self._ratios), self._ratios_until)
 
     def restore(self, state: MonitorState) -> None:
         """Back to ``state`` (taken after an earlier interval); later intervals are forgotten."""
@@ -255,6 +353,10 @@ class LiveHeadingMonitor:
         del self.episodes[state.n_closed:]
         self._next_check = state.next_check
         self._rest_bias = state.rest_bias
+        self._first = max(state.first, self._dropped_before)  # (rows before it forgotten: a rewind beyond history)
+        self._firsts = [(t, f) for t, f in self._firsts if f < state.first]
+        del self._ratios[state.n_ratios:]
+        self._ratios_until = state.ratios_until
         self.truncate(state.n_intervals)
 
     def truncate(self, n_intervals: int) -> None:

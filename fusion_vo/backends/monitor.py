@@ -32,8 +32,7 @@ show in its heading changes.
 
 The check runs on a whole recording (:func:`fusion_vo.backends.batch.fuse`); streaming use
 (:class:`~fusion_vo.backends.streaming.StreamingFusion`) runs it causally over a sliding window
-(:mod:`fusion_vo.backends.live_monitor`), for the heading sources only; the speed check below runs on
-whole recordings.
+(:mod:`fusion_vo.backends.live_monitor`), the speed check below included.
 
 Speeds
 ------
@@ -70,6 +69,7 @@ from __future__ import annotations
 import functools
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -119,7 +119,7 @@ def _chi2_ppf(probability: float, dof: int) -> float:
     return float(chi2.ppf(probability, dof))
 
 
-def _windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
+def windows(T: np.ndarray, length: float) -> list[tuple[int, int]]:
     """Consecutive runs of node intervals ``[a, b)`` about ``length`` seconds long."""
     K = len(T) - 1
     out = []
@@ -168,7 +168,7 @@ def reference_bias(T: np.ndarray, diff: np.ndarray, ok: np.ndarray, chunk: float
     """
     dt = np.diff(T)
     slopes = []
-    for a, b in _windows(T, chunk):
+    for a, b in windows(T, chunk):
         sel = ok[a:b]
         if np.count_nonzero(sel) < max(3, 0.5 * (b - a)):
             continue
@@ -231,7 +231,7 @@ def check_heading_sources(iv, config: FusionConfig, gyro_bias: float | None = No
     against = {s: np.full(len(dt), "", dtype=object) for s in names}
     for scale in _SCALES:
         dropped: set[str] = set()  # hysteresis state at this scale
-        for a, b in _windows(T, cfg.monitor_window * scale):
+        for a, b in windows(T, cfg.monitor_window * scale):
             theta, var = _window_sums(sources, a, b, float(T[b] - T[a]), extra)
             liar, liar_nis, liar_others = _find_liar(theta, var, threshold, cfg.monitor_probability, suspects)
             for s in names:
@@ -410,49 +410,74 @@ def _window_nis(s: str, theta: dict, var: dict) -> float | None:
     return (theta[s] - weighted / w_sum) ** 2 / (var[s] + 1.0 / w_sum)
 
 
-def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
-    """Find the spans where a suspect distance source (the wheels') and the first other one (the camera's) disagree;
-    drop the suspect's distance there (:attr:`DistanceSource.drop <fusion_vo.sensors.registry.DistanceSource.drop>`,
-    in place) and return the episodes (see the module docstring)."""
-    cfg = config
-    if not cfg.monitor or iv.n_steps < 2:
-        return []
+@dataclass
+class SpeedPair:
+    """The two distance sources the speed check compares on a grid: the suspect (the wheels') and the first other
+    one (the camera's), with their rows per node interval (:attr:`DistanceSource.change
+    <fusion_vo.sensors.registry.DistanceSource.change>`): distance ``d`` [m] and variance ``v`` [m²], ``both`` where
+    the two measure it."""
+
+    sensor: str
+    source: Any
+    reference: Any
+    both: np.ndarray
+    d_s: np.ndarray
+    v_s: np.ndarray
+    d_r: np.ndarray
+    v_r: np.ndarray
+
+    @property
+    def key(self) -> str:
+        """The name of the suspect's component in the monitor's decisions (``"wheel speed"``)."""
+        return f"{self.source.key} {self.source.component}"
+
+    def sums(self, a: int, b: int):
+        """``(D_s, σ_s², D_r, σ_r²)`` over the intervals ``[a, b)``, or None unless both measure all of them."""
+        if not self.both[a:b].all():
+            return None
+        return self.d_s[a:b].sum(), self.v_s[a:b].sum(), self.d_r[a:b].sum(), self.v_r[a:b].sum()
+
+    def ratio(self, a: int, b: int) -> float | None:
+        """``D_s / D_r`` over ``[a, b)`` when the reference moved clearly there (ten of its sigmas), else None."""
+        w = self.sums(a, b)
+        if w is None or not abs(w[2]) > 10 * np.sqrt(w[3]) + 1e-6:
+            return None
+        return float(w[0] / w[2])
+
+
+def speed_pair(iv, config: FusionConfig) -> SpeedPair | None:
+    """The registered distance sources of the grid ``iv`` the speed check compares, or None without a suspect and
+    another source with data."""
     found = [(sensor.name, d, rows) for sensor, d in sorted(registry.distance_sources(), key=lambda p: p[1].rank)
-             if (rows := d.change(iv, cfg)) is not None]
+             if (rows := d.change(iv, config)) is not None]
     suspect = next((f for f in found if f[1].suspect), None)
     other = next((f for f in found if not f[1].suspect), None)
     if suspect is None or other is None:
-        return []
-    T, dt = iv.t, iv.dt
-    K = len(dt)
-    (sensor, source, (s_ok, d_w, v_w)), (_, reference, (o_ok, d_c, v_c)) = suspect, other
-    both = s_ok & o_ok
+        return None
+    (sensor, source, (s_ok, d_s, v_s)), (_, reference, (r_ok, d_r, v_r)) = suspect, other
+    return SpeedPair(sensor, source, reference, s_ok & r_ok, d_s, v_s, d_r, v_r)
 
-    def sums(a: int, b: int):
-        if not both[a:b].all():
-            return None
-        return d_w[a:b].sum(), v_w[a:b].sum(), d_c[a:b].sum(), v_c[a:b].sum()
 
-    # the ratio of the recording: median over the shortest windows in which the camera moved clearly
-    ratios = [w[0] / w[2] for w in (sums(a, b) for a, b in _windows(T, cfg.monitor_window))
-              if w is not None and abs(w[2]) > 10 * np.sqrt(w[3]) + 1e-6]
-    if not ratios:
-        return []
-    rho = float(np.median(ratios))
+def speed_disagreement(pair: SpeedPair, T: np.ndarray, rho: float, config: FusionConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Where the suspect's distance disagrees with ``rho`` times the reference's (module docstring): per node interval
+    of the grid ``T``, whether it does and the largest NIS of a window that found it."""
+    cfg = config
+    K = len(T) - 1
     threshold = _chi2_ppf(cfg.monitor_probability, 1)
     release = _chi2_ppf(0.9, 1)
+
     def window_nis(a: int, b: int) -> float | None:
-        w = sums(a, b)
+        w = pair.sums(a, b)
         if w is None:
             return None
         return (w[0] - rho * w[2]) ** 2 / (w[1] + rho**2 * w[3] + (cfg.monitor_scale_sigma * w[0]) ** 2)
 
-    base = _windows(T, cfg.monitor_window)
+    base = windows(T, cfg.monitor_window)
     bad = np.zeros(K, bool)
     peak = np.zeros(K)
     for scale in _SCALES:
         dropped = False
-        for a, b in _windows(T, cfg.monitor_window * scale):
+        for a, b in windows(T, cfg.monitor_window * scale):
             nis = window_nis(a, b)
             if nis is None:
                 continue
@@ -465,11 +490,33 @@ def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
                     peak[c:d] = np.maximum(peak[c:d], nis)
             else:
                 dropped = False
+    return bad, peak
+
+
+def check_speed_sources(iv, config: FusionConfig) -> list[Episode]:
+    """Find the spans where a suspect distance source (the wheels') and the first other one (the camera's) disagree;
+    drop the suspect's distance there (:attr:`DistanceSource.drop <fusion_vo.sensors.registry.DistanceSource.drop>`,
+    in place) and return the episodes (see the module docstring)."""
+    cfg = config
+    if not cfg.monitor or iv.n_steps < 2:
+        return []
+    pair = speed_pair(iv, cfg)
+    if pair is None:
+        return []
+    T = iv.t
+    # the ratio of the recording: median over the shortest windows in which the reference moved clearly
+    ratios = [r for a, b in windows(T, cfg.monitor_window) if (r := pair.ratio(a, b)) is not None]
+    if not ratios:
+        return []
+    rho = float(np.median(ratios))
+    bad, peak = speed_disagreement(pair, T, rho, cfg)
+    source, reference = pair.source, pair.reference
     episodes = []
     for a, b in _runs(bad):
-        sel = both[a:b]
-        span_rho = float(d_w[a:b][sel].sum() / d_c[a:b][sel].sum()) if abs(d_c[a:b][sel].sum()) > 0 else float("nan")
-        episodes.append(Episode(sensor, source.component, float(T[a]), float(T[b]), float(peak[a:b].max()),
+        sel = pair.both[a:b]
+        d_s, d_r = pair.d_s[a:b][sel].sum(), pair.d_r[a:b][sel].sum()
+        span_rho = float(d_s / d_r) if abs(d_r) > 0 else float("nan")
+        episodes.append(Episode(pair.sensor, source.component, float(T[a]), float(T[b]), float(peak[a:b].max()),
                                 reference.key, f" ({source.key}/{reference.key} distance ratio {span_rho:.3f} there, "
                                 f"{rho:.3f} over the recording; with no third speed source either may be the wrong one)"))
     source.drop(iv, bad)
@@ -487,4 +534,5 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 _BIAS_CHUNK = 5  # the gyro bias' chunks (reference_bias) in units of monitor_window
 _SCALES = (1, 5, 15)  # window lengths in units of monitor_window: fast lies and slow drifts
 
-__all__ = ["Episode", "check_heading_sources", "check_speed_sources"]
+__all__ = ["Episode", "SpeedPair", "check_heading_sources", "check_speed_sources", "speed_disagreement",
+           "speed_pair"]

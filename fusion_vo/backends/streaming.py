@@ -272,7 +272,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._step_counts: dict[str, SensorCount] = {}  # counts of the node being processed
         self._retired_counts: dict[str, SensorCount] = {}  # counts of nodes older than the history
         self.rewinds = 0
-        self._monitor = LiveHeadingMonitor(self.config)
+        self._monitor = LiveHeadingMonitor(self.config, self.history)
         self._dirty: set[int] = set()  # iSAM2: nodes whose intervals late data changed
         # every sensor with a live intake (registry.Live), the built-in ones always (odometry twists also arrive
         # for a declared "wheel"), the others when declared: its registration and the name it is counted under
@@ -392,7 +392,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             # the heading monitor starts again: its windows hold the gyro's and the AHRS's readings about the
             # old axes (the spans it dropped so far stay in the notes, closed here)
             episodes = self._monitor.all_episodes(self._t_nodes[-1] if self._t_nodes else float(t))
-            self._monitor = LiveHeadingMonitor(self.config)
+            self._monitor = LiveHeadingMonitor(self.config, self.history)
             self._monitor.episodes = episodes
             if self._twist_delay is not None:
                 self._twist_delay.replace_gyro(*self._mounting.body_rates(T))

@@ -84,7 +84,7 @@ class HeadingSource:
 @dataclass(frozen=True)
 class DistanceSource:
     """The distance a sensor measures over each node interval, which the speed check compares with another's
-    (:func:`fusion_vo.backends.monitor.check_speed_sources`).
+    (:func:`fusion_vo.backends.monitor.check_speed_sources`; live: :mod:`fusion_vo.backends.live_monitor`).
 
     Attributes
     ----------
@@ -98,7 +98,8 @@ class DistanceSource:
         ``change(iv, config) -> (ok, distance, var) or None``: per node interval, whether it measures the distance
         travelled, the distance [m] and its variance [m²]; None when the grid ``iv`` has none of its data.
     drop : callable or None
-        ``drop(iv, bad)``: take its distance out of ``iv`` (in place) where ``bad`` (per interval).
+        ``drop(iv, bad)``: take its distance out of ``iv`` (in place) where ``bad`` (per interval); the live monitor
+        decides only for a suspect that has one.
     suspect : bool
         The one dropped when the two disagree (the wheels': slip and tyre changes are the common cause, and the
         other source keeps the translation); the check compares a suspect with the first other source.

@@ -1,41 +1,15 @@
 """The consistency monitor on speeds: the wheels' distance against the camera's, per window."""
 
-import dataclasses
-
 import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, fuse
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
-from backend_synth import position_errors, streams_of
+from backend_synth import camera_scaled, position_errors, streams_of, wheel_scaled
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 LIE = (20.0, 35.0)  # [s] span in which one stream's speed is scaled by 1.3
-
-
-def _wheel_scaled(wheel, t0: float, t1: float, k: float):
-    """Encoder counts whose increments in ``(t0, t1]`` are ``k`` times the recorded ones (both wheels)."""
-    dl = np.diff(wheel.left.astype(np.int64))
-    dr = np.diff(wheel.right.astype(np.int64))
-    inside = (wheel.t[1:] > t0) & (wheel.t[1:] <= t1)
-    dl = np.where(inside, np.round(dl * k), dl).astype(np.int64)
-    dr = np.where(inside, np.round(dr * k), dr).astype(np.int64)
-    left = np.concatenate([[wheel.left[0]], wheel.left[0] + np.cumsum(dl)])
-    right = np.concatenate([[wheel.right[0]], wheel.right[0] + np.cumsum(dr)])
-    return dataclasses.replace(wheel, left=left, right=right)
-
-
-def _camera_scaled(visual, t0: float, t1: float, k: float):
-    """Visual increments whose translation is ``k`` times too long in ``(t0, t1]``."""
-    out = []
-    for inc in visual:
-        if t0 < inc.t1 <= t1:
-            delta = np.array(inc.delta, dtype=float)
-            delta[:2] *= k
-            inc = dataclasses.replace(inc, delta=delta)
-        out.append(inc)
-    return out
 
 
 def _speed_episodes(result):
@@ -48,7 +22,7 @@ def drive():
 
 
 def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
-    streams = streams_of(drive).replace(wheel=_wheel_scaled(drive.wheel, *LIE, 1.3))
+    streams = streams_of(drive).replace(wheel=wheel_scaled(drive.wheel, *LIE, 1.3))
     result = fuse(streams, "all", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent
@@ -75,7 +49,7 @@ def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
 
 
 def test_camera_scale_gone_wrong_is_reported_with_its_span(drive):
-    streams = streams_of(drive).replace(visual=_camera_scaled(drive.visual, *LIE, 1.3))
+    streams = streams_of(drive).replace(visual=camera_scaled(drive.visual, *LIE, 1.3))
     result = fuse(streams, "ekf", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent
@@ -129,7 +103,7 @@ def test_the_wheels_are_checked_against_a_registered_distance_source(drive):
     odometer = Sensor(name="odometer", intervals=Step(100, on_grid),
                       distance=(DistanceSource("odometer", "distance", rank=50, change=change),))
     with registered(odometer):
-        streams = SensorStreams(wheel=_wheel_scaled(drive.wheel, *LIE, 1.3), imu=drive.imu, odometer=drive.truth)
+        streams = SensorStreams(wheel=wheel_scaled(drive.wheel, *LIE, 1.3), imu=drive.imu, odometer=drive.truth)
         result = fuse(streams.select(["wheel", "imu"]), "ekf", FusionConfig())
         assert _speed_episodes(result) == []  # without the odometer: the wheels' distance has nothing to meet
         result = fuse(streams.select(["wheel", "imu", "odometer"]), "ekf", FusionConfig())
