@@ -17,7 +17,12 @@ absolute deviation (in logarithm) over ``√n``. At least ``MIN_WINDOWS`` window
 are needed, else the check says it cannot decide and both are fused as stated.
 
 Decision. The ratio contradicts the priors when ``|ln ρ| > scale_sigmas · √(σ_v² + σ_r² + σ_ρ²)`` and
-``|ρ - 1| > scale_min_ratio``. Which one is wrong is then asked of a third sensor, the accelerometer: over
+``|ρ - 1| > scale_min_ratio``. A calibration error is in every window, turning or not; when a quarter of the
+windows in which both move, turns included (at least ``MIN_WINDOWS``), are nearer 1 than ``ρ`` and their own
+median does not contradict the priors, the ratio changed during the recording instead (a wheel that slipped for a
+while, a camera that lost its scale): both are used as stated, the finding says so, and the speed check of
+:mod:`fusion_vo.backends.monitor` drops the wheels' speed where the two disagree (the wheels are its suspect: slip
+is the common cause of a passing disagreement, as a wrong focal length or height is of a lasting one). Otherwise which one is wrong is asked of a third sensor, the accelerometer: over
 windows of half a second, each one's change of forward speed against the accelerometer's velocity change
 along the body's x axis (``R_BS`` of the IMU after the mounting check; an intercept per second takes its bias
 and any gravity from a tilt), ``Δv = s ∫a_x dt + c T``. The sensor whose slope ``s`` is near 1 has the right
@@ -79,14 +84,32 @@ def _wheel_distance(streams):
     return None, "", ""
 
 
-def ratio(steps: Steps, wheel_d: np.ndarray, ok: np.ndarray) -> tuple[float, float, int, float]:
-    """``(ρ, σ_ρ, windows, straight distance of the wheels [m])`` (module docstring; NaN without enough)."""
+@dataclasses.dataclass
+class ScaleRatio:
+    """The camera's distance over the wheels' on straight stretches (module docstring): ``rho`` the median over the
+    windows, ``sigma`` its standard error in logarithm (NaN without enough windows), ``distance`` the wheels' [m];
+    per window its ratio and its span ``(t0, t1)`` [s]."""
+
+    rho: float
+    sigma: float
+    distance: float
+    ratios: np.ndarray
+    spans: np.ndarray
+
+    @property
+    def windows(self) -> int:
+        return len(self.ratios)
+
+
+def ratio(steps: Steps, wheel_d: np.ndarray, ok: np.ndarray, straight_rate: float = STRAIGHT_RATE) -> ScaleRatio:
+    """The distance ratio of the camera's ``steps`` to the wheels' travel over them (module docstring), over the
+    steps turning slower than ``straight_rate`` [rad/s]."""
     cam_d = np.hypot(steps.delta[:, 0], steps.delta[:, 1])
     dt = steps.dt
-    use = (ok & (np.abs(steps.delta[:, 2]) < STRAIGHT_RATE * dt) & (cam_d > MOVING * dt)
+    use = (ok & (np.abs(steps.delta[:, 2]) < straight_rate * dt) & (cam_d > MOVING * dt)
            & (np.abs(wheel_d) > MOVING * dt))
     idx = np.flatnonzero(use)
-    ratios, distance = [], 0.0
+    ratios, spans, distance = [], [], 0.0
     start, c_sum, w_sum, time = None, 0.0, 0.0, 0.0
     for i in idx:
         if start is not None and i != start[1] + 1:  # a gap: the window ends
@@ -97,14 +120,41 @@ def ratio(steps: Steps, wheel_d: np.ndarray, ok: np.ndarray) -> tuple[float, flo
         time += dt[i]
         if time >= WINDOW:
             ratios.append(c_sum / w_sum)
+            spans.append((float(steps.t0[start[0]]), float(steps.t1[i])))
             distance += w_sum
             start, c_sum, w_sum, time = None, 0.0, 0.0, 0.0
+    found = np.array(ratios, dtype=np.float64), np.array(spans, dtype=np.float64).reshape(-1, 2)
     if len(ratios) < MIN_WINDOWS or distance < MIN_DISTANCE:
-        return math.nan, math.nan, len(ratios), distance
+        return ScaleRatio(math.nan, math.nan, distance, *found)
     logs = np.log(ratios)
     centre = float(np.median(logs))
     sigma = 1.4826 * float(np.median(np.abs(logs - centre))) / math.sqrt(len(logs))
-    return math.exp(centre), sigma, len(ratios), distance
+    return ScaleRatio(math.exp(centre), sigma, distance, *found)
+
+
+def contradicts(rho: float, sigma: float, s_v: float, s_w: float, cc: ConsistencyConfig) -> bool:
+    """Whether the ratio ``rho`` (standard error ``sigma`` in logarithm) contradicts the priors ``s_v``, ``s_w``."""
+    return (abs(math.log(rho)) > cc.scale_sigmas * math.sqrt(s_v**2 + s_w**2 + sigma**2)
+            and abs(rho - 1.0) > cc.scale_min_ratio)
+
+
+def agreeing(rho: float, moving: ScaleRatio, s_v: float, s_w: float, cc: ConsistencyConfig) -> np.ndarray | None:
+    """The windows of ``moving`` (all the windows in which both move, turns included) in which the two agree with
+    their priors while the straight windows' median ``rho`` contradicts them: those nearer 1 than ``rho`` (in
+    logarithm), when they are at least :data:`MIN_WINDOWS` and a quarter of all and their own median ratio does not
+    contradict the priors; else None. Such a ratio changed during the recording (a wheel that slipped, a camera that
+    lost its scale for a while): no calibration error, and the speed check's to find. A scale error is in every
+    window, turning or not."""
+    if not moving.windows:
+        return None
+    near = np.abs(np.log(moving.ratios)) < 0.5 * abs(math.log(rho))
+    n = int(np.count_nonzero(near))
+    if n < MIN_WINDOWS or n < 0.25 * moving.windows:
+        return None
+    logs = np.log(moving.ratios[near])
+    centre = float(np.median(logs))
+    sigma = 1.4826 * float(np.median(np.abs(logs - centre))) / math.sqrt(n)
+    return None if contradicts(math.exp(centre), sigma, s_v, s_w, cc) else near
 
 
 def arbiter(streams, steps: Steps, wheel_cum, max_gap: float) -> tuple[float, float, float, float] | None:
@@ -157,7 +207,8 @@ def check_scale(streams, config, max_gap: float):
     if steps is None or wheel_cum is None or len(wheel_cum.t) < 2:
         return None, streams, config
     wd, ok = wheel_cum.between(steps.t0, steps.t1, max_gap)
-    rho, sigma_rho, windows, distance = ratio(steps, wd[:, 0], ok)
+    found = ratio(steps, wd[:, 0], ok)
+    rho, sigma_rho, windows, distance = found.rho, found.sigma, found.windows, found.distance
     figures = {"ratio": None if math.isnan(rho) else round(rho, 4), "windows": windows,
                "straight_distance_m": round(distance, 3)}
     if math.isnan(rho):
@@ -170,9 +221,20 @@ def check_scale(streams, config, max_gap: float):
     s_v, s_w = priors.visual_scale_sigma, priors.wheel_scale_sigma
     log_rho = abs(math.log(rho))
     figures.update(ratio_sigma=round(sigma_rho, 4), camera_prior=s_v, wheel_prior=s_w)
-    if (log_rho <= cc.scale_sigmas * math.sqrt(s_v**2 + s_w**2 + sigma_rho**2)
-            or abs(rho - 1.0) <= cc.scale_min_ratio):
+    if not contradicts(rho, sigma_rho, s_v, s_w, cc):
         return Finding("scale", "camera", KEPT, "", figures), streams, config
+    moving = ratio(steps, wd[:, 0], ok, straight_rate=np.inf)
+    near = agreeing(rho, moving, s_v, s_w, cc)
+    if near is not None:
+        off = moving.spans[~near]
+        figures.update(moving_windows=moving.windows, agreeing_windows=int(np.count_nonzero(near)))
+        return (Finding("scale", "camera", UNDECIDED,
+                        f"cam0/sensor.yaml and {wheel_file}: the camera's distances are {rho:.3f} times the {wheel_word} "
+                        f"over {distance:.2f} m of straight driving, but agree with the stated scales in "
+                        f"{len(moving.ratios) - len(off)} of the {moving.windows} windows in which both move (the others "
+                        f"from t={off[0, 0]:.2f} to {off[-1, 1]:.2f}): their ratio changed during the recording, which no "
+                        "calibration explains; both are used as stated, and the speed check drops the "
+                        f"{wheel_word} speed where the two disagree", figures), streams, config)
     slopes = arbiter(streams, steps, wheel_cum, max_gap)
     wrong, said = "camera", "the data cannot tell which (no accelerometer to ask), so the camera's scale is given up"
     if slopes is not None:

@@ -105,32 +105,30 @@ def test_the_spans_found_so_far_are_readable_while_streaming():
     assert final[0]["start"] == midway[0]["start"] and final[0]["end"] > midway[0]["end"]
 
 
-SPEED_LIE = (20.0, 35.0)  # [s] the wheels' counts 1.3 times too large (tests/backends/test_monitor_speed.py)
+SPEED_LIE = (12.0, 22.0)  # [s] the wheels' counts 1.3 times too large
+
+
+def _speed_drive(seed: int):
+    """A generated 30 s drive with a camera, wheels and a gyro: its streams clean and with the wheels lying."""
+    s = synthetic_streams(SyntheticOptions(duration=30.0), seed=seed)
+    clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
+    return s, clean, clean.replace(wheel=wheel_scaled(s.wheel, *SPEED_LIE, 1.3))
 
 
 @pytest.fixture(scope="module")
 def speed_drive():
-    """The drive, and the streaming runs of its streams (clean or with the wheels lying), made once each."""
-    s = synthetic_streams(SyntheticOptions(duration=60.0), seed=0)
-    clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
-    cases = {"clean": clean, "lying": clean.replace(wheel=wheel_scaled(s.wheel, *SPEED_LIE, 1.3))}
-    runs = {}
-
-    def run(case, backend, monitor=True):
-        if (case, backend, monitor) not in runs:
-            runs[case, backend, monitor] = _stream(cases[case], backend, FusionConfig(monitor=monitor))
-        return runs[case, backend, monitor]
-
-    return s, cases, run
+    return _speed_drive(seed=2)
 
 
 @pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
 def test_a_wheel_speed_scaled_wrong_is_dropped_while_streaming(speed_drive, backend, name):
     """The live speed check: the wheels' distance against the camera's, held to their ratio over the stream so far.
-    Without it the streaming track believed the wheels (54 cm RMS against 11 cm on the clean drive); the whole-
-    recording check gives 13 cm (EKF) and 15 cm (iSAM2) on the same drive."""
-    s, _, run = speed_drive
-    watched, blind, honest = run("lying", backend), run("lying", backend, False), run("clean", backend)
+    Without it the streamed EKF believed the wheels: 27.8 cm RMS from the truth, against 7.8 cm on the clean drive
+    and 3.9 cm with the check."""
+    s, clean, lying = speed_drive
+    watched = _stream(lying, backend, FusionConfig())
+    blind = _stream(lying, backend, FusionConfig(monitor=False))
+    honest = _stream(clean, backend, FusionConfig())
     speed = [e for e in watched.inconsistent if e["component"] == "speed"]
     assert len(speed) == 1 and speed[0]["sensor"] == "wheel" and speed[0]["against"] == "camera", watched.inconsistent
     # caught within two checks of the lie's start, and trusted again within two windows of its end
@@ -141,21 +139,25 @@ def test_a_wheel_speed_scaled_wrong_is_dropped_while_streaming(speed_drive, back
     rms = position_errors(watched.trajectories[name], s.truth)[1]
     rms_blind = position_errors(blind.trajectories[name], s.truth)[1]
     rms_clean = position_errors(honest.trajectories[name], s.truth)[1]
-    assert rms < 1.5 * rms_clean + 0.02 and rms < 0.3 * rms_blind, (rms, rms_clean, rms_blind)
+    assert rms < rms_clean and rms < 0.3 * rms_blind, (rms, rms_clean, rms_blind)
 
 
-def test_the_live_monitor_gives_the_same_track_when_the_camera_comes_late(speed_drive):
+def test_the_live_monitor_gives_the_same_track_when_the_camera_comes_late():
     """Camera increments 0.5 s late (beyond the 0.3 s reorder window, within the 2 s history): the EKF rewinds, and
     the monitor's state with it (its decisions, the speed ratios it holds, the window it judges), so the track and
     the spans are those of the in-order stream. The window used to be what was left after the last trim of its
-    buffer, which a rewind did not undo: the wheels' yaw-rate span ended 1 s early and the track moved 0.3 mm."""
-    _, cases, run = speed_drive
-    in_order = run("lying", "ekf")
-    msgs = time_ordered_messages(cases["lying"])
-    fusion = streaming_for(cases["lying"], "ekf", FusionConfig())
-    fusion.feed(sorted(msgs, key=lambda m: m[0] + (0.5 if m[1] == "visual" else 0.0)))
-    late = fusion.finish()
-    assert fusion.rewinds > 1000
+    buffer, which a rewind did not undo: here (1 s windows, so that the 15 s window is trimmed within the drive) two
+    of the wheels' yaw-rate spans ended 0.5 s early and the track moved 0.5 mm."""
+    _, _, lying = _speed_drive(seed=0)
+    config = FusionConfig(monitor_window=1.0)
+    msgs = time_ordered_messages(lying)
+    runs = []
+    for order in (msgs, sorted(msgs, key=lambda m: m[0] + (0.5 if m[1] == "visual" else 0.0))):
+        fusion = streaming_for(lying, "ekf", config)
+        fusion.feed(order)
+        runs.append((fusion.rewinds, fusion.finish()))
+    (_, in_order), (rewinds, late) = runs
+    assert rewinds > 500
     assert {e["component"] for e in in_order.inconsistent} == {"speed", "yaw rate"}, in_order.inconsistent
     assert late.inconsistent == in_order.inconsistent
     np.testing.assert_allclose(late.trajectories["ekf"].xyyaw, in_order.trajectories["ekf"].xyyaw, atol=1e-9, rtol=0)
