@@ -19,6 +19,8 @@ from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
 from fusion_vo.simulation import simulate
 
+from husky_gps_stream_job import figures as husky_gps_figures, husky_parts, withheld_rms
+
 TINY = {"width": 80, "height": 48, "fu": 60.0, "fv": 60.0, "cu": 39.5, "cv": 23.5, "supersample": 1, "camera_rate": 2.0}
 NOISE = 0.05
 HEADING = 40.0
@@ -309,44 +311,23 @@ def test_bad_gps_option_is_a_one_line_error():
 
 # --------------------------------------------------------------------------- Husky (real recording)
 #: the import the Husky tests read, made ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_COMMANDS = {"python:husky_gps_stream": ["{repo}/tests/backends/husky_gps_stream_job.py", "{fusion-vo:husky_log}"]}
 BACKGROUND_JOBS = {"test_husky_gps_of_the_first_minute_then_withheld": ["fusion-vo:husky_log"],
-                   "test_husky_streamed_with_the_gps_of_the_first_minute": ["fusion-vo:husky_log"]}
+                   "test_husky_streamed_with_the_gps_of_the_first_minute": ["fusion-vo:husky_log",
+                                                                            "python:husky_gps_stream"]}
 
 
 @pytest.fixture(scope="module")
 def husky(husky_log):
     """test1.bag, first 120 s: odometry and IMU, the fixes of the first 60 s and those of the next 60 s
     (``husky_log``: the bag imported with its launch file's IMU transform, tests/conftest.py)."""
-    rec = Recording(husky_log)
-    gps = rec.gps()
-    t0 = float(gps.t[0])
-    base = streams_from_recording(rec, None, ["odom", "imu"])
-
-    def until(data, end):
-        keep = data.t <= end
-        return dataclasses.replace(data, **{f.name: getattr(data, f.name)[keep] for f in dataclasses.fields(data)
-                                            if isinstance(getattr(data, f.name), np.ndarray)
-                                            and len(getattr(data, f.name)) == len(data.t)})
-
-    part = base.replace(odom=until(base.odom, t0 + 120.0), imu=until(base.imu, t0 + 120.0))
-    first = until(gps, t0 + 60.0)
-    keep = (gps.t > t0 + 60.0) & (gps.t <= t0 + 120.0)
-    second = dataclasses.replace(gps, t=gps.t[keep], enu=gps.enu[keep], covariance=gps.covariance[keep],
-                                 geodetic=gps.geodetic[keep], status=gps.status[keep])
+    part, first, second = husky_parts(husky_log)
     free = fuse(part, "ekf")
     placed = {name: gps_model.align_to_fixes(free.trajectories[name].t, free.trajectories[name].xyyaw, first)
               for name in ("wheel", "ekf")}
-    baseline = {name: _withheld_rms(PoseData(free.trajectories[name].t, fit.apply(free.trajectories[name].xyyaw)),
+    baseline = {name: withheld_rms(PoseData(free.trajectories[name].t, fit.apply(free.trajectories[name].xyyaw)),
                                     second) for name, fit in placed.items()}
     return part, first, second, baseline
-
-
-def _withheld_rms(track, second):
-    t = second.t
-    pose = np.column_stack([np.interp(t, track.t, track.xyyaw[:, i]) for i in range(2)]
-                           + [np.interp(t, track.t, np.unwrap(track.xyyaw[:, 2]))])
-    err = gps_model.predict(pose, second.lever_arm) - second.enu[:, :2]
-    return float(np.sqrt(np.mean(np.sum(err ** 2, axis=1))))
 
 
 def test_husky_gps_of_the_first_minute_then_withheld(husky):
@@ -356,25 +337,22 @@ def test_husky_gps_of_the_first_minute_then_withheld(husky):
     # the receiver claims 0.9 m; its fixes scatter about 2 m around any smooth track: that is the floor
     fused = fuse(part.replace(gps=first), "ekf", {"gps": {"min_sigma": 2.0}})
     assert any(n.startswith("gps: world frame is ENU") for n in fused.notes)
-    rms = _withheld_rms(fused.trajectories["ekf"], second)
+    rms = withheld_rms(fused.trajectories["ekf"], second)
     assert rms < 0.5 * baseline["wheel"], (rms, baseline)
     assert rms < 1.1 * baseline["ekf"], (rms, baseline)
 
 
-def test_husky_streamed_with_the_gps_of_the_first_minute(husky):
+def test_husky_streamed_with_the_gps_of_the_first_minute(husky_log, ahead_json):
     """The same streamed to both backends, with the same 2 m floor: the world frame switches to ENU once, every fix
     is counted alike, and iSAM2 follows the EKF (measured: antenna RMS to the fused fixes 2.06 / 2.07 m, 22.0 /
     22.4 m on the withheld minute: the heading of ENU found causally from the first fixes, where a batch run fits
-    the whole minute)."""
-    part, first, second, _ = husky
-    runs = {}
-    for backend, name in (("ekf", "ekf"), ("gtsam", "gtsam_online")):
-        result = _streamed(part.replace(gps=first), backend, config={"gps": {"min_sigma": 2.0}}).finish()
-        assert sum("re-expressed in ENU" in n for n in result.notes) == 1
-        track = result.trajectories[name]
-        runs[backend] = result.counts[name]["gps"], _withheld_rms(track, first), _withheld_rms(track, second)
-    (ce, fe, we), (cg, fg, wg) = runs["ekf"], runs["gtsam"]
-    assert cg.as_dict() == ce.as_dict() and cg.used + cg.gated + cg.missing + cg.late == len(first.t)
+    the whole minute). The streams run in the session's second process (husky_gps_stream_job.py)."""
+    got = ahead_json("python:husky_gps_stream", lambda: husky_gps_figures(husky_log))
+    ekf, gtsam = got["ekf"], got["gtsam"]
+    assert ekf["switches"] == 1 and gtsam["switches"] == 1
+    c = gtsam["counts"]
+    assert c == ekf["counts"] and c["used"] + c["gated"] + c["missing"] + c["late"] == got["n_fixes"]
+    fe, fg, we, wg = ekf["fused_rms"], gtsam["fused_rms"], ekf["withheld_rms"], gtsam["withheld_rms"]
     assert fg < 2.5 and abs(fg - fe) < 0.1 * fe
     assert abs(wg - we) < 0.1 * we
 

@@ -2,25 +2,17 @@
 
 import pytest
 
-from fusion_vo import backends
-from fusion_vo.evaluation.metrics import align_se2, ape_rmse, associate, planar_trajectory
-from fusion_vo.odometry import OdometryConfig, run_visual_odometry
-from fusion_vo.recording import Recording
-from fusion_vo.simulation.generate import simulate
+from square_scores_job import scores
+
+#: the drive rendered and fused in the session's second process (tests/background.py)
+BACKGROUND_COMMANDS = {"python:square_101": ["{repo}/tests/backends/square_scores_job.py", "{out}"]}
+BACKGROUND_JOBS = {"*": ["python:square_101"]}
 
 
 @pytest.fixture(scope="module")
-def square_101(tmp_path_factory):
+def square_101(ahead_json, tmp_path_factory):
     """The standard ``square`` drive (camera, wheels, gyro) with seed 101, fused by every backend: ATE [mm]."""
-    rec = Recording(simulate(tmp_path_factory.mktemp("square") / "rec", profile="square", seed=101))
-    result = backends.run_backends(rec, run_visual_odometry(rec, OdometryConfig()), backend="all")
-    gt = rec.groundtruth()
-    reference = planar_trajectory(gt.t, gt.xyyaw[:, 0], gt.xyyaw[:, 1], gt.xyyaw[:, 2])
-    ate = {}
-    for name, track in result.trajectories.items():
-        ref, est = associate(reference, planar_trajectory(track.t, *track.xyyaw.T))
-        ate[name] = ape_rmse(ref, align_se2(ref, est)) * 1e3
-    return ate
+    return ahead_json("python:square_101", lambda: scores(tmp_path_factory.mktemp("square")))
 
 
 def test_isam2_scores_as_the_ekf_on_a_generated_square(square_101):
