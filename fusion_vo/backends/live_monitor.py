@@ -72,7 +72,8 @@ MIN_SPEED_WINDOWS = 5
 
 @dataclasses.dataclass(frozen=True)
 class MonitorState:
-    """What a rewind restores: the dropped components, the open spans and the intervals kept."""
+    """What a rewind restores: the dropped components, the open spans, the intervals kept, where the checks' window
+    starts and the speed ratios counted."""
 
     dropped: frozenset
     open_spans: tuple
