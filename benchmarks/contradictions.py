@@ -25,15 +25,21 @@ Three sections, each beside its baselines measured in the same run:
    turned by 90°, an IMU on its side stated upright, an IMU whose gyro and accelerometer disagree
    (:mod:`fusion_vo.simulation.faults`). Figures:
    the check's decision and the EKF's ATE [mm] with and without the checks, beside the unbroken drive's.
+4. **A stream that lies for a while.** Generated drives with a camera, wheels and a gyro
+   (:func:`~fusion_vo.sensors.synthetic.synthetic_streams`: 30 s seed 2, 45 s seed 0, 60 s seed 0), the wheels' counts
+   or the camera's translations 1.3 times too long over a span (:func:`~fusion_vo.sensors.synthetic.wheels_too_long`,
+   :func:`~fusion_vo.sensors.synthetic.camera_too_long`). Figures: RMS position error [cm] from the truth (same start,
+   no alignment) of the batch EKF and GTSAM with the checks (the default) and with the checks and the monitor off,
+   and of the streamed EKF and iSAM2 with the live monitor and without, beside the clean drive's; the scale check's
+   decision and the speed spans the batch check drops.
 
 Usage::
 
-    python benchmarks/contradictions.py [--sections 1,2,3] [--full] [--keep DIR]
+    python benchmarks/contradictions.py [--sections 1,2,3,4] [--full] [--keep DIR]
 """
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import shutil
 import sys
@@ -54,6 +60,7 @@ from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
+from fusion_vo.sensors.synthetic import SyntheticOptions, camera_too_long, synthetic_streams, wheels_too_long
 from fusion_vo.simulation.faults import columns, flip_left_encoder, shift_clock, turn_imu, twist_from_truth, write_csv
 
 BAG = HUSKY_BAG
@@ -190,9 +197,42 @@ def broken_drives(tmp: Path) -> None:
               f"   {decided}")
 
 
+# --------------------------------------------------------------------------- 4. passing lies
+def rms_cm(track: PoseData, truth: PoseData) -> float:
+    """RMS position error [cm] of ``track`` from ``truth`` (same start, no alignment)."""
+    gt = np.stack([np.interp(track.t, truth.t, truth.xyyaw[:, i]) for i in range(2)], axis=1)
+    return 100.0 * float(np.sqrt(np.mean(np.sum((track.xyyaw[:, :2] - gt) ** 2, axis=1))))
+
+
+def passing_lies() -> None:
+    from fusion_vo.backends import SensorStreams
+
+    print("\n4. A stream 1.3 times too long over a span of a generated drive: RMS position error [cm]; batch EKF / "
+          "GTSAM, streamed EKF / iSAM2")
+    print(f"   {'drive, span':22s} {'lie':7s} {'batch, checks':>14s} {'batch, off':>11s} {'live monitor':>13s} "
+          f"{'live, off':>10s}   scale check; speed spans dropped (batch)")
+    off = {"consistency": {"check": False}, "monitor": False}
+    for duration, seed, span in ((30.0, 2, (12.0, 22.0)), (45.0, 0, (20.0, 35.0)), (60.0, 0, (20.0, 35.0))):
+        s = synthetic_streams(SyntheticOptions(duration=duration), seed=seed)
+        clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
+        cases = {"none": clean, "wheels": clean.replace(wheel=wheels_too_long(s.wheel, *span, 1.3)),
+                 "camera": clean.replace(visual=camera_too_long(s.visual, *span, 1.3))}
+        for lie, streams in cases.items():
+            on, blind = fuse(streams, "all", FusionConfig()), fuse(streams, "all", FusionConfig.from_dict(off))
+            live = [streamed(streams, b, FusionConfig()) for b in ("ekf", "gtsam")]
+            live_off = [streamed(streams, b, FusionConfig(monitor=False)) for b in ("ekf", "gtsam")]
+            pair = lambda a, b: f"{rms_cm(a, s.truth):5.1f} /{rms_cm(b, s.truth):5.1f}"
+            scale = next((f["decision"] for f in on.consistency if f["check"] == "scale"), "-")
+            spans = ", ".join(f"{e['start']:.1f}-{e['end']:.1f} s" for e in on.inconsistent if e["component"] == "speed")
+            label = f"{duration:.0f} s seed {seed}, {span[0]:.0f}-{span[1]:.0f} s"
+            print(f"   {label:22s} {lie:7s} {pair(on.trajectories['ekf'], on.trajectories['gtsam']):>14s} "
+                  f"{pair(blind.trajectories['ekf'], blind.trajectories['gtsam']):>11s} {pair(*live):>13s} "
+                  f"{pair(*live_off):>10s}   {scale}; {spans or 'none'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = common.parser(__doc__)
-    parser.add_argument("--sections", default="1,2,3", help="which sections to run (default 1,2,3)")
+    parser.add_argument("--sections", default="1,2,3,4", help="which sections to run (default 1,2,3,4)")
     parser.add_argument("--full", action="store_true", help="section 2 also on hard and random60 (slow)")
     parser.add_argument("--keep", help="write the recordings to this folder and keep them")
     args = parser.parse_args(argv)
@@ -206,6 +246,8 @@ def main(argv: list[str] | None = None) -> int:
             wrong_focal(tmp, args.full)
         if "3" in sections:
             broken_drives(tmp)
+        if "4" in sections:
+            passing_lies()
     return 0
 
 

@@ -15,12 +15,13 @@ The robot drives a smooth path with twist ``v(t) = v₀ (1 + 0.3 sin(0.3 t))``,
 * optional AHRS orientations (true heading plus noise of ``ahrs_sigma``, an unknown heading offset).
 
 Faults can be injected: frames whose increment fails (status ``"lost"``), wrong visual matches, a gyro
-spike and an encoder jump.
+spike and an encoder jump; and, on the generated streams, a span in which the wheels' counts or the camera's
+translations are too long (:func:`wheels_too_long`, :func:`camera_too_long`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -170,3 +171,29 @@ def synthetic_streams(options: SyntheticOptions | None = None, seed: int = 0) ->
     truth_t = np.arange(0.0, o.duration, 0.01)
     truth = PoseData(truth_t, pose_at(truth_t))
     return SyntheticStreams(visual, wheel, imu, rng_data, truth, o.camera_height)
+
+
+def wheels_too_long(wheel: WheelData, t0: float, t1: float, k: float) -> WheelData:
+    """Encoder counts whose increments in ``(t0, t1]`` are ``k`` times the recorded ones (both wheels: a wheel that
+    slips, or a radius that changed for a while)."""
+    dl = np.diff(wheel.left.astype(np.int64))
+    dr = np.diff(wheel.right.astype(np.int64))
+    inside = (wheel.t[1:] > t0) & (wheel.t[1:] <= t1)
+    dl = np.where(inside, np.round(dl * k), dl).astype(np.int64)
+    dr = np.where(inside, np.round(dr * k), dr).astype(np.int64)
+    left = np.concatenate([[wheel.left[0]], wheel.left[0] + np.cumsum(dl)])
+    right = np.concatenate([[wheel.right[0]], wheel.right[0] + np.cumsum(dr)])
+    return replace(wheel, left=left, right=right)
+
+
+def camera_too_long(visual: list, t0: float, t1: float, k: float) -> list:
+    """Visual increments whose translation is ``k`` times too long when they end in ``(t0, t1]`` (a camera that lost
+    its scale for a while)."""
+    out = []
+    for inc in visual:
+        if t0 < inc.t1 <= t1:
+            delta = np.array(inc.delta, dtype=float)
+            delta[:2] *= k
+            inc = replace(inc, delta=delta)
+        out.append(inc)
+    return out

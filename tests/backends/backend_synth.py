@@ -39,27 +39,3 @@ def stated_height_sigma(s, visual_scale: float) -> float:
     scale is wrong on purpose states it, as ``fusion-vo simulate`` does, or the default prior (the height known
     to 0.2 %) keeps the wrong scale."""
     return max(abs(s.camera_height - s.camera_height / visual_scale), 1e-4)
-
-
-def wheel_scaled(wheel, t0: float, t1: float, k: float):
-    """Encoder counts whose increments in ``(t0, t1]`` are ``k`` times the recorded ones (both wheels)."""
-    dl = np.diff(wheel.left.astype(np.int64))
-    dr = np.diff(wheel.right.astype(np.int64))
-    inside = (wheel.t[1:] > t0) & (wheel.t[1:] <= t1)
-    dl = np.where(inside, np.round(dl * k), dl).astype(np.int64)
-    dr = np.where(inside, np.round(dr * k), dr).astype(np.int64)
-    left = np.concatenate([[wheel.left[0]], wheel.left[0] + np.cumsum(dl)])
-    right = np.concatenate([[wheel.right[0]], wheel.right[0] + np.cumsum(dr)])
-    return dataclasses.replace(wheel, left=left, right=right)
-
-
-def camera_scaled(visual, t0: float, t1: float, k: float):
-    """Visual increments whose translation is ``k`` times too long in ``(t0, t1]``."""
-    out = []
-    for inc in visual:
-        if t0 < inc.t1 <= t1:
-            delta = np.array(inc.delta, dtype=float)
-            delta[:2] *= k
-            inc = dataclasses.replace(inc, delta=delta)
-        out.append(inc)
-    return out

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, fuse
-from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+from fusion_vo.sensors.synthetic import SyntheticOptions, camera_too_long, synthetic_streams, wheels_too_long
 
-from backend_synth import camera_scaled, position_errors, streams_of, wheel_scaled
+from backend_synth import position_errors, streams_of
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
 LIE = (20.0, 35.0)  # [s] span in which one stream's speed is scaled by 1.3
@@ -22,7 +22,7 @@ def drive():
 
 
 def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
-    streams = streams_of(drive).replace(wheel=wheel_scaled(drive.wheel, *LIE, 1.3))
+    streams = streams_of(drive).replace(wheel=wheels_too_long(drive.wheel, *LIE, 1.3))
     result = fuse(streams, "all", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent
@@ -49,7 +49,7 @@ def test_wheel_speed_scaled_wrong_is_dropped_for_its_span(drive):
 
 
 def test_camera_scale_gone_wrong_is_reported_with_its_span(drive):
-    streams = streams_of(drive).replace(visual=camera_scaled(drive.visual, *LIE, 1.3))
+    streams = streams_of(drive).replace(visual=camera_too_long(drive.visual, *LIE, 1.3))
     result = fuse(streams, "ekf", FusionConfig())
     eps = _speed_episodes(result)
     assert len(eps) == 1, result.inconsistent
@@ -103,7 +103,7 @@ def test_the_wheels_are_checked_against_a_registered_distance_source(drive):
     odometer = Sensor(name="odometer", intervals=Step(100, on_grid),
                       distance=(DistanceSource("odometer", "distance", rank=50, change=change),))
     with registered(odometer):
-        streams = SensorStreams(wheel=wheel_scaled(drive.wheel, *LIE, 1.3), imu=drive.imu, odometer=drive.truth)
+        streams = SensorStreams(wheel=wheels_too_long(drive.wheel, *LIE, 1.3), imu=drive.imu, odometer=drive.truth)
         result = fuse(streams.select(["wheel", "imu"]), "ekf", FusionConfig())
         assert _speed_episodes(result) == []  # without the odometer: the wheels' distance has nothing to meet
         result = fuse(streams.select(["wheel", "imu", "odometer"]), "ekf", FusionConfig())

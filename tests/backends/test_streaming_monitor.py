@@ -7,9 +7,9 @@ import pytest
 
 from fusion_vo.backends import FusionConfig, SensorStreams
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams, wheels_too_long
 
-from backend_synth import position_errors, wheel_scaled
+from backend_synth import position_errors
 from husky_like import husky_like
 
 
@@ -112,7 +112,7 @@ def _speed_drive(seed: int):
     """A generated 30 s drive with a camera, wheels and a gyro: its streams clean and with the wheels lying."""
     s = synthetic_streams(SyntheticOptions(duration=30.0), seed=seed)
     clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
-    return s, clean, clean.replace(wheel=wheel_scaled(s.wheel, *SPEED_LIE, 1.3))
+    return s, clean, clean.replace(wheel=wheels_too_long(s.wheel, *SPEED_LIE, 1.3))
 
 
 @pytest.fixture(scope="module")
