@@ -17,8 +17,9 @@ the ``pose`` argument of its model, ``z = h(x) + n`` (the antenna's position: ``
 
 :class:`EkfFixes` does this for a batch EKF run, :class:`GraphFixes` for the factor graph (gated against its node's
 predicted pose and, with iSAM2, the online marginal covariance of the previous node), the functions
-:func:`ekf_update`, :func:`ekf_reacquire` and :class:`Reacquire` for the streaming EKF, and :func:`graph_gate` for
-the streaming iSAM2 (:class:`~fusion_vo.backends.online_graph.OnlineGraph`).
+:func:`ekf_update`, :func:`ekf_reacquire`, :func:`outage_note` and :class:`Reacquire` for the streaming EKF, and
+:func:`graph_gate` for the streaming iSAM2 (:class:`~fusion_vo.backends.online_graph.OnlineGraph`). The outage
+notes are the EKF's (batch and streaming).
 """
 
 from __future__ import annotations
@@ -88,6 +89,15 @@ class Reacquire:
         return True
 
 
+def outage_note(ekf, model: GpsModel, z, t_last: float, t: float, t0: float, sensor: str = "gps") -> str:
+    """The note of the first reading ``z`` at ``t`` after none since ``t_last`` (``t0``: the first node), before it is
+    applied: how far the EKF's estimate drifted meanwhile (its antenna from the reading) beside its position sigma."""
+    drift = float(np.linalg.norm(np.asarray(z, dtype=np.float64)[:2] - model.predict(ekf.x[:3])))
+    sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
+    return (f"ekf: {sensor} outage from {t_last - t0:.2f} to {t - t0:.2f} s in: drift {drift:.3f} m at its end "
+            f"(position sigma {sigma:.3f} m)")
+
+
 def note(backend: str, r: Readings, model: GpsModel, t0: float, reacquired: list | None = None) -> str:
     """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the readings skipped on reading."""
     text = f"{backend}: {r.sensor} {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
@@ -135,10 +145,7 @@ class EkfFixes:
         t, z, cov = float(self.t[k]), self.r.z[j], self.r.cov[j]
         if k > 0 and self.last is not None and t - self.last >= OUTAGE_NOTE_S:
             # the first reading after an outage measures how far the estimate drifted without them
-            drift = float(np.linalg.norm(z - self.model.predict(ekf.x[:3])))
-            sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
-            self.notes.append(f"ekf: {self.r.sensor} outage from {self.last - self.t[0]:.2f} to {t - self.t[0]:.2f} s "
-                              f"in: drift {drift:.3f} m at its end (position sigma {sigma:.3f} m)")
+            self.notes.append(outage_note(ekf, self.model, z, self.last, t, float(self.t[0]), self.r.sensor))
         self.last = t
         self.reacquire.apply(ekf, self.model, z, cov, t, self.r.sensor)
 

@@ -15,7 +15,7 @@ from fusion_vo.measurements import (
 )
 from fusion_vo.backends.ekf import YAW
 from fusion_vo.backends.world import prior_from_alignment
-from fusion_vo.backends.fixes import Reacquire, ekf_reacquire, ekf_update
+from fusion_vo.backends.fixes import OUTAGE_NOTE_S, Reacquire, ekf_reacquire, ekf_update, outage_note
 from fusion_vo.sensors.gps import align_to_fixes
 from fusion_vo.sensors.gps import predict as gps_predict
 
@@ -219,6 +219,7 @@ class HistoryMixin:
     def _apply_gps(self, fix: GpsFix) -> None:
         """EKF: a fix at the node just updated (module docstring of :mod:`~fusion_vo.backends.streaming`)."""
         ekf, model = self._ekf, self._gps_model
+        last, self._gps_last = self._gps_last, fix.t
         if self._frame == "start":
             aligned = self._align_world(fix, ekf.x[:3])
             if aligned is None:
@@ -232,6 +233,8 @@ class HistoryMixin:
             ekf.kf.P[:2, :2] += np.eye(2) * prior_sigma[0] ** 2
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
             self._to_enu(fit, fix.t)
+        elif last is not None and fix.t - last >= OUTAGE_NOTE_S:  # the drift without fixes, as a batch run says it
+            self._outages[fix.t] = outage_note(ekf, model, fix.enu, last, fix.t, self._t_nodes[0])
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
             accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
@@ -249,7 +252,7 @@ class HistoryMixin:
             return None
         re = self._gps_reacquire
         return (self._frame, len(self._gps_seen), None if re is None else (re.last_ok, len(re.times)),
-                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)))
+                (self._gps_model.n_used, self._gps_model.n_rejected, len(self._gps_model.rejected_t)), self._gps_last)
 
     def _rewind_gps(self, i: int, state: tuple | None) -> None:
         """Back to the GPS bookkeeping after node ``i``; undo the switch to ENU if it came after ``i``."""
@@ -258,7 +261,9 @@ class HistoryMixin:
                 bisect.insort(self._gps, fix, key=lambda f: f.t)
         if state is None:
             return
-        frame, n_seen, reacquire, model = state
+        frame, n_seen, reacquire, model, self._gps_last = state
+        for t in [t for t in self._outages if t > self._t_nodes[i] + 1e-3]:  # (re-applied with the fixes after i)
+            del self._outages[t]
         if self._frame == "enu" and frame == "start":
             _, poses, covs, n_notes = self._start_frame
             self._poses[:i + 1] = [p.copy() for p in poses[:i + 1]]

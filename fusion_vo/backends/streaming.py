@@ -45,7 +45,8 @@ fix later than the reorder window is re-timed onto the nearest processed node (t
 from the node to the fix folded into the antenna's lever arm, its covariance grown by that motion's) and that
 node rebuilt with it; one older than the history, or with no wheel data around it, is counted late.
 Each fix is counted once, at its node: used, gated (the gate, or a bad value on arrival), missing
-(kept for the alignment) or late.
+(kept for the alignment) or late. The EKF notes each outage of the fixes as a batch run does (the drift the first
+fix after it measures, :func:`~fusion_vo.backends.fixes.outage_note`).
 
 A pose for now
 --------------
@@ -111,7 +112,6 @@ streams that bring fewer calls than units.
 from __future__ import annotations
 
 import bisect
-import dataclasses
 import logging
 import threading
 from collections.abc import Iterable
@@ -320,6 +320,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._switch: tuple | None = None  # iSAM2: (node, heading of ENU in the start frame) of the switch to ENU
         self._frame = "start"
         self._gps_reacquire = None
+        self._gps_last: float | None = None  # EKF: the time of the last fix applied or kept (outage notes)
+        self._outages: dict[float, str] = {}  # EKF: fix time -> the note of the outage it ends
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
         self._pending: Started | None = None  # a node started but not yet applied (_begin_step)
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
@@ -588,6 +590,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             result.notes.append(f"{name}: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
                                 "world frame: " + ("ENU at the datum" if self._frame == "enu" else
                                                    "the start frame (the fixes never fixed the heading of ENU)"))
+            result.notes.extend(self._outages[t] for t in sorted(self._outages))
         if self._t_nodes:
             episodes = self._monitor.all_episodes(self._t_nodes[-1])
             result.inconsistent = [ep.as_dict() for ep in episodes]

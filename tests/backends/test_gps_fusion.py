@@ -142,6 +142,26 @@ def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
     assert any(f"ekf: gps {counts.used} fixes used, 5 rejected" in n for n in result.notes)
 
 
+def _outage(notes) -> tuple[float, float, float]:
+    """``(start, end, drift)`` of the one outage note."""
+    (note,) = [n for n in notes if n.startswith("ekf: gps outage")]
+    start, end = note.split("from ")[1].split(" s in")[0].split(" to ")
+    return float(start), float(end), float(note.split("drift ")[1].split(" m")[0])
+
+
+def test_streaming_ekf_reports_the_outage_as_a_batch_run_does(rec, fused, truth):
+    """The first fix after the 5 s outage measures how far the streamed estimate drifted without fixes, as in a batch
+    run; the streamed track's own error there bounds it."""
+    result = _stream_with_gps(rec).finish()
+    start, end, drift = _outage(result.notes)
+    b_start, b_end, b_drift = _outage(fused.notes)
+    assert abs(start - b_start) < 0.01 and abs(end - b_end) < 0.01 and OUTAGE[0] - 0.5 < start < end < OUTAGE[1] + 0.5
+    t, e = errors(result.trajectories["ekf"], truth)
+    before_the_fix = e[(t >= end - 1.0) & (t < end)].max()
+    assert 0.5 * before_the_fix < drift < before_the_fix + 3 * NOISE, (drift, before_the_fix)
+    assert abs(drift - b_drift) < 0.3 * b_drift, (drift, b_drift)
+
+
 @pytest.mark.parametrize("backend", ["ekf", "gtsam"])
 def test_replay_fuses_the_gps_it_is_given(rec, truth, tmp_path, backend):
     """``fusion-vo replay --sensors wheel,imu,gps`` streams the fixes: the live track ends in ENU at the truth,
@@ -178,6 +198,7 @@ def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec):
     np.testing.assert_allclose(tb.t, ta.t, atol=1e-12)
     np.testing.assert_allclose(tb.xyyaw, ta.xyyaw, atol=1e-9, rtol=0)
     assert [n for n in b.notes if "ENU" in n] == [n for n in a.notes if "ENU" in n]
+    assert [n for n in b.notes if "outage" in n] == [n for n in a.notes if "outage" in n] != []
 
 
 # --------------------------------------------------------------------------- streaming iSAM2
