@@ -89,13 +89,16 @@ class Reacquire:
         return True
 
 
-def outage_note(ekf, model: GpsModel, z, t_last: float, t: float, t0: float, sensor: str = "gps") -> str:
-    """The note of the first reading ``z`` at ``t`` after none since ``t_last`` (``t0``: the first node), before it is
-    applied: how far the EKF's estimate drifted meanwhile (its antenna from the reading) beside its position sigma."""
+def outage_note(ekf, model: GpsModel, z, covariance, t_last: float, t: float, t0: float, sensor: str = "gps") -> str:
+    """The note of the first reading ``z`` (``covariance``) at ``t`` after none since ``t_last`` (``t0``: the first
+    node), before it is applied: how far the EKF's estimate drifted meanwhile (its antenna from the reading), beside
+    the position sigma the filter states and the reading's own (floored as the gate floors it; one reading's
+    distance holds its own error too)."""
     drift = float(np.linalg.norm(np.asarray(z, dtype=np.float64)[:2] - model.predict(ekf.x[:3])))
     sigma = float(np.sqrt(np.trace(ekf.P[:2, :2])))
+    own = float(np.sqrt(np.trace(model.covariance(covariance))))
     return (f"ekf: {sensor} outage from {t_last - t0:.2f} to {t - t0:.2f} s in: drift {drift:.3f} m at its end "
-            f"(position sigma {sigma:.3f} m)")
+            f"(position sigma {sigma:.3f} m; the fix's own {own:.3f} m)")
 
 
 def note(backend: str, r: Readings, model: GpsModel, t0: float, reacquired: list | None = None) -> str:
@@ -145,7 +148,7 @@ class EkfFixes:
         t, z, cov = float(self.t[k]), self.r.z[j], self.r.cov[j]
         if k > 0 and self.last is not None and t - self.last >= OUTAGE_NOTE_S:
             # the first reading after an outage measures how far the estimate drifted without them
-            self.notes.append(outage_note(ekf, self.model, z, self.last, t, float(self.t[0]), self.r.sensor))
+            self.notes.append(outage_note(ekf, self.model, z, cov, self.last, t, float(self.t[0]), self.r.sensor))
         self.last = t
         self.reacquire.apply(ekf, self.model, z, cov, t, self.r.sensor)
 

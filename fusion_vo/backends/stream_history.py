@@ -234,7 +234,7 @@ class HistoryMixin:
             ekf.kf.P[YAW, YAW] += prior_sigma[2] ** 2
             self._to_enu(fit, fix.t)
         elif last is not None and fix.t - last >= OUTAGE_NOTE_S:  # the drift without fixes, as a batch run says it
-            self._outages[fix.t] = outage_note(ekf, model, fix.enu, last, fix.t, self._t_nodes[0])
+            self._outages[fix.t] = outage_note(ekf, model, fix.enu, fix.covariance, last, fix.t, self._t_nodes[0])
         accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
         if not accepted and self._gps_reacquire.due(fix.t, False):
             accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
