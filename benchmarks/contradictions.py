@@ -53,7 +53,7 @@ import common
 from common import HUSKY_BAG, HUSKY_IMU_TF
 
 from fusion_vo import baseline
-from fusion_vo.backends import FusionConfig, fuse
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
@@ -205,8 +205,6 @@ def rms_cm(track: PoseData, truth: PoseData) -> float:
 
 
 def passing_lies() -> None:
-    from fusion_vo.backends import SensorStreams
-
     print("\n4. A stream 1.3 times too long over a span of a generated drive: RMS position error [cm]; batch EKF / "
           "GTSAM, streamed EKF / iSAM2")
     print(f"   {'drive, span':22s} {'lie':7s} {'batch, checks':>14s} {'batch, off':>11s} {'live monitor':>13s} "
