@@ -27,7 +27,7 @@ has unusable messages or frames are dropped.
 ``fusion_vo: estimate`` holds ``backend``, ``frame`` (``start`` or ``enu``), ``published``,
 ``input_age_s`` (the node's clock minus the newest measurement: how stale the inputs are),
 ``predicted_s`` (how far the last published pose was predicted beyond the processed state), ``rewinds``,
-and ``monitor_drops`` (the heading-consistency monitor's spans, each as ``sensor component from t0 to t1``);
+and ``monitor_drops`` (the consistency monitor's spans, heading sources and speeds, each as ``sensor component from t0 to t1``);
 WARN when the inputs are older than ``horizon`` (stalled) or the monitor drops a sensor.
 """
 
