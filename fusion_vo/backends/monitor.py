@@ -447,9 +447,10 @@ class SpeedPair:
 
 def speed_pair(iv, config: FusionConfig) -> SpeedPair | None:
     """The registered distance sources of the grid ``iv`` the speed check compares, or None without a suspect and
-    another source with data."""
+    another source with data. A source whose rows do not cover the grid's intervals is left out (a sensor that keeps
+    its measurements outside a registered container, which the live monitor's window cannot assemble)."""
     found = [(sensor.name, d, rows) for sensor, d in sorted(registry.distance_sources(), key=lambda p: p[1].rank)
-             if (rows := d.change(iv, config)) is not None]
+             if (rows := d.change(iv, config)) is not None and len(rows[0]) == iv.n_steps]
     suspect = next((f for f in found if f[1].suspect), None)
     other = next((f for f in found if not f[1].suspect), None)
     if suspect is None or other is None:
