@@ -22,7 +22,8 @@ windows in which both move, turns included (at least ``MIN_WINDOWS``), are neare
 median does not contradict the priors, the ratio changed during the recording instead (a wheel that slipped for a
 while, a camera that lost its scale): both are used as stated, the finding says so, and the speed check of
 :mod:`fusion_vo.backends.monitor` drops the wheels' speed where the two disagree (the wheels are its suspect: slip
-is the common cause of a passing disagreement, as a wrong focal length or height is of a lasting one). Otherwise which one is wrong is asked of a third sensor, the accelerometer: over
+is the common cause of a passing disagreement, as a wrong focal length or height is of a lasting one). Otherwise
+which one is wrong is asked of a third sensor, the accelerometer: over
 windows of half a second, each one's change of forward speed against the accelerometer's velocity change
 along the body's x axis (``R_BS`` of the IMU after the mounting check; an intercept per second takes its bias
 and any gravity from a tilt), ``Δv = s ∫a_x dt + c T``. The sensor whose slope ``s`` is near 1 has the right
@@ -228,13 +229,15 @@ def check_scale(streams, config, max_gap: float):
     if near is not None:
         off = moving.spans[~near]
         figures.update(moving_windows=moving.windows, agreeing_windows=int(np.count_nonzero(near)))
+        where = f" (the others from t={off[0, 0]:.2f} to {off[-1, 1]:.2f})" if len(off) else ""
+        then = (f"the speed check drops the {wheel_word} speed where the two disagree" if config.monitor else
+                "fusion.monitor is off, so nothing is dropped where they disagree")
         return (Finding("scale", "camera", UNDECIDED,
                         f"cam0/sensor.yaml and {wheel_file}: the camera's distances are {rho:.3f} times the {wheel_word} "
                         f"over {distance:.2f} m of straight driving, but agree with the stated scales in "
-                        f"{len(moving.ratios) - len(off)} of the {moving.windows} windows in which both move (the others "
-                        f"from t={off[0, 0]:.2f} to {off[-1, 1]:.2f}): their ratio changed during the recording, which no "
-                        "calibration explains; both are used as stated, and the speed check drops the "
-                        f"{wheel_word} speed where the two disagree", figures), streams, config)
+                        f"{int(np.count_nonzero(near))} of the {moving.windows} windows in which both move{where}: their "
+                        f"ratio changed during the recording, which no calibration explains; both are used as stated, "
+                        f"and {then}", figures), streams, config)
     slopes = arbiter(streams, steps, wheel_cum, max_gap)
     wrong, said = "camera", "the data cannot tell which (no accelerometer to ask), so the camera's scale is given up"
     if slopes is not None:

@@ -108,3 +108,29 @@ def test_wheels_that_slip_for_a_while_are_no_calibration_error():
         rms = position_errors(result.trajectories[name], s.truth)[1]
         rms_clean = position_errors(honest.trajectories[name], s.truth)[1]
         assert rms < 1.5 * rms_clean + 0.02, (name, rms, rms_clean)
+
+
+def test_only_a_ratio_that_changed_is_taken_for_a_passing_disagreement():
+    """``agreeing``: the windows that agree with the stated scales while the straight median contradicts them. A
+    focal length off by 2 is in every window; a wheel that slipped for a while leaves most windows at 1; two
+    windows at 1 are too few to tell."""
+    from fusion_vo.consistency.config import ConsistencyConfig
+    from fusion_vo.consistency.scale import ScaleRatio, agreeing
+
+    cc = ConsistencyConfig()
+
+    def windows(ratios):
+        ratios = np.asarray(ratios, dtype=float)
+        spans = np.column_stack([np.arange(len(ratios)), np.arange(len(ratios)) + 1.0])
+        return ScaleRatio(float(np.median(ratios)), 0.01, 10.0, ratios, spans)
+
+    rng = np.random.default_rng(0)
+    calibration = windows(2.0 * (1 + 0.02 * rng.standard_normal(20)))
+    assert agreeing(2.0, calibration, 0.002, 0.02, cc) is None
+    passing = windows(np.r_[1 + 0.01 * rng.standard_normal(12), 0.77 * (1 + 0.01 * rng.standard_normal(8))])
+    near = agreeing(0.77, passing, 0.002, 0.02, cc)
+    assert near is not None and near[:12].all() and not near[12:].any()
+    assert agreeing(0.77, windows(np.r_[1.0, 1.0, np.full(10, 0.77)]), 0.002, 0.02, cc) is None
+    # the windows nearer 1 must themselves agree with the priors: at 1.2 they are a second scale error, not a change
+    assert agreeing(0.6, windows(np.r_[np.full(8, 1.2) * (1 + 0.01 * rng.standard_normal(8)), np.full(8, 0.6)]),
+                    0.002, 0.02, cc) is None
