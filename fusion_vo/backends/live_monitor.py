@@ -328,6 +328,8 @@ class LiveHeadingMonitor:
     def apply(self, iv: Intervals, dropped=None) -> None:
         """Mask the dropped components in ``iv`` (in place; default: the current decisions)."""
         dropped = self.dropped if dropped is None else dropped
+        if not dropped:  # (the common case: no registry lookups on every node)
+            return
         for key, (_, h) in _components().items():
             if key in dropped:
                 h.clear(iv)

@@ -97,7 +97,7 @@ def find_pauses(streams: SensorStreams, max_gap: float) -> list[Pause]:
     return pauses
 
 
-def _slice(data, lo: float, hi: float):
+def samples_between(data, lo: float, hi: float):
     """``data`` (a stream dataclass) with only the samples in ``[lo, hi]``; None when none are."""
     if data is None:
         return None
@@ -127,7 +127,7 @@ def split(streams: SensorStreams, pauses: list[Pause]) -> list[SensorStreams]:
             visual = [inc for inc in streams.visual if lo <= inc.t0 and inc.t1 <= hi]
         piece = streams.replace(camera=visual)
         for name, data in streams.sampled():
-            piece[name] = _slice(data, lo, hi)
+            piece[name] = samples_between(data, lo, hi)
         pieces.append(piece)
     return pieces
 

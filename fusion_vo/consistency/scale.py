@@ -127,10 +127,15 @@ def ratio(steps: Steps, wheel_d: np.ndarray, ok: np.ndarray, straight_rate: floa
     found = np.array(ratios, dtype=np.float64), np.array(spans, dtype=np.float64).reshape(-1, 2)
     if len(ratios) < MIN_WINDOWS or distance < MIN_DISTANCE:
         return ScaleRatio(math.nan, math.nan, distance, *found)
+    return ScaleRatio(*median_ratio(found[0]), distance, *found)
+
+
+def median_ratio(ratios: np.ndarray) -> tuple[float, float]:
+    """The median of ``ratios`` and its standard error in logarithm: 1.4826 times their median absolute deviation in
+    logarithm over ``√n`` (module docstring)."""
     logs = np.log(ratios)
     centre = float(np.median(logs))
-    sigma = 1.4826 * float(np.median(np.abs(logs - centre))) / math.sqrt(len(logs))
-    return ScaleRatio(math.exp(centre), sigma, distance, *found)
+    return math.exp(centre), 1.4826 * float(np.median(np.abs(logs - centre))) / math.sqrt(len(logs))
 
 
 def contradicts(rho: float, sigma: float, s_v: float, s_w: float, cc: ConsistencyConfig) -> bool:
@@ -152,10 +157,7 @@ def agreeing(rho: float, moving: ScaleRatio, s_v: float, s_w: float, cc: Consist
     n = int(np.count_nonzero(near))
     if n < MIN_WINDOWS or n < 0.25 * moving.windows:
         return None
-    logs = np.log(moving.ratios[near])
-    centre = float(np.median(logs))
-    sigma = 1.4826 * float(np.median(np.abs(logs - centre))) / math.sqrt(n)
-    return None if contradicts(math.exp(centre), sigma, s_v, s_w, cc) else near
+    return None if contradicts(*median_ratio(moving.ratios[near]), s_v, s_w, cc) else near
 
 
 def arbiter(streams, steps: Steps, wheel_cum, max_gap: float) -> tuple[float, float, float, float] | None:

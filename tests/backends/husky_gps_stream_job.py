@@ -8,24 +8,16 @@ The session's second process runs it ahead (tests/background.py); a test run wit
 :func:`figures` itself.
 """
 
-import dataclasses
 import json
 import sys
 
 import numpy as np
 
 from fusion_vo.backends import streams_from_recording
+from fusion_vo.backends.pauses import samples_between
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
-
-
-def until(data, end: float):
-    """``data`` (a dataclass of per-sample arrays) up to time ``end``."""
-    keep = data.t <= end
-    return dataclasses.replace(data, **{f.name: getattr(data, f.name)[keep] for f in dataclasses.fields(data)
-                                        if isinstance(getattr(data, f.name), np.ndarray)
-                                        and len(getattr(data, f.name)) == len(data.t)})
 
 
 def husky_parts(path):
@@ -34,11 +26,10 @@ def husky_parts(path):
     gps = rec.gps()
     t0 = float(gps.t[0])
     base = streams_from_recording(rec, None, ["odom", "imu"])
-    part = base.replace(odom=until(base.odom, t0 + 120.0), imu=until(base.imu, t0 + 120.0))
-    first = until(gps, t0 + 60.0)
-    keep = (gps.t > t0 + 60.0) & (gps.t <= t0 + 120.0)
-    second = dataclasses.replace(gps, t=gps.t[keep], enu=gps.enu[keep], covariance=gps.covariance[keep],
-                                 geodetic=gps.geodetic[keep], status=gps.status[keep])
+    part = base.replace(odom=samples_between(base.odom, -np.inf, t0 + 120.0),
+                        imu=samples_between(base.imu, -np.inf, t0 + 120.0))
+    first = samples_between(gps, -np.inf, t0 + 60.0)
+    second = samples_between(gps, np.nextafter(t0 + 60.0, np.inf), t0 + 120.0)  # (after the first minute's last)
     return part, first, second
 
 

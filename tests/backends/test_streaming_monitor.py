@@ -9,7 +9,7 @@ from fusion_vo.backends import FusionConfig, SensorStreams
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams, wheels_too_long
 
-from backend_synth import position_errors
+from backend_synth import position_errors, streams_of
 from husky_like import husky_like
 
 
@@ -111,7 +111,7 @@ SPEED_LIE = (12.0, 22.0)  # [s] the wheels' counts 1.3 times too large
 def _speed_drive(seed: int):
     """A generated 30 s drive with a camera, wheels and a gyro: its streams clean and with the wheels lying."""
     s = synthetic_streams(SyntheticOptions(duration=30.0), seed=seed)
-    clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
+    clean = streams_of(s)
     return s, clean, clean.replace(wheel=wheels_too_long(s.wheel, *SPEED_LIE, 1.3))
 
 

@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 from track_errors import ate, read_tum
 
-from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.backends import FusionConfig, fuse
 from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.cli.main import main
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams, wheels_too_long
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "backends"))
-from backend_synth import position_errors  # noqa: E402
+from backend_synth import position_errors, streams_of  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -93,7 +93,7 @@ def test_wheels_that_slip_for_a_while_are_no_calibration_error():
     camera's translation out of the whole drive: the EKF was 85.5 cm RMS from the truth and GTSAM 82.1 cm, against
     9.5 and 4.2 cm on the clean drive."""
     s = synthetic_streams(SyntheticOptions(duration=45.0), seed=0)
-    clean = SensorStreams(visual=s.visual, camera_height=s.camera_height, wheel=s.wheel, imu=s.imu)
+    clean = streams_of(s)
     lying = clean.replace(wheel=wheels_too_long(s.wheel, 20.0, 35.0, 1.3))
     result, honest = fuse(lying, "all", FusionConfig()), fuse(clean, "all", FusionConfig())
     (found,) = [f for f in result.consistency if f["check"] == "scale"]
