@@ -5,21 +5,25 @@ every backend (EKF, RTS, GTSAM batch, iSAM2, streaming) with no code of their ow
 from __future__ import annotations
 
 import json
+import pickle
 
 import numpy as np
 import pytest
 
-from fusion_vo.backends import SensorStreams, fuse
-from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.backends import SensorStreams
 from fusion_vo.errors import InputError
-from fusion_vo.measurements import ImuData, TwistData
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+from instances_job import CHAIN_MASKS, CORRUPT, IMU1_BIAS, make, twist
 
 TRACKS = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
-#: a gyro mounted upside down: its z axis is the body's -z (a half turn about x)
-UPSIDE_DOWN = np.diag([1.0, -1.0, -1.0, 1.0])
-IMU1_BIAS = 0.02  # [rad/s] in the body frame
+#: the fusion runs the tests read (tests/sensors/instances_job.py), made ahead in the background (tests/background.py)
+BACKGROUND_COMMANDS = {"python:instance_runs": ["{repo}/tests/sensors/instances_job.py", "{out}"]}
+BACKGROUND_JOBS = {name: ["python:instance_runs"] for name in (
+    "test_odom1_alone_is_as_accurate_as_the_same_twist_in_odom0", "test_odom1_streams_like_odom0",
+    "test_a_masked_component_has_no_influence", "test_a_masked_odometry_chains_between_keyframes",
+    "test_odom1_noise_is_its_own_section", "test_an_upside_down_imu1_helps_like_imu0_and_its_bias_is_estimated",
+    "test_imu1_streams")}
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -31,32 +35,11 @@ def _instances_made_here_are_removed():
             registry.unregister(name)
 
 
-def _truth_rates(truth, t):
-    """Forward speed and yaw rate of the ground truth at times ``t``."""
-    dt = np.gradient(truth.t)
-    v = np.hypot(np.gradient(truth.xyyaw[:, 0]), np.gradient(truth.xyyaw[:, 1])) / dt
-    w = np.gradient(np.unwrap(truth.xyyaw[:, 2])) / dt
-    return np.interp(t, truth.t, v), np.interp(t, truth.t, w)
-
-
-def _twist(truth, seed: int, hz: float = 50.0) -> TwistData:
-    """Another base's odometry twist: the truth's speed and yaw rate with 1 cm/s and 0.01 rad/s of noise."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(truth.t[0], truth.t[-1], 1.0 / hz)
-    v, w = _truth_rates(truth, t)
-    return TwistData(t, v + rng.normal(0.0, 0.01, len(t)), np.zeros(len(t)), w + rng.normal(0.0, 0.01, len(t)))
-
-
-def _upside_down_gyro(truth, seed: int, T_BS=UPSIDE_DOWN) -> ImuData:
-    """A second gyro at 100 Hz mounted upside down, with a body-frame bias of ``IMU1_BIAS`` and 2e-3 rad/s/√Hz of
-    noise: its own z reads minus the body's yaw rate."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(truth.t[0], truth.t[-1], 0.01)
-    _, w = _truth_rates(truth, t)
-    body = w + IMU1_BIAS + rng.normal(0.0, 2e-3 * np.sqrt(100.0), len(t))
-    gyro = np.column_stack([rng.normal(0, 1e-3, len(t)), rng.normal(0, 1e-3, len(t)), -body])
-    accel = np.tile([0.0, 0.0, -9.81], (len(t), 1))
-    return ImuData(t, gyro, accel, None, np.asarray(T_BS, dtype=np.float64), 100.0, {})
+@pytest.fixture(scope="module")
+def runs(ahead, tmp_path_factory) -> dict:
+    """Every fusion run of these tests by name (:func:`instances_job.runs`)."""
+    out = ahead("python:instance_runs", lambda: make(tmp_path_factory.mktemp("instances") / "runs"))
+    return pickle.loads((out / "runs.pkl").read_bytes())
 
 
 def _position_rms(track, truth) -> float:
@@ -69,115 +52,74 @@ def _heading_rms(track, truth) -> float:
     return float(np.sqrt(np.mean(np.angle(np.exp(1j * (track.xyyaw[:, 2] - yaw))) ** 2)))
 
 
-def _stream(streams: SensorStreams, backend: str, config=None):
-    """Every sample through the streaming fusion as ``fusion-vo replay`` feeds it; its result."""
-    fusion = streaming_for(streams, backend, config)
-    fusion.feed(time_ordered_messages(streams))
-    return fusion.finish()
-
-
-@pytest.fixture(scope="module")
-def drive():
-    """40 s of wheels and gyro (its bias 0.01 rad/s), and the same drive's twist as another odometer would give."""
-    s = synthetic_streams(SyntheticOptions(duration=40.0), seed=11)
-    return s, _twist(s.truth, seed=6)
-
-
 # --------------------------------------------------------------------------- odom1
-def test_odom1_alone_is_as_accurate_as_the_same_twist_in_odom0(drive):
+def test_odom1_alone_is_as_accurate_as_the_same_twist_in_odom0(runs):
     """The wheels removed, the twist as ``odom1`` gives what it gives as ``odom0`` in every backend, alone and with
     the gyro (odom0's delay estimate is off: odom1 has none)."""
-    s, twist = drive
-    config = {"graph": {"fixed_lag": 0.0}, "sync_odometry": False}
-    for others in ([], ["imu"]):
-        zero = fuse(SensorStreams(imu=s.imu, odom=twist).select(others + ["odom"]), "all", config)
-        one = fuse(SensorStreams(imu=s.imu, extra={"odom1": twist}).select(others + ["odom1"]), "all", config)
+    truth = runs["truth/drive"]
+    for others in ("alone", "imu"):
+        zero, one = runs[f"odom0/{others}"], runs[f"odom1/{others}"]
         for name in TRACKS:
-            a, b = _position_rms(zero.trajectories[name], s.truth), _position_rms(one.trajectories[name], s.truth)
+            a, b = _position_rms(zero.trajectories[name], truth), _position_rms(one.trajectories[name], truth)
             # measured: alone 0.0126-0.0131 m both; with the gyro 0.332-0.388 m (odom0), 0.334-0.385 m (odom1)
             assert abs(b - a) <= 0.03 * a + 1e-3, (others, name, a, b)
             assert one.counts[name]["odom1"].used >= 0.95 * (len(one.trajectories[name].t) - 1), one.counts[name]
         assert "odom1" not in zero.counts["ekf"]
         # a second odometer with its own noise beside odom0: measured 0.0081-0.0086 m alone, 0.206-0.267 with the
         # gyro
-        other = _twist(s.truth, seed=7)
-        both = fuse(SensorStreams(imu=s.imu, odom=twist, extra={"odom1": other}).select(others + ["odom", "odom1"]),
-                    "all", config)
+        both = runs[f"both/{others}"]
         for name in TRACKS:
-            a, b = _position_rms(zero.trajectories[name], s.truth), _position_rms(both.trajectories[name], s.truth)
+            a, b = _position_rms(zero.trajectories[name], truth), _position_rms(both.trajectories[name], truth)
             assert b < 0.8 * a, (others, name, a, b)
 
 
 @pytest.mark.parametrize("backend, track", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
-def test_odom1_streams_like_odom0(drive, backend, track):
+def test_odom1_streams_like_odom0(runs, backend, track):
     """``StreamingFusion.add("odom1", sample)``: the twist streamed as odom1 gives odom0's accuracy."""
-    s, twist = drive
-    config = {"sync_odometry": False}
-    zero = _stream(SensorStreams(odom=twist), backend, config)
-    one = _stream(SensorStreams(extra={"odom1": twist}), backend, config)
-    a, b = _position_rms(zero.trajectories[track], s.truth), _position_rms(one.trajectories[track], s.truth)
+    truth = runs["truth/drive"]
+    zero, one = runs[f"stream/{backend}/odom0"], runs[f"stream/{backend}/odom1"]
+    a, b = _position_rms(zero.trajectories[track], truth), _position_rms(one.trajectories[track], truth)
     assert a < 0.05 and abs(b - a) <= 0.03 * a + 1e-3, (backend, a, b)
     assert one.counts[track]["odom1"].used >= 700, one.counts[track]
 
 
-@pytest.mark.parametrize("component, corrupt", [
-    ("yaw_rate", lambda tw: TwistData(tw.t, tw.vx, tw.vy, tw.wz + 0.3)),
-    ("vx", lambda tw: TwistData(tw.t, 1.5 * tw.vx, tw.vy, tw.wz)),
-    ("vy", lambda tw: TwistData(tw.t, tw.vx, tw.vy + 0.2, tw.wz)),
-])
-def test_a_masked_component_has_no_influence(drive, component, corrupt):
+@pytest.mark.parametrize("component", list(CORRUPT))
+def test_a_masked_component_has_no_influence(runs, component):
     """A corrupted component left out of ``fusion.odom1.mask`` changes no estimate of any backend (equal to the
     last bit); kept in the mask, the same corruption moves the track."""
-    s, twist = drive
-    mask = [c for c in ("vx", "vy", "yaw_rate") if c != component]
-    bad = corrupt(twist)
-    masked = {"graph": {"fixed_lag": 0.0}, "odom1": {"mask": mask}}
-
-    def run(data, config):
-        return fuse(SensorStreams(wheel=s.wheel, imu=s.imu, extra={"odom1": data}).select(["wheel", "imu", "odom1"]),
-                    "all", config)
-
-    clean, corrupted = run(twist, masked), run(bad, masked)
-    kept = run(bad, {"graph": {"fixed_lag": 0.0}})
+    truth = runs["truth/drive"]
+    clean, corrupted, kept = (runs[f"mask/{component}/{name}"] for name in ("clean", "corrupted", "kept"))
     for name in TRACKS:
         assert np.array_equal(clean.trajectories[name].xyyaw, corrupted.trajectories[name].xyyaw), name
         moved = np.abs(kept.trajectories[name].xyyaw - clean.trajectories[name].xyyaw).max()
         assert moved > 0.05, (component, name, moved)
         if component != "vy":  # a sideways speed of 0.2 m/s moves the track without making this drive's worse
-            a, b = _position_rms(clean.trajectories[name], s.truth), _position_rms(kept.trajectories[name], s.truth)
+            a, b = _position_rms(clean.trajectories[name], truth), _position_rms(kept.trajectories[name], truth)
             # measured (EKF, RTS, GTSAM batch, iSAM2): masked 0.40, 0.26, 0.25, 0.40 m (yaw_rate left out) and
             # 0.36, 0.23, 0.23, 0.36 (vx left out); kept in, the corruption gives 0.76, 0.88, 0.88, 0.51 and
             # 0.51, 0.44, 0.43, 0.68
             assert b > 1.2 * a, (component, name, a, b)
 
 
-def test_a_masked_odometry_chains_between_keyframes(drive):
+def test_a_masked_odometry_chains_between_keyframes(runs):
     """With ``graph.keyframe_every: 3`` the masked readings between two keyframes are composed (the components left
     out held at zero) into one factor: the graph's track stays as accurate as with every node."""
-    s, twist = drive
-    streams = SensorStreams(imu=s.imu, extra={"odom1": twist}).select(["imu", "odom1"])
-    for mask in (["vx", "yaw_rate"], ["vx", "vy"]):
-        rms = []
-        for every in (1, 3):
-            config = {"graph": {"keyframe_every": every, "fixed_lag": 0.0, "online": False}, "odom1": {"mask": mask}}
-            rms.append(_position_rms(fuse(streams, "gtsam", config).trajectories["gtsam"], s.truth))
+    for mask in CHAIN_MASKS:
+        rms = [_position_rms(runs[f"chain/{'+'.join(mask)}/{every}"].trajectories["gtsam"], runs["truth/drive"])
+               for every in (1, 3)]
         # measured: 0.762 and 0.763 m ([vx, yaw_rate]: nothing measures the sideways motion), 0.757 and 0.750 m
         # ([vx, vy])
         assert rms[1] < 1.2 * rms[0], (mask, rms)
 
 
-def test_odom1_noise_is_its_own_section(drive):
+def test_odom1_noise_is_its_own_section(runs):
     """``fusion.odom1`` configures odom1 alone: its heading trusted (no skid terms), the track with the gyro moves,
     and odom0's does not."""
-    s, twist = drive
-    own = {"graph": {"fixed_lag": 0.0}, "odom1": {"yaw_scale": 0.0, "k_yaw": 1e-3}}
-    plain = {"graph": {"fixed_lag": 0.0}}
-    one = SensorStreams(imu=s.imu, extra={"odom1": twist}).select(["imu", "odom1"])
-    zero = SensorStreams(imu=s.imu, odom=twist).select(["imu", "odom"])
-    moved, kept = fuse(one, "all", own), fuse(one, "all", plain)
-    zero_own, zero_plain = fuse(zero, "all", own), fuse(zero, "all", plain)
+    truth = runs["truth/drive"]
+    moved, kept = runs["section/odom1/own"], runs["section/odom1/plain"]
+    zero_own, zero_plain = runs["section/odom0/own"], runs["section/odom0/plain"]
     for name in TRACKS:
-        a, b = _position_rms(kept.trajectories[name], s.truth), _position_rms(moved.trajectories[name], s.truth)
+        a, b = _position_rms(kept.trajectories[name], truth), _position_rms(moved.trajectories[name], truth)
         assert b < 0.5 * a, (name, a, b)  # the twist's heading outweighs the gyro's bias
         assert np.array_equal(zero_own.trajectories[name].xyyaw, zero_plain.trajectories[name].xyyaw), name
 
@@ -201,27 +143,14 @@ def test_instance_names_and_masks_are_checked():
 
 
 # --------------------------------------------------------------------------- imu1
-@pytest.fixture(scope="module")
-def skewed():
-    """30 s of wheels whose base is 5 % larger than configured (their heading drifts), the built-in gyro, and a
-    second gyro mounted upside down with its own bias."""
-    s = synthetic_streams(SyntheticOptions(duration=30.0, wheel_base_factor=1.05), seed=12)
-    return s, _upside_down_gyro(s.truth, seed=3)
-
-
-def test_an_upside_down_imu1_helps_like_imu0_and_its_bias_is_estimated(skewed):
+def test_an_upside_down_imu1_helps_like_imu0_and_its_bias_is_estimated(runs):
     """The wheels with imu1 (turned into the body frame by its T_BS) hold the heading as the wheels with imu0 do,
     in every backend, and imu1_gyro_bias is estimated; with its mounting ignored the gyro turns the wrong way."""
-    s, gyro1 = skewed
-    config = {"graph": {"fixed_lag": 0.0}}
-    wheels = fuse(SensorStreams(wheel=s.wheel).select(["wheel"]), "all", config)
-    zero = fuse(SensorStreams(wheel=s.wheel, imu=s.imu).select(["wheel", "imu"]), "all", config)
-    one = fuse(SensorStreams(wheel=s.wheel, extra={"imu1": gyro1}).select(["wheel", "imu1"]), "all", config)
-    flat = ImuData(gyro1.t, gyro1.gyro, gyro1.accel, None, np.eye(4), 100.0, {})
-    wrong = fuse(SensorStreams(wheel=s.wheel, extra={"imu1": flat}).select(["wheel", "imu1"]), "all", config)
+    truth = runs["truth/skewed"]
+    wheels, zero, one, wrong = (runs[f"imu1/{name}"] for name in ("wheels", "imu0", "imu1", "flat"))
     for name in TRACKS:
-        p_w, p0, p1 = (_position_rms(r.trajectories[name], s.truth) for r in (wheels, zero, one))
-        h1, h_x = _heading_rms(one.trajectories[name], s.truth), _heading_rms(wrong.trajectories[name], s.truth)
+        p_w, p0, p1 = (_position_rms(r.trajectories[name], truth) for r in (wheels, zero, one))
+        h1, h_x = _heading_rms(one.trajectories[name], truth), _heading_rms(wrong.trajectories[name], truth)
         # measured (m): wheels 0.71-0.72; with imu0 0.25, 0.059, 0.056, 0.27; with imu1 0.27, 0.048, 0.025, 0.28
         # (EKF, RTS, GTSAM batch, iSAM2)
         assert p1 < 0.5 * p_w and p1 < 1.25 * p0 + 0.02, (name, p_w, p0, p1)
@@ -234,13 +163,12 @@ def test_an_upside_down_imu1_helps_like_imu0_and_its_bias_is_estimated(skewed):
 
 
 @pytest.mark.parametrize("backend, track", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
-def test_imu1_streams(skewed, backend, track):
+def test_imu1_streams(runs, backend, track):
     """Replayed, imu1's samples arrive turned into the body frame; streamed it bounds the wheels' drift as in
     batch."""
-    s, gyro1 = skewed
-    wheels = _stream(SensorStreams(wheel=s.wheel), backend)
-    one = _stream(SensorStreams(wheel=s.wheel, extra={"imu1": gyro1}), backend)
-    p_w, p1 = _position_rms(wheels.trajectories[track], s.truth), _position_rms(one.trajectories[track], s.truth)
+    truth = runs["truth/skewed"]
+    wheels, one = runs[f"stream/{backend}/wheels"], runs[f"stream/{backend}/imu1"]
+    p_w, p1 = _position_rms(wheels.trajectories[track], truth), _position_rms(one.trajectories[track], truth)
     assert p1 < 0.5 * p_w, (backend, p_w, p1)
     assert one.counts[track]["imu1"].used >= 550, one.counts[track]
 
@@ -255,10 +183,10 @@ def recording(tmp_path_factory):
     tiny = {"width": 80, "height": 48, "fu": 60.0, "fv": 60.0, "cu": 39.5, "cv": 23.5, "supersample": 1,
             "camera_rate": 2.0}
     rec = simulate(tmp_path_factory.mktemp("instances") / "rec", profile="random", seed=3, duration=20.0, **tiny)
-    twist = _twist(Recording(rec).groundtruth(), seed=2)
+    twist_data = twist(Recording(rec).groundtruth(), seed=2)
     (rec / "odom1").mkdir()
     (rec / "odom1" / "data.csv").write_text("#timestamp [ns],v_x [m s^-1],v_y [m s^-1],w_z [rad s^-1]\n" + "".join(
-        f"{int(round(t * 1e9))},{vx:.6f},{vy:.6f},{wz:.6f}\n" for t, vx, vy, wz in zip(*twist.__dict__.values())))
+        f"{int(round(t * 1e9))},{vx:.6f},{vy:.6f},{wz:.6f}\n" for t, vx, vy, wz in zip(*twist_data.__dict__.values())))
     return rec
 
 
