@@ -284,13 +284,12 @@ class NodesMixin:
             streams.visual = usable
         elif spanning is not None:
             streams.visual = [spanning[1]]
-        # the states the backends carry for the whole run: an interval without the camera (an outage) must not
-        # drop the wheels' curvature from their model while the filter and the graph still carry it
-        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset, states=self._states)
+        # the states and scale priors the backends carry for the whole run: an interval without the camera (an
+        # outage) must not drop the wheels' curvature from their model while the filter and the graph still carry it
+        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset, states=self._states,
+                             priors=self._priors)
         if spanning is not None and spanning[0].t1 > t1 + 1e-9:  # counted used once, at its last interval
             iv.counts["camera"].used -= 1
-        iv.visual_scale_sigma = self._priors.visual_scale_sigma  # what the whole streams give (one interval's
-        iv.wheel_scale_sigma = self._priors.wheel_scale_sigma  # samples do not carry the sensors' files)
         for sensor, c in iv.counts.items():
             own = step.setdefault(sensor, SensorCount())
             own.gated += c.gated

@@ -259,14 +259,17 @@ def sensor_readings(iv: "Intervals", config: FusionConfig) -> list[Readings]:
 
 # --------------------------------------------------------------------------- builder
 def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None,
-                    heading_offset: float | None = None, states: tuple | None = None) -> Intervals:
+                    heading_offset: float | None = None, states: tuple | None = None,
+                    priors: ScalePriors | None = None) -> Intervals:
     """Express every stream of ``streams`` on the node grid (see the module docstring).
 
     ``nodes`` overrides the grid (streaming use builds one interval at a time); ``heading_offset``
     keeps the AHRS alignment of earlier calls (by default the first heading is aligned to the
     initial yaw); ``states`` are the run's states when they are decided for the whole run (streaming use: one
     interval's data must not change them), else they are decided from this grid
-    (:func:`~fusion_vo.backends.states.run_states`).
+    (:func:`~fusion_vo.backends.states.run_states`); ``priors`` likewise the run's scale priors
+    (:func:`scale_priors`; streaming use: one interval's samples do not carry the sensors' files), else those of
+    ``streams``, with their notes.
     """
     T = node_times(streams, config) if nodes is None else np.asarray(nodes, dtype=np.float64)
     K = len(T) - 1
@@ -277,13 +280,14 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     for sensor in registry.sensors():  # every sensor's (empty) measurements, data or not
         if sensor.grid is not None:
             iv.sensors[sensor.name] = sensor.grid(K, config)
-    range_in_visual = streams.visual is not None and streams.range_in_visual
-    priors = scale_priors(config, streams.camera_height, streams.camera_height_sigma,
-                          streams.range_height_sigma if range_in_visual else None,
-                          None if streams.wheel is None else streams.wheel.config,
-                          range_fused=streams.range is not None and not range_in_visual)
+    if priors is None:
+        range_in_visual = streams.visual is not None and streams.range_in_visual
+        priors = scale_priors(config, streams.camera_height, streams.camera_height_sigma,
+                              streams.range_height_sigma if range_in_visual else None,
+                              None if streams.wheel is None else streams.wheel.config,
+                              range_fused=streams.range is not None and not range_in_visual)
+        notes.extend(priors.notes)
     iv.visual_scale_sigma, iv.wheel_scale_sigma = priors.visual_scale_sigma, priors.wheel_scale_sigma
-    notes.extend(priors.notes)
     iv.heading_offset = heading_offset
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)
