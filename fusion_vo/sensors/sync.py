@@ -64,13 +64,10 @@ def rate_delay(t_a, rate_a, t_b, rate_b, max_delay: float = 1.0, step: float = 0
     lo, hi = max(t_a[0], t_b[0]) + max_delay, min(t_a[-1], t_b[-1]) - max_delay
     if hi - lo < 10 * max_delay:
         return None
-    grid = np.arange(lo, hi, step)
-    grid = grid[covered(grid, t_a)]
+    grid, a, pauses = _resampled(t_a, rate_a, t_b, lo, hi, step)
     if len(grid) < 3:
         return None
-    a = np.interp(grid, t_a, rate_a)
     shifts = np.arange(-int(round(max_delay / step)), int(round(max_delay / step)) + 1)
-    pauses = bool(np.max(np.diff(t_b)) > MAX_GAP)
     corr = np.array([_correlation(grid, a, t_b, rate_b, s * step, pauses) for s in shifts])
     best = int(np.argmax(corr))
     if corr[best] < min_correlation:
@@ -83,6 +80,14 @@ def rate_delay(t_a, rate_a, t_b, rate_b, max_delay: float = 1.0, step: float = 0
         if curvature < 0:
             frac = 0.5 * (c0 - c2) / curvature
     return float((shifts[best] + frac) * step)
+
+
+def _resampled(t_a, rate_a, t_b, lo: float, hi: float, step: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The grid ``lo, lo + step, ... < hi`` where stream a has samples (:func:`covered`), its rates there, and whether
+    stream b has a pause (then :func:`_correlation` checks its coverage at each shift)."""
+    grid = np.arange(lo, hi, step)
+    grid = grid[covered(grid, t_a)]
+    return grid, np.interp(grid, t_a, rate_a), bool(np.max(np.diff(t_b)) > MAX_GAP)
 
 
 def covered(x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -119,12 +124,9 @@ def rate_correlation(t_a, rate_a, t_b, rate_b, delays, margin: float, step: floa
     if len(t_a) < 3 or len(t_b) < 3:
         return [math.nan for _ in delays]
     lo, hi = max(t_a[0], t_b[0]) + margin, min(t_a[-1], t_b[-1]) - margin
-    grid = np.arange(lo, hi, step)
-    grid = grid[covered(grid, t_a)] if len(grid) else grid
+    grid, a, pauses = _resampled(t_a, rate_a, t_b, lo, hi, step)
     if len(grid) < 3:
         return [math.nan for _ in delays]
-    a = np.interp(grid, t_a, rate_a)
-    pauses = bool(np.max(np.diff(t_b)) > MAX_GAP)
     return [_correlation(grid, a, t_b, rate_b, d, pauses) for d in delays]
 
 
