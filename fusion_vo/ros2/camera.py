@@ -47,6 +47,7 @@ class CameraPipeline:
         self.errors = 0  # frames whose processing raised (logged once)
         self.latency_ms: deque = deque(maxlen=1000)  # arrival to increment handed to the fusion [ms]
         self._last_t = -np.inf
+        self._busy = False  # a frame taken from the queue and not yet handed on
         self._thread = threading.Thread(target=self._run, name="fusion-vo-camera", daemon=True)
         self._thread.start()
 
@@ -59,8 +60,9 @@ class CameraPipeline:
             self._cond.notify()
 
     def backlog(self) -> int:
+        """Frames waiting in the queue or being measured."""
         with self._cond:
-            return len(self._queue)
+            return len(self._queue) + int(self._busy)
 
     def stop(self, timeout: float = 1.0) -> None:
         with self._cond:
@@ -72,11 +74,13 @@ class CameraPipeline:
     def _run(self) -> None:
         while True:
             with self._cond:
+                self._busy = False
                 while not self._queue and not self._stop:
                     self._cond.wait()
                 if self._stop:
                     return
                 t, image, arrival = self._queue.popleft()
+                self._busy = True
             if t <= self._last_t:
                 self.out_of_order += 1
                 continue

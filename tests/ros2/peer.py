@@ -80,21 +80,26 @@ def received(diagnostics) -> int:
 
 
 def until_quiet(peer: Recorder, quiet: float = 1.0, timeout: float = 90.0) -> float:
-    """Wait until the node has taken no message and its camera queue has been empty for ``quiet`` seconds
-    (its diagnostics come on the steady clock); while waiting, a simulated clock left by a player goes on at real speed, so that the node's
-    timers fire while it catches up with a backlog. Returns the seconds waited."""
-    start = last_change = time.time()
-    count = received(peer.diagnostics)
+    """Wait until the node has taken no message and its camera has had no frame waiting or being measured
+    for ``quiet`` seconds, as told by diagnostics that came at the end of those seconds (they come on the
+    steady clock; a node too busy to send them is not quiet). While waiting, a simulated clock left by a
+    player goes on at real speed, so that the node's timers fire while it catches up with a backlog.
+    Returns the seconds waited."""
+    start = last_change = last_heard = time.time()
+    seen = peer.diagnostics
+    count = received(seen)
     clock0 = peer.clock_t
-    while time.time() - last_change < quiet and time.time() - start < timeout:
+    while last_heard - last_change < quiet and time.time() - start < timeout:
         time.sleep(0.02)
         if clock0 is not None:
             msg = Clock()
             _stamp_time(msg.clock, clock0 + time.time() - start)
             peer.clock.publish(msg)
-        now = received(peer.diagnostics)
-        if now != count:
-            count, last_change = now, time.time()
+        if peer.diagnostics is not seen:
+            seen, last_heard = peer.diagnostics, time.time()
+            now = received(seen)
+            if now != count or now < 0:
+                count, last_change = now, last_heard
     return time.time() - start
 
 

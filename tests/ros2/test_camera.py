@@ -8,6 +8,7 @@ the drive's starts and stops (steps in speed) they are off by the speed times th
 are checked against a looser bound beside the in-process stream's.
 """
 
+import numpy as np
 import pytest
 
 from fusion_vo.cli.main import main
@@ -71,7 +72,20 @@ def test_the_camera_frames_were_measured_and_fused(camera_run):
     # predicted to the clock: within a few millimetres on this 0.13 m drive (the wheels alone: 0.12 mm ATE,
     # replay's poses at the newest measurement 8 mm)
     assert ate["published"] < 3e-3, ate
-    assert len(out["poses"]) > 200  # 50 Hz over the 5 s
+
+
+def test_the_poses_came_at_the_publish_rate_over_the_whole_drive(camera_run, standard_recording):
+    """50 Hz on the played clock. A firing of the timer while the node is busy is skipped (rcl's timers do not
+    catch up), so a busy machine shows longer steps, never shorter ones: the median step is 20 ms on an idle
+    machine (benchmarks/ros2_node.py measures the rate), here bounded by 40 ms."""
+    out, _ = camera_run
+    poses, estimate = out["poses"], out["diagnostics"]["fusion_vo: estimate"]
+    assert len(poses) == int(estimate["published"]), estimate  # every pose the node sent was received
+    stamps = np.array([p["t"] for p in poses])
+    steps = np.diff(stamps)
+    assert np.min(steps) > 0.019 and np.median(steps) <= 0.04, np.percentile(steps, [0, 50, 90])
+    t = np.loadtxt(standard_recording("short") / "imu0" / "data.csv", delimiter=",", usecols=0) * 1e-9
+    assert stamps[0] < t[0] + 1.0 and stamps[-1] >= t[-1] - 1e-6, (stamps[[0, -1]], t[[0, -1]])
 
 
 def test_sigterm_stops_the_node_cleanly(camera_run):

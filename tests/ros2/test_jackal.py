@@ -39,14 +39,21 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     imu = np.loadtxt(calib / "imu0" / "data.csv", delimiter=",", comments="#", ndmin=2)
     yaw0 = float(se2.yaw_of_quaternion(imu[:1, 7:11])[0])
     t_end = imu[-1, 0] * 1e-9
-    poses = [p for p in out["poses"] if p["t"] <= t_end + 1e-6]
+    poses = out["poses"]
     assert out["pose_publisher_matched"]
-    assert len(poses) > 1000 and poses[-1]["t"] > t_end - 0.1  # 50 Hz over the 61 s, up to the bag's end
-    assert poses[0]["t"] < imu[0, 0] * 1e-9 + 0.5, "the recorder missed the node's first poses"
-    first, last = poses[0], poses[-1]
+    assert len(poses) == int(out["diagnostics"]["fusion_vo: estimate"]["published"])  # all received
+    # 50 Hz of bag time, played at 5x: a firing while the node is busy is skipped (tests/ros2/test_camera.py
+    # checks the rate at 1x), so here the median step is only bounded, at 10 Hz
+    stamps = np.array([p["t"] for p in poses])
+    steps = np.diff(stamps)
+    assert np.median(steps) <= 0.1, np.percentile(steps, [50, 90])
+    assert stamps[0] < imu[0, 0] * 1e-9 + 0.5, "the recorder missed the node's first poses"
+    assert stamps[-1] >= t_end, (stamps[-1], t_end)  # published up to the bag's end (and predicted beyond)
+    first = poses[0]
+    end = np.array([np.interp(t_end, stamps, [p[k] for p in poses]) for k in ("x", "y")])  # the pose at the end
     d = yaw0 - first["yaw"]
     rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
-    final = rot @ (np.array([last["x"], last["y"]]) - np.array([first["x"], first["y"]]))
+    final = rot @ (end - np.array([first["x"], first["y"]]))
     # beside it, the same fusion fed the same samples in-process (the baseline of docs/ros2.md)
     streams = streams_from_recording(Recording(calib), None, ["imu", "odom"])
     fusion = streaming_for(streams, "ekf")
