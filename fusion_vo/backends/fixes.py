@@ -65,23 +65,21 @@ class Reacquire:
         self.times: list[float] = []
 
     def apply(self, ekf, model: GpsModel, z, covariance, t: float, sensor: str = "gps") -> bool:
-        """Apply a reading at ``t`` to the EKF (:func:`ekf_update`), re-acquiring when due."""
-        if ekf_update(ekf, model, z, covariance, t, sensor):
-            self.last_ok = t
-            return True
-        if self.last_ok is None:
-            self.last_ok = t
-        if t - self.last_ok < self.after:
-            return False
-        self.times.append(t)
-        self.last_ok = t
+        """Apply a reading at ``t`` to the EKF (:func:`ekf_update`), re-acquiring when due (:meth:`due`)."""
+        accepted = ekf_update(ekf, model, z, covariance, t, sensor)
+        if not self.due(t, accepted):
+            return accepted
         return ekf_reacquire(ekf, model, z, covariance, t, sensor)
 
     def due(self, t: float, accepted: bool) -> bool:
-        """For a backend that gates itself: whether a rejected reading at ``t`` is to be applied anyway."""
-        if accepted or self.last_ok is None:
+        """Whether a reading at ``t``, ``accepted`` or not by the gate, is to be applied anyway: a rejected one
+        ``after`` seconds or more after the last reading applied (or the first reading, when none was), so with
+        ``after`` 0 every reading is applied."""
+        if accepted:
             self.last_ok = t
             return False
+        if self.last_ok is None:
+            self.last_ok = t
         if t - self.last_ok < self.after:
             return False
         self.times.append(t)
@@ -101,15 +99,21 @@ def outage_note(ekf, model: GpsModel, z, covariance, t_last: float, t: float, t0
             f"(position sigma {sigma:.3f} m; the fix's own {own:.3f} m)")
 
 
+def reacquired_text(times: list[float], t0: float) -> str:
+    """The part of a run's GPS note that says when fixes were applied anyway (:class:`Reacquire`), or ``""``."""
+    if not times:
+        return ""
+    return (f"; {len(times)} times a fix was applied anyway after rejections for gps_reacquire seconds "
+            f"(the estimate re-acquired the fixes; first at {times[0] - t0:.2f} s in)")
+
+
 def note(backend: str, r: Readings, model: GpsModel, t0: float, reacquired: list | None = None) -> str:
     """``"<backend>: gps N fixes used, M rejected by the gate (at ...)"`` plus the readings skipped on reading."""
     text = f"{backend}: {r.sensor} {model.n_used} fixes used, {model.n_rejected} rejected by the gate"
     if model.rejected_t:
         when = sorted(model.rejected_t)
         text += f" (t={when[0]:.2f} to {when[-1]:.2f}, {when[0] - t0:.2f} to {when[-1] - t0:.2f} s in)"
-    if reacquired:
-        text += (f"; {len(reacquired)} times a fix was applied anyway after rejections for gps_reacquire seconds "
-                 f"(the estimate re-acquired the fixes; first at {reacquired[0] - t0:.2f} s in)")
+    text += reacquired_text(reacquired or [], t0)
     skipped = sum(r.absolute.skipped.values())
     if skipped:
         text += f"; {skipped} skipped on reading ({', '.join(f'{n} {k}' for k, n in r.absolute.skipped.items() if n)})"
@@ -163,15 +167,12 @@ def graph_gate(model: GpsModel, reacquire: Reacquire, pose, z, covariance, pose_
     None): ``"used"`` when it passes ``model``'s gate, ``"reacquired"`` when it fails it after ``reacquire.after``
     seconds of rejections (then counted as a use, not a rejection), else None."""
     chk = model.check(pose, z, covariance, pose_cov, t)
-    if not chk.accepted and reacquire.due(t, False):
-        model.n_rejected -= 1  # applied after all: a use, not a rejection
-        model.rejected_t.pop()
-        model.n_used += 1
-        return "reacquired"
-    if chk.accepted:
-        reacquire.due(t, True)
-        return "used"
-    return None
+    if not reacquire.due(t, chk.accepted):
+        return "used" if chk.accepted else None
+    model.n_rejected -= 1  # applied after all: a use, not a rejection
+    model.rejected_t.pop()
+    model.n_used += 1
+    return "reacquired"
 
 
 class GraphFixes:

@@ -15,7 +15,7 @@ from fusion_vo.measurements import (
 )
 from fusion_vo.backends.ekf import YAW
 from fusion_vo.backends.world import prior_from_alignment
-from fusion_vo.backends.fixes import OUTAGE_NOTE_S, Reacquire, ekf_reacquire, ekf_update, outage_note
+from fusion_vo.backends.fixes import OUTAGE_NOTE_S, Reacquire, outage_note
 from fusion_vo.sensors.gps import align_to_fixes
 from fusion_vo.sensors.gps import predict as gps_predict
 
@@ -235,11 +235,7 @@ class HistoryMixin:
             self._to_enu(fit, fix.t)
         elif last is not None and fix.t - last >= OUTAGE_NOTE_S:  # the drift without fixes, as a batch run says it
             self._outages[fix.t] = outage_note(ekf, model, fix.enu, fix.covariance, last, fix.t, self._t_nodes[0])
-        accepted = ekf_update(ekf, model, fix.enu, fix.covariance, fix.t)
-        if not accepted and self._gps_reacquire.due(fix.t, False):
-            accepted = ekf_reacquire(ekf, model, fix.enu, fix.covariance, fix.t)
-        elif accepted:
-            self._gps_reacquire.due(fix.t, True)
+        accepted = self._gps_reacquire.apply(ekf, model, fix.enu, fix.covariance, fix.t)
         count = self._step_counts.setdefault("gps", SensorCount())
         if accepted:
             count.used += 1

@@ -122,6 +122,7 @@ from fusion_vo import backends
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.ekf import PlanarEkf
+from fusion_vo.backends.fixes import reacquired_text
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor
 from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.states import live_context, run_states
@@ -587,9 +588,12 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())
-            result.notes.append(f"{name}: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values); "
-                                "world frame: " + ("ENU at the datum" if self._frame == "enu" else
-                                                   "the start frame (the fixes never fixed the heading of ENU)"))
+            reacquire = self._graph.reacquire if self._graph is not None else self._gps_reacquire
+            reacquired = [] if reacquire is None else reacquire.times
+            result.notes.append(f"{name}: gps {gps.used} fixes used, {gps.gated} rejected (gate or bad values)"
+                                + reacquired_text(reacquired, self._t_nodes[0] if self._t_nodes else 0.0)
+                                + "; world frame: " + ("ENU at the datum" if self._frame == "enu" else
+                                                       "the start frame (the fixes never fixed the heading of ENU)"))
             result.notes.extend(self._outages[t] for t in sorted(self._outages))
         if self._t_nodes:
             episodes = self._monitor.all_episodes(self._t_nodes[-1])

@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from fusion_vo.backends import StreamingFusion, fuse, streams_from_recording
+from fusion_vo.backends import FusionConfig, StreamingFusion, fuse, streams_from_recording
+from fusion_vo.backends.fixes import Reacquire
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.cli.main import main
 from fusion_vo.evaluation.io import read_tum_poses
@@ -140,6 +141,32 @@ def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
     assert counts.gated == 5
     assert counts.used + counts.gated + counts.missing + counts.late == len(rec.gps().t)
     assert any(f"ekf: gps {counts.used} fixes used, 5 rejected" in n for n in result.notes)
+
+
+def test_the_re_acquisition_rule():
+    """A rejected reading is applied anyway ``after`` seconds or more after the last one applied (or after the
+    first reading, when none was applied); with ``after`` 0, every reading is."""
+    re = Reacquire(0.5)
+    decided = [(t, re.due(t, ok)) for t, ok in [(0.0, True), (0.2, False), (0.4, False), (0.6, False), (0.8, False),
+                                                 (1.0, True), (1.2, False)]]
+    assert [t for t, applied in decided if applied] == [0.6] and re.times == [0.6], decided
+    first_rejected = Reacquire(0.5)
+    assert [first_rejected.due(t, False) for t in (0.0, 0.4, 0.5, 0.7)] == [False, False, True, False]
+    always = Reacquire(0.0)
+    assert [always.due(t, False) for t in (0.0, 0.1, 0.2)] == [True, True, True]
+
+
+def test_a_jump_longer_than_gps_reacquire_is_re_acquired_at_the_same_fix_batch_and_streaming(rec):
+    """With ``gps_reacquire`` 0.5 s the jump's five fixes (0.8 s) are rejected until the third, which is applied
+    anyway; the estimate then jumps with it and re-acquires the true fixes after the jump the same way. The
+    batch EKF and the streaming EKF (one rule, :class:`~fusion_vo.backends.fixes.Reacquire`) say so alike."""
+    config = FusionConfig(gps_reacquire=0.5)
+    batch = fuse(streams_from_recording(rec, None, ["wheel", "imu", "gps"]), "ekf", config)
+    streamed = _stream_with_gps(rec, config=config).finish()
+    for result in (batch, streamed):
+        (note,) = [n for n in result.notes if n.startswith("ekf: gps") and "fixes used" in n]
+        assert "4 rejected" in note and result.counts["ekf"]["gps"].gated == 4, note
+        assert "2 times a fix was applied anyway" in note and f"first at {JUMP[0] + 0.4:.2f} s in" in note, note
 
 
 def _outage(notes) -> tuple[float, float, float]:
