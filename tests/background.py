@@ -18,11 +18,11 @@ the order the tests come; a test that needs a job's result waits for it. The job
 them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
 so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
 
-Only one job runs at a time, at a lower priority than the suite (``nice -n 5``). The jobs of ``tests/ros2`` (the DDS
-tests, whose timing a busy machine can upset) are their inputs: a DDS test starts once they are made, and the jobs
-before them take far less than the tests before ``tests/ros2``, so the second process is idle while a node runs. The tests that run
-beside it and measure time hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch
-commands' refusals), which a second busy core does not reach.
+Only one job runs at a time, at a lower priority than the suite (``nice -n 5``). The DDS tests (``tests/ros2``, whose
+timing a busy machine can upset) run last (tests/conftest.py) and run each node inside :meth:`BackgroundJobs.quiet`,
+which waits for the running job to end and starts none meanwhile. The tests that run beside a job and measure time
+hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch commands' refusals), which
+a second busy core does not reach.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -93,29 +94,58 @@ class BackgroundJobs:
             self.jobs[key] = Job(key, command(key, out, commands, {k: j.out for k, j in self.jobs.items()}), out)
         self.stopped = False
         self.process: subprocess.Popen | None = None
+        self._cond = threading.Condition()
+        self._held = 0  # quiet() callers: no job starts while one holds the process quiet
+        self._running = False
         self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
         self.thread.start()
 
+    @contextmanager
+    def quiet(self):
+        """Within this block no job runs: it waits for the running one to end and holds the next."""
+        with self._cond:
+            self._held += 1
+            while self._running:
+                self._cond.wait()
+        try:
+            yield
+        finally:
+            with self._cond:
+                self._held -= 1
+                self._cond.notify_all()
+
     def _run_all(self) -> None:
         for job in self.jobs.values():
+            with self._cond:
+                while self._held and not self.stopped:
+                    self._cond.wait(1.0)
+                self._running = True
             try:
-                if self.stopped:
-                    job.stderr = "not run: the session ended first"
-                    continue
-                job.out.parent.mkdir(parents=True, exist_ok=True)
-                self.process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                                text=True, cwd=REPO)
-                try:
-                    job.stdout, job.stderr = self.process.communicate(timeout=TIMEOUT_S)
-                except subprocess.TimeoutExpired:
-                    self.process.kill()
-                    job.stdout, job.stderr = self.process.communicate()
-                    job.stderr += f"\n(killed after {TIMEOUT_S:.0f} s)"
-                job.returncode = self.process.returncode
-            except Exception as exc:  # noqa: BLE001 -- reported by the test that waits for this job
-                job.stderr = f"could not run {job.key}: {exc!r}"
+                self._run(job)
             finally:
-                job.done.set()
+                with self._cond:
+                    self._running = False
+                    self._cond.notify_all()
+
+    def _run(self, job: Job) -> None:
+        try:
+            if self.stopped:
+                job.stderr = "not run: the session ended first"
+                return
+            job.out.parent.mkdir(parents=True, exist_ok=True)
+            self.process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                            text=True, cwd=REPO)
+            try:
+                job.stdout, job.stderr = self.process.communicate(timeout=TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                job.stdout, job.stderr = self.process.communicate()
+                job.stderr += f"\n(killed after {TIMEOUT_S:.0f} s)"
+            job.returncode = self.process.returncode
+        except Exception as exc:  # noqa: BLE001 -- reported by the test that waits for this job
+            job.stderr = f"could not run {job.key}: {exc!r}"
+        finally:
+            job.done.set()
 
     def __contains__(self, key: str) -> bool:
         return key in self.jobs

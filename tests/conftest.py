@@ -31,13 +31,21 @@ ROBOT_LOGS = TESTS / "data" / "robot_localization"
 HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 
+#: folders run last, in this order: the DDS tests, whose timing the session's second process must leave alone
+#: (tests/ros2/conftest.py), come when that process has run every other test's job
+LAST = ("ros2",)
+
+
 def pytest_collection_modifyitems(config, items) -> None:
-    """Mark each test with its folder's layer; a test folder that no layer names is an error."""
+    """Mark each test with its folder's layer (a test folder that no layer names is an error); the folders of
+    :data:`LAST` go to the end."""
+    folders = {}
     for item in items:
-        folder = Path(item.fspath).resolve().relative_to(TESTS).parts[0]
+        folder = folders[item.nodeid] = Path(item.fspath).resolve().relative_to(TESTS).parts[0]
         if folder not in FOLDER_LAYER:
             raise pytest.UsageError(f"tests/{folder}: no layer in tests/conftest.py's LAYERS names this folder")
         item.add_marker(getattr(pytest.mark, FOLDER_LAYER[folder]))
+    items.sort(key=lambda item: LAST.index(folders[item.nodeid]) + 1 if folders[item.nodeid] in LAST else 0)
 
 
 _background: BackgroundJobs | None = None

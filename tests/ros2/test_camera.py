@@ -17,7 +17,6 @@ from fusion_vo.evaluation.io import read_groundtruth
 from fusion_vo.recording import write_tum
 
 from background import placed
-from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
 #: the recording and its batch EKF run, made ahead in the background (tests/background.py)
@@ -27,7 +26,7 @@ BACKGROUND_JOBS = {"*": ["standard:short", "fusion-vo:camera_batch/batch"]}
 
 
 @pytest.fixture(scope="module")
-def camera_run(tmp_path_factory, standard_recording, ahead):
+def camera_run(tmp_path_factory, standard_recording, ahead, peer):
     tmp = tmp_path_factory.mktemp("camera")
     rec, track = standard_recording("short"), tmp / "node_track.tum"
 
@@ -45,7 +44,7 @@ def camera_run(tmp_path_factory, standard_recording, ahead):
                      "-p", f"trajectory_file:={track}"],
             "play": ["ros2-play", str(rec), "--speed", "1"], "signal": "SIGTERM",
             "stop_timeout": 120}  # (writing the track waits for the camera's last increment)
-    out = run_peer(tmp, spec)
+    out = peer(tmp, spec)
     published = tmp / "published.tum"
     poses = out["poses"]
     write_tum(published, [p["t"] for p in poses], [[p["x"], p["y"], p["yaw"]] for p in poses])

@@ -11,7 +11,6 @@ and exit status 2.
 import numpy as np
 import pytest
 
-from dds_namespace import run_peer
 
 pytestmark = pytest.mark.ros2
 
@@ -27,14 +26,14 @@ T_BS: {cols: 4, rows: 4, data: [0.0, -1.0, 0.0, 0.25, -1.0, 0.0, 0.0, 0.0, 0.0, 
 
 
 @pytest.fixture(scope="module")
-def faults(tmp_path_factory):
+def faults(tmp_path_factory, peer):
     tmp = tmp_path_factory.mktemp("faults")
     (tmp / "calib" / "cam0").mkdir(parents=True)
     (tmp / "calib" / "cam0" / "sensor.yaml").write_text(CAM0)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={tmp / 'calib'}", "-p", "sensors:=[camera,imu,odom]",
                      "-p", "diagnostics_period:=0.25", "-p", "backend:=gtsam", "-p", "smoothed_lag:=1.0"],
             "inject": True, "signal": "SIGTERM"}
-    return run_peer(tmp, spec)
+    return peer(tmp, spec)
 
 
 def test_bad_messages_are_counted_and_the_node_goes_on(faults):
@@ -81,12 +80,12 @@ def test_sigterm_stops_the_node_cleanly_within_two_seconds(faults):
     ([], "fusion: {ekf: {accel_sigma: fast}}\n", "node.yaml: fusion.ekf.accel_sigma: expected a number, got 'fast'"),
     (["-p"], None, "fusion-vo: error: --ros-args:"),
 ])
-def test_a_start_up_mistake_is_one_line_and_exit_2(tmp_path, args, config, message):
+def test_a_start_up_mistake_is_one_line_and_exit_2(tmp_path, args, config, message, peer):
     node = ["ros2"]
     if config is not None:
         (tmp_path / "node.yaml").write_text(config)
         node += ["--config", str(tmp_path / "node.yaml")]
-    out = run_peer(tmp_path, {"node": node + ["--ros-args", "-p", "sensors:=[imu,odom]"] + args})
+    out = peer(tmp_path, {"node": node + ["--ros-args", "-p", "sensors:=[imu,odom]"] + args})
     assert not out["ready"] and out["code"] == 2, out
     errors = [line for line in out["stderr"] if line.startswith("fusion-vo: error:")]
     assert len(errors) == 1 and message in errors[0], out["stderr"]

@@ -15,7 +15,7 @@ from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.geometry import se2
 from fusion_vo.recording import Recording
 
-from dds_namespace import DATA, run_peer
+from dds_namespace import DATA
 
 pytestmark = pytest.mark.ros2
 RL_FINAL = np.array([1.0206, 3.4292])
@@ -24,13 +24,13 @@ BACKGROUND_JOBS = {"*": ["fusion-vo:jackal_log"]}
 
 
 @pytest.fixture(scope="module")
-def jackal_run(jackal_log, tmp_path_factory):
+def jackal_run(jackal_log, tmp_path_factory, peer):
     tmp = tmp_path_factory.mktemp("jackal")
     calib = jackal_log  # the folder fusion-vo import-bag writes from test2.bag (tests/conftest.py)
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
                      "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
             "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "5"], "signal": "SIGINT"}
-    return calib, run_peer(tmp, spec)
+    return calib, peer(tmp, spec)
 
 
 def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jackal_run):
