@@ -75,14 +75,17 @@ def test_the_camera_frames_were_measured_and_fused(camera_run):
 
 def test_the_poses_came_at_the_publish_rate_over_the_whole_drive(camera_run, standard_recording):
     """50 Hz on the played clock. A firing of the timer while the node is busy is skipped (rcl's timers do not
-    catch up), so a busy machine shows longer steps, never shorter ones: the median step is 20 ms on an idle
+    catch up) and a late one stamps its pose late, so a busy machine shows uneven steps (10 ms after a late
+    firing) but never more than 50 poses in a second of the played clock. The median step is 20 ms on an idle
     machine (benchmarks/ros2_node.py measures the rate), here bounded by 40 ms."""
     out, _ = camera_run
     poses, estimate = out["poses"], out["diagnostics"]["fusion_vo: estimate"]
     assert len(poses) == int(estimate["published"]), estimate  # every pose the node sent was received
     stamps = np.array([p["t"] for p in poses])
     steps = np.diff(stamps)
-    assert np.min(steps) > 0.019 and np.median(steps) <= 0.04, np.percentile(steps, [0, 50, 90])
+    in_a_second = np.searchsorted(stamps, stamps + 1.0 - 1e-6) - np.arange(len(stamps))  # from each pose on
+    assert np.min(steps) > 0 and np.max(in_a_second) <= 51, (np.min(steps), np.max(in_a_second))
+    assert np.median(steps) <= 0.04, np.percentile(steps, [0, 50, 90])
     t = np.loadtxt(standard_recording("short") / "imu0" / "data.csv", delimiter=",", usecols=0) * 1e-9
     assert stamps[0] < t[0] + 1.0 and stamps[-1] >= t[-1] - 1e-6, (stamps[[0, -1]], t[[0, -1]])
 
