@@ -131,10 +131,16 @@ def _stream_with_gps(rec, gps_delay=0.0, backend="ekf", fixes=None, **kwargs):
     return fusion
 
 
-def test_streaming_ekf_with_gps_ends_in_enu(rec, truth):
+@pytest.fixture(scope="module")
+def ekf_streamed(rec):
+    """The streaming EKF fed the drive in time order: its frame at the end, and its result."""
     fusion = _stream_with_gps(rec)
-    assert fusion.current_estimate().frame == "enu"
-    result = fusion.finish()
+    return fusion.current_estimate().frame, fusion.finish()
+
+
+def test_streaming_ekf_with_gps_ends_in_enu(rec, truth, ekf_streamed):
+    frame, result = ekf_streamed
+    assert frame == "enu"
     t, e = errors(result.trajectories["ekf"], truth)
     late = (t > OUTAGE[1] + 2.0)
     assert np.sqrt(np.mean(e[late] ** 2)) <= NOISE
@@ -203,10 +209,10 @@ def _outage(notes) -> tuple[float, float, float]:
     return float(start), float(end), float(note.split("drift ")[1].split(" m")[0])
 
 
-def test_streaming_ekf_reports_the_outage_as_a_batch_run_does(rec, fused, truth):
+def test_streaming_ekf_reports_the_outage_as_a_batch_run_does(ekf_streamed, fused, truth):
     """The first fix after the 5 s outage measures how far the streamed estimate drifted without fixes, as in a batch
     run; the streamed track's own error there bounds it."""
-    result = _stream_with_gps(rec).finish()
+    result = ekf_streamed[1]
     start, end, drift = _outage(result.notes)
     b_start, b_end, b_drift = _outage(fused.notes)
     assert abs(start - b_start) < 0.01 and abs(end - b_end) < 0.01 and OUTAGE[0] - 0.5 < start < end < OUTAGE[1] + 0.5
@@ -239,9 +245,9 @@ def test_replay_fuses_the_gps_it_is_given(rec, truth, tmp_path, backend):
     assert ends["wheel,imu"] > 1.0
 
 
-def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec):
+def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec, ekf_streamed):
     """Fixes 0.4-0.8 s late and out of order rewind the EKF, across the switch to ENU too."""
-    a, b = _stream_with_gps(rec).finish(), _stream_with_gps(rec, gps_delay=0.4)
+    a, b = ekf_streamed[1], _stream_with_gps(rec, gps_delay=0.4)
     assert b.rewinds > 50
     b = b.finish()
     ca, cb = a.counts["ekf"], b.counts["ekf"]
