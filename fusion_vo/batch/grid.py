@@ -48,7 +48,7 @@ import numpy as np
 import yaml
 
 from fusion_vo.config import FRONTENDS
-from fusion_vo.config.files import load_yaml
+from fusion_vo.config.files import load_yaml, load_yaml_text
 from fusion_vo.config.run import RunConfig, default_config_text, validate_config
 from fusion_vo.errors import InputError
 
@@ -81,7 +81,7 @@ class ParameterSet:
 
 def _schema() -> dict:
     """The full default configuration as a nested mapping (the known keys)."""
-    return yaml.safe_load(default_config_text())
+    return load_yaml_text(default_config_text())
 
 
 def check_key(key: str, path: Path | None, schema: dict | None = None) -> None:

@@ -26,12 +26,12 @@ M = TypeVar("M", bound=BaseModel)
 
 class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
     """PyYAML's safe loader (its libyaml parser where PyYAML has it: a run's ``run.yaml`` loads in about a
-    fifth of the pure-Python parser's time), but a key given twice in one mapping is an error (PyYAML keeps
+    third of the pure-Python parser's time), but a key given twice in one mapping is an error (PyYAML keeps
     the last one: a section written twice in a configuration would silently lose the first one's values),
     and so is an integer too long to convert."""
 
 
-def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool = False):
+def _unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False):
     seen: dict = {}
     for key_node, _ in node.value:
         if key_node.tag == "tag:yaml.org,2002:merge":
@@ -47,7 +47,7 @@ def _unique_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode, deep: bool 
     return loader.construct_mapping(node, deep=deep)
 
 
-def _bounded_int(loader: yaml.SafeLoader, node: yaml.ScalarNode) -> int:
+def _bounded_int(loader: _UniqueKeyLoader, node: yaml.ScalarNode) -> int:
     """A YAML integer; one beyond Python's limit on converting digits (4300) is an error at its line, not an
     exception from deep inside the loader."""
     try:

@@ -287,11 +287,12 @@ def gps_streams(rec):
 
 
 @pytest.fixture(scope="module")
-def streamed(gps_streams):
-    """The drive streamed to iSAM2 with GPS (its frame at the end), without GPS, and to the EKF with GPS."""
+def streamed(gps_streams, ekf_streamed):
+    """The drive streamed to iSAM2 with GPS (its frame at the end), without GPS, and to the EKF with GPS (the run of
+    ``ekf_streamed``: fed sample by sample, it equals the EKF fed these streams' messages bit for bit)."""
     isam = _streamed(gps_streams, "gtsam")
     frame = isam.current_estimate().frame
-    return {"gtsam": isam.finish(), "frame": frame, "ekf": _streamed(gps_streams, "ekf").finish(),
+    return {"gtsam": isam.finish(), "frame": frame, "ekf": ekf_streamed[1],
             "free": _streamed(gps_streams.replace(gps=None), "gtsam").finish()}
 
 
