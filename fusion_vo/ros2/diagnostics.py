@@ -26,7 +26,8 @@ has unusable messages or frames are dropped.
 
 ``fusion_vo: estimate`` holds ``backend``, ``frame`` (``start`` or ``enu``), ``published``,
 ``input_age_s`` (the node's clock minus the newest measurement: how stale the inputs are),
-``predicted_s`` (how far the last published pose was predicted beyond the processed state), ``rewinds``,
+``predicted_s`` (how far the last published pose was predicted beyond the processed state),
+``predicted_max_s`` (the longest such prediction since start-up: the node's worst lag behind its clock), ``rewinds``,
 and ``monitor_drops`` (the consistency monitor's spans, heading sources and speeds, each as ``sensor component from t0 to t1``);
 WARN when the inputs are older than ``horizon`` (stalled) or the monitor drops a sensor.
 """
@@ -93,13 +94,13 @@ def input_status(stats: TopicStats, counts: dict, camera=None) -> DiagnosticStat
 
 
 def estimate_status(backend: str, frame: str, published: int, input_age: float | None, predicted: float | None,
-                    rewinds: int, episodes: list[dict], horizon: float) -> DiagnosticStatus:
+                    predicted_max: float, rewinds: int, episodes: list[dict], horizon: float) -> DiagnosticStatus:
     status = DiagnosticStatus(name=f"{NAME}: estimate", hardware_id=NAME)
     drops = "; ".join(f"{e['sensor']} {e['component']} from {e['start']:.2f} to {e['end']:.2f}" for e in episodes)
     status.values = [_kv("backend", backend), _kv("frame", frame), _kv("published", published),
                      _kv("input_age_s", "nan" if input_age is None else f"{input_age:.3f}"),
                      _kv("predicted_s", "nan" if predicted is None else f"{predicted:.3f}"),
-                     _kv("rewinds", rewinds), _kv("monitor_drops", drops or "none")]
+                     _kv("predicted_max_s", f"{predicted_max:.3f}"), _kv("rewinds", rewinds), _kv("monitor_drops", drops or "none")]
     stalled = input_age is not None and input_age > horizon
     status.level = DiagnosticStatus.WARN if stalled or episodes else DiagnosticStatus.OK
     status.message = ("inputs stalled" if stalled else "no input yet" if input_age is None else

@@ -100,6 +100,7 @@ class FusionNode(Node):
         self._last_t = -math.inf
         self._last_smoothed = -math.inf
         self._predicted: float | None = None
+        self._predicted_max = 0.0
         sensor_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=node.queue_depth,
                                 reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
         out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
@@ -199,6 +200,7 @@ class FusionNode(Node):
             return
         self._last_t = est.t
         self._predicted = est.predicted
+        self._predicted_max = max(self._predicted_max, est.predicted)
         self.pub.publish(conv.odometry_message(est, self.settings.node.odom_frame, self.settings.node.base_frame))
         self.published += 1
 
@@ -221,7 +223,7 @@ class FusionNode(Node):
         newest = self.fusion.current_estimate()
         age = None if newest is None or now <= 0 else now - newest.t
         statuses.append(estimate_status(self.settings.backend, "none" if newest is None else newest.frame,
-                                        self.published, age, self._predicted, self.fusion.rewinds,
+                                        self.published, age, self._predicted, self._predicted_max, self.fusion.rewinds,
                                         self.fusion.inconsistent(), self.settings.node.horizon))
         self.diag_pub.publish(diagnostic_array(statuses, lambda stamp: conv.set_stamp(stamp, max(now, 0.0))))
 
