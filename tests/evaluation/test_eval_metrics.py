@@ -1,5 +1,6 @@
 """Figures of fusion_vo.evaluation.metrics on trajectories with known errors."""
 
+import copy
 import math
 
 import numpy as np
@@ -104,6 +105,43 @@ def test_planar_relative_yaw_equals_evo_rotation_rpe(square):
         slow = m.rpe_errors(gt, est, delta, unit, m.PoseRelation.rotation_angle_deg)
         assert fast.size > 20
         np.testing.assert_allclose(fast, slow, atol=1e-6)
+
+
+def test_vectorised_rpe_translation_equals_evos_rpe(square):
+    """The translation errors are computed for all pairs at once; evo's RPE takes three SE(3) inversions per
+    pair. Same pairs, same numbers (a drive that also turns, so the frames of the pairs differ)."""
+    t, x, y, yaw = square
+    gt = trajectory(t[::4], x[::4], y[::4], yaw[::4], "gt")
+    est = trajectory(*distorted(t, x, y, yaw, scale=1.02, yaw_rate_bias=0.02, step=4))
+    for delta, unit in ((0.5, m.Unit.meters), (1.0, m.Unit.meters), (1, m.Unit.frames), (7, m.Unit.frames)):
+        rpe = m.RPE(m.PoseRelation.translation_part, delta=delta, delta_unit=unit, rel_delta_tol=m.REL_DELTA_TOL,
+                    all_pairs=unit == m.Unit.meters, pairs_from_reference=True)
+        rpe.process_data((gt, est))
+        fast = m.rpe_errors(gt, est, delta, unit)
+        assert fast.size > 20 and np.max(rpe.error) > 1e-4
+        np.testing.assert_allclose(fast, rpe.error, rtol=1e-12, atol=1e-14)
+    assert m.rpe_errors(gt, est, 1e3, m.Unit.meters).size == 0  # longer than the path: no pair
+
+
+def test_planar_anchor_and_alignment_equal_evos_se3_transforms(square):
+    t, x, y, yaw = square
+    gt = trajectory(t[::4], x[::4], y[::4], yaw[::4], "gt")
+    est = trajectory(*distorted(t, x, y, yaw, scale=1.02, yaw_rate_bias=0.02, step=4))
+    moved = copy.deepcopy(est)
+    moved.align_origin(gt)
+    anchored = m.anchor(gt, est)
+    np.testing.assert_allclose(anchored.positions_xyz, moved.positions_xyz, atol=1e-12)
+    np.testing.assert_allclose(anchored.orientations_quat_wxyz * np.sign(anchored.orientations_quat_wxyz[:, :1]),
+                               moved.orientations_quat_wxyz * np.sign(moved.orientations_quat_wxyz[:, :1]),
+                               atol=1e-12)
+    c, s = math.cos(0.3), math.sin(0.3)
+    matrix = np.eye(4)
+    matrix[:2, :2], matrix[:2, 3] = [[c, -s], [s, c]], [1.5, -2.0]
+    moved = copy.deepcopy(est)
+    moved.transform(matrix)
+    shifted = m.transform_2d(est, matrix[:2, :2], matrix[:2, 3])
+    np.testing.assert_allclose(shifted.positions_xyz, moved.positions_xyz, atol=1e-12)
+    np.testing.assert_allclose(m.yaw_of(shifted), m.yaw_of(moved), atol=1e-12)
 
 
 def test_standing_still_gives_figures_without_distance():
