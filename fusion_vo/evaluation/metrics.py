@@ -193,7 +193,7 @@ def associate(reference: PoseTrajectory3D, estimate: PoseTrajectory3D,
 def transform_2d(trajectory: PoseTrajectory3D, rotation: np.ndarray,
                  translation: np.ndarray) -> PoseTrajectory3D:
     """Copy of the planar ``trajectory`` with the rigid transform ``p -> R p + t`` applied on the left
-    (positions :math:`R p_k + t`, headings :math:`\psi_k + \angle R`)."""
+    (positions :math:`R p_k + t`, headings :math:`\\psi_k + \\angle R`)."""
     rotation = np.asarray(rotation, dtype=float)
     xy = trajectory.positions_xyz[:, :2] @ rotation.T + np.asarray(translation, dtype=float)
     yaw = yaw_of(trajectory) + math.atan2(rotation[1, 0], rotation[0, 0])
@@ -264,8 +264,8 @@ def rpe_pairs(reference: PoseTrajectory3D, delta: float, unit: Unit) -> np.ndarr
 def translation_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, pairs: np.ndarray) -> np.ndarray:
     """Norm of the translation of evo's RPE error pose :math:`E = (Q_i^{-1} Q_j)^{-1} (P_i^{-1} P_j)` per pair.
 
-    The translation of :math:`E` is :math:`R(Q_i^{-1} Q_j)^\top (t^P_{ij} - t^Q_{ij})` with
-    :math:`t^P_{ij} = R_{P_i}^\top (p_j - p_i)`, so its norm is :math:`\lVert t^P_{ij} - t^Q_{ij} \rVert`:
+    The translation of :math:`E` is :math:`R(Q_i^{-1} Q_j)^\\top (t^P_{ij} - t^Q_{ij})` with
+    :math:`t^P_{ij} = R_{P_i}^\\top (p_j - p_i)`, so its norm is :math:`\\lVert t^P_{ij} - t^Q_{ij} \\rVert`:
     computed for all pairs at once instead of evo's three SE(3) inversions per pair."""
     if len(pairs) == 0:
         return np.zeros(0)
