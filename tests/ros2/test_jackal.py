@@ -47,7 +47,10 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     stamps = np.array([p["t"] for p in poses])
     steps = np.diff(stamps)
     assert np.median(steps) <= 0.1, np.percentile(steps, [50, 90])
-    assert stamps[0] < imu[0, 0] * 1e-9 + 0.5, "the recorder missed the node's first poses"
+    # (every pose published was received, above) the node's first pose within 1 s of bag time (0.2 s at 5x; 0.56 s
+    # of bag time once with two busy loops beside it), while the robot still stands (it moves 4 mm in the first
+    # second, 0.87 m by 2 s): the displacement below starts from rest
+    assert stamps[0] < imu[0, 0] * 1e-9 + 1.0, ("the node's first pose came late", stamps[0], imu[0, 0] * 1e-9)
     assert stamps[-1] >= t_end, (stamps[-1], t_end)  # published up to the bag's end (and predicted beyond)
     first = poses[0]
     end = np.array([np.interp(t_end, stamps, [p[k] for p in poses]) for k in ("x", "y")])  # the pose at the end
