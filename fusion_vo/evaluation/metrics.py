@@ -218,7 +218,8 @@ def align_se2(reference: PoseTrajectory3D, estimate: PoseTrajectory3D) -> PoseTr
 def anchor(reference: PoseTrajectory3D, estimate: PoseTrajectory3D) -> PoseTrajectory3D:
     """Copy of the planar ``estimate`` moved rigidly so that its first pose equals the reference's first pose:
     :func:`transform_2d` by :math:`Q_0 P_0^{-1}`."""
-    turn = float(yaw_of(reference)[0] - yaw_of(estimate)[0])
+    first = [reference.orientations_quat_wxyz[0], estimate.orientations_quat_wxyz[0]]
+    turn = float(np.subtract(*se2.yaw_of_quaternion(first)))
     c, s = math.cos(turn), math.sin(turn)
     rotation = np.array([[c, -s], [s, c]])
     return transform_2d(estimate, rotation, reference.positions_xyz[0, :2] - rotation @ estimate.positions_xyz[0, :2])

@@ -10,11 +10,11 @@ which is the machine's load; once the speed has been steady for longer than that
 
 import numpy as np
 import pytest
-from scipy.spatial.transform import Rotation
 
 from fusion_vo.cli.main import main
 from fusion_vo.evaluation.evaluate import evaluate_trajectories
 from fusion_vo.evaluation.io import read_groundtruth
+from fusion_vo.geometry import se2
 from fusion_vo.recording import write_tum
 
 from background import placed
@@ -61,7 +61,7 @@ def _published_errors(reference, published, before: float = 0.5):
     and yaw rate, which the node predicts as constant) was steady over the ``before`` seconds up to the stamp;
     the truth's speed there; the largest change of the truth's velocity over those seconds (m/s)."""
     t, xy = reference.timestamps, reference.positions_xyz[:, :2]
-    yaw = np.unwrap(Rotation.from_quat(reference.orientations_quat_wxyz, scalar_first=True).as_euler("ZYX")[:, 0])
+    yaw = np.unwrap(se2.yaw_of_quaternion(reference.orientations_quat_wxyz))
     v = np.gradient(xy, t, axis=0)
     twist = np.column_stack([np.hypot(*v.T), np.gradient(yaw, t)])
     poses = np.loadtxt(published, ndmin=2)
