@@ -112,6 +112,7 @@ streams that bring fewer calls than units.
 from __future__ import annotations
 
 import bisect
+import importlib
 import logging
 import threading
 from collections.abc import Iterable
@@ -144,6 +145,12 @@ from fusion_vo.backends.stream_nodes import NodesMixin
 from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge_counts, payload_values
 
 logger = logging.getLogger(__name__)
+
+#: what the first node and the first mounting check load (filterpy and scipy.stats for the EKF, scipy's
+#: rotations for the check): about 0.6 s idle, loaded by the constructor so that a live stream's first
+#: samples do not wait behind it
+FIRST_NODE_IMPORTS = {"ekf": ("filterpy.kalman", "scipy.stats", "scipy.spatial.transform"),
+                      "gtsam": ("scipy.spatial.transform",)}
 
 def message_sensor(kind: str) -> str:
     """The sensor a kind of :func:`time_ordered_messages` is added to: the one whose intake names its samples
@@ -241,6 +248,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._online_graph = None
         if backend == "gtsam":
             self._online_graph = backends.OnlineGraph  # GTSAM: loaded only for an iSAM2 stream
+        for module in FIRST_NODE_IMPORTS[backend]:
+            importlib.import_module(module)
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:

@@ -4,7 +4,9 @@ The bag's IMU and wheel odometry go to the node by remapping; its calibration fo
 ``fusion-vo import-bag`` writes (the IMU's frame and the noise densities its messages state). The check is
 robot_localization's own: the final position within 0.138 m of (1.0206, 3.4292) in the frame of the IMU's
 absolute heading (the track's displacement rotated by the IMU's first yaw minus the track's first yaw),
-as ``tests/end_to_end/test_robot_logs.py`` checks ``fusion-vo run``.
+as ``tests/end_to_end/test_robot_logs.py`` checks ``fusion-vo run``, on the node's online track
+(``trajectory_file``: each node as filtered when it was processed, from the bag's first sample whatever the
+machine's load); the poses published on ``odometry/filtered`` are held to that track at the bag's end.
 """
 
 import numpy as np
@@ -12,6 +14,7 @@ import pytest
 
 from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.evaluation.io import read_tum_poses
 from fusion_vo.geometry import se2
 from fusion_vo.recording import Recording
 
@@ -27,10 +30,14 @@ BACKGROUND_JOBS = {"*": ["fusion-vo:jackal_log"]}
 def jackal_run(jackal_log, tmp_path_factory, peer):
     tmp = tmp_path_factory.mktemp("jackal")
     calib = jackal_log  # the folder fusion-vo import-bag writes from test2.bag (tests/conftest.py)
+    track = tmp / "node_track.tum"
     spec = {"node": ["ros2", "--ros-args", "-p", f"calibration:={calib}", "-p", "use_sim_time:=true",
-                     "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom"],
+                     "-p", "diagnostics_period:=0.25", "-r", "odom:=/jackal_velocity_controller/odom",
+                     "-p", f"trajectory_file:={track}"],
             "play": ["ros2-play", str(DATA / "test2.bag"), "--speed", "5"], "signal": "SIGINT"}
-    return calib, peer(tmp, spec)
+    out = peer(tmp, spec)
+    out["track"] = read_tum_poses(track) if track.exists() else None
+    return calib, out
 
 
 def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jackal_run):
@@ -47,16 +54,19 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     stamps = np.array([p["t"] for p in poses])
     steps = np.diff(stamps)
     assert np.median(steps) <= 0.1, np.percentile(steps, [50, 90])
-    # (every pose published was received, above) the node's first pose within 1 s of bag time (0.2 s at 5x; 0.56 s
-    # of bag time once with two busy loops beside it), while the robot still stands (it moves 4 mm in the first
-    # second, 0.87 m by 2 s): the displacement below starts from rest
-    assert stamps[0] < imu[0, 0] * 1e-9 + 1.0, ("the node's first pose came late", stamps[0], imu[0, 0] * 1e-9)
     assert stamps[-1] >= t_end, (stamps[-1], t_end)  # published up to the bag's end (and predicted beyond)
-    first = poses[0]
-    end = np.array([np.interp(t_end, stamps, [p[k] for p in poses]) for k in ("x", "y")])  # the pose at the end
-    d = yaw0 - first["yaw"]
+    track = out["track"]
+    assert track is not None, out["stdout"][-3:]
+    # the track starts at the bag's first sample, while the robot stands (it moves 4 mm in the first second)
+    assert abs(track.t[0] - imu[0, 0] * 1e-9) < 0.05, (track.t[0], imu[0, 0] * 1e-9)
+    end = np.array([np.interp(t_end, track.t, track.xyz[:, k]) for k in (0, 1)])
+    published_end = np.array([np.interp(t_end, stamps, [p[k] for p in poses]) for k in ("x", "y")])
+    # the published pose at the bag's end is the track's (measured 0.8-0.9 mm: the state predicted over the
+    # node's lag; mid-drive, where the lag meets the robot's turns, they differ by up to 0.8 m)
+    assert np.linalg.norm(published_end - end) < 0.01, (published_end, end)
+    d = yaw0 - float(se2.yaw_of_quaternion(track.quat_wxyz[:1])[0])
     rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
-    final = rot @ (end - np.array([first["x"], first["y"]]))
+    final = rot @ (end - track.xyz[0, :2])
     # beside it, the same fusion fed the same samples in-process (the baseline of docs/ros2.md)
     streams = streams_from_recording(Recording(calib), None, ["imu", "odom"])
     fusion = streaming_for(streams, "ekf")
@@ -68,7 +78,7 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     raw = np.loadtxt(calib / "odom0" / "pose.csv", delimiter=",", comments="#", ndmin=2)
     print(f"final position off by: node {np.linalg.norm(final - RL_FINAL):.4f} m, in-process "
           f"{np.linalg.norm(in_process - RL_FINAL):.4f} m, raw odometry {np.linalg.norm(raw[-1, 1:3] - RL_FINAL):.2f} m")
-    assert np.linalg.norm(final - RL_FINAL) < 0.138, (final, poses[0]["t"], out["diagnostics"])
+    assert np.linalg.norm(final - RL_FINAL) < 0.138, (final, out["diagnostics"])
     assert np.linalg.norm(raw[-1, 1:3] - RL_FINAL) > 5.0  # the raw odometry is far off: the check can fail
 
 
