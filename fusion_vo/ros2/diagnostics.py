@@ -13,6 +13,10 @@ topic, holding these keys (whole numbers since start-up):
     messages stating no measurement (a GPS without a fix, a range out of its limits);
 ``future``
     messages stamped more than ``horizon`` seconds ahead of the node's clock;
+``out_of_order``
+    messages stamped before an earlier message of the topic (counted as they arrive; they still go to the
+    fusion, which applies them in time order within its history: ``reordered`` or, when a busy node had them
+    sorted before the fusion saw them, not even that; ``late`` beyond it);
 ``<name>.used``, ``<name>.gated``, ``<name>.late``, ``<name>.reordered``, ``<name>.missing``
     the fusion's counts (:class:`~fusion_vo.backends.result.SensorCount`) under the names it keeps them:
     ``gyro`` and ``ahrs`` for the IMU, ``wheel`` for odometry and wheel ticks, else the sensor's. ``used``
@@ -20,7 +24,8 @@ topic, holding these keys (whole numbers since start-up):
     ``late`` messages older than the history, ``reordered`` messages out of order but applied in time order.
 
 The camera's status adds ``frames`` (processed by the frontend), ``failed`` (not measured),
-``dropped`` (pushed out of the full frame queue), ``out_of_order``, ``queue`` and ``latency_ms_p50`` /
+``dropped`` (pushed out of the full frame queue), ``out_of_order`` (there: frames not newer than the last one
+taken, left out), ``queue`` and ``latency_ms_p50`` /
 ``latency_ms_max`` (arrival of a frame to its increment in the fusion). The status is WARN while an input
 has unusable messages or frames are dropped.
 
@@ -56,6 +61,15 @@ class TopicStats:
     unusable_reason: str = ""
     skipped: int = 0
     future: int = 0
+    out_of_order: int = 0
+    newest: float = float("-inf")  # the newest stamp taken
+
+    def arrived(self, t: float) -> None:
+        """Count a message stamped ``t`` that goes to the fusion: out of order when older than the newest."""
+        if t < self.newest:
+            self.out_of_order += 1
+        else:
+            self.newest = t
 
     def reject(self, reason: str) -> None:
         """Count an unusable message; the first one of the topic is logged, later ones only counted."""
@@ -74,6 +88,8 @@ def input_status(stats: TopicStats, counts: dict, camera=None) -> DiagnosticStat
     status = DiagnosticStatus(name=f"{NAME}: {stats.sensor}", hardware_id=stats.topic)
     values = [_kv("received", stats.received), _kv("unusable", stats.unusable), _kv("skipped", stats.skipped),
               _kv("future", stats.future)]
+    if camera is None:  # (the camera's own count below)
+        values.append(_kv("out_of_order", stats.out_of_order))
     if stats.unusable_reason:
         values.append(_kv("unusable_reason", stats.unusable_reason))
     values += [_kv(f"{name}.{k}", v) for name, c in counts.items() for k, v in c.items()]

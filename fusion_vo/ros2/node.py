@@ -155,6 +155,7 @@ class FusionNode(Node):
             if sensor == "camera":
                 self.camera.put(t, sample.image)
             else:
+                stats.arrived(t)
                 self.intake.put(t, sensor, sample)
         except conv.Unusable as exc:
             stats.reject(str(exc))

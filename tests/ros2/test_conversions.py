@@ -14,6 +14,7 @@ from std_msgs.msg import Int64MultiArray  # noqa: E402
 from fusion_vo.backends.streaming import Estimate  # noqa: E402
 from fusion_vo.recording.gps import geodetic_to_enu  # noqa: E402
 from fusion_vo.ros2 import conversions as conv  # noqa: E402
+from fusion_vo.ros2.diagnostics import TopicStats, input_status  # noqa: E402
 
 pytestmark = pytest.mark.ros2
 
@@ -87,3 +88,12 @@ def test_the_published_odometry_carries_pose_and_twist_covariances():
     assert (cov[0, 0], cov[1, 1], cov[5, 5], cov[2, 2]) == (0.01, 0.02, 0.003, conv.UNESTIMATED_VARIANCE)
     tw = np.array(m.twist.covariance).reshape(6, 6)
     assert m.twist.twist.linear.x == 0.3 and (tw[0, 0], tw[5, 5]) == (1e-4, 3e-4)
+
+
+def test_a_topics_messages_stamped_before_an_earlier_one_are_counted_out_of_order():
+    stats = TopicStats("odom", "/odom")
+    for t in (1.0, 2.0, 1.5, 2.0, 3.0, 0.5):  # 1.5 and 0.5 came after a newer stamp; 2.0 twice is in order
+        stats.arrived(t)
+    assert stats.out_of_order == 2 and stats.newest == 3.0
+    values = {kv.key: kv.value for kv in input_status(stats, {}).values}
+    assert values["out_of_order"] == "2"
