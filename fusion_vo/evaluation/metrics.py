@@ -253,13 +253,18 @@ def rpe_pairs(reference: PoseTrajectory3D, delta: float, unit: Unit) -> np.ndarr
     evo reads only the positions of the poses it is given, so it gets 4x4 matrices holding those alone, not
     the trajectory's full poses (built one quaternion at a time).
     """
-    all_pairs = unit != Unit.frames and reference.num_poses <= ALL_PAIRS_LIMIT
     positions = np.zeros((reference.num_poses, 4, 4))
     positions[:, :3, 3] = reference.positions_xyz
     try:
-        return np.array(id_pairs_from_delta(positions, delta, unit, REL_DELTA_TOL, all_pairs), dtype=int)
+        return np.array(id_pairs_from_delta(positions, delta, unit, REL_DELTA_TOL, _all_pairs(reference, unit)),
+                        dtype=int)
     except filters.FilterException:
         return np.zeros((0, 2), dtype=int)
+
+
+def _all_pairs(reference: PoseTrajectory3D, unit: Unit) -> bool:
+    """Whether RPE takes every overlapping pair: over path lengths, unless the trajectory is very long."""
+    return unit != Unit.frames and reference.num_poses <= ALL_PAIRS_LIMIT
 
 
 def translation_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, pairs: np.ndarray) -> np.ndarray:
@@ -288,9 +293,8 @@ def rpe_errors(reference: PoseTrajectory3D, estimate: PoseTrajectory3D, delta: f
     """
     if relation == PoseRelation.translation_part:
         return translation_errors(reference, estimate, rpe_pairs(reference, delta, unit))
-    all_pairs = unit != Unit.frames and reference.num_poses <= ALL_PAIRS_LIMIT
-    rpe = RPE(relation, delta=delta, delta_unit=unit, rel_delta_tol=REL_DELTA_TOL, all_pairs=all_pairs,
-              pairs_from_reference=True)
+    rpe = RPE(relation, delta=delta, delta_unit=unit, rel_delta_tol=REL_DELTA_TOL,
+              all_pairs=_all_pairs(reference, unit), pairs_from_reference=True)
     try:
         rpe.process_data((reference, estimate))
     except filters.FilterException:
