@@ -185,3 +185,19 @@ def test_in_a_camera_outage_the_engine_keeps_the_wheels_model(drive, backend, na
     assert np.array_equal(ours.t, ref.t)
     assert np.max(np.abs(ours.xyyaw - ref.xyyaw)) < tolerance
 
+
+
+def test_the_first_node_takes_the_ahrs_heading_as_a_batch_run_does():
+    """The AHRS heading at the first node is applied there, as a batch run applies it: the same first pose and
+    covariance and the same number of headings used (the grids part later: a batch run spaces its nodes over
+    the whole log, a live one steps from the first sample)."""
+    s = synthetic_streams(SyntheticOptions(duration=3.0, ahrs_sigma=0.01), seed=17)
+    streams = streams_of(s).select(["wheel", "imu"])
+    cfg = FusionConfig(monitor=False)
+    batch = fuse(streams, "ekf", cfg)
+    fusion = streaming_for(streams, "ekf", cfg)
+    fusion.feed(time_ordered_messages(streams))
+    live = fusion.finish()
+    assert live.counts["ekf"]["ahrs"].used == batch.counts["ekf"]["ahrs"].used > 50
+    np.testing.assert_allclose(live.covariances["ekf"][0], batch.covariances["ekf"][0], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(live.trajectories["ekf"].xyyaw[0], batch.trajectories["ekf"].xyyaw[0], rtol=0, atol=1e-15)
