@@ -132,6 +132,17 @@ _REJECT_FACTOR = 25.0  # a block beyond this many times the gate is rejected out
 _FREE_VAR = 1e6
 
 
+def filter_libraries():
+    """filterpy's ``ExtendedKalmanFilter`` and scipy's ``chi2`` (about 0.6 s to load): loaded on first use, not
+    with the module, since a run without fusion (wheel dead reckoning only) needs neither; a live stream loads
+    them when it is built (:class:`~fusion_vo.backends.streaming.StreamingFusion`), so that its first samples
+    do not wait for them."""
+    from filterpy.kalman import ExtendedKalmanFilter
+    from scipy.stats import chi2
+
+    return ExtendedKalmanFilter, chi2
+
+
 class PlanarEkf:
     """The filter: :meth:`predict` to the next node, then :meth:`update` with that interval's measurements.
 
@@ -155,10 +166,7 @@ class PlanarEkf:
 
     def __init__(self, config: FusionConfig, camera_height: float | None = None, initial_pose=None,
                  initial_sigma=None, states=None, camera: bool = False, frame_error: float | None = None):
-        # loaded here, not with the module: a run without fusion (wheel dead reckoning only) needs neither
-        from filterpy.kalman import ExtendedKalmanFilter
-        from scipy.stats import chi2
-
+        ExtendedKalmanFilter, chi2 = filter_libraries()
         self.config = config
         self.camera_height = camera_height
         self.states = tuple(default_states(config) if states is None else states)

@@ -112,7 +112,6 @@ streams that bring fewer calls than units.
 from __future__ import annotations
 
 import bisect
-import importlib
 import logging
 import threading
 from collections.abc import Iterable
@@ -122,7 +121,7 @@ import numpy as np
 from fusion_vo import backends
 from fusion_vo.backends.batch import as_config
 from fusion_vo.backends.config import FusionConfig
-from fusion_vo.backends.ekf import PlanarEkf
+from fusion_vo.backends.ekf import PlanarEkf, filter_libraries
 from fusion_vo.backends.fixes import reacquired_text
 from fusion_vo.backends.live_monitor import LiveHeadingMonitor
 from fusion_vo.backends.result import FusionResult, SensorCount
@@ -130,6 +129,7 @@ from fusion_vo.backends.states import live_context, run_states
 from fusion_vo.backends.timeline import SensorStreams, scale_priors
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.sync import TwistDelay
+from fusion_vo.consistency import mounting
 from fusion_vo.consistency.live import LiveMounting, aligned_offset
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import (
@@ -145,12 +145,6 @@ from fusion_vo.backends.stream_nodes import NodesMixin
 from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge_counts, payload_values
 
 logger = logging.getLogger(__name__)
-
-#: what the first node and the first mounting check load (filterpy and scipy.stats for the EKF, scipy's
-#: rotations for the check): about 0.6 s idle, loaded by the constructor so that a live stream's first
-#: samples do not wait behind it
-FIRST_NODE_IMPORTS = {"ekf": ("filterpy.kalman", "scipy.stats", "scipy.spatial.transform"),
-                      "gtsam": ("scipy.spatial.transform",)}
 
 def message_sensor(kind: str) -> str:
     """The sensor a kind of :func:`time_ordered_messages` is added to: the one whose intake names its samples
@@ -248,8 +242,10 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._online_graph = None
         if backend == "gtsam":
             self._online_graph = backends.OnlineGraph  # GTSAM: loaded only for an iSAM2 stream
-        for module in FIRST_NODE_IMPORTS[backend]:
-            importlib.import_module(module)
+        # what the first node and the first mounting check would load inside an add() call (about 0.6 s)
+        if backend == "ekf":
+            filter_libraries()
+        mounting.scipy_rotation()
         self._lock = threading.RLock()
         self.config = as_config(config)
         if imu_noise:

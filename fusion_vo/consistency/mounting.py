@@ -289,13 +289,20 @@ _AXIS_ALIGNED = [np.array(m, dtype=np.float64) for m in (
     if np.linalg.det(m) > 0]
 
 
+def scipy_rotation():
+    """scipy's ``Rotation``, loaded on first use (only when an IMU is checked; a live stream loads it when it is
+    built, :class:`~fusion_vo.backends.streaming.StreamingFusion`, so that its first samples do not wait)."""
+    from scipy.spatial.transform import Rotation
+
+    return Rotation
+
+
 def rotation(up: np.ndarray, forward: np.ndarray | None, stated: np.ndarray) -> np.ndarray:
     """``R_BS`` whose third row is ``up`` and whose first row is ``forward`` as far as it allows (scipy's
     ``align_vectors``, the up axis exactly), or, without ``forward``, the stated ``R_BS`` turned by the
     smallest rotation that takes its up axis to ``up``; snapped to an axis-aligned rotation within
     ``SNAP_DEG``."""
-    from scipy.spatial.transform import Rotation  # (scipy loads only when an IMU is checked)
-
+    Rotation = scipy_rotation()
     if forward is not None:
         r, _ = Rotation.align_vectors([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], [up, forward], weights=[np.inf, 1.0])
         R = r.as_matrix()
@@ -384,8 +391,6 @@ def yaml_rows(T: np.ndarray) -> str:
 def static_tf(T: np.ndarray, parent: str = "base_link", child: str = "imu_link") -> str:
     """``x y z yaw pitch roll parent child`` of ``T_BS`` (``static_transform_publisher``'s order,
     ``R = Rz(yaw) Ry(pitch) Rx(roll)``; the frame names are those of a usual bag: put the bag's own)."""
-    from scipy.spatial.transform import Rotation
-
-    yaw, pitch, roll = Rotation.from_matrix(np.asarray(T, dtype=np.float64)[:3, :3]).as_euler("ZYX")
+    yaw, pitch, roll = scipy_rotation().from_matrix(np.asarray(T, dtype=np.float64)[:3, :3]).as_euler("ZYX")
     x, y, z = np.asarray(T, dtype=np.float64)[:3, 3]
     return " ".join(_number(v) for v in (x, y, z, yaw, pitch, roll)) + f" {parent} {child}"
