@@ -390,8 +390,10 @@ class NodesMixin:
     def _ekf_step(self, iv) -> None:
         ekf = self._ekf
         meas = interval_measurements(iv, self.config)
-        if len(self._t_nodes) == 1:  # the first interval: the readings at the first node (an AHRS heading), as a
-            start = meas["readings"].start(ekf)  # batch run applies them; node 0's record keeps the state before
+        if len(self._t_nodes) == 1:
+            # the first interval: the readings at the first node (an AHRS heading) as a batch run applies them;
+            # node 0's record keeps the state from before them, so a rewind to it applies them again
+            start = meas["readings"].start(ekf)
             if start:
                 ekf.update(start)
                 self._poses[0], self._covs[0] = ekf.x[:3].copy(), ekf.P[:3, :3].copy()

@@ -186,7 +186,6 @@ def test_in_a_camera_outage_the_engine_keeps_the_wheels_model(drive, backend, na
     assert np.max(np.abs(ours.xyyaw - ref.xyyaw)) < tolerance
 
 
-
 def test_the_first_node_takes_the_ahrs_heading_as_a_batch_run_does():
     """The AHRS heading at the first node is applied there, as a batch run applies it: the same first pose and
     covariance and the same number of headings used (the grids part later: a batch run spaces its nodes over
@@ -200,4 +199,5 @@ def test_the_first_node_takes_the_ahrs_heading_as_a_batch_run_does():
     live = fusion.finish()
     assert live.counts["ekf"]["ahrs"].used == batch.counts["ekf"]["ahrs"].used > 50
     np.testing.assert_allclose(live.covariances["ekf"][0], batch.covariances["ekf"][0], rtol=1e-12, atol=0)
-    np.testing.assert_allclose(live.trajectories["ekf"].xyyaw[0], batch.trajectories["ekf"].xyyaw[0], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(live.trajectories["ekf"].xyyaw[0], batch.trajectories["ekf"].xyyaw[0],
+                               rtol=0, atol=1e-15)

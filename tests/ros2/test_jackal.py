@@ -40,6 +40,12 @@ def jackal_run(jackal_log, tmp_path_factory, peer):
     return calib, out
 
 
+def _in_imu_heading(displacement: np.ndarray, turn: float) -> np.ndarray:
+    """A track's displacement turned by ``turn`` (the IMU's first yaw minus the track's) into the IMU's frame."""
+    c, s = np.cos(turn), np.sin(turn)
+    return np.array([[c, -s], [s, c]]) @ displacement
+
+
 def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jackal_run):
     calib, out = jackal_run
     assert out["player"]["code"] == 0, out["player"]
@@ -64,17 +70,13 @@ def test_the_bag_played_into_the_node_ends_where_robot_localization_expects(jack
     # the published pose at the bag's end is the track's (measured 0.8-0.9 mm: the state predicted over the
     # node's lag; mid-drive, where the lag meets the robot's turns, they differ by up to 0.8 m)
     assert np.linalg.norm(published_end - end) < 0.01, (published_end, end)
-    d = yaw0 - float(se2.yaw_of_quaternion(track.quat_wxyz[:1])[0])
-    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
-    final = rot @ (end - track.xyz[0, :2])
+    final = _in_imu_heading(end - track.xyz[0, :2], yaw0 - float(se2.yaw_of_quaternion(track.quat_wxyz[:1])[0]))
     # beside it, the same fusion fed the same samples in-process (the baseline of docs/ros2.md)
     streams = streams_from_recording(Recording(calib), None, ["imu", "odom"])
     fusion = streaming_for(streams, "ekf")
     fusion.feed(time_ordered_messages(streams))
     xy = fusion.finish().trajectories["ekf"].xyyaw
-    d = yaw0 - xy[0, 2]
-    rot = np.array([[np.cos(d), -np.sin(d)], [np.sin(d), np.cos(d)]])
-    in_process = rot @ (xy[-1, :2] - xy[0, :2])
+    in_process = _in_imu_heading(xy[-1, :2] - xy[0, :2], yaw0 - xy[0, 2])
     raw = np.loadtxt(calib / "odom0" / "pose.csv", delimiter=",", comments="#", ndmin=2)
     print(f"final position off by: node {np.linalg.norm(final - RL_FINAL):.4f} m, in-process "
           f"{np.linalg.norm(in_process - RL_FINAL):.4f} m, raw odometry {np.linalg.norm(raw[-1, 1:3] - RL_FINAL):.2f} m")
