@@ -143,7 +143,7 @@ class OnlineGraph:
             head = builder.first_node()
             head.factors.extend(nf.factors)
             head.values.update(nf.values)
-            head.sensors = nf.sensors
+            head.sensors = head.sensors + nf.sensors  # (the first node's own readings: an AHRS heading)
             nf = head
         return builder, nf
 
