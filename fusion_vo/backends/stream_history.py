@@ -113,7 +113,8 @@ class HistoryMixin:
         and gyro's motion ``s`` from the node to the fix, :meth:`_sliver`), which is the fix's lever arm at that node;
         its covariance grows by that motion's variance (the heading's through the lever arm). Node ``a`` is rebuilt
         with it (:meth:`_replace`), gated against iSAM2's estimate of that node (not re-acquired). Before the
-        alignment the fix is kept for it as an in-order one is (missing); a fix that cannot be placed is late."""
+        alignment the fix is kept for it as an in-order one is (missing), one at the first node too; any other fix that
+        cannot be placed is late."""
         T = self._t_nodes
         k = bisect.bisect_left(T, fix.t)
         a = min((j for j in (k - 1, k) if 0 <= j < len(T)), key=lambda j: abs(T[j] - fix.t))
@@ -122,6 +123,10 @@ class HistoryMixin:
         if a > 0 and rec is not None and self._records[a - 1] is not None \
                 and abs(T[a] - fix.t) <= 1.0 / self.config.step_hz:
             sliver = self._sliver(T[a], fix.t)
+        if sliver is None and self._frame == "start" and a == 0 and abs(T[0] - fix.t) <= 1e-3:
+            bisect.insort(self._gps_seen, fix, key=lambda f: f.t)  # at the first node: kept for the alignment
+            self._count("gps").missing += 1
+            return
         if sliver is None:
             self._count("gps").late += 1
             logger.warning("gps fix at t=%.3f arrived after t=%.3f was processed and could not be placed on a node; "

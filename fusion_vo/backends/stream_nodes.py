@@ -409,16 +409,22 @@ class NodesMixin:
         self._record(ekf.x[:3], ekf.P[:3, :3])
 
     def _due_fixes(self, t1: float) -> list:
-        """The queued fixes up to the node at ``t1`` leave the queue (kept in the node's record): those before it are
-        counted late (behind the last node already: they cannot be applied causally), those at it returned."""
+        """The queued fixes up to the node at ``t1`` leave the queue (kept in the node's record): those at it are
+        returned; those at the first node, while the heading of ENU is unknown, are kept for the alignment (as a fix
+        that does not fit yet is, :meth:`_align_world`: counted missing); any other before it is counted late (behind
+        the last node already: it cannot be applied causally)."""
         due = []
+        first = self._t_nodes[0] if len(self._t_nodes) == 1 and self._frame == "start" else None
         for fix in [f for f in self._gps if f.t <= t1 + 1e-3]:
             self._gps.remove(fix)
             self._step_fixes.append(fix)
-            if abs(fix.t - t1) > 1e-3:
-                self._step_counts.setdefault("gps", SensorCount()).late += 1
-            else:
+            if abs(fix.t - t1) <= 1e-3:
                 due.append(fix)
+            elif first is not None and abs(fix.t - first) <= 1e-3:
+                self._gps_seen.append(fix)
+                self._step_counts.setdefault("gps", SensorCount()).missing += 1
+            else:
+                self._step_counts.setdefault("gps", SensorCount()).late += 1
         return due
 
     def _graph_step(self, iv, prepared=None) -> None:
