@@ -15,6 +15,7 @@ from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
+from fusion_vo.sensors.imu import AHRS_OFFSET_WINDOW
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate
 
@@ -181,6 +182,8 @@ class NodesMixin:
                 t0 = self._t_nodes[-1]
                 if np.isfinite(until):
                     t1 = self._next_node(t0, until)
+                    if t1 is not None and self._awaits_ahrs(t0, until):
+                        return
                 else:  # finishing: the last samples end the track
                     end = self._last_time()
                     t1 = self._next_node(t0, end, end) if np.isfinite(end) else None
@@ -198,6 +201,15 @@ class NodesMixin:
                 started.stage = 2
             else:
                 self._end_step()
+
+    def _awaits_ahrs(self, t0: float, until: float) -> bool:
+        """Whether the interval from ``t0`` waits for the IMU's samples of :data:`~fusion_vo.sensors.imu.AHRS_OFFSET_WINDOW`
+        after it: while the AHRS's offset is not known (its orientations in the buffer), the interval that finds it
+        averages those, and only once the processed time ``until`` has passed them are they all in whatever order
+        they came."""
+        buf = self._buffers.get("imu")
+        return (self._heading_offset is None and bool(buf) and buf[-1][1][2] is not None
+                and until < t0 + AHRS_OFFSET_WINDOW)
 
     def _part(self, inc: VisualIncrement, t0: float, t1: float) -> tuple[VisualIncrement, int, int, int] | None:
         """The share of ``inc`` over the node interval ``(t0, t1)`` (:func:`increment_part`), its nodes those
@@ -243,7 +255,8 @@ class NodesMixin:
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
             hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
             if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
-                hi = max(hi, bisect.bisect_right(buf, t0 + 0.25 + self.config.max_gap, key=lambda item: item[0]) + 1)
+                hi = max(hi, bisect.bisect_right(buf, t0 + AHRS_OFFSET_WINDOW + self.config.max_gap,
+                                                 key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
             if reach is not None:  # the time of the last sample read (any new one, if all were read)
                 reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf

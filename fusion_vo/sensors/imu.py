@@ -379,6 +379,11 @@ def imu_grid(iv) -> ImuGrid:
 
 
 # --------------------------------------------------------------------------- registration
+#: the AHRS's first samples [s] whose headings, carried to the first node by the gyro, are averaged into the offset
+#: between AHRS north and the initial heading (:func:`add_intervals`)
+AHRS_OFFSET_WINDOW = 0.25
+
+
 def add_intervals(iv, streams, config, counts) -> None:
     """The gyro's integrated angle per node interval (:class:`ImuGrid` ``gyro_ok, gyro_angle``) and, with an AHRS
     orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw``,
@@ -413,7 +418,7 @@ def add_intervals(iv, streams, config, counts) -> None:
         # AHRS north vs. the estimate's initial heading, averaged over the samples of the first
         # quarter second with the gyro carrying the heading (one noisy sample would bias all headings)
         first = int(np.argmax(ok_n))
-        window = (ht >= T[first] - 1e-9) & (ht <= T[first] + 0.25)
+        window = (ht >= T[first] - 1e-9) & (ht <= T[first] + AHRS_OFFSET_WINDOW)
         gyro_heading = np.zeros(int(window.sum()))
         if len(gyro.t):
             angle = cumulative_angle(gyro)
