@@ -113,8 +113,9 @@ class IntakeMixin:
         return False  # iSAM2: the intervals the sample changes are marked once it is buffered (_mark)
 
     def _mark(self, t_lo: float, t_hi: float) -> None:
-        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding."""
-        if self.backend == "ekf" or not self._t_nodes or t_lo >= self._t_nodes[-1]:
+        """iSAM2: mark the processed node intervals overlapping ``[t_lo, t_hi]`` for rebuilding (the last node's too when
+        ``t_lo`` is at it: a camera increment re-timed onto it)."""
+        if self.backend == "ekf" or not self._t_nodes or t_lo > self._t_nodes[-1] + 1e-9:
             return
         first = max(bisect.bisect_left(self._t_nodes, t_lo - 1e-9), 1)
         last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
@@ -151,8 +152,11 @@ class IntakeMixin:
         T = self._t_nodes
         a = min(range(max(bisect.bisect_left(T, inc.t0) - 1, 0), min(bisect.bisect_left(T, inc.t0) + 1, len(T))),
                 key=lambda k: abs(T[k] - inc.t0))
-        if inc.t1 > T[-1] + 1e-9:
-            b, t_b = None, inc.t1  # ends after the last node: the next node is its frame, only t0 moves
+        step = 1.0 / self.config.step_hz
+        if inc.t1 > T[-1] + 0.5 * step:
+            # ends after the last node: the next node is its frame, only t0 moves (within half a step of the last node
+            # it ends there: fill-in nodes stepped from an epoch-scale start drift off the frames by float steps)
+            b, t_b = None, inc.t1
             if a != len(T) - 1:
                 return None
         else:
@@ -163,7 +167,6 @@ class IntakeMixin:
                 return None
         if abs(T[a] - inc.t0) < 1e-9 and abs(t_b - inc.t1) < 1e-9:
             return inc
-        step = 1.0 / self.config.step_hz
         if max(abs(T[a] - inc.t0), abs(t_b - inc.t1)) > step or self._records[a] is None:
             return None
         if b is not None and (self._records[b] is None or any(abs(v.t0 - T[a]) < 1e-9 for v in self._records[b].visual)
