@@ -81,8 +81,8 @@ class HistoryMixin:
             for v in rec.visual:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
             prev = self._records[j - 1]
-            iv, step, consumed, _, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
-                                                                  prev.heading_offset)
+            iv, step, consumed, rec.reach, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
+                                                                          prev.heading_offset)
             if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
                 step["gps"] = rec.counts["gps"]
             rec.counts, rec.visual = step, consumed

@@ -128,17 +128,35 @@ class IntakeMixin:
             return
         t = float(t)
         self._touch(stream, t)
+        buf = self._buffers[stream]
+        read = self._read_by_last(stream, t)
+        if read and self.backend == "ekf":
+            # from the intervals its predecessor in the stream is read by: those up to it read it as their next sample
+            k = bisect.bisect_right(buf, t, key=lambda item: item[0])
+            i = self._rewind_index(buf[k - 1][0] if k else t, 2)
+            if i is not None:
+                self._rewind(i)
         if self._late(sensor, t):
             return
-        buf = self._buffers[stream]
         if buf and t < buf[-1][0]:
             self._count(sensor).reordered += 1
         k = bisect.bisect_right(buf, t, key=lambda item: item[0])
         buf.insert(k, (t, payload))
-        if self._t_nodes and t < self._t_nodes[-1]:
+        if self._t_nodes and (t < self._t_nodes[-1] or read):
             # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
             self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
+
+    def _read_by_last(self, stream: str, t: float) -> bool:
+        """Whether a sample of ``stream`` at ``t``, at or after the last node, is one that node's interval would have
+        read: before the last sample it read of the stream (the first after its end, a neighbour of the spike check),
+        at most ``max_gap`` after the node. Such a sample came out of order within the window but after the node was
+        processed (the window vouches for the samples up to the node, not for those after it that the interval
+        reads), and the node is processed again with it, as for a late sample."""
+        if not self._t_nodes or not self._records or self._records[-1] is None:
+            return False
+        last = self._t_nodes[-1]
+        return last <= t < min(self._records[-1].reach.get(stream, -np.inf), last + self.config.max_gap)
 
     def _on_nodes(self, inc: VisualIncrement) -> VisualIncrement | None:
         """iSAM2: a late increment moved onto the processed nodes nearest its frames (None: it cannot be).

@@ -375,7 +375,8 @@ class NodesMixin:
         self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
                                          monitor=self._monitor.state() if keep else None, dropped=started.dropped,
                                          fixes=self._step_fixes, gps=self._gps_state() if keep else None,
-                                         offered=self._step_offered, slope=(float(iv.cx[0]), float(iv.cy[0]))))
+                                         offered=self._step_offered, slope=(float(iv.cx[0]), float(iv.cy[0])),
+                                         reach=started.reach))
         self._retire()
         self._prune(t0)
 

@@ -65,6 +65,7 @@ class NodeRecord:
     dropped: frozenset = frozenset()  # heading components the monitor dropped in this node's interval
     offered: int = 0  # iSAM2: fixes offered to the gate at this node (those without a factor were gated)
     slope: tuple | None = None  # the slope projection factors (cx, cy) of the interval ending at this node
+    reach: dict = field(default_factory=dict)  # stream -> time of the last sample its interval read (Started.reach)
 
 
 def payload_values(payload):
