@@ -129,10 +129,10 @@ class IntakeMixin:
         t = float(t)
         self._touch(stream, t)
         buf = self._buffers[stream]
+        k = bisect.bisect_right(buf, t, key=lambda item: item[0])  # (a rewind or a late count leaves the buffers)
         read = self._read_by_last(stream, t)
         if read and self.backend == "ekf":
             # from the intervals its predecessor in the stream is read by: those up to it read it as their next sample
-            k = bisect.bisect_right(buf, t, key=lambda item: item[0])
             i = self._rewind_index(buf[k - 1][0] if k else t, 2)
             if i is not None:
                 self._rewind(i)
@@ -140,7 +140,6 @@ class IntakeMixin:
             return
         if buf and t < buf[-1][0]:
             self._count(sensor).reordered += 1
-        k = bisect.bisect_right(buf, t, key=lambda item: item[0])
         buf.insert(k, (t, payload))
         if self._t_nodes and (t < self._t_nodes[-1] or read):
             # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only

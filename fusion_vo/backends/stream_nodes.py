@@ -202,14 +202,18 @@ class NodesMixin:
             else:
                 self._end_step()
 
-    def _awaits_ahrs(self, t0: float, until: float) -> bool:
-        """Whether the interval from ``t0`` waits for the IMU's samples of :data:`~fusion_vo.sensors.imu.AHRS_OFFSET_WINDOW`
-        after it: while the AHRS's offset is not known (its orientations in the buffer), the interval that finds it
-        averages those, and only once the processed time ``until`` has passed them are they all in whatever order
-        they came."""
+    def _finds_ahrs_offset(self, heading_offset: float | None) -> bool:
+        """Whether the next interval finds the AHRS's offset to the initial heading: none known yet (``heading_offset``)
+        and the buffered IMU samples carry orientations. That interval reads and averages the IMU's samples of
+        :data:`~fusion_vo.sensors.imu.AHRS_OFFSET_WINDOW` after its start."""
         buf = self._buffers.get("imu")
-        return (self._heading_offset is None and bool(buf) and buf[-1][1][2] is not None
-                and until < t0 + AHRS_OFFSET_WINDOW)
+        return heading_offset is None and bool(buf) and buf[-1][1][2] is not None
+
+    def _awaits_ahrs(self, t0: float, until: float) -> bool:
+        """Whether the interval from ``t0``, finding the AHRS's offset (:meth:`_finds_ahrs_offset`), waits for the
+        samples it averages: only once the processed time ``until`` has passed them are they all in, in whatever
+        order they came."""
+        return self._finds_ahrs_offset(self._heading_offset) and until < t0 + AHRS_OFFSET_WINDOW
 
     def _part(self, inc: VisualIncrement, t0: float, t1: float) -> tuple[VisualIncrement, int, int, int] | None:
         """The share of ``inc`` over the node interval ``(t0, t1)`` (:func:`increment_part`), its nodes those
@@ -254,7 +258,7 @@ class NodesMixin:
             more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
             hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
-            if name == "imu" and heading_offset is None and buf and buf[-1][1][2] is not None:
+            if name == "imu" and self._finds_ahrs_offset(heading_offset):
                 hi = max(hi, bisect.bisect_right(buf, t0 + AHRS_OFFSET_WINDOW + self.config.max_gap,
                                                  key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]

@@ -29,8 +29,24 @@ def _messages(s, rng, delay):
     msgs = [(v.t1, "visual", v) for v in s.visual]
     msgs += [(t, "wheel", WheelTicks(t, l, r)) for t, l, r in zip(s.wheel.t, s.wheel.left, s.wheel.right)]
     msgs += [(t, "imu", ImuSample(t, g, a)) for t, g, a in zip(s.imu.t, s.imu.gyro, s.imu.accel)]
+    return _arriving_late(msgs, rng, delay)
+
+
+def _arriving_late(msgs, rng, delay):
+    """``msgs`` (time-ordered ``(t, kind, message)``) in the order they arrive when each comes 0 to ``delay`` s late."""
     arrival = np.array([m[0] for m in msgs]) + rng.uniform(0.0, delay, len(msgs))
-    return [msgs[i] for i in np.argsort(arrival)]
+    return [msgs[i] for i in np.argsort(arrival, kind="stable")]
+
+
+def _log_piece(log, lo: float, hi: float) -> tuple:
+    """The odometry and IMU of the imported robot log ``log`` from ``lo`` to ``hi`` seconds after its first IMU sample,
+    with the configuration of the engine-against-itself tests (the decisions taken in hindsight off)."""
+    config = FusionConfig(monitor=False, sync_odometry=False)
+    streams = streams_from_recording(Recording(log), None, ["odom", "imu"], config)
+    t0 = streams.imu.t[0]
+    for name, data in streams.sampled():
+        streams[name] = samples_between(data, t0 + lo, t0 + hi)
+    return streams, config
 
 
 @pytest.fixture(scope="module")
@@ -142,14 +158,9 @@ def test_on_the_jackal_log_arrivals_shuffled_within_the_reorder_window_give_the_
     the 0.3 s reorder window): the engine's track is the one fed in time order, bit for bit. Fails if the interval
     that finds the AHRS's offset (averaged over the first quarter second) is built before every sample of that
     quarter second is in (the offset was then 1.3e-5 rad off, the tracks 0.1 mm apart after the 10 s)."""
-    config = FusionConfig(monitor=False, sync_odometry=False)
-    streams = streams_from_recording(Recording(jackal_log), None, ["odom", "imu"], config)
-    t0 = streams.imu.t[0]
-    for name, data in streams.sampled():
-        streams[name] = samples_between(data, -np.inf, t0 + 10.0)
+    streams, config = _log_piece(jackal_log, -np.inf, 10.0)
     in_order = time_ordered_messages(streams)
-    arrival = np.array([m[0] for m in in_order]) + np.random.default_rng(3).uniform(0.0, 0.28, len(in_order))
-    shuffled = [in_order[i] for i in np.argsort(arrival, kind="stable")]
+    shuffled = _arriving_late(in_order, np.random.default_rng(3), 0.28)
     assert shuffled[:20] != in_order[:20]
     tracks = []
     for messages in (in_order, shuffled):
@@ -169,14 +180,9 @@ def test_on_the_husky_log_a_sample_an_interval_reads_after_its_end_is_applied_wh
     sample after its end; the window vouches for the samples up to the node, not for that one, which may come
     after the node was processed. Fails if such a sample is not applied by processing again every interval that
     reads it (then 2 more intervals without odometry here, the track 2 mm off)."""
-    config = FusionConfig(monitor=False, sync_odometry=False)
-    streams = streams_from_recording(Recording(husky_log), None, ["odom", "imu"], config)
-    t0 = streams.imu.t[0]
-    for name, data in streams.sampled():
-        streams[name] = samples_between(data, t0 + 185.0, t0 + 205.0)
+    streams, config = _log_piece(husky_log, 185.0, 205.0)
     in_order = time_ordered_messages(streams)
-    arrival = np.array([m[0] for m in in_order]) + np.random.default_rng(4).uniform(0.0, 0.28, len(in_order))
-    shuffled = [in_order[i] for i in np.argsort(arrival, kind="stable")]
+    shuffled = _arriving_late(in_order, np.random.default_rng(4), 0.28)
     results = []
     for messages in (in_order, shuffled):
         fusion = streaming_for(streams, "ekf", config)
