@@ -19,7 +19,7 @@ from fusion_vo.backends.fixes import OUTAGE_NOTE_S, Reacquire, outage_note
 from fusion_vo.sensors.gps import align_to_fixes
 from fusion_vo.sensors.gps import predict as gps_predict
 
-from fusion_vo.backends.stream_state import merge_counts
+from fusion_vo.backends.stream_state import interval_coverage, merge_counts
 
 logger = logging.getLogger(__name__)
 
@@ -58,7 +58,7 @@ class HistoryMixin:
         self._heading_offset = rec.heading_offset
         if rec.monitor is not None:
             self._monitor.restore(rec.monitor)
-        del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:]
+        del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:], self._covered[i:]
         self.rewinds += 1
 
     def _drop_pending(self) -> None:
@@ -83,6 +83,7 @@ class HistoryMixin:
             prev = self._records[j - 1]
             iv, step, consumed, rec.reach, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
                                                                           prev.heading_offset)
+            self._cover(j - 1, interval_coverage(iv))
             if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
                 step["gps"] = rec.counts["gps"]
             rec.counts, rec.visual = step, consumed

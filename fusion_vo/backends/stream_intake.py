@@ -26,6 +26,14 @@ from fusion_vo.backends.stream_state import payload_values
 logger = logging.getLogger(__name__)
 
 
+def _finite(value) -> bool:
+    """Whether every number of ``value`` (a number or an array-like) is finite; TypeError or ValueError when it is
+    not numeric."""
+    if isinstance(value, float):  # (the common case, without numpy's per-call cost)
+        return math.isfinite(value)
+    return bool(np.isfinite(np.asarray(value, dtype=np.float64)).all())
+
+
 class IntakeMixin:
     """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
 
@@ -67,9 +75,8 @@ class IntakeMixin:
         """Non-finite values and times beyond the horizon are counted as gated, never raised."""
         try:
             t = float(t)
-            parts = values if isinstance(values, (list, tuple)) else [values]
-            flat = [np.ravel(np.asarray(v, dtype=np.float64)) for v in parts]
-            finite = np.isfinite(t) and all(bool(np.all(np.isfinite(v))) for v in flat)
+            finite = math.isfinite(t) and all(_finite(v) for v in (values if isinstance(values, (list, tuple))
+                                                                     else [values]))
         except (TypeError, ValueError):
             finite = False
         if not finite:

@@ -17,7 +17,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
 from fusion_vo.sensors.imu import AHRS_OFFSET_WINDOW
 
-from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate
+from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate, interval_coverage
 
 logger = logging.getLogger(__name__)
 
@@ -343,11 +343,12 @@ class NodesMixin:
     def _begin_step(self, t0: float, t1: float) -> None:
         """First unit of a node: its interval from the buffers, handed to the heading monitor."""
         iv, step, consumed, reach, graph_camera = self._interval(t0, t1, self._heading_offset)
+        covered = interval_coverage(iv)  # (a camera increment over several intervals: its share covers this one)
         monitor = self._monitor.state()
         self._monitor.add(iv)  # (the monitor judges the shares of an increment over several intervals)
         if graph_camera is not None:
             iv.sensors["camera"] = graph_camera
-        self._pending = Started(t0, t1, iv, step, consumed, monitor, reach)
+        self._pending = Started(t0, t1, iv, step, consumed, monitor, reach, covered)
 
     def _decide(self, started: Started) -> None:
         """The monitor's current decisions, applied to the started node's interval."""
@@ -374,6 +375,7 @@ class NodesMixin:
             self._graph_step(iv, started.factors)
             state = None
         t0 = self._t_nodes[-1]
+        self._cover(len(self._covered), started.covered)
         self._t_nodes.append(started.t1)
         keep = state is not None
         self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
@@ -383,6 +385,15 @@ class NodesMixin:
                                          reach=started.reach))
         self._retire()
         self._prune(t0)
+
+    def _cover(self, k: int, covered: dict[str, bool]) -> None:
+        """Interval ``k`` (ending at node ``k + 1``) is covered by the sensors ``covered`` says
+        (:func:`~fusion_vo.backends.stream_state.interval_coverage` of its interval as built, before the monitor's
+        decisions: what the finished run's outage notes are made of)."""
+        if k == len(self._covered):
+            self._covered.append(covered)
+        else:
+            self._covered[k] = covered
 
     # ------------------------------------------------------------------ backends
     def _first_node(self, t: float) -> None:

@@ -10,6 +10,9 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.live_monitor import MonitorState
 from fusion_vo.backends.result import SensorCount
+from fusion_vo.measurements.grid import outage_notes
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.visual import camera_grid
 
 logger = logging.getLogger(__name__)
 
@@ -46,6 +49,7 @@ class Started:
     consumed: list  # visual increments taken from the buffer
     monitor: MonitorState  # the heading monitor before the node was added to it
     reach: dict  # stream -> time of the last sample the interval read
+    covered: dict  # sensor -> whether its data cover the interval (interval_coverage)
     dropped: frozenset | None = None  # the monitor's decisions, once applied to ``iv``
     factors: list | None = None  # iSAM2: [builder, node factors, linearised factors] (background: None)
     stage: int = 0  # iSAM2: 1 once the factors are built, 2 once linearised
@@ -66,6 +70,33 @@ class NodeRecord:
     offered: int = 0  # iSAM2: fixes offered to the gate at this node (those without a factor were gated)
     slope: tuple | None = None  # the slope projection factors (cx, cy) of the interval ending at this node
     reach: dict = field(default_factory=dict)  # stream -> time of the last sample its interval read (Started.reach)
+
+
+def interval_coverage(iv) -> dict[str, bool]:
+    """Whether each sensor's data cover the one node interval of ``iv``: ``"camera"`` when a visual increment (or its
+    share) is on it, and each registered sensor's coverage label (``"gyro"``, ``"wheel"``, ...) as it reports it."""
+    covered = {}
+    cam = iv.sensors.get("camera")
+    if cam is not None:
+        covered["camera"] = bool(len(camera_grid(iv).i0))
+    for sensor in registry.sensors():
+        if sensor.coverage is not None and sensor.name in iv.sensors:
+            label, ok = sensor.coverage(iv)
+            covered[label] = bool(len(ok) and ok[-1])
+    return covered
+
+
+def node_outage_notes(t_nodes: list[float], covered: list[dict[str, bool]]) -> list[str]:
+    """The notes a batch run gives for the coverage of the intervals between the node times ``t_nodes`` (``covered[k]``
+    that of the interval ending at node ``k + 1``, :func:`interval_coverage`), for each sensor that covered at least
+    one interval (one that never did is said by its counts): :func:`~fusion_vo.measurements.grid.outage_notes`."""
+    T = np.asarray(t_nodes, dtype=np.float64)
+    notes = []
+    for label in dict.fromkeys(label for c in covered for label in c):  # (the camera's first, then the registry's order)
+        ok = np.array([c.get(label, False) for c in covered], dtype=bool)
+        if ok.any():
+            notes.extend(outage_notes(label, T, ok))
+    return notes
 
 
 def payload_values(payload):

@@ -74,6 +74,12 @@ node consumed. A measurement older than the last processed node but within the h
 
 Measurements older than the history are counted as ``late`` and reported by :meth:`finish`.
 
+Outages
+-------
+:meth:`finish`'s notes name the spans without the camera (0.2 s or longer) or without another sensor's samples
+(0.5 s or longer) as a batch run's do (:func:`~fusion_vo.measurements.grid.outage_notes`), from the coverage of
+each node interval as last processed (:func:`~fusion_vo.backends.stream_state.interval_coverage`).
+
 Bad input
 ---------
 A measurement with a non-finite time or value, or a time more than ``horizon`` seconds ahead of the
@@ -142,7 +148,9 @@ from fusion_vo.sensors.wheel_states import curvature_observable, curvature_state
 from fusion_vo.backends.stream_history import HistoryMixin
 from fusion_vo.backends.stream_intake import IntakeMixin
 from fusion_vo.backends.stream_nodes import NodesMixin
-from fusion_vo.backends.stream_state import Estimate, NodeRecord, Started, merge_counts, payload_values
+from fusion_vo.backends.stream_state import (
+    Estimate, NodeRecord, Started, merge_counts, node_outage_notes, payload_values,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -304,6 +312,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf
         self._t_nodes: list[float] = []
+        self._covered: list[dict[str, bool]] = []  # interval k (ending at node k + 1) -> the sensors covering it
         self._poses: list[np.ndarray] = []
         self._covs: list[np.ndarray] = []
         self._heading_offset: float | None = None
@@ -589,7 +598,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             result.covariances[name] = np.array(self._covs)
         counts = self.counts
         result.counts[name] = counts
-        result.notes = list(self._notes)
+        result.notes = node_outage_notes(self._t_nodes, self._covered) + list(self._notes)
         result.consistency = list(self._consistency)
         if "gps" in self.sensors:
             gps = counts.get("gps", SensorCount())

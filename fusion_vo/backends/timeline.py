@@ -36,7 +36,7 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import (  # noqa: F401 (the grid's helpers, here too)
-    coverage, node_index, node_indices, ordered_fields, time_order, uncovered_runs, when,
+    coverage, node_index, node_indices, ordered_fields, outage_notes, time_order, uncovered_runs, when,
 )
 from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
@@ -305,8 +305,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
             continue
         name, ok = sensor.coverage(iv)
         if name in counts:
-            for a, b in uncovered_runs(T, ok, 0.5):
-                notes.append(f"{name} unavailable from {when(a, T)} to {when(b, T)}")
+            notes.extend(outage_notes(name, T, ok))
     # with the built-in calibrations, decided here unless given for the run
     iv.states = run_states(context_of(iv, config), iv.states) if states is None else tuple(states)
     return iv

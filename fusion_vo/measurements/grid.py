@@ -94,3 +94,17 @@ def uncovered_runs(T: np.ndarray, covered: np.ndarray, min_length: float) -> lis
             runs.append((float(T[k]), float(T[j])))
         k = j
     return runs
+
+
+#: shortest span [s] without the camera's increments, and without another sensor's samples, that a note names
+CAMERA_LOST, UNAVAILABLE = 0.2, 0.5
+
+
+def outage_notes(label: str, T: np.ndarray, covered: np.ndarray) -> list[str]:
+    """The notes for the spans of node intervals that ``label``'s data do not cover (``covered`` (K,) over the node
+    times ``T`` (K+1,)): the camera lost for at least :data:`CAMERA_LOST` seconds, another sensor unavailable for at
+    least :data:`UNAVAILABLE`."""
+    if label == "camera":
+        return [f"camera lost from {when(a, T)} to {when(b, T)}; the other sensors carried the estimate"
+                for a, b in uncovered_runs(T, covered, CAMERA_LOST)]
+    return [f"{label} unavailable from {when(a, T)} to {when(b, T)}" for a, b in uncovered_runs(T, covered, UNAVAILABLE)]

@@ -44,7 +44,7 @@ from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
-from fusion_vo.measurements.grid import node_indices, uncovered_runs, when
+from fusion_vo.measurements.grid import node_indices, outage_notes
 
 
 @dataclass(frozen=True)
@@ -169,8 +169,7 @@ def add_intervals(iv, streams, config, counts) -> None:
     np.add.at(edges, cam.i0, 1)
     np.add.at(edges, cam.i1, -1)
     covered = np.cumsum(edges)[:-1] > 0
-    for a, b in uncovered_runs(T, covered, 0.2):
-        notes.append(f"camera lost from {when(a, T)} to {when(b, T)}; the other sensors carried the estimate")
+    notes.extend(outage_notes("camera", T, covered))
 
 
 def _stated_frame_cov(stated: list, cov: np.ndarray) -> np.ndarray:

@@ -313,3 +313,37 @@ def test_the_first_node_takes_the_ahrs_heading_as_a_batch_run_does():
     np.testing.assert_allclose(live.covariances["ekf"][0], batch.covariances["ekf"][0], rtol=1e-12, atol=0)
     np.testing.assert_allclose(live.trajectories["ekf"].xyyaw[0], batch.trajectories["ekf"].xyyaw[0],
                                rtol=0, atol=1e-15)
+
+
+def _outages(result) -> list[str]:
+    return [n for n in result.notes if " lost from " in n or " unavailable from " in n]
+
+
+@pytest.mark.parametrize("backend", ["ekf", "gtsam"])
+def test_the_engine_notes_the_camera_and_gyro_outages_the_batch_run_notes(drive, backend):
+    """A camera outage (frames 100-139 failed), a second without gyro samples and dropped frames: the engine's finished
+    run names the same outages, in the same words, as the batch run, when the samples come in time order and when
+    one in fifty wheel and IMU samples comes 0.8 s late (beyond the reorder window: rewinds and rebuilds). Fails if the engine says nothing of them,
+    counts an interval covered only by a share of a spanning increment as lost, or keeps the coverage of an interval
+    from before it was processed again."""
+    s, _ = drive
+    streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
+    visual = _with_frames_dropped_and_lost(streams.visual, shift=0.0)
+    lost = [dataclasses.replace(v, t0=visual[99].t1, status="lost") if 100 <= i < 140 else v
+            for i, v in enumerate(visual)]
+    keep = (streams.imu.t < 6.0) | (streams.imu.t > 7.0)
+    imu = dataclasses.replace(streams.imu, t=streams.imu.t[keep], gyro=streams.imu.gyro[keep],
+                              accel=streams.imu.accel[keep])
+    streams = _on_the_epoch_clock(streams.replace(visual=lost, imu=imu))
+    expected = _outages(fuse(streams, backend))
+    assert len(expected) == 2 and expected[0].startswith("camera lost from") and expected[1].startswith("gyro ")
+    msgs = time_ordered_messages(streams)
+    rng = np.random.default_rng(3)
+    arrival = np.array([t + (0.8 if kind != "visual" and rng.uniform() < 0.02 else 0.0) for t, kind, _ in msgs])
+    late = [msgs[i] for i in np.argsort(arrival, kind="stable")]
+    for feed in (msgs, late):
+        fusion = streaming_for(streams, backend)
+        fusion.feed(feed)
+        assert _outages(fusion.finish()) == expected
+        assert feed is msgs or fusion.rewinds > 0
+
