@@ -28,17 +28,18 @@ class HistoryMixin:
     """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
 
     # ------------------------------------------------------------------ history (EKF rewind)
-    def _rewind_index(self, t: float, back: int) -> int | None:
+    def _rewind_index(self, t: float, back: int, first: int | None = None) -> int | None:
         """The node to re-filter from for a measurement at ``t``, or None if it is beyond the history (or
         more than ``max_gap`` before the first node, even while the track is younger than the history).
 
         A sample at ``t`` changes the interval that contains it and, through interpolation at that
         interval's start, the one before; so the filter restarts ``back=2`` nodes before ``t``. A visual
-        increment is applied from its ``t0`` node (``back=0``).
+        increment is applied from its ``t0`` node (``back=0``). ``first``: the first node whose interval reads the
+        sample (:meth:`_first_reader`), to restart from the node before it instead.
         """
         if self.history <= 0 or t < self._t_nodes[0] - self.config.max_gap:
             return None  # (a sample that far before the first node would be interpolated across the gap)
-        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0)
+        i = max(bisect.bisect_left(self._t_nodes, t - 1e-9) - back, 0) if first is None else first - 1
         if self._records[i] is None or self._t_nodes[-1] - self._t_nodes[i] > self.history + 1e-9:
             return None
         return i

@@ -105,11 +105,13 @@ class IntakeMixin:
         else:
             logger.debug("%s sample rejected: %s (%s)", sensor, reason, detail)
 
-    def _late(self, sensor: str, t: float, back: int = 2) -> bool:
-        """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can."""
+    def _late(self, sensor: str, t: float, back: int = 2, first: int | None = None) -> bool:
+        """True if ``t`` is before the last node and cannot be re-applied; rewinds the EKF if it can: from ``back``
+        nodes before ``t``, or (``first``: the first node whose interval reads it, :meth:`_first_reader`) from the node
+        before ``first``."""
         if not self._t_nodes or t >= self._t_nodes[-1] - 1e-9:
             return False
-        i = self._rewind_index(t, back)
+        i = self._rewind_index(t, back, first)
         if i is None:
             self._count(sensor).late += 1
             logger.warning("%s measurement at t=%.3f arrived after t=%.3f was processed (beyond the %.3g s "
@@ -137,21 +139,49 @@ class IntakeMixin:
         self._touch(stream, t)
         buf = self._buffers[stream]
         k = bisect.bisect_right(buf, t, key=lambda item: item[0])  # (a rewind or a late count leaves the buffers)
-        read = self._read_by_last(stream, t)
-        if read and self.backend == "ekf":
-            # from the intervals its predecessor in the stream is read by: those up to it read it as their next sample
-            i = self._rewind_index(buf[k - 1][0] if k else t, 2)
+        # the first interval this sample (and the twists a new delay moved, _shift_twists) changes, when processed
+        shifted, self._shifted_from = self._shifted_from, None
+        t_from = t if shifted is None else min(t, shifted)
+        T = self._t_nodes
+        redo = bool(T) and (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from))
+        first = self._first_reader(stream, t_from) if redo else None
+        if T and t < T[-1] - 1e-9:
+            if self._late(sensor, t, first=first):
+                return
+        elif first is not None and self.backend == "ekf":
+            i = self._rewind_index(t, 0, first)
             if i is not None:
                 self._rewind(i)
-        if self._late(sensor, t):
-            return
         if buf and t < buf[-1][0]:
             self._count(sensor).reordered += 1
         buf.insert(k, (t, payload))
-        if self._t_nodes and (t < self._t_nodes[-1] or read):
-            # a late sample changes the interpolation, gating and spike medians of its neighbours' intervals only
-            self._mark(buf[max(k - 3, 0)][0], max(buf[min(k + 3, len(buf) - 1)][0], t))
+        if redo and self.backend != "ekf":
+            # a late sample changes the intervals that read it (their interpolation across a gap of the stream, the
+            # gating and the spike medians of its neighbours)
+            t_lo = buf[max(k - 3, 0)][0] if first is None else min(buf[max(k - 3, 0)][0], T[first])
+            self._mark(t_lo, max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
+
+    def _first_reader(self, stream: str, t: float) -> int | None:
+        """The first processed node whose interval would read a sample of ``stream`` at ``t``, or None before the
+        first interval.
+
+        Node ``j``'s interval read the stream's samples up to its reach (:attr:`NodeRecord.reach`: the last sample
+        it read, or any new one when it read all), so a sample before it changes what it read. Reach grows with
+        the node, so the nodes are scanned back from the newest while they would read ``t``: in a gap of the stream
+        the first reader is the gap's first interval, not the one holding ``t``. None also when the scan reaches a
+        node that has left the history (the first reader may be older still): the sample is then applied from two
+        nodes before it, or counted late (:meth:`_late`).
+        """
+        T, records = self._t_nodes, self._records
+        if len(T) < 2:
+            return None
+        j = len(T) - 1
+        while j >= 1 and records[j] is not None and records[j].reach.get(stream, np.inf) > t:
+            j -= 1
+        if j >= 1 and records[j] is None:  # (retired: the first reader may be older than the history)
+            return None
+        return min(j + 1, len(T) - 1)
 
     def _read_by_last(self, stream: str, t: float) -> bool:
         """Whether a sample of ``stream`` at ``t``, at or after the last node, is one that node's interval would have
@@ -234,6 +264,8 @@ class IntakeMixin:
         last = self._t_nodes[-1] if self._t_nodes else -np.inf
         keep = [item for item in buf if item[0] <= last]
         moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
+        if moved:  # the intervals that read them at their old times or would at the new ones are processed again
+            self._shifted_from = min(moved[0][0], moved[0][0] - dt)
         if buf:
             self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
 

@@ -60,8 +60,9 @@ Late data
 Both backends keep the last ``history`` seconds (default 2 s) of the raw samples and of what each
 node consumed. A measurement older than the last processed node but within the history is applied:
 
-* the EKF keeps its states too: it rewinds to the node before the measurement and re-filters
-  everything after it, so the result is the one the same data would have given in time order;
+* the EKF keeps its states too: it rewinds to the node before the first interval that reads the
+  measurement (in a gap of its stream, the gap's first) and re-filters everything after it, so the result is
+  the one the same data would have given in time order;
 * iSAM2 rebuilds the node intervals the measurement changes (its own interval and those whose
   interpolation, gating or spike median its neighbours feed) and swaps their factors for the new ones
   in one update (``removeFactorIndices``), when the next node is due; the custom factors are linearised
@@ -312,6 +313,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf
         self._t_nodes: list[float] = []
+        self._shifted_from: float | None = None  # earliest time of the twists a new delay moved (_shift_twists)
         self._covered: list[dict[str, bool]] = []  # interval k (ending at node k + 1) -> the sensors covering it
         self._poses: list[np.ndarray] = []
         self._covs: list[np.ndarray] = []

@@ -347,3 +347,30 @@ def test_the_engine_notes_the_camera_and_gyro_outages_the_batch_run_notes(drive,
         assert _outages(fusion.finish()) == expected
         assert feed is msgs or fusion.rewinds > 0
 
+
+def test_a_late_sample_inside_a_gap_of_its_stream_redoes_every_interval_that_read_across_the_gap(drive):
+    """The wheels silent from 4.98 s to 5.22 s (shorter than max_gap: the intervals in the gap interpolate across it),
+    and their one sample inside the gap arriving a second late: the EKF's track is the one of the samples in time
+    order, bit for bit. Fails if the engine redoes only the intervals next to the late sample (it re-filtered from two
+    nodes before it: 2.2 mm off), leaving the earlier intervals of the gap with the interpolation across the whole
+    gap. (iSAM2 rebuilds the intervals of the samples' three neighbours on each side, the whole gap here.)"""
+    backend, name = "ekf", "ekf"
+    s, _ = drive
+    streams = streams_of(s, stated_scale=1.02).select(["wheel", "imu"])
+    wheel = streams.wheel
+    inside = np.flatnonzero((wheel.t > 5.0) & (wheel.t < 5.2))
+    keep = np.ones(len(wheel.t), bool)
+    keep[inside[:-1]] = False  # (the last one stays, the one that comes late)
+    streams = streams.replace(wheel=dataclasses.replace(wheel, t=wheel.t[keep], left=wheel.left[keep],
+                                                        right=wheel.right[keep]))
+    msgs = time_ordered_messages(streams)
+    t_late = wheel.t[inside[-1]]
+    late = sorted(msgs, key=lambda m: m[0] + (1.0 if m[1] == "wheel" and m[0] == t_late else 0.0))
+    tracks = []
+    for feed in (msgs, late):
+        fusion = streaming_for(streams, backend)
+        fusion.feed(feed)
+        tracks.append(fusion.finish().trajectories[name])
+        assert feed is msgs or fusion.rewinds == 1
+    assert np.array_equal(tracks[0].t, tracks[1].t)
+    assert np.max(np.abs(tracks[0].xyyaw - tracks[1].xyyaw)) < 1e-12
