@@ -200,8 +200,9 @@ class IntakeMixin:
         iSAM2's nodes stay where they were processed (fill-in nodes when the camera was late), so the
         increment is re-timed: the wheels' (and gyro's) motion over the slivers between each frame and its
         nearest node is composed onto it, ``B(n_a)->B(t0)  (+)  delta  (+)  B(t1)->B(n_b)``, and its covariance
-        grows by 2 % of each sliver's motion (plus 0.1 mm / 0.1 mrad). Both nodes must be consecutive and
-        within the history, the slivers shorter than a node step, and no other increment on that interval.
+        grows by 2 % of each sliver's motion (plus 0.1 mm / 0.1 mrad). Both nodes must be within the history, the
+        slivers shorter than a node step, and no other increment on the intervals between them; an increment over
+        dropped frames spans several, and is then one factor between its two nodes, as in time order.
         """
         T = self._t_nodes
         a = min(range(max(bisect.bisect_left(T, inc.t0) - 1, 0), min(bisect.bisect_left(T, inc.t0) + 1, len(T))),
@@ -217,14 +218,17 @@ class IntakeMixin:
             k = bisect.bisect_left(T, inc.t1)
             b = min(range(max(k - 1, 0), min(k + 1, len(T))), key=lambda j: abs(T[j] - inc.t1))
             t_b = T[b]
-            if b != a + 1:
+            if b <= a:
                 return None
         if abs(T[a] - inc.t0) < 1e-9 and abs(t_b - inc.t1) < 1e-9:
             return inc
         if max(abs(T[a] - inc.t0), abs(t_b - inc.t1)) > step or self._records[a] is None:
             return None
-        if b is not None and (self._records[b] is None or any(abs(v.t0 - T[a]) < 1e-9 for v in self._records[b].visual)
-                              or any(abs(v.t1 - t_b) < 1e-9 for v in self._visual)):
+        # every interval it spans (frames dropped between its two: several) processed, within the history, and
+        # without another increment, taken or waiting
+        if b is not None and (any(self._records[j] is None or any(v.ok for v in self._records[j].visual)
+                                  for j in range(a + 1, b + 1))
+                              or any(v.ok and v.t1 > T[a] + 1e-9 and v.t0 < t_b - 1e-9 for v in self._visual)):
             return None
         head = self._sliver(T[a], inc.t0)
         tail = self._sliver(inc.t1, t_b)

@@ -69,8 +69,8 @@ node consumed. A measurement older than the last processed node but within the h
   at the current estimate, twice. The node times stay those already processed: a camera later than the
   reorder window finds fill-in nodes where its frames would have been, so its increment is re-timed onto
   the nearest two nodes (the wheels' and the gyro's motion over the slivers between each frame and its
-  node composed onto it, the covariance grown accordingly); it is counted late only if those nodes are
-  not consecutive or already carry an increment. The online poses of the rebuilt nodes become iSAM2's
+  node composed onto it, the covariance grown accordingly), one factor between them when it spans dropped
+  frames; it is counted late only if an interval between them already carries an increment. The online poses of the rebuilt nodes become iSAM2's
   estimates after the swap (:meth:`smoothed` gives the whole current estimate).
 
 Measurements older than the history are counted as ``late`` and reported by :meth:`finish`.
@@ -466,7 +466,9 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                 return
             inc = attached
         self._insert_visual(inc)
-        self._mark(inc.t1, inc.t1)  # consumed by the first node at or after its t1
+        # consumed by the first node at or after its t1; a re-timed one over several intervals re-does each of them
+        after = bisect.bisect_right(self._t_nodes, inc.t0 + 1e-9)
+        self._mark(self._t_nodes[after] if after < len(self._t_nodes) else inc.t1, inc.t1)
         self._advance(inc.t1)
 
     def add_wheel(self, m: WheelTicks) -> None:
