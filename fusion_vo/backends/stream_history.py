@@ -84,7 +84,7 @@ class HistoryMixin:
             prev = self._records[j - 1]
             iv, step, consumed, rec.reach, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
                                                                           prev.heading_offset)
-            self._cover(j - 1, interval_coverage(iv))
+            self._covered[j - 1] = interval_coverage(iv)  # (before the monitor's decisions, as when first processed)
             if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
                 step["gps"] = rec.counts["gps"]
             rec.counts, rec.visual = step, consumed

@@ -375,7 +375,7 @@ class NodesMixin:
             self._graph_step(iv, started.factors)
             state = None
         t0 = self._t_nodes[-1]
-        self._cover(len(self._covered), started.covered)
+        self._covered.append(started.covered)
         self._t_nodes.append(started.t1)
         keep = state is not None
         self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
@@ -385,15 +385,6 @@ class NodesMixin:
                                          reach=started.reach))
         self._retire()
         self._prune(t0)
-
-    def _cover(self, k: int, covered: dict[str, bool]) -> None:
-        """Interval ``k`` (ending at node ``k + 1``) is covered by the sensors ``covered`` says
-        (:func:`~fusion_vo.backends.stream_state.interval_coverage` of its interval as built, before the monitor's
-        decisions: what the finished run's outage notes are made of)."""
-        if k == len(self._covered):
-            self._covered.append(covered)
-        else:
-            self._covered[k] = covered
 
     # ------------------------------------------------------------------ backends
     def _first_node(self, t: float) -> None:

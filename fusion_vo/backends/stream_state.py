@@ -12,7 +12,6 @@ from fusion_vo.backends.live_monitor import MonitorState
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.measurements.grid import outage_notes
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.visual import camera_grid
 
 logger = logging.getLogger(__name__)
 
@@ -78,7 +77,7 @@ def interval_coverage(iv) -> dict[str, bool]:
     covered = {}
     cam = iv.sensors.get("camera")
     if cam is not None:
-        covered["camera"] = bool(len(camera_grid(iv).i0))
+        covered["camera"] = bool(len(cam.i0))
     for sensor in registry.sensors():
         if sensor.coverage is not None and sensor.name in iv.sensors:
             label, ok = sensor.coverage(iv)

@@ -195,6 +195,19 @@ def test_on_the_husky_log_a_sample_an_interval_reads_after_its_end_is_applied_wh
     assert np.array_equal(a.trajectories["ekf"].xyyaw, b.trajectories["ekf"].xyyaw)
 
 
+def _camera_late_by(streams, delay: float):
+    """iSAM2 fed ``streams`` in time order and with the camera ``delay`` seconds late: the camera's counts of both runs
+    and the distance [m] of each in-order node to the late run's track (whose nodes are fill-in nodes, not frames)."""
+    runs = []
+    for camera_delay in (0.0, delay):
+        fusion = streaming_for(streams, "gtsam")
+        fusion.feed(time_ordered_messages(streams, camera_delay=camera_delay))
+        runs.append(fusion.finish())
+    a, b = (r.trajectories["gtsam_online"] for r in runs)
+    at = np.column_stack([np.interp(a.t, b.t, b.xyyaw[:, i]) for i in range(2)])
+    return [r.counts["gtsam_online"]["camera"] for r in runs], np.linalg.norm(at - a.xyyaw[:, :2], axis=1)
+
+
 def test_on_the_epoch_clock_isam2_attaches_camera_increments_later_than_its_window(drive):
     """Recordings stamp epoch seconds, where a fill-in node stepped from the first sample sits a float step or more
     off the frame it stands for (0.24 µs a step, growing along the drive). With the camera 0.35 s late and the default
@@ -204,16 +217,8 @@ def test_on_the_epoch_clock_isam2_attaches_camera_increments_later_than_its_wind
     199 were counted late)."""
     s, _ = drive
     streams = _on_the_epoch_clock(streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"]))
-    runs = []
-    for delay in (0.0, 0.35):
-        fusion = streaming_for(streams, "gtsam")
-        fusion.feed(time_ordered_messages(streams, camera_delay=delay))
-        runs.append(fusion.finish())
-    in_order, late = (r.counts["gtsam_online"]["camera"] for r in runs)
+    (in_order, late), gap = _camera_late_by(streams, 0.35)
     assert in_order.late == 0 and late.late <= 1 and late.used >= in_order.used - 1 > 190
-    a, b = (r.trajectories["gtsam_online"] for r in runs)  # (the late run's nodes are fill-in nodes, not frames)
-    at = np.column_stack([np.interp(a.t, b.t, b.xyyaw[:, i]) for i in range(2)])
-    gap = np.linalg.norm(at - a.xyyaw[:, :2], axis=1)
     assert gap.max() < 0.015 and np.median(gap) < 0.004  # measured 7.1 / 1.6 mm; with them late 33 / 4.3 cm
 
 
@@ -385,14 +390,6 @@ def test_isam2_attaches_a_late_increment_over_dropped_frames_to_the_nodes_it_spa
     s, _ = drive
     streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
     streams = _on_the_epoch_clock(streams.replace(visual=_with_frames_dropped_and_lost(streams.visual, shift=0.0)))
-    runs = []
-    for delay in (0.0, 0.35):
-        fusion = streaming_for(streams, "gtsam")
-        fusion.feed(time_ordered_messages(streams, camera_delay=delay))
-        runs.append(fusion.finish())
-    in_order, late = (r.counts["gtsam_online"]["camera"] for r in runs)
+    (in_order, late), gap = _camera_late_by(streams, 0.35)
     assert in_order.late == 0 and late.late <= 1 and late.used >= in_order.used - 1
-    a, b = (r.trajectories["gtsam_online"] for r in runs)
-    at = np.column_stack([np.interp(a.t, b.t, b.xyyaw[:, i]) for i in range(2)])
-    gap = np.linalg.norm(at - a.xyyaw[:, :2], axis=1)
     assert gap.max() < 0.015 and np.median(gap) < 0.004
