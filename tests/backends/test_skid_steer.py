@@ -137,11 +137,24 @@ def test_delayed_odometry_is_put_on_the_gyro_clock():
     assert rms < 0.15 and rms_raw > 1.5 * rms, (rms, rms_raw)
 
 
+def _stale_twist_readers(fusion) -> list[int]:
+    """The processed nodes still in the engine's history whose interval read a twist sample that is no longer at
+    that time in its buffer (moved by a new delay estimate and not read again)."""
+    times = {t for t, _ in fusion._buffers["odom"]}
+    return [j for j, rec in enumerate(fusion._records)
+            if rec is not None and np.isfinite(reach := rec.reach.get("odom", np.inf)) and reach not in times]
+
+
 def test_streaming_puts_delayed_odometry_on_the_gyro_clock():
-    """Streaming use corrects the same 0.4 s delay, estimated from the samples seen so far."""
+    """Streaming use corrects the same 0.4 s delay, estimated from the samples seen so far.
+
+    Each new estimate moves the buffered twists the nodes have not passed; those the last nodes' intervals read
+    (the sample after an interval's end) are read again at their new times: after every change no processed
+    interval holds a twist at its old time. Fails if the moved twists are left for the intervals to come (then the
+    last 2 and 3 nodes keep a twist at its old time at the second and third of the 3 changes)."""
     import dataclasses
 
-    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+    from fusion_vo.backends.streaming import message_sensor, streaming_for, time_ordered_messages
 
     # measured: 1.10 m RMS corrected (from 20 s on), 1.83 m not corrected, 0.13 m for the drive on time
     odom, imu, truth = husky_like(duration=90.0, stop=(50.0, 70.0), yaw_scale=0.75, seed=1, corners=True,
@@ -150,7 +163,15 @@ def test_streaming_puts_delayed_odometry_on_the_gyro_clock():
     rms = {}
     for sync in (True, False):
         fusion = streaming_for(late, "ekf", FusionConfig(sync_odometry=sync))
-        fusion.feed(time_ordered_messages(late))
+        changes, stale = 0, []
+        for _, kind, sample in time_ordered_messages(late):
+            before = fusion._twist_delay.delay if sync else None
+            fusion.add(message_sensor(kind), sample)
+            if sync and fusion._twist_delay.delay != before:
+                changes += 1
+                stale += _stale_twist_readers(fusion)
+        assert not stale, stale
+        assert changes == 3 or not sync, changes  # (at 20.4 s, 50.4 s and 80.4 s)
         result = fusion.finish()
         _, rms[sync] = position_errors(result.trajectories["ekf"], truth)
         if sync:
