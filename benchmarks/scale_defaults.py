@@ -168,16 +168,13 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
     f = ekf.filter_for(iv, config)
-    meas = ekf.interval_measurements(iv, config)
-    blocks = meas["readings"].start(f)
-    if blocks:
-        f.update(blocks)
+    readings = ekf.interval_readings(iv, config)
+    f.begin(readings)
     kv = f.columns["visual_scale"].start
     out = np.empty(iv.n_steps + 1)
     out[0] = f.x[kv]
     for k in range(iv.n_steps):
-        f.predict(iv.dt[k], ekf.frame_error_cov(meas, k))
-        f.update(ekf.step_blocks(f, meas, k))
+        f.step(readings, k)
         out[k + 1] = f.x[kv]
     return out
 

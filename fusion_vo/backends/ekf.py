@@ -78,7 +78,7 @@ The accepted blocks are stacked into one update with filterpy's
 
 Each sensor contributes :class:`~fusion_vo.sensors.readings.Readings` (its measurement model, the
 readings per interval, their noise); :mod:`fusion_vo.backends.ekf_adapter` turns any of them into the
-blocks of a step (:func:`interval_measurements`, :func:`step_blocks`). Absolute readings (a GPS fix) are
+blocks of a step (:func:`interval_readings`, :meth:`PlanarEkf.step`). Absolute readings (a GPS fix) are
 applied at their own node after each step's update (:mod:`fusion_vo.backends.fixes`) with the same model's
 residual, Jacobian, Mahalanobis gate ``S = H P Hᵀ + Σ`` and robust weight, through
 :meth:`PlanarEkf.update_pose`; rejected fixes (a multipath jump) change nothing and are counted. The
@@ -324,6 +324,30 @@ class PlanarEkf:
             out[PX:PY + 1] = lin[4]
         return out
 
+    # ------------------------------------------------------------------ one node
+    def begin(self, readings: EkfReadings) -> None:
+        """Update with the readings at the first node of their grid (an AHRS heading), if any."""
+        blocks = readings.start(self)
+        if blocks:
+            self.update(blocks)
+
+    def step(self, readings: EkfReadings, k: int, inspect=None) -> np.ndarray:
+        """Interval ``k`` of the readings' grid: :meth:`predict` across it (with its frame error), then
+        :meth:`update` with its readings and those at its end node. ``inspect(blocks)`` sees the blocks at the
+        prediction, before the update. Returns the prediction's ``F``; the prediction stays in ``kf.x_prior``,
+        ``kf.P_prior``.
+
+        The one filter step of every pass: the batch filter (:func:`run_ekf`), the streaming engine (one
+        interval at a time) and the NIS of :mod:`fusion_vo.evaluation.consistency`.
+        """
+        F = self.predict(float(readings.t[k + 1] - readings.t[k]), readings.frame_cov(k))
+        self.time = float(readings.t[k + 1])
+        blocks = [b for _, b in readings.blocks(self, k)]
+        if inspect is not None:
+            inspect(blocks)
+        self.update(blocks)
+        return F
+
     # ------------------------------------------------------------------ measurement blocks
     def block(self, model: MeasurementModel, z, R, rows: tuple | None = None, name: str | None = None, **params):
         """``(sensor, z, h, H, R, angle_row)`` of one measurement through ``model`` at the current state.
@@ -409,23 +433,9 @@ class PlanarEkf:
 
 
 # --------------------------------------------------------------------------- batch run over intervals
-def interval_measurements(iv: Intervals, config: FusionConfig) -> dict:
-    """The sensors' readings on the filter's grid (:class:`~fusion_vo.backends.ekf_adapter.EkfReadings`), under
-    ``"readings"``."""
-    return {"readings": EkfReadings(sensor_readings(iv, config), iv.t)}
-
-
-def frame_error_cov(meas: dict, k: int) -> np.ndarray | None:
-    """The camera's frame error over interval ``k`` for the prediction into node ``k + 1``
-    (:meth:`~fusion_vo.backends.ekf_adapter.EkfReadings.frame_cov`), or None."""
-    readings = meas.get("readings")
-    return None if readings is None else readings.frame_cov(k)
-
-
-def step_blocks(ekf: PlanarEkf, meas: dict, k: int) -> list:
-    """Measurement blocks of interval ``k`` (from :func:`interval_measurements`) for :meth:`PlanarEkf.update`:
-    the sensors' readings over it and at its end, in their order."""
-    return [b for _, b in meas["readings"].blocks(ekf, k)]
+def interval_readings(iv: Intervals, config: FusionConfig) -> EkfReadings:
+    """The sensors' readings on the filter's grid ``iv.t`` (:class:`~fusion_vo.backends.ekf_adapter.EkfReadings`)."""
+    return EkfReadings(sensor_readings(iv, config), iv.t)
 
 
 def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
@@ -449,28 +459,23 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     ekf = filter_for(iv, config)
     ekf.innovations = InnovationLog()
     ekf.time = float(iv.t[0])
-    meas = interval_measurements(iv, config)
+    readings = interval_readings(iv, config)
     K = iv.n_steps
-    dt = iv.dt
     n = ekf.dim
     xs = np.zeros((K + 1, n))
     Ps = np.zeros((K + 1, n, n))
     x_prior = np.zeros((K + 1, n))
     P_prior = np.zeros((K + 1, n, n))
     Fs = np.zeros((K + 1, n, n))
-    blocks = meas["readings"].start(ekf)
-    if blocks:
-        ekf.update(blocks)
+    ekf.begin(readings)
     # absolute readings, applied at their nodes on their own after each step's update (GPS fixes)
-    at_nodes = [EkfFixes(r, iv.t) for r in meas["readings"].absolute]
+    at_nodes = [EkfFixes(r, iv.t) for r in readings.absolute]
     for run in at_nodes:
         run.node(ekf, 0)
     xs[0], Ps[0] = ekf.x, ekf.P
     for k in range(K):
-        Fs[k + 1] = ekf.predict(dt[k], frame_error_cov(meas, k))
-        x_prior[k + 1], P_prior[k + 1] = ekf.x, ekf.P
-        ekf.time = float(iv.t[k + 1])
-        ekf.update(step_blocks(ekf, meas, k))
+        Fs[k + 1] = ekf.step(readings, k)
+        x_prior[k + 1], P_prior[k + 1] = ekf.kf.x_prior.ravel(), ekf.kf.P_prior
         for run in at_nodes:
             run.node(ekf, k + 1)
         xs[k + 1], Ps[k + 1] = ekf.x, ekf.P

@@ -156,6 +156,7 @@ class EkfReadings:
 
     def __init__(self, readings: list[Readings], t: np.ndarray):
         t = np.asarray(t, dtype=np.float64)
+        self.t = t
         self.intervals: list[_Table] = []
         self.nodes: list[_Table] = []
         #: absolute readings of the pose, applied on their own (:mod:`fusion_vo.backends.fixes`)

@@ -119,7 +119,7 @@ from fusion_vo.backends.factors import (POSE_LETTERS, ModelFactor, ModelFactors,
                                         pose_table)
 from fusion_vo.backends.graph_builder import FRAME_LETTER, GraphBuilder, X
 from fusion_vo.backends.residuals import sensor_nis
-from fusion_vo.backends.isam import Retired, current_value_lookup, freeze_custom_factors, isam_params, track_estimate, update_reweighted
+from fusion_vo.backends.isam import Isam2Driver, Retired, current_value_lookup, freeze_custom_factors, isam_params
 
 logger = logging.getLogger(__name__)
 
@@ -161,15 +161,17 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
     model_factors: list[ModelFactor] = []
     values = gtsam.Values()
     dims: dict[int, int] = {}
-    isam = gtsam.ISAM2(isam_params()) if gcfg.online else None
+    maker = ValuesMaker()
+    driver = Isam2Driver(gtsam.Pose2(*builder.initial_pose()), gcfg.reweight_passes, maker) if gcfg.online else None
+    isam = None if driver is None else driver.isam
     lag = gtsam.IncrementalFixedLagSmoother(gcfg.fixed_lag, isam_params()) if gcfg.fixed_lag > 0 else None
     t_online = 0.0
     t_build = time.process_time()
-    estimate: dict = dict(builder.initial_estimate)
+    estimate: dict = {} if driver is None else driver.estimate  # running guesses of the next node's variables
+    estimate.update(builder.initial_estimate)
     prev_pose = gtsam.Pose2(*builder.initial_pose())
     # sensors whose factors are gated against the online estimate (GPS fixes)
     at_nodes = [(GraphFixes(builder, r), absolute_factor(r)) for r in builder.readings.absolute]
-    maker = ValuesMaker()
     batch_values: dict = {}
     # the sensors' residuals need every factor in iSAM2: nothing is marginalised then
     retired = Retired(builder, horizon=n_nodes + 1) if gcfg.residuals else Retired(builder)
@@ -187,7 +189,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
                 fixes.add(nf, n, pose_cov, factor)
         builder.count(nf)
         incremental = isam is not None or lag is not None
-        new_values = maker.make(nf.values) if incremental else None
+        new_values = maker.make(nf.values) if lag is not None else None
         if gcfg.batch:
             for f in nf.factors:
                 if isinstance(f, ModelFactor):
@@ -201,22 +203,22 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             dims[key] = 3 if isinstance(v, gtsam.Pose2) else 1
         t0 = time.process_time() if incremental else 0.0
         new_graph = gtsam.NonlinearFactorGraph()
-        weights: list = []
-        if incremental:
-            lookup = current_value_lookup(nf.values, isam if isam is not None else lag, prev_pose, n - 1)
-            for f in freeze_custom_factors(nf.factors, lookup, maker, weights):
-                new_graph.add(f)
-        if isam is not None:
-            reweighted += update_reweighted(isam, new_graph, new_values, nf.factors, weights, maker,
-                                            gcfg.reweight_passes)[1] > 0
+        if driver is not None:
+            frozen = driver.freeze(nf, n - 1)
+            new_graph = frozen.graph
+            reweighted += driver.add(nf, frozen)[1] > 0
             retired.step(isam, n)
             pose = isam.calculateEstimatePose2(X(n))
             online_poses[n] = (pose.x(), pose.y(), pose.theta())
             online_cov[n] = isam.marginalCovariance(X(n))
-            track_estimate(estimate, isam, builder, n, nf)
+            driver.advance(builder, n, nf, pose)
             t_online += time.process_time() - t0
             prev_pose = pose
         else:
+            if lag is not None:
+                lookup = current_value_lookup(nf.values, lag, prev_pose, n - 1)
+                for f in freeze_custom_factors(nf.factors, lookup, maker):
+                    new_graph.add(f)
             prev_pose = nf.values[X(n)]
             estimate["last_increment"] = nf.guess if nf.guess is not None else np.zeros(3)
         if lag is not None:

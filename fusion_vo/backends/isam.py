@@ -12,6 +12,7 @@ drive. Used by the batch run's ``gtsam_online`` track (:func:`fusion_vo.backends
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -228,6 +229,69 @@ def current_value_lookup(new: dict, solver, prev_pose: gtsam.Pose2, prev: int):
         return estimate(key)
 
     return value
+
+
+@dataclass
+class Frozen:
+    """A node's factors as they go into iSAM2: ``graph`` holds ``factors`` (in order) linearised at the prediction,
+    ``weights`` the robust weight each sensor-model factor got there (:func:`freeze_custom_factors`)."""
+
+    graph: gtsam.NonlinearFactorGraph
+    factors: list
+    weights: list
+
+
+class Isam2Driver:
+    """iSAM2 fed one node at a time: the one driver of the batch run's ``gtsam_online`` track
+    (:func:`fusion_vo.backends.graph.run_graph`) and of the streaming engine
+    (:class:`~fusion_vo.backends.online_graph.OnlineGraph`).
+
+    A node's factors (:class:`~fusion_vo.backends.graph_builder.NodeFactors`, ``nf``) go in in two calls:
+
+    1. :meth:`freeze` linearises its sensor-model factors at the prediction: its new variables at their
+       guesses ``nf.values``, the previous node's pose at :attr:`prev_pose`, every other variable at iSAM2's
+       estimate (:func:`current_value_lookup`, :func:`freeze_custom_factors`);
+    2. :meth:`add` updates iSAM2 with them and the new variables, and evaluates the robust weights again where
+       the update put the node, at most ``passes`` times (:func:`update_reweighted`).
+
+    :meth:`advance` then keeps the node's pose as :attr:`prev_pose` and the running bias and calibration
+    estimates (:func:`track_estimate`) that the next node's guesses start from.
+    """
+
+    def __init__(self, prev_pose: gtsam.Pose2, passes: int, maker: ValuesMaker | None = None):
+        self.isam = gtsam.ISAM2(isam_params())
+        self.passes = passes
+        self.maker = maker if maker is not None else ValuesMaker()
+        self.prev_pose = prev_pose  # iSAM2's estimate of the newest node
+        self.estimate: dict = {}  # running bias / calibration estimates (guesses of the next node)
+
+    def freeze(self, nf: NodeFactors, prev: int, factors: list | None = None) -> Frozen:
+        """``factors`` (default ``nf.factors``) linearised at the prediction of the node after the pose index
+        ``prev``."""
+        factors = nf.factors if factors is None else factors
+        lookup = current_value_lookup(nf.values, self.isam, self.prev_pose, prev)
+        weights: list = []
+        graph = gtsam.NonlinearFactorGraph()
+        for f in freeze_custom_factors(factors, lookup, self.maker, weights):
+            graph.add(f)
+        return Frozen(graph, list(factors), weights)
+
+    def add(self, nf: NodeFactors, frozen: Frozen, more: Frozen | None = None) -> tuple[list[int], int]:
+        """One iSAM2 update with the node's ``frozen`` factors (and ``more`` after them) and its new variables:
+        the indices of the factors in iSAM2 and the passes made for the robust weights (:func:`update_reweighted`)."""
+        if more is not None:
+            graph = gtsam.NonlinearFactorGraph()
+            for g in (frozen.graph, more.graph):
+                for i in range(g.size()):
+                    graph.add(g.at(i))
+            frozen = Frozen(graph, frozen.factors + more.factors, frozen.weights + more.weights)
+        return update_reweighted(self.isam, frozen.graph, self.maker.make(nf.values), frozen.factors, frozen.weights,
+                                 self.maker, self.passes)
+
+    def advance(self, builder: GraphBuilder, n: int, nf: NodeFactors, pose: gtsam.Pose2) -> None:
+        """Node ``n`` of ``builder`` is in, at ``pose``: the next node's guesses start from it."""
+        self.prev_pose = pose
+        track_estimate(self.estimate, self.isam, builder, n, nf)
 
 
 def track_estimate(estimate: dict, isam, builder: GraphBuilder, n: int, nf: NodeFactors) -> None:

@@ -44,8 +44,8 @@ from fusion_vo.backends.fixes import Reacquire, graph_gate
 from fusion_vo.backends.graph import world_covariances
 from fusion_vo.backends.graph_adapter import pose_factor
 from fusion_vo.backends.graph_builder import GraphBuilder, T_WS, X
-from fusion_vo.backends.isam import (current_value_lookup, estimate_lookup, freeze_custom_factors, insert_values,
-                                     isam_params, track_estimate, update_reweighted)
+from fusion_vo.backends.isam import (Isam2Driver, current_value_lookup, estimate_lookup, freeze_custom_factors,
+                                     insert_values, update_reweighted)
 from fusion_vo.sensors.gps import ANTENNA, GpsModel
 
 logger = logging.getLogger(__name__)
@@ -91,10 +91,9 @@ class OnlineGraph:
         self.states = states  # the run's scalar states (registry.State)
         # QR: a heading source dropped by the monitor leaves its offset variables to a random walk alone,
         # a conditioning that Cholesky can report as indeterminate
-        self.isam = gtsam.ISAM2(isam_params())
+        self.driver = Isam2Driver(gtsam.Pose2(*config.initial_pose), config.graph.reweight_passes)
+        self.isam = self.driver.isam
         self.n = 0  # nodes submitted
-        self.estimate: dict = {}  # running bias / calibration estimates (guesses of the next node)
-        self.prev_pose = gtsam.Pose2(*config.initial_pose)  # iSAM2's estimate of the newest node
         self.online: dict[int, np.ndarray] = {}  # node -> its pose as last computed (seeds rebuilds)
         self.last = 0  # newest node in iSAM2 (behind ``n`` while background jobs wait)
         self._forget_below = 0  # nodes before this left the history
@@ -135,7 +134,7 @@ class OnlineGraph:
         self.frames -= self.frames_made.pop(n, set())
         builder.frames = self.frames
         before = {g for g in (offset, offset + 1) if g in self.frames}  # (its interval's two nodes)
-        nf = builder.node(1, previous_pose, self.estimate)
+        nf = builder.node(1, previous_pose, self.driver.estimate)
         made = {g for g in (offset, offset + 1) if g in self.frames} - before
         if made:
             self.frames_made[n] = made
@@ -153,17 +152,14 @@ class OnlineGraph:
         builds them)."""
         if self._pool is not None:
             return None
-        builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.prev_pose)
-        return [builder, nf, None, None]
+        builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.driver.prev_pose)
+        return [builder, nf, None]
 
     def freeze(self, prepared: list) -> None:
         """Linearise the prepared node's custom factors at the current estimate (background: the worker does)."""
         if prepared is None:
             return
-        n, nf = self.n + 1, prepared[1]
-        lookup = current_value_lookup(nf.values, self.isam, self.prev_pose, self._offset(n))
-        prepared[3] = []
-        prepared[2] = freeze_custom_factors(nf.factors, lookup, weights=prepared[3])
+        prepared[2] = self.driver.freeze(prepared[1], self._offset(self.n + 1))
 
     def step(self, iv, prepared: list | None = None, fixes: list = ()):
         """Add the node ending ``iv`` (its factors from :meth:`prepare` / :meth:`freeze` when given) with the GPS
@@ -177,30 +173,18 @@ class OnlineGraph:
 
     def _add_node(self, n: int, iv, prepared: list | None, fixes=()):
         if prepared is None:
-            prepared = self._node_factors(n, iv, self._pending_first, self.prev_pose) + (None, None)
-        builder, nf, frozen, weights = prepared
-        lookup = None
-        if frozen is None or fixes:
-            lookup = current_value_lookup(nf.values, self.isam, self.prev_pose, self._offset(n))
+            prepared = self._node_factors(n, iv, self._pending_first, self.driver.prev_pose) + (None,)
+        builder, nf, frozen = prepared
         if frozen is None:
-            weights = []
-            frozen = freeze_custom_factors(nf.factors, lookup, weights=weights)
+            frozen = self.driver.freeze(nf, self._offset(n))
         self._pending_first = False
-        factors, sensors = nf.factors, nf.sensors
+        sensors, more = nf.sensors, None
         if fixes:  # the fixes that pass the gate, linearised at the prediction as the node's other factors
             gps = [f for fix in fixes if (f := self._fix_factor(n, nf.values[self.key(n)], fix)) is not None]
             if gps:
-                weights = list(weights)
-                frozen = list(frozen) + freeze_custom_factors(gps, lookup, weights=weights)
-                factors, sensors = factors + gps, sensors + ["gps"] * len(gps)
-        g = gtsam.NonlinearFactorGraph()
-        for f in frozen:
-            g.add(f)
-        values = gtsam.Values()
-        insert_values(values, nf.values)
-        # the robust weights at the updated estimate, as the whole-recording iSAM2 (graph.update_reweighted)
-        self.factors[n] = update_reweighted(self.isam, g, values, factors, weights,
-                                                       passes=self.config.graph.reweight_passes)[0]
+                more = self.driver.freeze(nf, self._offset(n), gps)
+                sensors = sensors + ["gps"] * len(gps)
+        self.factors[n] = self.driver.add(nf, frozen, more)[0]
         self.last = n
         self.node_sensors[n] = sensors
         for old in [k for k in self.factors if k < self._forget_below]:
@@ -212,8 +196,7 @@ class OnlineGraph:
                 del kept[old]
         pose, cov = self._pose_cov(n)
         self.prev_cov = cov
-        self.prev_pose = gtsam.Pose2(*map(float, pose))
-        track_estimate(self.estimate, self.isam, builder, 1, nf)
+        self.driver.advance(builder, 1, nf, gtsam.Pose2(*map(float, pose)))
         self._remember(n, pose)
         return [(n, pose, cov, sensors)]
 
@@ -289,7 +272,7 @@ class OnlineGraph:
             self.node_sensors[m] = sensors
         pose, cov = self._pose_cov(m)
         self.prev_cov = cov
-        self.prev_pose = gtsam.Pose2(*map(float, pose))
+        self.driver.prev_pose = gtsam.Pose2(*map(float, pose))
         self._remember(m, pose)
         return [(m, pose, cov, sensors)]
 
@@ -387,9 +370,11 @@ class OnlineGraph:
             out.append((n, pose, cov, nf.sensors))
             if n == self.last:
                 self.prev_cov = cov
-        self.prev_pose = self.isam.calculateEstimatePose2(self.key(self.last))
+        pose = self.isam.calculateEstimatePose2(self.key(self.last))
         if built[-1][0] == self.last:
-            track_estimate(self.estimate, self.isam, builder, 1, nf)
+            self.driver.advance(builder, 1, nf, pose)
+        else:
+            self.driver.prev_pose = pose
         return out
 
     def poses(self) -> np.ndarray:

@@ -9,7 +9,7 @@ import logging
 
 import numpy as np
 
-from fusion_vo.backends.ekf import PlanarEkf, frame_error_cov, interval_measurements, step_blocks
+from fusion_vo.backends.ekf import PlanarEkf, interval_readings
 from fusion_vo.backends.ekf_adapter import spread_covariance
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
@@ -409,16 +409,13 @@ class NodesMixin:
 
     def _ekf_step(self, iv) -> None:
         ekf = self._ekf
-        meas = interval_measurements(iv, self.config)
-        if len(self._t_nodes) == 1:
+        readings = interval_readings(iv, self.config)
+        if len(self._t_nodes) == 1 and readings.start(ekf):
             # the first interval: the readings at the first node (an AHRS heading) as a batch run applies them;
             # node 0's record keeps the state from before them, so a rewind to it applies them again
-            start = meas["readings"].start(ekf)
-            if start:
-                ekf.update(start)
-                self._poses[0], self._covs[0] = ekf.x[:3].copy(), ekf.P[:3, :3].copy()
-        ekf.predict(float(iv.dt[0]), frame_error_cov(meas, 0))
-        ekf.update(step_blocks(ekf, meas, 0))
+            ekf.begin(readings)
+            self._poses[0], self._covs[0] = ekf.x[:3].copy(), ekf.P[:3, :3].copy()
+        ekf.step(readings, 0)
         for fix in self._due_fixes(float(iv.t[-1])):
             self._apply_gps(fix)
         for sensor, c in ekf.counts.items():

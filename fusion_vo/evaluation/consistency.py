@@ -112,14 +112,15 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
     f = ekf_mod.filter_for(iv, config)  # the filter of a batch run (ekf.run_ekf)
-    meas = ekf_mod.interval_measurements(iv, config)
+    readings = ekf_mod.interval_readings(iv, config)
     out: dict[str, tuple[int, list]] = {}
-    for k in range(iv.n_steps):
-        f.predict(iv.dt[k], ekf_mod.frame_error_cov(meas, k))
-        blocks = ekf_mod.step_blocks(f, meas, k)
+
+    def nis(blocks):
         for sensor, dof, value in leave_one_out_nis(f.P, blocks):
-            out.setdefault(sensor, (dof, []))[1].append((iv.t[k + 1], value))
-        f.update(blocks)
+            out.setdefault(sensor, (dof, []))[1].append((f.time, value))
+
+    for k in range(iv.n_steps):
+        f.step(readings, k, inspect=nis)
     return {k: (m, np.array(v)) for k, (m, v) in out.items()}
 
 

@@ -5,7 +5,7 @@ lives in a recording and how it is read, its data in :class:`~fusion_vo.sensors.
 its configuration section, how its samples become measurements on the node grid
 (:func:`~fusion_vo.backends.timeline.build_intervals`; kept in ``Intervals.sensors[name]``, a container its module
 defines), and its contributions to the EKF
-(:func:`~fusion_vo.backends.ekf.step_blocks`) and to the factor graph
+(:meth:`~fusion_vo.backends.ekf.PlanarEkf.step`) and to the factor graph
 (:class:`~fusion_vo.backends.graph_builder.GraphBuilder`), and the heading components the heading monitor judges
 (:class:`HeadingSource`) and the distances the speed check compares (:class:`DistanceSource`). The timeline, both backends, ``SensorStreams``, the monitor and the recording reader
 iterate :func:`sensors` instead of naming sensors, so adding a sensor is one module
