@@ -28,6 +28,14 @@ latency   ``StreamingFusion`` fed the drive in arrival order (the camera's incre
           now"). Targets: p99 <= 2 ms, worst <= 10 ms. ``--gc-freeze`` calls ``gc.freeze()`` after start-up, as
           a live process should (CPython's full collections then skip the ~100 000 start-up objects).
 
+engine    ``StreamingFusion`` fed every sample in time order beside the batch run's online track of the same streams
+          (``fuse`` with the EKF's smoother and the GTSAM batch solution off): CPU time of each, how far apart
+          their node times are, and the largest position difference (the engine's track interpolated at the batch
+          run's nodes), on the generated drive (camera, wheels,
+          IMU) and on robot_localization's Jackal and Husky bags (wheel odometry and IMU). The decisions a batch
+          run takes in hindsight (the consistency monitor over the whole log, the twist's delay from the whole
+          log) are off, so both run the same per-node steps (``docs/decisions/0039-batch-online-tracks-share-the-engines-steps.md``).
+
 ``--config`` and ``--set`` change the backends' configuration (its ``fusion`` section), e.g. ``--set
 fusion.visual_frame_error=0.5``.
 
@@ -36,6 +44,7 @@ Usage::
     python benchmarks/backend_speed.py offline [--seconds 60] [--scale 10] [--repeat 3] [--profile 25]
     python benchmarks/backend_speed.py solvers [--seconds 60] [--repeat 3]
     python benchmarks/backend_speed.py latency [--seconds 60] [--repeat 3] [--camera-delay 0.15] [--gc-freeze]
+    python benchmarks/backend_speed.py engine [--seconds 60] [--repeat 3] [--out DIR]
 """
 
 from __future__ import annotations
@@ -51,14 +60,19 @@ import pstats
 import statistics
 import sys
 import time
+from pathlib import Path
 
 import gtsam
 import numpy as np
 
-from common import Stages, add_settings, cpu_seconds, fusion_settings, load, parser, table, with_settings
+from common import (JACKAL_BAG, Stages, add_settings, cpu_seconds, fusion_settings, import_husky, load, parser, table,
+                    with_settings, work_dir)
 
 from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, batch, chain, fuse, graph, graph_builder
-from fusion_vo.backends.streaming import message_sensor, time_ordered_messages
+from fusion_vo.backends.batch import streams_from_recording
+from fusion_vo.backends.streaming import message_sensor, streaming_for, time_ordered_messages
+from fusion_vo.recording import Recording
+from fusion_vo.recording.rosbag import import_bag
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
@@ -331,6 +345,59 @@ def latency(args) -> int:
     return 0
 
 
+# ------------------------------------------------------------------------------------------- engine
+def engine_streams(root, fusion: dict) -> list[tuple[str, SensorStreams, FusionConfig]]:
+    """The generated drive and the two robot logs, with the configuration both runs share (hindsight off)."""
+    settings = with_settings(fusion, ["monitor=false", "sync_odometry=false"])
+    config = FusionConfig.from_dict(settings)
+    out = [(f"generated drive, {root['seconds']:.0f} s (camera, wheels, IMU)", drive(root["seconds"])[1], config)]
+    jackal = root["dir"] / "jackal"
+    if not (jackal / "imu0").is_dir():
+        import_bag(JACKAL_BAG, jackal, imu_topic="/imu/data", odom_topic="/jackal_velocity_controller/odom",
+                   overwrite=True)
+    husky = import_husky(root["dir"] / "husky")
+    for name, folder in (("Jackal bag (odometry, IMU)", jackal), ("Husky bag (odometry, IMU)", husky)):
+        out.append((name, streams_from_recording(Recording(folder), None, ["odom", "imu"], config), config))
+    return out
+
+
+def engine(args) -> int:
+    fusion = fusion_settings(args)
+    print(f"load average {load()} before")
+    rows = []
+    with work_dir(args.out) as folder:  # (the streams are read into memory)
+        cases = engine_streams({"seconds": args.seconds, "dir": folder}, fusion)
+    for name, streams, config in cases:
+        msgs = time_ordered_messages(streams)
+        for backend, track, off in (("ekf", "ekf", ["ekf.smoother=false"]),
+                                    ("gtsam", "gtsam_online", ["graph.batch=false", "graph.marginals=false"])):
+            batch_config = FusionConfig.from_dict(with_settings(config.model_dump(mode="json"), off))
+            times_b, times_e = [], []
+            for _ in range(args.repeat):  # interleaved
+                t, result = cpu_seconds(lambda: fuse(streams, backend, batch_config))
+                times_b.append(t)
+
+                def live():
+                    fusion_ = streaming_for(streams, backend, config)
+                    fusion_.feed(msgs)
+                    return fusion_.finish()
+
+                t, streamed = cpu_seconds(live)
+                times_e.append(t)
+            a, b = result.trajectories[track], streamed.trajectories[track]
+            nodes = f"{len(a.t)}" if len(a.t) == len(b.t) else f"{len(a.t)} / {len(b.t)}"
+            apart = f"{np.max(np.abs(a.t - b.t)):.0e}" if len(a.t) == len(b.t) else "-"
+            inside = (a.t >= b.t[0]) & (a.t <= b.t[-1])  # the engine's positions interpolated at the batch's nodes
+            at = np.column_stack([np.interp(a.t[inside], b.t, b.xyyaw[:, i]) for i in (0, 1)])
+            diff = float(np.max(np.linalg.norm(a.xyyaw[inside, :2] - at, axis=1)))
+            tb, te = statistics.median(times_b), statistics.median(times_e)
+            rows.append([name, track, nodes, apart, f"{tb:.2f}", f"{te:.2f}", f"{te / tb:.1f}", f"{diff:.1e}"])
+    print(table(["streams", "track", "nodes", "node times apart [s]", "batch run [s CPU]",
+                 "engine, in time order [s CPU]", "engine / batch", "largest position difference [m]"], rows))
+    print(f"(median of {args.repeat} interleaved runs)\nload average {load()} after")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = parser(__doc__)
     sub = ap.add_subparsers(dest="command", required=True)
@@ -355,6 +422,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--gc-freeze", action="store_true", help="gc.freeze() after start-up, as a live process should")
     add_settings(p)
     p.set_defaults(func=latency)
+    p = sub.add_parser("engine", help="StreamingFusion fed in time order beside the batch run's online tracks")
+    p.add_argument("--seconds", type=float, default=60.0, help="length of the generated drive [s]")
+    p.add_argument("--repeat", type=int, default=3, help="interleaved repetitions (the median is shown)")
+    p.add_argument("--out", type=Path, help="folder for the imported bags (default: a temporary folder)")
+    add_settings(p)
+    p.set_defaults(func=engine)
     args = ap.parse_args(argv)
     return args.func(args)
 
