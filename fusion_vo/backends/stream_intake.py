@@ -37,31 +37,33 @@ def _finite(value) -> bool:
 class IntakeMixin:
     """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
 
-    def _synchronised(self, stream: str, t, payload):
-        """``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
+    def _synchronised(self, stream: str, t, payload) -> tuple:
+        """``(t, moved)``: ``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
         (:class:`~fusion_vo.sensors.sync.TwistDelay`, the rule of batch use); a gyro sample feeds that
         estimate. Nodes are processed that much later (``_advance``), so the corrected twists are not late.
-        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged."""
+        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged. When this
+        twist changes the estimate, the buffered twists move with it (:meth:`_shift_twists`) and ``moved`` is the
+        earliest time they were or now are at (else None), for ``_add`` to process again the intervals that read
+        them."""
         tracker = self._twist_delay
         if tracker is None or stream not in ("odom", "imu"):
-            return t
+            return t, None
         try:
             t_f = float(t)
             if stream == "imu":
                 rate = float(self.imu_T_BS[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
                 if np.isfinite(rate) and np.isfinite(t_f):
                     tracker.gyro(t_f, rate)
-                return t
+                return t, None
             wz = float(payload[2])
         except (TypeError, ValueError, IndexError):
-            return t
+            return t, None
         if not (np.isfinite(t_f) and np.isfinite(wz)):
-            return t
+            return t, None
         before = tracker.delay
         t_f = tracker.twist(t_f, wz)
-        if tracker.delay != before:
-            self._shift_twists(before - tracker.delay)
-        return t_f
+        moved = self._shift_twists(before - tracker.delay) if tracker.delay != before else None
+        return t_f, moved
 
     # ------------------------------------------------------------------ buffering
     def _check(self, sensor: str) -> None:
@@ -130,18 +132,22 @@ class IntakeMixin:
         last = min(bisect.bisect_left(self._t_nodes, t_hi - 1e-9), len(self._t_nodes) - 1)
         self._dirty.update(range(first, last + 1))
 
-    def _add(self, stream: str, t: float, payload) -> None:
+    def _add(self, stream: str, t: float, payload, moved: float | None = None) -> None:
+        """Buffer a sample of ``stream`` at ``t`` and process what it changes: the intervals that read it, and those
+        that read the samples of the stream a new delay estimate moved from ``moved`` on (:meth:`_synchronised`),
+        even when the sample itself is left out (:meth:`_reread`)."""
         self._check(stream)
         sensor = self._counted[stream]  # the name its counts are reported under
         if not self._valid(sensor, t, payload_values(payload)):
+            if moved is not None:
+                self._reread(stream, moved)
             return
         t = float(t)
-        self._touch(stream, t)
+        # the first interval this sample (and the samples moved with it) changes, when processed
+        t_from = t if moved is None else min(t, moved)
+        self._touch(stream, t_from)
         buf = self._buffers[stream]
         k = bisect.bisect_right(buf, t, key=lambda item: item[0])  # (a rewind or a late count leaves the buffers)
-        # the first interval this sample (and the twists a new delay moved, _shift_twists) changes, when processed
-        shifted, self._shifted_from = self._shifted_from, None
-        t_from = t if shifted is None else min(t, shifted)
         T = self._t_nodes
         redo = bool(T) and (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from))
         first = self._first_reader(stream, t_from) if redo else None
@@ -161,6 +167,23 @@ class IntakeMixin:
             t_lo = buf[max(k - 3, 0)][0] if first is None else min(buf[max(k - 3, 0)][0], T[first])
             self._mark(t_lo, max(buf[min(k + 3, len(buf) - 1)][0], t))
         self._advance(t)
+
+    def _reread(self, stream: str, t_from: float) -> None:
+        """Process again the intervals that read the samples of ``stream`` from ``t_from`` on (moved by a new delay
+        estimate whose sample was itself left out): the EKF rewinds to the node before the first of them, iSAM2
+        marks them for rebuilding; a node started meanwhile is started again."""
+        self._touch(stream, t_from)
+        T = self._t_nodes
+        if not T or not (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from)):
+            return
+        first = self._first_reader(stream, t_from)
+        if self.backend == "ekf":
+            i = self._rewind_index(t_from, 2, first)
+            if i is not None:
+                self._rewind(i)
+        else:
+            self._mark(t_from if first is None else min(t_from, T[first]), T[-1])
+        self._advance(self._latest)
 
     def _first_reader(self, stream: str, t: float) -> int | None:
         """The first processed node whose interval would read a sample of ``stream`` at ``t``, or None before the
@@ -261,17 +284,19 @@ class IntakeMixin:
             self._count("camera").reordered += 1
         bisect.insort(self._visual, inc, key=lambda v: v.t1)
 
-    def _shift_twists(self, dt: float) -> None:
+    def _shift_twists(self, dt: float) -> float | None:
         """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
-        that land before the last processed node stay buffered for a rewind or rebuild, as late data)."""
+        that land before the last processed node stay buffered for a rewind or rebuild, as late data). Returns a float
+        step before the earliest time a moved sample was or now is at (every interval that read one at its old time,
+        or would at its new time, is processed again: :meth:`_first_reader` counts the samples before a time), or
+        None when none moved."""
         buf = self._buffers.get("odom", [])
         last = self._t_nodes[-1] if self._t_nodes else -np.inf
         keep = [item for item in buf if item[0] <= last]
         moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
-        if moved:  # the intervals that read them at their old times or would at the new ones are processed again
-            self._shifted_from = min(moved[0][0], moved[0][0] - dt)
         if buf:
             self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
+        return float(np.nextafter(min(moved[0][0], moved[0][0] - dt), -np.inf)) if moved else None
 
     def _touch(self, stream: str, t: float) -> None:
         """A measurement of ``stream`` at ``t`` arrived: a started node it would change is started again

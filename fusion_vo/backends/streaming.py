@@ -313,7 +313,6 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf
         self._t_nodes: list[float] = []
-        self._shifted_from: float | None = None  # earliest time of the twists a new delay moved (_shift_twists)
         self._covered: list[dict[str, bool]] = []  # interval k (ending at node k + 1) -> the sensors covering it
         self._poses: list[np.ndarray] = []
         self._covs: list[np.ndarray] = []
@@ -388,7 +387,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                 self._count("gyro").gated += 1  # the IMU contradicted its mounting: left out
                 return
             if live.take is None:
-                self._add(sensor, self._synchronised(sensor, t, payload), payload)
+                t, moved = self._synchronised(sensor, t, payload)
+                self._add(sensor, t, payload, moved)
             elif self._valid(self._counted[sensor], t, values):
                 live.take(self, payload)
 
