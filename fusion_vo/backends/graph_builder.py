@@ -18,6 +18,7 @@ factor where nothing measures an interval's translation. All three solvers of :m
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, field
 
@@ -360,14 +361,21 @@ def kernel_width(config: FusionConfig, dof: int) -> float | None:
     0.999): a measurement inside the filter's gate keeps its full weight in the batch and iSAM2 alike,
     and beyond it its influence is bounded, as the filter bounds it (:class:`~fusion_vo.sensors.model.Gate`).
     """
-    from scipy.stats import chi2
-
     g = config.graph
     if g.robust == "none":
         return None
+    return _chi_width(float(g.robust_k), int(dof))
+
+
+@functools.lru_cache(maxsize=256)
+def _chi_width(k: float, dof: int) -> float | None:
+    """The width of :func:`kernel_width` for the one-row width ``k`` and ``dof`` rows (cached: a streamed run builds
+    a graph builder per node)."""
     if dof == 1:
-        return float(g.robust_k)
-    p = float(chi2.cdf(g.robust_k**2, 1))
+        return k
+    from scipy.stats import chi2  # on first use, as the filter's gate loads it (a camera-only run does not)
+
+    p = float(chi2.cdf(k**2, 1))
     if p >= 1.0:
         return None
     return float(np.sqrt(chi2.ppf(p, dof)))
