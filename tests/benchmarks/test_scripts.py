@@ -1,5 +1,6 @@
 """The benchmark scripts run as a user runs them: each prints its ``--help``, rejects bad options with a usage
-error, and a short run prints its table. They are run in subprocesses; no test imports them."""
+error, and a short run prints its table. They are run in subprocesses, from the session's start in the background
+(tests/background.py) or else by the test itself; no test imports them."""
 
 import json
 import re
@@ -14,12 +15,15 @@ REPO = Path(__file__).resolve().parents[2]
 FOLDER = REPO / "benchmarks"
 SCRIPTS = sorted(p.name for p in FOLDER.glob("*.py") if p.name != "common.py")
 
-#: runs each ``(script, argv)`` of argv[1] (JSON) as ``python benchmarks/SCRIPT ARGV...`` would, in this one
-#: process (their imports are shared, so it takes seconds), and prints each exit status and its output
+#: runs each ``(script, argv)`` of argv[2] (JSON) as ``python benchmarks/SCRIPT ARGV...`` would from the folder
+#: argv[1], in this one process (their imports are shared, so it takes seconds), and prints each exit status and its
+#: output
 _RUNNER = textwrap.dedent("""
-    import contextlib, io, json, runpy, sys
+    import contextlib, io, json, os, runpy, sys
+    os.chdir(sys.argv[1])
+    sys.path.insert(0, sys.argv[1])
     results = []
-    for script, argv in json.loads(sys.argv[1]):
+    for script, argv in json.loads(sys.argv[2]):
         out, err = io.StringIO(), io.StringIO()
         sys.argv = [script, *argv]
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -34,35 +38,45 @@ _RUNNER = textwrap.dedent("""
 
 
 def run_scripts(calls: list[tuple[str, list[str]]]) -> list[tuple[str, int, str, str]]:
-    proc = subprocess.run([sys.executable, "-c", _RUNNER, json.dumps(calls)], cwd=FOLDER, capture_output=True,
+    proc = subprocess.run([sys.executable, "-c", _RUNNER, str(FOLDER), json.dumps(calls)], capture_output=True,
                           text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def test_at_most_fifteen_benchmarks_each_with_a_help():
+HELP = [(s, ["--help"]) for s in SCRIPTS]
+BAD_OPTIONS = [("frontend_speed.py", ["end-to-end", "--variant", 'klt:{"fb_skip_ratio": 2}']),
+               ("frontend_speed.py", ["cpu", "--configs", 'direct:{"nope": 1}']),
+               ("fusion.py", ["--only", "nowhere"]),
+               ("fusion.py", ["--set", "fusion.no_such_option=1"]),
+               ("visual.py", ["independent", "--frontends", "klt,bogus"]),
+               ("visual.py", ["lens", "--recordings", "nowhere"]),
+               ("consistency.py", ["--seeds", "0"])]
+CONSISTENCY = [("consistency.py", ["--seeds", "2", "--duration", "6"])]
+
+
+def _scripts_job(calls) -> list[str]:
+    """The background job (``python:`` ARGS) that runs ``calls`` as :func:`run_scripts` does."""
+    return ["-c", _RUNNER, "{repo}/benchmarks", json.dumps(calls)]
+
+
+def test_at_most_fifteen_benchmarks_each_with_a_help(ahead_json):
     assert 5 <= len(SCRIPTS) <= 15, SCRIPTS
-    for script, code, out, err in run_scripts([(s, ["--help"]) for s in SCRIPTS]):
+    for script, code, out, err in ahead_json("python:bench_help", lambda: run_scripts(HELP)):
         assert code == 0, (script, err[-2000:])
         assert out.startswith("usage:") and len(out.splitlines()) > 10, (script, out[:500])  # and what it measures
 
 
-def test_bad_options_are_usage_errors():
-    calls = [("frontend_speed.py", ["end-to-end", "--variant", 'klt:{"fb_skip_ratio": 2}']),
-             ("frontend_speed.py", ["cpu", "--configs", 'direct:{"nope": 1}']),
-             ("fusion.py", ["--only", "nowhere"]),
-             ("fusion.py", ["--set", "fusion.no_such_option=1"]),
-             ("visual.py", ["independent", "--frontends", "klt,bogus"]),
-             ("visual.py", ["lens", "--recordings", "nowhere"]),
-             ("consistency.py", ["--seeds", "0"])]
-    for (script, argv), (_, code, out, err) in zip(calls, run_scripts(calls)):
+def test_bad_options_are_usage_errors(ahead_json):
+    calls = BAD_OPTIONS
+    for (script, argv), (_, code, out, err) in zip(calls, ahead_json("python:bench_bad", lambda: run_scripts(calls))):
         assert code != 0, (script, argv, out[-500:])
         assert "Traceback" not in err, (script, argv, err[-2000:])
         assert "error: " in err.strip().splitlines()[-1], (script, argv, err[-2000:])
 
 
-def test_consistency_prints_every_backend_and_sensor():
-    ((_, code, out, err),) = run_scripts([("consistency.py", ["--seeds", "2", "--duration", "6"])])
+def test_consistency_prints_every_backend_and_sensor(ahead_json):
+    ((_, code, out, err),) = ahead_json("python:bench_consistency", lambda: run_scripts(CONSISTENCY))
     assert code == 0, err[-2000:]
     rows = [[c.strip() for c in line.strip("|").split("|")] for line in out.splitlines() if line.startswith("| ")]
     nees = {r[0]: r for r in rows if len(r) == 5 and r[0] != "backend"}
@@ -76,8 +90,13 @@ def test_consistency_prints_every_backend_and_sensor():
 #: ``python benchmarks/fusion.py --only short --seeds 1 --out DIR``, run from the session's start in the background
 #: (tests/background.py) or else by the test itself
 FUSION_SHORT = ["{repo}/benchmarks/fusion.py", "--only", "short", "--seeds", "1", "--out", "{out}"]
-BACKGROUND_COMMANDS = {"python:fusion_short": FUSION_SHORT}
-BACKGROUND_JOBS = {"test_fusion_over_two_seeds_summarises_the_rows_it_printed": ["python:fusion_short"]}
+BACKGROUND_COMMANDS = {"python:fusion_short": FUSION_SHORT, "python:bench_help": _scripts_job(HELP),
+                       "python:bench_bad": _scripts_job(BAD_OPTIONS),
+                       "python:bench_consistency": _scripts_job(CONSISTENCY)}
+BACKGROUND_JOBS = {"test_fusion_over_two_seeds_summarises_the_rows_it_printed": ["python:fusion_short"],
+                   "test_at_most_fifteen_benchmarks_each_with_a_help": ["python:bench_help"],
+                   "test_bad_options_are_usage_errors": ["python:bench_bad"],
+                   "test_consistency_prints_every_backend_and_sensor": ["python:bench_consistency"]}
 
 
 @pytest.mark.slow

@@ -5,59 +5,33 @@ without an IMU it does not need scipy at all. ``--help`` loads neither numpy nor
 the command in a fresh interpreter and reports which of the watched modules ``sys.modules`` holds.
 """
 
-import json
-import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
+from startup_job import camera_only_runs, loaded_all
 
-WATCHED = ["gtsam", "matplotlib", "evo", "filterpy", "scipy", "scipy.stats", "scipy.spatial", "numpy", "cv2",
-           "pydantic"]
-
-PROBE = """
-import json, sys
-from fusion_vo.cli.main import main
-try:
-    code = main(sys.argv[2:])
-except SystemExit as exc:  # --help
-    code = exc.code
-print(json.dumps({'code': code, 'loaded': sorted(set(json.loads(sys.argv[1])) & set(sys.modules))}))
-"""
+#: the camera-only probes, run from the session's start in the background (tests/background.py) or else by the test
+BACKGROUND_COMMANDS = {"python:startup_probes": ["{repo}/tests/end_to_end/startup_job.py", "{standard:short}", "{out}"]}
+BACKGROUND_JOBS = {"test_camera_only_run_loads_no_backend_library": ["standard:short", "python:startup_probes"]}
 
 
 def _loaded(argv):
-    return _loaded_all([argv])[0]
-
-
-def _loaded_all(argvs):
-    """The probe of each command line in ``argvs``, run side by side (each in its own interpreter)."""
-    procs = [subprocess.Popen([sys.executable, "-c", PROBE, json.dumps(WATCHED), *argv], stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True) for argv in argvs]
-    out = []
-    for proc in procs:
-        stdout, stderr = proc.communicate(timeout=300)
-        assert proc.returncode == 0, stderr[-2000:]
-        out.append(json.loads(stdout.strip().splitlines()[-1]))
-    return out
+    return loaded_all([argv])[0]
 
 
 @pytest.mark.slow
-def test_camera_only_run_loads_no_backend_library(standard_recording, tmp_path):
-    seq, no_imu = tmp_path / "seq", tmp_path / "no_imu"
-    shutil.copytree(standard_recording("short"), seq)
-    shutil.rmtree(seq / "state_groundtruth_estimate0")  # nothing to evaluate against
-    shutil.copytree(seq, no_imu)
-    shutil.rmtree(no_imu / "imu0")
-    camera, without_imu, fused = _loaded_all([
-        ["-q", "run", str(seq), "--out", str(tmp_path / "out"), "--backend", "none"],
-        ["-q", "run", str(no_imu), "--out", str(tmp_path / "out2"), "--backend", "none"],
-        ["-q", "run", str(no_imu), "--out", str(tmp_path / "out3"), "--backend", "all"]])
-    assert camera["code"] == 0 and (tmp_path / "out" / "vo.tum").is_file()
+def test_camera_only_run_loads_no_backend_library(standard_recording, ahead_json, tmp_path):
+    runs = ahead_json("python:startup_probes",
+                      lambda: camera_only_runs(standard_recording("short"), tmp_path / "probes"))
+    folder = Path(runs["folder"])
+    camera, without_imu, fused = runs["camera"], runs["without_imu"], runs["fused"]
+    assert camera["code"] == 0 and (folder / "out" / "vo.tum").is_file()
     # the IMU's derotation uses scipy's Rotation, so scipy.spatial may load, and every run draws its report
     # (matplotlib): nothing more, none of the backends' libraries
     assert set(camera["loaded"]) <= {"numpy", "cv2", "pydantic", "scipy", "scipy.spatial", "matplotlib"}
-    assert (tmp_path / "out" / "report.html").is_file()
+    assert (folder / "out" / "report.html").is_file()
     assert {"numpy", "cv2"} <= set(camera["loaded"])  # the probe does see what the run loads
     # without an IMU (camera and wheels) scipy is needed only for the report to read its tracks' headings
     assert without_imu["code"] == 0 and set(without_imu["loaded"]) == {"numpy", "cv2", "pydantic", "matplotlib",
