@@ -104,7 +104,16 @@ def interval_table(r: Readings, t: np.ndarray) -> _Table:
     z = np.zeros((K, r.model.dim))
     R = np.zeros((K, m, m))
     index = np.full(K, -1, dtype=np.int64)
-    for j in np.argsort(n, kind="stable"):  # single-interval readings first
+    # single-interval readings first (the first of several over one interval), all at once; then the longer ones in
+    # their order, each over the intervals no reading has taken
+    single = np.flatnonzero(n == 1)
+    k, first = np.unique(r.i0[single], return_index=True)
+    j = single[first]
+    z[k] = rate[j]
+    R[k] = spread_covariance(cov[j], n[j][:, None, None], span[j][:, None, None])
+    ok[k] = True
+    index[k] = j
+    for j in np.flatnonzero(n > 1)[np.argsort(n[n > 1], kind="stable")]:
         steps = np.arange(r.i0[j], r.i1[j])
         free = steps[~ok[steps]]
         if not len(free):
