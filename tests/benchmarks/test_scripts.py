@@ -21,7 +21,6 @@ SCRIPTS = sorted(p.name for p in FOLDER.glob("*.py") if p.name != "common.py")
 _RUNNER = textwrap.dedent("""
     import contextlib, io, json, os, runpy, sys
     os.chdir(sys.argv[1])
-    sys.path.insert(0, sys.argv[1])
     results = []
     for script, argv in json.loads(sys.argv[2]):
         out, err = io.StringIO(), io.StringIO()
