@@ -325,11 +325,13 @@ class PlanarEkf:
         return out
 
     # ------------------------------------------------------------------ one node
-    def begin(self, readings: EkfReadings) -> None:
-        """Update with the readings at the first node of their grid (an AHRS heading), if any."""
+    def begin(self, readings: EkfReadings) -> bool:
+        """Update with the readings at the first node of their grid (an AHRS heading), if any: whether there were
+        any."""
         blocks = readings.start(self)
         if blocks:
             self.update(blocks)
+        return bool(blocks)
 
     def step(self, readings: EkfReadings, k: int, inspect=None) -> np.ndarray:
         """Interval ``k`` of the readings' grid: :meth:`predict` across it (with its frame error), then

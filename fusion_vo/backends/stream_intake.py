@@ -170,15 +170,16 @@ class IntakeMixin:
 
     def _reread(self, stream: str, t_from: float) -> None:
         """Process again the intervals that read the samples of ``stream`` from ``t_from`` on (moved by a new delay
-        estimate whose sample was itself left out): the EKF rewinds to the node before the first of them, iSAM2
-        marks them for rebuilding; a node started meanwhile is started again."""
+        estimate whose sample was itself left out), by :meth:`_add`'s rule for the samples moved with a sample it
+        takes: the EKF rewinds to the node before the first of them, iSAM2 marks them for rebuilding; a node started
+        meanwhile is started again."""
         self._touch(stream, t_from)
         T = self._t_nodes
         if not T or not (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from)):
             return
         first = self._first_reader(stream, t_from)
         if self.backend == "ekf":
-            i = self._rewind_index(t_from, 2, first)
+            i = None if first is None else self._rewind_index(t_from, 0, first)
             if i is not None:
                 self._rewind(i)
         else:

@@ -410,10 +410,9 @@ class NodesMixin:
     def _ekf_step(self, iv) -> None:
         ekf = self._ekf
         readings = interval_readings(iv, self.config)
-        if len(self._t_nodes) == 1 and readings.start(ekf):
+        if len(self._t_nodes) == 1 and ekf.begin(readings):
             # the first interval: the readings at the first node (an AHRS heading) as a batch run applies them;
             # node 0's record keeps the state from before them, so a rewind to it applies them again
-            ekf.begin(readings)
             self._poses[0], self._covs[0] = ekf.x[:3].copy(), ekf.P[:3, :3].copy()
         ekf.step(readings, 0)
         for fix in self._due_fixes(float(iv.t[-1])):
