@@ -67,8 +67,8 @@ def test_at_most_fifteen_benchmarks_each_with_a_help(ahead_json):
 
 
 def test_bad_options_are_usage_errors(ahead_json):
-    calls = BAD_OPTIONS
-    for (script, argv), (_, code, out, err) in zip(calls, ahead_json("python:bench_bad", lambda: run_scripts(calls))):
+    results = ahead_json("python:bench_bad", lambda: run_scripts(BAD_OPTIONS))
+    for (script, argv), (_, code, out, err) in zip(BAD_OPTIONS, results):
         assert code != 0, (script, argv, out[-500:])
         assert "Traceback" not in err, (script, argv, err[-2000:])
         assert "error: " in err.strip().splitlines()[-1], (script, argv, err[-2000:])
