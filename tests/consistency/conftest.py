@@ -6,24 +6,17 @@ import shutil
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
-
-from fusion_vo.simulation import simulate
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-#: a 30 s random drive whose camera is a token (64 x 36 at 5 Hz: the checks here use wheels, IMU, twist)
-TOKEN_CAMERA = {"width": 64, "height": 36, "fu": 42.0, "fv": 42.0, "cu": 31.5, "cv": 17.5, "camera_rate": 5.0,
-                "supersample": 1}
-#: a 0.3 m square at 20 Hz through a 320 x 180 camera of focal length 210 px: four straight legs for the scale
-SMALL_SQUARE = {"side": 0.3, "width": 320, "height": 180, "fu": 210.0, "fv": 210.0, "cu": 159.5, "cv": 89.5}
+from drives import make_drive, make_square  # noqa: E402
 
 
 @pytest.fixture(scope="session")
 def drive(tmp_path_factory) -> Path:
     """The unbroken 30 s drive (never modify it: use ``broken``)."""
-    return simulate(tmp_path_factory.mktemp("drive") / "rec", profile="random", seed=3, duration=30.0, **TOKEN_CAMERA)
+    return make_drive(tmp_path_factory.mktemp("drive") / "rec")
 
 
 @pytest.fixture
@@ -35,7 +28,7 @@ def broken(drive, tmp_path) -> Path:
 @pytest.fixture(scope="session")
 def square(tmp_path_factory) -> Path:
     """The small square (never modify it)."""
-    return simulate(tmp_path_factory.mktemp("square") / "rec", profile="square", seed=1, **SMALL_SQUARE)
+    return make_square(tmp_path_factory.mktemp("square") / "rec")
 
 
 @pytest.fixture(scope="session")

@@ -12,17 +12,13 @@ from pathlib import Path
 
 import pytest
 
-from fusion_vo.simulation import simulate
-
-#: a 160 x 120 camera over 5 cm of straight drive: 33 frames, most of which the KLT frontend tracks
-SMALL = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
-         "length": 0.05, "gt_rate": 50.0, "imu_rate": 100.0}
+from fault_tools import make_pristine
 
 
 @pytest.fixture(scope="session")
 def pristine(tmp_path_factory) -> Path:
     """The unbroken recording (never modify it: use ``recording``)."""
-    return simulate(tmp_path_factory.mktemp("faults") / "rec", profile="straight", seed=4, **SMALL)
+    return make_pristine(tmp_path_factory.mktemp("faults") / "rec")
 
 
 @pytest.fixture

@@ -6,6 +6,16 @@ import os
 from pathlib import Path
 
 from fusion_vo.cli.main import main
+from fusion_vo.simulation import simulate
+
+#: a 160 x 120 camera over 5 cm of straight drive: 33 frames, most of which the KLT frontend tracks
+SMALL = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
+         "length": 0.05, "gt_rate": 50.0, "imu_rate": 100.0}
+
+
+def make_pristine(path: Path) -> Path:
+    """The unbroken recording of the fault tests (straight drive, seed 4, :data:`SMALL`), written to ``path``."""
+    return simulate(path, profile="straight", seed=4, **SMALL)
 
 
 def snapshot(root: Path, skip: Path | None = None) -> dict[str, tuple]:

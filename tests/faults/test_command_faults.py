@@ -13,11 +13,23 @@ from pathlib import Path
 import pytest
 
 from fault_tools import assert_error, cli, snapshot
+from sweep_faults_job import run_all as run_sweeps
+
+#: the sweeps, run ahead in the background (tests/background.py, tests/conftest.py)
+BACKGROUND_COMMANDS = {"python:sweep_faults": ["{repo}/tests/faults/sweep_faults_job.py", "{out}"]}
+BACKGROUND_JOBS = {"test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option": ["python:sweep_faults"],
+                   "test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs": ["python:sweep_faults"]}
 
 
 def _files(root: Path) -> dict:
     """The snapshot without the folders' modification times."""
     return {k: v if not stat.S_ISDIR(v[0]) else v[0] for k, v in snapshot(root).items()}
+
+
+@pytest.fixture(scope="module")
+def sweeps(ahead_json, tmp_path_factory) -> dict:
+    """Each case of sweep_faults_job.SWEEPS: its grid file, exit status, output, whether results.csv was written."""
+    return ahead_json("python:sweep_faults", lambda: run_sweeps(tmp_path_factory.mktemp("sweeps")))
 
 
 def _one_line(err: str) -> None:
@@ -441,14 +453,12 @@ def test_an_interrupted_replay_leaves_the_earlier_files_whole(failure, pristine,
 
 
 # ------------------------------------------------------------------ sweep: a ranking that cannot be made
-def test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option(pristine, tmp_path, capsys):
-    grid = tmp_path / "grid.yaml"
-    grid.write_text("grid: {fusion.max_gap: [0.25]}\n")
-    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
-                           "--no-dashboard", "--backend", "ekf", "--trajectory", "ekf_smothed")
-    assert_error(status, err, "--trajectory ekf_smothed", "ekf_smoothed")  # the names the runs have
-    assert "no parameter set completed" not in out
-    assert (tmp_path / "sweep" / "results.csv").is_file()  # the runs themselves are kept
+def test_sweep_ranking_by_a_trajectory_no_run_has_is_an_error_naming_the_option(sweeps):
+    sweep = sweeps["unknown_trajectory"]
+    assert "Traceback" not in sweep["stderr"]
+    assert_error(sweep["code"], sweep["stderr"], "--trajectory ekf_smothed", "ekf_smoothed")  # the names the runs have
+    assert "no parameter set completed" not in sweep["stdout"]
+    assert sweep["results"]  # the runs themselves are kept
 
 
 def test_export_says_when_the_ground_truth_of_the_run_is_gone(run_folder, tmp_path, capsys):
@@ -525,7 +535,7 @@ def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
     from fusion_vo.simulation import simulate
 
     small = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
-             "gt_rate": 50.0, "imu_rate": 100.0}  # the camera of conftest.SMALL
+             "gt_rate": 50.0, "imu_rate": 100.0}  # the camera of fault_tools.SMALL
     rec = simulate(tmp_path / "arc", profile="circle", seed=4, radius=0.1, **small)
     out = tmp_path / "sensor.yaml"
     status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
@@ -673,14 +683,11 @@ def test_compare_out_that_is_a_file_says_so_before_evaluating(under, pristine_ru
     assert snapshot(tmp_path) == before
 
 
-def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(pristine, tmp_path, capsys):
+def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(sweeps):
     """'random: 6' over two choices silently ran two parameter sets."""
-    grid = tmp_path / "grid.yaml"
-    grid.write_text("random: 6\nseed: 0\nranges:\n  fusion.max_gap: [0.25, 0.5]\n")
-    status, out, err = cli(capsys, "sweep", pristine, "--out", tmp_path / "sweep", "--grid", grid, "--workers", "1",
-                           "--no-dashboard", "--backend", "ekf", "--no-evaluate")
-    assert status == 0, err
-    assert f"note: {grid}: 'random: 6' drew 2 distinct parameter sets; each runs once" in out
+    sweep = sweeps["repeated_draws"]
+    assert sweep["code"] == 0, sweep["stderr"]
+    assert f"note: {sweep['grid']}: 'random: 6' drew 2 distinct parameter sets; each runs once" in sweep["stdout"]
 
 
 # ------------------------------------------------------------------ empty option values, --threads' bound
