@@ -16,8 +16,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.image import imsave
 from matplotlib.figure import Figure
+from PIL import Image
+from PIL.PngImagePlugin import PngInfo
 
 from fusion_vo.geometry.se2 import yaw_of_quaternion
 from fusion_vo.evaluation.io import FRAME_STATUSES, FrameVelocities, write_atomic
@@ -85,6 +86,10 @@ def new_figure(rows: int = 1, height: float = 4.0, width: float = 8.0, sharex: b
     return fig, axes
 
 
+#: zlib level of the figures' PNG files (:func:`figure_png`)
+PNG_COMPRESS_LEVEL = 3
+
+
 def figure_png(fig: Figure) -> bytes:
     """``fig`` as PNG bytes: those of ``fig.savefig(format="png")`` with the ``Software`` text
     :data:`~fusion_vo.outputs.PNG_SOFTWARE` (how the program's pictures are told from the user's), drawn once.
@@ -95,8 +100,12 @@ def figure_png(fig: Figure) -> bytes:
     canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
     canvas.draw()  # (lays the figure out and renders it)
     buffer = io.BytesIO()
-    imsave(buffer, canvas.buffer_rgba(), format="png", origin="upper", dpi=fig.dpi,
-           metadata={"Software": PNG_SOFTWARE})
+    # RGB (the figures are opaque) at zlib level 3: half the encoding time of RGBA at the default level 6, for
+    # files about 10 % larger
+    info = PngInfo()
+    info.add_text("Software", PNG_SOFTWARE)
+    Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3]).save(
+        buffer, format="png", pnginfo=info, dpi=(fig.dpi, fig.dpi), compress_level=PNG_COMPRESS_LEVEL)
     return buffer.getvalue()
 
 
