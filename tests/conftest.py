@@ -37,15 +37,21 @@ LAST = ("ros2",)
 
 
 def pytest_collection_modifyitems(config, items) -> None:
-    """Mark each test with its folder's layer (a test folder that no layer names is an error); the folders of
-    :data:`LAST` go to the end."""
+    """Mark each test with its folder's layer (a test folder that no layer names is an error) and order them: the
+    modules that wait for the second process's work (``BACKGROUND_JOBS``, tests/background.py) after the others, so
+    that it has the others' time to get ahead of them, and the folders of :data:`LAST` at the end."""
     folders = {}
     for item in items:
         folder = folders[item.nodeid] = Path(item.fspath).resolve().relative_to(TESTS).parts[0]
         if folder not in FOLDER_LAYER:
             raise pytest.UsageError(f"tests/{folder}: no layer in tests/conftest.py's LAYERS names this folder")
         item.add_marker(getattr(pytest.mark, FOLDER_LAYER[folder]))
-    items.sort(key=lambda item: LAST.index(folders[item.nodeid]) + 1 if folders[item.nodeid] in LAST else 0)
+
+    def place(item) -> tuple[int, bool]:
+        folder = folders[item.nodeid]
+        return LAST.index(folder) + 1 if folder in LAST else 0, bool(getattr(item.module, "BACKGROUND_JOBS", None))
+
+    items.sort(key=place)
 
 
 _background: BackgroundJobs | None = None
