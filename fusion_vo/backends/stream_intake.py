@@ -149,7 +149,7 @@ class IntakeMixin:
         buf = self._buffers[stream]
         k = bisect.bisect_right(buf, t, key=lambda item: item[0])  # (a rewind or a late count leaves the buffers)
         T = self._t_nodes
-        redo = bool(T) and (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from))
+        redo = self._read_by_processed(stream, t_from)
         first = self._first_reader(stream, t_from) if redo else None
         if T and t < T[-1] - 1e-9:
             if self._late(sensor, t, first=first):
@@ -174,9 +174,9 @@ class IntakeMixin:
         takes: the EKF rewinds to the node before the first of them, iSAM2 marks them for rebuilding; a node started
         meanwhile is started again."""
         self._touch(stream, t_from)
-        T = self._t_nodes
-        if not T or not (t_from < T[-1] - 1e-9 or self._read_by_last(stream, t_from)):
+        if not self._read_by_processed(stream, t_from):
             return
+        T = self._t_nodes
         first = self._first_reader(stream, t_from)
         if self.backend == "ekf":
             i = None if first is None else self._rewind_index(t_from, 0, first)
@@ -206,6 +206,12 @@ class IntakeMixin:
         if j >= 1 and records[j] is None:  # (retired: the first reader may be older than the history)
             return None
         return min(j + 1, len(T) - 1)
+
+    def _read_by_processed(self, stream: str, t: float) -> bool:
+        """Whether a processed interval reads a sample of ``stream`` at ``t``: it lies before the last node, or the last
+        node's interval reads it (:meth:`_read_by_last`). Those intervals are processed again with it."""
+        T = self._t_nodes
+        return bool(T) and (t < T[-1] - 1e-9 or self._read_by_last(stream, t))
 
     def _read_by_last(self, stream: str, t: float) -> bool:
         """Whether a sample of ``stream`` at ``t``, at or after the last node, is one that node's interval would have
