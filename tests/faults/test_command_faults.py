@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from fault_tools import assert_error, cli, snapshot
+from fault_tools import SMALL, assert_error, cli, snapshot
 from sweep_faults_job import run_all as run_sweeps
 
 #: the sweeps, run ahead in the background (tests/background.py, tests/conftest.py)
@@ -534,8 +534,7 @@ def test_lever_arm_from_a_drive_along_an_arc_is_refused(tmp_path, capsys):
     """The frames' fixed point of an arc is the arc's centre: the lever arm came out wrong, to 0.1 mm."""
     from fusion_vo.simulation import simulate
 
-    small = {"width": 160, "height": 120, "fu": 200.0, "fv": 200.0, "cu": 79.5, "cv": 59.5, "supersample": 1,
-             "gt_rate": 50.0, "imu_rate": 100.0}  # the camera of fault_tools.SMALL
+    small = {k: v for k, v in SMALL.items() if k != "length"}  # the camera and rates of the fault tests' drive
     rec = simulate(tmp_path / "arc", profile="circle", seed=4, radius=0.1, **small)
     out = tmp_path / "sensor.yaml"
     status, _, err = cli(capsys, "calibrate", "lever-arm", rec, "--out", out)
@@ -686,6 +685,7 @@ def test_compare_out_that_is_a_file_says_so_before_evaluating(under, pristine_ru
 def test_a_sweep_whose_random_draws_repeat_says_how_many_sets_it_runs(sweeps):
     """'random: 6' over two choices silently ran two parameter sets."""
     sweep = sweeps["repeated_draws"]
+    assert "Traceback" not in sweep["stderr"]
     assert sweep["code"] == 0, sweep["stderr"]
     assert f"note: {sweep['grid']}: 'random: 6' drew 2 distinct parameter sets; each runs once" in sweep["stdout"]
 
