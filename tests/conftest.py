@@ -11,9 +11,11 @@ end_to_end   the commands and scripts as a user runs them: end_to_end, faults, b
 from __future__ import annotations
 
 import json
+import pickle
 from pathlib import Path
 
 import pytest
+from ahead_job import ahead_key
 from background import BackgroundJobs, jobs_of, placed
 
 from fusion_vo.cli.main import main
@@ -116,6 +118,21 @@ def ahead_json(background):
         if background is not None and key in background:
             return json.loads(background.result(key).stdout.strip().splitlines()[-1])
         return make()
+
+    return get
+
+
+@pytest.fixture
+def made_ahead(request, background):
+    """``made_ahead(name)`` -> the value of ``AHEAD[name]()`` of the test's module: made by the module's background
+    job (tests/ahead_job.py) if the session started it (waiting for it), else computed here."""
+    module = request.module
+    key = ahead_key(module.__file__)
+
+    def get(name: str):
+        if background is not None and key in background:
+            return pickle.loads((background.result(key).out / f"{name}.pickle").read_bytes())
+        return module.AHEAD[name]()
 
     return get
 
