@@ -14,15 +14,17 @@ work its tests will wait for:
                    (``{repo}``: the repository; a script of the repository run as a user runs it)
 
 Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
-the order the tests come; a test that needs a job's result waits for it. The jobs use fixed seeds, so making
-them early changes none of their numbers: only when they run. The suite's other work goes on in this process,
-so on two cores both are busy. A job that fails is reported by the test that waits for it, with its standard error.
+the order the tests come; a test that needs a job's result waits for it or, when the thread has not started it yet,
+runs it itself (after the jobs it reads): the test would only wait, so the second core stays busy. The jobs use
+fixed seeds, so making them early changes none of their numbers: only when they run. The suite's other work goes on
+in this process, so on two cores both are busy. A job that fails is reported by the test that waits for it, with
+its standard error.
 
-Only one job runs at a time, at a lower priority than the suite (``nice -n 5``). The DDS tests (``tests/ros2``, whose
-timing a busy machine can upset) run last (tests/conftest.py) and run each node inside :meth:`BackgroundJobs.quiet`,
-which waits for the running job to end and starts none meanwhile. The tests that run beside a job and measure time
-hold lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch commands' refusals), which
-a second busy core does not reach.
+Every job runs at a lower priority than the suite (``nice -n 5``). The DDS tests (``tests/ros2``, whose timing a
+busy machine can upset) run last (tests/conftest.py) and run each node inside :meth:`BackgroundJobs.quiet`, which
+waits for the running jobs to end and starts none meanwhile. The tests that run beside a job and measure time hold
+lower bounds (the replay's pace) or bounds of 10 s on work of about 5 s (the batch commands' refusals), which a
+second busy core does not reach.
 """
 
 from __future__ import annotations
@@ -53,6 +55,8 @@ class Job:
     key: str
     argv: list[str]
     out: Path
+    needs: list[str] = field(default_factory=list)  # the jobs whose output it reads
+    taken: bool = False  # started (or skipped) by the thread or by a test waiting for it
     done: threading.Event = field(default_factory=threading.Event)
     returncode: int | None = None
     stdout: str = ""
@@ -91,18 +95,20 @@ class BackgroundJobs:
         self.jobs = {}
         for i, key in enumerate(keys):
             out = self.root / f"{i:02d}_{key.replace(':', '_').replace('/', '_')}" / Path(key.partition(":")[2]).name
-            self.jobs[key] = Job(key, command(key, out, commands, {k: j.out for k, j in self.jobs.items()}), out)
+            argv = command(key, out, commands, {k: j.out for k, j in self.jobs.items()})
+            needs = [k for k in self.jobs if any(arg.startswith("{" + k + "}") for arg in commands.get(key, []))]
+            self.jobs[key] = Job(key, argv, out, needs)
         self.stopped = False
-        self.process: subprocess.Popen | None = None
+        self.processes: set[subprocess.Popen] = set()
         self._cond = threading.Condition()
         self._held = 0  # quiet() callers: no job starts while one holds the process quiet
-        self._running = False
+        self._running = 0  # jobs running
         self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
         self.thread.start()
 
     @contextmanager
     def quiet(self):
-        """Within this block no job runs: it waits for the running one to end and holds the next."""
+        """Within this block no job runs: it waits for the running ones to end and holds the next."""
         with self._cond:
             self._held += 1
             while self._running:
@@ -114,45 +120,64 @@ class BackgroundJobs:
                 self._held -= 1
                 self._cond.notify_all()
 
+    def _take(self, job: Job, wait: bool) -> bool:
+        """Mark ``job`` started and count it running, unless it was taken already (False); ``wait``: first wait for
+        the end of :meth:`quiet`."""
+        with self._cond:
+            while wait and self._held and not self.stopped:
+                self._cond.wait(1.0)
+            if job.taken:
+                return False
+            job.taken = True
+            self._running += 1
+            return True
+
     def _run_all(self) -> None:
         for job in self.jobs.values():
-            with self._cond:
-                while self._held and not self.stopped:
-                    self._cond.wait(1.0)
-                self._running = True
-            try:
+            for key in job.needs:  # (started by a test that waits for it: the thread waits for it too)
+                self.jobs[key].done.wait()
+            if self._take(job, wait=True):
                 self._run(job)
-            finally:
-                with self._cond:
-                    self._running = False
-                    self._cond.notify_all()
 
     def _run(self, job: Job) -> None:
+        """Run the taken ``job`` in this thread; its end is counted and announced."""
         try:
             if self.stopped:
                 job.stderr = "not run: the session ended first"
                 return
             job.out.parent.mkdir(parents=True, exist_ok=True)
-            self.process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                            text=True, cwd=REPO)
+            process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                       cwd=REPO)
+            self.processes.add(process)
             try:
-                job.stdout, job.stderr = self.process.communicate(timeout=TIMEOUT_S)
+                job.stdout, job.stderr = process.communicate(timeout=TIMEOUT_S)
             except subprocess.TimeoutExpired:
-                self.process.kill()
-                job.stdout, job.stderr = self.process.communicate()
+                process.kill()
+                job.stdout, job.stderr = process.communicate()
                 job.stderr += f"\n(killed after {TIMEOUT_S:.0f} s)"
-            job.returncode = self.process.returncode
+            finally:
+                self.processes.discard(process)
+            job.returncode = process.returncode
         except Exception as exc:  # noqa: BLE001 -- reported by the test that waits for this job
             job.stderr = f"could not run {job.key}: {exc!r}"
         finally:
+            with self._cond:
+                self._running -= 1
+                self._cond.notify_all()
             job.done.set()
 
     def __contains__(self, key: str) -> bool:
         return key in self.jobs
 
     def result(self, key: str) -> Job:
-        """Wait for job ``key`` and return it, after checking that it exited with status 0."""
+        """Wait for job ``key`` and return it, after checking that it exited with status 0; a job the thread has not
+        started yet is run here, after the jobs it reads (the caller would only wait)."""
         job = self.jobs[key]
+        for need in job.needs:
+            if not self.jobs[need].done.is_set():
+                self.result(need)
+        if not self._held and self._take(job, wait=False):
+            self._run(job)
         assert job.done.wait(TIMEOUT_S * len(self.jobs) + 60.0), f"{key} did not finish"
         assert job.returncode == 0, f"{key} failed:\n{job.stderr[-3000:]}"
         return job
@@ -160,8 +185,9 @@ class BackgroundJobs:
     def stop(self) -> None:
         """End the running job (if any), skip the rest and remove every output."""
         self.stopped = True
-        if self.process is not None and self.process.poll() is None:
-            self.process.kill()
+        for process in list(self.processes):
+            if process.poll() is None:
+                process.kill()
         self.thread.join(timeout=30.0)
         shutil.rmtree(self.root, ignore_errors=True)
 

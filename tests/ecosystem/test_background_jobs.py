@@ -1,0 +1,25 @@
+"""The suite's background queue (tests/background.py): a test that needs a job the queue has not started runs it
+itself, after the jobs it reads, instead of waiting behind the queue."""
+
+import time
+
+from background import BackgroundJobs
+
+SLOW = ["-c", "import time; time.sleep(30)"]
+WRITE = ["-c", "import pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True); (p / 'v').write_text('7')",
+         "{out}"]
+READ = ["-c", "import pathlib, sys; print(pathlib.Path(sys.argv[1], 'v').read_text())", "{python:write}"]
+
+
+def test_a_job_not_started_is_run_by_the_test_that_waits_for_it_after_the_jobs_it_reads():
+    jobs = BackgroundJobs(["python:slow", "python:write", "python:read"],
+                          {"python:slow": SLOW, "python:write": WRITE, "python:read": READ})
+    try:
+        start = time.monotonic()
+        assert jobs.result("python:read").stdout.strip() == "7"  # 'write' ran first: 'read' found its file
+        assert time.monotonic() - start < 15.0  # not behind the 30 s job the queue runs
+        assert not jobs.jobs["python:slow"].done.is_set()
+        assert jobs.jobs["python:write"].done.is_set()
+    finally:
+        jobs.stop()
+    assert not jobs.root.exists()
