@@ -14,11 +14,11 @@ work its tests will wait for:
                    (``{repo}``: the repository; a script of the repository run as a user runs it)
 
 Once the session has collected its tests, one thread runs the jobs those tests name, one subprocess at a time, in
-the order the tests come; a test that needs a job's result waits for it or, when the thread has not started it yet,
-runs it itself (after the jobs it reads): the test would only wait, so the second core stays busy. The jobs use
-fixed seeds, so making them early changes none of their numbers: only when they run. The suite's other work goes on
-in this process, so on two cores both are busy. A job that fails is reported by the test that waits for it, with
-its standard error.
+the order the tests come. A test that needs a job's result runs it itself when the thread has not started it yet
+(after the jobs it reads), and while it waits for the thread to finish it, runs the next jobs the thread has not
+started: the test would only wait, so the second core stays busy. The jobs use fixed seeds, so making them early
+changes none of their numbers: only when they run. The suite's other work goes on in this process, so on two cores
+both are busy. A job that fails is reported by the test that waits for it, with its standard error.
 
 Every job runs at a lower priority than the suite (``nice -n 5``). The DDS tests (``tests/ros2``, whose timing a
 busy machine can upset) run last (tests/conftest.py) and run each node inside :meth:`BackgroundJobs.quiet`, which
@@ -132,6 +132,13 @@ class BackgroundJobs:
             self._running += 1
             return True
 
+    def _next(self) -> Job | None:
+        """The first job not yet taken whose inputs are made (None: none, or within :meth:`quiet`)."""
+        if self._held:
+            return None
+        return next((job for job in self.jobs.values()
+                     if not job.taken and all(self.jobs[k].done.is_set() for k in job.needs)), None)
+
     def _run_all(self) -> None:
         for job in self.jobs.values():
             for key in job.needs:  # (started by a test that waits for it: the thread waits for it too)
@@ -171,13 +178,20 @@ class BackgroundJobs:
 
     def result(self, key: str) -> Job:
         """Wait for job ``key`` and return it, after checking that it exited with status 0; a job the thread has not
-        started yet is run here, after the jobs it reads (the caller would only wait)."""
+        started yet is run here, after the jobs it reads, and while the thread runs it, the jobs after it are (the
+        caller would only wait)."""
         job = self.jobs[key]
         for need in job.needs:
             if not self.jobs[need].done.is_set():
                 self.result(need)
         if not self._held and self._take(job, wait=False):
             self._run(job)
+        while not job.done.is_set():  # the thread runs it: meanwhile run the next jobs here
+            following = self._next()
+            if following is None:
+                break
+            if self._take(following, wait=False):
+                self._run(following)
         assert job.done.wait(TIMEOUT_S * len(self.jobs) + 60.0), f"{key} did not finish"
         assert job.returncode == 0, f"{key} failed:\n{job.stderr[-3000:]}"
         return job
