@@ -27,7 +27,7 @@ def test_a_job_not_started_is_run_by_the_test_that_waits_for_it_after_the_jobs_i
 
 def test_while_the_queue_runs_the_job_a_test_waits_for_the_test_runs_the_next():
     stamp = ["-c", "import sys, time; time.sleep(float(sys.argv[1])); print(time.time())"]
-    jobs = BackgroundJobs(["python:slow", "python:next"], {"python:slow": stamp + ["2"], "python:next": stamp + ["0"]})
+    jobs = BackgroundJobs(["python:slow", "python:next"], {"python:slow": stamp + ["4"], "python:next": stamp + ["0"]})
     try:
         while not jobs.jobs["python:slow"].taken:  # the queue's thread has started it
             time.sleep(0.01)
