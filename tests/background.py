@@ -79,12 +79,15 @@ def command(key: str, out: Path, commands: dict[str, list[str]], outs: dict[str,
     raise ValueError(f"unknown background job {key!r} (standard:NAME, example:NAME, fusion-vo:LABEL or python:LABEL)")
 
 
+def placeholder(arg: str) -> str | None:
+    """The NAME of ``arg``'s leading ``{NAME}`` (None: it has none)."""
+    return arg[1:].partition("}")[0] if arg.startswith("{") else None
+
+
 def placed(arg: str, places: dict[str, str]) -> str:
     """``arg`` with a leading ``{NAME}`` replaced by ``places[NAME]`` (``{data}/x.bag`` -> ``.../tests/data/x.bag``)."""
-    if not arg.startswith("{"):
-        return arg
-    name, _, rest = arg[1:].partition("}")
-    return places[name] + rest
+    name = placeholder(arg)
+    return arg if name is None else places[name] + arg[len(name) + 2:]
 
 
 class BackgroundJobs:
@@ -96,7 +99,7 @@ class BackgroundJobs:
         for i, key in enumerate(keys):
             out = self.root / f"{i:02d}_{key.replace(':', '_').replace('/', '_')}" / Path(key.partition(":")[2]).name
             argv = command(key, out, commands, {k: j.out for k, j in self.jobs.items()})
-            needs = [k for k in self.jobs if any(arg.startswith("{" + k + "}") for arg in commands.get(key, []))]
+            needs = [name for arg in commands.get(key, []) if (name := placeholder(arg)) in self.jobs]
             self.jobs[key] = Job(key, argv, out, needs)
         self.stopped = False
         self.processes: set[subprocess.Popen] = set()
@@ -197,7 +200,7 @@ class BackgroundJobs:
         return job
 
     def stop(self) -> None:
-        """End the running job (if any), skip the rest and remove every output."""
+        """End the running jobs (if any), skip the rest and remove every output."""
         self.stopped = True
         for process in list(self.processes):
             if process.poll() is None:
