@@ -42,13 +42,44 @@ def _workers_ignore_ctrl_c() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
+#: Dask's own default for its worker processes' ``MALLOC_TRIM_THRESHOLD_`` (``distributed.nanny.pre-spawn-environ``)
+DASK_MALLOC_TRIM = "65536"
+
+
+@contextlib.contextmanager
+def _worker_environment() -> Iterator[None]:
+    """Start worker processes with glibc's own memory thresholds, and leave the caller's environment as it was.
+
+    Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_=65536`` for its workers, which turns off glibc's dynamic mmap
+    threshold: every image-sized array is then mapped and unmapped again and its pages faulted in anew
+    (docs/decisions/0040). Unless the environment or the Dask configuration sets another value, the workers run
+    without it. The nanny also writes its worker variables (single-threaded BLAS, a fixed ``PYTHONHASHSEED``)
+    into the calling process's ``os.environ``, where every subprocess the caller starts later would inherit
+    them; the environment is put back once the workers have started. (A worker the nanny restarts later writes
+    them again.)
+    """
+    import dask
+
+    key = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
+    own = str(dask.config.get(key, default=None)) == DASK_MALLOC_TRIM and "MALLOC_TRIM_THRESHOLD_" not in os.environ
+    before = dict(os.environ)
+    try:
+        with dask.config.set({key: None} if own else {}):
+            yield
+    finally:
+        for name in set(os.environ) - set(before):
+            del os.environ[name]
+        os.environ.update(before)
+
+
 @contextlib.contextmanager
 def open_client(workers: int | None = None, scheduler: str | None = None, dashboard: bool = True,
                 announce: Callable[[str], None] | None = None) -> Iterator:
     """A ``distributed.Client``: connected to ``scheduler``, or to a new LocalCluster of ``workers``.
 
     The LocalCluster has one single-threaded worker process per core (or ``workers``), so that each
-    task has a core of its own; it is closed on exit.
+    task has a core of its own; it is closed on exit. Its workers keep glibc's memory thresholds and the
+    caller's environment is left unchanged (:func:`_worker_environment`).
 
     Parameters
     ----------
@@ -93,7 +124,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None, dashbo
                 import bokeh  # noqa: F401
             except ImportError:
                 address = None
-        with _workers_ignore_ctrl_c():
+        with _workers_ignore_ctrl_c(), _worker_environment():
             cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                        dashboard_address=address, silence_logs=logging.ERROR))
         client = stack.enter_context(Client(cluster))

@@ -1,5 +1,6 @@
 """Small generated recordings and a local Dask cluster of 2 worker processes, shared by the batch tests."""
 
+import os
 import shutil
 
 import pytest
@@ -8,6 +9,7 @@ pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) i
 
 from fusion_vo.simulation import simulate  # noqa: E402
 
+_ENVIRONMENT_BEFORE = dict(os.environ)  # before any cluster of the session started
 #: 4 s random drives on 320 x 180 frames (seeds whose robot moves)
 SEEDS = (3, 4, 6)
 
@@ -30,9 +32,15 @@ def recordings(tmp_path_factory):
 
 
 @pytest.fixture(scope="session")
-def client():
-    from distributed import Client, LocalCluster
+def environment_before() -> dict[str, str]:
+    """This process's environment as it was before any cluster of the session started."""
+    return _ENVIRONMENT_BEFORE
 
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
-            Client(cluster) as c:
+
+@pytest.fixture(scope="session")
+def client():
+    """The LocalCluster a batch starts (:func:`fusion_vo.batch.cluster.open_client`), with 2 workers."""
+    from fusion_vo.batch.cluster import open_client
+
+    with open_client(workers=2, dashboard=False) as c:
         yield c

@@ -92,6 +92,18 @@ def test_resumed_batch_runs_nothing_again(batch, recordings, client):
     assert list(failed["recording"]) == ["broken"] and not failed["cached"].any()
 
 
+def test_the_workers_keep_glibcs_memory_thresholds_and_the_callers_environment_is_left_alone(client, environment_before):
+    """Dask's nanny would set ``MALLOC_TRIM_THRESHOLD_=65536`` (every image-sized array mapped and faulted in anew)
+    in its workers and write its worker variables into this process's environment, for every later subprocess."""
+    names = ("MALLOC_TRIM_THRESHOLD_", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "PYTHONHASHSEED")
+    seen = client.run(lambda: {name: os.environ.get(name) for name in names})
+    assert len(seen) == 2
+    for env in seen.values():
+        assert env["MALLOC_TRIM_THRESHOLD_"] == environment_before.get("MALLOC_TRIM_THRESHOLD_")
+        assert env["OMP_NUM_THREADS"] == env["OPENBLAS_NUM_THREADS"] == "1"  # one single-threaded worker per core
+    assert {name: os.environ.get(name) for name in names} == {name: environment_before.get(name) for name in names}
+
+
 def test_cache_key_follows_files_and_configuration(recordings, tmp_path):
     good, _ = recordings
     rec = good[0]
