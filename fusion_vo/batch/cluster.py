@@ -61,10 +61,11 @@ def _worker_environment() -> Iterator[None]:
     import dask
 
     key = "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_"
-    own = str(dask.config.get(key, default=None)) == DASK_MALLOC_TRIM and "MALLOC_TRIM_THRESHOLD_" not in os.environ
+    dasks_default = (str(dask.config.get(key, default=None)) == DASK_MALLOC_TRIM
+                     and "MALLOC_TRIM_THRESHOLD_" not in os.environ)
     before = dict(os.environ)
     try:
-        with dask.config.set({key: None} if own else {}):
+        with dask.config.set({key: None} if dasks_default else {}):
             yield
     finally:
         for name in set(os.environ) - set(before):

@@ -10,6 +10,7 @@ pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) i
 from fusion_vo.simulation import simulate  # noqa: E402
 
 _ENVIRONMENT_BEFORE = dict(os.environ)  # before any cluster of the session started
+
 #: 4 s random drives on 320 x 180 frames (seeds whose robot moves)
 SEEDS = (3, 4, 6)
 
