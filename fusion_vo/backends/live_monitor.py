@@ -215,12 +215,8 @@ class LiveHeadingMonitor:
         kw["notes"], kw["episodes"] = [], []
         kw["sensors"] = sensors = {}
         for name, grid in last.sensors.items():
-            if dataclasses.is_dataclass(grid) and any(key[0] == name for key in columns):
-                grid = copy.copy(grid)
-                for f in dataclasses.fields(grid):
-                    if (name, f.name) in columns:
-                        setattr(grid, f.name, columns[(name, f.name)].array()[p:])
-            sensors[name] = grid
+            windowed = {key[1]: col.array()[p:] for key, col in columns.items() if key[0] == name}
+            sensors[name] = _with_parts(grid, windowed) if windowed else grid
         pos = self._vis["pos"].array().astype(int)
         rows = pos >= p
         sensors["camera"] = CameraGrid(pos[rows] - p, pos[rows] - p + 1, self._vis["delta"].array()[rows],
@@ -466,22 +462,51 @@ class _Column:
         return self._data[:self.n].copy()
 
 
+def _parts(container) -> list[tuple]:
+    """``(key, value)`` of a sensor's measurements on the grid: a dataclass's fields by name, a tuple's items by
+    position, a dict's by key (nothing for any other container)."""
+    if dataclasses.is_dataclass(container) and not isinstance(container, type):
+        return [(f.name, getattr(container, f.name)) for f in dataclasses.fields(container)]
+    if isinstance(container, tuple) and not hasattr(container, "_fields"):
+        return list(enumerate(container))
+    if isinstance(container, tuple):  # a named tuple
+        return list(zip(container._fields, container))
+    if isinstance(container, dict):
+        return list(container.items())
+    return []
+
+
+def _with_parts(container, values: dict):
+    """A copy of ``container`` (as :func:`_parts` reads it) with the parts ``values`` replaced."""
+    if dataclasses.is_dataclass(container):
+        out = copy.copy(container)
+        for key, v in values.items():
+            setattr(out, key, v)
+        return out
+    if isinstance(container, tuple) and hasattr(container, "_fields"):
+        return container._replace(**values)
+    if isinstance(container, tuple):
+        return tuple(values.get(i, v) for i, v in enumerate(container))
+    return {**container, **values}
+
+
 def _split(iv: Intervals) -> tuple[dict, dict]:
-    """Per-node and per-interval array fields of a two-node interval, of the grid (keys ``(None, field)``) and of
-    the measurements of each sensor that registers their container (``(sensor, field)``,
-    :attr:`Sensor.grid <fusion_vo.sensors.registry.Sensor.grid>`); the camera's increments aside."""
+    """Per-node and per-interval arrays of a two-node interval, of the grid (keys ``(None, field)``) and of every
+    registered sensor's measurements on it (``(sensor, part)``: the fields of its container, such as the
+    :attr:`Sensor.grid <fusion_vo.sensors.registry.Sensor.grid>` dataclass it registers, or the items of a
+    tuple or a dict of arrays it keeps in ``iv.sensors``); the camera's increments aside."""
     nodes, intervals = {}, {}
-    parts = [(None, iv)] + [(s.name, iv.sensors[s.name]) for s in registry.sensors()
-                            if s.grid is not None and s.name != "camera" and s.name in iv.sensors]
-    for owner, part in parts:
-        for f in dataclasses.fields(part):
-            v = getattr(part, f.name)
-            if (owner is None and f.name == "t") or not isinstance(v, np.ndarray):
+    parts = [(None, [(f.name, getattr(iv, f.name)) for f in dataclasses.fields(iv)])]
+    parts += [(s.name, _parts(iv.sensors[s.name])) for s in registry.sensors()
+              if s.name != "camera" and s.name in iv.sensors]
+    for owner, items in parts:
+        for key, v in items:
+            if (owner is None and key == "t") or not isinstance(v, np.ndarray):
                 continue
             if len(v) == 2:
-                nodes[(owner, f.name)] = v
+                nodes[(owner, key)] = v
             elif len(v) == 1:
-                intervals[(owner, f.name)] = v
+                intervals[(owner, key)] = v
     return nodes, intervals
 
 

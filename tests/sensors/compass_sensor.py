@@ -156,17 +156,19 @@ COMPASS_HEADING = registry.HeadingSource(
     window=lambda iv, config: lambda span, theta: 2.0 * config.section("compass").sigma ** 2,
     heading=lambda iv: iv.extra["compass"], kept=lambda iv: iv.extra["compass"][0][1:], clear=compass_clear)
 
-#: the compass with its heading checked by the monitor
-CHECKED_COMPASS_SENSOR = dataclasses.replace(COMPASS_SENSOR, heading=(COMPASS_HEADING,))
+#: the compass's live intake: ``StreamingFusion.add("compass", CompassSample(t, yaw))``
+COMPASS_LIVE = Live(sample=lambda m: (m.t, float(m.yaw)),
+                    data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64)),
+                    samples=lambda data: ((t, CompassSample(t, y)) for t, y in zip(data.t, data.yaw)))
+
+#: the compass with its heading checked by the monitor, in a batch run and live
+CHECKED_COMPASS_SENSOR = dataclasses.replace(COMPASS_SENSOR, heading=(COMPASS_HEADING,), live=COMPASS_LIVE)
 
 #: the compass with an unknown constant offset, estimated by both backends (prior 0 ± 0.5 rad)
 OFFSET_COMPASS_SENSOR = dataclasses.replace(
     COMPASS_SENSOR, folder="compass0", read=read_compass,
     states=(State("compass_offset", initial=0.0, sigma=0.5),),
-    readings=compass_readings(OFFSET_COMPASS),
-    live=Live(sample=lambda m: (m.t, float(m.yaw)),
-              data=lambda t, rows, fusion: CompassData(t, np.array(rows, dtype=np.float64)),
-              samples=lambda data: ((t, CompassSample(t, y)) for t, y in zip(data.t, data.yaw))),
+    readings=compass_readings(OFFSET_COMPASS), live=COMPASS_LIVE,
 )
 
 
