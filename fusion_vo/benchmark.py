@@ -353,11 +353,10 @@ def bound_table(rows: list[EndToEnd], cores: int | None = None) -> str:
     target (``TARGETS``).
 
     The plain script's side is the same bound of its faster run in the same repeat: it has no pipeline
-    to wait on, and on an idle machine its wall time per frame matched the bound (6.02 ms against 6.03 ms
-    with OpenCV's threads, 7.87 ms against 7.91 ms on one thread). Both sides are CPU times, so the ratio
-    holds up on a loaded machine, where the wall-clock ratios do not. It is a ceiling for fusion-vo: a
-    target above it cannot be met without cutting CPU time, and waits between fusion-vo's threads can
-    keep it from being reached.
+    to wait on, so on an idle machine its wall time per frame is that bound. Both sides are CPU times, so
+    the ratio holds up on a loaded machine, where the wall-clock ratios do not. It is a ceiling for
+    fusion-vo: a target above it cannot be met without cutting CPU time, and waits between fusion-vo's
+    threads can keep it from being reached.
     """
     cores = cores or available_cores()
     bases = [row for row in rows if row.baseline]

@@ -15,19 +15,19 @@ robot kept moving, so the track holds its last pose there and the gap is listed 
 The body twist ``(vx, vy, yaw rate)`` of a frame is the SE(2) logarithm of its increment divided by the
 real time between the two frames (not a nominal frame rate).
 
-Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``threads >= 2`` a reader
-thread decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's
-per-frame work that does not depend on earlier frames (its ``prepare``, when it has one), while the
-calling thread tracks, and one more thread turns each measured motion into a body increment (gyro
-derotation, ground geometry, the track) while the frontend measures the next frame. With ``handoff``, a
-frontend with a ``set_executor`` method gets one more thread for work it can hand off (KLT: the next
-frame's reference warped by the predicted motion; features: the reference warped for the refinement);
-it shortens the tracking thread but costs thread wake-ups, and on two idle cores it gave no wall-clock
-gain (docs/decisions/0002-hand-off-thread-off-by-default.md), so it is off by default. OpenCV releases the
-GIL while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads, the BLAS libraries one (the matrices are
-small). At most ``2 * threads + 2`` frames wait in a bounded queue (:func:`read_ahead`), so memory stays
-flat in recording length. The results are identical frame for frame to ``threads=1`` (everything in
-the calling thread, OpenCV single-threaded).
+Frames are decoded ahead of the tracker (:func:`prepared_frames`): with ``threads >= 2`` a reader thread
+decodes the recording's frames in order and a pool of ``threads`` workers does the frontend's per-frame work
+that does not depend on earlier frames (its ``prepare``, when it has one), while the calling thread tracks,
+and one more thread turns each measured motion into a body increment (gyro derotation, ground geometry, the
+track) while the frontend measures the next frame. With ``handoff``, a frontend with a ``set_executor`` method
+gets one more thread for work it can hand off (KLT: the next frame's reference warped by the predicted motion;
+features: the reference warped for the refinement); it shortens the tracking thread but costs thread wake-ups,
+and it does not shorten the wall time where the other threads already fill the cores
+(docs/decisions/0002-hand-off-thread-off-by-default.md), so it is off by default. OpenCV releases the GIL
+while it decodes and filters, so they overlap on the cores; OpenCV's own kernels may use ``threads`` threads,
+the BLAS libraries one (the matrices are small). At most ``2 * threads + 2`` frames wait in a bounded queue
+(:func:`read_ahead`), so memory stays flat in recording length. The results are identical frame for frame to
+``threads=1`` (everything in the calling thread, OpenCV single-threaded).
 """
 
 from __future__ import annotations

@@ -60,9 +60,7 @@ _potrf, _trtrs, _trtri = lapack.dpotrf, lapack.dtrtrs, lapack.dtrtri
 
 # The sweeps are meant to run with a single-threaded BLAS (the caller wraps them in
 # ``threadpoolctl.threadpool_limits(1, "blas")``): on blocks of about 60 columns OpenBLAS's threads
-# cost more than they save, and on a busy machine far more. Measured on robot_localization's Jackal
-# log (1225 nodes, ``fusion-vo run --backend gtsam``, load average about 25 on 2 cores): the marginal
-# covariances took 0.93 s of CPU with OpenBLAS's default two threads and 0.011 s with one.
+# cost more than they save, and on a busy machine far more (docs/decisions/0007-ekf-single-threaded-blas.md).
 
 #: the largest block (columns) of the block-tridiagonal system; beyond it GTSAM's elimination is used
 MAX_BLOCK = 400
@@ -407,9 +405,9 @@ def levenberg_marquardt(problem: ChainProblem, values: gtsam.Values, max_iterati
                         relative_tolerance: float = 1e-3):
     """Levenberg–Marquardt (module docstring) from ``values`` on the block-tridiagonal system.
 
-    On the batch graph of the 60 s generated drive it took 32-39 ms of CPU where GTSAM's
-    ``LevenbergMarquardtOptimizer`` on the same factors took 3.7-4.3 s, to the same cost
-    (``python benchmarks/backend_speed.py solvers``; docs/decisions/0006-own-levenberg-marquardt-loop.md).
+    It stays beside GTSAM's ``LevenbergMarquardtOptimizer`` because on the batch graph of the 60 s generated
+    drive it takes 32-39 ms of CPU where GTSAM's optimizer takes 3.7-4.3 s on the same factors, to the same
+    cost (``python benchmarks/backend_speed.py solvers``; docs/decisions/0006-own-levenberg-marquardt-loop.md).
 
     Returns
     -------

@@ -49,13 +49,11 @@ class EkfConfig(Section):
     visual_scale_random_walk: Walk = Field(1e-5, description=(
         "Random walk of the visual scale (the camera height) [1/√s], in both backends (a rigidly mounted camera "
         "keeps its height, and a range finder measures one that changes). Nothing but the height prior holds the "
-        "common scale of camera and wheels. With a walk as large as the wheels' (1e-4), the wheels' slip, shared "
-        "between the two scale factors, moved the camera's scale: at the generator's true noise the fused tracks "
-        "on ``square`` and ``random60`` were 2 and 1.5 times worse than with 1e-5. At the default priors the walks "
-        "no longer matter on clean drives: 1e-7 here, or 1e-3 for the wheels, moved no profile's mean ATE ratio to "
-        "visual odometry by more than 0.01 (docs/decisions/0036-visual-scale-model.md). Not 0: the graph ties each "
-        "calibration segment's visual scale to the previous one with this walk, and ties of 1e-6 are too stiff for "
-        "GTSAM's elimination (an indeterminate system on the drive of ``tests/backends/test_chain.py``)."))
+        "common scale of camera and wheels, and a walk as large as the wheels' lets their slip, shared between "
+        "the two scale factors, move the camera's scale (docs/decisions/0016-visual-scale-random-walk.md, "
+        "docs/decisions/0036-visual-scale-model.md). Not 0: the graph ties each calibration segment's visual scale "
+        "to the previous one with this walk, and ties of 1e-6 are too stiff for GTSAM's elimination (an "
+        "indeterminate system on the drive of ``tests/backends/test_chain.py``)."))
     smoother: bool = Field(True, description="Run the Rauch–Tung–Striebel pass.")
 
 
@@ -105,7 +103,7 @@ class FusionConfig(Section):
 
     step_hz: Float = Field(20.0, gt=0, le=1000, description=(
         "Node rate [Hz] where no camera frame provides the nodes (at most 1000: every node is a state of both "
-        "backends, so the work grows with the rate, and 1e9 Hz never finished)."))
+        "backends, so the work grows with the rate)."))
     max_gap: Positive = Field(0.25, description="A gap between two samples of a stream longer than this [s] is not "
                                                 "bridged.")
     reorder_window: NonNegative = Field(0.3, description=(
@@ -120,9 +118,8 @@ class FusionConfig(Section):
         "height is a mounting dimension, measured once, that no tyre, load, slip or floor changes). A "
         "``height_sigma`` [m] in ``cam0/sensor.yaml`` replaces it by ``height_sigma / height``. Camera and wheels "
         "measure only the ratio ``k_v / k_r``; with these two priors a disagreement ``ρ`` of their distances moves "
-        "the camera's scale by ``ρ σ_v² / (σ_v² + σ_r²)``: 1 % of it at the defaults (0.002 and 0.02), 96 % at the "
-        "former 0.05 and 0.01, which on clean generated drives put the wheels' radius error into the camera's "
-        "scale (docs/decisions/0036-visual-scale-model.md)."))
+        "the camera's scale by ``ρ σ_v² / (σ_v² + σ_r²)``: 1 % of it at the defaults (0.002 and 0.02), so that the "
+        "wheels' radius error does not become the camera's scale (docs/decisions/0036-visual-scale-model.md)."))
     wheel_base_sigma: Sigma = Field(0.05, description="Prior standard deviation of the wheel-base factor around 1.")
     wheel_scale_sigma: Sigma = Field(0.02, description=(
         "Prior standard deviation of the wheels' distance scale ``k_r = r_configured / r_true`` (their common "

@@ -316,9 +316,9 @@ def isam_params() -> gtsam.ISAM2Params:
 
     The factorisation is QR. Cholesky squares the condition number, and systems that are well posed
     but badly conditioned are then reported as indeterminate: with GPS, a loose first-heading prior (from
-    the fixes) beside near-exact wheel heading changes at low speed; on a generated barrel-lens recording
-    (``real_barrel_fine``), a gyro-bias variable beside very precise camera increments, where Cholesky
-    stopped the whole run (``docs/decisions/0031-incremental-solvers-factorise-with-qr.md``).
+    the fixes) beside near-exact wheel heading changes at low speed; a gyro-bias variable beside very
+    precise camera increments (the generated barrel-lens recording ``real_barrel_fine``,
+    ``tests/data/barrel_fine_fusion/``; ``docs/decisions/0031-incremental-solvers-factorise-with-qr.md``).
     """
     params = gtsam.ISAM2Params()
     params.setRelinearizeThreshold(0.1)

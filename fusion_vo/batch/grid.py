@@ -58,8 +58,7 @@ log = logging.getLogger(__name__)
 GRID_SECTIONS = ("grid", "random", "seed", "ranges", "fixed")
 
 #: most parameter sets a grid file may give (``random: N``, the combinations of ``grid:``, ``--trials``):
-#: each set is checked before anything runs (some 7 ms) and runs on every recording; ``random:
-#: 1000000000000`` never finished drawing them
+#: each set is made and checked before anything runs (some 7 ms each) and runs on every recording
 MAX_SETS = 10000
 
 

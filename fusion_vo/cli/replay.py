@@ -31,8 +31,8 @@ from fusion_vo.errors import InputError
 
 OUTPUTS = ("live_{b}.csv", "live_{b}.tum", "stream_{b}.tum", "replay.json")
 
-#: the highest ``--rate`` [Hz]: every query is a call of ``current_estimate()`` (1e9 Hz was still busy after
-#: 100 s on a 12 s recording), and a controller asks at most about once a millisecond
+#: the highest ``--rate`` [Hz]: every query is a call of ``current_estimate()``, so the work grows with the
+#: rate, and a controller asks at most about once a millisecond
 MAX_RATE_HZ = 1000.0
 
 

@@ -71,12 +71,12 @@ class OdometrySettings(Section):
     threads: Annotated[int, Field(ge=1, le=256), INTEGER] | None = Field(None, description=(
         "Threads the run may use: ``1`` decodes and tracks in the calling thread with OpenCV single-threaded; "
         "``N >= 2`` decodes and prepares frames ahead of the tracker in other threads (:func:`prepared_frames`) and "
-        "lets OpenCV use ``N`` threads. Null uses the cores available to the process; at most 256 (100000 started "
-        "threads until the process limit was hit). The results do not depend on it."))
+        "lets OpenCV use ``N`` threads. Null uses the cores available to the process; at most 256, so that a "
+        "mistyped value cannot start threads up to the process limit. The results do not depend on it."))
     handoff: bool = Field(False, description=(
         "With ``threads >= 2``, give a frontend that can hand work off (KLT, features) one more thread for it (off "
-        "by default: on two idle cores it saved the tracking thread 0.5-0.6 ms per frame but the wall time did not "
-        "fall). The results do not depend on it."))
+        "by default: it shortens the tracking thread, not the wall time, where the other threads already fill the "
+        "cores; docs/decisions/0002-hand-off-thread-off-by-default.md). The results do not depend on it."))
     camera_noise: bool = Field(True, description=(
         "Use the heading noise model that ``cam0/sensor.yaml`` states under ``camera_noise`` for this frontend "
         "(``fusion-vo calibrate camera-noise``, :mod:`fusion_vo.calibration.camera_noise`): each increment's "

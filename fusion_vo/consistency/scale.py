@@ -33,23 +33,18 @@ to be wrong: its scale rests on a focal length, a height and a floor model, any 
 factor (``--focal-length`` is a guess when the lens is uncalibrated), the wheels' on one radius; the sentence
 says the data could not tell.
 
-What is done with the wrong one. The camera: its translation is left out (standard deviation ``LEFT_OUT``,
-no correlation with its heading) and its heading kept; the wheels then carry the distance and the camera
-still straightens the heading. A wrong focal length is not only a scale: the increments are the camera's
-motion conjugated by its mounting (:mod:`fusion_vo.geometry.ground`), so a camera ahead of the axle reads
-a turn in place as a translation of ``(ρ - 1)`` times its lever arm's arc, and the lens model estimated
-under the wrong focal length bends the rest. Measured on the generated ``square``, ``hard`` and ``random60``
-drives run with ``--uncalibrated --focal-length 210`` (true 420; ATE after SE(2) alignment, EKF / RTS / GTSAM
-batch / iSAM2, mm; ``benchmarks/contradictions.py --full``, section 2): translation left out 0.9 / 0.8 / 0.8 /
-0.9, 4.1 / 3.0 / 2.9 / 4.1, 8.6 / 3.3 / 3.3 / 8.5; the increments divided by ``ρ`` (with the lever arm's part
-undone) and the prior released 1.2 / 1.3 / 1.2 / 1.2, 4.4 / 3.2 / 4.1 / 5.6, 8.5 / 3.1 / 3.1 / 8.5; the prior
-released alone 201 / 127 / 327 / 132, 168 / 120 / 100 / 140, 283 / 296 / 237 / 212; as stated (no check) 593,
-877, 1268 or worse; the wheels alone 35.9, 51.4, 71.4; visual odometry 602, 1125, 1290. Leaving the
-translation out is as good as the best rescaling and needs no model of how the focal length bent the
-increments. The wheels: their radii (or the twist's velocity) are multiplied by
-``ρ`` and their scale prior replaced by ``released_scale_sigma`` (no longer ``radius_sigma``), so the camera
-sets the scale and the backends start from the measured ratio. Both replace the prior of the scale they
-give up by ``released_scale_sigma``.
+What is done with the wrong one. The camera: its translation is left out (standard deviation ``LEFT_OUT``, no
+correlation with its heading) and its heading kept; the wheels then carry the distance and the camera still
+straightens the heading. A wrong focal length is not only a scale: the increments are the camera's motion
+conjugated by its mounting (:mod:`fusion_vo.geometry.ground`), so a camera ahead of the axle reads a turn in
+place as a translation of ``(ρ - 1)`` times its lever arm's arc, and the lens model estimated under the wrong
+focal length bends the rest. Leaving the translation out needs no model of how the focal length bent the
+increments; releasing the camera's scale prior alone would leave the lever arm's and the lens model's errors
+in them (docs/consistency.md, "A wrong focal length"; ``python benchmarks/contradictions.py --full``). The
+wheels: their radii (or the twist's velocity) are multiplied by ``ρ``, the ``radius_sigma`` of
+``wheel0/sensor.yaml`` is dropped and their scale prior widened to ``released_scale_sigma``, so the camera
+sets the scale and the backends start from the measured ratio. Both replace the prior of the scale they give
+up by ``released_scale_sigma``.
 """
 
 from __future__ import annotations

@@ -239,10 +239,10 @@ class HeightFilter:
     innovation variance times ``|r| / huber``), as the smoother's readings do.
 
     The ratios' variance factor ``φ`` is not estimated here: a reading is 10-100 times noisier than a
-    ratio, so the few seconds of readings a live filter has do not tell how good the ratios are (a
-    running covariance match over 50 readings moved ``φ`` to 150 on drives whose ratios were exactly as
-    stated). Give it the factor an offline run of the same camera found (``fusion-vo run`` says it in its
-    notes: "the scales' stated variance times ..."); 1 trusts the frontend's statement.
+    ratio, so the few seconds of readings a live filter has do not tell how good the ratios are
+    (docs/decisions/0020-camera-height-from-all-range-readings.md). Give it the factor an offline run of
+    the same camera found (``fusion-vo run`` says it in its notes: "the scales' stated variance times
+    ..."); 1 trusts the frontend's statement.
 
     Parameters
     ----------

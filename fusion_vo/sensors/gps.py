@@ -88,14 +88,10 @@ class GpsNoise(Section):
     estimate_sigma: bool = Field(False, description=(
         "Measure the fixes' scatter about the GPS-free track in the world-frame alignment and, when it is "
         "significantly larger than the receiver's stated sigma, raise ``min_sigma`` to it for the run "
-        "(:func:`scatter_floor`; batch backends only, ``StreamingFusion`` keeps the stated sigma). Off by default, "
-        "as measured by ``python benchmarks/gps_fusion.py``: on the Husky bag (stated 0.80 m) it measures 1.51 m, "
-        "the gate then rejects no fix of the first half (EKF 39, graph 209 with the stated sigma), yet the "
-        "withheld second half gets worse in every backend (RMS EKF 4.69 -> 4.86 m, EKF + RTS 4.61 -> 4.82, GTSAM "
-        "batch 4.52 -> 4.97, iSAM2 4.19 -> 4.69); with the first third or two thirds fused (``--husky-split 0.33 "
-        "/ 0.67``) the EKF gains (5.10 -> 4.47, 8.14 -> 6.69 m) and the graph loses once and gains once (4.36 -> "
-        "4.63, 7.53 -> 7.34 m): no consistent gain. On ``gps_outage`` (honest 5 cm) the test does not fire and "
-        "nothing changes."))
+        "(:func:`scatter_floor`; batch backends only, ``StreamingFusion`` keeps the stated sigma). Off by default: "
+        "fix errors correlated over tens of seconds fit no sigma for independent fixes, and on a real log the "
+        "measured one gave no consistent gain (docs/decisions/0027-gps-not-fused-by-default.md; ``python "
+        "benchmarks/gps.py --set fusion.gps.estimate_sigma=true``)."))
 
 
 # ---------------------------------------------------------------------- model

@@ -8,11 +8,10 @@ holds the camera's error ``e_k``, the gyro's white noise ``n_k`` (``Var n_k = σ
 noise, which is honest per interval: NIS 0.96-1.02 on the generated recordings) and its slowly changing bias
 ``b``. The bias is removed with the running mean of ``d`` over :data:`WINDOW` intervals (10 s at 20 Hz):
 ``r_k = d_k - mean_W(d)_k``. The mean takes ``1/W`` of each term's own variance with it, and consecutive
-residuals share ``-1/W`` of theirs through it; both are in the variances below. (Differences at a lag of
-three intervals were tried first: they remove a constant bias exactly, but also every camera error that
-persists over a few frames, and those are most of the realistic renders' errors: on
-real_fisheye_checker, whose heading errors correlate at +0.95 from frame to frame and are 3.8 times their
-stated variance, the differences gave 0.22 times. The running mean gives 3.0.) With the camera's true
+residuals share ``-1/W`` of theirs through it; both are in the variances below. (A running mean, not
+differences at a lag of a few intervals: those would remove a constant bias exactly, but also every camera
+error that persists over a few frames, most of the realistic renders' errors;
+docs/decisions/0018-camera-noise-from-the-gyro-off-by-default.md.) With the camera's true
 heading variance ``s σ_c,k²`` (``σ_c,k²`` its stated one) and its errors correlated at ``-f/2`` between
 consecutive intervals (the moving-average model of :mod:`fusion_vo.sensors.visual`,
 ``visual_frame_error = f``)::
