@@ -300,9 +300,9 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._states = registry.states(self.sensors, self.config)
         if wheel_config is not None:  # the wheels' curvature bias and its prior, as in a batch run
 
-            # whether the IMU brings an AHRS heading is known only from its samples: a stream decides from the
-            # camera and GPS declared (a batch run of wheels and an AHRS alone estimates the curvature)
-            observable = curvature_observable(camera="camera" in self.sensors, ahrs=False, gps="gps" in self.sensors)
+            # decided from the sensors declared: whether the IMU brings an AHRS heading is known only from its
+            # samples, so it does not count here (a batch run of wheels and an AHRS alone estimates the curvature)
+            observable = curvature_observable(registry.get(name).references_heading(None) for name in self.sensors)
             self._states = curvature_states(self._states, self.config,
                                             wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
                                             wheel_config.wheel_base, observable)

@@ -523,7 +523,8 @@ def _live_samples(data: GpsData) -> list:
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
     has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
-    default=False, config=("gps", GpsNoise), absolute_position=True, node_times=node_times, intervals=Step(50, add_intervals),
+    default=False, config=("gps", GpsNoise), absolute_position=True, heading_reference=True, node_times=node_times,
+    intervals=Step(50, add_intervals),
     readings=readings, graph_keyframes=_keyframes,
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, order=4),
 ))

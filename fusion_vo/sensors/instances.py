@@ -359,6 +359,7 @@ def imu_instance(n: int) -> Sensor:
                   states=(State(bias, initial=0.0, sigma=ImuNoise().gyro_bias_sigma,
                                 random_walk=ImuNoise().gyro_random_walk),),
                   intervals=Step(GYRO_ORDER, intervals), readings=readings, absolute_heading=True,
+                  heading_reference=False,  # a gyro: its bias is its own, so it cannot tell the wheels' curvature
                   live=Live(_imu_sample, live_data, neighbours=lambda config: int(config.section(name).spike_window) + 1,
                             samples=samples))
 

@@ -306,6 +306,14 @@ class Sensor:
         (:func:`~fusion_vo.backends.states.calibration_observable`), as with the camera or the gyro. True: when its
         samples are used on the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that
         says so (the IMU: when its AHRS gives headings). Default False.
+    heading_reference : bool, callable or None
+        The sensor measures the heading, or its change, without a bias of its own (the camera, the IMU's AHRS,
+        GPS, a compass): beside the wheels and a gyro it tells a difference of the wheels' radii (their
+        curvature bias) from the gyro's bias, so ``wheel.estimate_curvature: auto`` estimates the curvature
+        (:func:`~fusion_vo.sensors.wheel_states.curvature_observable`). ``heading_reference(data) -> bool``
+        decides from the sensor's data, or with ``data`` None for a live run, which has none yet (the camera:
+        some increment measured; the IMU: its samples carry an orientation, unknown live). None (the
+        default): as :attr:`absolute_heading` when that is a bool (a gyro of its own declares False).
     live : Live or None
         Its intake in :class:`~fusion_vo.backends.streaming.StreamingFusion` (``add(name, sample)``); the
         camera and GPS, whose samples make nodes, hand them on with ``Live.take``.
@@ -337,6 +345,7 @@ class Sensor:
     states: tuple = ()
     live: Live | None = None
     absolute_heading: Any = False
+    heading_reference: Any = None
     heading: tuple = ()
     distance: tuple = ()
 
@@ -349,6 +358,14 @@ class Sensor:
         if callable(self.absolute_heading):
             return bool(self.absolute_heading(iv))
         return bool(self.absolute_heading) and iv.uses(self.name)
+
+    def references_heading(self, data=None) -> bool:
+        """Whether it is a heading reference for the wheels' curvature (:attr:`heading_reference`) with its
+        ``data`` (None: a live run's, not known yet)."""
+        ref = self.heading_reference
+        if ref is None:
+            ref = self.absolute_heading if isinstance(self.absolute_heading, bool) else False
+        return bool(ref(data)) if callable(ref) else bool(ref)
 
     def available(self, data) -> bool:
         """Whether ``data`` has enough samples to be used."""

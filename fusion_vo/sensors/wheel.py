@@ -28,6 +28,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, TwistSample, WheelConfig, WheelData, WheelTicks
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, Step, register
+from fusion_vo.sensors.registry import sensors as registered_sensors
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
     WheelNoise, arc_covariance, arc_increment, arc_twist, odom_twist_noise, skid_variance, standstill,
     travel_variances,
@@ -320,14 +321,14 @@ def add_intervals(iv, streams, config, counts) -> None:
     w.ok, w.dl, w.dr = ok, np.diff(left), np.diff(right)
     w.base = travel.wheel_base
     if streams.wheel is not None:
-        observable = curvature_observable(camera=any(v.ok for v in streams.visual or ()),
-                                          ahrs=streams.imu is not None and streams.imu.orientation is not None,
-                                          gps=streams.gps is not None)
+        observable = curvature_observable(s.references_heading(data) for s in registered_sensors()
+                                          if (data := s.data(streams)) is not None)
         iv.states = curvature_states(iv.states, config, iv.wheel_scale_sigma, travel.wheel_base, observable)
         if config.wheel.estimate_curvature == "auto" and not observable:
-            iv.notes.append("wheel curvature bias not estimated: without a camera, an AHRS heading or GPS only the "
-                            "wheels and the gyro measure the turn, and a radius difference cannot be told from the "
-                            "gyro's bias (fusion.wheel.estimate_curvature: true estimates it anyway)")
+            iv.notes.append("wheel curvature bias not estimated: without a camera, an AHRS heading, GPS or another "
+                            "heading reference only the wheels and the gyro measure the turn, and a radius difference "
+                            "cannot be told from the gyro's bias (fusion.wheel.estimate_curvature: true estimates it "
+                            "anyway)")
     count.used += int(ok.sum())
     count.missing += int((~ok).sum())
 

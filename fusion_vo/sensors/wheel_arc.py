@@ -97,7 +97,8 @@ class WheelNoise(Section):
         "Standard deviation [rad/s] of the zero yaw rate at a standstill (vibration of a robot at rest)."))
     estimate_curvature: bool | Literal["auto"] = Field("auto", description=(
         "Estimate the curvature bias of unequal left and right radius errors (:class:`CurvedWheelModel`; encoder "
-        "ticks only, an odometry twist has no radii). ``auto``: when a camera, an AHRS heading or GPS is fused "
+        "ticks only, an odometry twist has no radii). ``auto``: when a camera, an AHRS heading, GPS or a "
+        "registered heading reference (a compass) is fused "
         "(:func:`~fusion_vo.sensors.wheel_states.curvature_observable`); on the generated drives, which all have "
         "a camera, it improves ``hard``, "
         "``height_error``, ``tilted`` and ``gps_outage`` and costs ``random60``'s EKF and iSAM2 4 %. With the "

@@ -60,16 +60,18 @@ def curvature_sigma(radius_rel_sigma: float, wheel_base: float) -> float:
     return float(math.sqrt(2.0) * radius_rel_sigma / wheel_base)
 
 
-def curvature_observable(camera: bool, ahrs: bool, gps: bool) -> bool:
+def curvature_observable(references) -> bool:
     """Whether the wheels' curvature bias is estimated under ``estimate_curvature: "auto"``: when a sensor
-    besides the wheels and the gyro measures the heading or its change (a camera, an AHRS heading, GPS).
+    besides the wheels and the gyro measures the heading or its change without a bias of its own
+    (``references``: whether each sensor of the run is such a reference, its
+    :attr:`~fusion_vo.sensors.registry.Sensor.heading_reference`: a camera, an AHRS heading, GPS, a compass).
 
     The wheels' turn carries ``c`` per metre driven, the gyro's its bias ``b`` per second; with nothing else,
     only their difference ``c v - b`` is measured, and the two separate only through changes of speed ``v``.
     The estimate of that split then leans on the two priors, and the heading drifts at the split's error
     (``docs/decisions/0013-no-curvature-without-a-heading-reference.md``).
     """
-    return camera or ahrs or gps
+    return any(references)
 
 
 def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float,

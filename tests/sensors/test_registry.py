@@ -16,6 +16,7 @@ from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.instances import imu_instance
 from fusion_vo.sensors.registry import Sensor, State, Step
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
@@ -208,8 +209,29 @@ def test_a_registered_heading_sensor_makes_the_wheel_base_observable(drive):
         calibrated = fuse(streams.select(["wheel", "compass"]), "all", config)
     for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
         assert "wheel_base_factor" not in plain.calibration[name], (name, plain.calibration[name])
-        # measured: 1.045 (EKF, GTSAM batch), 1.061 (iSAM2)
+        # measured: 1.046-1.047 (EKF, GTSAM batch), 1.062 (iSAM2)
         assert abs(calibrated.calibration[name]["wheel_base_factor"] - 1.05) < 0.015, (name, calibrated.calibration[name])
+
+
+def test_a_registered_heading_sensor_is_a_reference_for_the_wheels_curvature(drive):
+    """A sensor that declares ``absolute_heading`` has no bias of its own: beside encoder ticks and a gyro it tells
+    the wheels' curvature from the gyro's bias, so ``estimate_curvature: auto`` estimates it, as with a camera, an
+    AHRS or GPS; ``heading_reference=False`` (a second gyro's) leaves it out and says why."""
+    s, compass = drive
+    streams = SensorStreams(wheel=s.wheel, imu=s.imu, extra={"compass": compass})
+    results = {}
+    for ref in (None, False):
+        with registry.registered(dataclasses.replace(COMPASS_SENSOR, absolute_heading=True, heading_reference=ref)):
+            results[ref] = fuse(streams.select(["wheel", "imu", "compass"]), "ekf", FusionConfig())
+    assert "wheel_curvature" in results[None].calibration["ekf"], results[None].calibration
+    assert not [n for n in results[None].notes if "curvature bias not estimated" in n], results[None].notes
+    assert "wheel_curvature" not in results[False].calibration["ekf"], results[False].calibration
+    assert [n for n in results[False].notes if "curvature bias not estimated" in n], results[False].notes
+    # live, from the sensors declared: the camera and GPS are references, the IMU only once its samples show an
+    # AHRS, a second gyro never
+    assert [registry.get(n).references_heading(None) for n in ("camera", "gps", "imu", "wheel")] == [
+        True, True, False, False]
+    assert imu_instance(1).references_heading(None) is False
 
 
 def test_a_state_is_checked_when_registered():
