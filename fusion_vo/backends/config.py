@@ -21,13 +21,13 @@ from fusion_vo.config.base import (NUMBER, Count, Float, Fraction, Int, NonNegat
                                    Walk)
 from fusion_vo.consistency.config import ConsistencyConfig
 from fusion_vo.measurements import MAX_CAMERA_HEIGHT_M, MAX_POSITION_M
+from fusion_vo.robust import ROBUST_KERNELS
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.gps import GpsNoise
 from fusion_vo.sensors.imu import ImuNoise
 from fusion_vo.sensors.range import RangeNoise
 from fusion_vo.sensors.registry import StatePrior
 from fusion_vo.sensors.visual_noise import VisualNoiseConfig
-from fusion_vo.sensors.model import ROBUST_KERNELS
 from fusion_vo.sensors.wheel import WheelNoise, odom_twist_noise
 
 #: ``initial_pose``: x and y [m], within :data:`~fusion_vo.measurements.MAX_POSITION_M`

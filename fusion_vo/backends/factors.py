@@ -34,7 +34,8 @@ import gtsam
 import numpy as np
 
 from fusion_vo.geometry import se2
-from fusion_vo.sensors.model import MeasurementModel, robust_loss, robust_weight
+from fusion_vo.robust import mestimator, robust_loss, robust_weight
+from fusion_vo.sensors.model import MeasurementModel
 
 
 def gaussian_factor(items: list, b, unit, values: gtsam.Values | None = None):
@@ -86,7 +87,7 @@ class ModelFactor:
     rows : tuple or None
         The model's rows this factor uses (None: all).
     robust : tuple or None
-        ``(kernel, k)`` of GTSAM's ``mEstimator`` (``"huber"`` or ``"cauchy"``), or None.
+        ``(kernel, k)`` of GTSAM's ``mEstimator`` (``"huber"`` or ``"cauchy"``; :mod:`fusion_vo.robust`), or None.
     """
 
     model: MeasurementModel
@@ -207,11 +208,8 @@ class ModelFactor:
 
     def noise_model(self):
         base = covariance_noise(self.covariance)
-        if self.robust is None:
-            return base
-        kernel, k = self.robust
-        est = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[kernel]
-        return gtsam.noiseModel.Robust.Create(est.Create(k), base)
+        robust = None if self.robust is None else mestimator(*self.robust)
+        return base if robust is None else gtsam.noiseModel.Robust.Create(robust, base)
 
     def custom_factor(self) -> gtsam.CustomFactor:
         """The same factor as a :class:`gtsam.CustomFactor` around the model's residual and Jacobians."""

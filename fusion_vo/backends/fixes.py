@@ -8,8 +8,8 @@ the ``pose`` argument of its model, ``z = h(x) + n`` (the antenna's position: ``
   when there is none), a reading with ``d² = rᵀ S⁻¹ r`` above ``noise.gate_chi2`` is rejected
   (:meth:`~fusion_vo.sensors.gps.GpsModel.check`, which also floors ``Σ`` at ``noise.min_sigma``);
 * robust weight: an accepted reading's information is scaled by ``w(d)`` of ``noise.kernel`` (Huber ``k/d`` beyond
-  ``k``, Cauchy ``1 / (1 + (d/k)²)``): the EKF divides ``Σ`` by it, the graph wraps the factor in GTSAM's
-  ``mEstimator`` of the same kernel;
+  ``k``, Cauchy ``1 / (1 + (d/k)²)``; :mod:`fusion_vo.robust`): the EKF divides ``Σ`` by it, the graph wraps the
+  factor in GTSAM's ``mEstimator`` of the same kernel;
 * re-acquisition: after ``reacquire`` seconds in which every reading was rejected one is applied anyway (the EKF
   first widens its position covariance by the squared innovation), so an estimate that drifted while the readings
   were wrong, or absent, comes back;

@@ -32,6 +32,7 @@ from fusion_vo.backends.graph_adapter import GraphReadings, frame_poses, interva
 from fusion_vo.backends.graph_adapter import guess as readings_guess
 from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, covariance_noise
+from fusion_vo.robust import mestimator
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.imu import imu_grid
 from fusion_vo.sensors.visual import camera_grid
@@ -141,7 +142,7 @@ class GraphBuilder:
         if dof not in self._kernels:
             width = kernel_width(self.config, dof)
             self._kernels[dof] = None if width is None else (
-                (self.config.graph.robust, width), _robust_kernel(self.config.graph.robust, width))
+                (self.config.graph.robust, width), mestimator(self.config.graph.robust, width))
         return self._kernels[dof]
 
     def model_factor(self, model, z, cov, keys: dict, fixed: dict | None = None, params: dict | None = None,
@@ -169,7 +170,7 @@ class GraphBuilder:
         """GTSAM's noise model of ``cov`` inside the ``mEstimator`` ``kernel`` (``"huber"``, ``"cauchy"``; ``"none"``:
         the Gaussian alone) of ``width`` on the whitened distance."""
         base = covariance_noise(np.asarray(cov, dtype=np.float64))
-        robust = _robust_kernel(kernel, width)
+        robust = mestimator(kernel, width)
         return base if robust is None else gtsam.noiseModel.Robust.Create(robust, base)
 
     def initial_pose(self) -> np.ndarray:
@@ -379,13 +380,3 @@ def _chi_width(k: float, dof: int) -> float | None:
     if p >= 1.0:
         return None
     return float(np.sqrt(chi2.ppf(p, dof)))
-
-
-def _robust_kernel(name: str, width: float):
-    if name == "huber":
-        return gtsam.noiseModel.mEstimator.Huber.Create(width)
-    if name == "cauchy":
-        return gtsam.noiseModel.mEstimator.Cauchy.Create(width)
-    return None
-
-

@@ -24,8 +24,9 @@ factor by the backward recurrence of Takahashi et al. (for ``A = L Lᵀ`` with `
 ``Σ_kk = 1 / l_k² + (m_k / l_k)² Σ_{k+1,k+1}``), both in O(N).
 
 Readings and ratios whose normalised residual exceeds ``huber`` are down-weighted (iteratively
-reweighted least squares with Huber weights), so that a spike the range gate let through, or a frame
-whose scale the frontend got wrong, moves the heights around it by little.
+reweighted least squares with Huber weights ``w(|r|) = min(1, huber / |r|)``,
+:func:`fusion_vo.robust.robust_weight`), so that a spike the range gate let through, or a frame whose scale
+the frontend got wrong, moves the heights around it by little.
 
 The factor ``φ ≥ 1`` is estimated from the data (variance-component estimation): each ratio's squared
 normalised residual is compared with its redundancy ``1 - (Σ_kk + Σ_{k-1,k-1} - 2 Σ_{k-1,k}) / var_k``
@@ -54,6 +55,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import cholesky_banded, cho_solve_banded
+
+from fusion_vo.robust import robust_weight
 
 
 @dataclass
@@ -151,8 +154,8 @@ def smooth_heights(frame_t: np.ndarray, log_ratio: np.ndarray, log_ratio_sigma: 
         upper, x = _solve(n, w_p / var, z_p, w_r / var_r, z_r, j, c0, c1)
         res_p = (np.diff(x) - z_p) / np.sqrt(var)
         res_r = (z_r - (c0 * x[j] + c1 * x[j + 1])) / np.sqrt(var_r)
-        w_p = np.where(have, np.minimum(1.0, o.huber / np.maximum(np.abs(res_p), 1e-12)), 1.0)
-        w_r = np.minimum(1.0, o.huber / np.maximum(np.abs(res_r), 1e-12))
+        w_p = np.where(have, robust_weight(res_p, "huber", o.huber), 1.0)
+        w_r = robust_weight(res_r, "huber", o.huber)
         # how much of each ratio's residual variance is redundancy (its own share not taken by the fit)
         d, e = _inverse_bands(upper)
         redundancy = 1.0 - w_p * (d[1:] + d[:-1] - 2.0 * e) / var
@@ -323,8 +326,9 @@ class HeightFilter:
             y = math.log(r) - float(h @ m)
             S = float(h @ C @ h) + R
             d2 = y * y / S
-            if d2 > o.huber**2:  # Huber weight huber/|r|: its innovation variance times |r|/huber
-                R += S * (math.sqrt(d2) / o.huber - 1.0)
+            w = robust_weight(math.sqrt(d2), "huber", o.huber)
+            if w < 1.0:  # Huber's weight huber/|r|: its innovation variance divided by it
+                R += S * (1.0 / w - 1.0)
                 S = float(h @ C @ h) + R
                 self.n_downweighted += 1
             k = C @ h / S

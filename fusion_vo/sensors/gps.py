@@ -30,10 +30,10 @@ covariance ``P``; ``S = Σ`` against a fixed estimate), the squared Mahalanobis 
 ``d² = rᵀ S⁻¹ r``. A fix with ``d² > gate_chi2`` (default 13.82, the 99.9 % point of χ² with 2 degrees
 of freedom) is rejected and counted. Accepted fixes are further down-weighted by a robust kernel of
 ``d`` with width ``k`` (the weight multiplies the information ``Σ⁻¹``; a filter divides ``Σ`` by it;
-:func:`fusion_vo.sensors.model.robust_weight`, every robust reading's):
+:func:`fusion_vo.robust.robust_weight`, every robust reading's):
 
 * Huber:  ``w(d) = 1`` for ``d ≤ k``, else ``k / d``
-* Cauchy: ``w(d) = 1 / (1 + (d / k)²)``
+* Cauchy: ``w(d) = k² / (k² + d²) = 1 / (1 + (d / k)²)``
 
 In the factor graph the same kernel is GTSAM's ``mEstimator`` wrapped round the fix's Gaussian noise, so
 a 20 m multipath jump against decimetre noise pulls on the solution with a force that vanishes (Cauchy)
@@ -59,7 +59,8 @@ from pydantic import Field
 from fusion_vo.config.base import Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData, GpsFix
-from fusion_vo.sensors.model import ROBUST_KERNELS, MeasurementModel, robust_weight
+from fusion_vo.robust import ROBUST_KERNELS, robust_weight
+from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Absolute, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
 from fusion_vo.measurements import SensorCount
@@ -249,9 +250,10 @@ def robust_fit_rigid_2d(source: np.ndarray, target: np.ndarray, weights: np.ndar
                         iterations: int = 10) -> tuple[float, np.ndarray, np.ndarray]:
     """Rigid planar fit ``target ≈ R(yaw) source + t`` that ignores outliers such as multipath jumps.
 
-    Iteratively reweighted least squares (:func:`fusion_vo.geometry.se2.fit_rigid_2d` each step) with a
+    Iteratively reweighted least squares (:func:`fusion_vo.geometry.se2.fit_rigid_2d` each step) with the
     Cauchy weight ``1 / (1 + (r / (width · s))²)`` of each residual distance ``r``, where ``s`` is the
-    robust scale ``1.4826 · median(r)`` of the current residuals.
+    robust scale ``1.4826 · median(r)`` of the current residuals (:func:`fusion_vo.robust.robust_weight` of
+    unit width on ``r / (width · s)``).
 
     Returns
     -------
@@ -266,7 +268,7 @@ def robust_fit_rigid_2d(source: np.ndarray, target: np.ndarray, weights: np.ndar
         scale = 1.4826 * float(np.median(r))
         if scale <= 1e-12:
             break
-        rw = 1.0 / (1.0 + (r / (width * scale)) ** 2)
+        rw = robust_weight(r / (width * scale), "cauchy", 1.0)
         yaw, offset = se2.fit_rigid_2d(source, target, w * rw)
     return yaw, offset, rw
 

@@ -21,7 +21,7 @@ import gtsam
 
 from fusion_vo.backends import FusionConfig, SensorStreams, chain, fuse, graph
 from fusion_vo.backends.graph_builder import X
-from fusion_vo.sensors.model import robust_weight
+from fusion_vo.robust import robust_weight
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 #: the cases: (wrong visual matches [s], robust kernel)

@@ -10,8 +10,8 @@ import pytest
 
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData
+from fusion_vo.robust import robust_weight
 from fusion_vo.sensors import gps
-from fusion_vo.sensors.model import robust_weight
 from fusion_vo.backends.factors import ModelFactor
 
 LEVER = np.array([-0.35, 0.12, 0.8])
@@ -80,7 +80,7 @@ def test_factor_without_lever_arm_agrees_with_gtsams_translation_prior():
 
 
 def test_robust_weights():
-    """The fixes' weights are the one robust weight of every reading (fusion_vo.sensors.model)."""
+    """The fixes' weights are the one robust weight of every reading (fusion_vo.robust)."""
     assert robust_weight(1.0, "huber", 2.0) == 1.0
     assert robust_weight(8.0, "huber", 2.0) == pytest.approx(0.25)
     assert robust_weight(2.0, "cauchy", 2.0) == pytest.approx(0.5)

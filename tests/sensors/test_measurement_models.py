@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from fusion_vo.sensors.imu import AHRS, GYRO
-from fusion_vo.sensors.model import ARGUMENT_SIZES, Gate, robust_loss, robust_weight
+from fusion_vo.sensors.model import ARGUMENT_SIZES, Gate
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.range import RANGE
 from fusion_vo.sensors.visual import VISUAL
@@ -69,7 +69,7 @@ def test_range_scale_prior_has_the_models_information_at_its_solution():
     assert np.isclose(1.0 / sk**2, jac["visual_scale"][0, 0] ** 2 / sigma**2)
 
 
-def test_gate_and_robust_kernels():
+def test_gate():
     gate = Gate(0.999, 25.0)
     t = gate.threshold(2)
     assert np.isclose(t, 13.815510557964274)
@@ -77,11 +77,6 @@ def test_gate_and_robust_kernels():
     assert np.isclose(gate.inflation(4.0 * t, 2), 4.0)
     assert gate.inflation(30.0 * t, 2) is None and gate.inflation(np.nan, 2) is None
     assert Gate(1.0).inflation(1e12, 3) == 1.0
-    d = np.array([0.5, 3.0])
-    np.testing.assert_allclose(robust_weight(d, "huber", 1.345), [1.0, 1.345 / 3.0])
-    np.testing.assert_allclose(robust_loss(d, "huber", 1.345), [0.125, 1.345 * 3.0 - 0.5 * 1.345**2])
-    np.testing.assert_allclose(robust_weight(d, "cauchy", 2.0), [4.0 / 4.25, 4.0 / 13.0])
-    np.testing.assert_allclose(robust_loss(d, None, 1.0), 0.5 * d**2)
 
 
 def test_range_reading_sigma_from_the_readings():
