@@ -326,9 +326,8 @@ class HeightFilter:
             y = math.log(r) - float(h @ m)
             S = float(h @ C @ h) + R
             d2 = y * y / S
-            w = robust_weight(math.sqrt(d2), "huber", o.huber)
-            if w < 1.0:  # Huber's weight huber/|r|: its innovation variance divided by it
-                R += S * (1.0 / w - 1.0)
+            if d2 > o.huber**2:  # Huber's weight huber/|r| (robust_weight): the innovation variance over it
+                R += S * (math.sqrt(d2) / o.huber - 1.0)
                 S = float(h @ C @ h) + R
                 self.n_downweighted += 1
             k = C @ h / S
