@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from fusion_vo.geometry.camera import CameraModel
+from fusion_vo.robust import robust_weight
 
 logger = logging.getLogger(__name__)
 
@@ -115,7 +116,7 @@ def pair_errors(cam: CameraModel, p0: np.ndarray, p1: np.ndarray, iterations: in
         pred = cam.denormalize(np.column_stack([z.real, z.imag]))
         e = np.linalg.norm(pred - q1, axis=1)
         e = np.where(np.isfinite(e), e, np.inf)
-        w = 1.0 / (1.0 + (e / TRUNCATE_PX) ** 2)  # Cauchy weights
+        w = robust_weight(e / TRUNCATE_PX, "cauchy", 1.0)
     err[good] = e
     return err
 
