@@ -17,13 +17,15 @@ Rauch–Tung–Striebel smoother computes it)::
 (``D_k`` the diagonal blocks of ``H``, ``E_k`` the block below ``D_k``.) Each step is a dense LAPACK
 call on blocks of a few dozen columns, so the cost is linear in the length of the drive.
 
-The Levenberg–Marquardt iteration (:func:`levenberg_marquardt`) is the standard one, GTSAM's: solve the
-damped Gauss–Newton system ``(H + λ I) δ = g`` and keep ``x ⊕ δ`` if it lowers the cost; otherwise λ grows
-tenfold (from 1e-4) and the step is tried again, and above 1e8 the iteration stops where it is. After a kept
-step λ shrinks tenfold (to 0 below 1e-3, a plain Gauss–Newton step). The iteration ends when a kept step
-lowers the cost by less than ``relative_tolerance`` of it, or after ``max_iterations`` linearisations.
-``tests/backends/test_solver_equals_gtsam.py`` holds it to GTSAM's ``LevenbergMarquardtOptimizer`` (the same
-steps and solution) on a small drive's graph, with and without a robust kernel at work.
+The Levenberg–Marquardt iteration (:func:`levenberg_marquardt`) is the standard one, as in GTSAM's
+``LevenbergMarquardtOptimizer`` but with a schedule of its own for the damping λ: solve the damped Gauss–Newton
+system ``(H + λ I) δ = g`` and keep ``x ⊕ δ`` if it lowers the cost; otherwise λ grows tenfold (from 1e-4) and
+the step is tried again, and above 1e8 the iteration stops where it is. After a kept step λ shrinks tenfold (to
+0 below 1e-3, a plain Gauss–Newton step; GTSAM's starts at 1e-5 and stops above 1e5). The iteration ends when a
+kept step lowers the cost by less than ``relative_tolerance`` of it, or after ``max_iterations`` linearisations.
+``tests/backends/test_solver_equals_gtsam.py`` holds it to GTSAM's optimizer on a small drive's graph, with and
+without a robust kernel at work: the same steps and solution where every Gauss–Newton step lowers the cost, and
+the same minimum from a start where the damping must grow.
 
 Why not GTSAM's own optimizers: they need each sensor-model factor as a ``gtsam.CustomFactor`` that calls back
 into Python at every linearisation; here the sensor-model factors are linearised in numpy, all factors of a
