@@ -489,7 +489,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     result.covariances["ekf"] = Ps[:, :3, :3].copy()
     counts = _merge_counts(iv.counts, ekf.counts)
     result.counts["ekf"] = counts
-    result.calibration["ekf"] = _calibration(xs[-1], Ps[-1], iv)
+    result.calibration["ekf"] = calibration_report(xs[-1], Ps[-1], iv)
     result.innovations["ekf"] = ekf.innovations.table()
     result.timing["ekf"] = time.process_time() - start
     if config.ekf.smoother:
@@ -498,7 +498,7 @@ def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
         result.trajectories["ekf_smoothed"] = PoseData(iv.t.copy(), xsm[:, :3].copy())
         result.covariances["ekf_smoothed"] = Psm[:, :3, :3].copy()
         result.counts["ekf_smoothed"] = counts
-        result.calibration["ekf_smoothed"] = _calibration(xsm[-1], Psm[-1], iv)
+        result.calibration["ekf_smoothed"] = calibration_report(xsm[-1], Psm[-1], iv)
         result.timing["ekf_smoothed"] = time.process_time() - t1
     result.notes.extend(iv.notes)
     return result
@@ -523,8 +523,9 @@ def rts_smooth(xs, Ps, x_prior, P_prior, Fs) -> tuple[np.ndarray, np.ndarray]:
     return xsm, Psm
 
 
-def _calibration(x, P, iv: Intervals) -> dict:
-    """The calibration report (:func:`fusion_vo.backends.states.calibration`) of the state ``x, P``."""
+def calibration_report(x, P, iv: Intervals) -> dict:
+    """The calibration report (:func:`fusion_vo.backends.states.calibration`) of the state ``x, P`` with the states
+    of the node grid ``iv`` (a batch run's, or a live run's last interval)."""
     values = {st.name: x[DIM + i] for i, st in enumerate(iv.states)}
     sigmas = {st.name: np.sqrt(P[DIM + i, DIM + i]) for i, st in enumerate(iv.states)}
     return calibration(iv, values, sigmas)

@@ -238,8 +238,8 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         result.covariances["gtsam_online"] = world_covariances(online_poses[:, 2], online_cov)
         result.counts["gtsam_online"] = counts
         online_values = retired.complete(isam.calculateEstimate())
-        result.calibration["gtsam_online"] = _calibration(online_values, builder)
-        _state_sigmas(result.calibration["gtsam_online"], builder, lambda keys: [isam.marginalCovariance(k)[0, 0]
+        result.calibration["gtsam_online"] = calibration_report(online_values, builder)
+        add_state_sigmas(result.calibration["gtsam_online"], builder, lambda keys: [isam.marginalCovariance(k)[0, 0]
                                                                                   for k in keys])
         result.timing["gtsam_online"] = t_online
         result.timing["gtsam_online_per_node_ms"] = 1e3 * t_online / max(n_nodes, 1)
@@ -274,7 +274,7 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
         poses = np.array([[p.x(), p.y(), p.theta()] for p in (solution.atPose2(X(n)) for n in range(n_nodes))])
         result.trajectories["gtsam"] = PoseData(builder.t.copy(), poses)
         result.counts["gtsam"] = counts
-        result.calibration["gtsam"] = _calibration(solution, builder)
+        result.calibration["gtsam"] = calibration_report(solution, builder)
         t_solve = time.process_time() - t0
         if gcfg.marginals:
             t1 = time.process_time()
@@ -286,10 +286,10 @@ def run_graph(iv: Intervals, config: FusionConfig, initial: PoseData | None = No
             result.covariances["gtsam"] = world_covariances(poses[:, 2], cov)
             if problem is not None:
                 with threadpool_limits(limits=1, user_api="blas"):
-                    _state_sigmas(result.calibration["gtsam"], builder,
+                    add_state_sigmas(result.calibration["gtsam"], builder,
                                   lambda keys: chain.pose_marginals(lin, keys, dim=1)[:, 0, 0])
             else:
-                _state_sigmas(result.calibration["gtsam"], builder, lambda keys, m=None: [
+                add_state_sigmas(result.calibration["gtsam"], builder, lambda keys, m=None: [
                     (m := m or gtsam.Marginals(lin, solution)).marginalCovariance(k)[0, 0] for k in keys])
             result.timing["gtsam_marginals"] = time.process_time() - t1
         if gcfg.residuals:
@@ -388,16 +388,16 @@ def _seed_poses(values: gtsam.Values, initial: PoseData, builder: GraphBuilder) 
     return out
 
 
-def _calibration(values: gtsam.Values, builder: GraphBuilder) -> dict:
-    """The calibration report (:func:`fusion_vo.backends.states.calibration`): each estimated state's last
-    segment's variable."""
+def calibration_report(values: gtsam.Values, builder: GraphBuilder) -> dict:
+    """The calibration report (:func:`fusion_vo.backends.states.calibration`): each estimated state's variable of
+    the last segment of ``builder`` (a batch run's, or the builder of a live run's last node)."""
     last = int(builder.segment[-1])
     found = {st.name: values.atDouble(builder.state_key(st.name, last)) for st in builder.variables
              if values.exists(builder.state_key(st.name, last))}
     return calibration(builder.iv, found)
 
 
-def _state_sigmas(out: dict, builder: GraphBuilder, variances) -> None:
+def add_state_sigmas(out: dict, builder: GraphBuilder, variances) -> None:
     """``NAME_sigma`` in ``out`` for each estimated state (its last segment's variable), as the EKF reports it;
     ``variances(keys)`` gives their marginal variances. Nothing when the marginals fail."""
     if not builder.variables:

@@ -263,6 +263,7 @@ class Isam2Driver:
         self.passes = passes
         self.maker = maker if maker is not None else ValuesMaker()
         self.prev_pose = prev_pose  # iSAM2's estimate of the newest node
+        self.builder: GraphBuilder | None = None  # the builder of the newest node (its states' keys)
         self.estimate: dict = {}  # running bias / calibration estimates (guesses of the next node)
 
     def freeze(self, nf: NodeFactors, prev: int, factors: list | None = None) -> Frozen:
@@ -291,6 +292,7 @@ class Isam2Driver:
     def advance(self, builder: GraphBuilder, n: int, nf: NodeFactors, pose: gtsam.Pose2) -> None:
         """Node ``n`` of ``builder`` is in, at ``pose``: the next node's guesses start from it."""
         self.prev_pose = pose
+        self.builder = builder
         track_estimate(self.estimate, self.isam, builder, n, nf)
 
 

@@ -41,7 +41,7 @@ import numpy as np
 
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.fixes import Reacquire, graph_gate
-from fusion_vo.backends.graph import world_covariances
+from fusion_vo.backends.graph import add_state_sigmas, calibration_report, world_covariances
 from fusion_vo.backends.graph_adapter import pose_factor
 from fusion_vo.backends.graph_builder import GraphBuilder, T_WS, X
 from fusion_vo.backends.isam import (Isam2Driver, current_value_lookup, estimate_lookup, freeze_custom_factors,
@@ -375,6 +375,16 @@ class OnlineGraph:
             self.driver.advance(builder, 1, nf, pose)
         else:
             self.driver.prev_pose = pose
+        return out
+
+    def calibration(self) -> dict:
+        """The calibration report of the newest node's states (their current segment's variables) with their
+        marginal σ, as a batch run reports its iSAM2 track's (empty before the first node's update)."""
+        builder = self.driver.builder
+        if builder is None:
+            return {}
+        out = calibration_report(self.isam.calculateEstimate(), builder)
+        add_state_sigmas(out, builder, lambda keys: [self.isam.marginalCovariance(k)[0, 0] for k in keys])
         return out
 
     def poses(self) -> np.ndarray:

@@ -9,7 +9,7 @@ import logging
 
 import numpy as np
 
-from fusion_vo.backends.ekf import PlanarEkf, interval_readings
+from fusion_vo.backends.ekf import PlanarEkf, calibration_report, interval_readings
 from fusion_vo.backends.ekf_adapter import spread_covariance
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
@@ -363,6 +363,7 @@ class NodesMixin:
         self._monitor.check()  # (a no-op when it ran as a unit of its own)
         self._decide(started)
         iv, step = started.iv, started.step
+        self._last_iv = iv
         self._step_counts = step
         self._step_fixes = []
         self._step_offered = 0
@@ -402,6 +403,16 @@ class NodesMixin:
                                              self._gps_lever if "gps" in self.sensors else None)
             pose, cov = self._graph.start()
             self._record(pose, cov)
+
+    def _calibration(self) -> dict:
+        """The calibration report of the states the backend carries, at the newest node
+        (``FusionResult.calibration``: each estimated state, ``NAME_sigma``, the figures derived from it), as a
+        batch run reports its online track's."""
+        if self._last_iv is None:
+            return {}
+        if self.backend == "ekf":
+            return calibration_report(self._ekf.x, self._ekf.P, self._last_iv)
+        return self._graph.calibration()
 
     def _record(self, pose, cov) -> None:
         self._poses.append(np.asarray(pose, dtype=np.float64).copy())

@@ -340,6 +340,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._outages: dict[float, str] = {}  # EKF: fix time -> the note of the outage it ends
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
         self._pending: Started | None = None  # a node started but not yet applied (_begin_step)
+        self._last_iv = None  # the node grid of the newest node processed (its states, for the calibration)
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
@@ -588,7 +589,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             return total
 
     def finish(self) -> FusionResult:
-        """Process everything buffered and return the online trajectory (``ekf`` or ``gtsam_online``)."""
+        """Process everything buffered and return the online trajectory (``ekf`` or ``gtsam_online``), its counts,
+        notes and calibration (each estimated state at the newest node, with its σ)."""
         with self._lock:
             return self._finish()
 
@@ -602,6 +604,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             result.covariances[name] = np.array(self._covs)
         counts = self.counts
         result.counts[name] = counts
+        result.calibration[name] = self._calibration()
         result.notes = node_outage_notes(self._t_nodes, self._covered) + list(self._notes)
         result.consistency = list(self._consistency)
         if "gps" in self.sensors:

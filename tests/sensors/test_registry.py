@@ -279,6 +279,32 @@ def test_a_registered_sensor_streams_through_the_generic_add(drive, backend):
     assert yaw < 0.02, (backend, yaw)
     count = result.counts[name]["compass"]
     assert count.used >= 550 and count.gated == 2, (backend, count)
+    # the state at the newest node, with its σ (measured: 0.198, σ 0.0095, both backends)
+    calibration = result.calibration[name]
+    assert abs(calibration["compass_offset"] - OFFSET) < 0.01 and 0.003 < calibration["compass_offset_sigma"] < 0.03, \
+        calibration
+
+
+@pytest.mark.parametrize("backend, track", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_a_stream_reports_the_states_as_the_batch_runs_online_track_does(drive, backend, track):
+    """``StreamingFusion.finish().calibration`` holds each estimated state at the newest node with its σ and what is
+    derived from it, as a batch run's online track does: the same values where the two tracks are the same (the
+    camera's frames the nodes of both, the wheels and the IMU's gyro)."""
+    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+
+    s, _ = drive
+    streams = SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height)
+    batch = fuse(streams, backend, FusionConfig())
+    fusion = streaming_for(streams, backend, FusionConfig())
+    fusion.feed(time_ordered_messages(streams))
+    streamed = fusion.finish()
+    assert np.abs(streamed.trajectories[track].xyyaw - batch.trajectories[track].xyyaw).max() < 1e-9
+    ours, theirs = streamed.calibration[track], batch.calibration[track]
+    assert set(ours) == set(theirs) >= {"gyro_bias", "gyro_bias_sigma", "visual_scale", "camera_height",
+                                        "wheel_base_factor", "wheel_base", "wheel_curvature"}, (ours, theirs)
+    for key, value in theirs.items():
+        assert ours[key] == pytest.approx(value, rel=1e-6, abs=1e-12), (key, ours[key], value)
+    assert abs(ours["wheel_base_factor"] - 1.05) < 0.01, ours  # (the wheel base is 5 % off)
 
 
 # --------------------------------------------------------------------------- command line and run.yaml
