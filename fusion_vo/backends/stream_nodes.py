@@ -262,6 +262,8 @@ class NodesMixin:
                 hi = max(hi, bisect.bisect_right(buf, t0 + AHRS_OFFSET_WINDOW + self.config.max_gap,
                                                  key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
+            if len(rows) < live.min_rows and self._finishing:  # no later sample comes: the earlier ones, which a
+                rows = buf[max(min(hi, len(buf)) - live.min_rows, 0):hi]  # batch run's hook reads too
             if reach is not None:  # the time of the last sample read (any new one, if all were read)
                 reach[name] = buf[hi - 1][0] if hi <= len(buf) else np.inf
             if len(rows) < live.min_rows:

@@ -341,6 +341,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._step_fixes: list[GpsFix] = []  # fixes the node being processed consumed
         self._pending: Started | None = None  # a node started but not yet applied (_begin_step)
         self._last_iv = None  # the node grid of the newest node processed (its states, for the calibration)
+        self._finishing = False  # finish() processes the last nodes: no sample comes after the buffered ones
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
         # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
         self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
@@ -595,6 +596,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             return self._finish()
 
     def _finish(self) -> FusionResult:
+        self._finishing = True
         self._process(np.inf)
         self._collect(wait=True)
         name = "ekf" if self.backend == "ekf" else "gtsam_online"
