@@ -149,8 +149,6 @@ class PlanarEkf:
     Parameters
     ----------
     config : FusionConfig
-    camera_height : float, optional
-        Height the visual increments assume (for range updates).
     states : tuple of registry.State, optional
         The run's scalar states (:func:`fusion_vo.backends.states.run_states`), appended to the pose and twist
         with their priors and random walks, frozen where not estimated. Default: those of a run that fuses
@@ -164,11 +162,10 @@ class PlanarEkf:
         use gives 1 when the increments state their own (``CameraGrid.frame_cov``).
     """
 
-    def __init__(self, config: FusionConfig, camera_height: float | None = None, initial_pose=None,
-                 initial_sigma=None, states=None, camera: bool = False, frame_error: float | None = None):
+    def __init__(self, config: FusionConfig, initial_pose=None, initial_sigma=None, states=None, camera: bool = False,
+                 frame_error: float | None = None):
         ExtendedKalmanFilter, chi2 = filter_libraries()
         self.config = config
-        self.camera_height = camera_height
         self.states = tuple(default_states(config) if states is None else states)
         self.dim = dim = DIM + len(self.states)
         #: state columns of each measurement-model argument: the pose's, the twist's and each state's
@@ -444,7 +441,7 @@ def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
     """The filter for the node grid ``iv`` at its first node: the run's states (``iv.states``), the start pose
     and the camera's frame errors."""
     cam = camera_grid(iv)
-    return PlanarEkf(config, iv.camera_height, iv.initial_pose, iv.initial_sigma, iv.states,
+    return PlanarEkf(config, iv.initial_pose, iv.initial_sigma, iv.states,
                      camera=len(cam.i0) > 0, frame_error=cam.frame_error if cam.frame_cov is None else 1.0)
 
 

@@ -394,7 +394,7 @@ class NodesMixin:
         cfg = self.config
         self._t_nodes.append(t)
         if self.backend == "ekf":
-            self._ekf = PlanarEkf(cfg, self.camera_height, states=self._states, camera="camera" in self.sensors,
+            self._ekf = PlanarEkf(cfg, states=self._states, camera="camera" in self.sensors,
                                   frame_error=1.0 if self._camera_frame_errors else None)
             self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
                                              monitor=self._monitor.state(), gps=self._gps_state()))
