@@ -27,8 +27,8 @@ import numpy as np
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData, TwistSample, WheelConfig, WheelData, WheelTicks
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
-from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, Step, register
-from fusion_vo.sensors.registry import sensors as registered_sensors
+from fusion_vo.sensors.registry import (DistanceSource, HeadingSource, Live, Sensor, Step, register,
+                                        sensors as registered_sensors)
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
     WheelNoise, arc_covariance, arc_increment, arc_twist, odom_twist_noise, skid_variance, standstill,
     travel_variances,

@@ -13,6 +13,7 @@ import pytest
 from compass_sensor import COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
@@ -248,8 +249,6 @@ def test_a_state_is_checked_when_registered():
 # --------------------------------------------------------------------------- streaming
 def _stream(backend: str, s, compass: CompassData, extra_samples=()):
     """Stream the wheels and the compass as a replay does: every message through ``add(kind, message)``."""
-    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-
     streams = SensorStreams(wheel=s.wheel, extra={"compass": compass})
     fusion = streaming_for(streams, backend, {"reorder_window": 0.1})
     assert fusion.sensors == ["wheel", "compass"]
@@ -258,6 +257,14 @@ def _stream(backend: str, s, compass: CompassData, extra_samples=()):
     for _, _, kind, message in sorted(messages, key=lambda m: (m[0], m[1])):
         fusion.add(kind, message)
     return fusion, fusion.finish()
+
+
+def _batch_and_streamed(streams: SensorStreams, backend: str) -> tuple:
+    """The batch run of ``streams`` with ``backend`` and the same streams fed to the engine in time order."""
+    batch = fuse(streams, backend, FusionConfig())
+    fusion = streaming_for(streams, backend, FusionConfig())
+    fusion.feed(time_ordered_messages(streams))
+    return batch, fusion.finish()
 
 
 @pytest.mark.parametrize("backend", ["ekf", "gtsam"])
@@ -290,14 +297,9 @@ def test_a_stream_reports_the_states_as_the_batch_runs_online_track_does(drive, 
     """``StreamingFusion.finish().calibration`` holds each estimated state at the newest node with its σ and what is
     derived from it, as a batch run's online track does: the same values where the two tracks are the same (the
     camera's frames the nodes of both, the wheels and the IMU's gyro)."""
-    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-
     s, _ = drive
     streams = SensorStreams(visual=s.visual, wheel=s.wheel, imu=s.imu, camera_height=s.camera_height)
-    batch = fuse(streams, backend, FusionConfig())
-    fusion = streaming_for(streams, backend, FusionConfig())
-    fusion.feed(time_ordered_messages(streams))
-    streamed = fusion.finish()
+    batch, streamed = _batch_and_streamed(streams, backend)
     assert np.abs(streamed.trajectories[track].xyyaw - batch.trajectories[track].xyyaw).max() < 1e-9
     ours, theirs = streamed.calibration[track], batch.calibration[track]
     assert set(ours) == set(theirs) >= {"gyro_bias", "gyro_bias_sigma", "visual_scale", "camera_height",
@@ -316,19 +318,13 @@ def test_the_engine_fed_in_time_order_is_the_batch_runs_online_track_with_a_regi
     readings (the compass's heading at it) in one update with the second node's factors, a batch run in two, and
     the robust weights of the compass's readings follow where each update linearises them (with
     ``graph.robust: none`` the two differ by 1e-12 after the first node, measured)."""
-    from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
-
     s, compass = drive
     t_frames = sorted(float(v.t1) for v in s.visual)
     assert compass.t[-1] < t_frames[-2]
     streams = SensorStreams(visual=s.visual, wheel=s.wheel, camera_height=s.camera_height,
                             extra={"compass": _offset_compass(compass)})
     with registry.registered(OFFSET_COMPASS_SENSOR):
-        streams = streams.select(["camera", "wheel", "compass"])
-        batch = fuse(streams, backend, FusionConfig())
-        fusion = streaming_for(streams, backend, FusionConfig())
-        fusion.feed(time_ordered_messages(streams))
-        streamed = fusion.finish()
+        batch, streamed = _batch_and_streamed(streams.select(["camera", "wheel", "compass"]), backend)
     a, b = streamed.trajectories[track], batch.trajectories[track]
     assert np.array_equal(a.t, b.t)
     difference = np.abs(a.xyyaw - b.xyyaw).max(axis=1)
