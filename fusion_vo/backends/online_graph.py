@@ -102,6 +102,8 @@ class OnlineGraph:
         self._jobs: deque = deque()
         self.gps_model = None if gps is None else GpsModel(gps, config.gps)
         self.reacquire = Reacquire(config.gps_reacquire)
+        self.head: tuple | None = None  # node 0's (pose, covariance) after the first step (:meth:`step`)
+        self._head: tuple = ([], [])  # the first node's factor indices and sensors, in the first step
         self.switch: int | None = None  # the node where ENU starts (module docstring)
         self.prev_cov: np.ndarray | None = None  # reported covariance of the newest node (the fixes' gate)
         self.fix_factors: dict[int, list] = {}  # node -> its fixes' factors (a rebuilt node keeps them)
@@ -125,7 +127,11 @@ class OnlineGraph:
         """Node ``n``'s pose variable as reported: in ENU from the switch on (module docstring)."""
         return X(n + (ENU_INDEX if self.switch is not None and n >= self.switch else 0))
 
-    def _node_factors(self, n: int, iv, first: bool, previous_pose):
+    def _node_factors(self, n: int, iv, first: bool, previous_pose, head_update: bool = False):
+        """Node ``n``'s builder and factors (ending ``iv``, from ``previous_pose``). ``first``: node 1, which carries
+        the first node's own factors (priors, its readings); ``head_update``: those go into iSAM2 now, in an update
+        of their own, as a batch run makes it (their indices in :attr:`_head`), else they are merged into the node's
+        (a rebuild for late data swaps them all at once)."""
         offset = self._offset(n)
         builder = GraphBuilder(iv, self.config, offset=offset, t_origin=self.t_origin,
                                           states=self.states)
@@ -134,6 +140,11 @@ class OnlineGraph:
         self.frames -= self.frames_made.pop(n, set())
         builder.frames = self.frames
         before = {g for g in (offset, offset + 1) if g in self.frames}  # (its interval's two nodes)
+        if first and head_update:
+            head = builder.first_node(self.driver.estimate)
+            self._head = (self.driver.add(head, self.driver.freeze(head, -1))[0], head.sensors)
+            self.driver.advance(builder, 0, head, self.isam.calculateEstimatePose2(X(0)))
+            previous_pose, first = self.driver.prev_pose, False
         nf = builder.node(1, previous_pose, self.driver.estimate)
         made = {g for g in (offset, offset + 1) if g in self.frames} - before
         if made:
@@ -150,9 +161,9 @@ class OnlineGraph:
     def prepare(self, iv) -> list | None:
         """The factors of the next node (ending ``iv``); changes nothing (background: None, the worker
         builds them)."""
-        if self._pool is not None:
+        if self._pool is not None or self._pending_first:  # (the first node's factors update iSAM2 as they are built)
             return None
-        builder, nf = self._node_factors(self.n + 1, iv, self._pending_first, self.driver.prev_pose)
+        builder, nf = self._node_factors(self.n + 1, iv, False, self.driver.prev_pose)
         return [builder, nf, None]
 
     def freeze(self, prepared: list) -> None:
@@ -164,27 +175,33 @@ class OnlineGraph:
     def step(self, iv, prepared: list | None = None, fixes: list = ()):
         """Add the node ending ``iv`` (its factors from :meth:`prepare` / :meth:`freeze` when given) with the GPS
         ``fixes`` at its time, once aligned (:meth:`align`): ``(pose, covariance, sensors)``. In the background only
-        the interval is handed over: pose, covariance and sensors are None and come through :meth:`collect`."""
+        the interval is handed over: pose, covariance and sensors are None and come through :meth:`collect`. The first
+        node's step reports node 0 as well, once its own factors are in: :attr:`head`, its
+        ``(pose, covariance)`` (background: through :meth:`collect`)."""
         self.n += 1
         if self._pool is not None:
             self._jobs.append(self._pool.submit(self._add_node, self.n, iv, None, list(fixes)))
             return None, None, None
-        return self._add_node(self.n, iv, prepared, fixes)[0][1:]
+        out = self._add_node(self.n, iv, prepared, fixes)
+        self.head = out[0][1:3] if len(out) > 1 else None
+        return out[-1][1:]
 
     def _add_node(self, n: int, iv, prepared: list | None, fixes=()):
+        self._head = ([], [])
         if prepared is None:
-            prepared = self._node_factors(n, iv, self._pending_first, self.driver.prev_pose) + (None,)
+            prepared = self._node_factors(n, iv, self._pending_first, self.driver.prev_pose, head_update=True) + (None,)
         builder, nf, frozen = prepared
         if frozen is None:
             frozen = self.driver.freeze(nf, self._offset(n))
         self._pending_first = False
-        sensors, more = nf.sensors, None
+        head, sensors, more = self._head[0], self._head[1] + nf.sensors, None
+        head_result = [(0, *self._pose_cov(0), None)] if head else []
         if fixes:  # the fixes that pass the gate, linearised at the prediction as the node's other factors
             gps = [f for fix in fixes if (f := self._fix_factor(n, nf.values[self.key(n)], fix)) is not None]
             if gps:
                 more = self.driver.freeze(nf, self._offset(n), gps)
                 sensors = sensors + ["gps"] * len(gps)
-        self.factors[n] = self.driver.add(nf, frozen, more)[0]
+        self.factors[n] = head + self.driver.add(nf, frozen, more)[0]
         self.last = n
         self.node_sensors[n] = sensors
         for old in [k for k in self.factors if k < self._forget_below]:
@@ -198,7 +215,7 @@ class OnlineGraph:
         self.prev_cov = cov
         self.driver.advance(builder, 1, nf, gtsam.Pose2(*map(float, pose)))
         self._remember(n, pose)
-        return [(n, pose, cov, sensors)]
+        return head_result + [(n, pose, cov, sensors)]
 
     def _remember(self, n: int, pose: np.ndarray) -> None:
         """Node ``n``'s pose as last computed, in the frame of :meth:`key` (it seeds the rebuild of node ``n + 1``)."""

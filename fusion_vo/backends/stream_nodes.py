@@ -464,6 +464,8 @@ class NodesMixin:
         offered = fixes if self._frame == "enu" else []
         self._step_offered = len(offered)
         pose, cov, sensors = self._graph.step(iv, prepared, offered)
+        if self._graph.head is not None:  # node 0 once its own factors are in (the first step)
+            self._poses[0], self._covs[0] = self._graph.head
         if pose is None:  # background update under way: the last pose predicted meanwhile
             pose, cov = extrapolate(self._t_nodes, self._poses, self._covs, float(iv.t[-1]) - self._t_nodes[-1],
                                      self.config)
