@@ -12,9 +12,10 @@ import numpy as np
 from fusion_vo.backends.ekf import PlanarEkf, calibration_report, interval_readings
 from fusion_vo.backends.ekf_adapter import spread_covariance
 from fusion_vo.backends.result import SensorCount
-from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes
+from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes, step_node
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
+from fusion_vo.sensors.gps import GPS_SNAP
 from fusion_vo.sensors.imu import AHRS_OFFSET_WINDOW
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate, interval_coverage
@@ -114,23 +115,19 @@ class NodesMixin:
     # ------------------------------------------------------------------ processing
     def _next_node(self, after: float, until: float, end: float = np.inf) -> float | None:
         """The node after ``after``: toward the next frame, the batch grid's nodes (:meth:`_fill_to`); with none
-        known, a fill-in node one step on; once the stream finishes, those up to ``end``, the last sample's time,
-        and ``end`` itself unless it is within half a step of the last node (so that the nodes never depend on
-        when the samples arrived). A GPS fix is a node of its own."""
+        known, a batch run's steps after its last frame (:func:`~fusion_vo.backends.timeline.step_node`), up to
+        ``end``, the last sample's time, once the stream finishes (so that the nodes never depend on when the
+        samples arrived). A GPS fix is a node of its own."""
         step = 1.0 / self.config.step_hz
         frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
         fixes = [f.t for f in self._gps if f.t > after + 1e-9]
         if frames:
             nxt = self._fill_to(after, frames[0], step)
-        elif np.isfinite(end):  # one step at a time, as before the stream finished, then the last sample
-            if end - after <= 0.5 * step:
-                return None
-            nxt = min(after + step, end)
+            if fixes and fixes[0] < nxt - GPS_SNAP:  # a fix is a node of its own (timeline.GPS_SNAP)
+                nxt = fixes[0]
         else:
-            nxt = after + step
-        if fixes and fixes[0] < nxt - 1e-3:  # a fix is a node of its own (timeline.GPS_SNAP)
-            nxt = fixes[0]
-        return nxt if nxt <= until else None
+            nxt = step_node(after, step, end, fixes[0] if fixes else None)
+        return nxt if nxt is not None and nxt <= until else None
 
     def _fill_to(self, after: float, anchor: float, step: float) -> float:
         """The node after ``after`` toward the next frame ``anchor``: the batch grid's fill-in nodes between the two

@@ -2,9 +2,12 @@
 
 Both backends estimate the robot at a sequence of *node times* ``T_0 < T_1 < … < T_K``: every camera
 frame time, plus fill-in nodes at ``step_hz`` wherever the camera leaves a gap longer than
-``1.5 / step_hz`` (no camera at all, dropped frames, the camera stream stopping early) and another
-stream has samples at most ``max_gap`` apart around it (where no stream has any, there is nothing to put
-on a node, and the nodes grow with the samples, not with the seconds). Every measurement is applied at its own time:
+``1.5 / step_hz`` (dropped frames, a camera starting late) and another stream has samples at most ``max_gap``
+apart around it (where no stream has any, there is nothing to put on a node, and the nodes grow with the
+samples, not with the seconds). Between two frames the fill-in nodes are evenly spaced (:func:`fill_nodes`);
+after the last frame (no camera at all, the camera stream stopping early) no later frame is known, and the
+nodes step ``1 / step_hz`` at a time up to the last sample (:func:`step_nodes`), as a live run places them.
+Every measurement is applied at its own time:
 
 * visual increments relate the nodes at their own ``t0`` and ``t1`` (which are node times);
 * wheel travel and the gyro's integrated angle are *cumulative* quantities ``L(t), R(t), Θ(t)``; they
@@ -156,6 +159,33 @@ def fill_nodes(a: float, b: float, step: float) -> np.ndarray:
     return np.linspace(a, b, int(np.ceil((b - a) / step)) + 1)[1:-1]
 
 
+def step_node(after: float, step: float, end: float = np.inf, own: float | None = None) -> float | None:
+    """The node after ``after`` where no later frame is known, as a live run places it: one ``step`` on, or the last
+    sample's time ``end`` when that comes first; None when ``end`` is within half a step (no node is left). A time
+    ``own`` that is a node of its own (a GPS fix) is the node instead when it comes more than :data:`GPS_SNAP`
+    before that."""
+    if end - after <= 0.5 * step:
+        return None
+    nxt = min(after + step, end)
+    return float(own) if own is not None and own < nxt - GPS_SNAP else nxt
+
+
+def step_nodes(after: float, end: float, step: float, own: np.ndarray = np.zeros(0)) -> np.ndarray:
+    """The nodes after ``after`` up to the last sample's time ``end`` where no later frame is known: :func:`step_node`
+    after :func:`step_node` (so added up as a live run adds them), with the times ``own`` (sorted) that are nodes of
+    their own; one within :data:`GPS_SNAP` of a node is at that node."""
+    out = []
+    i = 0
+    while True:
+        while i < len(own) and own[i] <= after + GPS_SNAP:  # (at a node already)
+            i += 1
+        nxt = step_node(after, step, end, own[i] if i < len(own) else None)
+        if nxt is None:
+            return np.array(out)
+        out.append(nxt)
+        after = nxt
+
+
 def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
     """Camera frame times plus fill-in nodes at ``step_hz`` over the span of all streams (:func:`fill_nodes`)."""
     starts, ends, others = [], [], []
@@ -186,9 +216,16 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         if not len(cam) or np.min(np.abs(cam - edge)) > 0.5 * step:
             nodes.append(edge)
     nodes = np.unique(np.asarray(nodes))
-    gaps = np.diff(nodes)
-    fill = [fill_nodes(a, b, step) for a, b, g in zip(nodes[:-1], nodes[1:], gaps) if g > 1.5 * step]
-    if fill:
+    tail = np.zeros(0)
+    if len(nodes) > 1 and (not len(cam) or end - cam[-1] > 0.5 * step):
+        # after the last frame no later one is known: a live run's steps (step_nodes) up to the last sample
+        own = [np.setdiff1d(s.node_times(data, nodes, config), nodes) for s in registry.sensors()
+               if s.node_times is not None and (data := s.data(streams)) is not None]
+        tail = step_nodes(nodes[-2], end, step, np.unique(np.concatenate([np.zeros(0), *own])))
+        nodes = np.append(nodes[:-1], tail[-1:])
+    gaps = np.diff(nodes[:len(nodes) - len(tail[-1:])])
+    fill = [fill_nodes(a, b, step) for a, b, g in zip(nodes[:-1], nodes[1:], gaps) if g > 1.5 * step] + [tail[:-1]]
+    if sum(map(len, fill)):
         fill = np.concatenate(fill)
         # only between two samples of the other streams at most max_gap apart: a stretch without samples has
         # nothing to put on the nodes, and filling it would make the work grow with its seconds, not the samples

@@ -94,6 +94,9 @@ def test_range_finder_fixes_the_visual_scale_without_wheels():
 
 
 def test_ahrs_heading_bounds_the_heading_drift():
+    """With the AHRS the heading stays within its noise once the bias is learnt; without it, it drifts. Measured over
+    seeds 17-26: the largest late error 0.014-0.025 rad (this seed the largest: 0.025 EKF, 0.017 graph), 33-100
+    times smaller than without the AHRS."""
     opts = dict(duration=30.0, gyro_bias=0.03, ahrs_sigma=0.01)
     s = synthetic_streams(SyntheticOptions(**opts), seed=17)
     # a bias prior that is wrong on purpose, and an AHRS trusted as an absolute heading (no offset walk)
@@ -106,7 +109,7 @@ def test_ahrs_heading_bounds_the_heading_drift():
         err = np.abs(np.angle(np.exp(1j * (with_ahrs.trajectories[name].xyyaw[:, 2] - truth_yaw))))
         err_without = np.abs(np.angle(np.exp(1j * (without.trajectories[name].xyyaw[:, 2] - truth_yaw))))
         late = slice(len(err) // 2, None)  # once the bias has been learnt
-        assert err[late].max() < 0.025 and err_without[late].max() > 2 * err[late].max(), name
+        assert err[late].max() < 0.03 and err_without[late].max() > 10 * err[late].max(), name
         assert with_ahrs.counts[name]["ahrs"].used > 500
 
 

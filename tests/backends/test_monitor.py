@@ -12,6 +12,7 @@ from backend_synth import position_errors
 from husky_like import husky_like
 
 FUSED = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
+ONLINE = ("ekf", "gtsam_online")
 
 
 def _episodes(result, component):
@@ -62,7 +63,9 @@ def test_gyro_bias_step_is_dropped_from_the_step_on():
 def test_ahrs_is_kept_before_its_offset_moves_and_not_trusted_again_after():
     """An AHRS whose heading offset moves by 0.5 rad between 60 and 65 s and stays there (its heading
     *changes* agree again afterwards): it is dropped from the move to the end, not before, so its good
-    first minute pins the gyro's bias ahead of the stop at 90 s."""
+    first minute pins the gyro's bias ahead of the stop at 90 s, for the online tracks (the smoothers learn it at
+    the stop either way). Measured over seeds 0-9: online RMS 0.23-0.25 of the gyro-only one on average, at most
+    0.42; every track's RMS 0.24-0.26 m on average, at most 0.48 m (this seed 0.29-0.30 m)."""
     odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
                                   ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5)))
     result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
@@ -73,22 +76,31 @@ def test_ahrs_is_kept_before_its_offset_moves_and_not_trusted_again_after():
     for name in FUSED:
         _, rms = position_errors(result.trajectories[name], truth)
         _, rms_gyro = position_errors(gyro_only.trajectories[name], truth)
-        assert rms < 0.35 and rms < 0.6 * rms_gyro, (name, rms, rms_gyro)
+        assert rms < 0.35 and (name not in ONLINE or rms < 0.5 * rms_gyro), (name, rms, rms_gyro)
 
 
 def test_ahrs_is_trusted_again_once_its_heading_is_right_again():
     """The same AHRS offset of 0.5 rad from 60-65 s, gone again from 80-85 s (and an AHRS dropout at
-    100-102 s): the AHRS is dropped only while it is off, the dropout does not end its use."""
-    odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
-                                  ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5), (80.0, 0.5), (85.0, 0.0)))
-    orientation = imu.orientation.copy()
-    orientation[(imu.t >= 100.0) & (imu.t < 102.0)] = np.nan
-    imu = dataclasses.replace(imu, orientation=orientation)
-    result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
-    eps = _episodes(result, "AHRS heading")
-    assert eps and 54.0 <= eps[0]["start"] <= 61.0 and 84.0 <= eps[-1]["end"] <= 95.0, eps
-    _, rms = position_errors(result.trajectories["ekf"], truth)
-    assert rms < 0.35, rms
+    100-102 s): the AHRS is dropped only while it is off, the dropout does not end its use.
+
+    After a dropout the AHRS comes back only where its heading agrees with the one carried from before it, below
+    the 90 % quantile (``monitor.py``, ``_readmit_absolute``): a good AHRS is kept out about once in ten. Measured:
+    readmitted on 11 of seeds 0-11; RMS 0.05-0.28 m. Six seeds, at least five readmitted."""
+    readmitted = 0
+    for seed in range(6):
+        odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003, seed=seed,
+                                      ahrs_drift=0.0,
+                                      ahrs_knots=((60.0, 0.0), (65.0, 0.5), (80.0, 0.5), (85.0, 0.0)))
+        orientation = imu.orientation.copy()
+        orientation[(imu.t >= 100.0) & (imu.t < 102.0)] = np.nan
+        imu = dataclasses.replace(imu, orientation=orientation)
+        result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
+        eps = _episodes(result, "AHRS heading")
+        assert eps and 54.0 <= eps[0]["start"] <= 61.0 and 84.0 <= eps[0]["end"] <= 95.0, (seed, eps)
+        readmitted += len(eps) == 1
+        _, rms = position_errors(result.trajectories["ekf"], truth)
+        assert rms < 0.35, (seed, rms)
+    assert readmitted >= 5, readmitted
 
 
 def test_monitor_options_are_checked():
