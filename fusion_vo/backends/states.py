@@ -12,7 +12,8 @@ factor graph makes one variable per estimated state and calibration segment
 
 Two of the built-in calibrations are estimated only where the motion tells them apart
 (:func:`calibration_observable`): ``k_v`` needs a distance measured besides the camera's (the wheels, the range
-finder) and ``k_b`` a heading change measured besides the wheels' (the camera, the gyro, a heading sensor);
+finder: each sensor declares it) and ``k_b`` a heading change measured besides the wheels' (the camera, the gyro, a
+heading sensor);
 ``k_r`` needs both. A live run decides this from the sensors it fuses (:func:`observable_from`), a whole
 recording's from the measurements on its node grid.
 """
@@ -20,7 +21,6 @@ recording's from the measurements on its node grid.
 from __future__ import annotations
 
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.range import range_grid
 from fusion_vo.sensors.registry import State, StateContext
 from fusion_vo.sensors.visual import camera_grid
 from fusion_vo.sensors.wheel import wheel_grid
@@ -29,24 +29,25 @@ from fusion_vo.sensors.wheel import wheel_grid
 def calibration_observable(iv) -> tuple[bool, bool]:
     """Whether the visual scale and the wheel base can be told apart from the motion on the node grid ``iv``.
 
-    The visual scale needs an independent distance (wheels or the range finder) next to the camera;
-    the wheel base needs an independent heading change (camera, gyro, or a sensor that measures the heading:
-    the AHRS, a registered one declaring ``absolute_heading``) next to the wheels.
+    The visual scale needs a distance measured besides the camera's (a sensor declaring
+    :attr:`~fusion_vo.sensors.registry.Sensor.absolute_distance`: the wheels, the range finder); the wheel base
+    a heading or its change measured besides the wheels' (one declaring
+    :attr:`~fusion_vo.sensors.registry.Sensor.absolute_heading`: the camera, the IMU's gyro or AHRS).
     """
-    cam = len(camera_grid(iv).i0) > 0
-    wheel = iv.uses("wheel")
-    kv = cam and (wheel or range_grid(iv).ok.any())
-    kb = wheel and (cam or iv.uses("gyro") or any(s.gives_heading(iv) for s in registry.sensors()
-                                                   if s.absolute_heading))
+    kv = len(camera_grid(iv).i0) > 0 and any(s.gives_distance(iv) for s in registry.sensors()
+                                              if s.absolute_distance and s.name != "camera")
+    kb = iv.uses("wheel") and any(s.gives_heading(iv) for s in registry.sensors()
+                                  if s.absolute_heading and s.name not in ("wheel", "odom"))
     return bool(kv), bool(kb)
 
 
 def observable_from(sensors) -> tuple[bool, bool]:
-    """:func:`calibration_observable` for a live run fusing the sensors named in ``sensors``."""
+    """:func:`calibration_observable` for a live run fusing the sensors named in ``sensors`` (each declaration taken
+    as met: the data is not known ahead)."""
     s = set(sensors)
-    wheel = bool(s & {"wheel", "odom"})
-    heading = bool(s & {"camera", "imu"}) or any(registry.get(n).absolute_heading for n in s)
-    return "camera" in s and (wheel or "range" in s), wheel and heading
+    distance = any(registry.get(n).absolute_distance for n in s - {"camera"})
+    heading = any(registry.get(n).absolute_heading for n in s - {"wheel", "odom"})
+    return "camera" in s and distance, bool(s & {"wheel", "odom"}) and heading
 
 
 def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: float) -> StateContext:

@@ -559,7 +559,7 @@ register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
     grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings, states=(GYRO_BIAS, AHRS_OFFSET),
-    coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=has_heading,
+    coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=lambda iv: iv.uses("gyro") or has_heading(iv),
     heading_reference=lambda data: data is not None and data.orientation is not None,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
               samples=_live_samples, order=2),

@@ -199,7 +199,7 @@ def _live_samples(data: RangeData) -> list:
 register(Sensor(
     name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
     has=lambda recording: recording.has_range(), config=("range", RangeNoise), grid=RangeGrid.empty, intervals=Step(40, add_intervals),
-    readings=readings,
+    readings=readings, absolute_distance=lambda iv: bool(range_grid(iv).ok.any()),
     # the streaming buffers read as many neighbours around an interval as the gyro's spike check
     live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,
               neighbours=lambda config: int(config.imu.spike_window) + 1, samples=_live_samples, order=3),

@@ -301,11 +301,16 @@ class Sensor:
         State variables the sensor adds to both backends: while its data is used, or, for a state with a rule,
         as the rule decides for every run (module docstring).
     absolute_heading : bool or callable
-        The sensor measures the heading (absolute, or up to an offset it estimates as a state): beside the
-        wheels it is a heading reference, so the wheel-base factor is estimated
-        (:func:`~fusion_vo.backends.states.calibration_observable`), as with the camera or the gyro. True: when its
-        samples are used on the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that
-        says so (the IMU: when its AHRS gives headings). Default False.
+        The sensor measures the heading (absolute, or up to an offset it estimates as a state) or its change on
+        a scale of its own (a gyro): beside the wheels it is a heading reference, so the wheel-base factor is
+        estimated (:func:`~fusion_vo.backends.states.calibration_observable`). True: when its samples are used on
+        the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that says so (the camera:
+        when an increment is measured; the IMU: when its gyro or its AHRS is used). Default False.
+    absolute_distance : bool or callable
+        The sensor measures distance on a scale of its own (the wheels' travel, the range finder's height of the
+        camera): beside the camera the visual scale is estimated, and with a heading reference beside the wheels
+        their distance scale too (:func:`~fusion_vo.backends.states.calibration_observable`). True and callable as
+        :attr:`absolute_heading`. Default False.
     heading_reference : bool, callable or None
         The sensor measures the heading, or its change, without a bias of its own (the camera, the IMU's AHRS,
         GPS, a compass): beside the wheels and a gyro it tells a difference of the wheels' radii (their
@@ -345,6 +350,7 @@ class Sensor:
     states: tuple = ()
     live: Live | None = None
     absolute_heading: Any = False
+    absolute_distance: Any = False
     heading_reference: Any = None
     heading: tuple = ()
     distance: tuple = ()
@@ -358,6 +364,12 @@ class Sensor:
         if callable(self.absolute_heading):
             return bool(self.absolute_heading(iv))
         return bool(self.absolute_heading) and iv.uses(self.name)
+
+    def gives_distance(self, iv) -> bool:
+        """Whether it measures distance on the node grid ``iv`` (:attr:`absolute_distance`)."""
+        if callable(self.absolute_distance):
+            return bool(self.absolute_distance(iv))
+        return bool(self.absolute_distance) and iv.uses(self.name)
 
     def references_heading(self, data=None) -> bool:
         """Whether it is a heading reference for the wheels' curvature (:attr:`heading_reference`) with its

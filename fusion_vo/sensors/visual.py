@@ -333,6 +333,7 @@ VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
+    absolute_heading=lambda iv: len(camera_grid(iv).i0) > 0,
     heading_reference=lambda increments: increments is None or any(v.ok for v in increments),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
     heading=(HEADING,), distance=(DISTANCE,),

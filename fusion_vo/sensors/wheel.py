@@ -508,6 +508,7 @@ register(Sensor(
     pick=_pick_ticks, config=("wheel", WheelNoise),
     grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
+    absolute_distance=True,
     states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
     heading=(HEADING,), distance=(DISTANCE,),
 ))
@@ -517,7 +518,7 @@ register(Sensor(
     wanted=lambda selected, present: (("wheel" in selected or "odom" in selected) and present.get("odom", False)
                                       and not ("wheel" in selected and present.get("wheel", False))),
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
-    config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals),
+    config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals), absolute_distance=True,
     live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1),
 ))
 

@@ -93,6 +93,27 @@ def test_a_registered_state_with_a_rule_is_carried_like_the_built_in_ones(drive)
         assert "trim_offset" not in {s.name for s in registry.configurable_states()}
 
 
+def test_a_registered_distance_sensor_lets_the_camera_scale_be_estimated(drive):
+    """The visual scale is estimated where a distance is measured besides the camera's, whichever sensor measures
+    it: a registered one declaring ``absolute_distance`` (a measuring tape beside the camera and the IMU) counts as
+    the wheels or the range finder do, in a batch run (on the node grid, where it says it measures) and live."""
+    def scale(states):
+        return {st.name: st for st in states}["visual_scale"].estimated
+
+    config = FusionConfig()
+    iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
+    assert not scale(iv.states)  # the camera alone measures no distance of its own
+    assert not scale(run_states(live_context(config, ["camera", "imu"], 0.02, 0.01)))
+    with registry.registered(Sensor(name="tape", absolute_distance=lambda iv: len(iv.t) > 1)):
+        iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
+        assert scale(iv.states)
+        assert scale(run_states(live_context(config, ["camera", "imu", "tape"], 0.02, 0.01)))
+        assert not scale(run_states(live_context(config, ["camera", "imu"], 0.02, 0.01)))
+    with registry.registered(Sensor(name="tape", absolute_distance=lambda iv: False)):
+        iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
+        assert not scale(iv.states)  # it says it measured none on this grid
+
+
 @pytest.mark.parametrize("symbol", ["x", "b", "B", "ab"])
 def test_a_states_graph_letter_is_its_own(symbol):
     """x is the poses' letter and b the gyro bias's: a sensor's state may name neither (nor two letters)."""
