@@ -222,7 +222,8 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         own = [np.setdiff1d(s.node_times(data, nodes, config), nodes) for s in registry.sensors()
                if s.node_times is not None and (data := s.data(streams)) is not None]
         tail = step_nodes(nodes[-2], end, step, np.unique(np.concatenate([np.zeros(0), *own])))
-        nodes = np.append(nodes[:-1], tail[-1:])
+        if len(tail):  # (none: the data spans less than half a step, its two ends are the nodes)
+            nodes = np.append(nodes[:-1], tail[-1:])
     gaps = np.diff(nodes[:len(nodes) - len(tail[-1:])])
     fill = [fill_nodes(a, b, step) for a, b, g in zip(nodes[:-1], nodes[1:], gaps) if g > 1.5 * step] + [tail[:-1]]
     if sum(map(len, fill)):
