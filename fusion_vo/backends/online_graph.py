@@ -103,7 +103,6 @@ class OnlineGraph:
         self.gps_model = None if gps is None else GpsModel(gps, config.gps)
         self.reacquire = Reacquire(config.gps_reacquire)
         self.head: tuple | None = None  # node 0's (pose, covariance) after the first step (:meth:`step`)
-        self._head: tuple = ([], [])  # the first node's factor indices and sensors, in the first step
         self.switch: int | None = None  # the node where ENU starts (module docstring)
         self.prev_cov: np.ndarray | None = None  # reported covariance of the newest node (the fixes' gate)
         self.fix_factors: dict[int, list] = {}  # node -> its fixes' factors (a rebuilt node keeps them)
@@ -128,10 +127,10 @@ class OnlineGraph:
         return X(n + (ENU_INDEX if self.switch is not None and n >= self.switch else 0))
 
     def _node_factors(self, n: int, iv, first: bool, previous_pose, head_update: bool = False):
-        """Node ``n``'s builder and factors (ending ``iv``, from ``previous_pose``). ``first``: node 1, which carries
-        the first node's own factors (priors, its readings); ``head_update``: those go into iSAM2 now, in an update
-        of their own, as a batch run makes it (their indices in :attr:`_head`), else they are merged into the node's
-        (a rebuild for late data swaps them all at once)."""
+        """Node ``n``'s builder and factors (ending ``iv``, from ``previous_pose``), and the first node's factor indices
+        in iSAM2 and sensors when they went in here. ``first``: node 1, which carries the first node's own factors
+        (priors, its readings); ``head_update``: those go into iSAM2 now, in an update of their own, as a batch run
+        makes it, else they are merged into the node's (a rebuild for late data swaps them all at once)."""
         offset = self._offset(n)
         builder = GraphBuilder(iv, self.config, offset=offset, t_origin=self.t_origin,
                                           states=self.states)
@@ -140,9 +139,10 @@ class OnlineGraph:
         self.frames -= self.frames_made.pop(n, set())
         builder.frames = self.frames
         before = {g for g in (offset, offset + 1) if g in self.frames}  # (its interval's two nodes)
+        head_in = ([], [])
         if first and head_update:
             head = builder.first_node(self.driver.estimate)
-            self._head = (self.driver.add(head, self.driver.freeze(head, -1))[0], head.sensors)
+            head_in = (self.driver.add(head, self.driver.freeze(head, -1))[0], head.sensors)
             self.driver.advance(builder, 0, head, self.isam.calculateEstimatePose2(X(0)))
             previous_pose, first = self.driver.prev_pose, False
         nf = builder.node(1, previous_pose, self.driver.estimate)
@@ -155,7 +155,7 @@ class OnlineGraph:
             head.values.update(nf.values)
             head.sensors = head.sensors + nf.sensors  # (the first node's own readings: an AHRS heading)
             nf = head
-        return builder, nf
+        return builder, nf, head_in
 
     # ------------------------------------------------------------------ one node
     def prepare(self, iv) -> list | None:
@@ -163,7 +163,7 @@ class OnlineGraph:
         builds them)."""
         if self._pool is not None or self._pending_first:  # (the first node's factors update iSAM2 as they are built)
             return None
-        builder, nf = self._node_factors(self.n + 1, iv, False, self.driver.prev_pose)
+        builder, nf, _ = self._node_factors(self.n + 1, iv, False, self.driver.prev_pose)
         return [builder, nf, None]
 
     def freeze(self, prepared: list) -> None:
@@ -187,14 +187,17 @@ class OnlineGraph:
         return out[-1][1:]
 
     def _add_node(self, n: int, iv, prepared: list | None, fixes=()):
-        self._head = ([], [])
+        head, head_sensors = [], []  # the first node's factors in iSAM2, when they went in with this step
         if prepared is None:
-            prepared = self._node_factors(n, iv, self._pending_first, self.driver.prev_pose, head_update=True) + (None,)
-        builder, nf, frozen = prepared
+            builder, nf, (head, head_sensors) = self._node_factors(n, iv, self._pending_first, self.driver.prev_pose,
+                                                                   head_update=True)
+            frozen = None
+        else:
+            builder, nf, frozen = prepared
         if frozen is None:
             frozen = self.driver.freeze(nf, self._offset(n))
         self._pending_first = False
-        head, sensors, more = self._head[0], self._head[1] + nf.sensors, None
+        sensors, more = head_sensors + nf.sensors, None
         head_result = [(0, *self._pose_cov(0), None)] if head else []
         if fixes:  # the fixes that pass the gate, linearised at the prediction as the node's other factors
             gps = [f for fix in fixes if (f := self._fix_factor(n, nf.values[self.key(n)], fix)) is not None]
@@ -345,7 +348,7 @@ class OnlineGraph:
             if n - 1 == self.switch:  # node n's interval starts at the switch's pose in ENU
                 p = self.isam.calculateEstimatePose2(self.key(n - 1))
                 previous = np.array([p.x(), p.y(), p.theta()])
-            builder, nf = self._node_factors(n, iv, n == 1, gtsam.Pose2(*map(float, previous)))
+            builder, nf, _ = self._node_factors(n, iv, n == 1, gtsam.Pose2(*map(float, previous)))
             if fixes.get(n) and self.switch is not None:
                 pose_cov = self._pose_cov(n)[1]
                 for fix, lever in fixes[n]:

@@ -12,10 +12,9 @@ import numpy as np
 from fusion_vo.backends.ekf import PlanarEkf, calibration_report, interval_readings
 from fusion_vo.backends.ekf_adapter import spread_covariance
 from fusion_vo.backends.result import SensorCount
-from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes, step_node
+from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes, fix_first, step_node
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
-from fusion_vo.sensors.gps import GPS_SNAP
 from fusion_vo.sensors.imu import AHRS_OFFSET_WINDOW
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate, interval_coverage
@@ -122,9 +121,7 @@ class NodesMixin:
         frames = [v.t1 for v in self._visual if v.t1 > after + 1e-9]
         fixes = [f.t for f in self._gps if f.t > after + 1e-9]
         if frames:
-            nxt = self._fill_to(after, frames[0], step)
-            if fixes and fixes[0] < nxt - GPS_SNAP:  # a fix is a node of its own (timeline.GPS_SNAP)
-                nxt = fixes[0]
+            nxt = fix_first(self._fill_to(after, frames[0], step), fixes[0] if fixes else None)
         else:
             nxt = step_node(after, step, end, fixes[0] if fixes else None)
         return nxt if nxt is not None and nxt <= until else None

@@ -166,7 +166,12 @@ def step_node(after: float, step: float, end: float = np.inf, own: float | None 
     before that."""
     if end - after <= 0.5 * step:
         return None
-    nxt = min(after + step, end)
+    return fix_first(min(after + step, end), own)
+
+
+def fix_first(nxt: float, own: float | None) -> float:
+    """The next node: ``nxt``, or the time ``own`` of a node of its own (a GPS fix) when it comes more than
+    :data:`GPS_SNAP` before it (within that, the fix is at ``nxt``)."""
     return float(own) if own is not None and own < nxt - GPS_SNAP else nxt
 
 
@@ -216,16 +221,17 @@ def node_times(streams: SensorStreams, config: FusionConfig) -> np.ndarray:
         if not len(cam) or np.min(np.abs(cam - edge)) > 0.5 * step:
             nodes.append(edge)
     nodes = np.unique(np.asarray(nodes))
-    tail = np.zeros(0)
+    tail = np.zeros(0)  # the nodes after the last frame; the last of them replaces the last sample's time
     if len(nodes) > 1 and (not len(cam) or end - cam[-1] > 0.5 * step):
-        # after the last frame no later one is known: a live run's steps (step_nodes) up to the last sample
+        # no later frame is known there: a live run's steps (step_nodes) up to the last sample
         own = [np.setdiff1d(s.node_times(data, nodes, config), nodes) for s in registry.sensors()
                if s.node_times is not None and (data := s.data(streams)) is not None]
         tail = step_nodes(nodes[-2], end, step, np.unique(np.concatenate([np.zeros(0), *own])))
         if len(tail):  # (none: the data spans less than half a step, its two ends are the nodes)
-            nodes = np.append(nodes[:-1], tail[-1:])
-    gaps = np.diff(nodes[:len(nodes) - len(tail[-1:])])
+            nodes = nodes[:-1]
+    gaps = np.diff(nodes)
     fill = [fill_nodes(a, b, step) for a, b, g in zip(nodes[:-1], nodes[1:], gaps) if g > 1.5 * step] + [tail[:-1]]
+    nodes = np.append(nodes, tail[-1:])
     if sum(map(len, fill)):
         fill = np.concatenate(fill)
         # only between two samples of the other streams at most max_gap apart: a stretch without samples has

@@ -361,15 +361,17 @@ class Sensor:
 
     def gives_heading(self, iv) -> bool:
         """Whether it is a heading reference on the node grid ``iv`` (:attr:`absolute_heading`)."""
-        if callable(self.absolute_heading):
-            return bool(self.absolute_heading(iv))
-        return bool(self.absolute_heading) and iv.uses(self.name)
+        return self._declared(self.absolute_heading, iv)
 
     def gives_distance(self, iv) -> bool:
         """Whether it measures distance on the node grid ``iv`` (:attr:`absolute_distance`)."""
-        if callable(self.absolute_distance):
-            return bool(self.absolute_distance(iv))
-        return bool(self.absolute_distance) and iv.uses(self.name)
+        return self._declared(self.absolute_distance, iv)
+
+    def _declared(self, declaration, iv) -> bool:
+        """A declaration on the node grid ``iv``: a callable's answer, or True when its samples are used there."""
+        if callable(declaration):
+            return bool(declaration(iv))
+        return bool(declaration) and iv.uses(self.name)
 
     def references_heading(self, data=None) -> bool:
         """Whether it is a heading reference for the wheels' curvature (:attr:`heading_reference`) with its
