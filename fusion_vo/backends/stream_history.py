@@ -16,6 +16,7 @@ from fusion_vo.measurements import (
 from fusion_vo.backends.ekf import YAW
 from fusion_vo.backends.world import prior_from_alignment
 from fusion_vo.backends.fixes import OUTAGE_NOTE_S, Reacquire, outage_note
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.gps import align_to_fixes
 from fusion_vo.sensors.gps import predict as gps_predict
 
@@ -56,7 +57,7 @@ class HistoryMixin:
         self._ekf.kf.x = x.reshape(-1, 1).copy()
         self._ekf.kf.P = P.copy()
         self._ekf.linearisation = None  # that node's prediction is not the last one made
-        self._heading_offset = rec.heading_offset
+        self._carry = dict(rec.carry)
         if rec.monitor is not None:
             self._monitor.restore(rec.monitor)
         del self._t_nodes[i + 1:], self._poses[i + 1:], self._covs[i + 1:], self._records[i + 1:], self._covered[i:]
@@ -83,7 +84,7 @@ class HistoryMixin:
                 bisect.insort(self._visual, v, key=lambda inc: inc.t1)
             prev = self._records[j - 1]
             iv, step, consumed, rec.reach, graph_camera = self._interval(self._t_nodes[j - 1], self._t_nodes[j],
-                                                                          prev.heading_offset)
+                                                                          prev.carry)
             self._covered[j - 1] = interval_coverage(iv)  # (before the monitor's decisions, as when first processed)
             if "gps" in rec.counts:  # the node's fixes are not in its interval: their counts stay
                 step["gps"] = rec.counts["gps"]
@@ -93,16 +94,16 @@ class HistoryMixin:
             self._monitor.apply(iv, rec.dropped)  # the decision taken when the node was first processed
             if graph_camera is not None:
                 iv.sensors["camera"] = graph_camera
-            rec.heading_offset = iv.heading_offset if iv.heading_offset is not None else prev.heading_offset
-            if self._switch is not None and j == self._switch[0] and rec.heading_offset is not None:
-                rec.heading_offset -= self._switch[1]  # (the interval after it starts in ENU)
+            rec.carry = dict(iv.carry)  # (iv was built from prev's)
+            if self._switch is not None and j == self._switch[0]:
+                rec.carry = registry.turned(rec.carry, self._switch[1])  # (the interval after it starts in ENU)
             batches.append((j, iv))
         late = {j: self._late_fixes.pop(j) for j, _ in batches if j in self._late_fixes}
         for j in list(self._late_fixes):  # (their node left the history meanwhile)
             self._retired_counts.setdefault("gps", SensorCount()).late += len(self._late_fixes.pop(j))
         if not batches:
             return
-        self._heading_offset = self._records[-1].heading_offset
+        self._carry = dict(self._records[-1].carry)
         for j, pose, cov, used in self._graph.replace(batches, fixes=late):
             self._poses[j], self._covs[j] = pose, cov
             self._count_used(j, used)
@@ -145,8 +146,8 @@ class HistoryMixin:
             fit, sigma = aligned
             self._to_enu(fit, fix.t)
             self._switch = (len(T) - 1, fit.yaw)
-            if self._records[-1].heading_offset is not None:  # the next node's interval starts in ENU
-                self._records[-1].heading_offset -= fit.yaw
+            # the next node's interval starts in ENU
+            self._records[-1].carry = registry.turned(self._records[-1].carry, fit.yaw)
             for n, pose, cov, used in self._graph.align(np.array([*fit.offset, fit.yaw]), sigma, []):
                 self._poses[n], self._covs[n] = pose, cov
         motion, var = sliver
@@ -217,8 +218,7 @@ class HistoryMixin:
         self._poses = [p for p in fit.apply(np.array(self._poses))]
         self._covs = [rot @ cv @ rot.T for cv in self._covs]
         self._frame = "enu"
-        if self._heading_offset is not None:
-            self._heading_offset -= fit.yaw
+        self._carry = registry.turned(self._carry, fit.yaw)
         self._gps_reacquire = Reacquire(self.config.gps_reacquire)
         self._notes.append(f"gps: world frame re-expressed in ENU at t={t:.2f} (first heading "
                            f"{math.degrees(float(self._poses[0][2])):.2f} deg ± {math.degrees(fit.yaw_sigma):.2f})")

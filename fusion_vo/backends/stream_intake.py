@@ -275,8 +275,8 @@ class IntakeMixin:
         lo, hi = min(x, y), max(x, y)
         if hi - lo < 1e-9:
             return np.zeros(3), np.zeros(3)
-        iv = build_intervals(self._streams_between(lo, hi, self._heading_offset), self.config, np.array([lo, hi]),
-                             self._heading_offset)
+        iv = build_intervals(self._streams_between(lo, hi, self._carry), self.config, np.array([lo, hi]),
+                             self._carry)
         whl, imu = wheel_grid(iv), imu_grid(iv)
         if not iv.uses("wheel") or not whl.ok[0]:
             return None

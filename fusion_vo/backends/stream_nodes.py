@@ -15,7 +15,7 @@ from fusion_vo.backends.result import SensorCount
 from fusion_vo.backends.timeline import SensorStreams, build_intervals, fill_nodes, fix_first, step_node
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import VisualIncrement
-from fusion_vo.sensors.imu import AHRS_OFFSET_WINDOW
+from fusion_vo.sensors import registry
 
 from fusion_vo.backends.stream_state import NodeRecord, Started, extrapolate, interval_coverage
 
@@ -176,7 +176,7 @@ class NodesMixin:
                 t0 = self._t_nodes[-1]
                 if np.isfinite(until):
                     t1 = self._next_node(t0, until)
-                    if t1 is not None and self._awaits_ahrs(t0, until):
+                    if t1 is not None and self._awaits_carried(t0, until):
                         return
                 else:  # finishing: the last samples end the track
                     end = self._last_time()
@@ -196,18 +196,19 @@ class NodesMixin:
             else:
                 self._end_step()
 
-    def _finds_ahrs_offset(self, heading_offset: float | None) -> bool:
-        """Whether the next interval finds the AHRS's offset to the initial heading: none known yet (``heading_offset``)
-        and the buffered IMU samples carry orientations. That interval reads and averages the IMU's samples of
-        :data:`~fusion_vo.sensors.imu.AHRS_OFFSET_WINDOW` after its start."""
-        buf = self._buffers.get("imu")
-        return heading_offset is None and bool(buf) and buf[-1][1][2] is not None
+    def _ahead(self, name: str, carry: dict) -> float:
+        """Seconds after an interval's start whose samples of sensor ``name`` the interval's build reads to find the
+        value that sensor carries (:class:`~fusion_vo.sensors.registry.Carry`; the AHRS's offset to the initial
+        heading, averaged over its first quarter second): 0 once ``carry`` holds it."""
+        sensor = registry.resolve(name)
+        if sensor is None or sensor.carry is None or sensor.carry.ahead is None or name in carry:
+            return 0.0
+        return float(sensor.carry.ahead(self._buffers.get(name) or []))
 
-    def _awaits_ahrs(self, t0: float, until: float) -> bool:
-        """Whether the interval from ``t0``, finding the AHRS's offset (:meth:`_finds_ahrs_offset`), waits for the
-        samples it averages: only once the processed time ``until`` has passed them are they all in, in whatever
-        order they came."""
-        return self._finds_ahrs_offset(self._heading_offset) and until < t0 + AHRS_OFFSET_WINDOW
+    def _awaits_carried(self, t0: float, until: float) -> bool:
+        """Whether the interval from ``t0`` waits for the samples it reads to find a carried value (:meth:`_ahead`):
+        only once the processed time ``until`` has passed them are they all in, in whatever order they came."""
+        return any(until < t0 + ahead for name in self._buffers if (ahead := self._ahead(name, self._carry)) > 0)
 
     def _part(self, inc: VisualIncrement, t0: float, t1: float) -> tuple[VisualIncrement, int, int, int] | None:
         """The share of ``inc`` over the node interval ``(t0, t1)`` (:func:`increment_part`), its nodes those
@@ -238,12 +239,11 @@ class NodesMixin:
         times = [b[-1][0] for b in self._buffers.values() if b] + [v.t1 for v in self._visual]
         return max(times) if times else -np.inf
 
-    def _streams_between(self, t0: float, t1: float, heading_offset: float | None = None,
-                         reach: dict | None = None) -> SensorStreams:
+    def _streams_between(self, t0: float, t1: float, carry: dict, reach: dict | None = None) -> SensorStreams:
         """The buffered samples an interval needs: those inside it, the ones bracketing it, and (IMU,
         range finder) the neighbours the spike check's running median reads around those (the same values
-        as in batch use); until the AHRS offset is known (samples with an orientation), the IMU's first quarter second after
-        ``t0`` too."""
+        as in batch use); until a sensor's carried value is in ``carry``, the samples it is found from after ``t0``
+        too (:meth:`_ahead`: the IMU's first quarter second, when its samples carry orientations)."""
         streams = SensorStreams(camera_height=self.camera_height)
         for name, buf in self._buffers.items():
             if name == "range" and self._range_in_visual:  # used once: already in the visual increments
@@ -252,9 +252,9 @@ class NodesMixin:
             more = live.neighbours(self.config) if callable(live.neighbours) else int(live.neighbours)
             lo = max(bisect.bisect_right(buf, t0, key=lambda item: item[0]) - 1 - more, 0)
             hi = bisect.bisect_left(buf, t1, key=lambda item: item[0]) + 1 + more
-            if name == "imu" and self._finds_ahrs_offset(heading_offset):
-                hi = max(hi, bisect.bisect_right(buf, t0 + AHRS_OFFSET_WINDOW + self.config.max_gap,
-                                                 key=lambda item: item[0]) + 1)
+            ahead = self._ahead(name, carry)
+            if ahead > 0:
+                hi = max(hi, bisect.bisect_right(buf, t0 + ahead + self.config.max_gap, key=lambda item: item[0]) + 1)
             rows = buf[lo:hi]
             if len(rows) < live.min_rows and self._finishing:  # no later sample comes: the earlier ones, which a
                 rows = buf[max(min(hi, len(buf)) - live.min_rows, 0):hi]  # batch run's hook reads too
@@ -266,7 +266,7 @@ class NodesMixin:
             streams[name] = live.data(np.array([r[0] for r in rows]), [r[1] for r in rows], self)
         return streams
 
-    def _interval(self, t0: float, t1: float, heading_offset: float | None):
+    def _interval(self, t0: float, t1: float, carry: dict):
         """The node interval ``(t0, t1)`` from the buffers: ``(Intervals, step counts, consumed increments,
         time of the last sample read per stream, the factor graph's camera readings)``.
 
@@ -279,7 +279,7 @@ class NodesMixin:
         """
         step: dict[str, SensorCount] = {}
         reach: dict[str, float] = {}
-        streams = self._streams_between(t0, t1, heading_offset, reach)
+        streams = self._streams_between(t0, t1, carry, reach)
         consumed = [v for v in self._visual if v.t1 <= t1 + 1e-9]
         failed = sum(not v.ok for v in consumed)  # frames the frontend could not measure: nodes, counted missing
         if failed:
@@ -299,7 +299,7 @@ class NodesMixin:
             streams.visual = [spanning[1]]
         # the states and scale priors the backends carry for the whole run: an interval without the camera (an
         # outage) must not drop the wheels' curvature from their model while the filter and the graph still carry it
-        iv = build_intervals(streams, self.config, np.array([t0, t1]), heading_offset, states=self._states,
+        iv = build_intervals(streams, self.config, np.array([t0, t1]), carry, states=self._states,
                              priors=self._priors)
         if spanning is not None and spanning[0].t1 > t1 + 1e-9:  # counted used once, at its last interval
             iv.counts["camera"].used -= 1
@@ -338,7 +338,7 @@ class NodesMixin:
 
     def _begin_step(self, t0: float, t1: float) -> None:
         """First unit of a node: its interval from the buffers, handed to the heading monitor."""
-        iv, step, consumed, reach, graph_camera = self._interval(t0, t1, self._heading_offset)
+        iv, step, consumed, reach, graph_camera = self._interval(t0, t1, self._carry)
         covered = interval_coverage(iv)  # (a camera increment over several intervals: its share covers this one)
         monitor = self._monitor.state()
         self._monitor.add(iv)  # (the monitor judges the shares of an increment over several intervals)
@@ -363,8 +363,7 @@ class NodesMixin:
         self._step_counts = step
         self._step_fixes = []
         self._step_offered = 0
-        if iv.heading_offset is not None:
-            self._heading_offset = iv.heading_offset
+        self._carry = dict(iv.carry)
         if self.backend == "ekf":
             self._ekf_step(iv)
             state = (self._ekf.x.copy(), self._ekf.P.copy()) if self.history > 0 else None
@@ -375,7 +374,7 @@ class NodesMixin:
         self._covered.append(started.covered)
         self._t_nodes.append(started.t1)
         keep = state is not None
-        self._records.append(NodeRecord(state, self._heading_offset, step, started.consumed,
+        self._records.append(NodeRecord(state, dict(self._carry), step, started.consumed,
                                          monitor=self._monitor.state() if keep else None, dropped=started.dropped,
                                          fixes=self._step_fixes, gps=self._gps_state() if keep else None,
                                          offered=self._step_offered, slope=(float(iv.cx[0]), float(iv.cy[0])),
@@ -390,11 +389,11 @@ class NodesMixin:
         if self.backend == "ekf":
             self._ekf = PlanarEkf(cfg, states=self._states, camera="camera" in self.sensors,
                                   frame_error=1.0 if self._camera_frame_errors else None)
-            self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), None,
+            self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), {},
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])
         else:
-            self._records.append(NodeRecord(None, None))
+            self._records.append(NodeRecord(None, {}))
             self._graph = self._online_graph(cfg, t, self.background, self._states,
                                              self._gps_lever if "gps" in self.sensors else None)
             pose, cov = self._graph.start()

@@ -59,7 +59,7 @@ class NodeRecord:
     """What processing one node changed, kept while the node is within the history (EKF rewind)."""
 
     state: tuple | None  # EKF (x, P) after the node's update
-    heading_offset: float | None
+    carry: dict  # sensor -> the value its intervals carry (Intervals.carry) after this node
     counts: dict = field(default_factory=dict)  # sensor -> SensorCount of this node's step
     visual: list = field(default_factory=list)  # increments this node's step consumed
     monitor: MonitorState | None = None  # the heading monitor after this node

@@ -316,7 +316,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._covered: list[dict[str, bool]] = []  # interval k (ending at node k + 1) -> the sensors covering it
         self._poses: list[np.ndarray] = []
         self._covs: list[np.ndarray] = []
-        self._heading_offset: float | None = None
+        self._carry: dict = {}  # sensor -> the value its intervals carry (Intervals.carry), as of the last node
         self._notes: list[str] = list(self._priors.notes)
         if self._range_in_visual and "range" in self.sensors:
             self._notes.append("range finder: already in the visual increments (their per-frame height), "
@@ -429,11 +429,11 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         from the start: its first orientation gives the initial heading (the headings estimated since may carry
         what the old mounting did to them; the AHRS, absolute, takes it out)."""
         first = self._mounting.first_orientation
-        if self._heading_offset is None or first is None:
+        if self._carry.get("imu") is None or first is None:
             return
         offset = aligned_offset(self.imu_T_BS, first, float(self.config.initial_pose[2]))
         if offset is not None:
-            self._heading_offset = offset
+            self._carry["imu"] = offset
 
     def feed(self, messages: Iterable[tuple[float, str, object]]) -> None:
         """Add the samples ``(arrival time, kind, sample)`` of ``messages`` in their order

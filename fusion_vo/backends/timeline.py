@@ -79,14 +79,18 @@ class Intervals:
     cx, cy : ndarray (K,)
         Slope factors projecting body travel to the horizontal (1 on flat ground or without a sensor measuring
         the tilt).
-    camera_height : float or None
-        Height the visual increments assume.
+    facts : dict
+        What the streams carry about the camera besides the sensors' data (:data:`fusion_vo.sensors.streams.FACTS`:
+        ``camera_height``, the height the visual increments assume, and its stated σ, ...), for the models that
+        need them (the range finder's, the visual scale's).
     counts : dict[str, SensorCount]
         Bookkeeping of the input stage (gated samples, reordering, missing coverage).
     notes : list[str]
         Camera outages and streams that stop.
-    heading_offset : float or None
-        AHRS heading minus the estimate's heading (from the first AHRS sample).
+    carry : dict
+        Sensor name -> the value its ``intervals`` step found once and later builds keep
+        (:class:`~fusion_vo.sensors.registry.Carry`; the IMU's: AHRS heading minus the estimate's heading, from
+        the first AHRS sample).
     episodes : list
         The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
     visual_scale_sigma, wheel_scale_sigma : float
@@ -109,10 +113,10 @@ class Intervals:
     sensors: dict = field(default_factory=dict)
     cx: np.ndarray | None = None
     cy: np.ndarray | None = None
-    camera_height: float | None = None
+    facts: dict = field(default_factory=dict)
     counts: dict[str, SensorCount] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
-    heading_offset: float | None = None
+    carry: dict = field(default_factory=dict)
     episodes: list = field(default_factory=list)
     visual_scale_sigma: float = FusionConfig.model_fields["visual_scale_sigma"].default
     wheel_scale_sigma: float = FusionConfig.model_fields["wheel_scale_sigma"].default
@@ -303,13 +307,13 @@ def sensor_readings(iv: "Intervals", config: FusionConfig) -> list[Readings]:
 
 # --------------------------------------------------------------------------- builder
 def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndarray | None = None,
-                    heading_offset: float | None = None, states: tuple | None = None,
+                    carry: dict | None = None, states: tuple | None = None,
                     priors: ScalePriors | None = None) -> Intervals:
     """Express every stream of ``streams`` on the node grid (see the module docstring).
 
-    ``nodes`` overrides the grid (streaming use builds one interval at a time); ``heading_offset``
-    keeps the AHRS alignment of earlier calls (by default the first heading is aligned to the
-    initial yaw); ``states`` are the run's states when they are decided for the whole run (streaming use: one
+    ``nodes`` overrides the grid (streaming use builds one interval at a time); ``carry`` the values earlier
+    builds found (:attr:`Intervals.carry`; by default each sensor finds its own, the AHRS's first heading is
+    aligned to the initial yaw); ``states`` are the run's states when they are decided for the whole run (streaming use: one
     interval's data must not change them), else they are decided from this grid
     (:func:`~fusion_vo.backends.states.run_states`); ``priors`` likewise the run's scale priors
     (:func:`scale_priors`; streaming use: one interval's samples do not carry the sensors' files), else those of
@@ -319,7 +323,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     K = len(T) - 1
     counts: dict[str, SensorCount] = {}
     notes: list[str] = []
-    iv = Intervals(t=T, camera_height=streams.camera_height, counts=counts, notes=notes,
+    iv = Intervals(t=T, facts=streams.facts(), counts=counts, notes=notes,
                    visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma)
     for sensor in registry.sensors():  # every sensor's (empty) measurements, data or not
         if sensor.grid is not None:
@@ -332,7 +336,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
                               range_fused=streams.range is not None and not range_in_visual)
         notes.extend(priors.notes)
     iv.visual_scale_sigma, iv.wheel_scale_sigma = priors.visual_scale_sigma, priors.wheel_scale_sigma
-    iv.heading_offset = heading_offset
+    iv.carry = dict(carry or {})
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)
     for sensor, step in registry.ordered("intervals"):  # each sensor's samples onto the grid (its own module)

@@ -9,7 +9,8 @@ the datum of ``gps0/sensor.yaml``, and nothing tells the backends which way the 
    that carries that track's antenna positions onto the first fixes (robust to multipath jumps); the
    window grows from 2 s of fixes, doubling, until the fitted heading's standard deviation
    (from the fixes' noise) is below :data:`TARGET_YAW_SIGMA`, or the whole recording is used;
-3. the AHRS headings, aligned to the configured initial heading, are turned by the same rotation;
+3. absolute headings (the AHRS's), aligned to the configured initial heading, are turned by the same
+   rotation (each sensor's ``turn``, :func:`turn_world`);
 4. both backends then start at the aligned first pose, with a prior of three times the fit's
    standard deviations (heading at least :data:`MIN_YAW_SIGMA`), and the fixes themselves refine it;
 5. with ``fusion.gps.estimate_sigma``, the fit's residuals measure the fixes' actual scatter about the
@@ -33,9 +34,8 @@ import numpy as np
 from fusion_vo.backends.config import FusionConfig
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.sensors.gps import align_to_fixes, fixes_in, gps_grid, predict, scatter_floor
-from fusion_vo.sensors.imu import imu_grid
+from fusion_vo.sensors import registry
 from fusion_vo.backends.ekf import run_ekf
-from fusion_vo.geometry import se2
 
 logger = logging.getLogger(__name__)
 
@@ -63,15 +63,15 @@ def fallback_prior(iv: Intervals, config: FusionConfig, fix_sigma: float) -> tup
     return pose, np.array([3.0 * fix_sigma, 3.0 * fix_sigma, 1e-3])
 
 
-def rotate_ahrs(iv: Intervals, yaw: float) -> None:
-    """AHRS headings re-expressed in the rotated world frame: they were aligned to the configured
-    initial heading, which the world alignment turned by ``yaw``."""
-
-    imu = imu_grid(iv)
-    if imu.ahrs_ok.any():
-        imu.ahrs_yaw = se2.wrap_angle(imu.ahrs_yaw + yaw)
-    if iv.heading_offset is not None:
-        iv.heading_offset = float(iv.heading_offset - yaw)
+def turn_world(iv: Intervals, yaw: float) -> None:
+    """The measurements of ``iv`` and the values its build carries re-expressed in the world frame turned by
+    ``yaw`` (each sensor's :attr:`~fusion_vo.sensors.registry.Sensor.turn` and
+    :attr:`~fusion_vo.sensors.registry.Carry.turn`: the AHRS's headings, aligned to the configured initial heading
+    the alignment turned)."""
+    for sensor in registry.sensors():
+        if sensor.turn is not None and sensor.name in iv.sensors:
+            sensor.turn(iv, yaw)
+    iv.carry = registry.turned(iv.carry, yaw)
 
 
 def align_world(iv: Intervals, config: FusionConfig) -> None:
@@ -106,7 +106,7 @@ def align_world(iv: Intervals, config: FusionConfig) -> None:
                         f"configured initial heading {math.degrees(config.initial_pose[2]):.1f} deg is assumed")
         return
     iv.initial_pose, iv.initial_sigma = prior_from_alignment(fit, traj.xyyaw[0], fix_sigma)
-    rotate_ahrs(iv, fit.yaw)
+    turn_world(iv, fit.yaw)
     iv.notes.append(f"gps: world frame is ENU at the datum {tuple(round(v, 7) for v in gps.datum)}; first heading "
                     f"{math.degrees(iv.initial_pose[2]):.2f} deg (east = 0, counter-clockwise) estimated from the "
                     f"fixes of the first {min(window, traj.t[-1] - t_first):.0f} s (± {math.degrees(fit.yaw_sigma):.2f} deg, "

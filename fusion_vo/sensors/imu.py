@@ -49,7 +49,7 @@ from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData, ImuSample
 from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.sensors.registry import Carry, HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.sensors.wheel import at_rest
@@ -360,7 +360,7 @@ class ImuGrid:
 
     ``gyro_ok, gyro_angle`` (K,): where the gyro covers each node interval and its integrated body yaw
     rate over it [rad]; ``ahrs_ok, ahrs_yaw`` (K+1,): the AHRS heading at the nodes [rad], aligned so that the
-    first one is the initial yaw (``Intervals.heading_offset``).
+    first one is the initial yaw (the offset is carried, ``Intervals.carry["imu"]``).
     """
 
     gyro_ok: np.ndarray
@@ -386,8 +386,9 @@ AHRS_OFFSET_WINDOW = 0.25
 
 def add_intervals(iv, streams, config, counts) -> None:
     """The gyro's integrated angle per node interval (:class:`ImuGrid` ``gyro_ok, gyro_angle``) and, with an AHRS
-    orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw``,
-    ``Intervals.heading_offset``) and the slope factors ``Intervals.cx, cy``."""
+    orientation, its heading at the nodes aligned to the initial heading (``ahrs_ok, ahrs_yaw``; the offset
+    ``Intervals.carry["imu"]``, found at the first AHRS sample, :data:`CARRY`) and the slope factors
+    ``Intervals.cx, cy``."""
 
     imu, grid = streams.imu, imu_grid(iv)
     count = counts.setdefault("gyro", SensorCount())
@@ -414,7 +415,8 @@ def add_intervals(iv, streams, config, counts) -> None:
     if not ok_n.any():
         return
     yaw_t = np.interp(T, ht, yaw)
-    if iv.heading_offset is None:
+    offset = iv.carry.get("imu")
+    if offset is None:
         # AHRS north vs. the estimate's initial heading, averaged over the samples of the first
         # quarter second with the gyro carrying the heading (one noisy sample would bias all headings)
         first = int(np.argmax(ok_n))
@@ -425,8 +427,7 @@ def add_intervals(iv, streams, config, counts) -> None:
             gyro_heading = np.interp(ht[window], gyro.t, angle) - np.interp(T[first], gyro.t, angle)
         diffs = se2.wrap_angle(yaw[window] - yaw_t[first] - gyro_heading)
         mean = float(np.mean(diffs)) if len(diffs) else 0.0
-        iv.heading_offset = float(yaw_t[first] + mean - float(config.initial_pose[2]))
-    offset = iv.heading_offset
+        offset = iv.carry["imu"] = float(yaw_t[first] + mean - float(config.initial_pose[2]))
     grid.ahrs_ok = ok_n
     grid.ahrs_yaw = se2.wrap_angle(yaw_t - offset)
     acount.used += int(ok_n.sum())
@@ -549,6 +550,24 @@ AHRS_HEADING = HeadingSource(
     clear=_ahrs_clear, reference=0, reference_error=_ahrs_reference_error)
 
 
+def _ahrs_ahead(rows: list) -> float:
+    """While the AHRS's offset is not found: the samples of :data:`AHRS_OFFSET_WINDOW` after an interval's start
+    that it is averaged over, when the buffered samples ``rows`` carry orientations."""
+    return AHRS_OFFSET_WINDOW if rows and rows[-1][1][2] is not None else 0.0
+
+
+def _turn_ahrs(iv, yaw: float) -> None:
+    """The AHRS headings at the nodes once the world frame is turned by ``yaw`` (they were aligned to the
+    configured initial heading, which the turn moves)."""
+    grid = imu_grid(iv)
+    if grid.ahrs_ok.any():
+        grid.ahrs_yaw = se2.wrap_angle(grid.ahrs_yaw + yaw)
+
+
+#: the offset between AHRS north and the initial heading, found once and kept (``Intervals.carry["imu"]``)
+CARRY = Carry(turn=lambda offset, yaw: float(offset - yaw), ahead=_ahrs_ahead)
+
+
 def _live_samples(data: ImuData) -> list:
     """Recorded IMU rows as live samples (with the AHRS orientation when recorded)."""
     q = data.orientation if data.orientation is not None else [None] * len(data.t)
@@ -559,6 +578,7 @@ register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
     grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings, states=(GYRO_BIAS, AHRS_OFFSET),
+    carry=CARRY, turn=_turn_ahrs,
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=lambda iv: iv.uses("gyro") or has_heading(iv),
     heading_reference=lambda data: data is not None and data.orientation is not None,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",

@@ -157,7 +157,7 @@ def add_intervals(iv, streams, config, counts) -> None:
         return
     rng = streams.range
     count = counts.setdefault("range", SensorCount())
-    if iv.camera_height is None:
+    if iv.facts.get("camera_height") is None:
         raise InputError("the range finder needs the configured camera height (camera T_BS or camera_height)")
     rng = ordered_fields(rng, ("distance",), count)
     h = camera_height(rng, config.range)
@@ -183,7 +183,7 @@ def readings(iv, config) -> list[Readings]:
         return []
     n = np.flatnonzero(grid.ok)
     return [Readings("range", RANGE, n, n, grid.height[n], config.range.sigma**2,
-                     params={"camera_height": iv.camera_height}, order=ORDER["range"])]
+                     params={"camera_height": iv.facts["camera_height"]}, order=ORDER["range"])]
 
 
 def _live_sample(m) -> tuple:

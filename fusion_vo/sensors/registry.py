@@ -232,6 +232,33 @@ class Live:
 
 
 @dataclass(frozen=True)
+class Carry:
+    """A value a sensor's ``intervals`` step finds once, from its first samples, and every later build of the
+    node grid keeps (the IMU: the offset between its AHRS's north and the initial heading). It lives in
+    ``Intervals.carry[name]``: a batch run builds the whole grid at once, the streaming engine hands the value from
+    one interval to the next and keeps it with each node for its rewinds.
+
+    Attributes
+    ----------
+    turn : callable
+        ``turn(value, yaw) -> value``: the value once the world frame is turned by ``yaw`` (GPS's alignment,
+        :mod:`fusion_vo.backends.world`).
+    ahead : callable or None
+        ``ahead(rows) -> float``: while the value is not found, the seconds after an interval's start whose samples
+        the interval's build reads to find it, given the sensor's buffered live samples ``rows`` (``(t, payload)``);
+        the streaming engine waits for them. None: none beyond the interval.
+    """
+
+    turn: Callable
+    ahead: Callable | None = None
+
+
+def turned(carry: dict, yaw: float) -> dict:
+    """The carried values ``carry`` (sensor name -> value, :class:`Carry`) once the world frame is turned by ``yaw``."""
+    return {name: get(name).carry.turn(value, yaw) for name, value in carry.items()}
+
+
+@dataclass(frozen=True)
 class Sensor:
     """A sensor as the library sees it (module docstring).
 
@@ -294,6 +321,11 @@ class Sensor:
         ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
         :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
         (:class:`~fusion_vo.sensors.readings.Readings`): what both backends consume, each through its one adapter.
+    carry : Carry or None
+        A value its ``intervals`` step finds once and later builds keep (:class:`Carry`).
+    turn : callable or None
+        ``turn(iv, yaw)``: its measurements in ``iv`` re-expressed once the world frame is turned by ``yaw``
+        (absolute headings: the AHRS's; GPS's alignment, :mod:`fusion_vo.backends.world`).
     graph_keyframes : callable or None
         ``graph_keyframes(iv) -> indices``: grid nodes that must stay pose variables when the graph keeps only
         every ``keyframe_every``-th (a GPS fix's node).
@@ -347,6 +379,8 @@ class Sensor:
     coverage: Callable | None = None
     readings: Callable | None = None
     graph_keyframes: Callable | None = None
+    carry: Carry | None = None
+    turn: Callable | None = None
     states: tuple = ()
     live: Live | None = None
     absolute_heading: Any = False

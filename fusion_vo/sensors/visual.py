@@ -322,9 +322,10 @@ def _visual_scale(state: State, context) -> State:
 
 def _camera_height(value: float, sigma: float, iv) -> dict:
     """The camera height ``h / k_v`` a visual scale ``k_v`` gives (σ ``h σ_kv``), ``h`` the configured one."""
-    if not iv.camera_height:
+    height = iv.facts.get("camera_height")
+    if not height:
         return {}
-    return {"camera_height": (float(iv.camera_height / value), float(iv.camera_height * sigma))}
+    return {"camera_height": (float(height / value), float(height * sigma))}
 
 
 #: the visual scale ``k_v = h_configured / h_true`` (:class:`VisualModel`), a state of every run

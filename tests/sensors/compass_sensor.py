@@ -1,6 +1,8 @@
 """A compass defined outside the library: everything a new sensor needs, in this file alone.
 
-``COMPASS_SENSOR`` is an absolute heading; ``OFFSET_COMPASS_SENSOR`` a heading with an unknown constant
+``COMPASS_SENSOR`` is an absolute heading; ``NORTH_COMPASS_SENSOR`` one whose north is not the start frame's,
+turned so that its first readings give the initial heading (an offset it finds once and carries, as the IMU's AHRS
+does); ``OFFSET_COMPASS_SENSOR`` a heading with an unknown constant
 offset (a magnetometer's declination or mounting error), which it adds to both backends as a state
 variable (``compass_offset``), reads from a recording's ``compass0/data.csv`` (``#timestamp [ns],yaw [rad]``)
 and takes live through ``StreamingFusion.add("compass", CompassSample(t, yaw))``.
@@ -24,7 +26,7 @@ from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import Readings
-from fusion_vo.sensors.registry import Live, Sensor, State, Step
+from fusion_vo.sensors.registry import Carry, Live, Sensor, State, Step
 
 
 @dataclass
@@ -169,6 +171,44 @@ OFFSET_COMPASS_SENSOR = dataclasses.replace(
     COMPASS_SENSOR, folder="compass0", read=read_compass,
     states=(State("compass_offset", initial=0.0, sigma=0.5),),
     readings=compass_readings(OFFSET_COMPASS), live=COMPASS_LIVE,
+)
+
+
+# --------------------------------------------------------------------------- a value it finds once
+#: the span [s] of the first readings whose mean heading is the initial one (:func:`north_compass_intervals`)
+NORTH_WINDOW = 0.5
+
+
+def north_compass_intervals(iv, streams, config, counts):
+    """Headings at the nodes turned so that the first ones are the initial heading: the offset between the compass's
+    north and the start frame, the circular mean of its readings over :data:`NORTH_WINDOW` from the first node it
+    covers minus the initial heading, is found once and carried (``iv.carry["compass"]``)."""
+    compass_intervals(iv, streams, config, counts)
+    near, yaw = iv.extra["compass"]
+    offset = iv.carry.get("compass")
+    if offset is None and near.any():
+        data = streams["compass"]
+        t0 = iv.t[np.argmax(near)]
+        first = (data.t >= t0 - 1e-9) & (data.t <= t0 + NORTH_WINDOW)
+        if first.any():
+            mean = float(np.angle(np.mean(np.exp(1j * data.yaw[first]))))
+            offset = iv.carry["compass"] = mean - float(config.initial_pose[2])
+    if offset is None:  # (no reading to align it by: none used)
+        iv.extra["compass"] = (np.zeros_like(near), yaw)
+    else:
+        iv.extra["compass"] = (near, se2.wrap_angle(yaw - offset))
+
+
+def turn_north_compass(iv, yaw: float) -> None:
+    """Its headings once the world frame is turned by ``yaw``."""
+    near, heading = iv.extra["compass"]
+    iv.extra["compass"] = (near, se2.wrap_angle(heading + yaw))
+
+
+#: the north compass: an absolute heading whose offset to the start frame it finds from its first readings
+NORTH_COMPASS_SENSOR = dataclasses.replace(
+    COMPASS_SENSOR, intervals=Step(100, north_compass_intervals), live=COMPASS_LIVE, turn=turn_north_compass,
+    carry=Carry(turn=lambda offset, yaw: offset - yaw, ahead=lambda rows: NORTH_WINDOW if rows else 0.0),
 )
 
 

@@ -10,7 +10,7 @@ import inspect
 import numpy as np
 import pytest
 
-from compass_sensor import COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
+from compass_sensor import COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
@@ -328,6 +328,29 @@ def test_the_engine_fed_in_time_order_is_the_batch_runs_online_track_with_a_regi
     difference = np.abs(a.xyyaw - b.xyyaw).max(axis=1)
     assert difference.max() < 1e-9, difference
     assert streamed.counts[track]["compass"].used == batch.counts[track]["compass"].used
+
+
+@pytest.mark.parametrize("backend, track", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_a_value_a_sensor_finds_once_is_carried_from_node_to_node(drive, backend, track):
+    """The north compass of compass_sensor.py, whose north is 1 rad off the start frame, finds that offset once from
+    its first half second of readings and declares it carried (``Sensor.carry``, as the IMU's AHRS does). A batch
+    run finds it over the whole grid; the engine, fed in time order, reads those readings ahead of its first
+    interval, waits for them, and hands the offset from node to node: the tracks are the same, and the headings
+    are the true ones. Found anew from each interval's own readings, every heading would be the initial one;
+    without the readings ahead, the offset would be the first reading's alone."""
+    s, compass = drive
+    north = CompassData(compass.t, se2.wrap_angle(compass.yaw + 1.0))
+    streams = SensorStreams(wheel=s.wheel, extra={"compass": north})
+    with registry.registered(NORTH_COMPASS_SENSOR):
+        batch, streamed = _batch_and_streamed(streams, backend)
+    a, b = streamed.trajectories[track], batch.trajectories[track]
+    assert np.array_equal(a.t, b.t)
+    difference = np.abs(a.xyyaw - b.xyyaw).max(axis=1)
+    assert difference.max() < 1e-9, difference
+    yaw, _ = _errors(a, s.truth)
+    # measured: RMS 0.040 rad for both backends (the robot turns 0.04 rad in the first half second, which the
+    # offset takes in); the wheels alone 0.087, a compass whose north is the start frame's 0.011
+    assert yaw < 0.05, yaw
 
 
 # --------------------------------------------------------------------------- command line and run.yaml
