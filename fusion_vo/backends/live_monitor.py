@@ -41,7 +41,6 @@ from fusion_vo.backends.monitor import (Episode, check_heading_sources, heading_
                                        windows)
 from fusion_vo.backends.timeline import Intervals
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.visual import CameraGrid, camera_grid
 
 logger = logging.getLogger(__name__)
 
@@ -111,7 +110,7 @@ class LiveHeadingMonitor:
         self._t: list[float] = []  # node times: _t[0] starts the first kept interval
         self._node: dict[str, _Column] = {}  # per-node fields, one row per node time
         self._interval: dict[str, _Column] = {}  # per-interval fields
-        self._vis = {"pos": _Column(0), "delta": _Column(np.zeros(3)), "cov": _Column(np.zeros((3, 3)))}
+        self._pairs: dict[str, _Pairs] = {}  # sensor -> its readings over node pairs (_pair_rows)
         self._uses: set[str] = set()
         self._last: Intervals | None = None
         self._dropped_before = 0  # intervals trimmed from the front
@@ -126,7 +125,6 @@ class LiveHeadingMonitor:
         """Keep one two-node interval (raw, before any masking); it must start where the last one ended."""
         if not self.enabled:
             return
-        cam = camera_grid(iv)
         fields = _split(iv)
         if not self._t:
             self._t = [float(iv.t[0])]
@@ -142,10 +140,8 @@ class LiveHeadingMonitor:
                 self._interval[name] = _Column(v[0])
             self._interval[name].append(v[0])
         pos = len(self._t) - 2
-        for d, c in zip(cam.delta, cam.cov):
-            self._vis["pos"].append(pos)
-            self._vis["delta"].append(d)
-            self._vis["cov"].append(c)
+        for name, grid, rows in _pair_grids(iv):
+            self._pairs.setdefault(name, _Pairs(grid, rows)).add(pos, grid, rows)
         self._uses |= set(iv.counts)
         self._last = iv
         self._trim()
@@ -155,7 +151,6 @@ class LiveHeadingMonitor:
         pos = index - self._dropped_before
         if not self.enabled or pos < 0 or pos >= len(self._t) - 1:
             return
-        cam = camera_grid(iv)
         nodes, intervals = _split(iv)
         for name, v in nodes.items():
             if name in self._node:
@@ -163,14 +158,8 @@ class LiveHeadingMonitor:
         for name, v in intervals.items():
             if name in self._interval:
                 self._interval[name].set(pos, v[0])
-        rows = self._vis["pos"].array()
-        keep = rows != pos
-        new = {"pos": np.full(len(cam.delta), pos), "delta": np.asarray(cam.delta).reshape(-1, 3),
-               "cov": np.asarray(cam.cov).reshape(-1, 3, 3)}
-        merged = {k: np.concatenate([c.array()[keep], new[k]]) for k, c in self._vis.items()}
-        order = np.argsort(merged["pos"], kind="stable")
-        for k, c in self._vis.items():
-            c.replace(merged[k][order])
+        for name, grid, rows in _pair_grids(iv):
+            self._pairs.setdefault(name, _Pairs(grid, rows)).replace(pos, grid, rows)
         self._uses |= set(iv.counts)
 
     def _trim(self) -> None:
@@ -194,16 +183,14 @@ class LiveHeadingMonitor:
             col.drop_front(cut)
         for col in self._interval.values():
             col.drop_front(cut)
-        first = int(np.searchsorted(self._vis["pos"].array(), cut))  # rows are in position order
-        for col in self._vis.values():
-            col.drop_front(first)
-        self._vis["pos"].shift(-cut)
+        for pairs in self._pairs.values():
+            pairs.drop_front(cut)
         self._dropped_before += cut
 
     def _merged(self) -> Intervals:
         """The intervals of the window (from its first node on) as one :class:`Intervals`: the array fields of the
         grid and of every sensor's measurements from their columns, everything else as the newest interval has it,
-        the camera's increments from their rows (each over one interval)."""
+        the readings over node pairs (the camera's increments) from their rows."""
         last = self._last
         p = self._first - self._dropped_before
         columns = {**self._node, **self._interval}
@@ -217,12 +204,9 @@ class LiveHeadingMonitor:
         for name, grid in last.sensors.items():
             windowed = {key[1]: col.array()[p:] for key, col in columns.items() if key[0] == name}
             sensors[name] = _with_parts(grid, windowed) if windowed else grid
-        pos = self._vis["pos"].array().astype(int)
-        rows = pos >= p
-        sensors["camera"] = CameraGrid(pos[rows] - p, pos[rows] - p + 1, self._vis["delta"].array()[rows],
-                                       self._vis["cov"].array()[rows],
-                                       frame_error=last.sensors["camera"].frame_error,
-                                       noise=last.sensors["camera"].noise)
+        for name, pairs in self._pairs.items():
+            if name in last.sensors:
+                sensors[name] = pairs.merged(last.sensors[name], p)
         return Intervals(**kw)
 
     @property
@@ -368,9 +352,8 @@ class LiveHeadingMonitor:
             col.keep(keep + 1)
         for col in self._interval.values():
             col.keep(keep)
-        n_vis = int(np.searchsorted(self._vis["pos"].array(), keep))  # rows are in position order
-        for col in self._vis.values():
-            col.keep(n_vis)
+        for pairs in self._pairs.values():
+            pairs.keep(keep)
 
 
 def _bias(iv: Intervals, config: FusionConfig) -> tuple[float | None, bool]:
@@ -462,6 +445,78 @@ class _Column:
         return self._data[:self.n].copy()
 
 
+class _Pairs:
+    """The rows of one sensor's readings over node pairs (:func:`_pair_grids`), in the order of their first node:
+    ``i0``, ``i1`` counted from the first kept node, and the per-reading arrays its grid names."""
+
+    def __init__(self, grid, rows: tuple):
+        self.columns = {"i0": _Column(0), "i1": _Column(0)}
+        self.columns.update({key: _Column(np.zeros(np.shape(getattr(grid, key))[1:])) for key in rows})
+
+    def _new(self, pos: int, grid, rows: tuple) -> dict:
+        new = {"i0": np.asarray(grid.i0, int) + pos, "i1": np.asarray(grid.i1, int) + pos}
+        new.update({key: np.asarray(getattr(grid, key)) for key in rows})
+        return new
+
+    def add(self, pos: int, grid, rows: tuple) -> None:
+        """The readings of a two-node interval whose first node is ``pos``."""
+        new = self._new(pos, grid, rows)
+        for key, col in self.columns.items():
+            for value in new[key]:
+                col.append(value)
+
+    def replace(self, pos: int, grid, rows: tuple) -> None:
+        """Those of the interval starting at ``pos`` replaced (rebuilt with late data)."""
+        keep = self.columns["i0"].array() != pos
+        new = self._new(pos, grid, rows)
+        merged = {k: np.concatenate([c.array()[keep], new[k]]) for k, c in self.columns.items()}
+        order = np.argsort(merged["i0"], kind="stable")
+        for k, c in self.columns.items():
+            c.replace(merged[k][order])
+
+    def drop_front(self, cut: int) -> None:
+        """Forget the readings before node ``cut``; count from it."""
+        first = int(np.searchsorted(self.columns["i0"].array(), cut))
+        for col in self.columns.values():
+            col.drop_front(first)
+        self.columns["i0"].shift(-cut)
+        self.columns["i1"].shift(-cut)
+
+    def keep(self, n_intervals: int) -> None:
+        """Keep the readings of the first ``n_intervals`` intervals."""
+        n = int(np.searchsorted(self.columns["i0"].array(), n_intervals))
+        for col in self.columns.values():
+            col.keep(n)
+
+    def merged(self, last, p: int):
+        """The readings from node ``p`` on as a copy of the sensor's newest grid ``last``; its other per-reading
+        arrays (those it does not name) back to their defaults."""
+        i0 = self.columns["i0"].array().astype(int)
+        rows = i0 >= p
+        values = {k: c.array()[rows] for k, c in self.columns.items()}
+        values["i0"] = values["i0"].astype(int) - p
+        values["i1"] = values["i1"].astype(int) - p
+        n_last = len(last.i0)
+        for f in dataclasses.fields(last):
+            v = getattr(last, f.name)
+            if f.name not in values and isinstance(v, np.ndarray) and v.ndim and len(v) == n_last \
+                    and f.default is not dataclasses.MISSING:
+                values[f.name] = f.default
+        return dataclasses.replace(last, **values)
+
+
+def _pair_grids(iv: Intervals) -> list[tuple]:
+    """``(name, grid, rows)`` of the sensors whose measurements on the grid of ``iv`` are readings over node pairs
+    (the camera's increments): a dataclass with ``i0``, ``i1`` and ``ROWS``, the names of its per-reading arrays
+    the monitor keeps."""
+    out = []
+    for name, grid in iv.sensors.items():
+        rows = getattr(type(grid), "ROWS", None)
+        if rows is not None and dataclasses.is_dataclass(grid) and hasattr(grid, "i0") and hasattr(grid, "i1"):
+            out.append((name, grid, tuple(rows)))
+    return out
+
+
 def _parts(container) -> list[tuple]:
     """``(key, value)`` of a sensor's measurements on the grid: a dataclass's fields by name, a tuple's items by
     position, a dict's by key (nothing for any other container)."""
@@ -494,11 +549,12 @@ def _split(iv: Intervals) -> tuple[dict, dict]:
     """Per-node and per-interval arrays of a two-node interval, of the grid (keys ``(None, field)``) and of every
     registered sensor's measurements on it (``(sensor, part)``: the fields of its container, such as the
     :attr:`Sensor.grid <fusion_vo.sensors.registry.Sensor.grid>` dataclass it registers, or the items of a
-    tuple or a dict of arrays it keeps in ``iv.sensors``); the camera's increments aside."""
+    tuple or a dict of arrays it keeps in ``iv.sensors``); readings over node pairs (:func:`_pair_grids`) aside."""
     nodes, intervals = {}, {}
     parts = [(None, [(f.name, getattr(iv, f.name)) for f in dataclasses.fields(iv)])]
+    pairs = {name for name, _, _ in _pair_grids(iv)}
     parts += [(s.name, _parts(iv.sensors[s.name])) for s in registry.sensors()
-              if s.name != "camera" and s.name in iv.sensors]
+              if s.name not in pairs and s.name in iv.sensors]
     for owner, items in parts:
         for key, v in items:
             if (owner is None and key == "t") or not isinstance(v, np.ndarray):

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -96,6 +97,10 @@ class CameraGrid:
     noise : VisualNoiseEstimate or None
         What that estimate found (``fusion.visual_noise.estimate``; None when off or in streaming use).
     """
+
+    #: the per-increment arrays a windowed copy keeps (the live monitor's, which judges the increments' headings and
+    #: distances); the others go back to their defaults there
+    ROWS: ClassVar[tuple] = ("delta", "cov")
 
     i0: np.ndarray
     i1: np.ndarray
