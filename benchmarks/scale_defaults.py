@@ -167,8 +167,8 @@ def filtered_visual_scale(streams: SensorStreams, config) -> np.ndarray:
     value is the ``visual_scale`` of the EKF's calibration."""
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
-    f = ekf.filter_for(iv, config)
     readings = ekf.interval_readings(iv, config)
+    f = ekf.filter_for(iv, config, readings)
     f.begin(readings)
     kv = f.columns["visual_scale"].start
     out = np.empty(iv.n_steps + 1)

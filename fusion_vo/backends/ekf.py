@@ -85,8 +85,9 @@ residual, Jacobian, Mahalanobis gate ``S = H P Hᵀ + Σ`` and robust weight, th
 state then lives in ENU at the datum and starts at the pose :mod:`fusion_vo.backends.world` aligned to
 the fixes, with that alignment's uncertainty.
 
-With ``visual_frame_error > 0`` the state ends with the camera's errors at the previous and the current
-frame (:data:`FRAME_ERRORS` each; :mod:`fusion_vo.sensors.visual`): each prediction moves the current one
+When a sensor's readings state their frames' own errors (``Readings.frame_cov``: the camera's with
+``visual_frame_error > 0`` or stated frame covariances, :mod:`fusion_vo.sensors.visual`), the state ends with its
+errors at the previous and the current frame (:data:`FRAME_ERRORS` each): each prediction moves the current one
 into the previous one's place (a linear transition, so the smoother treats them like any state) and
 starts the new frame's at zero with its covariance, and a visual increment over one interval is
 ``h + (e_this - e_prev)/Δt`` with the rest of its noise.
@@ -113,7 +114,6 @@ from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.model import Gate, MeasurementModel
-from fusion_vo.sensors.visual import camera_grid
 
 logger = logging.getLogger(__name__)
 
@@ -153,17 +153,15 @@ class PlanarEkf:
         The run's scalar states (:func:`fusion_vo.backends.states.run_states`), appended to the pose and twist
         with their priors and random walks, frozen where not estimated. Default: those of a run that fuses
         the camera, the wheels and the IMU with its AHRS (:func:`default_states`).
-    camera : bool
-        Visual increments are fused. With a frame error ``f > 0`` the state then ends with the camera's
-        frame errors (:data:`FRAME_ERRORS`, :mod:`fusion_vo.sensors.visual`).
-    frame_error : float, optional
-        That ``f`` (default ``config.visual_frame_error``; :attr:`CameraGrid.frame_error <fusion_vo.sensors.visual.CameraGrid.frame_error>` in batch use);
-        only whether it is above 0 matters here (the frames' covariances come with :meth:`predict`), so batch
-        use gives 1 when the increments state their own (``CameraGrid.frame_cov``).
+    frame_errors : bool
+        The state ends with the frame errors (:data:`FRAME_ERRORS` each, of the previous and of the current node)
+        of the one sensor whose readings state them (:attr:`Readings.frame_cov
+        <fusion_vo.sensors.readings.Readings.frame_cov>`: the camera's, :mod:`fusion_vo.sensors.visual`); their
+        covariances come with :meth:`predict`. Default False.
     """
 
-    def __init__(self, config: FusionConfig, initial_pose=None, initial_sigma=None, states=None, camera: bool = False,
-                 frame_error: float | None = None):
+    def __init__(self, config: FusionConfig, initial_pose=None, initial_sigma=None, states=None,
+                 frame_errors: bool = False):
         ExtendedKalmanFilter, chi2 = filter_libraries()
         self.config = config
         self.states = tuple(default_states(config) if states is None else states)
@@ -172,10 +170,9 @@ class PlanarEkf:
         self.columns = dict(STATE_COLUMNS)
         for i, state in enumerate(self.states):
             self.columns[state.name] = slice(DIM + i, DIM + i + 1)
-        #: the camera's frame errors: (columns of the previous node's, of this node's), or None
+        #: the frame errors: (columns of the previous node's, of this node's), or None
         self.frame_errors: tuple[slice, slice] | None = None
-        frame_error = config.visual_frame_error if frame_error is None else frame_error
-        if camera and frame_error > 0:
+        if frame_errors:
             self.frame_errors = (slice(dim, dim + FRAME_ERRORS), slice(dim + FRAME_ERRORS, dim + 2 * FRAME_ERRORS))
             self.dim = dim = dim + 2 * FRAME_ERRORS
         self._frame_cov = np.eye(FRAME_ERRORS) * _FROZEN_VAR
@@ -437,12 +434,11 @@ def interval_readings(iv: Intervals, config: FusionConfig) -> EkfReadings:
     return EkfReadings(sensor_readings(iv, config), iv.t)
 
 
-def filter_for(iv: Intervals, config: FusionConfig) -> PlanarEkf:
-    """The filter for the node grid ``iv`` at its first node: the run's states (``iv.states``), the start pose
-    and the camera's frame errors."""
-    cam = camera_grid(iv)
-    return PlanarEkf(config, iv.initial_pose, iv.initial_sigma, iv.states,
-                     camera=len(cam.i0) > 0, frame_error=cam.frame_error if cam.frame_cov is None else 1.0)
+def filter_for(iv: Intervals, config: FusionConfig, readings: EkfReadings | None = None) -> PlanarEkf:
+    """The filter for the node grid ``iv`` at its first node: the run's states (``iv.states``), the start pose,
+    and the frame errors when its readings (``readings``, default :func:`interval_readings`) state them."""
+    readings = interval_readings(iv, config) if readings is None else readings
+    return PlanarEkf(config, iv.initial_pose, iv.initial_sigma, iv.states, frame_errors=readings.frame_errors)
 
 
 def default_states(config: FusionConfig) -> tuple:
@@ -455,10 +451,10 @@ def default_states(config: FusionConfig) -> tuple:
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
     """Filter (``"ekf"``) and smooth (``"ekf_smoothed"``) over the node grid of ``iv``."""
     start = time.process_time()
-    ekf = filter_for(iv, config)
+    readings = interval_readings(iv, config)
+    ekf = filter_for(iv, config, readings)
     ekf.innovations = InnovationLog()
     ekf.time = float(iv.t[0])
-    readings = interval_readings(iv, config)
     K = iv.n_steps
     n = ekf.dim
     xs = np.zeros((K + 1, n))

@@ -387,8 +387,10 @@ class NodesMixin:
         cfg = self.config
         self._t_nodes.append(t)
         if self.backend == "ekf":
-            self._ekf = PlanarEkf(cfg, states=self._states, camera="camera" in self.sensors,
-                                  frame_error=1.0 if self._camera_frame_errors else None)
+            # (the filter is sized before any reading: the camera's state their frame errors when it is fused
+            # with stated frame covariances or a frame-error share f > 0, as a batch run's do)
+            frame_errors = "camera" in self.sensors and (self._camera_frame_errors or cfg.visual_frame_error > 0)
+            self._ekf = PlanarEkf(cfg, states=self._states, frame_errors=frame_errors)
             self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), {},
                                              monitor=self._monitor.state(), gps=self._gps_state()))
             self._record(self._ekf.x[:3], self._ekf.P[:3, :3])

@@ -111,8 +111,8 @@ def ekf_nis(streams: SensorStreams, config: FusionConfig) -> dict[str, tuple[int
     """Sensor -> (dof, (M, 2) rows ``(t, NIS)``) over one EKF pass (:func:`leave_one_out_nis` at every step)."""
     config = with_recorded_noise(config, streams)
     iv = build_intervals(streams, config)
-    f = ekf_mod.filter_for(iv, config)  # the filter of a batch run (ekf.run_ekf)
     readings = ekf_mod.interval_readings(iv, config)
+    f = ekf_mod.filter_for(iv, config, readings)  # the filter of a batch run (ekf.run_ekf)
     out: dict[str, tuple[int, list]] = {}
 
     def nis(blocks):

@@ -1,10 +1,17 @@
 """The camera's frame errors (``visual_frame_error``): consecutive increments sharing a frame's error."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from backend_synth import position_errors, streams_of
 
 from fusion_vo.backends import FusionConfig, StreamingFusion, fuse
+from fusion_vo.backends.ekf import DIM, FRAME_ERRORS, filter_for
+from fusion_vo.backends.ekf_adapter import EkfReadings
+from fusion_vo.backends.timeline import build_intervals
+from fusion_vo.sensors.readings import Readings
+from fusion_vo.sensors.visual import VISUAL
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 TRACKS = ("ekf", "ekf_smoothed", "gtsam", "gtsam_online")
@@ -95,3 +102,19 @@ def _assert_same_track(track, ref) -> None:
     assert common.sum() > 0.95 * len(ref)
     assert np.max(np.abs(ours - ref.xyyaw[common])) < 1e-6
 
+
+
+def test_the_filter_carries_the_frame_errors_of_whichever_sensor_states_them():
+    """The EKF's frame-error states follow the readings, not a sensor's name: a registered sensor's readings
+    that state their frames' errors (``Readings.frame_cov``) get them, as the camera's do; the same readings
+    without them do not, nor does a run without such readings."""
+    s = synthetic_streams(SyntheticOptions(duration=4.0), seed=0)
+    config = FusionConfig()
+    iv = build_intervals(streams_of(s).select(["wheel"]), config)
+    k = np.arange(iv.n_steps)
+    cov = np.tile(np.eye(3) * 1e-4, (len(k), 1, 1))
+    framed = Readings("vo", VISUAL, k, k + 1, np.zeros((len(k), 3)), cov, frame_cov=0.25 * cov)
+    for readings, carried in (([framed], True), ([dataclasses.replace(framed, frame_cov=None)], False), ([], False)):
+        ekf = filter_for(iv, config, EkfReadings(readings, iv.t))
+        assert (ekf.frame_errors is not None) == carried
+        assert ekf.dim == DIM + len(iv.states) + (2 * FRAME_ERRORS if carried else 0)
