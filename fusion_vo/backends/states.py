@@ -53,13 +53,13 @@ def observable_from(sensors) -> tuple[bool, bool]:
 def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: float) -> StateContext:
     """The :class:`~fusion_vo.sensors.registry.StateContext` of a live run fusing the sensors named in
     ``sensors``, whose data is not known ahead: each counted as its live intake counts it (an odometry twist as
-    the wheels, the IMU as the gyro), the IMU's AHRS heading taken as coming (it may arrive in any interval)."""
+    the wheels, the IMU as the gyro), with what its samples may also bring (``Live.also_counted``: the IMU's AHRS
+    heading, which may arrive in any interval)."""
     used = set()
     for name in sensors:
-        sensor = registry.get(name)
-        used.add(sensor.live.counted_as or name if sensor.live is not None else name)
-        if name == "imu":
-            used.add("ahrs")
+        live = registry.get(name).live
+        used.add(live.counted_as or name if live is not None else name)
+        used.update(live.also_counted if live is not None else ())
     s = set(sensors)
     return StateContext(config, frozenset(used), observable_from(s), "odom" in s and "wheel" not in s,
                         float(visual_scale_sigma), float(wheel_scale_sigma))

@@ -582,6 +582,6 @@ register(Sensor(
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=lambda iv: iv.uses("gyro") or has_heading(iv),
     heading_reference=lambda data: data is not None and data.orientation is not None,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
-              samples=_live_samples, order=2),
+              also_counted=("ahrs",), samples=_live_samples, order=2),
     heading=(GYRO_HEADING, AHRS_HEADING),
 ))

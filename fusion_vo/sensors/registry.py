@@ -200,6 +200,9 @@ class Live:
         ``neighbours(config) -> int``.
     counted_as : str or None
         The name its counts are reported under (default: the sensor's).
+    also_counted : tuple of str
+        Other kinds of measurement its samples may bring (the IMU: its AHRS headings, ``ahrs``), taken as used by a
+        live run's states (:attr:`StateContext.used`), since they may arrive in any interval.
     samples : callable or None
         ``samples(data) -> iterable of (t, sample)``: its data as live samples (``t`` their arrival time), for
         replaying a recording (:func:`~fusion_vo.backends.streaming.time_ordered_messages`, ``fusion-vo replay``).
@@ -224,6 +227,7 @@ class Live:
     min_rows: int = 2
     neighbours: Any = 0
     counted_as: str | None = None
+    also_counted: tuple = ()
     samples: Callable | None = None
     take: Callable | None = None
     values: Callable | None = None
