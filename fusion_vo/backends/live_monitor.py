@@ -110,7 +110,7 @@ class LiveHeadingMonitor:
         self._t: list[float] = []  # node times: _t[0] starts the first kept interval
         self._node: dict[str, _Column] = {}  # per-node fields, one row per node time
         self._interval: dict[str, _Column] = {}  # per-interval fields
-        self._pairs: dict[str, _Pairs] = {}  # sensor -> its readings over node pairs (_pair_rows)
+        self._pairs: dict[str, _Pairs] = {}  # sensor -> its readings over node pairs (_pair_grids)
         self._uses: set[str] = set()
         self._last: Intervals | None = None
         self._dropped_before = 0  # intervals trimmed from the front
@@ -141,7 +141,7 @@ class LiveHeadingMonitor:
             self._interval[name].append(v[0])
         pos = len(self._t) - 2
         for name, grid, rows in _pair_grids(iv):
-            self._pairs.setdefault(name, _Pairs(grid, rows)).add(pos, grid, rows)
+            self._pairs.setdefault(name, _Pairs(grid, rows)).add(pos, grid)
         self._uses |= set(iv.counts)
         self._last = iv
         self._trim()
@@ -159,7 +159,7 @@ class LiveHeadingMonitor:
             if name in self._interval:
                 self._interval[name].set(pos, v[0])
         for name, grid, rows in _pair_grids(iv):
-            self._pairs.setdefault(name, _Pairs(grid, rows)).replace(pos, grid, rows)
+            self._pairs.setdefault(name, _Pairs(grid, rows)).replace(pos, grid)
         self._uses |= set(iv.counts)
 
     def _trim(self) -> None:
@@ -450,25 +450,26 @@ class _Pairs:
     ``i0``, ``i1`` counted from the first kept node, and the per-reading arrays its grid names."""
 
     def __init__(self, grid, rows: tuple):
+        self.rows = rows
         self.columns = {"i0": _Column(0), "i1": _Column(0)}
         self.columns.update({key: _Column(np.zeros(np.shape(getattr(grid, key))[1:])) for key in rows})
 
-    def _new(self, pos: int, grid, rows: tuple) -> dict:
+    def _new(self, pos: int, grid) -> dict:
         new = {"i0": np.asarray(grid.i0, int) + pos, "i1": np.asarray(grid.i1, int) + pos}
-        new.update({key: np.asarray(getattr(grid, key)) for key in rows})
+        new.update({key: np.asarray(getattr(grid, key)) for key in self.rows})
         return new
 
-    def add(self, pos: int, grid, rows: tuple) -> None:
+    def add(self, pos: int, grid) -> None:
         """The readings of a two-node interval whose first node is ``pos``."""
-        new = self._new(pos, grid, rows)
+        new = self._new(pos, grid)
         for key, col in self.columns.items():
             for value in new[key]:
                 col.append(value)
 
-    def replace(self, pos: int, grid, rows: tuple) -> None:
+    def replace(self, pos: int, grid) -> None:
         """Those of the interval starting at ``pos`` replaced (rebuilt with late data)."""
         keep = self.columns["i0"].array() != pos
-        new = self._new(pos, grid, rows)
+        new = self._new(pos, grid)
         merged = {k: np.concatenate([c.array()[keep], new[k]]) for k, c in self.columns.items()}
         order = np.argsort(merged["i0"], kind="stable")
         for k, c in self.columns.items():
@@ -491,11 +492,10 @@ class _Pairs:
     def merged(self, last, p: int):
         """The readings from node ``p`` on as a copy of the sensor's newest grid ``last``; its other per-reading
         arrays (those it does not name) back to their defaults."""
-        i0 = self.columns["i0"].array().astype(int)
-        rows = i0 >= p
+        rows = self.columns["i0"].array() >= p
         values = {k: c.array()[rows] for k, c in self.columns.items()}
-        values["i0"] = values["i0"].astype(int) - p
-        values["i1"] = values["i1"].astype(int) - p
+        values["i0"] = values["i0"] - p
+        values["i1"] = values["i1"] - p
         n_last = len(last.i0)
         for f in dataclasses.fields(last):
             v = getattr(last, f.name)

@@ -387,8 +387,8 @@ class NodesMixin:
         cfg = self.config
         self._t_nodes.append(t)
         if self.backend == "ekf":
-            # (the filter is sized before any reading: the camera's state their frame errors when it is fused
-            # with stated frame covariances or a frame-error share f > 0, as a batch run's do)
+            # (the filter is sized before any reading: the camera's readings state their frame errors when it is
+            # fused with stated frame covariances or a frame-error share f > 0, as in a batch run)
             frame_errors = "camera" in self.sensors and (self._camera_frame_errors or cfg.visual_frame_error > 0)
             self._ekf = PlanarEkf(cfg, states=self._states, frame_errors=frame_errors)
             self._records.append(NodeRecord((self._ekf.x.copy(), self._ekf.P.copy()), {},
