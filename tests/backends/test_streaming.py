@@ -443,8 +443,8 @@ def test_late_imu_samples_with_orientations_are_re_applied_exactly_as_in_order()
     streams = SensorStreams(odom=odom, imu=imu)
     assert imu.orientation is not None
     msgs = list(time_ordered_messages(streams))
-    imu_rows = [i for i, m in enumerate(msgs) if m[1] == "imu"]
-    late = sorted([m if i not in imu_rows[::3] else (m[0] + 1.0, *m[1:]) for i, m in enumerate(msgs)],
+    delayed = set([i for i, m in enumerate(msgs) if m[1] == "imu"][::3])
+    late = sorted([m if i not in delayed else (m[0] + 1.0, *m[1:]) for i, m in enumerate(msgs)],
                   key=lambda m: m[0])
     tracks = []
     for order in (msgs, late):
