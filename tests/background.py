@@ -152,13 +152,14 @@ class BackgroundJobs:
     def _run(self, job: Job) -> None:
         """Run the taken ``job`` in this thread; its end is counted and announced."""
         try:
-            if self.stopped:
-                job.stderr = "not run: the session ended first"
-                return
             job.out.parent.mkdir(parents=True, exist_ok=True)
-            process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                       cwd=REPO)
-            self.processes.add(process)
+            with self._cond:  # started and registered in one step, so that stop() kills it or it is never started
+                if self.stopped:
+                    job.stderr = "not run: the session ended first"
+                    return
+                process = subprocess.Popen(NICE + job.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                           cwd=REPO)
+                self.processes.add(process)
             try:
                 job.stdout, job.stderr = process.communicate(timeout=TIMEOUT_S)
             except subprocess.TimeoutExpired:
@@ -201,8 +202,10 @@ class BackgroundJobs:
 
     def stop(self) -> None:
         """End the running jobs (if any), skip the rest and remove every output."""
-        self.stopped = True
-        for process in list(self.processes):
+        with self._cond:
+            self.stopped = True
+            running = list(self.processes)
+        for process in running:
             if process.poll() is None:
                 process.kill()
         self.thread.join(timeout=30.0)

@@ -4,6 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from ahead_job import ahead_jobs
 from backend_synth import position_errors, streams_of
 from husky_like import husky_like
 
@@ -18,7 +19,10 @@ from fusion_vo.recording import Recording
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
-BACKGROUND_JOBS = {"test_on_the_jackal_log_the_engine_fed_in_time_order_is_the_batch_runs_online_track":
+#: the longer streams of :data:`AHEAD` are made in the session's second process (tests/ahead_job.py)
+BACKGROUND_COMMANDS, _AHEAD = ahead_jobs(__file__)
+BACKGROUND_JOBS = {**_AHEAD,
+                   "test_on_the_jackal_log_the_engine_fed_in_time_order_is_the_batch_runs_online_track":
                    ["fusion-vo:jackal_log"],
                    "test_on_the_jackal_log_arrivals_shuffled_within_the_reorder_window_give_the_in_order_track":
                    ["fusion-vo:jackal_log"],
@@ -50,9 +54,13 @@ def _log_piece(log, lo: float, hi: float) -> tuple:
     return streams, config
 
 
+def _drive_streams():
+    return synthetic_streams(SyntheticOptions(duration=10.0, visual_scale=1.02), seed=11)
+
+
 @pytest.fixture(scope="module")
 def drive():
-    s = synthetic_streams(SyntheticOptions(duration=10.0, visual_scale=1.02), seed=11)
+    s = _drive_streams()
     return s, fuse(streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"]), "all")
 
 
@@ -303,12 +311,10 @@ def test_the_engine_spans_dropped_and_lost_frames_as_the_batch_run_does(drive, b
     assert np.max(np.abs(ours.xyyaw - ref.xyyaw)) < 1e-8
 
 
-def test_isam2_rebuilds_an_interval_of_a_spanning_increment_with_late_data(drive):
-    """Wheel samples a second late make iSAM2 rebuild the intervals they fall in, those inside a span of dropped
-    frames too: every increment is still applied once, as in order (the camera's uses are those of the batch
-    run). Fails if a rebuilt interval takes the node grid after it for the span's nodes (10 increments were then
-    counted late or lost on a 20 s drive)."""
-    s, _ = drive
+def _spanning_increments_late_wheels() -> tuple[dict, int, int]:
+    """The drive of :func:`drive` with frames dropped and lost, streamed to iSAM2 in order and with the wheel samples
+    a second late: the counts of both runs, the late run's rewinds and the camera's uses in the batch run."""
+    s = _drive_streams()
     streams = streams_of(s, stated_scale=1.02).select(["camera", "wheel", "imu"])
     streams = _on_the_epoch_clock(streams.replace(visual=_with_frames_dropped_and_lost(streams.visual)))
     msgs = time_ordered_messages(streams)
@@ -318,9 +324,18 @@ def test_isam2_rebuilds_an_interval_of_a_spanning_increment_with_late_data(drive
         fusion = streaming_for(streams, "gtsam", history=2.0)
         fusion.feed(feed)
         counts[name] = {k: v.as_dict() for k, v in fusion.finish().counts["gtsam_online"].items()}
-        assert name == "in order" or fusion.rewinds > 100
+    return counts, fusion.rewinds, fuse(streams, "all").counts["gtsam_online"]["camera"].used
+
+
+def test_isam2_rebuilds_an_interval_of_a_spanning_increment_with_late_data(made_ahead):
+    """Wheel samples a second late make iSAM2 rebuild the intervals they fall in, those inside a span of dropped
+    frames too: every increment is still applied once, as in order (the camera's uses are those of the batch
+    run). Fails if a rebuilt interval takes the node grid after it for the span's nodes (10 increments were then
+    counted late or lost on a 20 s drive)."""
+    counts, rewinds, batch_used = made_ahead("spanning_late_wheels")
+    assert rewinds > 100, rewinds
     assert counts["late"] == counts["in order"]
-    assert counts["late"]["camera"]["used"] == fuse(streams, "all").counts["gtsam_online"]["camera"].used
+    assert counts["late"]["camera"]["used"] == batch_used
 
 
 @pytest.mark.parametrize("backend, name, tolerance", [("ekf", "ekf", 1e-8), ("gtsam", "gtsam_online", 1e-8)])
@@ -433,12 +448,9 @@ def test_isam2_attaches_a_late_increment_over_dropped_frames_to_the_nodes_it_spa
     assert gap.max() < 0.015 and np.median(gap) < 0.004
 
 
-def test_late_imu_samples_with_orientations_are_re_applied_exactly_as_in_order():
-    """Odometry and an IMU with an AHRS, every third IMU sample (the first one among them) arriving 1 s late, far
-    beyond the 0.05 s reorder window: the EKF rewinds (history 2 s) and rebuilds, and the AHRS's offset to the initial
-    heading, found once from the first quarter second and carried from node to node (``Sensor.carry``), is found
-    again with the late first sample. The track is the one fed in time order, exactly (measured: 0 m, 0 rad, 202
-    rewinds; with a rewind that keeps the newer offset, measured: 15 mm and 4 mrad off)."""
+def _late_imu_tracks() -> tuple[list, int]:
+    """Odometry and an IMU with an AHRS, 20 s, fed to the EKF in time order and with every third IMU sample (the first
+    one among them) 1 s late: the two tracks and the late run's rewinds."""
     odom, imu, _ = husky_like(duration=20.0, stop=(8.0, 12.0), ahrs_drift=0.0)
     streams = SensorStreams(odom=odom, imu=imu)
     assert imu.orientation is not None
@@ -451,7 +463,19 @@ def test_late_imu_samples_with_orientations_are_re_applied_exactly_as_in_order()
         fusion = streaming_for(streams, "ekf", FusionConfig(reorder_window=0.05))
         fusion.feed(order)
         tracks.append(fusion.finish().trajectories["ekf"])
-        rewinds = fusion.rewinds
+    return tracks, fusion.rewinds
+
+
+def test_late_imu_samples_with_orientations_are_re_applied_exactly_as_in_order(made_ahead):
+    """Odometry and an IMU with an AHRS, every third IMU sample (the first one among them) arriving 1 s late, far
+    beyond the 0.05 s reorder window: the EKF rewinds (history 2 s) and rebuilds, and the AHRS's offset to the initial
+    heading, found once from the first quarter second and carried from node to node (``Sensor.carry``), is found
+    again with the late first sample. The track is the one fed in time order, exactly (measured: 0 m, 0 rad, 202
+    rewinds; with a rewind that keeps the newer offset, measured: 15 mm and 4 mrad off)."""
+    tracks, rewinds = made_ahead("late_imu")
     assert rewinds > 100, rewinds
     assert np.array_equal(tracks[0].t, tracks[1].t)
     assert np.array_equal(tracks[0].xyyaw, tracks[1].xyyaw)
+
+
+AHEAD = {"late_imu": _late_imu_tracks, "spanning_late_wheels": _spanning_increments_late_wheels}

@@ -6,6 +6,7 @@ import time
 
 import numpy as np
 import pytest
+from ahead_job import ahead_jobs
 from backend_synth import streams_of
 
 from fusion_vo.backends import FusionConfig, StreamingFusion
@@ -17,9 +18,13 @@ from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 SENSORS = ["camera", "wheel", "imu"]
 
 
+def _drive():
+    return synthetic_streams(SyntheticOptions(duration=8.0, visual_scale=1.02), seed=11)
+
+
 @pytest.fixture(scope="module")
 def drive():
-    return synthetic_streams(SyntheticOptions(duration=8.0, visual_scale=1.02), seed=11)
+    return _drive()
 
 
 def _messages(s, camera_delay=0.0):
@@ -198,7 +203,9 @@ def test_concurrent_producers_and_a_reader(drive, backend, name):
 
 # ---------------------------------------------------------------------------- fusion-vo replay
 #: the recording the replay tests read, made ahead in the background (tests/background.py)
-BACKGROUND_JOBS = {"test_replay_writes_live_poses_at_a_fixed_rate_beside_the_batch_result": ["standard:short"]}
+#: the longer runs of :data:`AHEAD` are made in the session's second process (tests/ahead_job.py)
+BACKGROUND_COMMANDS, _AHEAD = ahead_jobs(__file__)
+BACKGROUND_JOBS = {**_AHEAD, "test_replay_writes_live_poses_at_a_fixed_rate_beside_the_batch_result": ["standard:short"]}
 
 
 @pytest.fixture(scope="module")
@@ -302,20 +309,17 @@ def test_isam2_inserts_late_samples_at_their_nodes(drive):
     assert np.linalg.norm(b.trajectories["gtsam_online"].xyyaw[-1, :2] - a.trajectories["gtsam_online"].xyyaw[-1, :2]) < 0.01
 
 
-def test_isam2_in_the_background_gives_the_same_track(drive):
-    """Updates on a worker thread: the same counts, poses and covariances as on the caller's, late data too.
-
-    The worker builds, linearises and adds each node in order from its own state, so the result does not
-    depend on its timing; a slow worker (every update delayed) must give the same track."""
-    s = drive
-    with pytest.raises(InputError, match="background"):
-        _fusion(s, "ekf", background=True)
+def _background_and_caller_runs() -> list[tuple]:
+    """iSAM2 on the caller's thread, on a worker thread, and on a worker whose every update is delayed, each fed the
+    drive in order and with the wheels 1.5 s late: ``(caller's result, [worker's, slow worker's])`` per order."""
+    s = _drive()
     slow = OnlineGraph._add_node
 
     def delayed(self, *args):
         time.sleep(0.002)
         return slow(self, *args)
 
+    out = []
     for msgs in (_messages(s), _wheels_late(s, 1.5)):
         sync, worker = _fusion(s, "gtsam"), _fusion(s, "gtsam", background=True)
         _feed(sync, msgs)
@@ -327,7 +331,18 @@ def test_isam2_in_the_background_gives_the_same_track(drive):
             mp.setattr(OnlineGraph, "_add_node", delayed)
             _feed(lagging, msgs)
             runs.append(lagging.finish())
-        a = sync.finish()
+        out.append((sync.finish(), runs))
+    return out
+
+
+def test_isam2_in_the_background_gives_the_same_track(drive, made_ahead):
+    """Updates on a worker thread: the same counts, poses and covariances as on the caller's, late data too.
+
+    The worker builds, linearises and adds each node in order from its own state, so the result does not
+    depend on its timing; a slow worker (every update delayed) must give the same track."""
+    with pytest.raises(InputError, match="background"):
+        _fusion(drive, "ekf", background=True)
+    for a, runs in made_ahead("background_and_caller"):
         ca, ta = a.counts["gtsam_online"], a.trajectories["gtsam_online"]
         for r in runs:
             assert {k: v.as_dict() for k, v in r.counts["gtsam_online"].items()} == {k: v.as_dict() for k, v in ca.items()}
@@ -397,3 +412,6 @@ def test_a_sample_long_before_the_first_node_is_late_even_while_the_track_is_you
     assert fusion.counts["wheel"].late == 5 and fusion.counts["wheel"].reordered == 0
     assert fusion.rewinds == 0
     np.testing.assert_array_equal(fusion.current_estimate().pose, before.pose)
+
+
+AHEAD = {"background_and_caller": _background_and_caller_runs}
