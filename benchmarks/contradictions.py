@@ -54,12 +54,13 @@ from common import HUSKY_BAG, HUSKY_IMU_TF
 
 from fusion_vo import baseline
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
-from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
+from fusion_vo.sensors.gps import read_fixes
 from fusion_vo.sensors.synthetic import SyntheticOptions, camera_too_long, synthetic_streams, wheels_too_long
 from fusion_vo.simulation.faults import columns, flip_left_encoder, shift_clock, turn_imu, twist_from_truth, write_csv
 
@@ -89,7 +90,7 @@ def husky(tmp: Path) -> None:
     header, t, values = columns(no_gravity / "imu0" / "data.csv")
     values[:, 3:6] = 0.0
     write_csv(no_gravity / "imu0" / "data.csv", header, t, values)
-    gps = Recording(plain).gps()
+    gps = read_fixes(Recording(plain))
 
     def rms(track: PoseData) -> str:
         return f"{float(np.sqrt(np.mean(gps_errors(track, gps) ** 2))):6.2f}"

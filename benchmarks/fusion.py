@@ -83,7 +83,7 @@ def live_beside_batch(seq, config) -> str:
     """The live engine fed ``seq``'s streams in time order beside the batch run's online tracks: per backend the
     largest position difference over their common nodes [m] and both ATEs [mm]."""
     rec = Recording(seq)
-    vo = run_visual_odometry(rec, config.odometry_config()) if rec.has_camera() else None
+    vo = run_visual_odometry(rec, config.odometry_config()) if rec.has("cam0") else None
     streams = streams_from_recording(rec, vo, config.sensors, config.fusion)
     batch = fuse(streams, "all", config.fusion)
     truth = rec.groundtruth()

@@ -48,7 +48,7 @@ from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.measurements import GpsData, PoseData
 from fusion_vo.odometry import run_visual_odometry
 from fusion_vo.recording import Recording
-from fusion_vo.sensors.gps import align_to_fixes, predict
+from fusion_vo.sensors.gps import align_to_fixes, predict, read_fixes
 
 OUTAGE, JUMP = (20.0, 30.0), (40.0, 41.0)
 COLUMNS = ("rms_gps_present", "max_outage", "end_outage", "max_jump")
@@ -98,7 +98,7 @@ def outage_figures(errors: tuple[np.ndarray, np.ndarray], t0: float) -> dict:
 def gps_outage(out: Path, fusion: dict) -> None:
     rec = Recording(standard(out, "gps_outage"))
     truth = truth_in_enu(rec)
-    gps = rec.gps()
+    gps = read_fixes(rec)
     vo = run_visual_odometry(rec)
     t0 = float(truth.t[0])
     rows = {}
@@ -211,7 +211,7 @@ def score_withheld(track: PoseData, withheld: GpsData) -> dict:
 
 def husky(out: Path, split: float, fusion: dict) -> None:
     rec = Recording(import_husky(out / "husky"))
-    gps = rec.gps()
+    gps = read_fixes(rec)
     t_mid = float(gps.t[0]) + split * (float(gps.t[-1]) - float(gps.t[0]))
     first, second = gps_subset(gps, gps.t <= t_mid), gps_subset(gps, gps.t > t_mid)
     base = streams_from_recording(rec, None, ["odom", "imu"])

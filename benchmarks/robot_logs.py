@@ -43,7 +43,9 @@ from fusion_vo.measurements import PoseData
 from fusion_vo.pipeline import run_pipeline
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag
-from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
+from fusion_vo.sensors.gps import read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_twist, twist_to_travel, wheel_track
 
 #: robot_localization's expected final position of the Jackal and its tolerance [m]
 RL_FINAL, RL_TOLERANCE = np.array([1.0206, 3.4292]), 0.138
@@ -69,7 +71,7 @@ def jackal(root) -> None:
                    overwrite=True)
     run_pipeline(seq, out, RunConfig(backend="all", evaluate=False), force=True)
     rec = Recording(seq)
-    yaw0 = float(se2.yaw_of_quaternion(rec.imu().orientation[:1])[0])
+    yaw0 = float(se2.yaw_of_quaternion(read_imu(rec).orientation[:1])[0])
     rows = []
     for name in ("wheel", *FUSED):
         final = final_in_imu_frame(read_track(out / f"{name}.tum"), yaw0)
@@ -102,7 +104,7 @@ def stream(streams: SensorStreams, backend: str, config: FusionConfig):
 
 def husky(root, backends: list[str], streaming: bool) -> None:
     rec = Recording(import_husky(root / "husky"))
-    odom, imu, gps = rec.odom(), rec.imu(), rec.gps()
+    odom, imu, gps = read_twist(rec), read_imu(rec), read_fixes(rec)
     streams = SensorStreams(odom=odom, imu=imu)
     rows = [("raw wheel odometry (baseline)", wheel_track(twist_to_travel(odom)), None, ""),
             ("wheel + gyro dead reckoning, bias at standstill (baseline)", baseline.wheel_gyro(rec), None, "")]

@@ -150,7 +150,7 @@ def stages(args) -> int:
     with work_dir(None) as tmp:
         seq = Path(args.sequence) if args.sequence else standard(tmp, "random60")
         rec = Recording(seq)
-        t = rec.frame_times if rec.has_camera() else None
+        t = rec.frame_times if rec.has("cam0") else None
         seconds = float(t[-1] - t[0]) if t is not None and len(t) > 1 else None
         evaluate = not args.no_evaluate
         runs, commands = [], []

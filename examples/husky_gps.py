@@ -53,7 +53,9 @@ from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag import import_bag, parse_static_tf
-from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
+from fusion_vo.sensors.gps import read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_twist, twist_to_travel, wheel_track
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_BAG = REPO / "tests" / "data" / "robot_localization" / "test1.bag"
@@ -63,7 +65,7 @@ HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 def distance_travelled(rec: Recording) -> float:
     """Path length of the wheel odometry: the integral of ``|v_x|`` [m]."""
-    odom = rec.odom()
+    odom = read_twist(rec)
     return float(np.sum(np.abs(odom.vx[:-1]) * np.diff(odom.t)))
 
 
@@ -81,7 +83,7 @@ def fused_tracks(rec: Recording, backend: str) -> tuple[dict[str, PoseData], lis
 
     Returns the tracks (named ``"<variant>: <trajectory>"``) and notes on what ran and how long it took.
     """
-    odom, imu = rec.odom(), rec.imu()
+    odom, imu = read_twist(rec), read_imu(rec)
     tracks: dict[str, PoseData] = {}
     notes: list[str] = []
     for variant, ahrs in VARIANTS.items():
@@ -119,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             for s in summary.streams:
                 print(f"  {s.stream:6s} {s.topic:34s} {s.written:6d} rows  {s.rate_hz:6.2f} Hz  {s.duration_s:6.1f} s")
             rec = Recording(seq)
-            gps = rec.gps()
+            gps = read_fixes(rec)
             path = distance_travelled(rec)
             tracks = {"raw wheel odometry": baseline.raw_odometry(rec),
                       "wheel + gyro dead reckoning (no filter)": baseline.wheel_gyro(rec)}

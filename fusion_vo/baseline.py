@@ -42,8 +42,8 @@ from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import VisualOdometry, heights_for
 from fusion_vo.recording import Recording
-from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw
-from fusion_vo.sensors.wheel import twist_to_travel, wheel_track
+from fusion_vo.sensors.imu import ImuNoise, cumulative_angle, gyro_yaw, read_imu
+from fusion_vo.sensors.wheel import read_twist, twist_to_travel, wheel_track
 
 MAX_CORNERS = 200
 QUALITY = 0.01
@@ -155,13 +155,13 @@ def odometry(rec: Recording) -> tuple[VisualOdometry, list, list, float]:
 
 def raw_odometry(rec: Recording) -> PoseData:
     """The robot's own odometry twist (``odom0``) dead-reckoned from the origin."""
-    return wheel_track(twist_to_travel(rec.odom()))
+    return wheel_track(twist_to_travel(read_twist(rec)))
 
 
 def wheel_gyro(rec: Recording) -> PoseData:
     """Wheel distance with the gyro's heading (module docstring): the odometry twist's travel per interval,
     its heading change from the integrated body-z gyro rate less the median rate at standstill."""
-    odom, imu = rec.odom(), rec.imu()
+    odom, imu = read_twist(rec), read_imu(rec)
     gyro = gyro_yaw(imu, ImuNoise().with_sensor_keys(imu.noise))
     still = (np.abs(odom.vx) < 1e-3) & (np.abs(odom.wz) < 1e-3)
     still_at_imu = np.interp(gyro.t, odom.t, still.astype(float)) > 0.999
@@ -179,7 +179,7 @@ def wheel_gyro(rec: Recording) -> PoseData:
 def along_orientation(rec: Recording) -> PoseData:
     """The odometry's forward speed along the IMU's 3-D orientation (module docstring), in the IMU's world
     frame; the heading is that of the body's x axis on the floor plane."""
-    odom, imu = rec.odom(), rec.imu()
+    odom, imu = read_twist(rec), read_imu(rec)
     if imu.orientation is None:
         raise ValueError(f"{rec.path}: the IMU states no orientation")
     t, v = odom.t, odom.vx

@@ -49,9 +49,10 @@ from threadpoolctl import threadpool_limits
 
 from frontends import make_frontend
 from frontends.base import FrameMotion, MotionStatus
+from fusion_vo.calibration.camera_noise import CameraNoise
+from fusion_vo.calibration.lens_from_motion import check_stated_lens, lens_from_motion
 from fusion_vo.config.odometry import OdometryConfig
 from fusion_vo.config.sensor_files import uncalibrated_camera
-from fusion_vo.calibration.lens_from_motion import check_stated_lens, lens_from_motion
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.geometry.derotation import GyroDerotation
@@ -59,7 +60,8 @@ from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.geometry.height import smooth_heights
 from fusion_vo.measurements import PoseData, RangeData, VisualIncrement
 from fusion_vo.recording import Frame, Recording
-from fusion_vo.sensors.range import camera_height, reading_sigma
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.range import camera_height, read_range, reading_sigma
 
 log = logging.getLogger(__name__)
 
@@ -403,9 +405,9 @@ class RangeReadings:
 def range_readings(recording: Recording) -> RangeReadings | None:
     """The gated readings of the recording's range finder (:func:`fusion_vo.sensors.range.camera_height`,
     :func:`fusion_vo.sensors.range.reading_sigma`), or ``None`` without a usable one."""
-    if not recording.has_range():
+    if not recording.has("range0"):
         return None
-    r: RangeData = recording.range()
+    r: RangeData = read_range(recording)
     if len(r) == 0:
         return None
     gated = camera_height(r)
@@ -513,8 +515,8 @@ def run_visual_odometry(
     ranged = range_heights(recording, recording.frame_times, readings) if readings is not None else None
     heights, height_sigmas = (None, None) if ranged is None else ranged
     derotation = None
-    if config.gyro_derotation and recording.has_imu():
-        derotation = GyroDerotation(recording.imu(), geometry)
+    if config.gyro_derotation and recording.has("imu0"):
+        derotation = GyroDerotation(read_imu(recording), geometry)
     vo = VisualOdometry(frontend, geometry, derotation, max_bridge=config.max_bridge)
     if heights is not None and config.range_smoothing:
         vo.kept_motions = []
@@ -626,7 +628,7 @@ def run_visual_odometry(
 def _with_camera_noise(recording: Recording, config: OdometryConfig, increments: list) -> tuple[list, str | None]:
     """``increments`` with the heading noise model of ``cam0/sensor.yaml`` when it states one for this frontend
     (``config.camera_noise``), and a note of what was done."""
-    noise = recording.camera_noise() if config.camera_noise else None
+    noise = CameraNoise.stated(recording) if config.camera_noise else None
     if noise is None:
         return increments, None
     if noise.frontend != config.frontend:

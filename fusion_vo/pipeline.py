@@ -52,21 +52,26 @@ import yaml
 from frontends import make_frontend
 from fusion_vo import backends
 from fusion_vo.backends.result import write_pose_covariances
+from fusion_vo.calibration.camera_noise import CameraNoise
 from fusion_vo.config import RunConfig
+from fusion_vo.config.sensor_files import uncalibrated_camera
 from fusion_vo.errors import InputError
 from fusion_vo.evaluation import run_report
 from fusion_vo.evaluation.headings import imu_headings, write_headings
 from fusion_vo.evaluation.influence import inputs as influence_inputs, leave_one_out, write_influence
 from fusion_vo.evaluation.innovations import from_residuals, write_innovations
-from fusion_vo.config.sensor_files import uncalibrated_camera
 from fusion_vo.geometry.ground import GroundGeometry
 from fusion_vo.measurements import PoseData
 from fusion_vo.odometry import OdometryConfig, OdometryResult, run_visual_odometry
 from fusion_vo.outputs import OutputFolder, check_outside, check_replaceable, write_atomic
 from fusion_vo.recording import Recording, write_tum
 from fusion_vo.recording.csvio import read_table
-from fusion_vo.recording.reader import STREAM_FOLDERS, read_groundtruth_csv
+from fusion_vo.recording.reader import GROUNDTRUTH, read_groundtruth_csv
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.gps import has_fixes, read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.range import read_range
+from fusion_vo.sensors.wheel import read_ticks, read_twist
 
 log = logging.getLogger(__name__)
 
@@ -124,7 +129,7 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     registry.ensure(config.sensors or ())
     known = registry.sensors()
     present = {s.name: s.present(rec) for s in known}
-    present["camera"] = rec.has_camera()
+    present["camera"] = rec.has("cam0")
     if config.sensors is None:
         chosen = [s for s in ("camera", "wheel", "imu") if present[s]]
         if not present["wheel"] and present["odom"]:
@@ -137,7 +142,7 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
         if s not in present:
             raise InputError(f"unknown sensor '{s}' (use {', '.join(present)})", rec.path)
         if not present[s]:
-            folder = STREAM_FOLDERS.get(s) or registry.get(s).folder or registry.get(s).where
+            folder = registry.get(s).folder or registry.get(s).where
             raise InputError(f"the sensors to use include '{s}' but the recording has no {folder.rstrip('/')}/",
                              rec.path)
     return list(config.sensors)
@@ -199,7 +204,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
         else:
             cam = rec.camera  # cam0/sensor.yaml
         if odometry.camera_noise:
-            rec.camera_noise()  # a bad camera_noise in cam0/sensor.yaml
+            CameraNoise.stated(rec)  # a bad camera_noise in cam0/sensor.yaml
         t_ns, _, _ = rec._frames_index()  # cam0/data.csv, frame names inside cam0/data/
         if len(t_ns) < 2:
             raise InputError(f"{len(t_ns)} frame listed: visual odometry needs at least two",
@@ -220,14 +225,14 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             except (InputError, TypeError, ValueError) as exc:
                 raise _config_error(exc, config_path, name) from None
         note("camera", t_ns * 1e-9, "cam0")
-    if "wheel" in sensors and rec.has_wheel():
-        note("wheel", rec.wheel().t, "wheel0")
-    if ("odom" in sensors or ("wheel" in sensors and not rec.has_wheel())) and rec.has_odom():
-        note("odom", rec.odom().t, "odom0")
+    if "wheel" in sensors and rec.has("wheel0"):
+        note("wheel", read_ticks(rec).t, "wheel0")
+    if ("odom" in sensors or ("wheel" in sensors and not rec.has("wheel0"))) and rec.has("odom0"):
+        note("odom", read_twist(rec).t, "odom0")
     if "imu" in sensors:
-        note("imu", rec.imu().t, "imu0")
-    if rec.has_range() and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
-        note("range", rec.range().t, "range0")
+        note("imu", read_imu(rec).t, "imu0")
+    if rec.has("range0") and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
+        note("range", read_range(rec).t, "range0")
     for name in sensors:  # a sensor registered outside the library: read by its own reader, now
         sensor = registry.get(name)
         if name not in registry.BUILTIN_ORDER and sensor.read is not None:
@@ -253,7 +258,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     groundtruth = None
     if config.evaluate and rec.has_groundtruth():
         gt_path = rec.path / "state_groundtruth_estimate0" / "data.csv"
-        groundtruth = read_groundtruth_csv(rec._need("ground truth", "state_groundtruth_estimate0"), min_poses=2)
+        groundtruth = read_groundtruth_csv(rec.data_file(GROUNDTRUTH, "ground truth"), min_poses=2)
         g0, g1 = float(groundtruth.t[0]), float(groundtruth.t[-1])
         if spans:
             lo = min(v[0] for v in spans.values())
@@ -261,15 +266,15 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             if g1 < lo or hi < g0:
                 raise InputError(f"ground truth {_span((g0, g1))} does not overlap the sensors' "
                                  f"{_span((lo, hi))}: it must be stamped on the recording's clock", gt_path)
-    if config.evaluate and groundtruth is None and rec.has_gps():
-        rec.gps()  # the fixes the evaluation scores against: a malformed file stops the run before any work
+    if config.evaluate and groundtruth is None and has_fixes(rec):
+        read_fixes(rec)  # the fixes the evaluation scores against: a malformed file stops the run before any work
     return RunInputs(rec, sensors, spans, groundtruth, times)
 
 
 def _line_of(rec: Recording, name: str, row: int) -> int | None:
     if name == "camera":
         return int(rec._frames_index()[2][row])
-    folder = STREAM_FOLDERS.get(name) or registry.get(name).folder
+    folder = registry.get(name).folder
     try:
         return int(read_table(rec.path / folder / "data.csv", (1, 64), "values").lines[row])
     except (InputError, IndexError):
@@ -366,7 +371,7 @@ def run_pipeline(
         summary.sensors = list(sensors)
         summary.files = sorted(p.name for p in staging.iterdir() if p.is_file() and not p.name.startswith("."))
         _write_summary(staging, summary)
-        evaluated = config.evaluate and (inputs.groundtruth is not None or rec.has_gps())
+        evaluated = config.evaluate and (inputs.groundtruth is not None or has_fixes(rec))
         _report(staging, out_dir.name, summary, config.evaluate, evaluated)
         folder.commit()
     return summary

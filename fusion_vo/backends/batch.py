@@ -37,10 +37,11 @@ from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
 from fusion_vo.backends.states import calibration_priors
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
+from fusion_vo.config.sensor_files import CameraFile
 from fusion_vo.consistency.stage import check_streams
 from fusion_vo.errors import InputError
-from fusion_vo.sensors import registry
 from fusion_vo.measurements import PoseData
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.imu import gyro_yaw
 from fusion_vo.sensors.sync import odometry_delay
 from fusion_vo.sensors.visual import camera_grid
@@ -302,7 +303,7 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
         raise InputError("sensor 'camera' was asked for but there are no visual increments (no cam0/ frames?)",
                          getattr(recording, "path", None))
     height = config.camera_height
-    if height is None and recording.has_camera():
+    if height is None and recording.has("cam0"):
         height = float(recording.camera.T_BS[2, 3])
     streams = SensorStreams(
         visual=list(increments) if "camera" in sensors else None,
@@ -344,5 +345,6 @@ def _range_height_sigma(visual) -> float | None:
 
 def _height_sigma(recording) -> float | None:
     """``height_sigma`` of the recording's ``cam0/sensor.yaml`` (None when absent or not a folder recording)."""
-    read = getattr(recording, "camera_height_sigma", None)
-    return read() if read is not None and recording.has_camera() else None
+    if not hasattr(recording, "sensor_file") or not recording.has("cam0"):
+        return None
+    return recording.sensor_file("cam0", CameraFile, required=False).height_sigma

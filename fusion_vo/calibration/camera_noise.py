@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo.config.files import validate
-from fusion_vo.config.sensor_files import CameraNoiseFile
+from fusion_vo.config.sensor_files import CameraFile, CameraNoiseFile
 from fusion_vo.errors import InputError
 
 log = logging.getLogger(__name__)
@@ -126,6 +126,13 @@ class CameraNoise:
         """The model ``camera_noise`` of a ``cam0/sensor.yaml`` states (checked when the file was read)."""
         return cls(stated.frontend, tuple(float(e) for e in stated.edges),
                    tuple(float(s) for s in stated.heading_sigma), float(stated.frame_sigma), int(stated.increments))
+
+    @classmethod
+    def stated(cls, recording) -> CameraNoise | None:
+        """The model ``camera_noise`` of a recording's ``cam0/sensor.yaml``, or None when the file does not state
+        it."""
+        stated = recording.sensor_file("cam0", CameraFile, required=False).camera_noise
+        return None if stated is None else cls.from_file(stated)
 
     @classmethod
     def from_dict(cls, data, path: str | Path | None = None) -> CameraNoise:

@@ -69,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
             seq = make_standard(STANDARD, Path(tmp) / STANDARD)
         else:
             rec = Recording(seq)
-            if not rec.has_camera():
+            if not rec.has("cam0"):
                 raise InputError("this recording has no camera stream (cam0/data.csv is missing)", rec.path)
             rec.camera, rec.frame_times  # noqa: B018 -- a one-line error for a bad sensor.yaml or data.csv
         rows = run_benchmark(seq, args.frontend, thread_counts=args.threads, repeats=args.repeats,

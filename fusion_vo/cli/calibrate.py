@@ -187,13 +187,13 @@ def run_lever_arm(args: argparse.Namespace) -> int:
 def _check_turn_in_place(rec) -> None:
     """With wheels, refuse a drive: the frames' fixed point is then the centre of the arc driven, not the
     axle, and the lever arm would come out wrong with a tiny standard deviation."""
-    if not rec.has_wheel():
+    if not rec.has("wheel0"):
         return
     import numpy as np
 
-    from fusion_vo.sensors.wheel import ticks_to_travel
+    from fusion_vo.sensors.wheel import read_ticks, ticks_to_travel
 
-    travel = ticks_to_travel(rec.wheel())
+    travel = ticks_to_travel(read_ticks(rec))
     dl, dr = np.diff(travel.left), np.diff(travel.right)
     axle = float(np.sum(np.abs(dl + dr))) / 2.0  # distance the axle centre moved
     arcs = float(np.sum(np.abs(dr - dl))) / 2.0  # distance each wheel moved about it
@@ -236,6 +236,7 @@ def run_wheels(args: argparse.Namespace) -> int:
     from fusion_vo.calibration.wheels import umbmark, wheels_from_groundtruth
     from fusion_vo.config.files import write_yaml_atomic
     from fusion_vo.recording import Recording
+    from fusion_vo.sensors.wheel import read_ticks
 
     rec = Recording(args.seq)
     if args.method == "umbmark":
@@ -245,11 +246,12 @@ def run_wheels(args: argparse.Namespace) -> int:
         if other.path.resolve() == rec.path.resolve():
             raise InputError("--ccw: the same recording as SEQ (UMBmark needs a clockwise and a counter-clockwise "
                              "square)", args.ccw)
-        r = umbmark((rec.wheel(), rec.groundtruth()), (other.wheel(), other.groundtruth()), sources=(rec.path, other.path))
+        r = umbmark((read_ticks(rec), rec.groundtruth()), (read_ticks(other), other.groundtruth()),
+                    sources=(rec.path, other.path))
     elif args.ccw:
         raise InputError("--ccw is used only with --method umbmark")
     else:
-        r = wheels_from_groundtruth(rec.wheel(), rec.groundtruth())
+        r = wheels_from_groundtruth(read_ticks(rec), rec.groundtruth())
     print(r.summary())
     if args.out:
         write_yaml_atomic(args.out, r.to_dict())

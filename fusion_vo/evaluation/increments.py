@@ -24,7 +24,7 @@ import numpy as np
 
 from fusion_vo.geometry import se2
 from fusion_vo.recording import Recording
-from fusion_vo.sensors.imu import ImuNoise, gyro_yaw
+from fusion_vo.sensors.imu import ImuNoise, gyro_yaw, read_imu
 
 
 def increment_errors(rec: Recording, increments) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -110,8 +110,8 @@ def against_truth(rec: Recording, vo) -> dict[str, float]:
            "camera mean NIS (3 if honest)": float(np.mean(nis)),
            "camera stated y-yaw correlation (mean)": float(np.mean(covariances[:, 1, 2] / (sigmas[:, 1] * sigmas[:, 2]))),
            "camera y-yaw correlation of the errors": float(np.corrcoef(errors[:, 1], errors[:, 2])[0, 1])}
-    if rec.has_imu():
-        imu = rec.imu()
+    if rec.has("imu0"):
+        imu = read_imu(rec)
         noise = ImuNoise().with_sensor_keys(imu.noise)
         gyro = gyro_yaw(imu, noise)
         rate = np.interp(gyro.t, gt.t, np.gradient(yaw, gt.t))

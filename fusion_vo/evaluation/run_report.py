@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from fusion_vo import evaluation
+from fusion_vo.config.files import load_yaml
 from fusion_vo.errors import InputError, check_folder
 from fusion_vo.evaluation import EVO_MISSING, evo_available
 from fusion_vo.evaluation import figures, plots
@@ -42,10 +43,9 @@ from fusion_vo.evaluation.report import ReportContent, write_report
 from fusion_vo.evaluation.run_tables import calibration_table, dropped_table, gated_spans, influence_table, pauses_table
 from fusion_vo.evaluation.verdict import verdict
 from fusion_vo.geometry import se2
-from fusion_vo.config.files import load_yaml
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
-from fusion_vo.sensors.gps import interpolate_poses, predict, robust_fit_rigid_2d
+from fusion_vo.sensors.gps import interpolate_poses, predict, read_fixes, robust_fit_rigid_2d
 
 logger = logging.getLogger(__name__)
 
@@ -196,7 +196,7 @@ def _groundtruth_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[
 
 
 def _gps_section(folder: RunFolder, sequence: Path, out: Path) -> tuple[dict, dict[str, Path], list]:
-    gps = Recording(sequence).gps()
+    gps = read_fixes(Recording(sequence))
     metrics, images = evaluate_against_gps(out, folder.files, gps, folder.config, sequence / "gps0" / "data.csv")
     headers, rows = gps_table(metrics)
     notes = [f"{n} GPS fixes skipped ({reason})" for reason, n in gps.skipped.items()]
@@ -209,7 +209,7 @@ def _gps_overlay(sequence: Path | None, folder: RunFolder, reference: str | None
     onto the reference track by the rigid fit of its antenna positions onto them. None without fixes."""
     if sequence is None or reference is None or not (sequence / "gps0" / "data.csv").is_file():
         return None
-    gps = Recording(sequence).gps()
+    gps = read_fixes(Recording(sequence))
     if gps_was_fused(folder.config):
         return gps.enu[:, :2], f"GPS fixes ({len(gps)}, fused)"
     ref = folder.tracks[reference]

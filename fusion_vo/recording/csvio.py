@@ -137,6 +137,15 @@ def check_magnitude(tab: Table, path: str | Path, columns: slice, limit: float, 
         raise InputError(f"{what} {value:g} is beyond ±{limit:g}: not a physical value", path, int(tab.lines[i]))
 
 
+def unit_quaternions(q: np.ndarray, lines: np.ndarray, path: Path, what: str) -> np.ndarray:
+    """``q`` (rows w, x, y, z) normalised; a row whose norm is more than 0.05 from 1 is an error naming its line."""
+    norms = np.linalg.norm(q, axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
+    if len(bad):
+        raise InputError(f"{what} has norm {norms[bad[0]]:.3f}, not 1", path, int(lines[bad[0]]))
+    return q / norms[:, None]
+
+
 def read_frame_list(path: str | Path) -> tuple[np.ndarray, list[str], np.ndarray]:
     """Read ``cam0/data.csv``: ``timestamp [ns], filename`` rows; returns (t_ns, names, lines)."""
     path = check_file(path)

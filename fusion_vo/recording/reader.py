@@ -10,10 +10,15 @@ Layout (``datasets/README.md``)::
     SEQ/gps0/data.csv, gps0/sensor.yaml
     SEQ/state_groundtruth_estimate0/data.csv
 
-Every stream is optional. A stream is *present* when its folder (``imu0/``) or its ``data.csv`` exists; a
-present stream whose ``data.csv`` is missing or unreadable (a broken link, a link loop, a folder) is an
-:class:`~fusion_vo.errors.InputError` naming the file, never silently dropped. Asking for a stream that is
-absent raises :class:`~fusion_vo.errors.InputError` too.
+Every stream is optional. A stream is *present* when its folder (``imu0/``) or its ``data.csv`` exists
+(:meth:`Recording.has`); a present stream whose ``data.csv`` is missing or unreadable (a broken link, a link loop,
+a folder) is an :class:`~fusion_vo.errors.InputError` naming the file, never silently dropped. Asking for a stream
+that is absent raises :class:`~fusion_vo.errors.InputError` too.
+
+:class:`Recording` reads the camera's frames and the ground truth. Each other stream is read by its sensor, in
+the sensor's module (:func:`fusion_vo.sensors.imu.read_imu`, :func:`fusion_vo.sensors.wheel.read_ticks`, ...), as a
+registered plugin reads its own: through :meth:`Recording.table` (the checked rows of ``FOLDER/data.csv``) and
+:meth:`Recording.sensor_file` (its ``sensor.yaml``).
 Camera frames are decoded lazily by :meth:`Recording.frames`. A frame that cannot be read (missing,
 corrupt, wrong size) is yielded with ``image=None`` and an ``error`` text, so that a long run can skip it
 with a warning and count it instead of stopping. Frame files are read as bytes and decoded in memory, so
@@ -39,16 +44,13 @@ from typing import Iterator, TypeVar
 import cv2
 import numpy as np
 
-from fusion_vo.calibration.camera_noise import CameraNoise
+from fusion_vo.config.sensor_files import CameraFile, SensorFile
 from fusion_vo.errors import InputError, check_file
 from fusion_vo.geometry import se2
-from fusion_vo.config.sensor_files import CameraFile, ImuFile, SensorFile, WheelFile
 from fusion_vo.geometry.camera import CameraModel
-from fusion_vo.measurements import (MAX_ACCELERATION, MAX_ANGULAR_RATE, MAX_POSITION_M, MAX_RANGE_M, MAX_SPEED, GpsData,
-                                    ImuData, PoseData, RangeData, TwistData, WheelConfig, WheelData)
+from fusion_vo.measurements import MAX_POSITION_M, PoseData
 from fusion_vo.outputs import make_folder, write_atomic
-from fusion_vo.recording.csvio import check_magnitude, read_frame_list, read_table
-from fusion_vo.recording.gps import read_gps
+from fusion_vo.recording.csvio import check_magnitude, read_frame_list, read_table, unit_quaternions
 
 log = logging.getLogger(__name__)
 
@@ -56,16 +58,14 @@ F = TypeVar("F", bound=SensorFile)
 
 VIDEO_EXTENSIONS = (".avi", ".mp4", ".mkv", ".mov", ".webm")
 
-#: stream folders of the layout, by the name :meth:`Recording.streams` uses
-STREAM_FOLDERS = {"camera": "cam0", "imu": "imu0", "wheel": "wheel0", "odom": "odom0", "range": "range0",
-                  "gps": "gps0", "groundtruth": "state_groundtruth_estimate0"}
+#: the camera's folder (its frames, read here) and the ground truth's (the reference a run is scored against); every
+#: other stream is read by its sensor (:mod:`fusion_vo.sensors`) through :meth:`Recording.table`
+CAMERA = "cam0"
+GROUNDTRUTH = "state_groundtruth_estimate0"
 
 #: bit depths a 16-bit frame may hold
 BIT_DEPTHS = (10, 12, 14, 16)
 
-#: tick counts are 32-bit counters, signed or unsigned (:mod:`fusion_vo.sensors.wheel` takes their changes
-#: modulo 2^32): a count outside [-2^31, 2^32) is not one
-_TICK_RANGE = (-(2.0**31), 2.0**32)
 
 
 @dataclass
@@ -105,47 +105,49 @@ class Recording:
     def __repr__(self) -> str:
         return f"Recording({str(self.path)!r}, streams={self.streams()})"
 
-    # ------------------------------------------------------------------ presence
-    def _present(self, folder: str) -> bool:
+    # ------------------------------------------------------------------ any stream
+    def has(self, folder: str) -> bool:
+        """Whether the stream ``folder`` (``imu0``, ``odom1``, ``compass0`` ...) is present: its folder or its
+        ``data.csv`` exists (a broken link too, which reading it reports)."""
         return os.path.lexists(self.path / folder)
 
-    def has_camera(self) -> bool:
-        return self._present("cam0")
-
-    def has_imu(self) -> bool:
-        return self._present("imu0")
-
-    def has_wheel(self) -> bool:
-        return self._present("wheel0")
-
-    def has_odom(self) -> bool:
-        return self._present("odom0")
-
-    def has_range(self) -> bool:
-        return self._present("range0")
-
-    def has_gps(self) -> bool:
-        """Whether ``gps0/`` is present. GPS is fused only when asked for, and scores a run only without
-        ground truth, so a ``gps0/`` whose ``data.csv`` is missing (or a broken link, a link loop, a folder)
-        would be left out without a word: that is an :class:`InputError` naming the file."""
-        if not self._present("gps0"):
-            return False
-        check_file(self.path / "gps0" / "data.csv")
-        return True
-
-    def has_groundtruth(self) -> bool:
-        return self._present("state_groundtruth_estimate0")
-
     def streams(self) -> list[str]:
-        """Names of the streams present: camera, imu, wheel, odom, range, gps, groundtruth."""
-        return [n for n, folder in STREAM_FOLDERS.items() if self._present(folder)]
+        """The folders present that hold a stream (a ``data.csv``, or a folder whose ``data.csv`` is missing),
+        sorted by name: ``cam0``, ``imu0``, ``state_groundtruth_estimate0`` ..."""
+        return sorted(p.name for p in self.path.iterdir() if p.name[-1:].isdigit() and (p.is_dir() or p.is_symlink()))
 
-    def _need(self, name: str, folder: str) -> Path:
-        if not self._present(folder):
-            raise InputError(f"this recording has no {name} stream (no {folder}/)", self.path)
+    def data_file(self, folder: str, what: str) -> Path:
+        """``FOLDER/data.csv``, checked to be a readable file; an :class:`InputError` naming it (or the recording,
+        when ``folder`` is absent: "this recording has no ``what`` stream")."""
+        if not self.has(folder):
+            raise InputError(f"this recording has no {what} stream (no {folder}/)", self.path)
         p = self.path / folder / "data.csv"
         check_file(p)
         return p
+
+    def table(self, folder: str, columns: int | tuple[int, int], stream: str, values: str = "values",
+              min_rows: int = 1, **options):
+        """The rows ``timestamp [ns], v1, v2 ...`` of ``FOLDER/data.csv`` with every check of
+        :func:`~fusion_vo.recording.csvio.read_table` (``options`` are its keywords; ``values`` names the columns in
+        its messages), and at least ``min_rows`` of them: ``(table, path)``. ``stream`` names the stream
+        (``"IMU"``)."""
+        path = self.data_file(folder, stream)
+        return _enough_rows(read_table(path, columns, values, **options), path, min_rows, stream), path
+
+    def sensor_file(self, folder: str, model: type[F], required: bool) -> F:
+        """``FOLDER/sensor.yaml`` read and checked by ``model`` (a
+        :class:`~fusion_vo.config.sensor_files.SensorFile`); a key close to one it reads is warned about once
+        per folder."""
+        warn = folder not in self._keys_told
+        self._keys_told.add(folder)
+        return model.read(self.path / folder / "sensor.yaml", required=required, warn=warn)
+
+    def warn_defaults(self, folder: str, defaults: list[str]) -> None:
+        """Warn once per folder, naming its ``sensor.yaml``, about the ``defaults`` taken for keys it does not
+        state."""
+        if defaults and folder not in self._defaults_told:
+            self._defaults_told.add(folder)
+            log.warning("%s: %s", self.path / folder / "sensor.yaml", "; ".join(defaults))
 
     # ------------------------------------------------------------------ camera
     @property
@@ -153,8 +155,8 @@ class Recording:
         """The camera model of ``cam0/sensor.yaml`` (every key of the file is checked with it,
         :class:`~fusion_vo.config.sensor_files.CameraFile`)."""
         if self._camera is None:
-            self._need("camera", "cam0")
-            self._camera = self._file("cam0", CameraFile, required=True).camera(self.path / "cam0" / "sensor.yaml")
+            self.data_file(CAMERA, "camera")
+            self._camera = self.sensor_file(CAMERA, CameraFile, required=True).camera(self.path / "cam0" / "sensor.yaml")
         return self._camera
 
     @camera.setter
@@ -164,7 +166,7 @@ class Recording:
 
     def _frames_index(self) -> tuple[np.ndarray, list[str], np.ndarray]:
         if self._frame_list is None:
-            path = self._need("camera", "cam0")
+            path = self.data_file(CAMERA, "camera")
             self._frame_list = read_frame_list(path)
             if len(self._frame_list[0]) == 0:
                 raise InputError("no frames listed", path)
@@ -185,7 +187,7 @@ class Recording:
         return self._frames_index()[0].astype(np.float64) * 1e-9
 
     def __len__(self) -> int:
-        return len(self._frames_index()[0]) if self.has_camera() else 0
+        return len(self._frames_index()[0]) if self.has(CAMERA) else 0
 
     def video_path(self) -> Path | None:
         cam = self.path / "cam0"
@@ -227,7 +229,7 @@ class Recording:
         (``image``), and ``None`` until then.
         """
         if self._shift is None:
-            depth = self._file("cam0", CameraFile, required=False).bit_depth
+            depth = self.sensor_file(CAMERA, CameraFile, required=False).bit_depth
             if depth is not None:
                 self._shift = 16 - depth if depth > 8 else 0
             elif image is not None:
@@ -261,109 +263,13 @@ class Recording:
         finally:
             cap.release()
 
-    # ------------------------------------------------------------------ other streams
-    def imu(self, folder: str = "imu0") -> ImuData:
-        """``imu0`` (or another IMU's ``folder``, ``imu1`` ...): gyro, accelerometer and (when the 4 extra columns are
-        present) an AHRS orientation.
-
-        ``sensor.yaml`` is required (its absence is an :class:`InputError`); without ``T_BS`` the IMU
-        is taken as aligned with the body and without the noise keys the configuration's noise is used, with
-        a warning naming the file."""
-        path = self._need("IMU", folder)
-        tab = _enough_rows(read_table(path, (6, 10), "IMU values"), path, 2, "IMU")
-        if tab.values.shape[1] not in (6, 10):
-            raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path, int(tab.lines[0]))
-        check_magnitude(tab, path, slice(0, 3), MAX_ANGULAR_RATE, "angular rate [rad/s]")
-        check_magnitude(tab, path, slice(3, 6), MAX_ACCELERATION, "acceleration [m/s²]")
-        orient = None
-        if tab.values.shape[1] == 10:
-            orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
-        T, noise, rate = self.imu_calibration(folder)
-        return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
-
-    def imu_calibration(self, folder: str = "imu0") -> tuple[np.ndarray, dict, float | None]:
-        """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (or ``folder``'s, required): the IMU's pose in the
-        body frame (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default
-        taken is warned about once, naming the file."""
-        imu = self._file(folder, ImuFile, required=True)  # the IMU's mounting and noise: never assumed without a word
-        ypath = self.path / folder / "sensor.yaml"
-        T, noise, rate = imu.pose(np.eye(4)), imu.noise(), imu.rate_hz
-        defaults = ([] if imu.T_BS is not None else ["no T_BS: the IMU is taken as aligned with the body (identity)"]) + (
-            [] if noise else ["no noise keys: the configuration's IMU noise is used"])
-        if defaults and folder not in self._defaults_told:
-            self._defaults_told.add(folder)
-            log.warning("%s: %s", ypath, "; ".join(defaults))
-        return T, noise, rate
-
-    def wheel(self) -> WheelData:
-        """``wheel0``: cumulative encoder counts and the wheel calibration."""
-        path = self._need("wheel encoder", "wheel0")
-        tab = _enough_rows(read_table(path, 2, "tick counts"), path, 2, "wheel encoder")
-        frac = np.abs(tab.values - np.round(tab.values))
-        if np.any(frac > 0):
-            i = int(np.flatnonzero(frac.max(axis=1) > 0)[0])
-            raise InputError("tick counts must be integers", path, int(tab.lines[i]))
-        out = ((tab.values < _TICK_RANGE[0]) | (tab.values >= _TICK_RANGE[1])).any(axis=1)
-        if np.any(out):
-            i = int(np.flatnonzero(out)[0])
-            raise InputError(f"tick count {tab.values[i][np.argmax(np.abs(tab.values[i]))]:.0f} is not a 32-bit counter "
-                             "(signed or unsigned)", path, int(tab.lines[i]))
-        counts = tab.values.astype(np.int64)
-        return WheelData(tab.t, counts[:, 0], counts[:, 1], self.wheel_config())
-
-    def wheel_config(self) -> WheelConfig:
-        """The wheel calibration of ``wheel0/sensor.yaml`` (required, as are its four keys:
-        :class:`~fusion_vo.config.sensor_files.WheelFile`)."""
-        wheel = self._file("wheel0", WheelFile, required=True)
-        return WheelConfig(wheel.ticks_per_revolution, wheel.wheel_radius_left, wheel.wheel_radius_right,
-                           wheel.wheel_base, wheel.radius_sigma)
-
-    def camera_height_sigma(self) -> float | None:
-        """``height_sigma`` of ``cam0/sensor.yaml``: standard deviation [m] of the camera height its
-        ``T_BS`` states, or None when the file does not state it."""
-        return self._file("cam0", CameraFile, required=False).height_sigma
-
-    def camera_noise(self):
-        """``camera_noise`` of ``cam0/sensor.yaml``: the camera's heading noise model
-        (:class:`fusion_vo.calibration.camera_noise.CameraNoise`), or None when the file does not state it."""
-        stated = self._file("cam0", CameraFile, required=False).camera_noise
-        if stated is None:
-            return None
-        return CameraNoise.from_file(stated)
-
-    def odom(self, folder: str = "odom0") -> TwistData:
-        """``odom0`` (or another odometry's ``folder``, ``odom1`` ...): body-frame twist."""
-        path = self._need("odometry", folder)
-        tab = _enough_rows(read_table(path, 3, "twist values"), path, 1, "odometry")
-        check_magnitude(tab, path, slice(0, 2), MAX_SPEED, "speed [m/s]")
-        check_magnitude(tab, path, slice(2, 3), MAX_ANGULAR_RATE, "yaw rate [rad/s]")
-        return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
-
-    def range(self) -> RangeData:
-        """``range0``: downward distance to the floor."""
-        path = self._need("range finder", "range0")
-        tab = _enough_rows(read_table(path, 1, "distance"), path, 1, "range finder")
-        bad = np.flatnonzero(tab.values[:, 0] <= 0)
-        if len(bad):
-            raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
-        check_magnitude(tab, path, slice(0, 1), MAX_RANGE_M, "distance [m]")
-        return RangeData(tab.t, tab.values[:, 0])
-
-    def gps(self) -> GpsData:
-        """``gps0``: fixes in local ENU at the datum, unusable fixes skipped and counted (:mod:`.gps`)."""
-        self._need("GPS", "gps0")
-        return read_gps(self.path / "gps0")
+    # ------------------------------------------------------------------ the reference
+    def has_groundtruth(self) -> bool:
+        return self.has(GROUNDTRUTH)
 
     def groundtruth(self) -> PoseData:
         """``state_groundtruth_estimate0``: pose of B in W; see :func:`read_groundtruth_csv` for the rules."""
-        return read_groundtruth_csv(self._need("ground truth", "state_groundtruth_estimate0"))
-
-    def _file(self, folder: str, model: type[F], required: bool) -> F:
-        """``FOLDER/sensor.yaml`` read and checked by ``model`` (a key close to one it reads is warned about once
-        per folder)."""
-        warn = folder not in self._keys_told
-        self._keys_told.add(folder)
-        return model.read(self.path / folder / "sensor.yaml", required=required, warn=warn)
+        return read_groundtruth_csv(self.data_file(GROUNDTRUTH, "ground truth"))
 
 
 def _enough_rows(tab, path: Path, need: int, stream: str):
@@ -378,15 +284,6 @@ def _enough_rows(tab, path: Path, need: int, stream: str):
 
 
 # ---------------------------------------------------------------------- ground truth
-
-def unit_quaternions(q: np.ndarray, lines: np.ndarray, path: Path, what: str) -> np.ndarray:
-    """``q`` (rows w, x, y, z) normalised; a row whose norm is more than 0.05 from 1 is an error naming its line."""
-    norms = np.linalg.norm(q, axis=1)
-    bad = np.flatnonzero(np.abs(norms - 1.0) > 0.05)
-    if len(bad):
-        raise InputError(f"{what} has norm {norms[bad[0]]:.3f}, not 1", path, int(lines[bad[0]]))
-    return q / norms[:, None]
-
 
 def read_groundtruth_csv(path: str | Path, min_poses: int = 1) -> PoseData:
     """Read ground truth (``state_groundtruth_estimate0/data.csv``): the one reader of it.

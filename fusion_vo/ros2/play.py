@@ -44,6 +44,10 @@ from fusion_vo.errors import InputError
 from fusion_vo.recording import Recording
 from fusion_vo.recording.rosbag.reader import opened, one_line
 from fusion_vo.ros2 import conversions as conv
+from fusion_vo.sensors.gps import has_fixes, read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.range import read_range
+from fusion_vo.sensors.wheel import read_ticks, read_twist
 
 log = logging.getLogger(__name__)
 
@@ -140,7 +144,7 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
         msg.header.frame_id = frame
         return msg
 
-    if rec.has_camera():
+    if rec.has("cam0"):
         def frames():
             for f in rec.frames():
                 if f.image is None:
@@ -154,8 +158,8 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
                 msg.data = img.tobytes()
                 yield f.t, "image", Image, msg
         streams.append(frames())
-    if rec.has_imu():
-        d = rec.imu()
+    if rec.has("imu0"):
+        d = read_imu(rec)
 
         def imu():
             for k, t in enumerate(d.t):
@@ -170,8 +174,8 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
                     msg.orientation_covariance[0] = -1.0
                 yield float(t), "imu/data", Imu, msg
         streams.append(imu())
-    if rec.has_wheel():
-        w = rec.wheel()
+    if rec.has("wheel0"):
+        w = read_ticks(rec)
 
         def wheel():
             for t, left, right in zip(w.t, w.left, w.right):
@@ -179,8 +183,8 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
                 yield float(t), "wheel_ticks", Int64MultiArray, Int64MultiArray(
                     data=[ns // 1_000_000_000, ns % 1_000_000_000, int(left), int(right)])
         streams.append(wheel())
-    if rec.has_odom():
-        o = rec.odom()
+    if rec.has("odom0"):
+        o = read_twist(rec)
 
         def odom():
             for t, vx, vy, wz in zip(o.t, o.vx, o.vy, o.wz):
@@ -189,8 +193,8 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
                 msg.twist.twist.linear.x, msg.twist.twist.linear.y, msg.twist.twist.angular.z = float(vx), float(vy), float(wz)
                 yield float(t), "odom", Odometry, msg
         streams.append(odom())
-    if rec.has_range():
-        r = rec.range()
+    if rec.has("range0"):
+        r = read_range(rec)
 
         def ranges():
             for t, d in zip(r.t, r.distance):
@@ -198,8 +202,8 @@ def recording_messages(path: Path) -> Iterator[tuple[float, str, type, object]]:
                 msg.radiation_type, msg.min_range, msg.max_range, msg.range = Range.INFRARED, 0.0, 100.0, float(d)
                 yield float(t), "range", Range, msg
         streams.append(ranges())
-    if rec.has_gps():
-        g = rec.gps()
+    if has_fixes(rec):
+        g = read_fixes(rec)
 
         def gps():
             for k, t in enumerate(g.t):
@@ -284,8 +288,8 @@ class Player(Node):
 
 
 #: what a recording folder's streams are published as
-RECORDING_TOPICS = {"camera": ("image", Image), "imu": ("imu/data", Imu), "wheel": ("wheel_ticks", Int64MultiArray),
-                    "odom": ("odom", Odometry), "range": ("range", Range), "gps": ("gps/fix", NavSatFix)}
+RECORDING_TOPICS = {"cam0": ("image", Image), "imu0": ("imu/data", Imu), "wheel0": ("wheel_ticks", Int64MultiArray),
+                    "odom0": ("odom", Odometry), "range0": ("range", Range), "gps0": ("gps/fix", NavSatFix)}
 
 
 def source_topics(source: Path, summary: PlaySummary) -> dict[str, type]:

@@ -25,7 +25,8 @@ import numpy as np
 
 from frontends import make_frontend
 from fusion_vo.backends.streaming import StreamingFusion
-from fusion_vo.config.sensor_files import read_camera
+from fusion_vo.calibration.camera_noise import CameraNoise
+from fusion_vo.config.sensor_files import CameraFile, read_camera
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.geometry.ground import GroundGeometry
@@ -34,6 +35,8 @@ from fusion_vo.pipeline import resolve_sensors
 from fusion_vo.recording import Recording
 from fusion_vo.recording.gps import gps_settings
 from fusion_vo.ros2.settings import NodeSettings
+from fusion_vo.sensors.imu import imu_calibration
+from fusion_vo.sensors.wheel import wheel_config
 
 log = logging.getLogger(__name__)
 
@@ -78,22 +81,22 @@ def sensor_setup(settings: NodeSettings) -> SensorSetup:
     if "camera" in sensors:
         yaml_path = _need(folder, "cam0", "the camera")
         setup.camera = read_camera(yaml_path)
-        setup.camera_height_sigma = rec.camera_height_sigma()
-        setup.camera_noise = rec.camera_noise() if run.odometry_config().camera_noise else None
+        setup.camera_height_sigma = rec.sensor_file("cam0", CameraFile, required=False).height_sigma
+        setup.camera_noise = CameraNoise.stated(rec) if run.odometry_config().camera_noise else None
     if fusion.camera_height is not None:
         setup.camera_height = fusion.camera_height
     elif setup.camera is not None:
         setup.camera_height = float(run.odometry.height or setup.camera.T_BS[2, 3])
     if "imu" in sensors:
         if rec is not None and os.path.lexists(folder / "imu0" / "sensor.yaml"):
-            setup.imu_T_BS, setup.imu_noise, _ = rec.imu_calibration()
+            setup.imu_T_BS, setup.imu_noise, _ = imu_calibration(rec)
         else:
             setup.imu_T_BS = np.eye(4)
             setup.notes.append("no imu0/sensor.yaml in the calibration: the IMU is taken as aligned with the body, "
                                "with the configuration's noise")
     if "wheel" in sensors:
         _need(folder, "wheel0", "the wheels")
-        setup.wheel_config = rec.wheel_config()
+        setup.wheel_config = wheel_config(rec)
     if "gps" in sensors:
         path = (folder / "gps0" / "sensor.yaml") if folder is not None else Path("gps0") / "sensor.yaml"
         setup.gps, notes = gps_settings(path)

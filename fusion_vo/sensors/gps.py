@@ -57,14 +57,16 @@ import numpy as np
 from pydantic import Field
 
 from fusion_vo.config.base import Positive, Section, Sigma
+from fusion_vo.errors import check_file
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData, GpsFix
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import time_order
+from fusion_vo.recording.gps import read_gps
 from fusion_vo.robust import ROBUST_KERNELS, robust_weight
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Absolute, Readings
 from fusion_vo.sensors.registry import Live, Sensor, Step, register
-from fusion_vo.measurements import SensorCount
-from fusion_vo.measurements.grid import time_order
 
 log = logging.getLogger(__name__)
 
@@ -522,9 +524,26 @@ def _live_samples(data: GpsData) -> list:
     return [(t, GpsFix(t, enu[:2], cov)) for t, enu, cov in zip(data.t, data.enu, data.covariance)]
 
 
+# --------------------------------------------------------------------------- its stream in a recording
+def read_fixes(recording, folder: str = "gps0") -> GpsData:
+    """``gps0/`` of a recording: the fixes in local ENU at the datum, unusable fixes skipped and counted
+    (:func:`fusion_vo.recording.gps.read_gps`, the one reader of the GPS layout)."""
+    recording.data_file(folder, "GPS")
+    return read_gps(recording.path / folder)
+
+
+def has_fixes(recording, folder: str = "gps0") -> bool:
+    """Whether ``gps0/`` is present. GPS is fused only when asked for, and scores a run only without ground truth,
+    so a ``gps0/`` whose ``data.csv`` is missing (or a broken link, a link loop, a folder) would be left out without
+    a word: that is an :class:`~fusion_vo.errors.InputError` naming the file."""
+    if not recording.has(folder):
+        return False
+    check_file(recording.path / folder / "data.csv")
+    return True
+
+
 register(Sensor(
-    name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=lambda recording: recording.gps(),
-    has=lambda recording: recording.has_gps() if hasattr(recording, "has_gps") else False,
+    name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=read_fixes, has=has_fixes,
     default=False, config=("gps", GpsNoise), absolute_position=True, heading_reference=True, node_times=node_times,
     intervals=Step(50, add_intervals),
     readings=readings, graph_keyframes=_keyframes,

@@ -46,14 +46,17 @@ import numpy as np
 from pydantic import Field
 
 from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
+from fusion_vo.config.sensor_files import ImuFile
+from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import ImuData, ImuSample
-from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Carry, HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.measurements import ImuData, ImuSample, MAX_ACCELERATION, MAX_ANGULAR_RATE
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
-from fusion_vo.sensors.wheel import at_rest
+from fusion_vo.recording.csvio import check_magnitude, unit_quaternions
+from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Readings
+from fusion_vo.sensors.registry import Carry, HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.sensors.wheel import at_rest
 
 logger = logging.getLogger(__name__)
 
@@ -574,9 +577,42 @@ def _live_samples(data: ImuData) -> list:
     return [(t, ImuSample(t, g, a, o)) for t, g, a, o in zip(data.t, data.gyro, data.accel, q)]
 
 
+# --------------------------------------------------------------------------- its stream in a recording
+def read_imu(recording, folder: str = "imu0") -> ImuData:
+    """``imu0/data.csv`` of a recording (or another IMU's ``folder``, ``imu1`` ...): gyro, accelerometer and (when the
+    4 extra columns are present) an AHRS orientation, with the mounting, noise and rate of :func:`imu_calibration`.
+
+    Rows are ``timestamp [ns], gyro x y z [rad/s], accel x y z [m/s²][, w x y z]``, checked by
+    :meth:`fusion_vo.recording.Recording.table` (and each rate and acceleration against its physical range,
+    each quaternion's norm against 1)."""
+    tab, path = recording.table(folder, (6, 10), "IMU", "IMU values", min_rows=2)
+    if tab.values.shape[1] not in (6, 10):
+        raise InputError("expected 6 IMU columns (gyro xyz, accel xyz) or 10 (plus a quaternion w,x,y,z)", path,
+                         int(tab.lines[0]))
+    check_magnitude(tab, path, slice(0, 3), MAX_ANGULAR_RATE, "angular rate [rad/s]")
+    check_magnitude(tab, path, slice(3, 6), MAX_ACCELERATION, "acceleration [m/s²]")
+    orient = None
+    if tab.values.shape[1] == 10:
+        orient = unit_quaternions(tab.values[:, 6:10], tab.lines, path, "orientation quaternion")
+    T, noise, rate = imu_calibration(recording, folder)
+    return ImuData(tab.t, tab.values[:, 0:3], tab.values[:, 3:6], orient, T, rate, noise)
+
+
+def imu_calibration(recording, folder: str = "imu0") -> tuple[np.ndarray, dict, float | None]:
+    """``(T_BS, noise, rate_hz)`` of ``imu0/sensor.yaml`` (or ``folder``'s, required): the IMU's pose in the body
+    frame (identity without ``T_BS``), its EuRoC noise keys that are given, and its rate. A default taken is warned
+    about once, naming the file."""
+    imu = recording.sensor_file(folder, ImuFile, required=True)  # never assumed without a word
+    T, noise = imu.pose(np.eye(4)), imu.noise()
+    recording.warn_defaults(folder, ([] if imu.T_BS is not None else
+                                     ["no T_BS: the IMU is taken as aligned with the body (identity)"])
+                            + ([] if noise else ["no noise keys: the configuration's IMU noise is used"]))
+    return T, noise, imu.rate_hz
+
+
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
-    read=lambda recording: recording.imu(), has=lambda recording: recording.has_imu(), config=("imu", ImuNoise),
+    read=read_imu, config=("imu", ImuNoise),
     grid=ImuGrid.empty, intervals=Step(10, add_intervals), readings=readings, states=(GYRO_BIAS, AHRS_OFFSET),
     carry=CARRY, turn=_turn_ahrs,
     coverage=lambda iv: ("gyro", imu_grid(iv).gyro_ok), absolute_heading=lambda iv: iv.uses("gyro") or has_heading(iv),

@@ -48,12 +48,12 @@ from fusion_vo.config.base import Int, NonNegative, Positive, Section, Sigma
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import ImuData, ImuSample, SensorCount, TwistData, TwistSample
 from fusion_vo.measurements.grid import coverage, ordered_fields
-from fusion_vo.sensors.imu import GyroModel, ImuNoise, body_yaw_rate, cumulative_angle, gated_yaw_rate
+from fusion_vo.sensors.imu import GyroModel, ImuNoise, body_yaw_rate, cumulative_angle, gated_yaw_rate, read_imu
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors.registry import Live, Sensor, State, Step, register_kind
 from fusion_vo.sensors.wheel import (STANDSTILL, WheelNoise, arc_twist, gyro_turn, odom_twist_noise, standstill,
-                                     twist_to_travel)
+                                     read_twist, twist_to_travel)
 
 logger = logging.getLogger(__name__)
 
@@ -242,7 +242,7 @@ def odometry_instance(n: int) -> Sensor:
         return [] if on_grid is None else odom_readings(name, on_grid, iv, config.section(name))
 
     return Sensor(name=name, where=f"{folder}/", min_samples=2, folder=folder,
-                  read=lambda recording: recording.odom(folder), default=False, config=(name, OdomInstanceNoise),
+                  read=lambda recording: read_twist(recording, folder), default=False, config=(name, OdomInstanceNoise),
                   intervals=Step(ODOM_ORDER, intervals), readings=readings,
                   live=Live(_twist_sample, _twist_data, samples=_twist_samples))
 
@@ -355,7 +355,7 @@ def imu_instance(n: int) -> Sensor:
                 for t, g, a in zip(data.t, data.gyro, data.accel)]
 
     return Sensor(name=name, where=f"{folder}/", min_samples=2, folder=folder,
-                  read=lambda recording: recording.imu(folder), default=False, config=(name, ImuInstanceNoise),
+                  read=lambda recording: read_imu(recording, folder), default=False, config=(name, ImuInstanceNoise),
                   states=(State(bias, initial=0.0, sigma=ImuNoise().gyro_bias_sigma,
                                 random_walk=ImuNoise().gyro_random_walk),),
                   intervals=Step(GYRO_ORDER, intervals), readings=readings, absolute_heading=True,

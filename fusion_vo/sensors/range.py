@@ -20,13 +20,14 @@ from pydantic import Field, model_validator
 
 from fusion_vo.config.base import NonNegative, Positive, Section, Sigma
 from fusion_vo.errors import InputError
-from fusion_vo.measurements import RangeData, RangeSample
-from fusion_vo.sensors.imu import running_median
-from fusion_vo.sensors.model import MeasurementModel
-from fusion_vo.sensors.registry import Live, Sensor, Step, register
+from fusion_vo.measurements import MAX_RANGE_M, RangeData, RangeSample
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import ordered_fields
+from fusion_vo.recording.csvio import check_magnitude
+from fusion_vo.sensors.imu import running_median
+from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Readings
+from fusion_vo.sensors.registry import Live, Sensor, Step, register
 
 logger = logging.getLogger(__name__)
 
@@ -196,9 +197,19 @@ def _live_samples(data: RangeData) -> list:
     return [(t, RangeSample(t, d)) for t, d in zip(data.t, data.distance)]
 
 
+def read_range(recording, folder: str = "range0") -> RangeData:
+    """``range0/data.csv`` of a recording: ``timestamp [ns], distance [m]`` to the floor, each positive and within
+    the physical range."""
+    tab, path = recording.table(folder, 1, "range finder", "distance")
+    bad = np.flatnonzero(tab.values[:, 0] <= 0)
+    if len(bad):
+        raise InputError("distance must be positive", path, int(tab.lines[bad[0]]))
+    check_magnitude(tab, path, slice(0, 1), MAX_RANGE_M, "distance [m]")
+    return RangeData(tab.t, tab.values[:, 0])
+
+
 register(Sensor(
-    name="range", where="range0/", field="range", folder="range0", read=lambda recording: recording.range(),
-    has=lambda recording: recording.has_range(), config=("range", RangeNoise), grid=RangeGrid.empty, intervals=Step(40, add_intervals),
+    name="range", where="range0/", field="range", folder="range0", read=read_range, config=("range", RangeNoise), grid=RangeGrid.empty, intervals=Step(40, add_intervals),
     readings=readings, absolute_distance=lambda iv: bool(range_grid(iv).ok.any()),
     # the streaming buffers read as many neighbours around an interval as the gyro's spike check
     live=Live(_live_sample, lambda t, rows, fusion: RangeData(t, np.array(rows)), min_rows=1,

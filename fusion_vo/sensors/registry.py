@@ -284,7 +284,8 @@ class Sensor:
     read : callable or None
         ``read(recording) -> data``: the reader of that folder.
     has : callable or None
-        ``has(recording) -> bool``: whether the recording has the sensor (default: its folder exists).
+        ``has(recording) -> bool``: whether the recording has the sensor (default: its folder is present,
+        :meth:`fusion_vo.recording.Recording.has`).
     wanted : callable or None
         ``wanted(selected, present) -> bool``: whether to read it for the sensor names ``selected`` given what
         the recording has (``present``: name -> bool); default: when its own name is selected.
@@ -424,12 +425,13 @@ class Sensor:
         return data is not None and len(data) >= self.min_samples
 
     def present(self, recording) -> bool:
-        """Whether ``recording`` has this sensor's folder."""
+        """Whether ``recording`` has this sensor's folder (:meth:`fusion_vo.recording.Recording.has`: a broken link
+        too, which its reader then reports)."""
         if self.has is not None:
             return bool(self.has(recording))
-        if self.folder is None or not hasattr(recording, "path"):
+        if self.folder is None or not hasattr(recording, "has"):
             return False
-        return (recording.path / self.folder).exists()
+        return recording.has(self.folder)
 
     def is_wanted(self, selected, present: dict) -> bool:
         if self.wanted is not None:

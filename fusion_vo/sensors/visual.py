@@ -41,11 +41,11 @@ from typing import ClassVar
 
 import numpy as np
 
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import node_indices, outage_notes
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, State, Step, register
-from fusion_vo.measurements import SensorCount
-from fusion_vo.measurements.grid import node_indices, outage_notes
 
 
 @dataclass(frozen=True)
@@ -337,7 +337,7 @@ def _camera_height(value: float, sigma: float, iv) -> dict:
 VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale, derived=_camera_height)
 
 register(Sensor(
-    name="camera", where="cam0/ frames or visual increments", field="visual",
+    name="camera", where="cam0/ frames or visual increments", field="visual", folder="cam0",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
     absolute_heading=lambda iv: len(camera_grid(iv).i0) > 0,
     heading_reference=lambda increments: increments is None or any(v.ok for v in increments),

@@ -24,9 +24,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fusion_vo.config.sensor_files import WheelFile
+from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import PoseData, TwistData, TwistSample, WheelConfig, WheelData, WheelTicks
+from fusion_vo.measurements import (MAX_ANGULAR_RATE, MAX_SPEED, PoseData, TwistData, TwistSample, WheelConfig,
+                                    WheelData, WheelTicks)
+from fusion_vo.measurements import SensorCount
+from fusion_vo.measurements.grid import coverage, ordered_fields
+from fusion_vo.recording.csvio import check_magnitude
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
+from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import (DistanceSource, HeadingSource, Live, Sensor, Step, register,
                                         sensors as registered_sensors)
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
@@ -35,9 +42,6 @@ from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise
 )
 from fusion_vo.sensors.wheel_states import (CURVATURE, WHEEL_BASE_FACTOR, WHEEL_SCALE, curvature_observable,
                                             curvature_states)
-from fusion_vo.measurements import SensorCount
-from fusion_vo.measurements.grid import coverage, ordered_fields
-from fusion_vo.sensors.readings import ORDER, Readings
 
 logger = logging.getLogger(__name__)
 
@@ -502,9 +506,48 @@ def _live_twist_data(t, rows, fusion) -> TwistData:
     return TwistData(t, v[:, 0], v[:, 1], v[:, 2])
 
 
+# --------------------------------------------------------------------------- its streams in a recording
+#: tick counts are 32-bit counters, signed or unsigned (their changes are taken modulo 2^32): a count outside
+#: [-2^31, 2^32) is not one
+TICK_RANGE = (-(2.0**31), 2.0**32)
+
+
+def read_ticks(recording, folder: str = "wheel0") -> WheelData:
+    """``wheel0/data.csv`` of a recording: ``timestamp [ns], left, right`` cumulative encoder counts (integers, 32-bit
+    counters), with the calibration of :func:`wheel_config`."""
+    tab, path = recording.table(folder, 2, "wheel encoder", "tick counts", min_rows=2)
+    frac = np.abs(tab.values - np.round(tab.values))
+    if np.any(frac > 0):
+        i = int(np.flatnonzero(frac.max(axis=1) > 0)[0])
+        raise InputError("tick counts must be integers", path, int(tab.lines[i]))
+    out = ((tab.values < TICK_RANGE[0]) | (tab.values >= TICK_RANGE[1])).any(axis=1)
+    if np.any(out):
+        i = int(np.flatnonzero(out)[0])
+        raise InputError(f"tick count {tab.values[i][np.argmax(np.abs(tab.values[i]))]:.0f} is not a 32-bit counter "
+                         "(signed or unsigned)", path, int(tab.lines[i]))
+    counts = tab.values.astype(np.int64)
+    return WheelData(tab.t, counts[:, 0], counts[:, 1], wheel_config(recording, folder))
+
+
+def wheel_config(recording, folder: str = "wheel0") -> WheelConfig:
+    """The wheel calibration of ``wheel0/sensor.yaml`` (required, as are its four keys:
+    :class:`~fusion_vo.config.sensor_files.WheelFile`)."""
+    wheel = recording.sensor_file(folder, WheelFile, required=True)
+    return WheelConfig(wheel.ticks_per_revolution, wheel.wheel_radius_left, wheel.wheel_radius_right,
+                       wheel.wheel_base, wheel.radius_sigma)
+
+
+def read_twist(recording, folder: str = "odom0") -> TwistData:
+    """``odom0/data.csv`` of a recording (or another odometry's ``folder``, ``odom1`` ...): ``timestamp [ns], vx, vy
+    [m/s], yaw rate [rad/s]`` in the body frame."""
+    tab, path = recording.table(folder, 3, "odometry", "twist values")
+    check_magnitude(tab, path, slice(0, 2), MAX_SPEED, "speed [m/s]")
+    check_magnitude(tab, path, slice(2, 3), MAX_ANGULAR_RATE, "yaw rate [rad/s]")
+    return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
+
+
 register(Sensor(
-    name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0",
-    read=lambda recording: recording.wheel(), has=lambda recording: recording.has_wheel(),
+    name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0", read=read_ticks,
     pick=_pick_ticks, config=("wheel", WheelNoise),
     grid=WheelGrid.empty, intervals=Step(20, add_intervals), readings=readings,
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
@@ -513,8 +556,7 @@ register(Sensor(
     heading=(HEADING,), distance=(DISTANCE,),
 ))
 register(Sensor(
-    name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0",
-    read=lambda recording: recording.odom(), has=lambda recording: recording.has_odom(),
+    name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0", read=read_twist,
     wanted=lambda selected, present: (("wheel" in selected or "odom" in selected) and present.get("odom", False)
                                       and not ("wheel" in selected and present.get("wheel", False))),
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),

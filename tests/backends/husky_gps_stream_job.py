@@ -18,12 +18,13 @@ from fusion_vo.backends.pauses import samples_between
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
+from fusion_vo.sensors.gps import read_fixes
 
 
 def husky_parts(path):
     """The odometry and IMU of the first 120 s, the fixes of the first 60 s and those of the next 60 s."""
     rec = Recording(path)
-    gps = rec.gps()
+    gps = read_fixes(rec)
     t0 = float(gps.t[0])
     base = streams_from_recording(rec, None, ["odom", "imu"])
     part = base.replace(odom=samples_between(base.odom, -np.inf, t0 + 120.0),

@@ -19,6 +19,9 @@ from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsFix, ImuSample, PoseData, WheelTicks
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
+from fusion_vo.sensors.gps import read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_ticks
 from fusion_vo.simulation import simulate
 
 from husky_gps_stream_job import figures as husky_gps_figures, husky_parts, withheld_rms
@@ -93,7 +96,7 @@ def test_multipath_jump_is_rejected_counted_and_moves_nothing(fused, truth, name
 
 
 def test_counts_add_up_to_the_fixes(rec, fused):
-    n = len(rec.gps())
+    n = len(read_fixes(rec))
     for name in ("ekf", "gtsam"):
         c = fused.counts[name]["gps"]
         assert c.used + c.gated + c.missing == n, (name, c)
@@ -116,7 +119,7 @@ def test_drift_during_the_outage_is_larger_than_with_gps_and_bounded(fused, trut
 def _stream_with_gps(rec, gps_delay=0.0, backend="ekf", fixes=None, **kwargs):
     """The streaming EKF (or iSAM2) fed in arrival order, the fixes (default: the recording's) arriving
     ``gps_delay`` seconds after their time (every other one twice that: they also arrive out of order)."""
-    wheel, imu, gps = rec.wheel(), rec.imu(), rec.gps() if fixes is None else fixes
+    wheel, imu, gps = read_ticks(rec), read_imu(rec), read_fixes(rec) if fixes is None else fixes
     fusion = StreamingFusion(backend, sensors=["wheel", "imu", "gps"], wheel_config=wheel.config,
                              imu_T_BS=imu.T_BS, imu_noise=imu.noise, gps_lever_arm=gps.lever_arm, **kwargs)
     events = [(t, 0, i) for i, t in enumerate(wheel.t)] + [(t, 1, i) for i, t in enumerate(imu.t)]
@@ -148,7 +151,7 @@ def test_streaming_ekf_with_gps_ends_in_enu(rec, truth, ekf_streamed):
     assert counts.gated == 5
     # fed in time order, no fix is late: the one at the first node is kept for the alignment (it was counted late)
     assert counts.late == 0
-    assert counts.used + counts.gated + counts.missing + counts.late == len(rec.gps().t)
+    assert counts.used + counts.gated + counts.missing + counts.late == len(read_fixes(rec).t)
     assert any(f"ekf: gps {counts.used} fixes used, 5 rejected" in n for n in result.notes)
 
 
@@ -242,7 +245,7 @@ def test_replay_fuses_the_gps_it_is_given(rec, truth, tmp_path, backend):
         if "gps" in sensors:
             counts = info["counts"]["gps"]
             assert counts["gated"] == 5
-            assert counts["used"] + counts["gated"] + counts["missing"] + counts["late"] == len(rec.gps().t)
+            assert counts["used"] + counts["gated"] + counts["missing"] + counts["late"] == len(read_fixes(rec).t)
     assert ends["wheel,imu,gps"] < 2 * NOISE
     assert ends["wheel,imu"] > 1.0
 
@@ -331,7 +334,7 @@ def test_streaming_isam2_counts_every_fix_as_the_ekf_does(streamed, rec):
     assert counts["gtsam"].as_dict() == counts["ekf"].as_dict()
     c = counts["gtsam"]
     assert c.gated == 5  # the multipath jump
-    assert c.used + c.gated + c.missing + c.late == len(rec.gps().t)
+    assert c.used + c.gated + c.missing + c.late == len(read_fixes(rec).t)
     assert any(n.startswith(f"gtsam_online: gps {c.used} fixes used, 5 rejected") and "ENU at the datum" in n
                for n in streamed["gtsam"].notes)
     assert sum(n.startswith("gps: world frame re-expressed in ENU") for n in streamed["gtsam"].notes) == 1
@@ -369,7 +372,7 @@ def test_late_fixes_are_placed_on_isam2s_nodes(gps_streams, streamed, truth, rec
     result = fusion.finish()
     c, in_order = result.counts["gtsam_online"]["gps"], streamed["gtsam"].counts["gtsam_online"]["gps"]
     assert c.gated == 5 and c.late == in_order.late == 0
-    assert c.used + c.gated + c.missing + c.late == len(rec.gps().t)
+    assert c.used + c.gated + c.missing + c.late == len(read_fixes(rec).t)
     track = result.trajectories["gtsam_online"]
     assert _present_rms(track, truth) <= 0.7 * NOISE
     d = _difference(track, streamed["gtsam"].trajectories["gtsam_online"])
@@ -379,7 +382,7 @@ def test_late_fixes_are_placed_on_isam2s_nodes(gps_streams, streamed, truth, rec
 def test_fixes_later_than_the_history_are_counted_late(gps_streams, rec):
     result = _streamed(gps_streams, "gtsam", delay=1.5, history=1.0).finish()
     c = result.counts["gtsam_online"]["gps"]
-    assert c.late > 50 and c.used + c.gated + c.missing + c.late == len(rec.gps().t)
+    assert c.late > 50 and c.used + c.gated + c.missing + c.late == len(read_fixes(rec).t)
     assert any(n.startswith("late measurements not applied: ") and f"gps {c.late}" in n for n in result.notes)
 
 
@@ -457,7 +460,7 @@ def test_husky_cut_with_gps_from_the_command_line(tmp_path):
     assert main(["-q", "import-bag", str(bag), str(seq), "--static-tf", tf]) == 0
     assert main(["-q", "run", str(seq), "--out", str(out), "--sensors", "odom,imu,gps", "--backend", "all"]) == 0
     summary = json.loads((out / "summary.json").read_text())
-    n = len(Recording(seq).gps())
+    n = len(read_fixes(Recording(seq)))
     for name in ("ekf", "gtsam"):
         c = summary["fusion"]["counts"][name]["gps"]
         assert c["used"] + c["gated"] + c["missing"] == n and c["used"] > n // 2

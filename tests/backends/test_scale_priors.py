@@ -7,6 +7,7 @@ from backend_synth import streams_of
 
 from fusion_vo.backends import fuse
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+from fusion_vo.sensors.wheel import read_ticks
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +72,7 @@ def test_bad_sigma_in_sensor_yaml_names_the_key(tmp_path):
         "{ticks_per_revolution: 4096, wheel_radius_left: 0.05, wheel_radius_right: 0.05, wheel_base: 0.3,"
         " radius_sigma: -0.001}\n")
     with pytest.raises(InputError, match="radius_sigma"):
-        Recording(tmp_path).wheel()
+        read_ticks(Recording(tmp_path))
 
 
 

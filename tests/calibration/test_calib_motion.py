@@ -10,9 +10,10 @@ from fusion_vo.calibration.lever_arm import fixed_point, lever_arm_from_turn
 from fusion_vo.calibration.motion import frame_motions
 from fusion_vo.calibration.wheels import umbmark, wheels_from_groundtruth
 from fusion_vo.cli.main import main
-from fusion_vo.errors import InputError
 from fusion_vo.config.files import load_yaml
+from fusion_vo.errors import InputError
 from fusion_vo.recording import Recording
+from fusion_vo.sensors.wheel import read_ticks
 from fusion_vo.simulation import simulate
 
 #: a small camera seeing few frames: the wheel tests only need the encoders and the ground truth
@@ -81,14 +82,14 @@ def _assert_recovered(config, truth, tol=0.002):
 
 def test_wheels_from_groundtruth(squares):
     cw, _, truth = squares
-    r = wheels_from_groundtruth(cw.wheel(), cw.groundtruth())
+    r = wheels_from_groundtruth(read_ticks(cw), cw.groundtruth())
     _assert_recovered(r.config, truth)
     assert abs(r.config.wheel_base / 0.3 - 1) > 0.01  # the nominal value was off and has moved
 
 
 def test_umbmark(squares, tmp_path):
     cw, ccw, truth = squares
-    r = umbmark((cw.wheel(), cw.groundtruth()), (ccw.wheel(), ccw.groundtruth()))
+    r = umbmark((read_ticks(cw), cw.groundtruth()), (read_ticks(ccw), ccw.groundtruth()))
     _assert_recovered(r.config, truth)
     assert r.details["Ed"] == pytest.approx(truth["wheel_radius_right"] / truth["wheel_radius_left"], rel=0.002)
     out = tmp_path / "wheel.yaml"

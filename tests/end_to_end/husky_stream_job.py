@@ -15,6 +15,7 @@ from fusion_vo.backends.batch import streams_from_recording
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.recording import Recording
+from fusion_vo.sensors.gps import read_fixes
 
 
 def figures(path) -> dict:
@@ -23,7 +24,7 @@ def figures(path) -> dict:
     fusion = streaming_for(streams, "ekf")
     fusion.feed(time_ordered_messages(streams))
     result = fusion.finish()
-    errors = gps_errors(result.trajectories["ekf"], Recording(path).gps())
+    errors = gps_errors(result.trajectories["ekf"], read_fixes(Recording(path)))
     return {"notes": list(result.notes), "imu_t0": float(streams.imu.t[0]),
             "gps_rms_m": float(np.sqrt(np.mean(errors**2)))}
 

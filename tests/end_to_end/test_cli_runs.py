@@ -71,7 +71,7 @@ def test_wheel_and_imu_only_run_needs_no_camera(standard_recording, tmp_path):
     src = standard_recording("short")
     seq = tmp_path / "seq"
     shutil.copytree(src, seq, ignore=shutil.ignore_patterns("cam0"))
-    assert Recording(seq).streams() == ["imu", "wheel", "groundtruth"]
+    assert Recording(seq).streams() == ["imu0", "state_groundtruth_estimate0", "wheel0"]
     assert main(["run", str(seq), "--out", str(tmp_path / "out"), "--backend", "ekf"]) == 0
     ekf = read_tum(tmp_path / "out" / "ekf.tum")
     assert ekf.num_poses > 10 and np.all(np.isfinite(ekf.positions_xyz))

@@ -24,6 +24,7 @@ from fusion_vo.evaluation.metrics import gps_errors
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.recording import Recording
+from fusion_vo.sensors.gps import read_fixes
 
 from husky_stream_job import figures as husky_stream
 
@@ -118,7 +119,7 @@ def test_husky_against_gps(husky_log, ahead, tmp_path):
     assert not [n for n in summary["notes"] if "T_BS" in n]  # mounted as the launch file says
     assert [f["decision"] for f in summary["fusion"]["consistency"] if f["check"] == "mounting"] == ["kept"]
     # the AHRS departs from the gyro and the GPS course from about 190 s on; its first three minutes are kept
-    t0 = float(Recording(seq).gps().t[0])
+    t0 = float(read_fixes(Recording(seq)).t[0])
     assert 150.0 < episodes[0]["start"] - t0 < 195.0 and episodes[0]["end"] - t0 > 390.0, episodes
 
 
@@ -146,7 +147,7 @@ def test_husky_imu_imported_without_its_mounting_is_found_from_the_data(husky_pl
     assert sentence.startswith("imu0/sensor.yaml: T_BS contradicts the data (the body's up is the IMU's +y axis")
     assert "T_BS data: [0.0, 0.0, -1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]" in sentence
     assert '--static-tf "0.0 0.0 0.0 -1.5708 0.0 1.5708 base_link imu_link"' in sentence
-    gps = Recording(seq).gps()
+    gps = read_fixes(Recording(seq))
     for name in ("wheel", "ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
         t, xy, yaw = _read_tum(out / f"{name}.tum")
         rms = float(np.sqrt(np.mean(gps_errors(PoseData(t, np.column_stack([xy, yaw])), gps) ** 2)))

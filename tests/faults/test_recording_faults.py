@@ -11,6 +11,9 @@ import numpy as np
 import pytest
 
 from fault_tools import assert_error, cli, snapshot
+from fusion_vo.sensors.gps import read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_ticks, read_twist
 
 
 def _rows(path: Path) -> list[str]:
@@ -549,7 +552,7 @@ def test_a_misspelt_sensor_yaml_key_is_a_warning_naming_the_file_and_the_key_mea
                                                                               "rostopic": "/a"}))
     rec = Recording(recording)
     with caplog.at_level(logging.WARNING):
-        {"cam0": lambda: rec.camera, "wheel0": rec.wheel, "imu0": rec.imu}[folder]()
+        {"cam0": lambda: rec.camera, "wheel0": lambda: read_ticks(rec), "imu0": lambda: read_imu(rec)}[folder]()
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert warnings == [f"{recording / folder / 'sensor.yaml'}: unknown key '{key}' (did you mean '{known}'?)"]
 
@@ -567,7 +570,7 @@ def test_zero_coefficients_with_model_none_and_an_empty_imu_yaml_are_accepted(re
     rec = Recording(recording)
     with caplog.at_level(logging.WARNING):
         assert not rec.camera.has_distortion
-        imu = rec.imu()
+        imu = read_imu(rec)
     assert np.array_equal(imu.T_BS, np.eye(4)) and imu.noise == {}
     warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
     assert len(warnings) == 1 and warnings[0].startswith(f"{recording / 'imu0' / 'sensor.yaml'}: no T_BS")
@@ -618,7 +621,7 @@ def test_a_recorded_value_beyond_its_physical_range_names_the_file_and_line(reco
     path.write_text(header + "\n" + "\n".join(rows) + "\n")
     rec = Recording(recording)
     with pytest.raises(InputError) as info:
-        rec.odom() if stream == "odom0" else rec.gps()
+        read_twist(rec) if stream == "odom0" else read_fixes(rec)
     assert str(info.value).startswith(f"{path}:6: {expected}")
 
 

@@ -4,8 +4,10 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from fusion_vo.geometry.height import _inverse_bands, _solve, smooth_heights
+from fusion_vo.sensors.range import read_range
 
 RATE, READ_RATE, SIGMA_R = 20.0, 40.0, 0.0005
 
@@ -183,7 +185,7 @@ def test_live_visual_odometry_with_the_height_filter(tilted):
 
     rec = Recording(tilted)
     ate = ate_against(rec)
-    rng = rec.range()
+    rng = read_range(rec)
     geometry = GroundGeometry(rec.camera)
     runs = {}
     for label in ("newest reading", "filter"):
@@ -214,7 +216,7 @@ def test_a_spike_in_the_readings_does_not_scale_the_frames(tilted, tmp_path):
     data = seq / "range0" / "data.csv"
     lines = data.read_text().splitlines()
     frames = Recording(tilted).frame_times
-    readings = Recording(tilted).range().t
+    readings = read_range(Recording(tilted)).t
     i = int(np.argmin(np.abs(readings - frames[len(frames) // 2])))  # the reading nearest a frame
     stamp, _ = lines[i + 1].split(",")
     lines[i + 1] = f"{stamp},0.5"  # 0.4 m above the floor's 0.1 m
@@ -262,6 +264,9 @@ def test_a_stream_takes_the_same_scale_priors_as_a_batch_run(tilted, use_range):
     ate = ate_against(rec)
     vo = run_visual_odometry(rec, OdometryConfig(use_range=use_range))
     streams = streams_from_recording(rec, vo, ["camera", "wheel", "imu"] + (["range"] if use_range else []))
+    # the mount's stated height uncertainty reaches the fusion (the file states max(|error|, 0.1 mm) x height)
+    stated = yaml.safe_load((tilted / "cam0" / "sensor.yaml").read_text())["height_sigma"]
+    assert streams.camera_height_sigma == stated > 0
     offline = backends.fuse(streams, "ekf")
     fusion = streaming_for(streams, "ekf")
     fusion.feed(time_ordered_messages(streams))

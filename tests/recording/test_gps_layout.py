@@ -11,6 +11,7 @@ import yaml
 from fusion_vo.errors import InputError
 from fusion_vo.recording import Recording
 from fusion_vo.recording.gps import DEFAULT_HORIZONTAL_SIGMA, HEADER, enu_to_geodetic, format_rows
+from fusion_vo.sensors.gps import read_fixes
 
 DATUM = (47.3977, 8.5456, 488.0)
 
@@ -35,8 +36,8 @@ def test_fixes_are_read_in_enu_with_their_covariance_and_lever_arm(tmp_path):
               {"T_BS": {"cols": 4, "rows": 4, "data": T.ravel().tolist()}, "horizontal_sigma_m": 1.5,
                "datum": {"latitude": DATUM[0], "longitude": DATUM[1], "altitude": DATUM[2]}})
     rec = Recording(tmp_path)
-    assert "gps" in rec.streams()
-    gps = rec.gps()
+    assert "gps0" in rec.streams()
+    gps = read_fixes(rec)
     np.testing.assert_allclose(gps.enu, enu + [5.0, 6.0, 0.0], atol=1e-3)  # configured datum: not the first fix
     np.testing.assert_allclose(gps.covariance[0], [[0.04, 0.01], [0.01, 0.09]])
     np.testing.assert_allclose(gps.covariance[2], np.eye(2) * 1.5**2)  # covariance unknown: the default sigma
@@ -60,7 +61,7 @@ def test_no_fix_nan_and_zero_covariance_are_skipped_and_counted(tmp_path):
     fields[1] = "nan"                   # NaN latitude on line 7 (the 6th fix)
     text[6] = ",".join(fields)
     (tmp_path / "gps0" / "data.csv").write_text("\n".join(text) + "\n")
-    gps = Recording(tmp_path).gps()
+    gps = read_fixes(Recording(tmp_path))
     assert gps.skipped == {"no fix": 2, "NaN": 2, "zero covariance": 1}
     assert len(gps) == 2
     np.testing.assert_allclose(gps.t, [1.2, 1.4])
@@ -72,7 +73,7 @@ def test_no_fix_nan_and_zero_covariance_are_skipped_and_counted(tmp_path):
 
 def test_missing_sensor_yaml_uses_the_documented_defaults_and_says_so(tmp_path):
     write_gps(tmp_path, [[0, 0, 0], [1, 1, 0]], [0, 0], [0, 0], np.zeros((2, 3)), None)
-    gps = Recording(tmp_path).gps()
+    gps = read_fixes(Recording(tmp_path))
     assert gps.horizontal_sigma == DEFAULT_HORIZONTAL_SIGMA
     np.testing.assert_allclose(gps.covariance[1], np.eye(2) * DEFAULT_HORIZONTAL_SIGMA**2)
     np.testing.assert_allclose(gps.lever_arm, 0.0)
@@ -84,7 +85,7 @@ def test_six_column_files_of_older_imports_are_read(tmp_path):
     (tmp_path / "gps0" / "data.csv").write_text(
         "#timestamp [ns],latitude [deg],longitude [deg],altitude [m],e [m],n [m],u [m]\n"
         f"100,{DATUM[0]},{DATUM[1]},{DATUM[2]},0,0,0\n200,{DATUM[0] + 1e-5},{DATUM[1]},{DATUM[2]},0,1.11,0\n")
-    gps = Recording(tmp_path).gps()
+    gps = read_fixes(Recording(tmp_path))
     assert gps.enu[1, 1] == pytest.approx(1.112, abs=0.01)
 
 
@@ -97,14 +98,14 @@ def test_six_column_files_of_older_imports_are_read(tmp_path):
 def test_bad_sensor_yaml_names_the_file_and_key(tmp_path, yaml_data, message):
     write_gps(tmp_path, [[0, 0, 0]], [0], [0], np.zeros((1, 3)), yaml_data)
     with pytest.raises(InputError, match=message) as err:
-        Recording(tmp_path).gps()
+        read_fixes(Recording(tmp_path))
     assert err.value.path == tmp_path / "gps0" / "sensor.yaml"
 
 
 def test_every_fix_unusable_is_an_error_naming_the_file(tmp_path):
     write_gps(tmp_path, [[0, 0, 0], [1, 0, 0]], [-1, -1], [0, 0], np.zeros((2, 3)), {})
     with pytest.raises(InputError, match="no usable GPS fix") as err:
-        Recording(tmp_path).gps()
+        read_fixes(Recording(tmp_path))
     assert err.value.path == tmp_path / "gps0" / "data.csv"
 
 
@@ -113,5 +114,5 @@ def test_malformed_row_names_the_line(tmp_path):
     p = tmp_path / "gps0" / "data.csv"
     p.write_text(p.read_text() + "1600000000,abc,8,400,0,0,0,0,0,0,0,0\n")
     with pytest.raises(InputError, match="'abc' is not a number") as err:
-        Recording(tmp_path).gps()
+        read_fixes(Recording(tmp_path))
     assert err.value.line == 4

@@ -9,10 +9,13 @@ import yaml
 
 from fusion_vo.cli.main import main
 from fusion_vo.errors import InputError
-from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.evaluation.io import read_tum
 from fusion_vo.evaluation.metrics import yaw_of
+from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.recording import Recording, write_tum
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.range import read_range
+from fusion_vo.sensors.wheel import read_ticks, read_twist
 
 T0 = 1_600_000_000_000_000_000
 
@@ -54,16 +57,16 @@ def make_recording(root, n_frames=4, size=(64, 48)):
 
 def test_reads_every_stream(tmp_path):
     rec = Recording(make_recording(tmp_path / "seq"))
-    assert rec.streams() == ["camera", "imu", "wheel", "odom", "range", "groundtruth"]
+    assert rec.streams() == ["cam0", "imu0", "odom0", "range0", "state_groundtruth_estimate0", "wheel0"]
     assert len(rec) == 4 and np.allclose(np.diff(rec.frame_times), 0.05)
     frames = list(rec.frames())
     assert [f.index for f in frames] == [0, 1, 2, 3]
     assert all(f.image is not None and f.image.shape == (48, 64) and f.error is None for f in frames)
-    imu = rec.imu()
+    imu = read_imu(rec)
     assert imu.gyro.shape == (10, 3) and imu.orientation is None and imu.noise["gyroscope_noise_density"] == 1e-4
-    wheel = rec.wheel()
+    wheel = read_ticks(rec)
     assert wheel.left.tolist() == [2147483600, -2147483600] and wheel.config.wheel_base == 0.3
-    assert rec.odom().wz[0] == 0.2 and rec.range().distance[1] == 0.11
+    assert read_twist(rec).wz[0] == 0.2 and read_range(rec).distance[1] == 0.11
     gt = rec.groundtruth()
     assert gt.xyyaw[0] == pytest.approx([1.0, 2.0, 0.5])
 
@@ -119,7 +122,7 @@ def test_malformed_rows_name_file_and_line(tmp_path, rel, content, message, line
     root = make_recording(tmp_path / "seq")
     (root / rel).write_text(content)
     rec = Recording(root)
-    reader = {"imu0": rec.imu, "wheel0": rec.wheel, "cam0": lambda: rec.frame_times,
+    reader = {"imu0": lambda: read_imu(rec), "wheel0": lambda: read_ticks(rec), "cam0": lambda: rec.frame_times,
               "state_groundtruth_estimate0": rec.groundtruth}[rel.split("/")[0]]
     with pytest.raises(InputError) as err:
         reader()
@@ -131,24 +134,52 @@ def test_missing_calibration_key(tmp_path):
     root = make_recording(tmp_path / "seq")
     (root / "wheel0" / "sensor.yaml").write_text("ticks_per_revolution: 4096\nwheel_base: 0.3\n")
     with pytest.raises(InputError, match="missing key 'wheel_radius_left'"):
-        Recording(root).wheel()
+        read_ticks(Recording(root))
     (root / "cam0" / "sensor.yaml").write_text("resolution: [64, 48]\n")
     with pytest.raises(InputError, match="missing key 'intrinsics'"):
         Recording(root).camera
+
+
+def test_a_stream_of_any_folder_is_read_with_the_checks_every_stream_gets(tmp_path):
+    """A registered sensor's own folder (``compass0/``) is listed and read through ``Recording.table``: its rows get
+    the checks of the built-in streams, each a one-line error naming the file and the line."""
+    root = make_recording(tmp_path / "seq")
+    rec = Recording(root)
+    assert not rec.has("compass0") and "compass0" not in rec.streams()
+    with pytest.raises(InputError, match="this recording has no compass stream") as info:
+        rec.table("compass0", 1, "compass", "heading")
+    assert info.value.path == root
+    (root / "compass0").mkdir()
+    data = root / "compass0" / "data.csv"
+    data.write_text(f"#timestamp [ns],yaw [rad]\n{T0},0.1\n{T0 + 10**8},0.2\n")
+    tab, path = Recording(root).table("compass0", 1, "compass", "heading")
+    assert path == data and np.allclose(tab.values[:, 0], [0.1, 0.2]) and np.allclose(np.diff(tab.t), 0.1)
+    assert "compass0" in Recording(root).streams()
+    for rows, message, line in ((f"{T0},0.1\n{T0},0.2\n", "duplicate timestamp", 3),
+                                (f"{T0},0.1\n{T0 + 1},nan\n", "NaN", 3),
+                                (f"{T0},0.1,7\n", "1 heading, found 3 fields", 2)):
+        data.write_text("#h\n" + rows)
+        with pytest.raises(InputError, match=message) as info:
+            Recording(root).table("compass0", 1, "compass", "heading")
+        assert (info.value.path, info.value.line) == (data, line)
+    data.write_text(f"#h\n{T0},0.1\n")
+    with pytest.raises(InputError, match="compass") as info:
+        Recording(root).table("compass0", 1, "compass", "heading", min_rows=2)
+    assert info.value.path == data
 
 
 def test_missing_stream_is_a_clear_error(tmp_path):
     root = make_recording(tmp_path / "seq")
     (root / "imu0" / "data.csv").unlink()
     with pytest.raises(InputError, match="file not found") as info:  # imu0/ is there: a broken stream
-        Recording(root).imu()
+        read_imu(Recording(root))
     assert info.value.path == root / "imu0" / "data.csv"
-    assert "imu" in Recording(root).streams()
+    assert "imu0" in Recording(root).streams()
     (root / "imu0" / "sensor.yaml").unlink()
     (root / "imu0").rmdir()
     with pytest.raises(InputError, match="no IMU stream"):
-        Recording(root).imu()
-    assert "imu" not in Recording(root).streams()
+        read_imu(Recording(root))
+    assert "imu0" not in Recording(root).streams()
 
 
 def test_tum_round_trip(tmp_path):

@@ -29,6 +29,9 @@ from fusion_vo.recording.rosbag import (
     parse_static_tf,
     ypr_to_matrix,
 )
+from fusion_vo.sensors.gps import read_fixes
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_twist
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
 JACKAL = DATA / "test2.bag"
@@ -81,7 +84,7 @@ def test_jackal_imu_has_the_ahrs_quaternion_and_reads_back(jackal):
     header = (out / "imu0" / "data.csv").read_text().splitlines()[0]
     assert header.endswith("q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []")
     rec = Recording(out)
-    imu = rec.imu()
+    imu = read_imu(rec)
     assert imu.orientation is not None and imu.orientation.shape == (3061, 4)
     assert np.allclose(np.linalg.norm(imu.orientation, axis=1), 1.0, atol=1e-6)
     assert np.allclose(imu.T_BS, np.eye(4))  # the messages are in base_link already
@@ -139,18 +142,18 @@ def test_husky_gps_local_enu_and_imu_mounting(husky):
     assert fixes.shape[1] == 12
     np.testing.assert_allclose(fixes[:, 9:12], cov[: len(fixes)], rtol=1e-5)
     np.testing.assert_array_equal(fixes[:, 7], [m.status.status for m in msgs][: len(fixes)])
-    data = Recording(out).gps()
+    data = read_fixes(Recording(out))
     assert len(data) == 30 and data.skipped == {}
     np.testing.assert_allclose(data.covariance[:, 0, 0], cov[:30, 0], rtol=1e-5)
     np.testing.assert_allclose(data.enu, fixes[:, 4:7], atol=1e-3)
     # the GPS track and the wheel odometry agree on the distance travelled (about 1 m/s for 12 s)
-    odom = Recording(out).odom()
+    odom = read_twist(Recording(out))
     wheel_dist = float(np.sum(odom.vx[:-1] * np.diff(odom.t)))
     gps_path = float(np.sum(np.hypot(*np.diff(fixes[:, 4:6], axis=0).T)))
     assert 9.0 < wheel_dist < 13.0
     assert gps_path == pytest.approx(wheel_dist, rel=0.25)
     # with the launch file's static transform, gravity and the yaw rate land on the body's z axis
-    imu = Recording(out).imu()
+    imu = read_imu(Recording(out))
     acc_b = imu.accel @ imu.T_BS[:3, :3].T
     gyro_b = imu.gyro @ imu.T_BS[:3, :3].T
     assert np.mean(acc_b[:, 2]) == pytest.approx(9.8, abs=0.4)
@@ -162,7 +165,7 @@ def test_husky_gps_local_enu_and_imu_mounting(husky):
 def test_husky_without_static_tf_notes_identity(tmp_path):
     summary = import_bag(HUSKY, tmp_path / "seq")
     assert any("imu0 T_BS set to the identity" in n for n in summary.notes)
-    assert np.allclose(Recording(tmp_path / "seq").imu().T_BS, np.eye(4))
+    assert np.allclose(read_imu(Recording(tmp_path / "seq")).T_BS, np.eye(4))
 
 
 # ------------------------------------------------------------------------------------ geometry
@@ -336,7 +339,7 @@ def test_ros2_bag_with_camera_imu_gps(ros2_bag, tmp_path):
     assert model.distortion_model == "radial-tangential"
     assert np.allclose(model.T_BS[:3, 3], [0.2, 0.0, 0.1])
     assert np.allclose(model.T_BS[:3, :3], np.diag([1.0, -1.0, -1.0]))
-    imu_data = rec.imu()
+    imu_data = read_imu(rec)
     assert imu_data.orientation is None  # orientation_covariance[0] == -1
     assert imu_data.gyro[-1, 2] == pytest.approx(99.0)  # the zero-stamped sample sorted by its bag time
     assert imu_data.gyro[150, 2] == pytest.approx(15.0)

@@ -21,7 +21,6 @@ from pydantic import Field
 
 from fusion_vo.backends.result import SensorCount
 from fusion_vo.config.base import Section, Sigma
-from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.model import MeasurementModel
@@ -110,19 +109,10 @@ def compass_readings(model):
 
 
 def read_compass(recording) -> CompassData:
-    """``compass0/data.csv`` of a recording: ``timestamp [ns], yaw [rad]`` per row."""
-    path = recording.path / "compass0" / "data.csv"
-    rows = []
-    for number, line in enumerate(path.read_text().splitlines(), 1):
-        if not line.strip() or line.startswith("#"):
-            continue
-        try:
-            t_ns, yaw = (float(v) for v in line.split(","))
-        except ValueError:
-            raise InputError("expected 'timestamp [ns],yaw [rad]'", path, number) from None
-        rows.append((t_ns * 1e-9, yaw))
-    data = np.array(rows, dtype=np.float64).reshape(-1, 2)
-    return CompassData(data[:, 0], data[:, 1])
+    """``compass0/data.csv`` of a recording: ``timestamp [ns], yaw [rad]`` per row, with the checks every stream's
+    rows get (:meth:`fusion_vo.recording.Recording.table`)."""
+    tab, _ = recording.table("compass0", 1, "compass", "heading [rad]")
+    return CompassData(tab.t, tab.values[:, 0])
 
 
 COMPASS_SENSOR = Sensor(name="compass", where="compass0/", config=("compass", CompassNoise),

@@ -13,6 +13,8 @@ import pytest
 from fusion_vo.backends import SensorStreams
 from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
+from fusion_vo.sensors.imu import read_imu
+from fusion_vo.sensors.wheel import read_twist
 
 from instances_job import CHAIN_MASKS, CORRUPT, IMU1_BIAS, make, twist
 
@@ -237,7 +239,7 @@ def test_import_bag_writes_a_second_odometry_and_imu(tmp_path):
         assert (tmp_path / "two" / f"{kind}0" / "data.csv").read_bytes() == \
             (tmp_path / "two" / f"{kind}1" / "data.csv").read_bytes()
     rec = Recording(tmp_path / "two")
-    assert len(rec.odom("odom1")) == 3060 and len(rec.imu("imu1").t) == 3061
+    assert len(read_twist(rec, "odom1")) == 3060 and len(read_imu(rec, "imu1").t) == 3061
     import_bag(bag, tmp_path / "one", imu_topic=imu, odom_topic=[odom])
     assert sorted(p.name for p in (tmp_path / "one").iterdir() if p.is_dir()) == ["imu0", "odom0"]
     with pytest.raises(InputError, match="--odom-topic given 11 times"):

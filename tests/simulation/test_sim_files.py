@@ -60,7 +60,7 @@ def test_layout_is_complete(generate):
     assert len(list((root / "cam0/data").iterdir())) == len(frames)
     # the project's own reader sees every stream, and the camera written is the one simulated
     rec = Recording(root)
-    assert rec.streams() == ["camera", "imu", "wheel", "odom", "range", "groundtruth"]
+    assert rec.streams() == ["cam0", "imu0", "odom0", "range0", "state_groundtruth_estimate0", "wheel0"]
     cam = read_camera(root / "cam0/sensor.yaml")
     assert (cam.width, cam.height, cam.fu, cam.cu) == (80, 48, 60.0, 39.5)
     np.testing.assert_allclose(cam.T_BS, camera_mount(0.25, 0.10), atol=1e-12)

@@ -10,6 +10,7 @@ import yaml
 
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
+from fusion_vo.sensors.gps import has_fixes, read_fixes
 from fusion_vo.simulation import SimulationOptions
 from fusion_vo.simulation.standard import STANDARD
 
@@ -24,7 +25,7 @@ def rec(generate):
 
 
 def test_fixes_are_the_antenna_in_enu_with_the_stated_noise(rec):
-    gps = rec.gps()
+    gps = read_fixes(rec)
     gt = rec.groundtruth()
     np.testing.assert_allclose(gps.lever_arm, [-0.3, 0.2, 0.5])
     assert gps.horizontal_sigma == 0.05 and gps.skipped == {}
@@ -41,7 +42,7 @@ def test_fixes_are_the_antenna_in_enu_with_the_stated_noise(rec):
 
 
 def test_outage_leaves_no_fix_and_the_rate_holds_elsewhere(rec):
-    t = rec.gps().t - 1.6e9
+    t = read_fixes(rec).t - 1.6e9
     assert not np.any((t >= 10.0) & (t <= 15.0))
     gaps = np.diff(t)
     assert np.max(gaps) == pytest.approx(5.4, abs=1e-5)  # 9.8 s -> 15.2 s: both ends are inside
@@ -49,7 +50,7 @@ def test_outage_leaves_no_fix_and_the_rate_holds_elsewhere(rec):
 
 
 def test_alignment_helper_recovers_the_world_heading_from_the_fixes(rec):
-    gps = rec.gps()
+    gps = read_fixes(rec)
     gt = rec.groundtruth()
     fit = gps_model.align_to_fixes(gt.t, gt.xyyaw, gps, t_end=gt.t[0] + 19.0)  # before the jump
     assert fit is not None and fit.n == 70
@@ -71,7 +72,7 @@ def test_truth_and_sensor_yaml(rec):
 
 
 def test_without_the_option_no_gps_is_written(generate):
-    assert not Recording(generate("short", "random", 0, duration=2.0)).has_gps()
+    assert not has_fixes(Recording(generate("short", "random", 0, duration=2.0)))
 
 
 @pytest.mark.parametrize("options", [{"gps_outages": [[5.0]]}, {"gps_jumps": [[3.0, 2.0, 1.0, 1.0]]},
