@@ -67,7 +67,6 @@ GROUNDTRUTH = "state_groundtruth_estimate0"
 BIT_DEPTHS = (10, 12, 14, 16)
 
 
-
 @dataclass
 class Frame:
     """One camera frame: its index (row in ``cam0/data.csv``), time [s], grey image or ``None``."""
@@ -112,9 +111,13 @@ class Recording:
         return os.path.lexists(self.path / folder)
 
     def streams(self) -> list[str]:
-        """The folders present that hold a stream (a ``data.csv``, or a folder whose ``data.csv`` is missing),
-        sorted by name: ``cam0``, ``imu0``, ``state_groundtruth_estimate0`` ..."""
-        return sorted(p.name for p in self.path.iterdir() if p.name[-1:].isdigit() and (p.is_dir() or p.is_symlink()))
+        """The stream folders present, sorted: the folders (or links) whose name ends in a digit, as the layout
+        names them (``cam0``, ``imu0``, ``state_groundtruth_estimate0``, a plugin's ``compass0`` ...)."""
+        try:
+            entries = list(self.path.iterdir())
+        except OSError as exc:
+            raise InputError(f"cannot list the recording folder ({exc.strerror})", self.path) from None
+        return sorted(p.name for p in entries if p.name[-1:].isdigit() and (p.is_dir() or p.is_symlink()))
 
     def data_file(self, folder: str, what: str) -> Path:
         """``FOLDER/data.csv``, checked to be a readable file; an :class:`InputError` naming it (or the recording,
