@@ -69,9 +69,6 @@ from fusion_vo.recording.csvio import read_table
 from fusion_vo.recording.reader import GROUNDTRUTH, read_groundtruth_csv
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.gps import has_fixes, read_fixes
-from fusion_vo.sensors.imu import read_imu
-from fusion_vo.sensors.range import read_range
-from fusion_vo.sensors.wheel import read_ticks, read_twist
 
 log = logging.getLogger(__name__)
 
@@ -129,7 +126,6 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     registry.ensure(config.sensors or ())
     known = registry.sensors()
     present = {s.name: s.present(rec) for s in known}
-    present["camera"] = rec.has("cam0")
     if config.sensors is None:
         chosen = [s for s in ("camera", "wheel", "imu") if present[s]]
         if not present["wheel"] and present["odom"]:
@@ -225,26 +221,21 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             except (InputError, TypeError, ValueError) as exc:
                 raise _config_error(exc, config_path, name) from None
         note("camera", t_ns * 1e-9, "cam0")
-    if "wheel" in sensors and rec.has("wheel0"):
-        note("wheel", read_ticks(rec).t, "wheel0")
-    if ("odom" in sensors or ("wheel" in sensors and not rec.has("wheel0"))) and rec.has("odom0"):
-        note("odom", read_twist(rec).t, "odom0")
-    if "imu" in sensors:
-        note("imu", read_imu(rec).t, "imu0")
-    if rec.has("range0") and ("range" in sensors or ("camera" in sensors and odometry.use_range)):
-        note("range", read_range(rec).t, "range0")
-    for name in sensors:  # a sensor registered outside the library: read by its own reader, now
-        sensor = registry.get(name)
-        if name not in registry.BUILTIN_ORDER and sensor.read is not None:
+    known = registry.sensors()
+    present = {s.name: s.present(rec) for s in known}
+    for sensor in known:  # every stream the run reads, by its sensor's reader, now (the camera's frames above)
+        if sensor.name == "camera" or sensor.read is None:
+            continue
+        scales_frames = sensor.name == "range" and "camera" in sensors and odometry.use_range and present["range"]
+        if sensor.is_wanted(sensors, present) or scales_frames:
             data = sensor.read(rec)
-            t = np.asarray(getattr(data, "t", ()), dtype=np.float64)
-            note(name, t, sensor.folder or name)
+            note(sensor.name, np.asarray(getattr(data, "t", ()), dtype=np.float64), sensor.folder or sensor.name)
 
     for name, path in files.items():  # a jump of more than a day inside one stream: another clock
         step = np.diff(times[name])
         if len(step) and step.max() > MAX_JUMP_S:
             i = int(np.argmax(step))
-            line = _line_of(rec, name, i + 1)
+            line = _line_of(rec, name, float(times[name][i + 1]))
             raise InputError(f"timestamp jumps by {step[i]:.0f} s from the row before; all rows of a stream must "
                              "be on the recording's clock", path, line)
     names = list(spans)
@@ -271,14 +262,19 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     return RunInputs(rec, sensors, spans, groundtruth, times)
 
 
-def _line_of(rec: Recording, name: str, row: int) -> int | None:
+def _line_of(rec: Recording, name: str, t: float) -> int | None:
+    """The line of ``name``'s ``data.csv`` whose timestamp is ``t`` [s] (a reader may have skipped rows, as GPS
+    skips unusable fixes), or None."""
     if name == "camera":
-        return int(rec._frames_index()[2][row])
-    folder = registry.get(name).folder
-    try:
-        return int(read_table(rec.path / folder / "data.csv", (1, 64), "values").lines[row])
-    except (InputError, IndexError):
-        return None
+        t_ns, _, lines = rec._frames_index()
+    else:
+        try:
+            tab = read_table(rec.path / registry.get(name).folder / "data.csv", (1, 64), "values", allow_nan=True)
+        except InputError:
+            return None
+        t_ns, lines = tab.t_ns, tab.lines
+    rows = np.flatnonzero(np.abs(t_ns * 1e-9 - t) < 1e-9)
+    return int(lines[rows[0]]) if len(rows) else None
 
 
 def _span(span: tuple[float, float]) -> str:

@@ -472,6 +472,35 @@ def test_clock_error_names_both_streams_and_their_spans(recording, tmp_path, cap
     assert_error(status, err, "wheel", "imu", "do not overlap", "s to ")
 
 
+def _gps_with_a_jump(rec: Path, jump_s: float) -> int:
+    """``gps0/``: 20 fixes over the wheels' span, the fifth unusable (no fix: skipped by the reader) and those from
+    the tenth on ``jump_s`` later; the line of the tenth fix."""
+    from fusion_vo.recording.gps import HEADER, enu_to_geodetic, format_rows
+
+    t_wheel = np.loadtxt(rec / "wheel0" / "data.csv", delimiter=",", comments="#", usecols=0, dtype=np.int64)
+    t_ns = np.linspace(t_wheel[0], t_wheel[-1], 20).astype(np.int64)
+    t_ns[9:] += int(jump_s * 1e9)
+    enu = np.zeros((len(t_ns), 3))
+    status = np.zeros(len(t_ns), int)
+    status[4] = -1
+    rows = format_rows(t_ns, enu_to_geodetic(enu, (45.0, 7.0, 200.0)), enu, status, np.full(len(t_ns), 2),
+                       np.tile([0.25, 0.0, 0.25], (len(t_ns), 1)))
+    (rec / "gps0").mkdir()
+    (rec / "gps0" / "data.csv").write_text("\n".join([HEADER, *rows]) + "\n")
+    return 11  # the header is line 1
+
+
+def test_fixes_on_another_clock_are_named_with_their_line_as_every_stream_is(recording, tmp_path, capsys):
+    """GPS, read by its sensor's reader as every stream is, gets the checks of the run's inputs: a jump of two days
+    inside ``gps0/data.csv`` names the file and the line of the fix after the jump (counted in the file's rows, not
+    in the usable fixes the reader keeps), before any work."""
+    line = _gps_with_a_jump(recording, 2 * 86400.0)
+    status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--sensors", "wheel,gps",
+                         "--backend", "none", "--no-evaluate")
+    assert_error(status, err, f"gps0/data.csv:{line}", "timestamp jumps by 172800 s")
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_stream_not_used_may_be_broken(recording, tmp_path, capsys):
     imu_symlink_loop(recording)
     status, _, err = cli(capsys, "run", recording, "--out", tmp_path / "out", "--sensors", "wheel",
