@@ -50,4 +50,9 @@ def main(module_path: Path, out: Path) -> None:
 
 
 if __name__ == "__main__":
+    # run as a script, tests/ comes first on the path, and its folders are named as the project's packages
+    # (tests/frontends): the packages are imported first, from where they are installed
+    sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != TESTS]
+    importlib.import_module("frontends")
+    importlib.import_module("fusion_vo")
     main(Path(sys.argv[1]).resolve(), Path(sys.argv[2]))

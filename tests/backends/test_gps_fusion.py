@@ -6,6 +6,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -24,6 +26,7 @@ from fusion_vo.sensors.imu import read_imu
 from fusion_vo.sensors.wheel import read_ticks
 from fusion_vo.simulation import simulate
 
+from ahead_job import ahead_jobs
 from husky_gps_stream_job import figures as husky_gps_figures, husky_parts, withheld_rms
 
 TINY = {"width": 80, "height": 48, "fu": 60.0, "fv": 60.0, "cu": 39.5, "cv": 23.5, "supersample": 1, "camera_rate": 2.0}
@@ -37,10 +40,14 @@ OPTIONS = {"duration": 24.0, "gps": True, "gps_rate": 5.0, "gps_noise": NOISE, "
            "gps_origin": ORIGIN.tolist()}
 
 
+def _simulated(folder) -> Recording:
+    """The 24 s drive with GPS (an outage and a multipath jump) every test of this module reads."""
+    return Recording(simulate(folder, profile="random", seed=21, **{**TINY, **OPTIONS}))
+
+
 @pytest.fixture(scope="module")
 def rec(tmp_path_factory):
-    return Recording(simulate(tmp_path_factory.mktemp("gpsfuse") / "rec", profile="random", seed=21,
-                              **{**TINY, **OPTIONS}))
+    return _simulated(tmp_path_factory.mktemp("gpsfuse") / "rec")
 
 
 @pytest.fixture(scope="module")
@@ -227,27 +234,42 @@ def test_streaming_ekf_reports_the_outage_as_a_batch_run_does(ekf_streamed, fuse
     assert abs(drift - b_drift) < 0.3 * b_drift, (drift, b_drift)
 
 
+def _replays() -> dict:
+    """``fusion-vo replay --sensors wheel,imu,gps`` and ``--sensors wheel,imu`` of the drive, each backend: per
+    backend and sensors, the info ``replay.json`` holds, the distance of the track's end from the truth [m], and
+    the number of fixes in the recording."""
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = _simulated(Path(tmp) / "rec")
+        gt = rec.groundtruth()
+        truth = PoseData(gt.t, gps_model.Alignment(math.radians(HEADING), ORIGIN, 0.0, 0).apply(gt.xyyaw))
+        runs = {"fixes": len(read_fixes(rec).t)}
+        for backend in ("ekf", "gtsam"):
+            for sensors in ("wheel,imu,gps", "wheel,imu"):
+                out = Path(tmp) / f"{backend}_{sensors.count(',')}"
+                code = main(["-q", "replay", str(rec.path), "--out", str(out), "--speed", "0", "--backend", backend,
+                             "--sensors", sensors])
+                info = json.loads((out / "replay.json").read_text()) if code == 0 else None
+                track = read_tum_poses(out / f"stream_{backend}.tum") if code == 0 else None
+                end = None if track is None else float(np.hypot(*(track.xyz[-1, :2] - [
+                    np.interp(track.t[-1], truth.t, truth.xyyaw[:, k]) for k in (0, 1)])))
+                runs[backend, sensors] = {"code": code, "info": info, "end": end}
+    return runs
+
+
 @pytest.mark.parametrize("backend", ["ekf", "gtsam"])
-def test_replay_fuses_the_gps_it_is_given(rec, truth, tmp_path, backend):
+def test_replay_fuses_the_gps_it_is_given(made_ahead, backend):
     """``fusion-vo replay --sensors wheel,imu,gps`` streams the fixes: the live track ends in ENU at the truth,
     every fix is counted, the 5 jumped ones gated; without GPS the track stays in the start frame, metres off."""
-    ends = {}
+    runs = made_ahead("replays")
     for sensors in ("wheel,imu,gps", "wheel,imu"):
-        out = tmp_path / f"{backend}_{sensors.count(',')}"
-        assert main(["-q", "replay", str(rec.path), "--out", str(out), "--speed", "0", "--backend", backend,
-                     "--sensors", sensors]) == 0
-        info = json.loads((out / "replay.json").read_text())
-        assert info["sensors"] == sensors.split(",")
-        track = read_tum_poses(out / f"stream_{backend}.tum")
-        t_end, end = track.t[-1], track.xyz[-1, :2]
-        true_end = [np.interp(t_end, truth.t, truth.xyyaw[:, k]) for k in (0, 1)]
-        ends[sensors] = float(np.hypot(*(end - true_end)))
-        if "gps" in sensors:
-            counts = info["counts"]["gps"]
-            assert counts["gated"] == 5
-            assert counts["used"] + counts["gated"] + counts["missing"] + counts["late"] == len(read_fixes(rec).t)
-    assert ends["wheel,imu,gps"] < 2 * NOISE
-    assert ends["wheel,imu"] > 1.0
+        run = runs[backend, sensors]
+        assert run["code"] == 0
+        assert run["info"]["sensors"] == sensors.split(",")
+    counts = runs[backend, "wheel,imu,gps"]["info"]["counts"]["gps"]
+    assert counts["gated"] == 5
+    assert counts["used"] + counts["gated"] + counts["missing"] + counts["late"] == runs["fixes"]
+    assert runs[backend, "wheel,imu,gps"]["end"] < 2 * NOISE
+    assert runs[backend, "wheel,imu"]["end"] > 1.0
 
 
 def test_late_gps_fixes_are_re_applied_exactly_as_in_order(rec, ekf_streamed):
@@ -398,8 +420,12 @@ def test_bad_gps_option_is_a_one_line_error():
 
 # --------------------------------------------------------------------------- Husky (real recording)
 #: the import the Husky tests read, made ahead in the background (tests/background.py, tests/conftest.py)
-BACKGROUND_COMMANDS = {"python:husky_gps_stream": ["{repo}/tests/backends/husky_gps_stream_job.py", "{fusion-vo:husky_log}"]}
-BACKGROUND_JOBS = {"test_husky_gps_of_the_first_minute_then_withheld": ["fusion-vo:husky_log"],
+#: the longer runs of :data:`AHEAD` are made in the session's second process too (tests/ahead_job.py)
+_AHEAD_COMMANDS, _AHEAD = ahead_jobs(__file__)
+BACKGROUND_COMMANDS = {**_AHEAD_COMMANDS,
+                       "python:husky_gps_stream": ["{repo}/tests/backends/husky_gps_stream_job.py", "{fusion-vo:husky_log}"]}
+BACKGROUND_JOBS = {**_AHEAD,
+                   "test_husky_gps_of_the_first_minute_then_withheld": ["fusion-vo:husky_log"],
                    "test_husky_streamed_with_the_gps_of_the_first_minute": ["fusion-vo:husky_log",
                                                                             "python:husky_gps_stream"]}
 
@@ -474,10 +500,13 @@ SCATTER_OPTIONS = {"duration": 40.0, "gps": True, "gps_rate": 5.0, "gps_noise": 
                    "gps_lever_arm": [-0.3, 0.2, 0.5], "gps_heading_deg": HEADING, "gps_origin": ORIGIN.tolist()}
 
 
+def _scatter_simulated(folder) -> Recording:
+    return Recording(simulate(folder, profile="random", seed=5, **{**TINY, **SCATTER_OPTIONS}))
+
+
 @pytest.fixture(scope="module")
 def scatter_rec(tmp_path_factory):
-    return Recording(simulate(tmp_path_factory.mktemp("gpsscatter") / "rec", profile="random", seed=5,
-                              **{**TINY, **SCATTER_OPTIONS}))
+    return _scatter_simulated(tmp_path_factory.mktemp("gpsscatter") / "rec")
 
 
 def _stated(streams, sigma):
@@ -497,23 +526,35 @@ def _aligned(streams, options):
     return iv
 
 
-def test_fixes_scattering_four_times_their_claim_are_fused_with_the_measured_sigma(scatter_rec):
+def _scatter_claimed_a_quarter() -> tuple:
+    """The receiver of ``scatter_rec`` claiming a quarter of its true scatter: the alignment's notes and measured
+    sigma, and the batch runs with the scatter estimated and with the claim (notes and GPS counts of each)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = _scatter_simulated(Path(tmp) / "rec")
+        streams = _stated(streams_from_recording(rec, None, ["wheel", "imu", "gps"]), SCATTER_TRUE / 4)
+    iv = _aligned(streams, {"gps": {"estimate_sigma": True}})
+    runs = {}
+    for estimate in (True, False):
+        result = fuse(streams, "all", {"gps": {"estimate_sigma": estimate}})
+        runs[estimate] = (result.notes, {name: result.counts[name]["gps"].as_dict() for name in ("ekf", "gtsam")})
+    return iv.notes, gps_model.gps_grid(iv).min_sigma, runs
+
+
+def test_fixes_scattering_four_times_their_claim_are_fused_with_the_measured_sigma(made_ahead):
     """A receiver claiming a quarter of its true scatter: the alignment measures the scatter, both backends
     fuse with it, and the gate, which with the claim throws most genuine fixes away (measured: EKF 158,
     graph 125 of 201), rejects none."""
-    streams = _stated(streams_from_recording(scatter_rec, None, ["wheel", "imu", "gps"]), SCATTER_TRUE / 4)
-    iv = _aligned(streams, {"gps": {"estimate_sigma": True}})
+    notes, min_sigma, runs = made_ahead("scatter_claimed_a_quarter")
     # the estimate's standard error is about sigma / sqrt(2 m) for the m = 161 fixes of the alignment (32 s):
     # 3 of them (measured 0.1996 m)
-    assert any("(161 fixes of the alignment" in n for n in iv.notes), iv.notes
-    assert gps_model.gps_grid(iv).min_sigma == pytest.approx(SCATTER_TRUE, rel=3.0 / math.sqrt(2 * 161)), gps_model.gps_grid(iv).min_sigma
-    measured = fuse(streams, "all", {"gps": {"estimate_sigma": True}})
-    claimed = fuse(streams, "all", {"gps": {"estimate_sigma": False}})
-    assert any("fixes scatter" in n and "fusion.gps.estimate_sigma: false" in n for n in measured.notes)
-    assert not any("fixes scatter" in n for n in claimed.notes)
+    assert any("(161 fixes of the alignment" in n for n in notes), notes
+    assert min_sigma == pytest.approx(SCATTER_TRUE, rel=3.0 / math.sqrt(2 * 161)), min_sigma
+    (measured_notes, measured), (claimed_notes, claimed) = runs[True], runs[False]
+    assert any("fixes scatter" in n and "fusion.gps.estimate_sigma: false" in n for n in measured_notes)
+    assert not any("fixes scatter" in n for n in claimed_notes)
     for name in ("ekf", "gtsam"):
-        assert measured.counts[name]["gps"].gated == 0, (name, measured.counts[name]["gps"])
-        assert claimed.counts[name]["gps"].gated > 10, (name, claimed.counts[name]["gps"])
+        assert measured[name]["gated"] == 0, (name, measured[name])
+        assert claimed[name]["gated"] > 10, (name, claimed[name])
 
 
 def test_honest_fixes_keep_their_stated_sigma(scatter_rec):
@@ -535,3 +576,6 @@ def test_scatter_floor_accounts_for_the_tracks_drift():
     drifting = gps_model.scatter_floor(fit, 0.3, drift_var=0.45 ** 2)
     assert not drifting.significant and drifting.sigma < 0.3
     assert not gps_model.scatter_floor(fit, 0.5).significant
+
+
+AHEAD = {"replays": _replays, "scatter_claimed_a_quarter": _scatter_claimed_a_quarter}

@@ -1,9 +1,12 @@
 """The suite's background queue (tests/background.py): a test that needs a job the queue has not started runs it
 itself, after the jobs it reads, instead of waiting behind the queue."""
 
+import pickle
+import subprocess
+import sys
 import time
 
-from background import BackgroundJobs
+from background import REPO, BackgroundJobs
 
 SLOW = ["-c", "import time; time.sleep(30)"]
 WRITE = ["-c", "import pathlib, sys; p = pathlib.Path(sys.argv[1]); p.mkdir(parents=True); (p / 'v').write_text('7')",
@@ -36,3 +39,15 @@ def test_while_the_queue_runs_the_job_a_test_waits_for_the_test_runs_the_next():
         assert float(jobs.result("python:next").stdout) < slow_end  # made while the test waited, not after
     finally:
         jobs.stop()
+
+
+def test_a_module_made_ahead_imports_the_project_not_the_test_folders_named_as_it(tmp_path):
+    """``tests/ahead_job.py`` run as a script has tests/ first on its path, where ``tests/frontends`` is a folder
+    named as the ``frontends`` package: the values of ``AHEAD`` must see the package (a replay imports it)."""
+    module = tmp_path / "test_probe.py"
+    module.write_text("import importlib\n"
+                      "AHEAD = {'where': lambda: importlib.import_module('frontends').make_frontend.__module__}\n")
+    done = subprocess.run([sys.executable, str(REPO / "tests" / "ahead_job.py"), str(module), str(tmp_path / "out")],
+                          cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert pickle.loads((tmp_path / "out" / "where.pickle").read_bytes()).startswith("frontends")
