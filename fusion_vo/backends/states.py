@@ -68,7 +68,8 @@ def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: 
 def context_of(iv, config) -> StateContext:
     """The :class:`~fusion_vo.sensors.registry.StateContext` of the node grid ``iv`` of a whole recording."""
     return StateContext(config, frozenset(iv.counts), calibration_observable(iv), bool(wheel_grid(iv).twist),
-                        float(iv.visual_scale_sigma), float(iv.wheel_scale_sigma))
+                        float(iv.facts.get("visual_scale_sigma", config.visual_scale_sigma)),
+                        float(iv.facts.get("wheel_scale_sigma", config.wheel_scale_sigma)))
 
 
 def run_states(context: StateContext, plain=()) -> tuple[State, ...]:

@@ -82,7 +82,13 @@ class Intervals:
     facts : dict
         What the streams carry about the camera besides the sensors' data (:data:`fusion_vo.sensors.streams.FACTS`:
         ``camera_height``, the height the visual increments assume, and its stated σ, ...), for the models that
-        need them (the range finder's, the visual scale's).
+        need them (the range finder's, the visual scale's), and the run's scale priors ``visual_scale_sigma`` and
+        ``wheel_scale_sigma`` (:func:`scale_priors`): the relative prior standard deviations of the visual scale
+        ``k_v`` (camera height) and of the wheels' distance scale ``k_r`` (common wheel radius),
+        ``height_sigma / height`` of ``cam0/sensor.yaml`` and ``radius_sigma / radius`` of ``wheel0/sensor.yaml``
+        when stated, else ``FusionConfig.visual_scale_sigma`` and ``FusionConfig.wheel_scale_sigma``. The common
+        scale of camera and wheels is unobservable from the two alone: their ratio is measured, and these priors
+        (or a range finder) decide how a disagreement is shared.
     counts : dict[str, SensorCount]
         Bookkeeping of the input stage (gated samples, reordering, missing coverage).
     notes : list[str]
@@ -93,13 +99,6 @@ class Intervals:
         the first AHRS sample).
     episodes : list
         The monitor's :class:`~fusion_vo.backends.monitor.Episode` s.
-    visual_scale_sigma, wheel_scale_sigma : float
-        Prior standard deviations (relative) of the visual scale ``k_v`` (camera height) and of the
-        wheels' distance scale ``k_r`` (common wheel radius): ``height_sigma / height`` of
-        ``cam0/sensor.yaml`` and ``radius_sigma / radius`` of ``wheel0/sensor.yaml`` when stated, else
-        ``FusionConfig.visual_scale_sigma`` and ``FusionConfig.wheel_scale_sigma``. The common scale of
-        camera and wheels is unobservable from the two alone: their ratio is measured, and these priors
-        (or a range finder) decide how a disagreement is shared.
     initial_pose, initial_sigma : ndarray (3,) or None
         Start pose and its standard deviations ``(x, y, yaw)`` when the world frame was aligned to the
         fixes (ENU at the datum, :func:`~fusion_vo.sensors.gps.align_to_fixes`); None: the configured
@@ -118,8 +117,6 @@ class Intervals:
     notes: list[str] = field(default_factory=list)
     carry: dict = field(default_factory=dict)
     episodes: list = field(default_factory=list)
-    visual_scale_sigma: float = FusionConfig.model_fields["visual_scale_sigma"].default
-    wheel_scale_sigma: float = FusionConfig.model_fields["wheel_scale_sigma"].default
     initial_pose: np.ndarray | None = None
     initial_sigma: np.ndarray | None = None
     states: tuple = ()
@@ -323,8 +320,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
     K = len(T) - 1
     counts: dict[str, SensorCount] = {}
     notes: list[str] = []
-    iv = Intervals(t=T, facts=streams.facts(), counts=counts, notes=notes,
-                   visual_scale_sigma=config.visual_scale_sigma, wheel_scale_sigma=config.wheel_scale_sigma)
+    iv = Intervals(t=T, facts=streams.facts(), counts=counts, notes=notes)
     for sensor in registry.sensors():  # every sensor's (empty) measurements, data or not
         if sensor.grid is not None:
             iv.sensors[sensor.name] = sensor.grid(K, config)
@@ -335,7 +331,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
                               None if streams.wheel is None else streams.wheel.config,
                               range_fused=streams.range is not None and not range_in_visual)
         notes.extend(priors.notes)
-    iv.visual_scale_sigma, iv.wheel_scale_sigma = priors.visual_scale_sigma, priors.wheel_scale_sigma
+    iv.facts.update(visual_scale_sigma=priors.visual_scale_sigma, wheel_scale_sigma=priors.wheel_scale_sigma)
     iv.carry = dict(carry or {})
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)

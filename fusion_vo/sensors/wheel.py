@@ -327,7 +327,8 @@ def add_intervals(iv, streams, config, counts) -> None:
     if streams.wheel is not None:
         observable = curvature_observable(s.references_heading(data) for s in registered_sensors()
                                           if (data := s.data(streams)) is not None)
-        iv.states = curvature_states(iv.states, config, iv.wheel_scale_sigma, travel.wheel_base, observable)
+        iv.states = curvature_states(iv.states, config, iv.facts.get("wheel_scale_sigma", config.wheel_scale_sigma),
+                                     travel.wheel_base, observable)
         if config.wheel.estimate_curvature == "auto" and not observable:
             iv.notes.append("wheel curvature bias not estimated: without a camera, an AHRS heading, GPS or another "
                             "heading reference only the wheels and the gyro measure the turn, and a radius difference "
