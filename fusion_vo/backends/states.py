@@ -10,44 +10,62 @@ factor graph makes one variable per estimated state and calibration segment
 (:class:`~fusion_vo.backends.graph_builder.GraphBuilder`), and both report the estimates through
 :func:`calibration`.
 
-Two of the built-in calibrations are estimated only where the motion tells them apart
-(:func:`calibration_observable`): ``k_v`` needs a distance measured besides the camera's (the wheels, the range
-finder: each sensor declares it) and ``k_b`` a heading change measured besides the wheels' (the camera, the gyro, a
-heading sensor);
-``k_r`` needs both. A live run decides this from the sensors it fuses (:func:`observable_from`), a whole
-recording's from the measurements on its node grid.
+A state that :attr:`~fusion_vo.sensors.registry.State.needs` another sensor's measurement is estimated only where
+the motion tells it apart (:func:`observability`): the camera's ``k_v`` needs a distance measured besides the
+camera's (the wheels, the range finder: each sensor declares it), the wheels' ``k_b`` a heading change measured
+besides the wheels' (the camera, the gyro, a heading sensor); ``k_r`` is estimated with both. A live run decides
+this from the sensors it fuses (:func:`observable_from`), a whole recording's from the measurements on its node
+grid.
 """
 
 from __future__ import annotations
 
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.registry import State, StateContext
-from fusion_vo.sensors.visual import camera_grid
 from fusion_vo.sensors.wheel import wheel_grid
 
 
-def calibration_observable(iv) -> tuple[bool, bool]:
-    """Whether the visual scale and the wheel base can be told apart from the motion on the node grid ``iv``.
+def _others(owner, sensors):
+    """The sensors of ``sensors`` other than ``owner`` and than those that stand in for it
+    (:attr:`~fusion_vo.sensors.registry.Sensor.also_available_as`: the odometry twist for the wheels)."""
+    return [s for s in sensors if s.name != owner.name and owner.name not in s.also_available_as]
 
-    The visual scale needs a distance measured besides the camera's (a sensor declaring
-    :attr:`~fusion_vo.sensors.registry.Sensor.absolute_distance`: the wheels, the range finder); the wheel base
-    a heading or its change measured besides the wheels' (one declaring
-    :attr:`~fusion_vo.sensors.registry.Sensor.absolute_heading`: the camera, the IMU's gyro or AHRS).
+
+def _needed(needs: str):
+    """The declaration a state's ``needs`` asks of another sensor."""
+    return (lambda s: s.absolute_distance) if needs == "distance" else (lambda s: s.absolute_heading)
+
+
+def observability(iv) -> dict[str, bool]:
+    """For each state that :attr:`~fusion_vo.sensors.registry.State.needs` another sensor's measurement, whether
+    the motion on the node grid ``iv`` tells it apart: its sensor's measurements are on the grid
+    (:meth:`~fusion_vo.sensors.registry.Sensor.measured_on`) and another sensor measures what it needs there
+    (:meth:`~fusion_vo.sensors.registry.Sensor.gives_distance`, :meth:`~fusion_vo.sensors.registry.Sensor.gives_heading`).
     """
-    kv = len(camera_grid(iv).i0) > 0 and any(s.gives_distance(iv) for s in registry.sensors()
-                                              if s.absolute_distance and s.name != "camera")
-    kb = iv.uses("wheel") and any(s.gives_heading(iv) for s in registry.sensors()
-                                  if s.absolute_heading and s.name not in ("wheel", "odom"))
-    return bool(kv), bool(kb)
+    sensors = registry.sensors()
+    out = {}
+    for owner in sensors:
+        for state in owner.states:
+            if state.needs is None:
+                continue
+            gives = (lambda s: s.gives_distance(iv)) if state.needs == "distance" else (lambda s: s.gives_heading(iv))
+            out[state.name] = owner.measured_on(iv) and any(gives(s) for s in _others(owner, sensors)
+                                                             if _needed(state.needs)(s))
+    return out
 
 
-def observable_from(sensors) -> tuple[bool, bool]:
-    """:func:`calibration_observable` for a live run fusing the sensors named in ``sensors`` (each declaration taken
-    as met: the data is not known ahead)."""
-    s = set(sensors)
-    distance = any(registry.get(n).absolute_distance for n in s - {"camera"})
-    heading = any(registry.get(n).absolute_heading for n in s - {"wheel", "odom"})
-    return "camera" in s and distance, bool(s & {"wheel", "odom"}) and heading
+def observable_from(sensors) -> dict[str, bool]:
+    """:func:`observability` for a live run fusing the sensors named in ``sensors`` (each declaration taken as met:
+    the data is not known ahead)."""
+    fused = [registry.get(n) for n in dict.fromkeys(sensors)]
+    out = {}
+    for owner in registry.sensors():
+        for state in owner.states:
+            if state.needs is None:
+                continue
+            present = any(s.name == owner.name or owner.name in s.also_available_as for s in fused)
+            out[state.name] = present and any(_needed(state.needs)(s) for s in _others(owner, fused))
+    return out
 
 
 def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: float) -> StateContext:
@@ -67,7 +85,7 @@ def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: 
 
 def context_of(iv, config) -> StateContext:
     """The :class:`~fusion_vo.sensors.registry.StateContext` of the node grid ``iv`` of a whole recording."""
-    return StateContext(config, frozenset(iv.counts), calibration_observable(iv), bool(wheel_grid(iv).twist),
+    return StateContext(config, frozenset(iv.counts), observability(iv), bool(wheel_grid(iv).twist),
                         float(iv.facts.get("visual_scale_sigma", config.visual_scale_sigma)),
                         float(iv.facts.get("wheel_scale_sigma", config.wheel_scale_sigma)))
 

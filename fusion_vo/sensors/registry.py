@@ -105,6 +105,10 @@ class State:
     derived : callable or None
         ``derived(value, sigma, iv) -> {name: (value, sigma)}``: further calibration figures its estimate gives on
         the node grid ``iv`` (the camera height from the visual scale), reported beside it.
+    needs : {"distance", "heading"} or None
+        What another sensor must measure (:attr:`Sensor.absolute_distance`, :attr:`Sensor.absolute_heading`) for
+        the motion to tell this state apart: a distance for the visual scale, a heading for the wheel base
+        (:func:`~fusion_vo.backends.states.observability`); its rule reads ``context.observable[name]``.
     """
 
     name: str
@@ -115,8 +119,11 @@ class State:
     symbol: str | None = None
     rule: Callable | None = None
     derived: Callable | None = None
+    needs: str | None = None
 
     def __post_init__(self) -> None:
+        if self.needs not in (None, "distance", "heading"):
+            raise ValueError(f"state {self.name}: needs must be 'distance', 'heading' or None, not {self.needs!r}")
         try:
             self.prior()
         except ConfigError as exc:
@@ -151,9 +158,9 @@ class StateContext:
     used : frozenset of str
         The measurement kinds the run fuses, as its counts name them (``camera``, ``wheel``, ``gyro``, ``ahrs``,
         ``range``, ``gps``, a registered sensor's name).
-    observable : tuple of bool
-        Whether the visual scale and the wheel base can be told apart from the motion
-        (:func:`~fusion_vo.backends.states.calibration_observable`).
+    observable : dict of str to bool
+        For each state that :attr:`State.needs` a measurement of another sensor, whether the run has it and the
+        motion can tell the state apart (:func:`~fusion_vo.backends.states.observability`).
     twist : bool
         The wheels are an odometry twist (no wheel base of their own).
     visual_scale_sigma, wheel_scale_sigma : float
@@ -163,7 +170,7 @@ class StateContext:
 
     config: Any
     used: frozenset
-    observable: tuple
+    observable: dict
     twist: bool
     visual_scale_sigma: float
     wheel_scale_sigma: float
@@ -322,6 +329,10 @@ class Sensor:
         ``coverage(iv) -> (label, ok)``: the node intervals its samples cover (``ok``, after the consistency
         monitor's decisions) and the name its counts go under; a run of uncovered intervals longer than half a
         second inside the data becomes a note (``"label unavailable from ... to ..."``).
+    on_grid : callable or None
+        ``on_grid(iv) -> bool``: whether its measurements are on the node grid ``iv``, which its states that
+        :attr:`State.needs` another sensor's measurement require too (the camera: when an increment is placed).
+        Default: its samples are used there (``Intervals.uses(name)``).
     readings : callable or None
         ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
         :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
@@ -340,13 +351,13 @@ class Sensor:
     absolute_heading : bool or callable
         The sensor measures the heading (absolute, or up to an offset it estimates as a state) or its change on
         a scale of its own (a gyro): beside the wheels it is a heading reference, so the wheel-base factor is
-        estimated (:func:`~fusion_vo.backends.states.calibration_observable`). True: when its samples are used on
+        estimated (:func:`~fusion_vo.backends.states.observability`). True: when its samples are used on
         the node grid (``Intervals.uses(name)``); ``absolute_heading(iv) -> bool``: when that says so (the camera:
         when an increment is measured; the IMU: when its gyro or its AHRS is used). Default False.
     absolute_distance : bool or callable
         The sensor measures distance on a scale of its own (the wheels' travel, the range finder's height of the
         camera): beside the camera the visual scale is estimated, and with a heading reference beside the wheels
-        their distance scale too (:func:`~fusion_vo.backends.states.calibration_observable`). True and callable as
+        their distance scale too (:func:`~fusion_vo.backends.states.observability`). True and callable as
         :attr:`absolute_heading`. Default False.
     heading_reference : bool, callable or None
         The sensor measures the heading, or its change, without a bias of its own (the camera, the IMU's AHRS,
@@ -382,6 +393,7 @@ class Sensor:
     grid: Callable | None = None
     intervals: Step | None = None
     coverage: Callable | None = None
+    on_grid: Callable | None = None
     readings: Callable | None = None
     graph_keyframes: Callable | None = None
     carry: Carry | None = None
@@ -405,6 +417,10 @@ class Sensor:
     def gives_distance(self, iv) -> bool:
         """Whether it measures distance on the node grid ``iv`` (:attr:`absolute_distance`)."""
         return self._declared(self.absolute_distance, iv)
+
+    def measured_on(self, iv) -> bool:
+        """Whether its measurements are on the node grid ``iv`` (:attr:`on_grid`)."""
+        return bool(self.on_grid(iv)) if self.on_grid is not None else iv.uses(self.name)
 
     def _declared(self, declaration, iv) -> bool:
         """A declaration on the node grid ``iv``: a callable's answer, or True when its samples are used there."""

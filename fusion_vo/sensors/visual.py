@@ -322,7 +322,7 @@ def _visual_scale(state: State, context) -> State:
     config = context.config
     return dataclasses.replace(state, sigma=context.visual_scale_sigma,
                                random_walk=config.ekf.visual_scale_random_walk,
-                               estimated=bool(config.self_calibration and context.observable[0]))
+                               estimated=bool(config.self_calibration and context.observable.get(state.name, False)))
 
 
 def _camera_height(value: float, sigma: float, iv) -> dict:
@@ -333,13 +333,19 @@ def _camera_height(value: float, sigma: float, iv) -> dict:
     return {"camera_height": (float(height / value), float(height * sigma))}
 
 
+def _placed(iv) -> bool:
+    """Whether an increment is placed on the node grid ``iv``: the camera measures there."""
+    return len(camera_grid(iv).i0) > 0
+
+
 #: the visual scale ``k_v = h_configured / h_true`` (:class:`VisualModel`), a state of every run
-VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale, derived=_camera_height)
+VISUAL_SCALE = State("visual_scale", initial=1.0, symbol="s", rule=_visual_scale, derived=_camera_height,
+                     needs="distance")
 
 register(Sensor(
     name="camera", where="cam0/ frames or visual increments", field="visual", folder="cam0",
     grid=CameraGrid.empty, intervals=Step(30, add_intervals), readings=readings, states=(VISUAL_SCALE,),
-    absolute_heading=lambda iv: len(camera_grid(iv).i0) > 0,
+    absolute_heading=_placed, on_grid=_placed,
     heading_reference=lambda increments: increments is None or any(v.ok for v in increments),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
     heading=(HEADING,), distance=(DISTANCE,),

@@ -28,14 +28,14 @@ def _wheel_base_factor(state: State, context) -> State:
     config = context.config
     return dataclasses.replace(state, sigma=config.wheel_model(context.twist)[1],
                                random_walk=config.ekf.scale_random_walk,
-                               estimated=bool(config.self_calibration and context.observable[1]))
+                               estimated=bool(config.self_calibration and context.observable.get(state.name, False)))
 
 
 def _wheel_scale(state: State, context) -> State:
     """``k_r``: estimated with both the visual scale and the wheel base (only their ratio is measured otherwise),
     its prior the run's radius uncertainty."""
     config = context.config
-    kv, kb = context.observable
+    kv, kb = (context.observable.get(name, False) for name in ("visual_scale", WHEEL_BASE_FACTOR.name))
     return dataclasses.replace(state, sigma=context.wheel_scale_sigma, random_walk=config.ekf.scale_random_walk,
                                estimated=bool(config.self_calibration and kv and kb))
 
@@ -51,7 +51,8 @@ def _wheel_base(value: float, sigma: float, iv) -> dict:
 
 #: the wheel-base factor ``k_b = b_true / b_configured`` and the wheels' distance scale
 #: ``k_r = r_configured / r_true`` (:class:`WheelModel`), states of every run
-WHEEL_BASE_FACTOR = State("wheel_base_factor", initial=1.0, symbol="w", rule=_wheel_base_factor, derived=_wheel_base)
+WHEEL_BASE_FACTOR = State("wheel_base_factor", initial=1.0, symbol="w", rule=_wheel_base_factor, derived=_wheel_base,
+                          needs="heading")
 WHEEL_SCALE = State("wheel_scale", initial=1.0, symbol="r", rule=_wheel_scale)
 
 

@@ -69,6 +69,42 @@ def test_a_live_run_decides_from_the_sensors_it_fuses():
     assert not any(st.estimated for st in alone.values())
 
 
+def _observed(state: State, context) -> State:
+    """A state whose rule estimates it where the run can tell it apart (``State.needs``), as ``k_v``'s and ``k_b``'s
+    do."""
+    return dataclasses.replace(state, estimated=context.observable[state.name])
+
+
+def test_a_registered_state_needing_another_sensors_heading_is_estimated_only_beside_one(drive):
+    """A beacon whose bearing scale needs a heading from another sensor (``State(needs="heading")``): estimated
+    beside the IMU (its gyro and AHRS declare ``absolute_heading``), held alone (its own bearings, which it
+    declares a heading, do not count) or beside the wheels, which measure no heading; live from the sensors fused,
+    and on a recording's node grid from the measurements there (the beacon measured on every interval)."""
+    beacon = Sensor(name="beacon", on_grid=lambda iv: len(iv.t) > 1, absolute_heading=True,
+                    states=(State("beacon_scale", initial=1.0, rule=_observed, needs="heading"),))
+    config = FusionConfig()
+
+    def live(*sensors):
+        return {st.name: st.estimated for st in run_states(live_context(config, list(sensors), 0.02, 0.01))}
+
+    with registry.registered(beacon):
+        assert live("beacon", "imu")["beacon_scale"] and not live("beacon")["beacon_scale"]
+        assert not live("beacon", "wheel")["beacon_scale"] and not live("imu")["beacon_scale"]
+        assert live("beacon", "wheel")["wheel_base_factor"]  # its bearings are a heading beside the wheels
+        # the built-in ones by the same rule: the camera's scale beside a distance, the wheel base beside a heading
+        # measured by a sensor that is not the wheels or the odometry twist standing in for them
+        both = live("camera", "wheel")
+        assert both["visual_scale"] and both["wheel_base_factor"]
+        assert not live("camera", "imu")["visual_scale"] and not live("wheel", "odom")["wheel_base_factor"]
+        assert live("odom", "imu")["wheel_base_factor"] and not live("odom", "imu")["visual_scale"]
+        on_grid, _ = _grid(drive, wheel=drive.wheel, imu=drive.imu)
+        assert {s.name: s.estimated for s in on_grid.states}["beacon_scale"]
+        wheels_only, _ = _grid(drive, wheel=drive.wheel)
+        assert not {s.name: s.estimated for s in wheels_only.states}["beacon_scale"]
+    with pytest.raises(ValueError, match="needs must be"):
+        State("bad", needs="speed")
+
+
 def _trim(state: State, context) -> State:
     """A state whose rule estimates it only beside the wheels (as a built-in calibration's does)."""
     return dataclasses.replace(state, sigma=0.3, estimated="wheel" in context.used)
