@@ -21,7 +21,7 @@ grid.
 from __future__ import annotations
 
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.registry import State, StateContext
+from fusion_vo.sensors.registry import Sensor, State, StateContext
 from fusion_vo.sensors.wheel import wheel_grid
 
 
@@ -48,9 +48,8 @@ def observability(iv) -> dict[str, bool]:
         for state in owner.states:
             if state.needs is None:
                 continue
-            gives = (lambda s: s.gives_distance(iv)) if state.needs == "distance" else (lambda s: s.gives_heading(iv))
-            out[state.name] = owner.measured_on(iv) and any(gives(s) for s in _others(owner, sensors)
-                                                             if _needed(state.needs)(s))
+            gives = Sensor.gives_distance if state.needs == "distance" else Sensor.gives_heading
+            out[state.name] = owner.measured_on(iv) and any(gives(s, iv) for s in _others(owner, sensors))
     return out
 
 
