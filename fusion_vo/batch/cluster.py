@@ -42,6 +42,14 @@ def _workers_ignore_ctrl_c() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
+def _quiet_worker_log() -> None:
+    """In a worker process: its ``distributed.worker`` log only at CRITICAL. A worker whose heartbeat meets the
+    scheduler as the cluster shuts down logs the closed stream as an ERROR with a traceback, on the command's
+    standard error; a task's own error reaches the batch through its future, and the worker's other errors
+    through the scheduler."""
+    logging.getLogger("distributed.worker").setLevel(logging.CRITICAL)
+
+
 #: Dask's own default for its worker processes' ``MALLOC_TRIM_THRESHOLD_`` (``distributed.nanny.pre-spawn-environ``)
 DASK_MALLOC_TRIM = "65536"
 
@@ -129,6 +137,7 @@ def open_client(workers: int | None = None, scheduler: str | None = None, dashbo
             cluster = stack.enter_context(LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                                        dashboard_address=address, silence_logs=logging.ERROR))
         client = stack.enter_context(Client(cluster))
+        client.run(_quiet_worker_log)
         if announce:
             link = client.dashboard_link if address else "off (the dashboard needs bokeh)"
             announce(f"Dask LocalCluster: {n} workers, dashboard {link}")
