@@ -37,14 +37,13 @@ from fusion_vo.backends.result import FusionResult, Innovations, SensorCount
 from fusion_vo.backends.states import calibration_priors
 from fusion_vo.backends.timeline import SensorStreams, build_intervals
 from fusion_vo.backends.world import align_world
-from fusion_vo.config.sensor_files import CameraFile
 from fusion_vo.consistency.stage import check_streams
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.imu import gyro_yaw
 from fusion_vo.sensors.sync import odometry_delay
-from fusion_vo.sensors.visual import camera_grid
+from fusion_vo.sensors.visual import camera_grid, stated_height_sigma
 from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
 
 logger = logging.getLogger(__name__)
@@ -347,4 +346,4 @@ def _height_sigma(recording) -> float | None:
     """``height_sigma`` of the recording's ``cam0/sensor.yaml`` (None when absent or not a folder recording)."""
     if not hasattr(recording, "sensor_file") or not recording.has("cam0"):
         return None
-    return recording.sensor_file("cam0", CameraFile, required=False).height_sigma
+    return stated_height_sigma(recording)

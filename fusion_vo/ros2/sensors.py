@@ -26,7 +26,7 @@ import numpy as np
 from frontends import make_frontend
 from fusion_vo.backends.streaming import StreamingFusion
 from fusion_vo.calibration.camera_noise import CameraNoise
-from fusion_vo.config.sensor_files import CameraFile, read_camera
+from fusion_vo.config.sensor_files import read_camera
 from fusion_vo.errors import InputError
 from fusion_vo.geometry.camera import CameraModel
 from fusion_vo.geometry.ground import GroundGeometry
@@ -36,6 +36,7 @@ from fusion_vo.recording import Recording
 from fusion_vo.recording.gps import gps_settings
 from fusion_vo.ros2.settings import NodeSettings
 from fusion_vo.sensors.imu import imu_calibration
+from fusion_vo.sensors.visual import stated_height_sigma
 from fusion_vo.sensors.wheel import wheel_config
 
 log = logging.getLogger(__name__)
@@ -81,7 +82,7 @@ def sensor_setup(settings: NodeSettings) -> SensorSetup:
     if "camera" in sensors:
         yaml_path = _need(folder, "cam0", "the camera")
         setup.camera = read_camera(yaml_path)
-        setup.camera_height_sigma = rec.sensor_file("cam0", CameraFile, required=False).height_sigma
+        setup.camera_height_sigma = stated_height_sigma(rec)
         setup.camera_noise = CameraNoise.stated(rec) if run.odometry_config().camera_noise else None
     if fusion.camera_height is not None:
         setup.camera_height = fusion.camera_height

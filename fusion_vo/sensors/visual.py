@@ -41,6 +41,7 @@ from typing import ClassVar
 
 import numpy as np
 
+from fusion_vo.config.sensor_files import CameraFile
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, outage_notes
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
@@ -331,6 +332,12 @@ def _camera_height(value: float, sigma: float, iv) -> dict:
     if not height:
         return {}
     return {"camera_height": (float(height / value), float(height * sigma))}
+
+
+def stated_height_sigma(recording) -> float | None:
+    """``height_sigma`` of a recording's ``cam0/sensor.yaml``: the standard deviation [m] of the camera height its
+    ``T_BS`` states, or None when the file does not state it."""
+    return recording.sensor_file("cam0", CameraFile, required=False).height_sigma
 
 
 def _placed(iv) -> bool:
