@@ -57,7 +57,6 @@ import numpy as np
 from pydantic import Field
 
 from fusion_vo.config.base import Positive, Section, Sigma
-from fusion_vo.errors import check_file
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import GpsData, GpsFix
 from fusion_vo.measurements import SensorCount
@@ -538,7 +537,7 @@ def has_fixes(recording, folder: str = "gps0") -> bool:
     a word: that is an :class:`~fusion_vo.errors.InputError` naming the file."""
     if not recording.has(folder):
         return False
-    check_file(recording.path / folder / "data.csv")
+    recording.data_file(folder, "GPS")
     return True
 
 
