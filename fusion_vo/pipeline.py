@@ -123,6 +123,11 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
     Any registered sensor (:mod:`fusion_vo.sensors.registry`) may be named; by default the camera, wheels
     (or odometry) and IMU are used, and a sensor registered outside the library when its folder is present
     (and its ``default`` allows)."""
+    return _resolve(rec, config)[0]
+
+
+def _resolve(rec: Recording, config: RunConfig) -> tuple[list[str], dict[str, bool]]:
+    """:func:`resolve_sensors`, and which registered sensors the recording has (name -> present)."""
     registry.ensure(config.sensors or ())
     known = registry.sensors()
     present = {s.name: s.present(rec) for s in known}
@@ -133,7 +138,7 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
         if not chosen:
             raise InputError("the recording has none of cam0/, wheel0/, imu0/, odom0/", rec.path)
         return chosen + [s.name for s in known if s.name not in registry.BUILTIN_ORDER and present[s.name]
-                         and s.by_default(present)]
+                         and s.by_default(present)], present
     for s in config.sensors:
         if s not in present:
             raise InputError(f"unknown sensor '{s}' (use {', '.join(present)})", rec.path)
@@ -141,7 +146,7 @@ def resolve_sensors(rec: Recording, config: RunConfig) -> list[str]:
             folder = registry.get(s).folder or registry.get(s).where
             raise InputError(f"the sensors to use include '{s}' but the recording has no {folder.rstrip('/')}/",
                              rec.path)
-    return list(config.sensors)
+    return list(config.sensors), present
 
 
 @dataclass
@@ -178,7 +183,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
     odometry = config.odometry_config()
 
     rec = Recording(sequence)
-    sensors = resolve_sensors(rec, config)
+    sensors, present = _resolve(rec, config)
     spans: dict[str, tuple[float, float]] = {}
     files: dict[str, Path] = {}
     times: dict[str, np.ndarray] = {}
@@ -221,9 +226,7 @@ def check_inputs(sequence: str | Path, config: RunConfig, config_path: str | Pat
             except (InputError, TypeError, ValueError) as exc:
                 raise _config_error(exc, config_path, name) from None
         note("camera", t_ns * 1e-9, "cam0")
-    known = registry.sensors()
-    present = {s.name: s.present(rec) for s in known}
-    for sensor in known:  # every stream the run reads, by its sensor's reader, now (the camera's frames above)
+    for sensor in registry.sensors():  # every stream the run reads, by its sensor's reader, now (the camera's frames above)
         if sensor.name == "camera" or sensor.read is None:
             continue
         scales_frames = sensor.name == "range" and "camera" in sensors and odometry.use_range and present["range"]
