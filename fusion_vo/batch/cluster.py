@@ -45,8 +45,8 @@ def _workers_ignore_ctrl_c() -> Iterator[None]:
 def _quiet_worker_log() -> None:
     """In a worker process: its ``distributed.worker`` log only at CRITICAL. A worker whose heartbeat meets the
     scheduler as the cluster shuts down logs the closed stream as an ERROR with a traceback, on the command's
-    standard error; a task's own error reaches the batch through its future, and the worker's other errors
-    through the scheduler."""
+    standard error; a task's own error reaches the batch through its future. Set once, on the workers the cluster
+    starts with (one its nanny restarts logs as Dask does)."""
     logging.getLogger("distributed.worker").setLevel(logging.CRITICAL)
 
 
