@@ -33,15 +33,15 @@ ROBOT_LOGS = TESTS / "data" / "robot_localization"
 HUSKY_IMU_TF = "0 -0.3 0.52 -1.570796327 0 1.570796327 base_link imu_link"
 
 
-#: folders run last, in this order: the DDS tests, whose timing the session's second process must leave alone
-#: (tests/ros2/conftest.py), come when that process has run every other test's job
-LAST = ("ros2",)
+#: folders run first, in this order: the DDS tests, which wait for a node most of their time, while the session's
+#: second process runs the other tests' jobs at the lowest priority beside them (tests/ros2/conftest.py)
+FIRST = ("ros2",)
 
 
 def pytest_collection_modifyitems(config, items) -> None:
     """Mark each test with its folder's layer (a test folder that no layer names is an error) and order them: the
-    modules that wait for the second process's work (``BACKGROUND_JOBS``, tests/background.py) after the others, so
-    that it has the others' time to get ahead of them, and the folders of :data:`LAST` at the end."""
+    folders of :data:`FIRST` first, then the modules that do not wait for the second process's work
+    (``BACKGROUND_JOBS``, tests/background.py) before those that do, so that it has their time to get ahead."""
     folders = {}
     for item in items:
         folder = folders[item.nodeid] = Path(item.fspath).resolve().relative_to(TESTS).parts[0]
@@ -51,7 +51,7 @@ def pytest_collection_modifyitems(config, items) -> None:
 
     def place(item) -> tuple[int, bool]:
         folder = folders[item.nodeid]
-        return LAST.index(folder) + 1 if folder in LAST else 0, bool(getattr(item.module, "BACKGROUND_JOBS", None))
+        return FIRST.index(folder) if folder in FIRST else len(FIRST), bool(getattr(item.module, "BACKGROUND_JOBS", None))
 
     items.sort(key=place)
 

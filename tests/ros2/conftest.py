@@ -1,5 +1,5 @@
-"""The DDS tests' peer, run while the session's second process is quiet (tests/background.py): a node's timing
-is then the machine's, not that of a job running beside it."""
+"""The DDS tests' peer, run while the session's second process runs at the lowest priority (tests/background.py):
+the node's timing is then the machine's, the jobs take only the time it leaves."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ from dds_namespace import run_peer
 
 @pytest.fixture(scope="session")
 def peer(background):
-    """``peer(tmp_path, spec)``: :func:`dds_namespace.run_peer` with no background job running meanwhile."""
+    """``peer(tmp_path, spec)``: :func:`dds_namespace.run_peer` with the background jobs at the lowest priority
+    meanwhile."""
 
     def run(tmp_path, spec):
-        with background.quiet() if background is not None else nullcontext():
+        with background.lowest() if background is not None else nullcontext():
             return run_peer(tmp_path, spec)
 
     return run
