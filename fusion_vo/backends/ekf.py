@@ -444,8 +444,8 @@ def filter_for(iv: Intervals, config: FusionConfig, readings: EkfReadings | None
 def default_states(config: FusionConfig) -> tuple:
     """The states of a run fusing the camera, the wheels (encoder ticks) and the IMU with its AHRS, with the
     configured priors: the filter's states when none are given."""
-    return run_states(live_context(config, ("camera", "wheel", "imu"), config.visual_scale_sigma,
-                                   config.wheel_scale_sigma))
+    priors = {"visual_scale_sigma": config.visual_scale_sigma, "wheel_scale_sigma": config.wheel_scale_sigma}
+    return run_states(live_context(config, ("camera", "wheel", "imu"), priors))
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:

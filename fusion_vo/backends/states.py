@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.registry import Sensor, State, StateContext
-from fusion_vo.sensors.wheel import wheel_grid
 
 
 def _others(owner, sensors):
@@ -67,26 +66,33 @@ def observable_from(sensors) -> dict[str, bool]:
     return out
 
 
-def live_context(config, sensors, visual_scale_sigma: float, wheel_scale_sigma: float) -> StateContext:
+def stood_in(present) -> frozenset:
+    """The sensors not in ``present`` (names) whose measurements come from a sensor of ``present`` standing in for
+    them (:attr:`~fusion_vo.sensors.registry.Sensor.also_available_as`: the wheels, from an odometry twist)."""
+    present = set(present)
+    stand_ins = [registry.get(name) for name in present if registry.resolve(name) is not None]
+    return frozenset(owner.name for owner in registry.sensors()
+                     if owner.name not in present and any(owner.name in s.also_available_as for s in stand_ins))
+
+
+def live_context(config, sensors, facts) -> StateContext:
     """The :class:`~fusion_vo.sensors.registry.StateContext` of a live run fusing the sensors named in
     ``sensors``, whose data is not known ahead: each counted as its live intake counts it (an odometry twist as
     the wheels, the IMU as the gyro), with what its samples may also bring (``Live.also_counted``: the IMU's AHRS
-    heading, which may arrive in any interval)."""
+    heading, which may arrive in any interval); ``facts`` as the run's files give them (the scale priors)."""
     used = set()
     for name in sensors:
         live = registry.get(name).live
         used.add(live.counted_as or name if live is not None else name)
         used.update(live.also_counted if live is not None else ())
     s = set(sensors)
-    return StateContext(config, frozenset(used), observable_from(s), "odom" in s and "wheel" not in s,
-                        float(visual_scale_sigma), float(wheel_scale_sigma))
+    return StateContext(config, frozenset(used), observable_from(s), stood_in(s), dict(facts))
 
 
-def context_of(iv, config) -> StateContext:
-    """The :class:`~fusion_vo.sensors.registry.StateContext` of the node grid ``iv`` of a whole recording."""
-    return StateContext(config, frozenset(iv.counts), observability(iv), bool(wheel_grid(iv).twist),
-                        float(iv.facts.get("visual_scale_sigma", config.visual_scale_sigma)),
-                        float(iv.facts.get("wheel_scale_sigma", config.wheel_scale_sigma)))
+def context_of(iv, config, present) -> StateContext:
+    """The :class:`~fusion_vo.sensors.registry.StateContext` of the node grid ``iv`` of a whole recording, whose
+    streams hold the data of the sensors named in ``present``."""
+    return StateContext(config, frozenset(iv.counts), observability(iv), stood_in(present), dict(iv.facts))
 
 
 def run_states(context: StateContext, plain=()) -> tuple[State, ...]:

@@ -307,8 +307,7 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
                                             wheel_config.relative_radius_sigma(self.config.wheel_scale_sigma),
                                             wheel_config.wheel_base, observable)
         # with the built-in calibrations, decided from the sensors declared (states.live_context)
-        self._states = run_states(live_context(self.config, self.sensors, self._priors.visual_scale_sigma,
-                                               self._priors.wheel_scale_sigma), self._states)
+        self._states = run_states(live_context(self.config, self.sensors, self._priors.facts()), self._states)
         self._visual: list[VisualIncrement] = []
         self._fill: tuple | None = None  # (from, to, fill-in nodes) of the gap to the next frame
         self._latest = -np.inf

@@ -263,6 +263,10 @@ class ScalePriors:
     wheel_scale_sigma: float
     notes: list[str] = field(default_factory=list)
 
+    def facts(self) -> dict:
+        """The two priors as facts of a run (:attr:`Intervals.facts`, :class:`~fusion_vo.sensors.registry.StateContext`)."""
+        return {"visual_scale_sigma": self.visual_scale_sigma, "wheel_scale_sigma": self.wheel_scale_sigma}
+
 
 def scale_priors(config: FusionConfig, camera_height: float | None, camera_height_sigma: float | None = None,
                  range_height_sigma: float | None = None, wheel_config=None, range_fused: bool = False) -> ScalePriors:
@@ -331,7 +335,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
                               None if streams.wheel is None else streams.wheel.config,
                               range_fused=streams.range is not None and not range_in_visual)
         notes.extend(priors.notes)
-    iv.facts.update(visual_scale_sigma=priors.visual_scale_sigma, wheel_scale_sigma=priors.wheel_scale_sigma)
+    iv.facts.update(priors.facts())
     iv.carry = dict(carry or {})
     iv.states = registry.states([s.name for s in registry.sensors() if s.states and s.data(streams) is not None],
                                 config)
@@ -351,7 +355,7 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         if name in counts:
             notes.extend(outage_notes(name, T, ok))
     # with the built-in calibrations, decided here unless given for the run
-    iv.states = run_states(context_of(iv, config), iv.states) if states is None else tuple(states)
+    iv.states = run_states(context_of(iv, config, streams), iv.states) if states is None else tuple(states)
     return iv
 
 

@@ -55,7 +55,7 @@ import dataclasses
 import re
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 from pydantic import Field
 
 from fusion_vo.config.base import MAX_NUMBER, ConfigError, Float, Section, Sigma, Walk
@@ -161,19 +161,20 @@ class StateContext:
     observable : dict of str to bool
         For each state that :attr:`State.needs` a measurement of another sensor, whether the run has it and the
         motion can tell the state apart (:func:`~fusion_vo.backends.states.observability`).
-    twist : bool
-        The wheels are an odometry twist (no wheel base of their own).
-    visual_scale_sigma, wheel_scale_sigma : float
-        The priors of the visual scale and of the wheels' distance scale the run's files give
-        (:func:`~fusion_vo.backends.timeline.scale_priors`).
+    stood_in : frozenset of str
+        The sensors whose measurements the run takes from a sensor standing in for them
+        (:attr:`Sensor.also_available_as`: the wheels, when only an odometry twist is fused).
+    facts : mapping
+        Facts of the run a rule may read, by name: those of its node grid
+        (:attr:`~fusion_vo.backends.timeline.Intervals.facts`), among them the priors ``visual_scale_sigma`` and
+        ``wheel_scale_sigma`` the run's files give (:func:`~fusion_vo.backends.timeline.scale_priors`).
     """
 
     config: Any
     used: frozenset
     observable: dict
-    twist: bool
-    visual_scale_sigma: float
-    wheel_scale_sigma: float
+    stood_in: frozenset
+    facts: Mapping
 
 
 class StatePrior(Section):

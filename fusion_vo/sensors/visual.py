@@ -321,7 +321,7 @@ def _visual_scale(state: State, context) -> State:
     """``k_v``: estimated under self-calibration where another sensor measures distance (its observability, in
     ``context``), with the prior the run's files give and the configured random walk."""
     config = context.config
-    return dataclasses.replace(state, sigma=context.visual_scale_sigma,
+    return dataclasses.replace(state, sigma=context.facts["visual_scale_sigma"],
                                random_walk=config.ekf.visual_scale_random_walk,
                                estimated=bool(config.self_calibration and context.observable.get(state.name, False)))
 

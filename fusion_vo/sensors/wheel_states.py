@@ -26,7 +26,7 @@ def _wheel_base_factor(state: State, context) -> State:
     """``k_b``: estimated under self-calibration where another sensor measures the heading (its observability,
     in ``context``), its prior the wheel base's (or the odometry twist's yaw-rate) σ."""
     config = context.config
-    return dataclasses.replace(state, sigma=config.wheel_model(context.twist)[1],
+    return dataclasses.replace(state, sigma=config.wheel_model("wheel" in context.stood_in)[1],
                                random_walk=config.ekf.scale_random_walk,
                                estimated=bool(config.self_calibration and context.observable.get(state.name, False)))
 
@@ -36,7 +36,7 @@ def _wheel_scale(state: State, context) -> State:
     its prior the run's radius uncertainty."""
     config = context.config
     kv, kb = (context.observable.get(name, False) for name in ("visual_scale", WHEEL_BASE_FACTOR.name))
-    return dataclasses.replace(state, sigma=context.wheel_scale_sigma, random_walk=config.ekf.scale_random_walk,
+    return dataclasses.replace(state, sigma=context.facts["wheel_scale_sigma"], random_walk=config.ekf.scale_random_walk,
                                estimated=bool(config.self_calibration and kv and kb))
 
 

@@ -11,9 +11,13 @@ from fusion_vo.backends.ekf import DIM, filter_for
 from fusion_vo.backends.graph_builder import GraphBuilder
 from fusion_vo.backends.states import live_context, run_states
 from fusion_vo.backends.timeline import build_intervals
+from fusion_vo.measurements import TwistData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.registry import Sensor, State
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+
+#: the scale priors a live run's files give (``StateContext.facts``)
+PRIORS = {"visual_scale_sigma": 0.02, "wheel_scale_sigma": 0.01}
 
 
 
@@ -61,12 +65,26 @@ def test_self_calibration_off_holds_the_three_calibrations(drive):
 
 def test_a_live_run_decides_from_the_sensors_it_fuses():
     config = FusionConfig()
-    table = {st.name: st for st in run_states(live_context(config, ["camera", "odom", "imu"], 0.02, 0.01))}
+    table = {st.name: st for st in run_states(live_context(config, ["camera", "odom", "imu"], PRIORS))}
     assert table["visual_scale"].estimated and table["wheel_base_factor"].estimated and table["wheel_scale"].estimated
     assert table["visual_scale"].sigma == 0.02 and table["wheel_scale"].sigma == 0.01
     assert table["wheel_base_factor"].sigma == config.odom_base_sigma  # an odometry twist's prior
-    alone = {st.name: st for st in run_states(live_context(config, ["odom"], 0.02, 0.01))}
+    alone = {st.name: st for st in run_states(live_context(config, ["odom"], PRIORS))}
     assert not any(st.estimated for st in alone.values())
+    ticks = {st.name: st for st in run_states(live_context(config, ["camera", "wheel", "odom", "imu"], PRIORS))}
+    assert ticks["wheel_base_factor"].sigma == config.wheel_base_sigma != config.odom_base_sigma
+
+
+def test_an_odometry_twist_stands_in_for_the_wheels_on_a_grid_as_in_a_live_run(drive):
+    """The wheels' base-factor prior is the odometry twist's where only the twist is fused, the ticks' where they
+    are there, on a whole recording's grid as in a live run."""
+    config = FusionConfig()
+    twist = TwistData(drive.wheel.t, np.full(len(drive.wheel.t), 0.5), np.zeros(len(drive.wheel.t)),
+                      np.zeros(len(drive.wheel.t)))
+    for which, sigma in (({"odom": twist}, config.odom_base_sigma),
+                         ({"odom": twist, "wheel": drive.wheel}, config.wheel_base_sigma)):
+        iv, _ = _grid(drive, config, visual=drive.visual, imu=drive.imu, **which)
+        assert {st.name: st for st in iv.states}["wheel_base_factor"].sigma == sigma, which
 
 
 def _observed(state: State, context) -> State:
@@ -85,7 +103,7 @@ def test_a_registered_state_needing_another_sensors_heading_is_estimated_only_be
     config = FusionConfig()
 
     def live(*sensors):
-        return {st.name: st.estimated for st in run_states(live_context(config, list(sensors), 0.02, 0.01))}
+        return {st.name: st.estimated for st in run_states(live_context(config, list(sensors), PRIORS))}
 
     with registry.registered(beacon):
         assert live("beacon", "imu")["beacon_scale"] and not live("beacon")["beacon_scale"]
@@ -139,12 +157,12 @@ def test_a_registered_distance_sensor_lets_the_camera_scale_be_estimated(drive):
     config = FusionConfig()
     iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
     assert not scale(iv.states)  # the camera alone measures no distance of its own
-    assert not scale(run_states(live_context(config, ["camera", "imu"], 0.02, 0.01)))
+    assert not scale(run_states(live_context(config, ["camera", "imu"], PRIORS)))
     with registry.registered(Sensor(name="tape", absolute_distance=lambda iv: len(iv.t) > 1)):
         iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
         assert scale(iv.states)
-        assert scale(run_states(live_context(config, ["camera", "imu", "tape"], 0.02, 0.01)))
-        assert not scale(run_states(live_context(config, ["camera", "imu"], 0.02, 0.01)))
+        assert scale(run_states(live_context(config, ["camera", "imu", "tape"], PRIORS)))
+        assert not scale(run_states(live_context(config, ["camera", "imu"], PRIORS)))
     with registry.registered(Sensor(name="tape", absolute_distance=lambda iv: False)):
         iv, _ = _grid(drive, visual=drive.visual, imu=drive.imu)
         assert not scale(iv.states)  # it says it measured none on this grid
