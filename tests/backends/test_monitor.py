@@ -8,6 +8,7 @@ import pytest
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
+from ahead_job import ahead_jobs
 from backend_synth import position_errors
 from husky_like import husky_like
 
@@ -60,33 +61,36 @@ def test_gyro_bias_step_is_dropped_from_the_step_on():
         assert end < 0.5 and rms < 0.3, (name, end, rms)
 
 
-def test_ahrs_is_kept_before_its_offset_moves_and_not_trusted_again_after():
+def _offset_moves() -> tuple:
+    """A 150 s drive whose AHRS heading offset moves by 0.5 rad between 60 and 65 s, fused by every backend with the
+    AHRS and with the gyro alone: (truth, result, gyro_only)."""
+    odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
+                                  ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5)))
+    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    gyro_only = fuse(SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=None)), "all", FusionConfig())
+    return truth, result, gyro_only
+
+
+def test_ahrs_is_kept_before_its_offset_moves_and_not_trusted_again_after(made_ahead):
     """An AHRS whose heading offset moves by 0.5 rad between 60 and 65 s and stays there (its heading
     *changes* agree again afterwards): it is dropped from the move to the end, not before, so its good
     first minute pins the gyro's bias ahead of the stop at 90 s, for the online tracks (the smoothers learn it at
     the stop either way). Measured over seeds 0-9: online RMS 0.23-0.25 of the gyro-only one on average, at most
     0.42; every track's RMS 0.24-0.26 m on average, at most 0.48 m (this seed 0.29-0.30 m)."""
-    odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003,
-                                  ahrs_drift=0.0, ahrs_knots=((60.0, 0.0), (65.0, 0.5)))
-    result = fuse(SensorStreams(odom=odom, imu=imu), "all", FusionConfig())
+    truth, result, gyro_only = made_ahead("offset_moves")
     eps = _episodes(result, "AHRS heading")
     assert len(eps) == 1 and 54.0 <= eps[0]["start"] <= 61.0 and eps[0]["end"] >= truth.t[-1] - 1.0, eps
     # without its first minute (the AHRS dropped for the whole recording) the gyro's bias is found only at the stop
-    gyro_only = fuse(SensorStreams(odom=odom, imu=dataclasses.replace(imu, orientation=None)), "all", FusionConfig())
     for name in FUSED:
         _, rms = position_errors(result.trajectories[name], truth)
         _, rms_gyro = position_errors(gyro_only.trajectories[name], truth)
         assert rms < 0.35 and (name not in ONLINE or rms < 0.5 * rms_gyro), (name, rms, rms_gyro)
 
 
-def test_ahrs_is_trusted_again_once_its_heading_is_right_again():
-    """The same AHRS offset of 0.5 rad from 60-65 s, gone again from 80-85 s (and an AHRS dropout at
-    100-102 s): the AHRS is dropped only while it is off, the dropout does not end its use.
-
-    After a dropout the AHRS comes back only where its heading agrees with the one carried from before it, below
-    the 90 % quantile (``monitor.py``, ``_readmit_absolute``): a good AHRS is kept out about once in ten. Measured:
-    readmitted on 11 of seeds 0-11; RMS 0.05-0.28 m. Six seeds, at least five readmitted."""
-    readmitted = 0
+def _offset_comes_back() -> list:
+    """Six seeds of a 150 s drive whose AHRS offset moves by 0.5 rad from 60-65 s and back from 80-85 s, with an
+    AHRS dropout at 100-102 s, filtered by the EKF: [(truth, result)]."""
+    runs = []
     for seed in range(6):
         odom, imu, truth = husky_like(duration=150.0, stop=(90.0, 110.0), yaw_scale=1.0, gyro_bias=0.003, seed=seed,
                                       ahrs_drift=0.0,
@@ -94,7 +98,19 @@ def test_ahrs_is_trusted_again_once_its_heading_is_right_again():
         orientation = imu.orientation.copy()
         orientation[(imu.t >= 100.0) & (imu.t < 102.0)] = np.nan
         imu = dataclasses.replace(imu, orientation=orientation)
-        result = fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())
+        runs.append((truth, fuse(SensorStreams(odom=odom, imu=imu), "ekf", FusionConfig())))
+    return runs
+
+
+def test_ahrs_is_trusted_again_once_its_heading_is_right_again(made_ahead):
+    """The same AHRS offset of 0.5 rad from 60-65 s, gone again from 80-85 s (and an AHRS dropout at
+    100-102 s): the AHRS is dropped only while it is off, the dropout does not end its use.
+
+    After a dropout the AHRS comes back only where its heading agrees with the one carried from before it, below
+    the 90 % quantile (``monitor.py``, ``_readmit_absolute``): a good AHRS is kept out about once in ten. Measured:
+    readmitted on 11 of seeds 0-11; RMS 0.05-0.28 m. Six seeds, at least five readmitted."""
+    readmitted = 0
+    for seed, (truth, result) in enumerate(made_ahead("offset_comes_back")):
         eps = _episodes(result, "AHRS heading")
         assert eps and 54.0 <= eps[0]["start"] <= 61.0 and 84.0 <= eps[0]["end"] <= 95.0, (seed, eps)
         readmitted += len(eps) == 1
@@ -131,3 +147,8 @@ def test_an_honest_gyro_is_kept_next_to_an_ahrs_on_a_clean_generated_drive(seed,
     result = fuse(streams, "ekf", FusionConfig())
     assert result.inconsistent == [], result.inconsistent
     assert not any("inconsistent" in n for n in result.notes), result.notes
+
+
+#: the longer runs above, made in the session's second process (tests/ahead_job.py)
+AHEAD = {"offset_moves": _offset_moves, "offset_comes_back": _offset_comes_back}
+BACKGROUND_COMMANDS, BACKGROUND_JOBS = ahead_jobs(__file__)

@@ -170,13 +170,9 @@ def _gps_along(truth, t: np.ndarray, sigma: float, rng) -> GpsData:
                    lever_arm=np.zeros(3), horizontal_sigma=sigma)
 
 
-@pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
-def test_without_a_camera_the_batch_run_places_the_engines_nodes(backend, name):
-    """Without a camera the engine cannot know where the data ends: it steps its nodes ``1 / step_hz`` at a time and
-    restarts at each GPS fix; a batch run places them the same way (``timeline.step_nodes``). Odometry and IMU of
-    a generated skid-steered drive on an epoch clock whose last sample comes 0.017 s after a step, without and with
-    GPS at 2.5 Hz jittered by up to 20 ms: the same node times, and without GPS the same track (spaced evenly up to
-    the last sample, the batch run's grid had one node more, measured)."""
+def _without_a_camera(backend: str) -> tuple:
+    """Odometry and IMU of a generated drive on an epoch clock, without and with GPS fixes at 2.5 Hz jittered by up
+    to 20 ms, fed to the engine and run in batch by ``backend``: (the fixes' times, [(gps?, engine's, batch's)])."""
     odom, imu, truth = husky_like(duration=30.0, stop=(10.0, 15.0), yaw_scale=1.0)
     epoch = 1.7e9
     odom = dataclasses.replace(odom, t=odom.t + epoch)
@@ -186,14 +182,27 @@ def test_without_a_camera_the_batch_run_places_the_engines_nodes(backend, name):
     fix_t = epoch + np.arange(0.3, 29.5, 0.4)
     fix_t += rng.uniform(-0.02, 0.02, len(fix_t))
     config = FusionConfig(monitor=False, sync_odometry=False)
+    runs = []
     for gps in (None, _gps_along(truth, fix_t, 0.5, rng)):
         streams = SensorStreams(odom=odom, imu=imu, gps=gps)
         fusion = streaming_for(streams, backend, config)
         fusion.feed(time_ordered_messages(streams))
-        live, batch = fusion.finish(), fuse(streams, backend, config)
+        runs.append((gps is not None, fusion.finish(), fuse(streams, backend, config)))
+    return fix_t, runs
+
+
+@pytest.mark.parametrize("backend, name", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
+def test_without_a_camera_the_batch_run_places_the_engines_nodes(made_ahead, backend, name):
+    """Without a camera the engine cannot know where the data ends: it steps its nodes ``1 / step_hz`` at a time and
+    restarts at each GPS fix; a batch run places them the same way (``timeline.step_nodes``). Odometry and IMU of
+    a generated skid-steered drive on an epoch clock whose last sample comes 0.017 s after a step, without and with
+    GPS at 2.5 Hz jittered by up to 20 ms: the same node times, and without GPS the same track (spaced evenly up to
+    the last sample, the batch run's grid had one node more, measured)."""
+    fix_t, runs = made_ahead(f"without_a_camera_{backend}")
+    for with_gps, live, batch in runs:
         ours, ref = live.trajectories[name], batch.trajectories[name]
-        assert len(ref.t) >= 600 and np.array_equal(ours.t, ref.t), (gps is None, len(ours.t), len(ref.t))
-        if gps is None:
+        assert len(ref.t) >= 600 and np.array_equal(ours.t, ref.t), (with_gps, len(ours.t), len(ref.t))
+        if not with_gps:
             assert np.max(np.abs(ours.xyyaw - ref.xyyaw)) < 1e-8
         else:
             assert np.min(np.abs(ref.t[:, None] - fix_t), axis=0).max() <= 1e-3  # every fix at a node
@@ -478,4 +487,6 @@ def test_late_imu_samples_with_orientations_are_re_applied_exactly_as_in_order(m
     assert np.array_equal(tracks[0].xyyaw, tracks[1].xyyaw)
 
 
-AHEAD = {"late_imu": _late_imu_tracks, "spanning_late_wheels": _spanning_increments_late_wheels}
+AHEAD = {"late_imu": _late_imu_tracks, "spanning_late_wheels": _spanning_increments_late_wheels,
+         "without_a_camera_ekf": lambda: _without_a_camera("ekf"),
+         "without_a_camera_gtsam": lambda: _without_a_camera("gtsam")}

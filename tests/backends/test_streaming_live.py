@@ -289,18 +289,24 @@ def _wheels_late(s, delay):
     return [(m[0], m[2], m[3]) for m in msgs]
 
 
-def test_isam2_inserts_late_samples_at_their_nodes(drive):
-    s = drive
+def _late_samples_runs() -> tuple:
+    """iSAM2 fed the drive in order, with every wheel sample 1.5 s late (2 s history) and the same with a 1 s
+    history: (the late one's rewinds, the three results, the three smoothed tracks)."""
+    s = _drive()
     in_order, late, lost = (_fusion(s, "gtsam", history=h) for h in (2.0, 2.0, 1.0))
     _feed(in_order, _messages(s))
     _feed(late, _wheels_late(s, 1.5))  # every wheel sample 1.5 s late: 30 node intervals behind
     _feed(lost, _wheels_late(s, 1.5))  # a 1 s history is too short for them
-    assert late.rewinds > 50
-    a, b, c = in_order.finish(), late.finish(), lost.finish()
+    results = in_order.finish(), late.finish(), lost.finish()
+    return late.rewinds, results, (in_order.smoothed(), late.smoothed(), lost.smoothed())
+
+
+def test_isam2_inserts_late_samples_at_their_nodes(made_ahead):
+    rewinds, (a, b, c), (sa, sb, sc) = made_ahead("late_samples")
+    assert rewinds > 50
     ca, cb = a.counts["gtsam_online"], b.counts["gtsam_online"]
     assert {k: v.as_dict() for k, v in cb.items()} == {k: v.as_dict() for k, v in ca.items()}
     assert c.counts["gtsam_online"]["wheel"].late > 300
-    sa, sb, sc = in_order.smoothed(), late.smoothed(), lost.smoothed()
     np.testing.assert_allclose(sb.t, sa.t, atol=1e-12)
     gap = np.linalg.norm(sb.xyyaw[:, :2] - sa.xyyaw[:, :2], axis=1).max()
     gap_lost = np.linalg.norm(sc.xyyaw[:, :2] - sa.xyyaw[:, :2], axis=1).max()
@@ -352,16 +358,22 @@ def test_isam2_in_the_background_gives_the_same_track(drive, made_ahead):
             np.testing.assert_allclose(r.covariances["gtsam_online"], a.covariances["gtsam_online"], rtol=1e-9, atol=1e-12)
 
 
-def test_isam2_attaches_camera_increments_later_than_its_window(drive):
-    """A camera 150 ms late with a 50 ms window: iSAM2's nodes are fill-in nodes by the time an increment
-    comes; it is re-timed onto the nearest nodes (the wheels' and gyro's motion over the slivers between
-    frame and node composed onto it) instead of being lost."""
-    s = drive
+def _camera_late_runs() -> tuple:
+    """iSAM2 with a 50 ms window fed the drive in order, with the camera 150 ms late (2 s history) and the same
+    without history: the three results."""
+    s = _drive()
     in_order, late, lost = (_fusion(s, "gtsam", window=0.05, history=h) for h in (2.0, 2.0, 0.0))
     _feed(in_order, _messages(s))
     _feed(late, _messages(s, camera_delay=0.15))
     _feed(lost, _messages(s, camera_delay=0.15))
-    a, b, c = in_order.finish(), late.finish(), lost.finish()
+    return in_order.finish(), late.finish(), lost.finish()
+
+
+def test_isam2_attaches_camera_increments_later_than_its_window(made_ahead):
+    """A camera 150 ms late with a 50 ms window: iSAM2's nodes are fill-in nodes by the time an increment
+    comes; it is re-timed onto the nearest nodes (the wheels' and gyro's motion over the slivers between
+    frame and node composed onto it) instead of being lost."""
+    a, b, c = made_ahead("camera_late")
     cam_a, cam_b = a.counts["gtsam_online"]["camera"], b.counts["gtsam_online"]["camera"]
     assert cam_b.late <= 2 and cam_b.used >= cam_a.used - 2 and cam_a.used > 150
     assert c.counts["gtsam_online"]["camera"].late > 150
@@ -414,4 +426,5 @@ def test_a_sample_long_before_the_first_node_is_late_even_while_the_track_is_you
     np.testing.assert_array_equal(fusion.current_estimate().pose, before.pose)
 
 
-AHEAD = {"background_and_caller": _background_and_caller_runs}
+AHEAD = {"background_and_caller": _background_and_caller_runs, "late_samples": _late_samples_runs,
+         "camera_late": _camera_late_runs}
