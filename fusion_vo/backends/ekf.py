@@ -110,7 +110,7 @@ from fusion_vo.backends.ekf_adapter import EkfReadings
 from fusion_vo.backends.fixes import EkfFixes
 from fusion_vo.backends.result import FusionResult, InnovationLog, SensorCount
 from fusion_vo.backends.states import calibration, live_context, run_states
-from fusion_vo.backends.timeline import Intervals, sensor_readings
+from fusion_vo.backends.timeline import Intervals, scale_priors, sensor_readings
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors.model import Gate, MeasurementModel
@@ -444,8 +444,7 @@ def filter_for(iv: Intervals, config: FusionConfig, readings: EkfReadings | None
 def default_states(config: FusionConfig) -> tuple:
     """The states of a run fusing the camera, the wheels (encoder ticks) and the IMU with its AHRS, with the
     configured priors: the filter's states when none are given."""
-    priors = {"visual_scale_sigma": config.visual_scale_sigma, "wheel_scale_sigma": config.wheel_scale_sigma}
-    return run_states(live_context(config, ("camera", "wheel", "imu"), priors))
+    return run_states(live_context(config, ("camera", "wheel", "imu"), scale_priors(config, None).facts()))
 
 
 def run_ekf(iv: Intervals, config: FusionConfig) -> FusionResult:
