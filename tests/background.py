@@ -122,7 +122,7 @@ class BackgroundJobs:
             self.jobs[key] = Job(key, argv, out, needs)
         self.stopped = False
         self.processes: set[subprocess.Popen] = set()
-        self._cond = threading.Condition()
+        self._lock = threading.Lock()  # guards taking a job, starting a process, stopping, lowest()
         self._held = 0  # lowest() callers: while one holds it, the jobs run at the lowest priority
         self.thread = threading.Thread(target=self._run_all, name="tests-background", daemon=True)
         self.thread.start()
@@ -132,21 +132,21 @@ class BackgroundJobs:
         """Within this block the jobs run at the lowest priority: the running ones are lowered (every thread of
         the job and of its children, on Linux; elsewhere they go on as they are) and the next ones start at it.
         After it the running ones are raised back where the user may do so."""
-        with self._cond:
+        with self._lock:
             self._held += 1
             for process in self.processes:
                 renice(process.pid, LOWEST)
         try:
             yield
         finally:
-            with self._cond:
+            with self._lock:
                 self._held -= 1
                 for process in self.processes if not self._held else ():
                     renice(process.pid, NICE)
 
     def _take(self, job: Job) -> bool:
         """Mark ``job`` started, unless it was taken already (False)."""
-        with self._cond:
+        with self._lock:
             if job.taken:
                 return False
             job.taken = True
@@ -168,7 +168,7 @@ class BackgroundJobs:
         """Run the taken ``job`` in this thread and announce its end."""
         try:
             job.out.parent.mkdir(parents=True, exist_ok=True)
-            with self._cond:  # started and registered in one step, so that stop() kills it or it is never started
+            with self._lock:  # started and registered in one step, so that stop() kills it or it is never started
                 if self.stopped:
                     job.stderr = "not run: the session ended first"
                     return
@@ -215,7 +215,7 @@ class BackgroundJobs:
 
     def stop(self) -> None:
         """End the running jobs (if any), skip the rest and remove every output."""
-        with self._cond:
+        with self._lock:
             self.stopped = True
             running = list(self.processes)
         for process in running:
