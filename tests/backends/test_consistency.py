@@ -4,13 +4,21 @@ benchmarks/consistency.py runs 25 seeds against the chi-square bands)."""
 
 import numpy as np
 
+from ahead_job import ahead_jobs
+from fusion_vo.backends import FusionConfig, SensorStreams, fuse
 from fusion_vo.backends.graph import world_covariances
 from fusion_vo.evaluation.consistency import band, ekf_nis, leave_one_out_nis, run, verdict
+from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
 
-def test_average_nees_of_every_backend_is_near_three_and_each_sensors_nis_near_its_dof():
+def _nees_and_nis() -> tuple[dict, dict]:
+    """NEES of every backend and each sensor's NIS on four 20 s drives."""
     nis: dict = {}
-    nees = run(seeds=4, duration=20.0, nis=nis)
+    return run(seeds=4, duration=20.0, nis=nis), nis
+
+
+def test_average_nees_of_every_backend_is_near_three_and_each_sensors_nis_near_its_dof(made_ahead):
+    nees, nis = made_ahead("nees_and_nis")
     for name, v in nees.items():
         mean = float(np.nanmean(v))
         # 3 is consistent; a covariance 2.7 times too small in each direction gives about 22
@@ -30,9 +38,6 @@ def _nis_ok(dof: int, mean: float) -> bool:
 def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound():
     """The NIS bound above catches a wheel noise stated ten times too small or too large, which the pose
     NEES alone barely shows (measured: wheel NIS 14 and 0.05 against 1.9; NEES of the EKF 6.2 and 2.5)."""
-    from fusion_vo.backends import FusionConfig, SensorStreams
-    from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
-
     means = {}
     broken = (("too small", {"k": 0.001, "k_lateral": 0.0005}), ("too large", {"k": 0.1, "k_lateral": 0.05}))
     for label, wheel in broken:
@@ -47,16 +52,11 @@ def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound():
     assert means["too large"][1] < 0.4 * means["too large"][0], means
 
 
-def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound_of_the_factor_graph_too():
-    """The graph's per-sensor NIS at its solution (measured on these two seeds: wheel NIS 16 for GTSAM batch
-    and iSAM2 when the noise is stated ten times too small, 0.08 for both when ten times too large, against
-    2.4-2.8 with the right noise). Without the fallback for an indefinite residual covariance (the robust
-    kernel's down-weighted measurements) iSAM2's mean came out at -29 when the noise is ten times too small."""
-    from fusion_vo.backends import FusionConfig, SensorStreams, fuse
-    from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
-
+def _graph_nis_with_wrong_wheel_noise() -> tuple[list, dict]:
+    """The graph's wheel NIS at its solution on two 20 s drives with the wheel noise ten times too small and too
+    large: each run's (label, backend, dof, rows) and each label's mean per backend."""
     cases = (("too small", {"k": 0.001, "k_lateral": 0.0005}), ("too large", {"k": 0.1, "k_lateral": 0.05}))
-    means = {}
+    shapes, means = [], {}
     for label, wheel in cases:
         values: dict = {}
         for seed in range(2):
@@ -65,9 +65,25 @@ def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound_of_the_factor_gra
             result = fuse(streams, "gtsam", FusionConfig.from_dict({"wheel": wheel, "graph": {"residuals": True}}))
             for backend in ("gtsam", "gtsam_online"):
                 dof, rows = result.residuals[backend]["wheel"]
-                assert dof == 3 and len(rows) > 70, (backend, dof, len(rows))
+                shapes.append((label, backend, dof, len(rows)))
                 values.setdefault(backend, []).append(rows[:, 1])
         means[label] = {b: float(np.mean(np.concatenate(v))) for b, v in values.items()}
+    return shapes, means
+
+
+AHEAD = {"nees_and_nis": _nees_and_nis, "graph_nis_with_wrong_wheel_noise": _graph_nis_with_wrong_wheel_noise}
+BACKGROUND_COMMANDS, BACKGROUND_JOBS = ahead_jobs(__file__)
+
+
+def test_a_wheel_noise_model_ten_times_off_fails_the_nis_bound_of_the_factor_graph_too(made_ahead):
+    """The graph's per-sensor NIS at its solution (measured on these two seeds: wheel NIS 16 for GTSAM batch
+    and iSAM2 when the noise is stated ten times too small, 0.08 for both when ten times too large, against
+    2.4-2.8 with the right noise). Without the fallback for an indefinite residual covariance (the robust
+    kernel's down-weighted measurements) iSAM2's mean came out at -29 when the noise is ten times too small."""
+    shapes, means = made_ahead("graph_nis_with_wrong_wheel_noise")
+    assert len(shapes) == 8
+    for label, backend, dof, rows in shapes:
+        assert dof == 3 and rows > 70, (label, backend, dof, rows)
     for backend in ("gtsam", "gtsam_online"):  # the right noise model passes: the test above
         assert means["too small"][backend] > 2.0 * 3, means
         assert means["too large"][backend] < 0.4 * 3, means

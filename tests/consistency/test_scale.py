@@ -6,6 +6,7 @@ import dataclasses
 import json
 import re
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -19,29 +20,40 @@ from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams, whe
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "backends"))
 from backend_synth import position_errors, streams_of  # noqa: E402
+from drives import make_square  # noqa: E402
+
+from ahead_job import ahead_jobs  # noqa: E402
 
 
-@pytest.fixture(scope="module")
-def half_focal(square, tmp_path_factory):
-    """The small square run with ``--uncalibrated --focal-length`` at half its true 210 px."""
-    out = tmp_path_factory.mktemp("half_focal") / "run"
-    assert main(["-q", "run", str(square), "--out", str(out), "--uncalibrated", "--focal-length", "105",
-                 "--no-evaluate"]) == 0
-    return out, json.loads((out / "summary.json").read_text())
+def _half_focal() -> dict:
+    """The small square run with ``--uncalibrated --focal-length`` at half its true 210 px, in a temporary folder:
+    its summary and the ATE of each track against the square's ground truth."""
+    with tempfile.TemporaryDirectory() as tmp:
+        square = make_square(Path(tmp) / "rec")
+        out = Path(tmp) / "run"
+        assert main(["-q", "run", str(square), "--out", str(out), "--uncalibrated", "--focal-length", "105",
+                     "--no-evaluate"]) == 0
+        return {"summary": json.loads((out / "summary.json").read_text()),
+                "ate": {name: ate(read_tum(out / f"{name}.tum"), square)
+                        for name in ("wheel", "vo", "ekf", "ekf_smoothed", "gtsam", "gtsam_online")}}
 
 
-def test_half_focal_length_is_named_and_kept_out_of_the_fused_tracks(square, half_focal):
-    out, summary = half_focal
+AHEAD = {"half_focal": _half_focal}
+BACKGROUND_COMMANDS, BACKGROUND_JOBS = ahead_jobs(__file__)
+
+
+def test_half_focal_length_is_named_and_kept_out_of_the_fused_tracks(made_ahead):
+    half_focal = made_ahead("half_focal")
+    summary, errors = half_focal["summary"], half_focal["ate"]
     (sentence,) = [n for n in summary["notes"] if n.startswith("cam0/sensor.yaml")]
     assert "the camera's distances are 2.0" in sentence and "--focal-length" in sentence, sentence
     assert "the accelerometer sides with the wheels" in sentence and "leaves the camera's translation out" in sentence
     (found,) = [f for f in summary["fusion"]["consistency"] if f["check"] == "scale"]
     assert found["decision"] == "corrected" and abs(found["estimate"]["ratio"] - 2.0) < 0.05
-    wheels = ate(read_tum(out / "wheel.tum"), square)
-    vo = ate(read_tum(out / "vo.tum"), square)
+    wheels, vo = errors["wheel"], errors["vo"]
     assert vo > 10 * wheels  # the camera's track is far off: the fused tracks could be too
     for name in ("ekf", "ekf_smoothed", "gtsam", "gtsam_online"):
-        assert ate(read_tum(out / f"{name}.tum"), square) <= wheels, name
+        assert errors[name] <= wheels, name
 
 
 def test_wheel_radius_given_as_a_diameter_is_named(square_vo):

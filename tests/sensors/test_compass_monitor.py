@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ahead_job import ahead_jobs
 from compass_sensor import CHECKED_COMPASS_SENSOR, CompassData
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
@@ -17,8 +18,7 @@ from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 JUMP_AT = 15.0  # s into the drive: the compass's heading jumps by 0.3 rad (a magnetic disturbance) and stays off
 
 
-@pytest.fixture(scope="module")
-def drive():
+def _drive():
     """30 s of wheels (their base 5 % off) and a gyro, and a compass (0.02 rad, 10 Hz) 0.3 rad off from 15 s on."""
     s = synthetic_streams(SyntheticOptions(duration=30.0, wheel_base_factor=1.05), seed=4)
     rng = np.random.default_rng(7)
@@ -26,6 +26,12 @@ def drive():
     yaw = np.interp(t, s.truth.t, np.unwrap(s.truth.xyyaw[:, 2])) + rng.normal(0.0, 0.02, len(t))
     yaw[t >= s.truth.t[0] + JUMP_AT] += 0.3
     return s, CompassData(t, se2.wrap_angle(yaw))
+
+
+@pytest.fixture(scope="module")
+def drive():
+    """:func:`_drive`"""
+    return _drive()
 
 
 def _heading_rms(track, truth, after: float) -> float:
@@ -56,14 +62,10 @@ def test_the_monitor_drops_a_registered_heading_that_jumps(drive):
         assert ours < 0.02 and theirs > 0.2, (name, ours, theirs)
 
 
-@pytest.mark.parametrize("backend, track", [("ekf", "ekf"), ("gtsam", "gtsam_online")])
-def test_the_live_monitor_drops_a_registered_heading_that_jumps(drive, backend, track):
-    """The same drive streamed: the live monitor windows the compass's headings (a tuple of arrays on the node grid,
-    no registered container) and drops them once a check sees the jump (measured: 0.008 rad RMS after it, both
-    backends; the stream with the monitor off follows the jump). Fails if the live monitor keeps only the newest
-    interval of a sensor without a registered container (the compass's ``drop`` then meets arrays of another
-    length: a ValueError)."""
-    s, compass = drive
+def _streamed(backend: str, track: str) -> dict:
+    """The drive streamed by ``backend`` with the live monitor on and off: the start, the end of the drive, the
+    compass's episodes (monitor on) and the heading's RMS error after the jump (on, off)."""
+    s, compass = _drive()
     t0 = float(s.truth.t[0])
     with registry.registered(CHECKED_COMPASS_SENSOR):
         streams = SensorStreams(wheel=s.wheel, imu=s.imu, compass=compass).select(["wheel", "imu", "compass"])
@@ -73,11 +75,30 @@ def test_the_live_monitor_drops_a_registered_heading_that_jumps(drive, backend, 
                                                                              "monitor": monitor}))
             fusion.feed(time_ordered_messages(streams))
             results[monitor] = fusion.finish()
-    episodes = [e for e in results[True].inconsistent if e["sensor"] == "compass"]
-    assert len(episodes) == 1 and episodes[0]["component"] == "compass heading", results[True].inconsistent
+    after = t0 + JUMP_AT + 2.0  # (the check runs every monitor_window / 2 of data: the jump is used until then)
+    return {"t0": t0, "end": float(s.truth.t[-1]), "inconsistent": results[True].inconsistent,
+            "rms": [_heading_rms(results[m].trajectories[track], s.truth, after) for m in (True, False)]}
+
+
+AHEAD = {"streamed_ekf": lambda: _streamed("ekf", "ekf"), "streamed_gtsam": lambda: _streamed("gtsam", "gtsam_online")}
+BACKGROUND_COMMANDS, BACKGROUND_JOBS = ahead_jobs(__file__)
+
+
+@pytest.mark.parametrize("backend", ["ekf", "gtsam"])
+def test_the_live_monitor_drops_a_registered_heading_that_jumps(made_ahead, backend):
+    """The same drive streamed: the live monitor windows the compass's headings (a tuple of arrays on the node grid,
+    no registered container) and drops them once a check sees the jump (measured: 0.008 rad RMS after it, both
+    backends; the stream with the monitor off follows the jump). Fails if the live monitor keeps only the newest
+    interval of a sensor without a registered container (the compass's ``drop`` then meets arrays of another
+    length: a ValueError)."""
+    made = made_ahead(f"streamed_{backend}")
+    t0 = made["t0"]
+    episodes = [e for e in made["inconsistent"] if e["sensor"] == "compass"]
+    assert len(episodes) == 1 and episodes[0]["component"] == "compass heading", made["inconsistent"]
     # decided causally: within the windows that hold the jump, and to the end
     assert t0 + 10.0 - 0.1 <= episodes[0]["start"] <= t0 + JUMP_AT + 2.0, episodes
-    assert episodes[0]["end"] == pytest.approx(float(s.truth.t[-1]), abs=0.2)
-    after = t0 + JUMP_AT + 2.0  # (the check runs every monitor_window / 2 of data: the jump is used until then)
-    ours, theirs = (_heading_rms(results[m].trajectories[track], s.truth, after) for m in (True, False))
+    assert episodes[0]["end"] == pytest.approx(made["end"], abs=0.2)
+    ours, theirs = made["rms"]
     assert ours < 0.02 and theirs > 0.2, (ours, theirs)
+
+
