@@ -23,7 +23,8 @@ import lazy_loader
 # pay for filterpy, scipy.stats or GTSAM (``graph``, ``online_graph``: what the modules of this package reach
 # GTSAM through)
 __getattr__, __dir__, __all__ = lazy_loader.attach(__name__, submod_attrs={
-    "batch": ["BACKENDS", "backend_names", "fuse", "run_backends", "streams_from_recording", "wheel_dead_reckoning"],
+    "batch": ["BACKENDS", "backend_names", "fuse", "run_backends", "streams_from_recording", "dead_reckoning",
+              "wheel_dead_reckoning"],
     "config": ["EkfConfig", "FusionConfig", "GraphConfig"],
     "graph": ["run_graph"],
     "online_graph": ["OnlineGraph"],

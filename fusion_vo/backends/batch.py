@@ -44,7 +44,6 @@ from fusion_vo.sensors import registry
 from fusion_vo.sensors.imu import gyro_yaw
 from fusion_vo.sensors.sync import odometry_delay
 from fusion_vo.sensors.visual import camera_grid, stated_height_sigma
-from fusion_vo.sensors.wheel import ticks_to_travel, twist_to_travel, wheel_track
 
 logger = logging.getLogger(__name__)
 
@@ -107,9 +106,7 @@ def fuse(streams: SensorStreams, backend="all", config: FusionConfig | dict | No
 def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig) -> FusionResult:
     """:func:`fuse` of streams that passed the consistency checks."""
     result = FusionResult()
-    wheel = wheel_dead_reckoning(streams, config)
-    if wheel is not None:
-        result.trajectories["wheel"] = wheel
+    result.trajectories.update(dead_reckoning(streams, config))
     if not names:
         return result
     streams, delay = synchronise_odometry(streams, config)
@@ -319,16 +316,24 @@ def streams_from_recording(recording, visual=None, sensors=None, config: FusionC
     return streams.select(sensors)
 
 
-def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = None) -> PoseData | None:
-    """Wheel-only trajectory (``wheel.tum``) at the encoder (or twist) rate, or None without wheels."""
+def dead_reckoning(streams: SensorStreams, config: FusionConfig | None = None) -> dict[str, PoseData]:
+    """The tracks single sensors' data give alone (:attr:`~fusion_vo.sensors.registry.Sensor.dead_reckoning`: the
+    wheels' ``wheel.tum``, at the encoder or twist rate), by track name."""
     config = config or FusionConfig()
-    if streams.wheel is not None and len(streams.wheel) > 1:
-        travel = ticks_to_travel(streams.wheel, config.wheel)
-    elif streams.odom is not None and len(streams.odom) > 1:
-        travel = twist_to_travel(streams.odom, max_speed=config.odom.max_speed)
-    else:
-        return None
-    return wheel_track(travel, config.initial_pose)
+    tracks: dict[str, PoseData] = {}
+    for sensor in registry.sensors():
+        if sensor.dead_reckoning is None:
+            continue
+        name, make = sensor.dead_reckoning
+        data = sensor.data(streams)
+        if name not in tracks and sensor.available(data):
+            tracks[name] = make(data, config)
+    return tracks
+
+
+def wheel_dead_reckoning(streams: SensorStreams, config: FusionConfig | None = None) -> PoseData | None:
+    """The wheel-only track (``wheel.tum``) of :func:`dead_reckoning`, or None without wheels or a twist."""
+    return dead_reckoning(streams, config).get("wheel")
 
 
 def _range_height_sigma(visual) -> float | None:

@@ -375,6 +375,12 @@ class Sensor:
         The heading components it gives the heading monitor (the IMU: its gyro and its AHRS).
     distance : tuple of DistanceSource
         The distances it gives the speed check (the wheels', the camera's).
+    dead_reckoning : tuple (str, callable) or None
+        ``(track, make)``: ``make(data, config) -> PoseData`` (``config``: the
+        :class:`~fusion_vo.backends.config.FusionConfig`) is the track its data alone gives, which a batch run
+        keeps beside the fused ones as ``track`` (``track.tum``); where several sensors with data name the same
+        track, the first in :func:`sensors`' order makes it (the wheels' ticks before the odometry twist, both
+        ``wheel``).
     """
 
     name: str
@@ -406,6 +412,7 @@ class Sensor:
     heading_reference: Any = None
     heading: tuple = ()
     distance: tuple = ()
+    dead_reckoning: tuple | None = None
 
     def data(self, streams) -> Any:
         """Its data in ``streams`` (a :class:`~fusion_vo.sensors.streams.SensorStreams`), or None."""

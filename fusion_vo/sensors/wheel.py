@@ -547,6 +547,16 @@ def read_twist(recording, folder: str = "odom0") -> TwistData:
     return TwistData(tab.t, tab.values[:, 0], tab.values[:, 1], tab.values[:, 2])
 
 
+def _ticks_track(ticks: WheelData, config) -> PoseData:
+    """The wheels' dead reckoning (``wheel.tum``): the arcs of their ticks chained from the initial pose."""
+    return wheel_track(ticks_to_travel(ticks, config.wheel), config.initial_pose)
+
+
+def _twist_track(twist: TwistData, config) -> PoseData:
+    """The odometry twist's dead reckoning (``wheel.tum`` without ticks), as :func:`_ticks_track`."""
+    return wheel_track(twist_to_travel(twist, max_speed=config.odom.max_speed), config.initial_pose)
+
+
 register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0", read=read_ticks,
     pick=_pick_ticks, config=("wheel", WheelNoise),
@@ -554,7 +564,7 @@ register(Sensor(
     coverage=lambda iv: ("wheel", wheel_grid(iv).ok),
     absolute_distance=True,
     states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
-    heading=(HEADING,), distance=(DISTANCE,),
+    heading=(HEADING,), distance=(DISTANCE,), dead_reckoning=("wheel", _ticks_track),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0", read=read_twist,
@@ -563,6 +573,7 @@ register(Sensor(
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
     config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals), absolute_distance=True,
     live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1),
+    dead_reckoning=("wheel", _twist_track),
 ))
 
 __all__ = [

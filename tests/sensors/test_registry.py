@@ -12,14 +12,16 @@ import pytest
 
 from compass_sensor import COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
 
-from fusion_vo.backends import FusionConfig, SensorStreams, fuse
+from fusion_vo.backends import FusionConfig, SensorStreams, dead_reckoning, fuse
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
+from fusion_vo.measurements import PoseData, TwistData
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.instances import imu_instance
 from fusion_vo.sensors.registry import Sensor, State, Step
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
+from fusion_vo.sensors.wheel import ticks_to_travel, wheel_track
 
 #: the offset compass's true offset [rad]
 OFFSET = 0.2
@@ -73,6 +75,31 @@ def test_a_sensor_registered_outside_the_library_is_fused_by_both_backends(drive
         assert yaw_with < 0.015, (name, yaw_with)
         assert end_with < 0.1 * end_without, (name, end_with, end_without)
         assert fused.counts[name]["compass"].used >= 600, (name, fused.counts[name]["compass"])
+
+
+def _heading_track(data: CompassData, config) -> PoseData:
+    """The compass's headings alone, at the origin: a track of its own."""
+    return PoseData(data.t.copy(), np.column_stack([np.zeros((len(data), 2)), data.yaw]))
+
+
+def test_a_registered_sensors_dead_reckoning_is_kept_beside_the_fused_tracks(drive):
+    """``Sensor.dead_reckoning``: the track a sensor's data alone give is kept under its name, as the wheels' is as
+    ``wheel`` (from the ticks, before the odometry twist)."""
+    s, compass = drive
+    with registry.registered(dataclasses.replace(COMPASS_SENSOR, dead_reckoning=("compass", _heading_track))):
+        streams = SensorStreams(wheel=s.wheel, extra={"compass": compass}).select(["wheel", "compass"])
+        fused = fuse(streams, "ekf", FusionConfig.from_dict({"compass": {"sigma": 0.02}}))
+    assert set(fused.trajectories) == {"wheel", "compass", "ekf", "ekf_smoothed"}
+    np.testing.assert_array_equal(fused.trajectories["compass"].xyyaw, _heading_track(compass, None).xyyaw)
+    ticks = wheel_track(ticks_to_travel(s.wheel, FusionConfig().wheel))
+    np.testing.assert_array_equal(fused.trajectories["wheel"].xyyaw, ticks.xyyaw)
+    t = np.arange(s.wheel.t[0], s.wheel.t[-1], 0.04)  # a twist of 0.5 m/s straight ahead at 25 Hz
+    twist = SensorStreams(wheel=s.wheel, odom=TwistData(t, np.full(len(t), 0.5), np.zeros(len(t)), np.zeros(len(t))))
+    assert dead_reckoning(twist)["wheel"].t.size == len(s.wheel)  # the ticks' track, not the twist's
+    np.testing.assert_array_equal(dead_reckoning(twist)["wheel"].xyyaw, ticks.xyyaw)
+    only_twist = dead_reckoning(SensorStreams(odom=twist.odom))["wheel"]
+    assert only_twist.t.size == len(t)
+    np.testing.assert_allclose(only_twist.xyyaw[-1], [0.5 * (t[-1] - t[0]), 0.0, 0.0], atol=1e-9)
 
 
 def test_a_registered_sensors_configuration_goes_through_the_schema(drive):
