@@ -1,5 +1,6 @@
 """Small generated recordings and a local Dask cluster of 2 worker processes, shared by the batch tests."""
 
+import logging
 import os
 import shutil
 
@@ -43,5 +44,12 @@ def client():
     """The LocalCluster a batch starts (:func:`fusion_vo.batch.cluster.open_client`), with 2 workers."""
     from fusion_vo.batch.cluster import open_client
 
+    handlers = logging.getLogger("distributed").handlers
+    levels = {handler: handler.level for handler in handlers}
     with open_client(workers=2, dashboard=False) as c:
+        # Dask's LocalCluster lowers every stream handler of the "distributed" logger to ERROR while it runs, and
+        # under pytest those are pytest's own capture handlers too: left so for the rest of the session, every later
+        # test's caplog would miss its warnings. The levels come back here; Dask sets the same ones when it closes.
+        for handler, level in levels.items():
+            handler.setLevel(level)
         yield c
