@@ -8,16 +8,9 @@ import pytest
 
 pytest.importorskip("distributed", reason="the batch extra (dask[distributed]) is not installed")
 
-from fusion_vo.simulation import simulate  # noqa: E402
+from small_recordings import SEEDS, small_recording  # noqa: E402
 
 _ENVIRONMENT_BEFORE = dict(os.environ)  # before any cluster of the session started
-
-#: 4 s random drives on 320 x 180 frames (seeds whose robot moves)
-SEEDS = (3, 4, 6)
-
-
-def small_recording(path, seed):
-    return simulate(path, profile="random", seed=seed, duration=4.0, width=320, height=180, cu=160.0, cv=90.0)
 
 
 @pytest.fixture(scope="session")

@@ -2,6 +2,8 @@
 
 import math
 import os
+import tempfile
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -11,6 +13,9 @@ from fusion_vo.batch import METRICS, run_batch
 from fusion_vo.batch.tasks import Task, cache_key
 from fusion_vo.config import RunConfig
 from fusion_vo.pipeline import run_pipeline
+
+from ahead_job import ahead_jobs
+from small_recordings import SEEDS, small_recording
 
 
 @pytest.fixture(scope="module")
@@ -26,23 +31,51 @@ def _same(a, b):
     return (math.isnan(a) and math.isnan(b)) or math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12)
 
 
-def test_figures_equal_those_of_single_runs(batch, recordings, tmp_path):
+#: the files of a run compared number by number with the batch's
+COMPARED = ("vo.tum", "gtsam.tum", "velocities.csv")
+
+
+def _table(path):
+    csv = path.suffix == ".csv"
+    return np.genfromtxt(path, delimiter="," if csv else None, skip_header=1 if csv else 0, dtype=float)
+
+
+def _single_runs() -> dict:
+    """The good recordings (conftest.py's, made again in a temporary folder) each run alone in this process: per
+    recording, its trajectories, frames, metrics, the names of the files written and the tables of
+    :data:`COMPARED`."""
+    runs = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for seed in SEEDS:
+            rec = small_recording(Path(tmp) / "recordings" / f"drive{seed}", seed)
+            out = Path(tmp) / "runs" / rec.name
+            single = run_pipeline(rec, out, RunConfig())
+            runs[rec.name] = {"trajectories": single.trajectories, "frames": single.frames, "metrics": single.metrics,
+                              "files": sorted(p.name for p in out.iterdir()),
+                              "tables": {name: _table(out / name) for name in COMPARED}}
+    return runs
+
+
+AHEAD = {"single_runs": _single_runs}
+BACKGROUND_COMMANDS, BACKGROUND_JOBS = ahead_jobs(__file__)
+
+
+def test_figures_equal_those_of_single_runs(batch, recordings, made_ahead):
     out, frame = batch
     good, _ = recordings
+    runs = made_ahead("single_runs")
+    assert sorted(runs) == sorted(rec.name for rec in good)
     for rec in good:
-        single = run_pipeline(rec, tmp_path / rec.name, RunConfig())
+        single = runs[rec.name]
         rows = frame[frame["recording"] == rec.name]
-        assert list(rows["trajectory"]) == single.trajectories
-        assert set(rows["status"]) == {"ok"} and set(rows["frames"]) == {single.frames}
+        assert list(rows["trajectory"]) == single["trajectories"]
+        assert set(rows["status"]) == {"ok"} and set(rows["frames"]) == {single["frames"]}
         for row in rows.to_dict("records"):
             for metric in METRICS:
-                assert _same(row[metric], float(single.metrics[row["trajectory"]].get(metric, math.nan))), (rec.name, metric)
-        assert sorted(p.name for p in (out / rec.name).iterdir()) == sorted(p.name for p in (tmp_path / rec.name).iterdir())
-        for name in ("vo.tum", "gtsam.tum", "velocities.csv"):
-            mine = np.genfromtxt(out / rec.name / name, delimiter="," if name.endswith(".csv") else None,
-                                 skip_header=1 if name.endswith(".csv") else 0, dtype=float)
-            theirs = np.genfromtxt(tmp_path / rec.name / name, delimiter="," if name.endswith(".csv") else None,
-                                   skip_header=1 if name.endswith(".csv") else 0, dtype=float)
+                assert _same(row[metric], float(single["metrics"][row["trajectory"]].get(metric, math.nan))), (rec.name, metric)
+        assert sorted(p.name for p in (out / rec.name).iterdir()) == single["files"]
+        for name in COMPARED:
+            mine, theirs = _table(out / rec.name / name), single["tables"][name]
             assert mine.shape == theirs.shape and len(mine) > 50, name
             np.testing.assert_allclose(mine, theirs, rtol=0, atol=1e-9, err_msg=name)
     assert frame[frame["trajectory"] == "vo"]["ate_m"].notna().all()
