@@ -1,10 +1,14 @@
 """The suite's background queue (tests/background.py): a test that needs a job the queue has not started runs it
-itself, after the jobs it reads, instead of waiting behind the queue."""
+itself, after the jobs it reads, instead of waiting behind the queue; a job forked from the server that imported the
+heavy libraries runs as a new interpreter would."""
 
+import json
 import pickle
 import subprocess
 import sys
 import time
+
+import pytest
 
 from background import REPO, BackgroundJobs
 
@@ -51,3 +55,23 @@ def test_a_module_made_ahead_imports_the_project_not_the_test_folders_named_as_i
                           cwd=REPO, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-2000:]
     assert pickle.loads((tmp_path / "out" / "where.pickle").read_bytes()).startswith("frontends")
+
+
+def test_a_forked_job_runs_as_a_new_interpreter_would():
+    """A job forked from the server (tests/job_runner.py) sees a new interpreter's ``sys.argv``, ``__name__``,
+    working folder and ``sys.path`` (no folder of the test session on it), and its exit status and standard error
+    come back to the test."""
+    probe = ["-c", "import json, os, sys; print(json.dumps([sys.argv, __name__, os.getcwd(), sys.path]));"
+                   "print('said', file=sys.stderr); sys.exit(int(sys.argv[1]))"]
+    fresh = json.loads(subprocess.check_output([sys.executable, *probe, "0"], cwd=REPO, text=True))
+    jobs = BackgroundJobs(["python:ok", "python:fails"], {"python:ok": probe + ["0"], "python:fails": probe + ["3"]})
+    try:
+        ok = jobs.result("python:ok")
+        assert json.loads(ok.stdout) == fresh
+        assert str(REPO / "tests") not in fresh[3]
+        assert ok.stderr == "said\n"
+        with pytest.raises(AssertionError, match="python:fails failed:\nsaid"):
+            jobs.result("python:fails")
+        assert jobs.jobs["python:fails"].returncode == 3
+    finally:
+        jobs.stop()
