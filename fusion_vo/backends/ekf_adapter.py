@@ -55,13 +55,10 @@ def _as_rates(r: Readings, span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np
     cov = r.cov
     frame = r.frame_cov
     if r.model.increment:
-        rate = se2.log_many(r.z)
-        J = se2.log_jacobian(r.z)
-        if r.rows is not None:
-            J = J[:, list(r.rows)][:, :, list(r.rows)]
+        rate, Jf = se2.log_with_jacobian(r.z)
+        J = Jf if r.rows is None else Jf[:, list(r.rows)][:, :, list(r.rows)]
         cov = J @ cov @ np.transpose(J, (0, 2, 1))
         if frame is not None:
-            Jf = se2.log_jacobian(r.z)
             frame = Jf @ frame @ np.transpose(Jf, (0, 2, 1))
     else:
         rate = r.z.copy()

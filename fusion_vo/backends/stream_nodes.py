@@ -39,8 +39,9 @@ def increment_part(inc: VisualIncrement, nodes: list[float], k: int) -> VisualIn
     t0, t1 = nodes[k], nodes[k + 1]
     span = inc.t1 - inc.t0
     delta = np.asarray(inc.delta, dtype=np.float64)
-    J = se2.log_jacobian(delta)[0]
-    part = se2.exp_many(se2.log_many(delta) * ((t1 - t0) / span))[0]
+    xi, J = se2.log_with_jacobian(delta)
+    J = J[0]
+    part = se2.exp_many(xi * ((t1 - t0) / span))[0]
     Jk_inv = se2.exp_jacobian(se2.log_many(part))[0]
     rate_cov = spread_covariance(J @ np.asarray(inc.covariance, dtype=np.float64) @ J.T, len(nodes) - 1, span)
     cov = Jk_inv @ (rate_cov * (t1 - t0) ** 2) @ Jk_inv.T  # (the one-interval reading's R Δt_k²)

@@ -163,7 +163,13 @@ def exp_jacobian(twist) -> np.ndarray:
 
 def log_jacobian(p) -> np.ndarray:
     """``∂ log(p) / ∂p`` (N, 3, 3) of increments ``p`` (N, 3): the inverse of :func:`exp_jacobian` at ``log(p)``."""
-    return np.linalg.inv(exp_jacobian(log_many(p)))
+    return log_with_jacobian(p)[1]
+
+
+def log_with_jacobian(p) -> tuple[np.ndarray, np.ndarray]:
+    """``log(p)`` (N, 3) of increments ``p`` (N, 3) (:func:`log_many`) and its Jacobian (:func:`log_jacobian`)."""
+    xi = log_many(p)
+    return xi, np.linalg.inv(exp_jacobian(xi))
 
 
 def integrate(increments) -> np.ndarray:
