@@ -15,6 +15,7 @@ import pickle
 from pathlib import Path
 
 import pytest
+import job_runner
 from ahead_job import ahead_key
 from background import BackgroundJobs, jobs_of, placed
 
@@ -57,6 +58,13 @@ def pytest_collection_modifyitems(config, items) -> None:
 
 
 _background: BackgroundJobs | None = None
+
+
+def pytest_sessionstart(session) -> None:
+    """Start the server the background jobs are forked from (tests/job_runner.py): it imports the heavy libraries
+    on the second core while this process collects the tests."""
+    if not session.config.option.collectonly:
+        job_runner.start_server()
 
 
 def pytest_collection_finish(session) -> None:

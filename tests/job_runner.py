@@ -15,6 +15,7 @@ A job that needs an interpreter of its own (one that blocks an import, for insta
 from __future__ import annotations
 
 import multiprocessing
+import multiprocessing.forkserver
 import os
 import json
 import runpy
@@ -41,6 +42,12 @@ def context():
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload([__name__, *PRELOAD])
     return ctx
+
+
+def start_server() -> None:
+    """Start the server process now (else the first job starts it), where there is one."""
+    if context() is not None:
+        multiprocessing.forkserver.ensure_running()
 
 
 def run_command(argv: list[str], cwd: str, stdout: str, stderr: str, niceness: int,
