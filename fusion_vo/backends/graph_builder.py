@@ -34,9 +34,6 @@ from fusion_vo.backends.timeline import Intervals, sensor_readings
 from fusion_vo.backends.factors import ModelFactor, POSE_LETTERS, covariance_noise
 from fusion_vo.robust import mestimator
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.imu import imu_grid
-from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import arc_increment, wheel_grid
 
 
 logger = logging.getLogger(__name__)
@@ -307,45 +304,15 @@ class GraphBuilder:
 
 
 def initial_calibration(iv: Intervals) -> dict:
-    """Closed-form first guesses of the gyro bias, visual scale and wheel-base factor.
+    """First values of the calibration states on the node grid ``iv``, by name: every sensor's
+    :attr:`~fusion_vo.sensors.registry.Sensor.first_guesses` in their order, each given those before it.
 
     Only initial values (the graph estimates them): without them a dead-reckoned initial trajectory
     drifts with the uncorrected gyro bias and Levenberg–Marquardt needs many damped iterations.
-    The reference heading change is the camera's (independent of every calibration) where available.
     """
-    cam, whl, imu = camera_grid(iv), wheel_grid(iv), imu_grid(iv)
     out: dict = {}
-    dt = iv.dt
-    single = cam.i1 == cam.i0 + 1
-    vis_yaw = np.full(iv.n_steps, np.nan)
-    vis_xy = np.full(iv.n_steps, np.nan)
-    vis_yaw[cam.i0[single]] = cam.delta[single, 2]
-    vis_xy[cam.i0[single]] = np.hypot(cam.delta[single, 0], cam.delta[single, 1])
-    wheel_yaw = wheel_xy = None
-    if iv.uses("wheel"):
-        inc = arc_increment(whl.dl, whl.dr, whl.base)
-        yaw_ok = whl.ok & whl.yaw_ok
-        wheel_yaw = np.where(yaw_ok, inc[:, 2], np.nan)
-        wheel_xy = np.where(whl.ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan)
-    ref = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else wheel_yaw
-    if iv.uses("gyro") and ref is not None:
-        ok = imu.gyro_ok & np.isfinite(ref)
-        if ok.sum() > 10:
-            out["gyro_bias"] = float(np.sum(imu.gyro_angle[ok] - ref[ok]) / np.sum(dt[ok]))
-    if wheel_xy is not None:
-        ok = np.isfinite(vis_xy) & np.isfinite(wheel_xy)
-        if ok.sum() > 10 and np.sum(wheel_xy[ok]) > 0:
-            out["visual_scale"] = float(np.sum(vis_xy[ok]) / np.sum(wheel_xy[ok]))
-        heading = vis_yaw if np.isfinite(vis_yaw).sum() > 10 else None
-        if heading is None and "gyro_bias" in out:
-            heading = np.where(imu.gyro_ok, imu.gyro_angle - out["gyro_bias"] * dt, np.nan)
-        if heading is not None:
-            ok = np.isfinite(heading) & np.isfinite(wheel_yaw)
-            if ok.sum() > 10 and np.sum(heading[ok] ** 2) > 1e-6:
-                out["wheel_base_factor"] = float(np.sum(wheel_yaw[ok] * heading[ok]) / np.sum(heading[ok] ** 2))
-    for key, lo, hi in (("visual_scale", 0.8, 1.25), ("wheel_base_factor", 0.5, 2.0)):
-        if key in out and not lo < out[key] < hi:
-            del out[key]
+    for _, step in registry.ordered("first_guesses"):
+        out.update(step.run(iv, out))
     return out
 
 

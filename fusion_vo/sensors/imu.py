@@ -56,7 +56,9 @@ from fusion_vo.recording.csvio import check_magnitude, unit_quaternions
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import Carry, HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.sensors.visual import FIRST_GUESS_INTERVALS, camera_heading_reference
 from fusion_vo.sensors.wheel import at_rest
+from fusion_vo.sensors.wheel_arc import wheel_motion
 
 logger = logging.getLogger(__name__)
 
@@ -610,6 +612,22 @@ def imu_calibration(recording, folder: str = "imu0") -> tuple[np.ndarray, dict, 
     return T, noise, imu.rate_hz
 
 
+def _first_gyro_bias(iv, guesses: dict) -> dict:
+    """The gyro bias's first guess: ``b = Σ (θ_gyro - θ_ref) / Σ Δt`` over the intervals both cover (more than
+    :data:`~fusion_vo.sensors.visual.FIRST_GUESS_INTERVALS`), the reference heading change the camera's
+    (:func:`~fusion_vo.sensors.visual.camera_heading_reference`), else the wheels'."""
+    ref = camera_heading_reference(iv)
+    if ref is None:
+        ref, _ = wheel_motion(iv)
+    if not iv.uses("gyro") or ref is None:
+        return {}
+    imu = imu_grid(iv)
+    ok = imu.gyro_ok & np.isfinite(ref)
+    if ok.sum() <= FIRST_GUESS_INTERVALS:
+        return {}
+    return {"gyro_bias": float(np.sum(imu.gyro_angle[ok] - ref[ok]) / np.sum(iv.dt[ok]))}
+
+
 register(Sensor(
     name="imu", where="imu0/", field="imu", min_samples=2, folder="imu0",
     read=read_imu, config=("imu", ImuNoise),
@@ -619,5 +637,5 @@ register(Sensor(
     heading_reference=lambda data: data is not None and data.orientation is not None,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
               also_counted=("ahrs",), samples=_live_samples, order=2),
-    heading=(GYRO_HEADING, AHRS_HEADING),
+    heading=(GYRO_HEADING, AHRS_HEADING), first_guesses=Step(10, _first_gyro_bias),
 ))

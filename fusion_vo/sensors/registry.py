@@ -257,6 +257,11 @@ class Sensor:
         The heading components it gives the heading monitor (the IMU: its gyro and its AHRS).
     distance : tuple of DistanceSource
         The distances it gives the speed check (the wheels', the camera's).
+    first_guesses : Step or None
+        ``run(iv, guesses) -> {state: value}``: closed-form first values of states on the node grid ``iv`` for the
+        factor graph's first linearisation (a state without one starts at its prior mean), given those of the steps
+        before it in ``order`` (``guesses``): the gyro bias's (the IMU, 10), the visual scale's (the camera, 20), the
+        wheel base's (the wheels, 30), each from another sensor's motion on the grid.
     dead_reckoning : tuple (str, callable) or None
         ``(track, make)``: ``make(data, config) -> PoseData`` (``config``: the
         :class:`~fusion_vo.backends.config.FusionConfig`) is the track its data alone gives, which a batch run
@@ -294,6 +299,7 @@ class Sensor:
     heading_reference: Any = None
     heading: tuple = ()
     distance: tuple = ()
+    first_guesses: Step | None = None
     dead_reckoning: tuple | None = None
 
     def data(self, streams) -> Any:

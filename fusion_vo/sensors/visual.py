@@ -47,6 +47,7 @@ from fusion_vo.measurements.grid import node_indices, outage_notes
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, State, Step, register
+from fusion_vo.sensors.wheel_arc import wheel_motion
 
 
 @dataclass(frozen=True)
@@ -121,6 +122,44 @@ class CameraGrid:
 def camera_grid(iv) -> CameraGrid:
     """The camera's measurements on the node grid ``iv`` (an :class:`~fusion_vo.backends.timeline.Intervals`)."""
     return iv.sensors["camera"]
+
+
+#: node intervals a first guess of a calibration state compares over, at least (:attr:`Sensor.first_guesses`)
+FIRST_GUESS_INTERVALS = 10
+
+
+def camera_motion(iv) -> tuple[np.ndarray, np.ndarray]:
+    """The camera's heading change and distance per node interval of ``iv`` from its increments over a single
+    interval (NaN elsewhere)."""
+    cam = camera_grid(iv)
+    single = cam.i1 == cam.i0 + 1
+    yaw = np.full(iv.n_steps, np.nan)
+    xy = np.full(iv.n_steps, np.nan)
+    yaw[cam.i0[single]] = cam.delta[single, 2]
+    xy[cam.i0[single]] = np.hypot(cam.delta[single, 0], cam.delta[single, 1])
+    return yaw, xy
+
+
+def camera_heading_reference(iv) -> np.ndarray | None:
+    """The camera's heading changes per node interval (:func:`camera_motion`), independent of every calibration,
+    where it measured more than :data:`FIRST_GUESS_INTERVALS` intervals; else None. The first guesses of the gyro
+    bias and the wheel base read them."""
+    yaw, _ = camera_motion(iv)
+    return yaw if np.isfinite(yaw).sum() > FIRST_GUESS_INTERVALS else None
+
+
+def _first_visual_scale(iv, guesses: dict) -> dict:
+    """The visual scale's first guess: ``s = Σ d_camera / Σ d_wheels`` over the intervals both measure (more than
+    :data:`FIRST_GUESS_INTERVALS`), kept within (0.8, 1.25)."""
+    _, wheel_xy = wheel_motion(iv)
+    if wheel_xy is None:
+        return {}
+    _, camera_xy = camera_motion(iv)
+    ok = np.isfinite(camera_xy) & np.isfinite(wheel_xy)
+    if ok.sum() <= FIRST_GUESS_INTERVALS or np.sum(wheel_xy[ok]) <= 0:
+        return {}
+    scale = float(np.sum(camera_xy[ok]) / np.sum(wheel_xy[ok]))
+    return {"visual_scale": scale} if 0.8 < scale < 1.25 else {}
 
 
 # --------------------------------------------------------------------------- registration
@@ -355,5 +394,5 @@ register(Sensor(
     absolute_heading=_placed, on_grid=_placed,
     heading_reference=lambda increments: increments is None or any(v.ok for v in increments),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
-    heading=(HEADING,), distance=(DISTANCE,),
+    heading=(HEADING,), distance=(DISTANCE,), first_guesses=Step(20, _first_visual_scale),
 ))

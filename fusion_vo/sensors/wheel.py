@@ -41,7 +41,7 @@ from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise
     travel_variances,
 )
 from fusion_vo.sensors.wheel_states import (CURVATURE, WHEEL_BASE_FACTOR, WHEEL_SCALE, curvature_observable,
-                                            curvature_states)
+                                            curvature_states, first_wheel_base_factor)
 
 logger = logging.getLogger(__name__)
 
@@ -565,6 +565,7 @@ register(Sensor(
     absolute_distance=True,
     states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
     heading=(HEADING,), distance=(DISTANCE,), dead_reckoning=("wheel", _ticks_track),
+    first_guesses=Step(30, first_wheel_base_factor),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0", read=read_twist,

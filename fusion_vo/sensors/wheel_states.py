@@ -13,7 +13,11 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import numpy as np
+
 from fusion_vo.sensors.registry import State
+from fusion_vo.sensors.visual import FIRST_GUESS_INTERVALS, camera_heading_reference
+from fusion_vo.sensors.wheel_arc import wheel_motion
 
 
 #: the wheels' curvature bias ``c`` [rad/m] (:class:`CurvedWheelModel`), a state of encoder-tick wheels; its
@@ -87,3 +91,25 @@ def curvature_states(states, config, radius_rel_sigma: float, wheel_base: float,
         return tuple(states)
     sigma = curvature_sigma(radius_rel_sigma, wheel_base)
     return tuple(dataclasses.replace(st, sigma=sigma) if st.name == CURVATURE.name else st for st in states)
+
+
+def first_wheel_base_factor(iv, guesses: dict) -> dict:
+    """The wheel-base factor's first guess: ``k = Σ θ_wheels θ_ref / Σ θ_ref²`` over the intervals both cover (more
+    than :data:`~fusion_vo.sensors.visual.FIRST_GUESS_INTERVALS`), the reference the camera's heading changes
+    (:func:`~fusion_vo.sensors.visual.camera_heading_reference`), else the gyro's corrected by the first guess of
+    its bias; kept within (0.5, 2)."""
+    wheel_yaw, _ = wheel_motion(iv)
+    if wheel_yaw is None:
+        return {}
+    heading = camera_heading_reference(iv)
+    if heading is None and "gyro_bias" in guesses:
+        imu = iv.sensors["imu"]
+        heading = np.where(imu.gyro_ok, imu.gyro_angle - guesses["gyro_bias"] * iv.dt, np.nan)
+    if heading is None:
+        return {}
+    ok = np.isfinite(heading) & np.isfinite(wheel_yaw)
+    if ok.sum() <= FIRST_GUESS_INTERVALS or np.sum(heading[ok] ** 2) <= 1e-6:
+        return {}
+    factor = float(np.sum(wheel_yaw[ok] * heading[ok]) / np.sum(heading[ok] ** 2))
+    return {"wheel_base_factor": factor} if 0.5 < factor < 2.0 else {}
+

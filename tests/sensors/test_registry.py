@@ -13,7 +13,9 @@ import pytest
 from compass_sensor import COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
 
 from fusion_vo.backends import FusionConfig, SensorStreams, dead_reckoning, fuse
+from fusion_vo.backends.graph_builder import GraphBuilder
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.backends.timeline import build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
 from fusion_vo.measurements import PoseData, TwistData
@@ -100,6 +102,31 @@ def test_a_registered_sensors_dead_reckoning_is_kept_beside_the_fused_tracks(dri
     only_twist = dead_reckoning(SensorStreams(odom=twist.odom))["wheel"]
     assert only_twist.t.size == len(t)
     np.testing.assert_allclose(only_twist.xyyaw[-1], [0.5 * (t[-1] - t[0]), 0.0, 0.0], atol=1e-9)
+
+
+def test_a_registered_sensors_first_guess_starts_the_graph_beside_the_built_in_ones(drive):
+    """``Sensor.first_guesses``: the graph's initial values of the states, each sensor's step given those before it.
+    On wheels whose base is 5 % long and a gyro with a bias, without a camera: the gyro's bias against the wheels'
+    heading changes, then the wheel base against the gyro's corrected ones, then the compass's own guess."""
+    s, compass = drive
+    seen = []
+
+    def offset_guess(iv, guesses):
+        seen.append(dict(guesses))
+        return {"compass_offset": 0.2}
+
+    sensor = dataclasses.replace(OFFSET_COMPASS_SENSOR, first_guesses=Step(40, offset_guess))
+    with registry.registered(sensor):
+        streams = SensorStreams(wheel=s.wheel, imu=s.imu, extra={"compass": compass}).select(["wheel", "imu", "compass"])
+        config = FusionConfig.from_dict({"compass": {"sigma": 0.02}})
+        guesses = GraphBuilder(build_intervals(streams, config), config).initial_estimate
+    assert list(guesses) == ["gyro_bias", "wheel_base_factor", "compass_offset"]
+    assert seen == [{k: guesses[k] for k in ("gyro_bias", "wheel_base_factor")}]
+    assert guesses["compass_offset"] == 0.2
+    # measured: 1.053 against the drive's 5 % long wheel base, and a bias of 0.0145 rad/s against its 0.01 (the
+    # wheels' heading changes it is read against are those of the long base)
+    assert abs(guesses["wheel_base_factor"] - 1.05) < 0.02, guesses
+    assert abs(guesses["gyro_bias"] - SyntheticOptions().gyro_bias) < 0.01, guesses
 
 
 def test_a_registered_sensors_configuration_goes_through_the_schema(drive):
