@@ -1,9 +1,10 @@
 """Run a background job's command line in a process forked from one that has imported the heavy libraries.
 
 Each job of tests/background.py is a command line, ``python -c CODE ARGS``, ``python -m MODULE ARGS`` or ``python
-SCRIPT ARGS``. Started as a new interpreter, each job spends about 2 s of CPU importing numpy, SciPy, OpenCV, GTSAM,
-Matplotlib and filterpy before its own work. :func:`start` instead forks it from a server process (multiprocessing's
-``forkserver``) that imported them once (:data:`PRELOAD`); :func:`run_command` then runs the command line as the
+SCRIPT ARGS``. Started as a new interpreter, each job spends about 2 s of CPU importing NumPy, SciPy, OpenCV, GTSAM,
+Matplotlib, filterpy and the library (evo, pandas, Dask and rosbags too, for some) before its own work.
+tests/background.py instead forks it from a server process (multiprocessing's ``forkserver``, :func:`context`) that
+imported them once (:data:`PRELOAD`); :func:`run_command` then runs the command line as the
 interpreter would: ``sys.argv`` and the interpreter's own ``sys.path`` (without the test session's folders), the
 working folder, the standard output and error into files, ``__main__`` as the module's name, the exit status from
 ``SystemExit``. The modules it imports are the installed ones, as in a new interpreter.
@@ -26,7 +27,8 @@ from pathlib import Path
 #: imported once by the server process; a forked job finds them imported
 PRELOAD = ["numpy", "scipy.linalg", "scipy.optimize", "scipy.stats", "cv2", "gtsam", "matplotlib", "PIL.Image",
            "filterpy.kalman", "pydantic", "yaml", "fusion_vo.cli.main", "fusion_vo.pipeline",
-           "fusion_vo.backends.streaming", "fusion_vo.evaluation.run_report", "fusion_vo.simulation.standard"]
+           "fusion_vo.backends.streaming", "fusion_vo.evaluation.run_report", "fusion_vo.evaluation.evaluate",
+           "fusion_vo.simulation.standard", "rosbags.highlevel", "rosbags.typesys", "pandas", "distributed"]
 
 
 def interpreter_path() -> list[str]:
