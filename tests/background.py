@@ -228,7 +228,7 @@ class BackgroundJobs:
         finally:
             job.done.set()
 
-    def _start(self, job: Job, niceness: int) -> "JobProcess":
+    def _start(self, job: Job, niceness: int) -> JobProcess:
         """Start ``job`` at ``niceness``: forked from the server with the heavy libraries imported
         (tests/job_runner.py), or where there is none, as a new interpreter."""
         files = {name: job.out.parent / f"{name}.txt" for name in ("stdout", "stderr")}

@@ -15,10 +15,10 @@ A job that needs an interpreter of its own (one that blocks an import, for insta
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import multiprocessing.forkserver
 import os
-import json
 import runpy
 import subprocess
 import sys

@@ -221,10 +221,6 @@ def standstill(d_left, d_right, dt, noise: WheelNoise) -> np.ndarray:
     return (dl < limit) & (dr < limit)
 
 
-__all__ = ["WheelNoise", "odom_twist_noise", "arc_increment", "travel_variances", "skid_variance", "arc_covariance",
-           "arc_twist", "standstill"]
-
-
 def wheel_motion(iv) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
     """The wheels' heading change and distance per node interval of ``iv`` (NaN where the consistency monitor does
     not keep them), or None, None where the wheels are not used (the first guesses of the calibration states)."""
@@ -235,3 +231,6 @@ def wheel_motion(iv) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
     return (np.where(whl.ok & whl.yaw_ok, inc[:, 2], np.nan),
             np.where(whl.ok, np.hypot(inc[:, 0], inc[:, 1]), np.nan))
 
+
+__all__ = ["WheelNoise", "odom_twist_noise", "arc_increment", "travel_variances", "skid_variance", "arc_covariance",
+           "arc_twist", "standstill", "wheel_motion"]

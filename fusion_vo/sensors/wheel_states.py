@@ -112,4 +112,3 @@ def first_wheel_base_factor(iv, guesses: dict) -> dict:
         return {}
     factor = float(np.sum(wheel_yaw[ok] * heading[ok]) / np.sum(heading[ok] ** 2))
     return {"wheel_base_factor": factor} if 0.5 < factor < 2.0 else {}
-
