@@ -25,7 +25,8 @@ the step is tried again, and above 1e8 the iteration stops where it is. After a 
 kept step lowers the cost by less than ``relative_tolerance`` of it, or after ``max_iterations`` linearisations.
 ``tests/backends/test_solver_equals_gtsam.py`` holds it to GTSAM's optimizer on a small drive's graph, with and
 without a robust kernel at work: the same steps and solution where every Gauss–Newton step lowers the cost, and
-the same minimum from a start where the damping must grow.
+the same minimum from a start far off; on Rosenbrock's function, whose first Gauss–Newton step raises the cost,
+it holds the damping's growth.
 
 Why not GTSAM's own optimizers: they need each sensor-model factor as a ``gtsam.CustomFactor`` that calls back
 into Python at every linearisation; here the sensor-model factors are linearised in numpy, all factors of a
