@@ -3,8 +3,8 @@
 ``k_b = b_true / b_configured`` scales the wheels' (or an odometry twist's) turn, ``k_r = r_configured / r_true``
 their distance (the common radius error), ``c`` [rad/m] adds a turn per metre driven (unequal radii;
 :class:`~fusion_vo.sensors.wheel.CurvedWheelModel`). ``k_b`` is estimated where another sensor measures the
-heading, ``k_r`` where the visual scale is estimated too (camera and wheels measure only the ratio of their
-scales), ``c`` by ``wheel.estimate_curvature`` (:func:`curvature_states`); each is a
+heading, ``k_r`` where another sensor's distance scale is estimated too (the visual scale: camera and wheels
+measure only the ratio of their scales), ``c`` by ``wheel.estimate_curvature`` (:func:`curvature_states`); each is a
 :class:`~fusion_vo.sensors.registry.State` of the ``wheel`` sensor (:mod:`fusion_vo.backends.states`).
 """
 
@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 
+from fusion_vo.sensors import registry
 from fusion_vo.sensors.registry import State
 from fusion_vo.sensors.visual import FIRST_GUESS_INTERVALS, camera_heading_reference
 from fusion_vo.sensors.wheel_arc import wheel_motion
@@ -36,12 +37,15 @@ def _wheel_base_factor(state: State, context) -> State:
 
 
 def _wheel_scale(state: State, context) -> State:
-    """``k_r``: estimated with both the visual scale and the wheel base (only their ratio is measured otherwise),
-    its prior the run's radius uncertainty."""
+    """``k_r``: estimated with the wheel base and a distance scale of another sensor (a state that
+    :attr:`~fusion_vo.sensors.state.State.needs` a distance: the camera's visual scale; only the ratio of the two
+    scales is measured otherwise), its prior the run's radius uncertainty."""
     config = context.config
-    kv, kb = (context.observable.get(name, False) for name in ("visual_scale", WHEEL_BASE_FACTOR.name))
+    scale = any(context.observable.get(st.name, False) for s in registry.sensors() for st in s.states
+                if st.needs == "distance" and st.name != state.name)
+    kb = context.observable.get(WHEEL_BASE_FACTOR.name, False)
     return dataclasses.replace(state, sigma=context.facts["wheel_scale_sigma"], random_walk=config.ekf.scale_random_walk,
-                               estimated=bool(config.self_calibration and kv and kb))
+                               estimated=bool(config.self_calibration and scale and kb))
 
 
 def _wheel_base(value: float, sigma: float, iv) -> dict:

@@ -123,6 +123,28 @@ def test_a_registered_state_needing_another_sensors_heading_is_estimated_only_be
         State("bad", needs="speed")
 
 
+def test_a_registered_distance_scale_lets_the_wheels_distance_scale_be_estimated():
+    """The wheels' distance scale ``k_r`` is estimated beside another sensor's distance scale (a state that needs a
+    distance), as beside the camera's: a registered lidar odometer whose scale needs the wheels' distance, with the
+    IMU's heading for the wheel base. Without the lidar, or with it held by self-calibration off, ``k_r`` is held.
+    Fails if ``k_r``'s rule names the camera's scale."""
+    lidar = Sensor(name="lidar", on_grid=lambda iv: len(iv.t) > 1,
+                   states=(State("lidar_scale", initial=1.0, rule=_observed, needs="distance"),))
+    config = FusionConfig()
+
+    def live(*sensors, config=config):
+        return {st.name: st.estimated for st in run_states(live_context(config, list(sensors), PRIORS))}
+
+    with registry.registered(lidar):
+        fused = live("lidar", "wheel", "imu")
+        assert fused["lidar_scale"] and fused["wheel_base_factor"] and fused["wheel_scale"]
+        assert not fused["visual_scale"]
+        assert not live("wheel", "imu")["wheel_scale"]
+        assert not live("lidar", "wheel")["wheel_scale"]  # no heading: the wheel base is held, and so k_r
+        assert not live("lidar", "wheel", "imu", config=FusionConfig.from_dict({"self_calibration": False}))[
+            "wheel_scale"]
+
+
 def _trim(state: State, context) -> State:
     """A state whose rule estimates it only beside the wheels (as a built-in calibration's does)."""
     return dataclasses.replace(state, sigma=0.3, estimated="wheel" in context.used)
