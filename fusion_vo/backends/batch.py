@@ -13,17 +13,16 @@ Before anything is fused, the streams pass the consistency checks (:mod:`fusion_
 configuration the data contradict (the IMU's mounting, an encoder's sign, a twist's frame, a clock, the
 camera's or the wheels' scale) is corrected or the stream left out, with a sentence in the notes.
 
-Before the streams are merged, an odometry twist is put on the gyro's clock: its delay behind the
-gyro is estimated from the two yaw rates over the whole recording
-(:func:`~fusion_vo.sensors.sync.rate_delay`) and, when it exceeds the twist's sample period (the
-resolution of a twist held between samples), its timestamps are moved back by it
-(``FusionConfig.sync_odometry``). Streaming use applies the same rule causally, to the samples seen
-so far (:class:`~fusion_vo.sensors.sync.TwistDelay`).
+Before the streams are merged, each sensor that declares a clock step puts its data on another sensor's
+clock (:func:`synchronise_clocks`). The odometry twist's is the one built in: its delay behind the gyro is
+estimated from the two yaw rates over the whole recording (:func:`~fusion_vo.sensors.sync.rate_delay`) and,
+when it exceeds the twist's sample period (the resolution of a twist held between samples), its timestamps are
+moved back by it (``FusionConfig.sync_odometry``, :func:`~fusion_vo.sensors.wheel.synchronise_twist`). Streaming
+use applies the same rule causally, to the samples seen so far (:class:`~fusion_vo.sensors.sync.TwistDelay`).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 
@@ -41,8 +40,6 @@ from fusion_vo.consistency.stage import check_streams
 from fusion_vo.errors import InputError
 from fusion_vo.measurements import PoseData
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.imu import gyro_yaw
-from fusion_vo.sensors.sync import odometry_delay
 from fusion_vo.sensors.visual import camera_grid, stated_height_sigma
 
 logger = logging.getLogger(__name__)
@@ -109,7 +106,7 @@ def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig
     result.trajectories.update(dead_reckoning(streams, config))
     if not names:
         return result
-    streams, delay = synchronise_odometry(streams, config)
+    streams, offsets = synchronise_clocks(streams, config)
     pauses = find_pauses(streams, config.max_gap)
     # split at the pauses, except where a camera slower than max_gap alone bridges its frame gaps
     cut = cuts(streams, pauses)
@@ -117,7 +114,7 @@ def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig
                for p in pauses if all(p is not c for c in cut)]
     t_first = float(sample_times(streams)[0]) if pauses else 0.0
     if not cut:
-        whole = _fuse_piece(streams, names, config, delay)
+        whole = _fuse_piece(streams, names, config, offsets)
         result.merge(whole)
         result.inconsistent = whole.inconsistent
         result.visual_noise = whole.visual_noise
@@ -139,7 +136,7 @@ def _fuse_checked(streams: SensorStreams, names: list[str], config: FusionConfig
             results.append(None)
             continue
         first = not any(r is not None for r in results)
-        results.append(_fuse_piece(piece, names, config if first or absolute else origin, delay))
+        results.append(_fuse_piece(piece, names, config if first or absolute else origin, offsets))
     used = [r for r in results if r is not None]
     if not used:
         raise InputError(f"no two samples of the sensors used are within fusion.max_gap ({config.max_gap:g} s) of "
@@ -195,17 +192,16 @@ def _note_silent_sensors(result: FusionResult) -> None:
         logger.warning("%s", text)
 
 
-def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
-                delay: float | None = None) -> FusionResult:
+def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig, offsets=()) -> FusionResult:
     """The backends ``names`` over streams without a pause in every stream."""
     result = FusionResult()
     t0 = time.process_time()
     iv = build_intervals(streams, config)
     if any(s.absolute_position and s.data(streams) is not None for s in registry.sensors()):
         align_world(iv, config)  # an absolute sensor (GPS) sets the world frame
-    if delay is not None:
-        iv.notes.append(f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
-        result.time_offsets["odom_delay"] = float(delay)
+    for offset in offsets:  # (the clocks' offsets found over the whole recording, :func:`synchronise_clocks`)
+        iv.notes.append(offset.note)
+        result.time_offsets[offset.key] = offset.seconds
     result.priors = calibration_priors(iv)
     result.timing["timeline"] = time.process_time() - t0
     result.inconsistent = [ep.as_dict() for ep in iv.episodes]
@@ -232,22 +228,16 @@ def _fuse_piece(streams: SensorStreams, names: list[str], config: FusionConfig,
     return result
 
 
-def synchronise_odometry(streams: SensorStreams, config: FusionConfig) -> tuple[SensorStreams, float | None]:
-    """``streams`` with the odometry twist's timestamps moved back by its estimated delay behind the gyro.
-
-    Returns the streams and the delay [s] (None when not corrected: no twist, no gyro, no turns, a
-    delay shorter than the twist's sample period, or ``config.sync_odometry`` off). See
-    :mod:`fusion_vo.sensors.sync`.
-    """
-    odom, imu = streams.odom, streams.imu
-    if not config.sync_odometry or odom is None or imu is None or len(odom) < 3 or len(imu) < 3:
-        return streams, None
-    gyro = gyro_yaw(imu, config.imu)
-    delay = odometry_delay(odom.t, odom.wz, gyro.t, gyro.rate, max_delay=config.max_odom_delay)
-    if delay is None:
-        return streams, None
-    logger.info("odometry twist delayed by %.3f s behind the gyro; corrected", delay)
-    return streams.replace(odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
+def synchronise_clocks(streams: SensorStreams, config: FusionConfig) -> tuple[SensorStreams, list]:
+    """``streams`` with each sensor's data moved onto the clock its :attr:`~fusion_vo.sensors.registry.Sensor.clock`
+    step puts it on (the odometry twist's onto the gyro's), in the steps' order, and the
+    :class:`~fusion_vo.sensors.registry.ClockOffset` each removed."""
+    offsets = []
+    for _, step in registry.ordered("clock"):
+        streams, offset = step.run(streams, config)
+        if offset is not None:
+            offsets.append(offset)
+    return streams, offsets
 
 
 def with_recorded_noise(config: FusionConfig, streams: SensorStreams) -> FusionConfig:

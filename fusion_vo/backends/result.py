@@ -128,7 +128,7 @@ class FusionResult:
         backends start from (:func:`fusion_vo.backends.states.calibration_priors`).
     time_offsets : dict[str, float]
         Clock offsets the run estimated and corrected [s]: ``odom_delay``, the odometry twist's delay behind
-        the gyro (:func:`fusion_vo.backends.batch.synchronise_odometry`).
+        the gyro (:func:`fusion_vo.sensors.wheel.synchronise_twist`).
     """
 
     trajectories: dict[str, PoseData] = field(default_factory=dict)

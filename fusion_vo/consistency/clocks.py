@@ -3,7 +3,7 @@
 Every stream that measures the turn gives a yaw rate: the camera's increments, the encoders' turn
 ``(d_r - d_l)/b`` per sample interval, the gyro about the body's up axis (``T_BS``, after the mounting check),
 an odometry twist's ``wz`` (checked here only without a gyro: against the gyro, ``fusion.sync_odometry``
-estimates and removes its delay, :func:`fusion_vo.backends.batch.synchronise_odometry`). For each pair the
+estimates and removes its delay, :func:`fusion_vo.sensors.wheel.synchronise_twist`). For each pair the
 delay of one behind the other is the shift that maximises the normalised cross-correlation of their rates
 (:func:`fusion_vo.sensors.sync.rate_delay`, the same estimate as the odometry's, searched within
 ``fusion.max_odom_delay`` and at most a twelfth of the streams' common span; none when the peak correlation

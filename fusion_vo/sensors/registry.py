@@ -71,6 +71,25 @@ class Step:
 
 
 @dataclass(frozen=True)
+class ClockOffset:
+    """A clock offset a sensor's :attr:`Sensor.clock` step found and removed from its data in a batch run.
+
+    Attributes
+    ----------
+    key : str
+        Its name in ``FusionResult.time_offsets`` (``odom_delay``).
+    seconds : float
+        The offset removed [s].
+    note : str
+        The sentence the run's notes give it.
+    """
+
+    key: str
+    seconds: float
+    note: str
+
+
+@dataclass(frozen=True)
 class Live:
     """How :meth:`StreamingFusion.add <fusion_vo.backends.streaming.StreamingFusion.add>` takes a sensor's samples.
 
@@ -262,6 +281,10 @@ class Sensor:
         factor graph's first linearisation (a state without one starts at its prior mean), given those of the steps
         before it in ``order`` (``guesses``): the gyro bias's (the IMU, 10), the visual scale's (the camera, 20), the
         wheel base's (the wheels, 30), each from another sensor's motion on the grid.
+    clock : Step or None
+        ``run(streams, config) -> (streams, offset)``: in a batch run, before the node grid is built, its data in
+        ``streams`` moved onto another sensor's clock (the odometry twist's timestamps onto the gyro's), with the
+        :class:`ClockOffset` removed or None, which the run reports (``FusionResult.time_offsets`` and a note).
     dead_reckoning : tuple (str, callable) or None
         ``(track, make)``: ``make(data, config) -> PoseData`` (``config``: the
         :class:`~fusion_vo.backends.config.FusionConfig`) is the track its data alone gives, which a batch run
@@ -300,6 +323,7 @@ class Sensor:
     heading: tuple = ()
     distance: tuple = ()
     first_guesses: Step | None = None
+    clock: Step | None = None
     dead_reckoning: tuple | None = None
 
     def data(self, streams) -> Any:

@@ -20,7 +20,7 @@ give a delay that is only noise; moving its timestamps by it would shift every s
 
 :func:`odometry_delay` is the one rule both uses apply: the delay of an odometry twist behind the
 gyro, kept only when it exceeds the twist's sample period (the resolution of a twist held between
-samples). Batch use (:func:`fusion_vo.backends.batch.synchronise_odometry`) applies it to the whole
+samples). Batch use (:func:`fusion_vo.sensors.wheel.synchronise_twist`) applies it to the whole
 recording; streaming use (:class:`fusion_vo.backends.streaming.StreamingFusion`) keeps a
 :class:`TwistDelay`, which applies it to the samples seen so far (the first ``min_span`` seconds, then
 again every ``refresh`` seconds over the last ``span`` seconds) and moves each later twist sample back
@@ -34,7 +34,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from fusion_vo.sensors.imu import gated_yaw_rate
+from fusion_vo.sensors.gyro import gated_yaw_rate
 
 logger = logging.getLogger(__name__)
 

@@ -18,6 +18,7 @@ In :mod:`fusion_vo.sensors.wheel_arc` (:class:`WheelNoise`, :func:`arc_increment
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass
@@ -32,10 +33,12 @@ from fusion_vo.measurements import (MAX_ANGULAR_RATE, MAX_SPEED, PoseData, Twist
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.recording.csvio import check_magnitude
+from fusion_vo.sensors.gyro import gyro_yaw
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
-from fusion_vo.sensors.registry import (DistanceSource, HeadingSource, Live, Sensor, Step, register,
+from fusion_vo.sensors.registry import (ClockOffset, DistanceSource, HeadingSource, Live, Sensor, Step, register,
                                         sensors as registered_sensors)
+from fusion_vo.sensors.sync import odometry_delay
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
     WheelNoise, arc_covariance, arc_increment, arc_twist, odom_twist_noise, skid_variance, standstill,
     travel_variances,
@@ -557,6 +560,33 @@ def _twist_track(twist: TwistData, config) -> PoseData:
     return wheel_track(twist_to_travel(twist, max_speed=config.odom.max_speed), config.initial_pose)
 
 
+def synchronise_twist(streams, config) -> tuple:
+    """``streams`` with the odometry twist's timestamps moved back by its estimated delay behind the gyro.
+
+    Returns the streams (:class:`~fusion_vo.sensors.streams.SensorStreams`) and the delay [s]: None when not
+    corrected (no twist, no gyro, no turns, a delay shorter than the twist's sample period, or
+    ``config.sync_odometry`` off). See :mod:`fusion_vo.sensors.sync`.
+    """
+    odom, imu = streams.odom, streams.imu
+    if not config.sync_odometry or odom is None or imu is None or len(odom) < 3 or len(imu) < 3:
+        return streams, None
+    gyro = gyro_yaw(imu, config.imu)
+    delay = odometry_delay(odom.t, odom.wz, gyro.t, gyro.rate, max_delay=config.max_odom_delay)
+    if delay is None:
+        return streams, None
+    logger.info("odometry twist delayed by %.3f s behind the gyro; corrected", delay)
+    return streams.replace(odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
+
+
+def _twist_clock(streams, config) -> tuple:
+    """The odometry twist's :attr:`~fusion_vo.sensors.registry.Sensor.clock` step (:func:`synchronise_twist`)."""
+    streams, delay = synchronise_twist(streams, config)
+    if delay is None:
+        return streams, None
+    return streams, ClockOffset("odom_delay", float(delay),
+                                f"odometry twist {delay * 1e3:.0f} ms behind the gyro: its timestamps corrected")
+
+
 register(Sensor(
     name="wheel", where="wheel0/ or odom0/", field="wheel", min_samples=2, folder="wheel0", read=read_ticks,
     pick=_pick_ticks, config=("wheel", WheelNoise),
@@ -574,12 +604,12 @@ register(Sensor(
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
     config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals), absolute_distance=True,
     live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1),
-    dead_reckoning=("wheel", _twist_track),
+    clock=Step(10, _twist_clock), dead_reckoning=("wheel", _twist_track),
 ))
 
 __all__ = [
     "WheelNoise", "odom_twist_noise", "WheelTravel", "WheelConfig", "unwrap_ticks", "ticks_to_travel", "twist_to_travel",
     "arc_increment", "arc_covariance", "arc_twist", "travel_variances", "skid_variance", "standstill", "wheel_track",
     "WheelModel", "CurvedWheelModel", "StandstillModel", "WHEEL", "CURVED_WHEEL", "STANDSTILL",
-    "wheel_model", "gyro_turn",
+    "wheel_model", "gyro_turn", "synchronise_twist",
 ]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fusion_vo.backends import FusionConfig, SensorStreams, fuse
-from fusion_vo.backends.batch import streams_from_recording, synchronise_odometry
+from fusion_vo.backends.batch import streams_from_recording, synchronise_clocks
 from fusion_vo.backends.pauses import samples_between
 from fusion_vo.backends.streaming import message_sensor, streaming_for, time_ordered_messages
 from fusion_vo.measurements import TwistSample
@@ -144,11 +144,14 @@ def test_delayed_odometry_is_put_on_the_gyro_clock():
                                   gyro_noise=0.001)
     late = dataclasses.replace(odom, t=odom.t + 0.4)
     assert rate_delay(late.t, late.wz, imu.t, imu.gyro[:, 2]) == pytest.approx(0.4, abs=0.05)
-    streams, delay = synchronise_odometry(SensorStreams(odom=late, imu=imu), FusionConfig())
+    streams, offsets = synchronise_clocks(SensorStreams(odom=late, imu=imu), FusionConfig())
+    assert [o.key for o in offsets] == ["odom_delay"]  # the odometry twist's declared clock step
+    delay = offsets[0].seconds
     assert delay == pytest.approx(0.4, abs=0.05)
     np.testing.assert_allclose(streams.odom.t, late.t - delay)
-    assert synchronise_odometry(SensorStreams(odom=odom, imu=imu), FusionConfig())[1] is None
+    assert synchronise_clocks(SensorStreams(odom=odom, imu=imu), FusionConfig())[1] == []
     corrected = fuse(SensorStreams(odom=late, imu=imu), "ekf", FusionConfig())
+    assert corrected.time_offsets["odom_delay"] == delay
     raw = fuse(SensorStreams(odom=late, imu=imu), "ekf", FusionConfig(sync_odometry=False))
     assert any("behind the gyro" in n for n in corrected.notes)
     _, rms = position_errors(corrected.trajectories["ekf_smoothed"], truth)
