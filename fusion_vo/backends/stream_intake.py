@@ -12,16 +12,12 @@ import time
 import numpy as np
 
 from fusion_vo.backends.result import SensorCount
+from fusion_vo.backends.stream_state import payload_values
 from fusion_vo.backends.timeline import build_intervals
 from fusion_vo.errors import InputError
-from fusion_vo.measurements import (
-    VisualIncrement,
-)
 from fusion_vo.geometry import se2
-from fusion_vo.sensors.imu import imu_grid
-from fusion_vo.sensors.wheel import arc_increment, wheel_grid
-
-from fusion_vo.backends.stream_state import payload_values
+from fusion_vo.measurements import VisualIncrement
+from fusion_vo.sensors import registry
 
 logger = logging.getLogger(__name__)
 
@@ -270,19 +266,20 @@ class IntakeMixin:
         return dataclasses.replace(inc, t0=float(T[a]), t1=float(t_b), delta=delta, covariance=cov)
 
     def _sliver(self, x: float, y: float):
-        """Body motion from ``x`` to ``y`` (either order) from the buffered wheels and gyro, and its variance
-        (2 % of the motion, plus 0.1 mm / 0.1 mrad); None without wheel data there."""
+        """Body motion from ``x`` to ``y`` (either order) from the buffered samples of the sensors that declare their
+        :attr:`~fusion_vo.sensors.registry.Sensor.motion` (the wheels' arc with the gyro's turn), and its variance
+        (2 % of the motion, plus 0.1 mm / 0.1 mrad); None where they do not measure it."""
         lo, hi = min(x, y), max(x, y)
         if hi - lo < 1e-9:
             return np.zeros(3), np.zeros(3)
         iv = build_intervals(self._streams_between(lo, hi, self._carry), self.config, np.array([lo, hi]),
                              self._carry)
-        whl, imu = wheel_grid(iv), imu_grid(iv)
-        if not iv.uses("wheel") or not whl.ok[0]:
+        motion = np.full((1, 3), np.nan)
+        for _, step in registry.ordered("motion"):
+            motion = step.run(iv, motion)
+        inc = motion[0]
+        if not np.all(np.isfinite(inc)):
             return None
-        inc = arc_increment(whl.dl, whl.dr, whl.base)[0]
-        if iv.uses("gyro") and imu.gyro_ok[0]:
-            inc[2] = imu.gyro_angle[0]
         var = (0.02 * np.abs(inc)) ** 2 + np.array([1e-4, 1e-4, 1e-4]) ** 2
         return (inc if y >= x else se2.inverse(inc)), var
 

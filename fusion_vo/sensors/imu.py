@@ -501,6 +501,18 @@ def imu_calibration(recording, folder: str = "imu0") -> tuple[np.ndarray, dict, 
     return T, noise, imu.rate_hz
 
 
+def _gyro_motion(iv, motion: np.ndarray) -> np.ndarray:
+    """The IMU's :attr:`~fusion_vo.sensors.registry.Sensor.motion` step: the gyro's integrated turn replaces the
+    heading change of each node interval whose motion is known and whose gyro is used."""
+    imu = imu_grid(iv)
+    if not iv.uses("gyro"):
+        return motion
+    out = motion.copy()
+    turn = imu.gyro_ok & np.isfinite(out[:, 2])
+    out[turn, 2] = imu.gyro_angle[turn]
+    return out
+
+
 def _first_gyro_bias(iv, guesses: dict) -> dict:
     """The gyro bias's first guess: ``b = Σ (θ_gyro - θ_ref) / Σ Δt`` over the intervals both cover (more than
     :data:`~fusion_vo.sensors.visual.FIRST_GUESS_INTERVALS`), the reference heading change the camera's
@@ -526,5 +538,5 @@ register(Sensor(
     heading_reference=lambda data: data is not None and data.orientation is not None,
     live=Live(_live_sample, _live_data, neighbours=lambda config: int(config.imu.spike_window) + 1, counted_as="gyro",
               also_counted=("ahrs",), samples=_live_samples, order=2),
-    heading=(GYRO_HEADING, AHRS_HEADING), first_guesses=Step(10, _first_gyro_bias),
+    heading=(GYRO_HEADING, AHRS_HEADING), first_guesses=Step(10, _first_gyro_bias), motion=Step(20, _gyro_motion),
 ))

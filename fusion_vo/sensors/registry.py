@@ -281,6 +281,11 @@ class Sensor:
         factor graph's first linearisation (a state without one starts at its prior mean), given those of the steps
         before it in ``order`` (``guesses``): the gyro bias's (the IMU, 10), the visual scale's (the camera, 20), the
         wheel base's (the wheels, 30), each from another sensor's motion on the grid.
+    motion : Step or None
+        ``run(iv, motion) -> motion``: the body motion ``(dx, dy, dψ)`` over each node interval of ``iv`` ((K, 3), NaN
+        where unknown) as this sensor measures it, given that of the steps before it in ``order``: the streaming
+        engine's motion from a node to a time between nodes (a GPS fix's, a late increment's frame). The built-in
+        ones: the wheels' arc (10, the odometry twist's too), then the gyro's turn where the arc is known (20).
     clock : Step or None
         ``run(streams, config) -> (streams, offset)``: in a batch run, before the node grid is built, its data in
         ``streams`` moved onto another sensor's clock (the odometry twist's timestamps onto the gyro's), with the
@@ -323,6 +328,7 @@ class Sensor:
     heading: tuple = ()
     distance: tuple = ()
     first_guesses: Step | None = None
+    motion: Step | None = None
     clock: Step | None = None
     dead_reckoning: tuple | None = None
 

@@ -560,6 +560,17 @@ def _twist_track(twist: TwistData, config) -> PoseData:
     return wheel_track(twist_to_travel(twist, max_speed=config.odom.max_speed), config.initial_pose)
 
 
+def _arc_motion(iv, motion: np.ndarray) -> np.ndarray:
+    """The wheels' :attr:`~fusion_vo.sensors.registry.Sensor.motion` step: their arc over each node interval where
+    they measure it (an odometry twist's intervals are on the same grid)."""
+    whl = wheel_grid(iv)
+    if not iv.uses("wheel"):
+        return motion
+    out = motion.copy()
+    out[whl.ok] = arc_increment(whl.dl, whl.dr, whl.base)[whl.ok]
+    return out
+
+
 def synchronise_twist(streams, config) -> tuple:
     """``streams`` with the odometry twist's timestamps moved back by its estimated delay behind the gyro.
 
@@ -595,7 +606,7 @@ register(Sensor(
     absolute_distance=True,
     states=(WHEEL_BASE_FACTOR, WHEEL_SCALE, CURVATURE), live=Live(_live_ticks, _live_ticks_data, samples=_live_ticks_samples, order=1),
     heading=(HEADING,), distance=(DISTANCE,), dead_reckoning=("wheel", _ticks_track),
-    first_guesses=Step(30, first_wheel_base_factor),
+    first_guesses=Step(30, first_wheel_base_factor), motion=Step(10, _arc_motion),
 ))
 register(Sensor(
     name="odom", where="odom0/", field="odom", min_samples=2, folder="odom0", read=read_twist,

@@ -14,11 +14,11 @@ from compass_sensor import COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_
 
 from fusion_vo.backends import FusionConfig, SensorStreams, dead_reckoning, fuse
 from fusion_vo.backends.graph_builder import GraphBuilder
-from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
+from fusion_vo.backends.streaming import StreamingFusion, streaming_for, time_ordered_messages
 from fusion_vo.backends.timeline import build_intervals
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import PoseData, TwistData
+from fusion_vo.measurements import ImuSample, PoseData, TwistData, TwistSample
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.instances import imu_instance
 from fusion_vo.sensors.registry import Sensor, State, Step
@@ -137,6 +137,39 @@ def test_a_registered_sensors_clock_step_puts_its_data_on_the_run_clock(drive):
     assert moved.time_offsets == {"compass_latency": LATENCY} and on_time.time_offsets == {}
     assert "compass stamped 300 ms late: its timestamps corrected" in moved.notes
     assert _errors(unmoved.trajectories["ekf"], s.truth)[0] > 1.5 * _errors(moved.trajectories["ekf"], s.truth)[0]
+
+
+def _turn_of(turn: float):
+    """A motion step that replaces the heading change of every interval whose motion is known by ``turn``."""
+    def step(iv, motion):
+        out = motion.copy()
+        out[np.isfinite(out[:, 2]), 2] = turn
+        return out
+    return step
+
+
+def test_a_registered_motion_step_is_the_engines_motion_between_nodes():
+    """``Sensor.motion``: the streaming engine's motion over a sliver between a node and a time between nodes (a
+    late increment's frame, a GPS fix) is the registered steps' in their order: the odometry twist's arc (0.5 m/s,
+    0.08 rad/s) with the gyro's turn (0.1 rad/s) over 13 ms, inverted backwards; a registered step after them
+    replaces the turn, and one that leaves the motion unknown leaves the sliver unplaced."""
+    fusion = StreamingFusion("ekf", FusionConfig(), ["imu", "odom"], steps_per_call=None)
+    for k in range(300):
+        t = 1000.0 + 0.01 * k
+        fusion.add_imu(ImuSample(t, np.array([0.0, 0.0, 0.1]), np.array([0.0, 0.0, 9.81])))
+        fusion.add("odom", TwistSample(t, 0.5, 0.0, 0.08))
+    x, y, dt = 1001.0, 1001.013, 0.013
+    motion, var = fusion._sliver(x, y)
+    d, arc = 0.5 * dt, 0.08 * dt  # the twist's arc: its chord, turned by half its angle; the gyro's turn
+    np.testing.assert_allclose(motion, [d * np.sin(arc) / arc, d * (1.0 - np.cos(arc)) / arc, 0.1 * dt], rtol=0,
+                               atol=1e-12)
+    np.testing.assert_allclose(fusion._sliver(y, x)[0], se2.inverse(motion), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(var, (0.02 * np.abs(motion)) ** 2 + 1e-8)
+    with registry.registered(Sensor(name="turnmeter", motion=Step(30, _turn_of(0.002)))):
+        assert fusion._sliver(x, y)[0][2] == 0.002
+    with registry.registered(Sensor(name="turnmeter", motion=Step(30, _turn_of(float("nan"))))):
+        assert fusion._sliver(x, y) is None
+    assert fusion._sliver(x, y)[0][2] == motion[2]
 
 
 def test_a_registered_sensors_first_guess_starts_the_graph_beside_the_built_in_ones(drive):
