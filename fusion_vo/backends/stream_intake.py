@@ -34,32 +34,23 @@ class IntakeMixin:
     """Methods of :class:`~fusion_vo.backends.streaming.StreamingFusion` (module docstring); they use its state."""
 
     def _synchronised(self, stream: str, t, payload) -> tuple:
-        """``(t, moved)``: ``t`` of an odometry twist moved back by its delay behind the gyro estimated so far
-        (:class:`~fusion_vo.sensors.sync.TwistDelay`, the rule of batch use); a gyro sample feeds that
-        estimate. Nodes are processed that much later (``_advance``), so the corrected twists are not late.
-        Other streams, and values that cannot be read (counted as gated by ``_add``), pass unchanged. When this
-        twist changes the estimate, the buffered twists move with it (:meth:`_shift_twists`) and ``moved`` is the
-        earliest time they were or now are at (else None), for ``_add`` to process again the intervals that read
-        them."""
-        tracker = self._twist_delay
-        if tracker is None or stream not in ("odom", "imu"):
-            return t, None
-        try:
-            t_f = float(t)
-            if stream == "imu":
-                rate = float(self.imu_T_BS[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
-                if np.isfinite(rate) and np.isfinite(t_f):
-                    tracker.gyro(t_f, rate)
-                return t, None
-            wz = float(payload[2])
-        except (TypeError, ValueError, IndexError):
-            return t, None
-        if not (np.isfinite(t_f) and np.isfinite(wz)):
-            return t, None
-        before = tracker.delay
-        t_f = tracker.twist(t_f, wz)
-        moved = self._shift_twists(before - tracker.delay) if tracker.delay != before else None
-        return t_f, moved
+        """``(t, moved)``: ``t`` on the run's clock (:attr:`~fusion_vo.sensors.registry.Live.clock`: an odometry
+        twist's moved back by its delay behind the gyro estimated so far, :class:`~fusion_vo.sensors.sync.TwistClock`,
+        the rule of batch use); every other sample is shown to each clock (a gyro sample feeds that estimate). Nodes
+        are processed that much later (``_advance``), so the corrected samples are not late. Values that cannot be
+        read (counted as gated by ``_add``) pass unchanged. When this sample changes its clock's offset, the buffered
+        samples of its stream move with it (:meth:`_shift_samples`) and ``moved`` is the earliest time they were or
+        now are at (else None), for ``_add`` to process again the intervals that read them."""
+        moved = None
+        for clock in self._clocks:
+            if stream != clock.stream:
+                clock.observe(stream, t, payload)
+                continue
+            before = clock.offset
+            t = clock.correct(t, payload)
+            if clock.offset != before:
+                moved = self._shift_samples(stream, before - clock.offset)
+        return t, moved
 
     # ------------------------------------------------------------------ buffering
     def _check(self, sensor: str) -> None:
@@ -288,18 +279,18 @@ class IntakeMixin:
             self._count("camera").reordered += 1
         bisect.insort(self._visual, inc, key=lambda v: v.t1)
 
-    def _shift_twists(self, dt: float) -> float | None:
-        """The twist delay changed: move the buffered twist samples not yet processed by ``dt`` [s] (those
+    def _shift_samples(self, stream: str, dt: float) -> float | None:
+        """A clock's offset changed: move the buffered samples of ``stream`` not yet processed by ``dt`` [s] (those
         that land before the last processed node stay buffered for a rewind or rebuild, as late data). Returns a float
         step before the earliest time a moved sample was or now is at (every interval that read one at its old time,
         or would at its new time, is processed again: :meth:`_first_reader` counts the samples before a time), or
         None when none moved."""
-        buf = self._buffers.get("odom", [])
+        buf = self._buffers.get(stream, [])
         last = self._t_nodes[-1] if self._t_nodes else -np.inf
         keep = [item for item in buf if item[0] <= last]
         moved = [(item[0] + dt, item[1]) for item in buf if item[0] > last]
         if buf:
-            self._buffers["odom"] = sorted(keep + moved, key=lambda item: item[0])
+            self._buffers[stream] = sorted(keep + moved, key=lambda item: item[0])
         return float(np.nextafter(min(moved[0][0], moved[0][0] - dt), -np.inf)) if moved else None
 
     def _touch(self, stream: str, t: float) -> None:

@@ -54,7 +54,7 @@ class NodesMixin:
     def _advance(self, t: float) -> None:
         self._collect()
         self._latest = max(self._latest, float(t))
-        lag = self._twist_delay.lag() if self._twist_delay is not None else 0.0
+        lag = max((clock.lag() for clock in self._clocks), default=0.0)
         until = self._latest - self.config.reorder_window - lag
         self._process(until, self._budget(until))
 

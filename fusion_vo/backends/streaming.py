@@ -135,7 +135,6 @@ from fusion_vo.backends.result import FusionResult, SensorCount
 from fusion_vo.backends.states import live_context, run_states
 from fusion_vo.backends.timeline import SensorStreams, scale_priors
 from fusion_vo.sensors import registry
-from fusion_vo.sensors.sync import TwistDelay
 from fusion_vo.consistency import mounting
 from fusion_vo.consistency.live import LiveMounting, aligned_offset
 from fusion_vo.errors import InputError
@@ -342,9 +341,10 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
         self._last_iv = None  # the node grid of the newest node processed (its states, for the calibration)
         self._finishing = False  # finish() processes the last nodes: no sample comes after the buffered ones
         self._start_frame: tuple | None = None  # (node, poses, covariances, note) before the switch to ENU
-        # an odometry twist's delay behind the gyro, estimated from the samples so far (as in batch use)
-        self._twist_delay = (TwistDelay(self.config.max_odom_delay, self.config.imu)
-                             if self.config.sync_odometry and "imu" in self.sensors else None)
+        # what puts a sensor's samples on the run's clock as they come (Live.clock: an odometry twist's delay behind
+        # the gyro, estimated from the samples so far as in batch use)
+        self._clocks = [clock for s in registry.sensors() if s.live is not None and s.live.clock is not None
+                        for clock in (s.live.clock(self),) if clock is not None]
         # the IMU's stated mounting checked against the data seen so far (fusion_vo.consistency.live)
         self._mounting = (LiveMounting(self.imu_T_BS, self.config, wheel_config)
                           if "imu" in self.sensors and self.config.consistency.check else None)
@@ -414,8 +414,8 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             episodes = self._monitor.all_episodes(self._t_nodes[-1] if self._t_nodes else float(t))
             self._monitor = LiveHeadingMonitor(self.config, self.history)
             self._monitor.episodes = episodes
-            if self._twist_delay is not None:
-                self._twist_delay.replace_gyro(*self._mounting.body_rates(T))
+            for clock in self._clocks:
+                clock.remounted(*self._mounting.body_rates(T))
             self._reanchor_ahrs()
             if self._ekf is not None:  # the bias the readings about the wrong axis taught the filter, replaced
                 bias, sigma = self._mounting.gyro_bias or (0.0, self.config.imu.gyro_bias_sigma)
@@ -621,15 +621,10 @@ class StreamingFusion(IntakeMixin, NodesMixin, HistoryMixin):
             episodes = self._monitor.all_episodes(self._t_nodes[-1])
             result.inconsistent = [ep.as_dict() for ep in episodes]
             result.notes.extend("live monitor: " + ep.note(self._t_nodes[0]) for ep in episodes)
-        if self._twist_delay is not None and self._twist_delay.history:
-            t_first = self._t_nodes[0] if self._t_nodes else 0.0
-            (t, d), *later = self._twist_delay.history
-            text = f"odometry twist {d * 1e3:.0f} ms behind the gyro: its timestamps corrected from t={t:.2f} " \
-                   f"({t - t_first:.1f} s in)"
-            if later:
-                ms = [x[1] * 1e3 for x in later]
-                text += f", re-estimated {len(ms)} times ({min(ms):.0f}-{max(ms):.0f} ms, last {ms[-1]:.0f} ms)"
-            result.notes.append(text)
+        for clock in self._clocks:
+            text = clock.note(self._t_nodes[0] if self._t_nodes else 0.0)
+            if text is not None:
+                result.notes.append(text)
         if self.config.visual_noise.estimate and "camera" in self.sensors:
             result.notes.append("camera heading noise not estimated in streaming use (fusion.visual_noise.estimate is "
                                 "for batch runs): the stated noise and visual_frame_error were used")

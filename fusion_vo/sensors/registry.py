@@ -129,6 +129,15 @@ class Live:
     values : callable or None
         ``values(payload) -> list``: the numbers of a sample that must be finite (default: the payload's
         entries that are not None).
+    clock : callable or None
+        ``clock(fusion) -> clock or None``: what puts its samples on the run's clock as they come (the odometry
+        twist's delay behind the gyro, :class:`~fusion_vo.sensors.sync.TwistClock`), made when the engine is
+        built (None: the run needs none). The engine hands it every sample of another stream
+        (``observe(stream, t, payload)``) and takes the time of each of its own from it (``correct(t, payload)``);
+        when its ``offset`` [s] changes, the samples of its ``stream`` buffered and not yet processed move by the
+        change, and the intervals that read them are processed again. Nodes wait ``lag()`` seconds for its
+        samples; ``remounted(t, rates)`` gives it the gyro's yaw rates re-read after the IMU's mounting was
+        corrected; ``note(t_first)`` is its sentence in the run's notes, or None.
     """
 
     sample: Callable
@@ -142,6 +151,7 @@ class Live:
     values: Callable | None = None
     message: str | None = None
     order: float = 4
+    clock: Callable | None = None
 
 
 @dataclass(frozen=True)

@@ -244,4 +244,73 @@ class TwistDelay:
             self.delay = delay
 
 
-__all__ = ["rate_delay", "rate_correlation", "odometry_delay", "TwistDelay"]
+class TwistClock:
+    """The odometry twist's clock in a live run: its samples' times moved back by the :class:`TwistDelay` estimate,
+    which the gyro's samples feed (the odometry sensor's ``Live.clock``, :mod:`fusion_vo.sensors.registry`).
+
+    Parameters
+    ----------
+    config : FusionConfig
+        ``max_odom_delay`` and the gyro's spike gating (``imu``).
+    imu_T_BS : callable
+        ``imu_T_BS() -> (4, 4)``: the IMU's mounting as the engine reads it now (corrected mid-stream when the data
+        contradict the stated one); a gyro sample's body yaw rate is ``(R_BS ω_S)_z``.
+    """
+
+    #: the stream whose times it corrects
+    stream = "odom"
+
+    def __init__(self, config, imu_T_BS):
+        self.tracker = TwistDelay(config.max_odom_delay, config.imu)
+        self._imu_T_BS = imu_T_BS
+
+    @property
+    def offset(self) -> float:
+        """The current delay [s], removed from every twist time from now on."""
+        return self.tracker.delay
+
+    def correct(self, t, payload):
+        """A twist sample's time on the gyro's clock (``t`` unchanged when the sample cannot be read: the engine
+        counts it as gated)."""
+        try:
+            t_f, wz = float(t), float(payload[2])
+        except (TypeError, ValueError, IndexError):
+            return t
+        if not (math.isfinite(t_f) and math.isfinite(wz)):
+            return t
+        return self.tracker.twist(t_f, wz)
+
+    def observe(self, stream: str, t, payload) -> None:
+        """A sample of another stream: a gyro sample (``imu``) feeds the estimate with its body yaw rate."""
+        if stream != "imu":
+            return
+        try:
+            t_f = float(t)
+            rate = float(self._imu_T_BS()[2, :3] @ np.asarray(payload[0], dtype=np.float64).reshape(3))
+        except (TypeError, ValueError, IndexError):
+            return
+        if math.isfinite(rate) and math.isfinite(t_f):
+            self.tracker.gyro(t_f, rate)
+
+    def remounted(self, t, rates) -> None:
+        """The IMU's mounting was corrected: the gyro's body yaw rates so far, read about the right axes."""
+        self.tracker.replace_gyro(t, rates)
+
+    def lag(self) -> float:
+        """How long [s] after the other streams a twist sample arrives (:meth:`TwistDelay.lag`)."""
+        return self.tracker.lag()
+
+    def note(self, t_first: float) -> str | None:
+        """The run's note on the delay (None when it never changed); ``t_first`` the first node's time."""
+        if not self.tracker.history:
+            return None
+        (t, d), *later = self.tracker.history
+        text = f"odometry twist {d * 1e3:.0f} ms behind the gyro: its timestamps corrected from t={t:.2f} " \
+               f"({t - t_first:.1f} s in)"
+        if later:
+            ms = [x[1] * 1e3 for x in later]
+            text += f", re-estimated {len(ms)} times ({min(ms):.0f}-{max(ms):.0f} ms, last {ms[-1]:.0f} ms)"
+        return text
+
+
+__all__ = ["rate_delay", "rate_correlation", "odometry_delay", "TwistDelay", "TwistClock"]

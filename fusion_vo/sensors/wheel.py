@@ -38,7 +38,7 @@ from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import (ClockOffset, DistanceSource, HeadingSource, Live, Sensor, Step, register,
                                         sensors as registered_sensors)
-from fusion_vo.sensors.sync import odometry_delay
+from fusion_vo.sensors.sync import TwistClock, odometry_delay
 from fusion_vo.sensors.wheel_arc import (  # noqa: F401 (the arc model and noise, here too)
     WheelNoise, arc_covariance, arc_increment, arc_twist, odom_twist_noise, skid_variance, standstill,
     travel_variances,
@@ -589,6 +589,14 @@ def synchronise_twist(streams, config) -> tuple:
     return streams.replace(odom=dataclasses.replace(odom, t=np.asarray(odom.t) - delay)), delay
 
 
+def _live_twist_clock(fusion):
+    """The odometry twist's live clock (``Live.clock``): its delay behind the gyro, estimated as the samples come,
+    when the run synchronises it and fuses an IMU."""
+    if not fusion.config.sync_odometry or "imu" not in fusion.sensors:
+        return None
+    return TwistClock(fusion.config, lambda: fusion.imu_T_BS)
+
+
 def _twist_clock(streams, config) -> tuple:
     """The odometry twist's :attr:`~fusion_vo.sensors.registry.Sensor.clock` step (:func:`synchronise_twist`)."""
     streams, delay = synchronise_twist(streams, config)
@@ -614,7 +622,8 @@ register(Sensor(
                                       and not ("wheel" in selected and present.get("wheel", False))),
     default=lambda present: not present.get("wheel", False), pick=_pick_twist, also_available_as=("wheel",),
     config=("odom", WheelNoise), intervals=Step(20, _add_twist_intervals), absolute_distance=True,
-    live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1),
+    live=Live(_live_twist, _live_twist_data, counted_as="wheel", samples=_live_twist_samples, message="twist", order=1,
+              clock=_live_twist_clock),
     clock=Step(10, _twist_clock), dead_reckoning=("wheel", _twist_track),
 ))
 

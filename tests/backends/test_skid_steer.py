@@ -159,6 +159,11 @@ def test_delayed_odometry_is_put_on_the_gyro_clock():
     assert rms < 0.15 and rms_raw > 1.5 * rms, (rms, rms_raw)
 
 
+def _twist_delay(fusion):
+    """The engine's estimate of the twist's delay behind the gyro (the odometry's live clock), or None."""
+    return next((clock.tracker for clock in fusion._clocks if clock.stream == "odom"), None)
+
+
 def _stale_twist_readers(fusion) -> list[int]:
     """The processed nodes still in the engine's history whose interval read a twist sample that is no longer at
     that time in its buffer (moved by a new delay estimate and not read again)."""
@@ -179,9 +184,9 @@ def test_a_new_twist_delay_from_a_twist_left_out_still_moves_what_the_intervals_
     fusion = streaming_for(late, "ekf", FusionConfig())
     changes = []  # the twists whose yaw rate changes the estimate
     for i, (_, kind, sample) in enumerate(messages):
-        before = fusion._twist_delay.delay
+        before = _twist_delay(fusion).delay
         fusion.add(message_sensor(kind), sample)
-        if fusion._twist_delay.delay != before:
+        if _twist_delay(fusion).delay != before:
             changes.append(i)
     assert changes and all(messages[i][1] == "twist" for i in changes), changes
     for i in changes:
@@ -190,10 +195,10 @@ def test_a_new_twist_delay_from_a_twist_left_out_still_moves_what_the_intervals_
     fusion = streaming_for(late, "ekf", FusionConfig())
     stale = {}
     for i, (_, kind, sample) in enumerate(messages):
-        before = fusion._twist_delay.delay
+        before = _twist_delay(fusion).delay
         fusion.add(message_sensor(kind), sample)
         if i in changes:
-            assert fusion._twist_delay.delay != before
+            assert _twist_delay(fusion).delay != before
             stale[i] = _stale_twist_readers(fusion)
     assert not any(stale.values()), stale
     assert fusion.finish().counts["ekf"]["wheel"].gated == len(changes)
@@ -213,9 +218,9 @@ def test_on_the_husky_log_a_new_twist_delay_leaves_no_interval_reading_a_twist_a
     fusion = streaming_for(streams, "ekf", config)
     stale = []
     for _, kind, sample in time_ordered_messages(streams):
-        before = fusion._twist_delay.delay
+        before = _twist_delay(fusion).delay
         fusion.add(message_sensor(kind), sample)
-        if fusion._twist_delay.delay != before:
+        if _twist_delay(fusion).delay != before:
             stale.append(_stale_twist_readers(fusion))
     assert len(stale) == 2 and not any(stale), stale
 
@@ -233,16 +238,16 @@ def _delayed_odometry_streamed() -> dict:
         fusion = streaming_for(late, "ekf", FusionConfig(sync_odometry=sync))
         changes, stale = 0, []
         for _, kind, sample in time_ordered_messages(late):
-            before = fusion._twist_delay.delay if sync else None
+            before = _twist_delay(fusion).delay if sync else None
             fusion.add(message_sensor(kind), sample)
-            if sync and fusion._twist_delay.delay != before:
+            if sync and _twist_delay(fusion).delay != before:
                 changes += 1
                 stale += _stale_twist_readers(fusion)
         result = fusion.finish()
         run = {"changes": changes, "stale": stale, "rms": position_errors(result.trajectories["ekf"], truth)[1],
-               "delay": None if fusion._twist_delay is None else fusion._twist_delay.delay}
+               "delay": None if _twist_delay(fusion) is None else _twist_delay(fusion).delay}
         if sync:
-            run.update(history=fusion._twist_delay.history, notes=result.notes, late=result.counts["ekf"]["wheel"].late,
+            run.update(history=_twist_delay(fusion).history, notes=result.notes, late=result.counts["ekf"]["wheel"].late,
                        t0=float(odom.t[0]))
         runs[sync] = run
     return runs

@@ -10,7 +10,7 @@ import inspect
 import numpy as np
 import pytest
 
-from compass_sensor import COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
+from compass_sensor import COMPASS_LIVE, COMPASS_SENSOR, NORTH_COMPASS_SENSOR, OFFSET_COMPASS_SENSOR, CompassData
 
 from fusion_vo.backends import FusionConfig, SensorStreams, dead_reckoning, fuse
 from fusion_vo.backends.graph_builder import GraphBuilder
@@ -388,6 +388,56 @@ def _batch_and_streamed(streams: SensorStreams, backend: str) -> tuple:
     fusion = streaming_for(streams, backend, FusionConfig())
     fusion.feed(time_ordered_messages(streams))
     return batch, fusion.finish()
+
+
+class _LatencyClock:
+    """A compass's live clock (``Live.clock``): its stamps :data:`LATENCY` late, moved back; nodes wait that long
+    for its samples. It records the streams it was shown."""
+
+    stream = "compass"
+    offset = LATENCY
+
+    def __init__(self):
+        self.seen = set()
+
+    def correct(self, t, payload):
+        return t - LATENCY
+
+    def observe(self, stream, t, payload):
+        self.seen.add(stream)
+
+    def remounted(self, t, rates):
+        pass
+
+    def lag(self):
+        return LATENCY
+
+    def note(self, t_first):
+        return "compass stamped 300 ms late: its timestamps corrected"
+
+
+def test_a_registered_sensors_live_clock_puts_its_samples_on_the_run_clock(drive):
+    """``Live.clock``: streamed, a compass stamped 0.3 s late whose clock moves its stamps back (and makes the nodes
+    wait for it) gives the track of the compass on time (to 1e-9), with its note; the clock is shown the other
+    streams' samples. Without the clock the late compass leaves a larger heading error."""
+    s, compass = drive
+    late = CompassData(compass.t + LATENCY, compass.yaw)
+    live = dataclasses.replace(COMPASS_SENSOR, live=COMPASS_LIVE)
+    clocks = []
+
+    def clock(fusion):
+        clocks.append(_LatencyClock())
+        return clocks[-1]
+
+    with registry.registered(live):
+        on_time = _stream("ekf", s, compass)[1]
+        unmoved = _stream("ekf", s, late)[1]
+    with registry.registered(dataclasses.replace(live, live=dataclasses.replace(COMPASS_LIVE, clock=clock))):
+        moved = _stream("ekf", s, late)[1]
+    np.testing.assert_allclose(moved.trajectories["ekf"].xyyaw, on_time.trajectories["ekf"].xyyaw, rtol=0, atol=1e-9)
+    assert "compass stamped 300 ms late: its timestamps corrected" in moved.notes
+    assert len(clocks) == 1 and clocks[0].seen == {"wheel"}
+    assert _errors(unmoved.trajectories["ekf"], s.truth)[0] > 1.5 * _errors(moved.trajectories["ekf"], s.truth)[0]
 
 
 @pytest.mark.parametrize("backend", ["ekf", "gtsam"])
