@@ -45,7 +45,6 @@ from fusion_vo.errors import InputError
 from fusion_vo.sensors import registry
 from fusion_vo.sensors.readings import Readings
 from fusion_vo.sensors.streams import SensorStreams  # noqa: F401 (the run's input, here too)
-from fusion_vo.sensors import visual_noise
 from fusion_vo.backends.monitor import check_heading_sources, check_speed_sources
 from fusion_vo.backends.states import context_of, run_states
 from fusion_vo.sensors.gps import GPS_SNAP
@@ -343,7 +342,8 @@ def build_intervals(streams: SensorStreams, config: FusionConfig, nodes: np.ndar
         if sensor.data(streams) is not None:
             step.run(iv, streams, config, counts)
     if nodes is None:  # whole-recording use: check the heading sources and the speeds against each other
-        visual_noise.apply(iv, config)  # the camera's heading noise from the gyro's, when asked for
+        for _, step in registry.ordered("whole_recording"):  # (the camera's heading noise from the gyro's)
+            step.run(iv, config)
         iv.episodes = check_heading_sources(iv, config)
         iv.episodes += check_speed_sources(iv, config)
         iv.episodes.sort(key=lambda e: e.start)

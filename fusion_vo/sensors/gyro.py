@@ -4,8 +4,9 @@ The body yaw rate is the body-z component of the IMU's rate rotated into the bod
 (:func:`body_yaw_rate`). Spikes (an impossible sample) are found against a running median: a sample further than
 ``spike_threshold`` from the median of its ``2w+1`` neighbours, or above ``max_rate``, or not finite, is gated
 (counted) and replaced by the median so integration carries on (:func:`gated_yaw_rate`). The gyro's measurement
-model and the rest of the IMU are in :mod:`fusion_vo.sensors.imu`; this module is what the clock alignment of
-:mod:`fusion_vo.sensors.sync` needs of the gyro.
+model (:class:`GyroModel`) is here too; the rest of the IMU is in :mod:`fusion_vo.sensors.imu`. This module is what
+the clock alignment of :mod:`fusion_vo.sensors.sync` and the camera's noise estimate
+(:mod:`fusion_vo.sensors.visual_noise`) need of the gyro.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from pydantic import Field
 
 from fusion_vo.config.base import Int, Positive, Section, Sigma, Walk
 from fusion_vo.measurements import ImuData
+from fusion_vo.sensors.model import MeasurementModel
 
 logger = logging.getLogger(__name__)
 
@@ -134,4 +136,50 @@ def running_median(x: np.ndarray, half_width: int, valid: np.ndarray | None = No
     return np.where(np.isfinite(med), med, 0.0)
 
 
-__all__ = ["ImuNoise", "GyroYaw", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "gated_yaw_rate", "running_median"]
+@dataclass(frozen=True)
+class GyroModel(MeasurementModel):
+    """The gyro's integrated angle over an interval ``Δt`` as a measurement of the heading change.
+
+    ``z = Θ = ∫ ω_z dt``, ``h(δ, b_g) = d_ψ + b_g Δt``, ``R = σ_g² Δt``; Jacobians ``∂h/∂δ = (0, 0, 1)``,
+    ``∂h/∂b_g = Δt``. Arguments ``motion``, ``gyro_bias``; parameter ``dt`` (the EKF evaluates it per
+    unit time: ``z = Θ/Δt``, ``R = σ_g²/Δt``, ``dt = 1``).
+    """
+
+    name: str = "gyro"
+    linear: bool = True
+    args: tuple = ("motion", "gyro_bias")
+    dim: int = 1
+    turn_rows: tuple = (0,)
+    uses_dt: bool = True
+    guess_rank: tuple = (None, 0)
+
+    def guess(self, z, estimate: dict, dt: float):
+        """The heading change: the angle less the running bias estimate's share, ``Θ - b̂ Δt``."""
+        return None, float(z[0]) - estimate.get("gyro_bias", 0.0) * dt
+
+    def evaluate(self, motion, gyro_bias, dt=1.0):
+        d = np.asarray(motion, dtype=np.float64)
+        if d.ndim == 1 and isinstance(dt, (int, float)):  # one measurement: without array overhead
+            t = float(dt)
+            return (np.array([float(d[2]) + float(gyro_bias[0]) * t]),
+                    {"motion": np.array([[0.0, 0.0, 1.0]]), "gyro_bias": np.array([[t]])})
+        b = np.asarray(gyro_bias, dtype=np.float64)
+        dt = np.asarray(dt, dtype=np.float64)
+        h = d[..., 2:3] + b * dt[..., None] if dt.ndim else d[..., 2:3] + b * float(dt)
+        j_d = np.zeros(d.shape[:-1] + (1, 3))
+        j_d[..., 0, 2] = 1.0
+        j_b = np.broadcast_to(dt, d.shape[:-1]).astype(np.float64)[..., None, None].copy()
+        return h, {"motion": j_d, "gyro_bias": j_b}
+
+    @staticmethod
+    def variance(noise_density: float, dt):
+        """``σ_g² Δt`` of the integrated angle over ``dt`` [s]."""
+        return noise_density**2 * np.asarray(dt, dtype=np.float64)
+
+
+#: the gyro's measurement model
+GYRO = GyroModel()
+
+
+__all__ = ["GyroModel", "GYRO", "ImuNoise", "GyroYaw", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "gated_yaw_rate",
+           "running_median"]

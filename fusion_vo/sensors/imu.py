@@ -52,8 +52,8 @@ from fusion_vo.measurements import ImuData, ImuSample, MAX_ACCELERATION, MAX_ANG
 from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import coverage, ordered_fields
 from fusion_vo.recording.csvio import check_magnitude, unit_quaternions
-from fusion_vo.sensors.gyro import (GyroYaw, ImuNoise, body_yaw_rate, discrete_sigma, gated_yaw_rate, gyro_yaw,
-                                    running_median)
+from fusion_vo.sensors.gyro import (GYRO, GyroModel, GyroYaw, ImuNoise, body_yaw_rate, discrete_sigma, gated_yaw_rate,
+                                    gyro_yaw, running_median)
 from fusion_vo.sensors.model import MeasurementModel
 from fusion_vo.sensors.readings import ORDER, Readings
 from fusion_vo.sensors.registry import Carry, HeadingSource, Live, Sensor, State, Step, register
@@ -169,54 +169,13 @@ def tilt_from_accel(accel: np.ndarray, T_BS: np.ndarray | None = None) -> tuple[
 
 
 __all__ = [
-    "ImuNoise", "GyroYaw", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw", "gated_yaw_rate",
-    "running_median", "rest_noise_density", "REST_MIN_SAMPLES",
+    "ImuNoise", "GyroYaw", "GyroModel", "GYRO", "AhrsHeading", "discrete_sigma", "body_yaw_rate", "gyro_yaw",
+    "gated_yaw_rate", "running_median", "rest_noise_density", "REST_MIN_SAMPLES",
     "cumulative_angle", "quat_to_matrix", "ahrs_heading", "tilt_from_accel",
 ]
 
 
 # --------------------------------------------------------------------------- measurement models
-@dataclass(frozen=True)
-class GyroModel(MeasurementModel):
-    """The gyro's integrated angle over an interval ``Δt`` as a measurement of the heading change.
-
-    ``z = Θ = ∫ ω_z dt``, ``h(δ, b_g) = d_ψ + b_g Δt``, ``R = σ_g² Δt``; Jacobians ``∂h/∂δ = (0, 0, 1)``,
-    ``∂h/∂b_g = Δt``. Arguments ``motion``, ``gyro_bias``; parameter ``dt`` (the EKF evaluates it per
-    unit time: ``z = Θ/Δt``, ``R = σ_g²/Δt``, ``dt = 1``).
-    """
-
-    name: str = "gyro"
-    linear: bool = True
-    args: tuple = ("motion", "gyro_bias")
-    dim: int = 1
-    turn_rows: tuple = (0,)
-    uses_dt: bool = True
-    guess_rank: tuple = (None, 0)
-
-    def guess(self, z, estimate: dict, dt: float):
-        """The heading change: the angle less the running bias estimate's share, ``Θ - b̂ Δt``."""
-        return None, float(z[0]) - estimate.get("gyro_bias", 0.0) * dt
-
-    def evaluate(self, motion, gyro_bias, dt=1.0):
-        d = np.asarray(motion, dtype=np.float64)
-        if d.ndim == 1 and isinstance(dt, (int, float)):  # one measurement: without array overhead
-            t = float(dt)
-            return (np.array([float(d[2]) + float(gyro_bias[0]) * t]),
-                    {"motion": np.array([[0.0, 0.0, 1.0]]), "gyro_bias": np.array([[t]])})
-        b = np.asarray(gyro_bias, dtype=np.float64)
-        dt = np.asarray(dt, dtype=np.float64)
-        h = d[..., 2:3] + b * dt[..., None] if dt.ndim else d[..., 2:3] + b * float(dt)
-        j_d = np.zeros(d.shape[:-1] + (1, 3))
-        j_d[..., 0, 2] = 1.0
-        j_b = np.broadcast_to(dt, d.shape[:-1]).astype(np.float64)[..., None, None].copy()
-        return h, {"motion": j_d, "gyro_bias": j_b}
-
-    @staticmethod
-    def variance(noise_density: float, dt):
-        """``σ_g² Δt`` of the integrated angle over ``dt`` [s]."""
-        return noise_density**2 * np.asarray(dt, dtype=np.float64)
-
-
 @dataclass(frozen=True)
 class AhrsModel(MeasurementModel):
     """The AHRS heading: ``z = ψ_AHRS``, ``h(ψ, o_ψ) = ψ + o_ψ`` (wrapped), ``R = σ_ψ²``; both Jacobians 1.
@@ -243,7 +202,6 @@ class AhrsModel(MeasurementModel):
         return h, {"heading": one, "ahrs_offset": one.copy()}
 
 
-GYRO = GyroModel()
 AHRS = AhrsModel()
 
 

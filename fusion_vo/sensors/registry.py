@@ -245,6 +245,10 @@ class Sensor:
         ``on_grid(iv) -> bool``: whether its measurements are on the node grid ``iv``, which its states that
         :attr:`State.needs` another sensor's measurement require too (the camera: when an increment is placed).
         Default: its samples are used there (``Intervals.uses(name)``).
+    whole_recording : Step or None
+        ``run(iv, config)``: on a whole recording's node grid ``iv``, once every sensor's samples are on it and before
+        the consistency monitor judges them, what needs all of them (the camera's heading noise estimated against
+        the gyro, :func:`fusion_vo.sensors.visual_noise.apply`). Not run by the streaming engine.
     readings : callable or None
         ``readings(iv, config) -> list of Readings``: its measurements on the node grid of
         :class:`~fusion_vo.backends.timeline.Intervals`, as readings of its measurement models
@@ -326,6 +330,7 @@ class Sensor:
     intervals: Step | None = None
     coverage: Callable | None = None
     on_grid: Callable | None = None
+    whole_recording: Step | None = None
     readings: Callable | None = None
     graph_keyframes: Callable | None = None
     carry: Carry | None = None

@@ -46,6 +46,7 @@ from fusion_vo.measurements import SensorCount
 from fusion_vo.measurements.grid import node_indices, outage_notes
 from fusion_vo.sensors.model import MeasurementModel, scaled_motion
 from fusion_vo.sensors.readings import ORDER, Readings
+from fusion_vo.sensors import visual_noise
 from fusion_vo.sensors.registry import DistanceSource, HeadingSource, Live, Sensor, State, Step, register
 from fusion_vo.sensors.wheel_arc import wheel_motion
 
@@ -395,4 +396,5 @@ register(Sensor(
     heading_reference=lambda increments: increments is None or any(v.ok for v in increments),
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, message="visual", order=0),
     heading=(HEADING,), distance=(DISTANCE,), first_guesses=Step(20, _first_visual_scale),
+    whole_recording=Step(10, visual_noise.apply),
 ))

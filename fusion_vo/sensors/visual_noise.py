@@ -62,9 +62,8 @@ import numpy as np
 from pydantic import Field
 
 from fusion_vo.config.base import MAX_NUMBER, Int, Positive, Section
-from fusion_vo.sensors.imu import GYRO, imu_grid
-from fusion_vo.sensors.visual import camera_grid
-from fusion_vo.sensors.wheel import at_rest
+from fusion_vo.sensors import registry
+from fusion_vo.sensors.gyro import GYRO
 
 logger = logging.getLogger(__name__)
 
@@ -245,13 +244,22 @@ def estimate(camera, camera_var, gyro, gyro_var, config: VisualNoiseConfig) -> V
     return out
 
 
+def _at_rest(iv, config) -> np.ndarray:
+    """The node intervals in which a heading source says the robot stands still (the wheels',
+    :attr:`~fusion_vo.sensors.sources.HeadingSource.at_rest`); none without one."""
+    return next((h.at_rest(iv, config) for _, h in registry.heading_sources() if h.at_rest is not None),
+                np.zeros(iv.n_steps, bool))
+
+
 def apply(iv, config) -> VisualNoiseEstimate | None:
     """Estimate the camera's heading noise on the whole recording's grid ``iv`` and put what is resolved into
     it: the increments' heading (co)variances scaled, the camera's frame-error share set
     (:class:`~fusion_vo.sensors.visual.CameraGrid` ``cov``, ``frame_error``). Returns the estimate, also kept as
     the grid's ``noise`` (its note added to ``iv.notes``), or None when ``config.visual_noise.estimate`` is off."""
 
-    cfg, cam, imu = config.visual_noise, camera_grid(iv), imu_grid(iv)
+    # (the camera's and the IMU's grids, :class:`~fusion_vo.sensors.visual.CameraGrid` and
+    # :class:`~fusion_vo.sensors.imu.ImuGrid`, read from ``iv``: visual.py imports this module, imu.py visual.py)
+    cfg, cam, imu = config.visual_noise, iv.sensors["camera"], iv.sensors["imu"]
     if not cfg.estimate:
         return None
     if not len(cam.i0) or not iv.uses("gyro"):
@@ -266,7 +274,7 @@ def apply(iv, config) -> VisualNoiseEstimate | None:
         camera[cam.i0[single]] = cam.delta[single, 2]
         camera_var[cam.i0[single]] = cam.cov[single, 2, 2]
         gyro = np.where(imu.gyro_ok, imu.gyro_angle, np.nan)
-        gyro_var = GYRO.variance(config.imu.density(at_rest(iv, config)), iv.dt) * np.ones(K)
+        gyro_var = GYRO.variance(config.imu.density(_at_rest(iv, config)), iv.dt) * np.ones(K)
         out = estimate(camera, camera_var, gyro, gyro_var, cfg)
     if out.scale_applied:
         root = np.sqrt(out.scale)

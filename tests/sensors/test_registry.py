@@ -23,7 +23,7 @@ from fusion_vo.sensors import registry
 from fusion_vo.sensors.instances import imu_instance
 from fusion_vo.sensors.registry import Sensor, State, Step
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
-from fusion_vo.sensors.wheel import ticks_to_travel, wheel_track
+from fusion_vo.sensors.wheel import ticks_to_travel, wheel_grid, wheel_track
 
 #: the offset compass's true offset [rad]
 OFFSET = 0.2
@@ -172,6 +172,31 @@ def test_a_registered_motion_step_is_the_engines_motion_between_nodes():
     assert fusion._sliver(x, y)[0][2] == motion[2]
 
 
+def test_a_registered_whole_recording_step_sees_every_sensor_on_the_grid(drive):
+    """``Sensor.whole_recording``: a compass's step runs once on a whole recording's grid, after every sensor's samples
+    are on it (the wheels' too, whatever the steps' order) and before the readings are taken: here it leaves out the
+    compass's first half, and the EKF uses the other half only. The streaming engine does not run it."""
+    s, compass = drive
+    calls = []
+
+    def second_half(iv, config):
+        calls.append((len(iv.t), bool(wheel_grid(iv).ok.any())))
+        near, yaw = iv.extra["compass"]
+        iv.extra["compass"] = (near & (iv.t >= iv.t[len(iv.t) // 2]), yaw)
+
+    sensor = dataclasses.replace(COMPASS_SENSOR, live=COMPASS_LIVE, whole_recording=Step(1, second_half))
+    with registry.registered(sensor):
+        streams = SensorStreams(wheel=s.wheel, extra={"compass": compass}).select(["wheel", "compass"])
+        half = fuse(streams, "ekf", FusionConfig.from_dict({"compass": {"sigma": 0.02}}))
+        assert calls == [(len(half.trajectories["ekf"]), True)]
+        _stream("ekf", s, compass)
+    assert len(calls) == 1
+    with registry.registered(COMPASS_SENSOR):
+        whole = fuse(streams, "ekf", FusionConfig.from_dict({"compass": {"sigma": 0.02}}))
+    used, all_used = half.counts["ekf"]["compass"].used, whole.counts["ekf"]["compass"].used
+    assert abs(used - all_used / 2) <= 2, (used, all_used)
+
+
 def test_a_registered_sensors_first_guess_starts_the_graph_beside_the_built_in_ones(drive):
     """``Sensor.first_guesses``: the graph's initial values of the states, each sensor's step given those before it.
     On wheels whose base is 5 % long and a gyro with a bias, without a camera: the gyro's bias against the wheels'
@@ -217,7 +242,8 @@ def test_a_registered_sensors_configuration_goes_through_the_schema(drive):
 
 def test_each_built_in_sensor_lives_in_its_own_module():
     """Every hook of a built-in sensor, its heading sources' too, is defined in that sensor's module or one of its
-    parts (``wheel_arc``, ``wheel_states``, the IMU's ``gyro``: GPS, range ... need no backend edits)."""
+    parts (``wheel_arc``, ``wheel_states``, the IMU's ``gyro``, the camera's ``visual_noise``: GPS, range ... need no
+    backend edits)."""
     home = {"camera": "fusion_vo.sensors.visual", "wheel": "fusion_vo.sensors.wheel", "odom": "fusion_vo.sensors.wheel",
             "imu": "fusion_vo.sensors.imu", "range": "fusion_vo.sensors.range", "gps": "fusion_vo.sensors.gps"}
     assert registry.names()[:6] == tuple(home)
@@ -236,7 +262,7 @@ def test_each_built_in_sensor_lives_in_its_own_module():
         assert len(hooks) >= 3, sensor.name
         for field_name, fn in hooks:
             parts = (home[sensor.name], home[sensor.name] + "_arc", home[sensor.name] + "_states")
-            parts += ("fusion_vo.sensors.gyro",) if sensor.name == "imu" else ()
+            parts += {"imu": ("fusion_vo.sensors.gyro",), "camera": ("fusion_vo.sensors.visual_noise",)}.get(sensor.name, ())
             assert fn.__module__ in parts, (sensor.name, field_name, fn.__module__)
     assert {h.key for _, h in registry.heading_sources()} == {"camera", "wheel", "gyro", "ahrs"}
     assert {d.key for _, d in registry.distance_sources()} == {"camera", "wheel"}
