@@ -544,6 +544,7 @@ def has_fixes(recording, folder: str = "gps0") -> bool:
 register(Sensor(
     name="gps", where="gps0/ (usable fixes)", field="gps", folder="gps0", read=read_fixes, has=has_fixes,
     default=False, config=("gps", GpsNoise), absolute_position=True, heading_reference=True, node_times=node_times,
+    absolute_distance=True,
     intervals=Step(50, add_intervals),
     readings=readings, graph_keyframes=_keyframes,
     live=Live(_live_sample, values=_live_values, take=_live_take, samples=_live_samples, order=4),

@@ -272,7 +272,7 @@ class Sensor:
         when an increment is measured; the IMU: when its gyro or its AHRS is used). Default False.
     absolute_distance : bool or callable
         The sensor measures distance on a scale of its own (the wheels' travel, the range finder's height of the
-        camera): beside the camera the visual scale is estimated, and with a heading reference beside the wheels
+        camera, GPS's fixes): beside the camera the visual scale is estimated, and with a heading reference beside the wheels
         their distance scale too (:func:`~fusion_vo.backends.states.observability`). True and callable as
         :attr:`absolute_heading`. Default False.
     heading_reference : bool, callable or None
