@@ -1,4 +1,4 @@
-"""Helpers for the backend tests: errors against the truth, visual dead reckoning."""
+"""Helpers for the backend tests: errors against the truth, visual dead reckoning, GPS fixes of a track."""
 
 import dataclasses
 
@@ -6,7 +6,7 @@ import numpy as np
 
 from fusion_vo.backends import SensorStreams
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import PoseData
+from fusion_vo.measurements import GpsData, PoseData
 
 
 def position_errors(track: PoseData, truth: PoseData) -> tuple[float, float]:
@@ -39,3 +39,12 @@ def stated_height_sigma(s, visual_scale: float) -> float:
     scale is wrong on purpose states it, as ``fusion-vo simulate`` does, or the default prior (the height known
     to 0.2 %) keeps the wrong scale."""
     return max(abs(s.camera_height - s.camera_height / visual_scale), 1e-4)
+
+
+def gps_along(truth, t: np.ndarray, sigma: float, rng) -> GpsData:
+    """Fixes of the ``truth`` track at the times ``t``, in ENU at the datum (the antenna at the body's origin)."""
+    enu = np.column_stack([np.interp(t, truth.t, truth.xyyaw[:, 0]), np.interp(t, truth.t, truth.xyyaw[:, 1]),
+                           np.zeros(len(t))]) + np.column_stack([rng.normal(0.0, sigma, (len(t), 2)), np.zeros(len(t))])
+    return GpsData(t=t, enu=enu, covariance=np.tile(np.eye(2) * sigma**2, (len(t), 1, 1)),
+                   geodetic=np.zeros((len(t), 3)), status=np.zeros(len(t), int), datum=(0.0, 0.0, 0.0),
+                   lever_arm=np.zeros(3), horizontal_sigma=sigma)

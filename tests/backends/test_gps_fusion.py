@@ -18,7 +18,7 @@ from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.cli.main import main
 from fusion_vo.evaluation.io import read_tum_poses
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import GpsData, GpsFix, ImuSample, PoseData, WheelTicks
+from fusion_vo.measurements import GpsFix, ImuSample, PoseData, WheelTicks
 from fusion_vo.recording import Recording
 from fusion_vo.sensors import gps as gps_model
 from fusion_vo.sensors import registry
@@ -29,6 +29,7 @@ from fusion_vo.sensors.wheel import read_ticks
 from fusion_vo.simulation import simulate
 
 from ahead_job import ahead_jobs
+from backend_synth import gps_along, position_errors
 from husky_gps_stream_job import figures as husky_gps_figures, husky_parts, withheld_rms
 
 TINY = {"width": 80, "height": 48, "fu": 60.0, "fv": 60.0, "cu": 39.5, "cv": 23.5, "supersample": 1, "camera_rate": 2.0}
@@ -125,29 +126,19 @@ def test_drift_during_the_outage_is_larger_than_with_gps_and_bounded(fused, trut
     assert drift < 0.2 and drift > 0.5 * e[last_second].max()
 
 
-def _fixes_of(truth: PoseData, noise: float, seed: int, rate: float = 5.0) -> GpsData:
-    """GPS fixes of a drive's ground truth (the world frame taken as ENU, the antenna at the body origin) at ``rate``
-    with ``noise`` [m] per axis."""
-    rng = np.random.default_rng(seed)
-    k = np.arange(0, len(truth.t), max(1, int(round(1.0 / rate / np.median(np.diff(truth.t))))))
-    enu = np.column_stack([truth.xyyaw[k, :2] + rng.normal(0.0, noise, (len(k), 2)), np.zeros(len(k))])
-    return GpsData(truth.t[k], enu, np.tile(np.eye(2) * noise**2, (len(k), 1, 1)), np.zeros((len(k), 3)),
-                   np.zeros(len(k), int), (47.0, 8.0, 400.0), np.zeros(3), noise)
-
-
 def test_gps_fixes_measure_the_camera_scale_where_no_wheels_do():
     """GPS declares ``absolute_distance``: with a camera whose stated height is 5 % off (its ``height_sigma`` says 5 %),
     the IMU and 5 cm fixes at 5 Hz, and no wheels, every backend estimates the visual scale from the fixes (40 s
     generated drive). Baseline, the same run with GPS not declared a distance: the scale held at 1, each track
     2.2-3.6 times as far from the truth (measured 0.014-0.024 m against 0.045-0.067 m RMS)."""
     s = synthetic_streams(SyntheticOptions(duration=40.0, visual_scale=1.05), seed=11)
-    streams = SensorStreams(visual=s.visual, imu=s.imu, gps=_fixes_of(s.truth, NOISE, seed=5),
+    fix_t = s.truth.t[::int(round(0.2 / np.median(np.diff(s.truth.t))))]  # 5 Hz
+    streams = SensorStreams(visual=s.visual, imu=s.imu, gps=gps_along(s.truth, fix_t, NOISE, np.random.default_rng(5)),
                             camera_height=s.camera_height, camera_height_sigma=0.05 * s.camera_height)
     streams = streams.select(["camera", "imu", "gps"])
 
     def rms(track):
-        xy = np.column_stack([np.interp(track.t, s.truth.t, s.truth.xyyaw[:, i]) for i in range(2)])
-        return float(np.sqrt(np.mean(np.sum((track.xyyaw[:, :2] - xy) ** 2, axis=1))))
+        return position_errors(track, s.truth)[1]
 
     declared = fuse(streams, "all")
     gps = registry.get("gps")

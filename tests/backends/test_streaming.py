@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 from ahead_job import ahead_jobs
-from backend_synth import position_errors, streams_of
+from backend_synth import gps_along, position_errors, streams_of
 from husky_like import husky_like
 
 from fusion_vo.backends import FusionConfig, SensorStreams, StreamingFusion, fuse
@@ -14,7 +14,7 @@ from fusion_vo.backends.pauses import samples_between
 from fusion_vo.backends.streaming import streaming_for, time_ordered_messages
 from fusion_vo.errors import InputError
 from fusion_vo.geometry import se2
-from fusion_vo.measurements import GpsData, ImuSample, RangeSample, WheelTicks
+from fusion_vo.measurements import ImuSample, RangeSample, WheelTicks
 from fusion_vo.recording import Recording
 from fusion_vo.sensors.synthetic import SyntheticOptions, synthetic_streams
 
@@ -161,15 +161,6 @@ def test_on_the_jackal_log_the_engine_fed_in_time_order_is_the_batch_runs_online
         assert live.counts[name][sensor].used == batch.counts[name][sensor].used > 1000, sensor
 
 
-def _gps_along(truth, t: np.ndarray, sigma: float, rng) -> GpsData:
-    """Fixes of the ``truth`` track at the times ``t``, in ENU at the datum (the antenna at the body's origin)."""
-    enu = np.column_stack([np.interp(t, truth.t, truth.xyyaw[:, 0]), np.interp(t, truth.t, truth.xyyaw[:, 1]),
-                           np.zeros(len(t))]) + np.column_stack([rng.normal(0.0, sigma, (len(t), 2)), np.zeros(len(t))])
-    return GpsData(t=t, enu=enu, covariance=np.tile(np.eye(2) * sigma**2, (len(t), 1, 1)),
-                   geodetic=np.zeros((len(t), 3)), status=np.zeros(len(t), int), datum=(0.0, 0.0, 0.0),
-                   lever_arm=np.zeros(3), horizontal_sigma=sigma)
-
-
 def _without_a_camera(backend: str) -> tuple:
     """Odometry and IMU of a generated drive on an epoch clock, without and with GPS fixes at 2.5 Hz jittered by up
     to 20 ms, fed to the engine and run in batch by ``backend``: (the fixes' times, [(gps?, engine's, batch's)])."""
@@ -183,7 +174,7 @@ def _without_a_camera(backend: str) -> tuple:
     fix_t += rng.uniform(-0.02, 0.02, len(fix_t))
     config = FusionConfig(monitor=False, sync_odometry=False)
     runs = []
-    for gps in (None, _gps_along(truth, fix_t, 0.5, rng)):
+    for gps in (None, gps_along(truth, fix_t, 0.5, rng)):
         streams = SensorStreams(odom=odom, imu=imu, gps=gps)
         fusion = streaming_for(streams, backend, config)
         fusion.feed(time_ordered_messages(streams))
